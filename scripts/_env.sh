@@ -1,0 +1,24 @@
+# Shared by scripts/run.sh and scripts/test.sh: make a virtual environment in .venv
+# and install the project into it (with extras given as $1, e.g. "test").
+set -euo pipefail
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$ROOT"
+PY="${PYTHON:-python3}"
+
+as_root() { if [ "$(id -u)" = 0 ]; then "$@"; elif command -v sudo >/dev/null; then sudo "$@"; else
+  echo "need root to run: $*" >&2; return 1; fi; }
+
+if [ ! -x .venv/bin/python ]; then
+  if ! "$PY" -m venv .venv 2>/dev/null; then
+    echo "python3 -m venv failed; installing Debian's python3-venv" >&2
+    as_root apt-get update -qq && as_root apt-get install -y -qq python3-venv
+    "$PY" -m venv .venv
+  fi
+fi
+extras="${1:-}"
+stamp=".venv/.installed${extras:+-$extras}"
+if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
+  .venv/bin/python -m pip install -q --upgrade pip
+  if [ -n "$extras" ]; then .venv/bin/python -m pip install -q -e ".[$extras]"; else .venv/bin/python -m pip install -q -e .; fi
+  touch "$stamp"
+fi

@@ -1,0 +1,1 @@
+"""The imperative shell: supervisor, loops, safety, drivers, simulated robot, sessions."""

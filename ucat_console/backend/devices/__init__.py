@@ -1,0 +1,1 @@
+"""Device drivers (one module per device) and the emulators that speak their bytes."""

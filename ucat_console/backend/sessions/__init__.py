@@ -1,0 +1,1 @@
+"""Session recording and reading (MCAP), index, repair and export."""

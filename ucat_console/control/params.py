@@ -1,0 +1,148 @@
+"""Controller parameters: one frozen dataclass per block, defaults from control.md.
+
+Every default below is the single definition of that value in the project. Names follow
+the paper's symbols (``lam_st`` is lambda_St, ``w`` is omega).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any, Self
+
+from ucat_console.typedconf import dump_toml, from_dict, load_toml, param, validate
+
+
+class _Config:
+    """Shared behaviour of config dataclasses: validation, TOML in/out, copies."""
+
+    def __post_init__(self) -> None:
+        validate(self)
+        self._check()
+
+    def _check(self) -> None:  # cross-field checks
+        pass
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Self:
+        return from_dict(cls, data)
+
+    @classmethod
+    def from_toml(cls, path: str | Path) -> Self:
+        return load_toml(cls, path)
+
+    def to_toml(self) -> str:
+        return dump_toml(self)
+
+    def replace(self, **changes: Any) -> Self:
+        return replace(self, **changes)
+
+
+@dataclass(frozen=True)
+class MpcConfig(_Config):
+    """The fin MPC (control.md sections 1-5, paper Table I)."""
+
+    # cost weights (eq 17)
+    lam_f: float = param(1.5, lo=0.0, hi=100.0, doc="weight of the force tracking error")
+    lam_st: float = param(5.0, lo=0.0, hi=100.0, doc="weight of the Strouhal penalty")
+    lam_a: float = param(1.0, lo=0.0, hi=100.0, doc="weight of the amplitude penalty")
+    lam_d: float = param(1.0, lo=0.0, hi=100.0, doc="weight of the smoothness penalty")
+    # horizon and solver
+    horizon: int = param(2, choices=(2,), doc="strokes per cycle H (the solver is built for H=2)")
+    n_samples: int = param(500, lo=1, hi=100_000, doc="stage-1 samples N")
+    max_iter: int = param(60, lo=0, hi=10_000, doc="stage-2 iteration limit k_max")
+    refine_starts: int = param(
+        4, lo=1, hi=64, doc="best samples refined by the production solver (the paper refines 1)"
+    )
+    solver: str = param("numba", choices=("numba", "scipy"), doc="stage-2 implementation")
+    force_model: str = param("analytic", choices=("analytic", "table"), doc="fin force model")
+    table_path: str | None = param(None, doc="force table file (.npz); None: built from the model")
+    table_n_d: int = param(241, lo=2, hi=4001, doc="force table nodes along the stroke d")
+    table_n_w: int = param(121, lo=2, hi=4001, doc="force table nodes along the rate w")
+    # fluid and fin (Table I)
+    rho: float = param(1000.0, lo=1.0, hi=2000.0, lo_open=True, unit="kg/m3", doc="water density")
+    fin_area: float = param(0.020, lo=0.0, hi=1.0, lo_open=True, unit="m2", doc="fin planform A_f")
+    fin_length: float = param(0.10, lo=0.0, hi=2.0, lo_open=True, unit="m", doc="effective fin length L_f")
+    r_c: float = param(0.10, lo=0.0, hi=2.0, lo_open=True, unit="m", doc="radius of gyration r_c")
+    c_d: float = param(0.70, lo=0.0, hi=20.0, doc="drag coefficient C_D")
+    c_l: float = param(0.25, lo=0.0, hi=20.0, doc="lift coefficient C_L")
+    # Strouhal surrogate (eqs 10-12)
+    st_opt: float = param(0.30, lo=0.01, hi=2.0, doc="optimal Strouhal number")
+    eta_max: float = param(1.0, lo=0.0, hi=10.0, lo_open=True, doc="surrogate scale")
+    st_low: float = param(0.25, lo=0.0, hi=2.0, doc="St corridor lower edge (reporting)")
+    st_high: float = param(0.35, lo=0.0, hi=2.0, doc="St corridor upper edge (reporting)")
+    v_floor: float = param(0.05, lo=0.0, hi=5.0, lo_open=True, unit="m/s", doc="speed floor for St")
+    # bounds (eq 18)
+    d_max: float = param(1.2, lo=0.0, hi=3.14159, lo_open=True, unit="rad", doc="stroke limit")
+    d_eps: float = param(0.05, lo=0.0, hi=3.14159, lo_open=True, unit="rad", doc="shortest stroke")
+    w_min: float = param(0.5, lo=0.0, hi=100.0, lo_open=True, unit="rad/s", doc="slowest mean rate")
+    w_max: float = param(8.0, lo=0.0, hi=100.0, lo_open=True, unit="rad/s", doc="fastest mean rate")
+    a_min: float = param(0.03, lo=0.0, hi=1.0, unit="m", doc="amplitude penalty threshold A_min")
+
+    def _check(self) -> None:
+        if not self.d_eps < self.d_max:
+            raise ValueError(f"d_eps/d_max: need d_eps < d_max, got {self.d_eps} >= {self.d_max}")
+        if not self.w_min < self.w_max:
+            raise ValueError(f"w_min/w_max: need w_min < w_max, got {self.w_min} >= {self.w_max}")
+        if not self.st_low < self.st_high:
+            raise ValueError(
+                f"st_low/st_high: need st_low < st_high, got {self.st_low} >= {self.st_high}"
+            )
+
+    @property
+    def weights(self) -> tuple[float, float, float, float]:
+        return (self.lam_f, self.lam_st, self.lam_a, self.lam_d)
+
+
+@dataclass(frozen=True)
+class BaselineConfig(_Config):
+    """The fixed-frequency inverse model of Remmas et al. (control.md section 6)."""
+
+    frequency: float = param(2.0, lo=0.05, hi=10.0, unit="Hz", doc="fixed fin-beat frequency")
+
+
+@dataclass(frozen=True)
+class PidGains(_Config):
+    kp: float = param(0.0, lo=0.0, hi=1000.0, doc="proportional gain")
+    ki: float = param(0.0, lo=0.0, hi=1000.0, doc="integral gain")
+    kd: float = param(0.0, lo=0.0, hi=1000.0, doc="derivative gain")
+    limit: float = param(1.0, lo=0.0, hi=100.0, lo_open=True, unit="N", doc="output limit")
+
+
+@dataclass(frozen=True)
+class BodyConfig(_Config):
+    """Body-frame layer (control.md section 7, paper Table I)."""
+
+    velocity: PidGains = PidGains(kp=40.0, ki=1.0, kd=0.1, limit=2.5)
+    depth: PidGains = PidGains(kp=5.0, ki=0.1, kd=0.005, limit=0.5)
+    yaw_rate: PidGains = PidGains(kp=3.0, ki=0.2, kd=0.0, limit=0.5)
+    median_window: int = param(5, lo=1, hi=101, doc="median filter length for DVL and depth")
+    depth_sign: float = param(
+        1.0, choices=(1.0, -1.0),
+        doc="sign from depth error to front-fin f_y (+1: positive f_y drives the hull down)",
+    )
+
+
+@dataclass(frozen=True)
+class ExecutorConfig(_Config):
+    """Execution module (control.md section 8, Algorithm 2)."""
+
+    w_threshold: float = param(
+        0.3, lo=0.0, hi=50.0, lo_open=True, unit="rad/s", doc="stroke finished below this rate"
+    )
+    min_stroke_time: float = param(
+        0.02, lo=0.0, hi=5.0, unit="s", doc="ignore completion before this time in a stroke"
+    )
+    stroke_timeout_factor: float = param(
+        3.0, lo=1.0, hi=100.0, doc="a stroke is also finished after this many planned durations"
+    )
+
+
+@dataclass(frozen=True)
+class PowerConfig(_Config):
+    """Power estimate from encoder positions (control.md section 9)."""
+
+    fin_inertia: float = param(2.8e-5, lo=0.0, hi=1.0, unit="kg m2", doc="fin inertia I")
+    filter_tau: float = param(
+        0.02, lo=0.0, hi=1.0, unit="s", doc="first-order low-pass on rate and acceleration"
+    )

@@ -1,0 +1,1 @@
+"""The paper's experiments E1-E5 and their reports."""

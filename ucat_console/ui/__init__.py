@@ -1,0 +1,1 @@
+"""The viser web UI."""
