@@ -20,3 +20,8 @@ __all__ = [
     "PidGains",
     "PowerConfig",
 ]
+
+from ucat_console.control.cost import CostBreakdown  # noqa: E402
+from ucat_console.control.mpc import FinMpc, Plan  # noqa: E402
+
+__all__ += ["CostBreakdown", "FinMpc", "Plan"]

@@ -136,6 +136,9 @@ class ExecutorConfig(_Config):
     stroke_timeout_factor: float = param(
         3.0, lo=1.0, hi=100.0, doc="a stroke is also finished after this many planned durations"
     )
+    stroke_timeout_min: float = param(
+        0.1, lo=0.0, hi=10.0, unit="s", doc="a stroke never times out earlier than this"
+    )
 
 
 @dataclass(frozen=True)

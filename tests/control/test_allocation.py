@@ -1,0 +1,152 @@
+"""Fin force allocation, sync mode, and the body-frame controller's signs and data handling."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from ucat_console.backend.devices.readings import DepthReading, DvlVelocity, ImuReading
+from ucat_console.control.allocation import (
+    FIN_SIDES,
+    BodyController,
+    BodySetpoints,
+    allocate,
+)
+from ucat_console.control.params import BodyConfig, PidGains
+
+B = 0.2981  # lateral fin distance used to turn differentials into moments (m)
+
+
+def yaw_moment(per_fin) -> float:
+    """N_z = x F_y - y F_x per fin with body forward force -f_x at y = side * B (z down)."""
+    return sum(-(side * B) * (-fx) for side, (fx, _fy) in zip(FIN_SIDES, per_fin))
+
+
+def test_sums_without_yaw():
+    a = allocate(-1.2, 0.4, 0.0)
+    fins = a.per_fin()
+    assert sum(fx for fx, _ in fins) == pytest.approx(-1.2)
+    assert all(fx == pytest.approx(-0.3) for fx, _ in fins)
+    assert fins[0][1] + fins[1][1] == pytest.approx(0.4)
+    assert fins[0][1] == fins[1][1] == pytest.approx(0.2)
+    assert fins[2][1] == fins[3][1] == 0.0
+    assert yaw_moment(fins) == pytest.approx(0.0)
+
+
+def test_yaw_differential_is_a_pure_moment():
+    plain = allocate(-1.0, 0.4, 0.0).per_fin()
+    turned = allocate(-1.0, 0.4, 0.2).per_fin()
+    delta = [t[0] - p[0] for t, p in zip(turned, plain)]
+    # +m/2 on the front starboard fin, -m/2 on the front port fin, rear unchanged
+    assert delta == pytest.approx([0.1, -0.1, 0.0, 0.0])
+    assert sum(delta) == pytest.approx(0.0)
+    assert sum(fx for fx, _ in turned) == pytest.approx(-1.0)
+    assert [t[1] for t in turned] == [p[1] for p in plain]
+    # positive yaw command: port pushes forward harder -> clockwise from above (N > 0, z down)
+    assert yaw_moment(turned) == pytest.approx(0.2 * B)
+
+
+def test_sync_mode_three_logical_fins():
+    a = allocate(-0.8, 0.3, 0.1, sync=True)
+    assert a.sync
+    assert len(a.targets) == 3
+    assert a.fins == ((0,), (1,), (2, 3))
+    physical = sorted(i for fins in a.fins for i in fins)
+    assert physical == [0, 1, 2, 3]
+    # each physical fin gets the same target as without sync
+    assert a.per_fin() == allocate(-0.8, 0.3, 0.1).per_fin()
+    assert a.targets[2] == (pytest.approx(-0.2), 0.0)
+
+
+def test_allocate_rejects_nan():
+    with pytest.raises(ValueError, match="yaw"):
+        allocate(0.0, 0.0, math.nan)
+
+
+def dvl(t, vx, valid=True):
+    return DvlVelocity(t=t, vx=vx, vy=0.0, vz=0.0, valid=valid, altitude=1.0, fom=0.01)
+
+
+def body_cfg(**kw) -> BodyConfig:
+    base = dict(
+        velocity=PidGains(kp=2.0, limit=2.5),
+        depth=PidGains(kp=5.0, limit=0.5),
+        yaw_rate=PidGains(kp=3.0, limit=0.5),
+        median_window=3,
+    )
+    base.update(kw)
+    return BodyConfig(**base)
+
+
+def test_velocity_error_gives_forward_thrust_negative_fx():
+    ctl = BodyController(body_cfg())
+    ctl.on_dvl(dvl(0.0, 0.1))
+    cmd = ctl.update(0.0, BodySetpoints(velocity=0.3))
+    # F_x* = -kp (0.3 - 0.1) = -0.4
+    assert cmd.fx == pytest.approx(-0.4)
+    assert cmd.velocity_updated
+    assert all(fx == pytest.approx(-0.1) for fx, _ in cmd.allocation.per_fin())
+
+
+def test_missing_dvl_holds_output_and_is_not_zero_velocity():
+    ctl = BodyController(body_cfg())
+    ctl.on_dvl(dvl(0.0, 0.1))
+    first = ctl.update(0.0, BodySetpoints(velocity=0.3))
+    for k in range(1, 6):
+        ctl.on_dvl(dvl(0.1 * k, 0.0, valid=False))
+        cmd = ctl.update(0.1 * k, BodySetpoints(velocity=0.3))
+        assert cmd.fx == first.fx  # held; zero velocity would give -0.6
+        assert not cmd.velocity_updated
+        assert cmd.velocity == pytest.approx(0.1)
+    assert ctl.dvl_missing == 5
+
+
+def test_no_dvl_yet_gives_no_thrust_and_no_velocity():
+    ctl = BodyController(body_cfg())
+    cmd = ctl.update(0.0, BodySetpoints(velocity=0.3))
+    assert cmd.velocity is None
+    assert cmd.fx == 0.0
+
+
+def test_median_filter_removes_dvl_spike():
+    ctl = BodyController(body_cfg())
+    for t, v in ((0.0, 0.2), (0.1, 0.2), (0.2, 3.0)):
+        ctl.on_dvl(dvl(t, v))
+    cmd = ctl.update(0.2, BodySetpoints(velocity=0.2))
+    assert cmd.velocity == pytest.approx(0.2)
+    assert cmd.fx == pytest.approx(0.0)
+
+
+def test_depth_sign_and_front_lift():
+    ctl = BodyController(body_cfg())
+    ctl.on_depth(DepthReading(t=0.0, depth_m=1.95, pressure_pa=0.0))
+    cmd = ctl.update(0.0, BodySetpoints(depth=2.0))
+    # too shallow by 0.05 m: F_y* = +5 * 0.05 = 0.25, half on each front fin
+    assert cmd.fy == pytest.approx(0.25)
+    fins = cmd.allocation.per_fin()
+    assert fins[0][1] == fins[1][1] == pytest.approx(0.125)
+    flipped = BodyController(body_cfg(depth_sign=-1.0))
+    flipped.on_depth(DepthReading(t=0.0, depth_m=1.95, pressure_pa=0.0))
+    assert flipped.update(0.0, BodySetpoints(depth=2.0)).fy == pytest.approx(-0.25)
+
+
+def test_yaw_rate_command_turns_to_starboard():
+    ctl = BodyController(body_cfg())
+    ctl.on_imu(ImuReading(t=0.0, accel_g=(0.0, 0.0, 1.0), gyro=(0.0, 0.0, 0.0)))
+    ctl.on_dvl(dvl(0.0, 0.2))
+    cmd = ctl.update(0.0, BodySetpoints(velocity=0.2, yaw_rate=0.1))
+    assert cmd.yaw == pytest.approx(0.3)  # 3 * 0.1
+    fins = cmd.allocation.per_fin()
+    assert fins[1][0] < fins[0][0]  # port front fin pushes forward harder (more negative f_x)
+    assert yaw_moment(fins) > 0.0
+
+
+def test_bad_readings_and_setpoints():
+    ctl = BodyController(body_cfg())
+    with pytest.raises(ValueError, match="dvl.vx"):
+        ctl.on_dvl(dvl(0.0, math.nan))
+    with pytest.raises(ValueError, match="depth"):
+        BodySetpoints(depth=-1.0)
+    with pytest.raises(ValueError, match="velocity"):
+        BodySetpoints(velocity=math.inf)

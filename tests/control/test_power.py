@@ -1,0 +1,108 @@
+"""Fin power from encoder angles against the analytic answer for a sinusoid."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from ucat_console.control.params import MpcConfig, PowerConfig
+from ucat_console.control.power import (
+    PowerEstimator,
+    energy_per_metre,
+    fleet_mean_power,
+    power_trace,
+    time_mean,
+)
+
+MCFG = MpcConfig()
+A, F = 0.5, 2.0
+OMEGA = 2.0 * math.pi * F
+
+
+def sinusoid(periods: int = 2, dt: float = 1e-4):
+    t = np.arange(0.0, periods / F + dt / 2, dt)
+    return t, A * np.sin(OMEGA * t)
+
+
+def analytic_drag_mean() -> float:
+    # w = A omega cos(omega t); mean |cos|^3 = 4 / (3 pi)
+    k = 0.5 * MCFG.rho * MCFG.c_d * MCFG.fin_area * MCFG.r_c**3
+    return k * (A * OMEGA) ** 3 * 4.0 / (3.0 * math.pi)
+
+
+def analytic_inertial_mean(inertia: float) -> float:
+    # I alpha w = -I A^2 omega^3 sin cos = -(I A^2 omega^3 / 2) sin(2 omega t);
+    # mean of max(0, -sin) = 1 / pi  ->  I A^2 omega^3 / (2 pi)
+    return inertia * A**2 * OMEGA**3 / (2.0 * math.pi)
+
+
+def test_drag_power_of_a_sinusoid():
+    t, theta = sinusoid()
+    tr = power_trace(t, theta, PowerConfig(filter_tau=0.0), MCFG)
+    expected = analytic_drag_mean()  # 0.7369 W with the paper's coefficients
+    assert expected == pytest.approx(0.7369, abs=1e-4)
+    assert time_mean(tr.t, tr.p_drag) == pytest.approx(expected, rel=2e-3)
+
+
+def test_inertial_power_of_a_sinusoid_is_rectified():
+    inertia = 0.01
+    t, theta = sinusoid()
+    tr = power_trace(t, theta, PowerConfig(fin_inertia=inertia, filter_tau=0.0), MCFG)
+    # the signed inertial power averages to zero over whole periods
+    assert abs(time_mean(tr.t, tr.p_inert)) < 0.01 * analytic_inertial_mean(inertia)
+    positive = time_mean(tr.t, np.maximum(0.0, tr.p_inert))
+    assert positive == pytest.approx(analytic_inertial_mean(inertia), rel=5e-3)
+    assert tr.mean_power == pytest.approx(
+        analytic_inertial_mean(inertia) + analytic_drag_mean(), rel=5e-3
+    )
+
+
+def test_filter_attenuates_rate_like_a_first_order_lag():
+    tau = 0.02
+    t, theta = sinusoid(periods=6)
+    tr = power_trace(t, theta, PowerConfig(filter_tau=tau), MCFG)
+    last_period = tr.t >= tr.t[-1] - 1.0 / F
+    peak = np.max(np.abs(tr.w[last_period]))
+    assert peak == pytest.approx(A * OMEGA / math.sqrt(1.0 + (OMEGA * tau) ** 2), rel=5e-3)
+
+
+def test_streaming_equals_batch():
+    t, theta = sinusoid(periods=1, dt=1e-3)
+    pcfg = PowerConfig()
+    tr = power_trace(t, theta, pcfg, MCFG)
+    est = PowerEstimator(pcfg, MCFG)
+    out = [est.update(float(a), float(b)) for a, b in zip(t, theta)]
+    assert out[0] is None and out[1] is None
+    assert out[-1].p_fin == pytest.approx(tr.p_fin[-1])
+    assert out[-1].w == pytest.approx(tr.w[-1])
+    assert est.mean_power == pytest.approx(tr.mean_power)
+
+
+def test_fleet_mean_per_fin_and_total():
+    t, theta = sinusoid()
+    angles = np.column_stack([theta, np.zeros_like(theta), theta])
+    per_fin, total = fleet_mean_power(t, angles, PowerConfig(filter_tau=0.0), MCFG)
+    assert per_fin[1] == 0.0
+    assert per_fin[0] == pytest.approx(per_fin[2])
+    assert total == pytest.approx(2.0 * per_fin[0])
+
+
+def test_energy_per_metre():
+    assert energy_per_metre(2.0, 10.0, 4.0) == pytest.approx(5.0)
+    with pytest.raises(ValueError, match="distance"):
+        energy_per_metre(2.0, 10.0, 0.0)
+
+
+def test_bad_input():
+    est = PowerEstimator(PowerConfig(), MCFG)
+    est.update(0.0, 0.0)
+    with pytest.raises(ValueError, match="t"):
+        est.update(0.0, 0.1)
+    with pytest.raises(ValueError, match="theta"):
+        est.update(0.1, math.nan)
+    with pytest.raises(ValueError, match="theta"):
+        power_trace([0.0, 0.1, 0.2], [0.0, 0.1], PowerConfig(), MCFG)
+    with pytest.raises(ValueError, match="t"):
+        power_trace([], [], PowerConfig(), MCFG)

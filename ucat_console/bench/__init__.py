@@ -1,0 +1,1 @@
+"""Benchmarks behind ``ucat-console bench`` (figures for the README, never test assertions)."""

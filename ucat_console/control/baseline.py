@@ -1,0 +1,146 @@
+"""Baseline controller: the fixed-frequency inverse model of Remmas et al. (control.md section 6).
+
+Each fin beats at the fixed frequency ``f`` (:class:`BaselineConfig`); the requested mean
+force magnitude ``F`` sets the amplitude through the paper's eq 19::
+
+    theta_max = arccos(1 - F / (8 C_D rho A_f (r_c pi f)^2))
+
+(the arccos argument clipped to [-1, 1], the amplitude clipped to ``d_max``), and the force
+direction is set by moving the oscillation centre. The plan is written in the command
+format the MPC uses, so the same execution module runs both controllers.
+
+Angle convention (the fin model of control.md section 1, where forward thrust is f_x < 0).
+A stroke pair about a centre ``c`` (strokes ``+2A`` and ``-2A`` at the same rate ``w``) has
+both mid-stroke angles at ``c``; eq 5 gives fin-frame forces whose drag parts along x cancel,
+so the cycle-mean body force is::
+
+    f_bar = R(c) (-L cos A, -D cos A) = cos(A) * q w^2 * R(c) (-C_L, -C_D),   q = 0.5 rho A_f r_c^2
+
+i.e. it points at ``c + zero_direction`` with ``zero_direction = atan2(-C_D, -C_L)``
+(-1.914 rad, about -110 deg, with the paper's coefficients). The centre that makes the mean
+force point along the request ``(f_x*, f_y*)`` is therefore::
+
+    c = atan2(f_y*, f_x*) - atan2(-C_D, -C_L)        (wrapped to (-pi, pi])
+
+(plus pi if the amplitude exceeds pi/2, where cos A changes sign). With the paper's
+coefficients a pure forward request (-1, 0) N gives c = -1.228 rad, a pure f_y request
+(0, 1) N gives c = -2.798 rad; the benchmark's targets (f_x <= 0, f_y >= 0) map to centres
+in [-2.80, -1.23] rad with no wrap in between.
+
+Rate: a sinusoid of amplitude A at frequency f sweeps 2A in half a period, so both strokes
+run at the mean rate ``w = 4 A f`` (floored at ``MpcConfig.w_min`` so that a zero or tiny
+amplitude never commands a zero profile velocity). The baseline does not clip ``w`` to
+``w_max``: its fixed frequency is what defines it, and its thrust saturates through
+``d_max`` (which is why it cannot reach 0.4 m/s in the paper).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from ucat_console.control.argcheck import finite, in_range
+from ucat_console.control.params import BaselineConfig, MpcConfig
+
+
+def wrap_angle(angle: float) -> float:
+    """``angle`` wrapped to (-pi, pi]."""
+    a = math.remainder(angle, 2.0 * math.pi)  # in [-pi, pi]
+    return math.pi if a == -math.pi else a
+
+
+def baseline_gain(cfg: MpcConfig, bcfg: BaselineConfig) -> float:
+    """The force scale of eq 19, ``8 C_D rho A_f (r_c pi f)^2`` (N)."""
+    if cfg.c_d <= 0.0:
+        raise ValueError(
+            f"c_d: {cfg.c_d!r} is out of range for the baseline; allowed: (0.0, 20.0]"
+        )
+    return 8.0 * cfg.c_d * cfg.rho * cfg.fin_area * (cfg.r_c * math.pi * bcfg.frequency) ** 2
+
+
+def baseline_amplitude(force_magnitude: float, cfg: MpcConfig, bcfg: BaselineConfig) -> float:
+    """Stroke amplitude theta_max (rad) for a mean force magnitude (N), eq 19.
+
+    The arccos argument is clipped to [-1, 1] and the amplitude to ``cfg.d_max``.
+    """
+    f = in_range("force_magnitude", force_magnitude, 0.0, unit="N")
+    arg = 1.0 - f / baseline_gain(cfg, bcfg)
+    arg = min(1.0, max(-1.0, arg))
+    return min(math.acos(arg), cfg.d_max)
+
+
+def zero_direction(cfg: MpcConfig) -> float:
+    """Direction (rad, body frame) of a symmetric stroke pair's mean force about centre 0."""
+    return math.atan2(-cfg.c_d, -cfg.c_l)
+
+
+@dataclass(frozen=True)
+class BaselinePlan:
+    """One baseline cycle, in the MPC's command format.
+
+    ``u = (d_1, d_2, w_1, w_2)`` are the strokes and rates, ``commands =
+    (theta_1, w_1, theta_2, w_2)`` the absolute targets for the execution module;
+    ``amplitude`` and ``centre`` (rad, centre in (-pi, pi]) are what the console shows.
+    """
+
+    target: tuple[float, float]
+    amplitude: float
+    centre: float
+    frequency: float
+    u: tuple[float, float, float, float]
+    commands: tuple[float, float, float, float]
+
+
+class BaselinePlanner:
+    """Per-fin plans of the inverse-model baseline (stateless apart from its configuration)."""
+
+    def __init__(self, cfg: MpcConfig, bcfg: BaselineConfig) -> None:
+        baseline_gain(cfg, bcfg)  # rejects C_D = 0 here rather than at the first plan
+        self.cfg = cfg
+        self.bcfg = bcfg
+
+    def rate(self, amplitude: float) -> float:
+        """Mean stroke rate (rad/s) of a sinusoid of ``amplitude`` at the fixed frequency."""
+        a = in_range("amplitude", amplitude, 0.0, unit="rad")
+        return max(4.0 * a * self.bcfg.frequency, self.cfg.w_min)
+
+    def centre(self, fx: float, fy: float, amplitude: float) -> float:
+        """Oscillation centre (rad, (-pi, pi]) whose mean force points along (fx, fy)."""
+        c = math.atan2(fy, fx) - zero_direction(self.cfg)
+        if math.cos(amplitude) < 0.0:
+            c += math.pi
+        return wrap_angle(c)
+
+    def plan(self, fx: float, fy: float, theta_now: float) -> BaselinePlan:
+        """Cycle plan for the per-fin target (fx, fy) N, starting at the fin angle ``theta_now``.
+
+        The first stroke goes to the extreme of the oscillation farther from ``theta_now``
+        (``centre + A`` on a tie), the second to the other extreme, so that in steady state
+        successive cycles join without a jump. A zero request holds the fin where it is.
+        """
+        fx = finite("fx", fx)
+        fy = finite("fy", fy)
+        theta_now = finite("theta_now", theta_now)
+        magnitude = math.hypot(fx, fy)
+        amplitude = baseline_amplitude(magnitude, self.cfg, self.bcfg)
+        w = self.rate(amplitude)
+        if magnitude == 0.0:
+            centre = wrap_angle(theta_now)
+            first, second = theta_now, theta_now
+        else:
+            centre = self.centre(fx, fy, amplitude)
+            upper, lower = centre + amplitude, centre - amplitude
+            if abs(lower - theta_now) > abs(upper - theta_now):
+                first, second = lower, upper
+            else:
+                first, second = upper, lower
+        d1 = first - theta_now
+        d2 = second - first
+        return BaselinePlan(
+            target=(fx, fy),
+            amplitude=amplitude,
+            centre=centre,
+            frequency=self.bcfg.frequency,
+            u=(d1, d2, w, w),
+            commands=(first, w, second, w),
+        )

@@ -1,0 +1,240 @@
+"""The Strouhal-aware fin MPC (control.md section 4, paper Algorithm 1).
+
+:class:`FinMpc` plans one fin's next cycle. Two stage-2 implementations share one
+sampler contract and one cost definition:
+
+- ``solver="numba"`` (production): one compiled, allocation-free call per solve; stage 1
+  draws ``n_samples`` admissible stroke pairs, stage 2 refines the ``refine_starts`` best
+  with a projected BFGS method using the analytic gradient.
+- ``solver="scipy"`` (the paper's path, kept as the reference): numpy sampling, then
+  ``scipy.optimize.minimize(method="L-BFGS-B")`` with finite-difference gradients and
+  ``maxiter=max_iter`` from the best sample.
+
+Both keep each stroke's sign from its warm start and never return a plan worse than it.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+import scipy.optimize
+
+from ucat_console.control import mpc_kernels as K
+from ucat_console.control.cost import H, CostBreakdown, breakdown_from_terms, cost_terms
+from ucat_console.control.fin_model import ForceTable
+from ucat_console.control.params import MpcConfig
+
+#: allowed ranges of the planner's inputs (besides finiteness)
+MAX_TARGET_N = 100.0
+MAX_SPEED = 10.0
+MAX_ANGLE = 4.0 * math.pi
+MAX_RATE_PREV = 1000.0
+
+
+@dataclass(frozen=True)
+class Plan:
+    """One planned cycle of one fin."""
+
+    u: tuple[float, float, float, float]  # [d_1, d_2, w_1, w_2]
+    cost: CostBreakdown
+    commands: tuple[float, float, float, float]  # [theta_1, w_1, theta_2, w_2]
+    sample_time_s: float
+    refine_time_s: float
+    warm_start: tuple[float, float, float, float]
+    warm_start_cost: float
+
+    @property
+    def solve_time_s(self) -> float:
+        return self.sample_time_s + self.refine_time_s
+
+
+def _check_finite(name: str, value: float, lo: float, hi: float) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}: expected a number in [{lo}, {hi}], got {value!r}") from None
+    if not lo <= v <= hi:  # also false for NaN
+        raise ValueError(f"{name}: {value!r} is out of range; allowed: finite, in [{lo}, {hi}]")
+    return v
+
+
+def _check_vector(name: str, value: Sequence[float], n: int, lo: float, hi: float) -> tuple[float, ...]:
+    """A length-n vector of finite numbers in [lo, hi] (plain Python: this is on the
+    planner's hot path, where numpy's per-call overhead would dominate)."""
+    try:
+        out = tuple(_check_finite(f"{name}[{i}]", x, lo, hi) for i, x in enumerate(value))
+    except TypeError:
+        out = ()
+    if len(out) != n:
+        raise ValueError(f"{name}: expected shape ({n},), got {np.shape(value)}")
+    return out
+
+
+class FinMpc:
+    """Planner for one fin. Not thread-safe: give each planner thread its own instance."""
+
+    def __init__(self, config: MpcConfig | None = None, seed: int | None = None) -> None:
+        self.config = config or MpcConfig()
+        cfg = self.config
+        if cfg.force_model == "table":
+            table = (
+                ForceTable.load(cfg.table_path) if cfg.table_path else ForceTable.from_model(cfg)
+            )
+            if not table.covers(cfg):
+                raise ValueError(
+                    f"table_path: force table spans d [{table.d[0]}, {table.d[-1]}], "
+                    f"w [{table.w[0]}, {table.w[-1]}]; it must cover d in "
+                    f"[-{cfg.d_max}, {cfg.d_max}] and w in [{cfg.w_min}, {cfg.w_max}]"
+                )
+            self.table: ForceTable | None = table
+            self._gx, self._gy = table.stroke_frame()
+            axes = (table.d[0], table.d[1] - table.d[0], table.w[0], table.w[1] - table.w[0])
+            self._params = K.pack_params(cfg, axes)
+        else:
+            self.table = None
+            self._gx = self._gy = np.zeros((2, 2))
+            self._params = K.pack_params(cfg, None)
+        self._rng = np.zeros(1, dtype=np.uint64)
+        self._rng[0] = np.uint64(seed if seed is not None else 0x5EED)
+        self._best_u = np.zeros((cfg.refine_starts, 4))
+        self._best_j = np.zeros(cfg.refine_starts)
+        self._block = np.zeros((5, K.SAMPLE_BLOCK))
+        self._work = np.zeros((8, 4))
+        self._hinv = np.zeros((4, 4))
+        self._u = np.zeros(4)
+        self._terms = np.zeros(K.N_TERMS)
+        self._np_rng = np.random.default_rng(seed)
+
+    # ------------------------------------------------------------------ validation
+    def _inputs(self, f_target, v_body, theta0, u_prev) -> tuple[tuple, float, float, tuple]:
+        f = _check_vector("f_target", f_target, 2, -MAX_TARGET_N, MAX_TARGET_N)
+        v = _check_finite("v_body", v_body, -MAX_SPEED, MAX_SPEED)
+        th = _check_finite("theta0", theta0, -MAX_ANGLE, MAX_ANGLE)
+        up = _check_vector("u_prev", u_prev, 2 * H, -MAX_RATE_PREV, MAX_RATE_PREV)
+        return f, v, th, up
+
+    def cost(self, u, f_target, v_body, theta0, u_prev) -> CostBreakdown:
+        """J and its terms for plan ``u = [d_1, d_2, w_1, w_2]`` (the compiled cost)."""
+        f, v, th, up = self._inputs(f_target, v_body, theta0, u_prev)
+        cfg = self.config
+        uu = _check_vector("u", u, 2 * H, -cfg.d_max - 1e-12, cfg.w_max + 1e-12)
+        for k in range(H):
+            if not cfg.d_eps - 1e-12 <= abs(uu[k]) <= cfg.d_max + 1e-12:
+                raise ValueError(
+                    f"u[{k}] (d_{k + 1}): |{uu[k]}| outside [{cfg.d_eps}, {cfg.d_max}] rad"
+                )
+            if not cfg.w_min - 1e-12 <= uu[H + k] <= cfg.w_max + 1e-12:
+                raise ValueError(
+                    f"u[{H + k}] (w_{k + 1}): {uu[H + k]} outside [{cfg.w_min}, {cfg.w_max}] rad/s"
+                )
+        problem = K.pack_problem(f, v, th, up)
+        terms = np.zeros(K.N_TERMS)
+        K.cost_kernel(
+            self._params, problem, self._gx, self._gy, np.asarray(uu), np.zeros(4), terms
+        )
+        return _breakdown(terms)
+
+    def cost_gradient(self, u, f_target, v_body, theta0, u_prev) -> np.ndarray:
+        """Analytic (sub)gradient of J at ``u`` (compiled)."""
+        f, v, th, up = self._inputs(f_target, v_body, theta0, u_prev)
+        uu = np.asarray(u, dtype=float)
+        problem = K.pack_problem(f, v, th, up)
+        grad = np.zeros(4)
+        K.cost_kernel(self._params, problem, self._gx, self._gy, uu, grad, np.zeros(K.N_TERMS))
+        return grad
+
+    # ------------------------------------------------------------------ planning
+    def plan(self, f_target, v_body, theta0, u_prev, seed: int | None = None, refine: bool = True) -> Plan:
+        """Plan the next cycle from angle ``theta0`` (Algorithm 1).
+
+        ``seed`` makes this solve reproducible; without it the planner's own random
+        stream continues. ``refine=False`` runs stage 1 only.
+        """
+        f, v, th, up = self._inputs(f_target, v_body, theta0, u_prev)
+        if self.config.solver == "scipy":
+            return self._plan_scipy(f, v, th, up, seed, refine)
+        if seed is not None:
+            self._rng[0] = np.uint64(seed & 0xFFFFFFFFFFFFFFFF)
+        problem = K.pack_problem(f, v, th, up)
+        cfg = self.config
+        ns_sample, ns_refine = K.plan_kernel(
+            self._params, problem, self._gx, self._gy, cfg.n_samples,
+            cfg.max_iter if refine else 0, self._rng, self._best_u, self._best_j, self._block,
+            self._work, self._hinv, self._u, self._terms,
+        )
+        u = self._u.tolist()
+        if not all(map(math.isfinite, u)) or not math.isfinite(self._terms[K.T_TOTAL]):
+            raise FloatingPointError(f"planner produced a non-finite plan {u}")
+        return self._make_plan(
+            tuple(u), _breakdown(self._terms), th, ns_sample * 1e-9, ns_refine * 1e-9,
+            tuple(self._best_u[0].tolist()), float(self._best_j[0]),
+        )
+
+    def _plan_scipy(self, f, v, th, up, seed, refine) -> Plan:
+        cfg = self.config
+        rng = np.random.default_rng(seed) if seed is not None else self._np_rng
+        t0 = time.perf_counter()
+        n = cfg.n_samples
+        mag = rng.uniform(cfg.d_eps, cfg.d_max, size=(n, H))
+        w = rng.uniform(cfg.w_min, cfg.w_max, size=(n, H))
+        sign = np.where(rng.random(n) < 0.5, 1.0, -1.0)
+        d = np.stack([sign * mag[:, 0], -sign * mag[:, 1]], axis=1)
+        samples = np.concatenate([d, w], axis=1)
+        j = cost_terms(samples, f, v, th, up, cfg, self.table)["total"]
+        best = int(np.argmin(j))
+        u0 = samples[best]
+        j0 = float(j[best])
+        t1 = time.perf_counter()
+        u_best, j_best = u0, j0
+        if refine and cfg.max_iter > 0:
+            bounds = [
+                (cfg.d_eps, cfg.d_max) if u0[k] > 0 else (-cfg.d_max, -cfg.d_eps) for k in range(H)
+            ] + [(cfg.w_min, cfg.w_max)] * H
+
+            def fun(x: np.ndarray) -> float:
+                return float(cost_terms(x, f, v, th, up, cfg, self.table)["total"])
+
+            res = scipy.optimize.minimize(
+                fun, u0, method="L-BFGS-B", bounds=bounds, options={"maxiter": cfg.max_iter}
+            )
+            x = np.clip(res.x, [b[0] for b in bounds], [b[1] for b in bounds])
+            jx = fun(x)
+            if np.all(np.isfinite(x)) and jx < j0:
+                u_best, j_best = x, jx
+        t2 = time.perf_counter()
+        terms = cost_terms(u_best, f, v, th, up, cfg, self.table)
+        return self._make_plan(
+            tuple(float(x) for x in u_best), breakdown_from_terms(terms), th,
+            t1 - t0, t2 - t1, tuple(float(x) for x in u0), j0,
+        )
+
+    @staticmethod
+    def _make_plan(u, cost, theta0, t_sample, t_refine, warm, warm_cost) -> Plan:
+        theta1 = theta0 + u[0]
+        theta2 = theta1 + u[1]
+        return Plan(
+            u=u,
+            cost=cost,
+            commands=(theta1, u[2], theta2, u[3]),
+            sample_time_s=t_sample,
+            refine_time_s=t_refine,
+            warm_start=warm,
+            warm_start_cost=warm_cost,
+        )
+
+
+def _breakdown(terms: np.ndarray) -> CostBreakdown:
+    t = terms.tolist()
+    return CostBreakdown(
+        total=t[K.T_TOTAL],
+        force=t[K.T_FORCE],
+        strouhal_penalty=t[K.T_ST_PEN],
+        amplitude=t[K.T_AMP],
+        smoothness=t[K.T_DIFF],
+        st=t[K.T_ST],
+        mean_force=(t[K.T_FBX], t[K.T_FBY]),
+    )

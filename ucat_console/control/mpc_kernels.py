@@ -1,0 +1,569 @@
+"""Compiled MPC kernels: cost with analytic gradient, sampler, bounded quasi-Newton.
+
+Everything here is numba ``njit(cache=True)`` and allocation-free: the caller owns every
+work array (see :class:`ucat_console.control.mpc.FinMpc`). One call of :func:`plan_kernel`
+solves one fin's problem: stage 1 draws ``n`` admissible stroke pairs and keeps the best
+``k`` as warm starts; stage 2 refines each with a projected BFGS method on the
+sign-constrained box (each stroke keeps the sign of its warm start) and returns the best
+point found, never worse than the best sample.
+
+The cost uses the stroke-frame force g(d, w) = R(d/2) f^l(d, w) (see fin_model), so that
+f_1 = R(theta0) g(d_1, w_1) and f_2 = R(theta0) R(d_1) g(d_2, w_2).
+
+Random numbers come from splitmix64 (one uint64 of state), so a plan is reproducible
+from its seed on every machine.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+
+import numba
+import numpy as np
+from llvmlite import ir
+from numba.core import cgutils, types
+from numba.extending import intrinsic
+
+from ucat_console.control.params import MpcConfig
+
+# --- layout of the constant parameter vector -------------------------------------------
+P_LAM_F, P_LAM_ST, P_LAM_A, P_LAM_D = 0, 1, 2, 3
+P_Q, P_CL, P_CD, P_LF = 4, 5, 6, 7
+P_ST_OPT, P_ETA_MAX, P_VFLOOR, P_AMIN = 8, 9, 10, 11
+P_DEPS, P_DMAX, P_WMIN, P_WMAX = 12, 13, 14, 15
+P_TD0, P_THD, P_TW0, P_THW, P_MODE = 16, 17, 18, 19, 20
+N_PARAMS = 21
+MODE_ANALYTIC, MODE_TABLE = 0.0, 1.0
+
+# --- layout of the per-solve problem vector ---------------------------------------------
+Q_FX, Q_FY, Q_V, Q_C0, Q_S0 = 0, 1, 2, 3, 4
+Q_PREV = 5  # 5..8: u_prev
+N_PROBLEM = 9
+
+# --- layout of the terms output ---------------------------------------------------------
+T_TOTAL, T_FORCE, T_ST_PEN, T_AMP, T_DIFF, T_ST, T_FBX, T_FBY = range(8)
+N_TERMS = 8
+
+
+def pack_params(cfg: MpcConfig, table_axes: tuple[float, float, float, float] | None) -> tuple:
+    """The constant parameter vector of one MPC configuration.
+
+    Parameters travel as tuples, not arrays: compiled code then knows no store can
+    change them, which lets the sampler's loop be vectorised."""
+    p = np.zeros(N_PARAMS)
+    p[P_LAM_F], p[P_LAM_ST], p[P_LAM_A], p[P_LAM_D] = cfg.weights
+    p[P_Q] = 0.5 * cfg.rho * cfg.fin_area * cfg.r_c**2
+    p[P_CL], p[P_CD], p[P_LF] = cfg.c_l, cfg.c_d, cfg.fin_length
+    p[P_ST_OPT], p[P_ETA_MAX], p[P_VFLOOR], p[P_AMIN] = cfg.st_opt, cfg.eta_max, cfg.v_floor, cfg.a_min
+    p[P_DEPS], p[P_DMAX], p[P_WMIN], p[P_WMAX] = cfg.d_eps, cfg.d_max, cfg.w_min, cfg.w_max
+    if table_axes is None:
+        p[P_MODE] = MODE_ANALYTIC
+    else:
+        p[P_TD0], p[P_THD], p[P_TW0], p[P_THW] = table_axes
+        p[P_MODE] = MODE_TABLE
+    return tuple(p.tolist())
+
+
+def pack_problem(f_target, v_body: float, theta0: float, u_prev) -> tuple:
+    """The per-solve problem vector (a tuple, see :func:`pack_params`)."""
+    return (
+        float(f_target[0]), float(f_target[1]), float(v_body),
+        math.cos(theta0), math.sin(theta0),
+        float(u_prev[0]), float(u_prev[1]), float(u_prev[2]), float(u_prev[3]),
+    )
+
+
+if not sys.platform.startswith("linux"):  # pragma: no cover
+    raise ImportError("the compiled MPC kernels read CLOCK_MONOTONIC through Linux's clock_gettime")
+
+
+@intrinsic
+def monotonic_ns(typingctx):
+    """CLOCK_MONOTONIC in nanoseconds (the clock of time.perf_counter_ns on Linux),
+    read inside compiled code without leaving nopython mode."""
+
+    def codegen(context, builder, signature, args):
+        i32 = ir.IntType(32)
+        i64 = ir.IntType(64)
+        timespec = ir.LiteralStructType([i64, i64])
+        fnty = ir.FunctionType(i32, [i32, timespec.as_pointer()])
+        fn = cgutils.get_or_insert_function(builder.module, fnty, "clock_gettime")
+        ts = cgutils.alloca_once(builder, timespec)
+        builder.call(fn, [ir.Constant(i32, 1), ts])  # CLOCK_MONOTONIC
+        zero = ir.Constant(i32, 0)
+        sec = builder.load(builder.gep(ts, [zero, zero]))
+        nsec = builder.load(builder.gep(ts, [zero, ir.Constant(i32, 1)]))
+        return builder.add(builder.mul(sec, ir.Constant(i64, 1_000_000_000)), nsec)
+
+    return types.int64(), codegen
+
+
+_FAST = {"contract", "arcp", "nsz", "afn", "reassoc"}  # no "nnan"/"ninf": inf is a sentinel
+_jit = numba.njit(cache=True, nogil=True, error_model="numpy", fastmath=_FAST)
+_inline = numba.njit(cache=True, nogil=True, error_model="numpy", fastmath=_FAST, inline="always")
+
+
+# Polynomial sine/cosine and exponential. They are exact to ~1e-15 on the ranges used,
+# and unlike libm calls they let the sampler's inner loop run on SIMD lanes.
+_COS_C = np.array([(-1.0) ** k / math.factorial(2 * k) for k in range(11)])
+_SIN_C = np.array([(-1.0) ** k / math.factorial(2 * k + 1) for k in range(11)])
+_EXP_C = np.array([1.0 / math.factorial(k) for k in range(13)])
+_LN2_HI = 0.693145751953125
+_LN2_LO = 1.42860682030941723212e-6
+
+
+@intrinsic
+def _bits_to_float(typingctx, bits):
+    """Reinterpret an int64 as a float64 (IEEE-754 bit pattern)."""
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], ir.DoubleType())
+
+    return types.float64(types.int64), codegen
+
+
+@_inline
+def sincos(x):
+    """(sin x, cos x) for |x| <= pi: Taylor series of the half angle (|x/2| <= pi/2,
+    11 terms, truncation below 2e-17) and the double-angle formulas."""
+    h = 0.5 * x
+    h2 = h * h
+    c = _COS_C[10]
+    s = _SIN_C[10]
+    for k in range(9, -1, -1):
+        c = c * h2 + _COS_C[k]
+        s = s * h2 + _SIN_C[k]
+    s = s * h
+    return 2.0 * s * c, c * c - s * s
+
+
+@_inline
+def exp_neg(y):
+    """exp(y) for y <= 1 (smaller than 1e-300 returns 0): range reduction by ln 2 and a
+    degree-12 Taylor polynomial (relative error ~1e-15)."""
+    if y < -690.0:
+        y = -690.0
+    n = math.floor(y * 1.4426950408889634 + 0.5)
+    r = (y - n * _LN2_HI) - n * _LN2_LO
+    e = _EXP_C[12]
+    for k in range(11, -1, -1):
+        e = e * r + _EXP_C[k]
+    return e * _bits_to_float((np.int64(n) + np.int64(1023)) << np.int64(52))
+
+
+@_jit
+def _sgn(x):
+    if x > 0.0:
+        return 1.0
+    if x < 0.0:
+        return -1.0
+    return 0.0
+
+
+@_inline
+def stroke_force(p, gx_tab, gy_tab, d, w, cd, sd):
+    """Stroke-frame force g and its partial derivatives at (d, w).
+
+    ``cd, sd`` are cos d and sin d (shared with the caller). Returns
+    (gx, gy, dgx/dd, dgy/dd, dgx/dw, dgy/dw).
+    """
+    if p[P_MODE] == MODE_ANALYTIC:
+        qw2 = p[P_Q] * w * w
+        gx = -qw2 * p[P_CL] * cd
+        gy = -qw2 * (p[P_CL] * sd + p[P_CD])
+        return gx, gy, qw2 * p[P_CL] * sd, -qw2 * p[P_CL] * cd, 2.0 * gx / w, 2.0 * gy / w
+    nd = gx_tab.shape[0]
+    nw = gx_tab.shape[1]
+    hd = p[P_THD]
+    hw = p[P_THW]
+    fi = (d - p[P_TD0]) / hd
+    fj = (w - p[P_TW0]) / hw
+    if fi < 0.0:
+        fi = 0.0
+    if fi > nd - 1.000001:
+        fi = nd - 1.000001
+    if fj < 0.0:
+        fj = 0.0
+    if fj > nw - 1.000001:
+        fj = nw - 1.000001
+    i = int(fi)
+    j = int(fj)
+    td = fi - i
+    tw = fj - j
+    x00 = gx_tab[i, j]
+    x10 = gx_tab[i + 1, j]
+    x01 = gx_tab[i, j + 1]
+    x11 = gx_tab[i + 1, j + 1]
+    y00 = gy_tab[i, j]
+    y10 = gy_tab[i + 1, j]
+    y01 = gy_tab[i, j + 1]
+    y11 = gy_tab[i + 1, j + 1]
+    gx = (1 - td) * ((1 - tw) * x00 + tw * x01) + td * ((1 - tw) * x10 + tw * x11)
+    gy = (1 - td) * ((1 - tw) * y00 + tw * y01) + td * ((1 - tw) * y10 + tw * y11)
+    dgx_dd = ((1 - tw) * (x10 - x00) + tw * (x11 - x01)) / hd
+    dgy_dd = ((1 - tw) * (y10 - y00) + tw * (y11 - y01)) / hd
+    dgx_dw = ((1 - td) * (x01 - x00) + td * (x11 - x10)) / hw
+    dgy_dw = ((1 - td) * (y01 - y00) + td * (y11 - y10)) / hw
+    return gx, gy, dgx_dd, dgy_dd, dgx_dw, dgy_dw
+
+
+@_inline
+def cost_eval(p, q, gx_tab, gy_tab, d1, d2, w1, w2, want_grad):
+    """J at u = (d1, d2, w1, w2) as a tuple of scalars: (J, c_force, c_St, c_amp,
+    c_diff, St, f_bar_x, f_bar_y, dJ/dd1, dJ/dd2, dJ/dw1, dJ/dw2); the gradient is zero
+    unless ``want_grad``. Inlined, so a constant flag removes the gradient code and
+    unused terms cost nothing."""
+    a1 = abs(d1)
+    a2 = abs(d2)
+    s1 = _sgn(d1)
+    s2 = _sgn(d2)
+    sn1, c1 = sincos(d1)
+    sn2, c2 = sincos(d2)
+    g1x, g1y, g1x_d, g1y_d, g1x_w, g1y_w = stroke_force(p, gx_tab, gy_tab, d1, w1, c1, sn1)
+    g2x, g2y, g2x_d, g2y_d, g2x_w, g2y_w = stroke_force(p, gx_tab, gy_tab, d2, w2, c2, sn2)
+    # second stroke rotated by the first: h2 = R(d1) g2
+    h2x = c1 * g2x - sn1 * g2y
+    h2y = sn1 * g2x + c1 * g2y
+    dt1 = a1 / w1
+    dt2 = a2 / w2
+    T = dt1 + dt2
+    inv_t = 1.0 / T
+    mx = (dt1 * g1x + dt2 * h2x) * inv_t
+    my = (dt1 * g1y + dt2 * h2y) * inv_t
+    c0 = q[Q_C0]
+    s0 = q[Q_S0]
+    fbx = c0 * mx - s0 * my
+    fby = s0 * mx + c0 * my
+    ex = fbx - q[Q_FX]
+    ey = fby - q[Q_FY]
+    c_force = abs(ex) + abs(ey)
+    # Strouhal number: St = (a1 + a2) L_f / (2 T V)
+    v = q[Q_V]
+    if v < p[P_VFLOOR]:
+        v = p[P_VFLOOR]
+    kst = p[P_LF] / (2.0 * v)
+    ssum = a1 + a2
+    st = kst * ssum * inv_t
+    x = st / p[P_ST_OPT]
+    ex1 = exp_neg(1.0 - x)
+    eta = p[P_ETA_MAX] * x * ex1
+    c_st = p[P_ETA_MAX] - eta
+    st_active = c_st > 0.0
+    if not st_active:
+        c_st = 0.0
+    half_l = 0.5 * p[P_LF]
+    m1 = p[P_AMIN] - a1 * half_l
+    m2 = p[P_AMIN] - a2 * half_l
+    c_amp = 0.0
+    if m1 > 0.0:
+        c_amp += m1
+    if m2 > 0.0:
+        c_amp += m2
+    e_d1 = d1 - q[Q_PREV]
+    e_d2 = d2 - q[Q_PREV + 1]
+    e_w1 = w1 - q[Q_PREV + 2]
+    e_w2 = w2 - q[Q_PREV + 3]
+    c_diff = 0.5 * (abs(e_d1) + abs(e_d2) + abs(e_w1) + abs(e_w2))
+    lam_f = p[P_LAM_F]
+    lam_st = p[P_LAM_ST]
+    lam_a = p[P_LAM_A]
+    lam_d = p[P_LAM_D]
+    total = lam_f * c_force + lam_st * c_st + lam_a * c_amp + lam_d * c_diff
+    if not want_grad:
+        return total, c_force, c_st, c_amp, c_diff, st, fbx, fby, 0.0, 0.0, 0.0, 0.0
+    # --- gradient (sub-gradient at kinks: sign(0) = 0) ---------------------------------
+    sx = _sgn(ex) * lam_f
+    sy = _sgn(ey) * lam_f
+    # derivatives of dt_k and T
+    dt1_d = s1 / w1
+    dt1_w = -a1 / (w1 * w1)
+    dt2_d = s2 / w2
+    dt2_w = -a2 / (w2 * w2)
+    # n = dt1 g1 + dt2 h2 ; m = n / T ; dm = (dn - m dT) / T
+    # d/dd1: dt1_d g1 + dt1 g1_d + dt2 dh2/dd1, with dh2/dd1 = (-h2y, h2x)
+    n_x = dt1_d * g1x + dt1 * g1x_d - dt2 * h2y
+    n_y = dt1_d * g1y + dt1 * g1y_d + dt2 * h2x
+    m_x_d1 = (n_x - mx * dt1_d) * inv_t
+    m_y_d1 = (n_y - my * dt1_d) * inv_t
+    n_x = dt1_w * g1x + dt1 * g1x_w
+    n_y = dt1_w * g1y + dt1 * g1y_w
+    m_x_w1 = (n_x - mx * dt1_w) * inv_t
+    m_y_w1 = (n_y - my * dt1_w) * inv_t
+    r_x = c1 * g2x_d - sn1 * g2y_d
+    r_y = sn1 * g2x_d + c1 * g2y_d
+    n_x = dt2_d * h2x + dt2 * r_x
+    n_y = dt2_d * h2y + dt2 * r_y
+    m_x_d2 = (n_x - mx * dt2_d) * inv_t
+    m_y_d2 = (n_y - my * dt2_d) * inv_t
+    r_x = c1 * g2x_w - sn1 * g2y_w
+    r_y = sn1 * g2x_w + c1 * g2y_w
+    n_x = dt2_w * h2x + dt2 * r_x
+    n_y = dt2_w * h2y + dt2 * r_y
+    m_x_w2 = (n_x - mx * dt2_w) * inv_t
+    m_y_w2 = (n_y - my * dt2_w) * inv_t
+    # c_force through fbar = R(theta0) m: d c = sx (c0 dmx - s0 dmy) + sy (s0 dmx + c0 dmy)
+    kx = sx * c0 + sy * s0
+    ky = -sx * s0 + sy * c0
+    g_d1 = kx * m_x_d1 + ky * m_y_d1
+    g_w1 = kx * m_x_w1 + ky * m_y_w1
+    g_d2 = kx * m_x_d2 + ky * m_y_d2
+    g_w2 = kx * m_x_w2 + ky * m_y_w2
+    if st_active:
+        # dSt = kst (dS T - S dT) / T^2 ; dc_st/dSt = -eta_max e^{1-x} (1 - x) / St_opt
+        dc = -lam_st * p[P_ETA_MAX] * ex1 * (1.0 - x) / p[P_ST_OPT]
+        k = dc * kst * inv_t
+        g_d1 += k * (s1 - ssum * inv_t * dt1_d)
+        g_d2 += k * (s2 - ssum * inv_t * dt2_d)
+        g_w1 += k * (-ssum * inv_t * dt1_w)
+        g_w2 += k * (-ssum * inv_t * dt2_w)
+    if m1 > 0.0:
+        g_d1 -= lam_a * half_l * s1
+    if m2 > 0.0:
+        g_d2 -= lam_a * half_l * s2
+    hd = 0.5 * lam_d
+    return (
+        total, c_force, c_st, c_amp, c_diff, st, fbx, fby,
+        g_d1 + hd * _sgn(e_d1),
+        g_d2 + hd * _sgn(e_d2),
+        g_w1 + hd * _sgn(e_w1),
+        g_w2 + hd * _sgn(e_w2),
+    )
+
+
+@_inline
+def cost_grad(p, q, gx_tab, gy_tab, x, grad):
+    """J at x (len 4) with its gradient written to ``grad``."""
+    r = cost_eval(p, q, gx_tab, gy_tab, x[0], x[1], x[2], x[3], True)
+    grad[0] = r[8]
+    grad[1] = r[9]
+    grad[2] = r[10]
+    grad[3] = r[11]
+    return r[0]
+
+
+@_inline
+def write_terms(r, terms):
+    for i in range(N_TERMS):
+        terms[i] = r[i]
+
+
+@_jit
+def _rand(state):
+    """splitmix64: next uniform double in [0, 1)."""
+    z = state[0] + np.uint64(0x9E3779B97F4A7C15)
+    state[0] = z
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    z = z ^ (z >> np.uint64(31))
+    return float(np.int64(z >> np.uint64(11))) * (1.0 / 9007199254740992.0)
+
+
+SAMPLE_BLOCK = 64
+
+
+@_jit
+def sample_stage(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block):
+    """Stage 1: n admissible samples; keeps the best len(best_j) (sorted) in best_u.
+
+    Samples are drawn and costed in blocks of SAMPLE_BLOCK (``block`` is a (5, B)
+    scratch array) so that the cost loop runs on SIMD lanes."""
+    k = best_j.shape[0]
+    for i in range(k):
+        best_j[i] = np.inf
+    d_eps = p[P_DEPS]
+    d_span = p[P_DMAX] - d_eps
+    w_lo = p[P_WMIN]
+    w_span = p[P_WMAX] - w_lo
+    bd1 = block[0]
+    bd2 = block[1]
+    bw1 = block[2]
+    bw2 = block[3]
+    bj = block[4]
+    done = 0
+    while done < n:
+        m = min(block.shape[1], n - done)
+        done += m
+        for i in range(m):
+            a1 = d_eps + d_span * _rand(rng)
+            a2 = d_eps + d_span * _rand(rng)
+            bw1[i] = w_lo + w_span * _rand(rng)
+            bw2[i] = w_lo + w_span * _rand(rng)
+            if _rand(rng) < 0.5:
+                bd1[i] = a1
+                bd2[i] = -a2
+            else:
+                bd1[i] = -a1
+                bd2[i] = a2
+        for i in range(m):
+            bj[i] = cost_eval(p, q, gx_tab, gy_tab, bd1[i], bd2[i], bw1[i], bw2[i], False)[0]
+        for i in range(m):
+            j = bj[i]
+            if j < best_j[k - 1]:
+                pos = k - 1
+                while pos > 0 and best_j[pos - 1] > j:
+                    best_j[pos] = best_j[pos - 1]
+                    for c in range(4):
+                        best_u[pos, c] = best_u[pos - 1, c]
+                    pos -= 1
+                best_j[pos] = j
+                best_u[pos, 0] = bd1[i]
+                best_u[pos, 1] = bd2[i]
+                best_u[pos, 2] = bw1[i]
+                best_u[pos, 3] = bw2[i]
+
+
+@_jit
+def _box(p, x0, lo, hi):
+    """The sign-constrained box around a warm start."""
+    for k in range(2):
+        if x0[k] >= 0.0:
+            lo[k] = p[P_DEPS]
+            hi[k] = p[P_DMAX]
+        else:
+            lo[k] = -p[P_DMAX]
+            hi[k] = -p[P_DEPS]
+        lo[2 + k] = p[P_WMIN]
+        hi[2 + k] = p[P_WMAX]
+
+
+@_jit
+def refine(p, q, gx_tab, gy_tab, x, j0, max_iter, work, hinv):
+    """Stage 2: projected BFGS from x (updated in place) inside its sign box.
+
+    ``work`` is an (8, 4) scratch array (rows 0-6 used), ``hinv`` a (4, 4) one. Returns the final cost,
+    which is never above ``j0`` (the cost at the start)."""
+    lo = work[0]
+    hi = work[1]
+    g = work[2]
+    xn = work[3]
+    gn = work[4]
+    dirn = work[5]
+    yv = work[6]
+    _box(p, x, lo, hi)
+    j = cost_grad(p, q, gx_tab, gy_tab, x, g)
+    for a in range(4):
+        for b in range(4):
+            hinv[a, b] = 1.0 if a == b else 0.0
+    fresh = True
+    for _ in range(max_iter):
+        # free variables: not held at a bound by the gradient
+        slope = 0.0
+        for a in range(4):
+            dirn[a] = 0.0
+        for a in range(4):
+            if (x[a] <= lo[a] and g[a] > 0.0) or (x[a] >= hi[a] and g[a] < 0.0):
+                continue
+            acc = 0.0
+            for b in range(4):
+                if (x[b] <= lo[b] and g[b] > 0.0) or (x[b] >= hi[b] and g[b] < 0.0):
+                    continue
+                acc -= hinv[a, b] * g[b]
+            dirn[a] = acc
+            slope += acc * g[a]
+        if not slope < 0.0:
+            if fresh:
+                break
+            for a in range(4):
+                for b in range(4):
+                    hinv[a, b] = 1.0 if a == b else 0.0
+            fresh = True
+            continue
+        alpha = 1.0
+        accepted = False
+        jn = j
+        for _ls in range(30):
+            dec = 0.0
+            moved = False
+            for a in range(4):
+                v = x[a] + alpha * dirn[a]
+                if v < lo[a]:
+                    v = lo[a]
+                elif v > hi[a]:
+                    v = hi[a]
+                xn[a] = v
+                if v != x[a]:
+                    moved = True
+                dec += g[a] * (v - x[a])
+            if not moved:
+                break
+            jn = cost_grad(p, q, gx_tab, gy_tab, xn, gn)
+            if jn <= j + 1e-4 * dec and jn < j:
+                accepted = True
+                break
+            alpha *= 0.5
+        if not accepted:
+            if fresh:
+                break
+            for a in range(4):
+                for b in range(4):
+                    hinv[a, b] = 1.0 if a == b else 0.0
+            fresh = True
+            continue
+        # BFGS update of the inverse Hessian with s = xn - x, y = gn - g
+        sy = 0.0
+        for a in range(4):
+            dirn[a] = xn[a] - x[a]  # s
+            yv[a] = gn[a] - g[a]
+            sy += dirn[a] * yv[a]
+        improvement = j - jn
+        for a in range(4):
+            x[a] = xn[a]
+            g[a] = gn[a]
+        j = jn
+        fresh = False
+        if sy > 1e-12:
+            rho = 1.0 / sy
+            # hy = H y ; yhy = y' H y
+            yhy = 0.0
+            for a in range(4):
+                acc = 0.0
+                for b in range(4):
+                    acc += hinv[a, b] * yv[b]
+                xn[a] = acc  # reuse xn as hy
+            for a in range(4):
+                yhy += yv[a] * xn[a]
+            for a in range(4):
+                for b in range(4):
+                    hinv[a, b] += (
+                        -rho * (dirn[a] * xn[b] + xn[a] * dirn[b])
+                        + (rho * rho * yhy + rho) * dirn[a] * dirn[b]
+                    )
+        if improvement <= 1e-12 * (1.0 + abs(j)):
+            break
+    return j
+
+
+@_jit
+def plan_kernel(p, q, gx_tab, gy_tab, n, max_iter, rng, best_u, best_j, block, work, hinv, u_out, terms):
+    """One solve: sampling, refinement of the best len(best_j) samples, final terms.
+
+    Returns the durations of the two stages in nanoseconds.
+    """
+    t0 = monotonic_ns()
+    sample_stage(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block)
+    t_mid = monotonic_ns()
+    for c in range(4):
+        u_out[c] = best_u[0, c]
+    j_best = best_j[0]
+    if max_iter > 0:
+        x = work[7]
+        for s in range(best_j.shape[0]):
+            if not best_j[s] < np.inf:
+                break
+            for c in range(4):
+                x[c] = best_u[s, c]
+            j = refine(p, q, gx_tab, gy_tab, x, best_j[s], max_iter, work, hinv)
+            if j < j_best:
+                j_best = j
+                for c in range(4):
+                    u_out[c] = x[c]
+    write_terms(cost_eval(p, q, gx_tab, gy_tab, u_out[0], u_out[1], u_out[2], u_out[3], False), terms)
+    return t_mid - t0, monotonic_ns() - t_mid
+
+
+@_jit
+def cost_kernel(p, q, gx_tab, gy_tab, u, grad, terms):
+    """J, its gradient and its terms at one point (for callers outside the solver)."""
+    write_terms(cost_eval(p, q, gx_tab, gy_tab, u[0], u[1], u[2], u[3], False), terms)
+    return cost_grad(p, q, gx_tab, gy_tab, u, grad)
