@@ -12,7 +12,7 @@ import logging
 import sys
 
 #: sub-command modules under ucat_console.cli
-COMMANDS = ["bench"]
+COMMANDS = ["bench", "devices"]
 
 
 def build_parser() -> argparse.ArgumentParser:

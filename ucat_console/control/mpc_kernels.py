@@ -360,6 +360,8 @@ def _rand(state):
 
 
 SAMPLE_BLOCK = 64
+FTOL = 2.220446049250313e-09  # scipy's L-BFGS-B default factr * eps
+PGTOL = 1e-5
 
 
 @_jit
@@ -529,7 +531,20 @@ def refine(p, q, gx_tab, gy_tab, x, j0, max_iter, work, hinv):
                         -rho * (dirn[a] * xn[b] + xn[a] * dirn[b])
                         + (rho * rho * yhy + rho) * dirn[a] * dirn[b]
                     )
-        if improvement <= 1e-12 * (1.0 + abs(j)):
+        # scipy L-BFGS-B's default stopping rules: relative decrease below ftol,
+        # or projected gradient below pgtol
+        if improvement <= FTOL * max(abs(j), abs(j + improvement), 1.0):
+            break
+        pg = 0.0
+        for a in range(4):
+            v = x[a] - g[a]
+            if v < lo[a]:
+                v = lo[a]
+            elif v > hi[a]:
+                v = hi[a]
+            if abs(v - x[a]) > pg:
+                pg = abs(v - x[a])
+        if pg <= PGTOL:
             break
     return j
 

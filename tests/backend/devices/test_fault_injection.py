@@ -1,0 +1,69 @@
+"""The shared fault description: activation, expiry and clearing, on a fake clock."""
+
+from __future__ import annotations
+
+import pytest
+
+from ucat_console.backend.devices.faults import Fault, FaultSet, FaultSettings, as_fault
+from ucat_console.backend.devices.reporting import EventReporter
+
+
+class FakeClock:
+    def __init__(self) -> None:
+        self.now = 100.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def test_fault_expires_after_its_duration() -> None:
+    clock = FakeClock()
+    faults = FaultSet(clock)
+    faults.inject("silence", duration=2.0)
+    faults.inject(Fault.CORRUPT)
+    assert faults.snapshot() == {Fault.SILENCE, Fault.CORRUPT}
+    clock.now = 101.9
+    assert faults.active(Fault.SILENCE)
+    clock.now = 102.0
+    assert not faults.active("silence")
+    assert faults.active("corrupt")  # no duration: until cleared
+    faults.clear("corrupt")
+    assert faults.snapshot() == frozenset()
+
+
+def test_clear_all_and_bad_names() -> None:
+    faults = FaultSet(FakeClock())
+    faults.inject("slow")
+    faults.inject("invalid")
+    faults.clear()
+    assert not faults.snapshot()
+    with pytest.raises(ValueError, match="fault: 'melt'"):
+        as_fault("melt")
+    with pytest.raises(ValueError, match="duration"):
+        faults.inject("slow", duration=0.0)
+    with pytest.raises(ValueError, match="slow_delay_s"):
+        FaultSettings(slow_delay_s=-1.0)
+
+
+def test_reporter_throttles_and_reports_conditions_on_edges() -> None:
+    clock = FakeClock()
+    events = []
+    rep = EventReporter("imu", events.append, clock, min_interval_s=1.0)
+    assert rep.throttled("checksum", "bad")
+    assert not rep.throttled("checksum", "bad")
+    assert not rep.throttled("checksum", "bad")
+    clock.now += 1.0
+    assert rep.throttled("checksum", "bad")
+    assert events[-1].data["suppressed"] == 2 and events[-1].t == 101.0
+    rep.condition("silence", True, "quiet", "error")
+    rep.condition("silence", True, "quiet", "error")
+    rep.condition("silence", False, "back")
+    assert [e.code for e in events[2:]] == ["silence", "recovered"]
+    assert events[-1].data["fault"] == "silence" and events[-1].level == "info"
+
+
+def test_reporter_survives_a_failing_sink() -> None:
+    def broken(event):
+        raise RuntimeError("sink down")
+
+    EventReporter("dvl", broken, FakeClock()).emit("silence", "quiet")  # must not raise

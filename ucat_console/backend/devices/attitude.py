@@ -1,0 +1,283 @@
+"""Attitude from gyro and accelerometer: a small multiplicative quaternion EKF.
+
+Used when the IMU (the IMU-only 3DM-CX5) does not stream its own orientation. Pure
+functions on a frozen :class:`AttitudeState`; time is an argument, nothing here keeps a
+clock or a thread.
+
+Conventions (those of the 3DM-CX5): sensor frame x forward, y right, z down; world frame
+NED; ``q = (w, x, y, z)`` rotates sensor vectors into the world (``v_w = R(q) v_b``);
+Euler angles are ZYX (yaw, pitch, roll). The accelerometer measures specific force in g,
+so a level sensor at rest reads ``(0, 0, -1)``.
+
+Filter: nominal quaternion and gyro bias, error state ``[dtheta (sensor frame), dbias]``
+with a 6x6 covariance. Prediction integrates ``gyro - bias`` exactly for a constant rate
+over the step; the correction compares the measured specific-force direction with
+``R(q)^T (0, 0, -1)``. The correction is skipped while the vehicle accelerates (the norm
+of the specific force differs from 1 g by more than ``accel_gate``). Yaw is not
+observable from gravity: it follows the gyro alone, as in the paper's EKF without a
+magnetometer.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from ucat_console.backend.devices.readings import ImuReading
+from ucat_console.control.params import _Config
+from ucat_console.typedconf import param
+
+Quaternion = tuple[float, float, float, float]
+Vector3 = tuple[float, float, float]
+
+_GRAVITY_DIRECTION_NED = np.array([0.0, 0.0, -1.0])  # specific force at rest, in g
+
+
+@dataclass(frozen=True)
+class AttitudeConfig(_Config):
+    """Noise model and gates of the attitude EKF."""
+
+    gyro_noise: float = param(
+        0.003, lo=0.0, hi=1.0, lo_open=True, unit="rad/s/sqrt(Hz)", doc="gyro white-noise density"
+    )
+    gyro_bias_walk: float = param(
+        1e-4, lo=0.0, hi=0.1, unit="rad/s/sqrt(s)", doc="gyro bias random walk"
+    )
+    accel_noise: float = param(
+        0.03, lo=0.0, hi=1.0, lo_open=True, unit="g", doc="accelerometer noise per sample"
+    )
+    accel_gate: float = param(
+        0.15, lo=0.0, hi=2.0, lo_open=True, unit="g",
+        doc="skip the accel correction when | |a| - 1 g | exceeds this",
+    )
+    initial_attitude_std: float = param(
+        0.5, lo=0.0, hi=3.2, lo_open=True, unit="rad", doc="initial attitude uncertainty"
+    )
+    initial_bias_std: float = param(
+        0.02, lo=0.0, hi=1.0, unit="rad/s", doc="initial gyro bias uncertainty"
+    )
+    max_dt: float = param(
+        0.25, lo=0.0, hi=10.0, lo_open=True, unit="s",
+        doc="longer gaps between samples are not integrated (only the uncertainty grows)",
+    )
+
+
+@dataclass(frozen=True)
+class AttitudeState:
+    """Estimate at time ``t``: attitude, gyro bias and error covariance (6x6, read-only)."""
+
+    t: float
+    q: Quaternion
+    bias: Vector3
+    cov: np.ndarray = field(repr=False, compare=False)
+
+    @property
+    def euler(self) -> Vector3:
+        return euler_from_quaternion(self.q)
+
+    @property
+    def attitude_std(self) -> Vector3:
+        d = np.sqrt(np.clip(np.diag(self.cov)[:3], 0.0, None))
+        return (float(d[0]), float(d[1]), float(d[2]))
+
+
+# ---------------------------------------------------------------- quaternion helpers
+
+
+def quaternion_multiply(a: Sequence[float], b: Sequence[float]) -> Quaternion:
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return (
+        aw * bw - ax * bx - ay * by - az * bz,
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+    )
+
+
+def quaternion_normalize(q: Sequence[float]) -> Quaternion:
+    n = math.sqrt(sum(v * v for v in q))
+    if not n > 0.0 or not math.isfinite(n):
+        raise ValueError(f"quaternion {tuple(q)!r} cannot be normalised")
+    w, x, y, z = (v / n for v in q)
+    if w < 0.0:  # one sign for one rotation
+        w, x, y, z = -w, -x, -y, -z
+    return (w, x, y, z)
+
+
+def quaternion_from_rotation_vector(phi: Sequence[float]) -> Quaternion:
+    """``exp`` of a rotation vector (axis times angle, rad)."""
+    px, py, pz = (float(v) for v in phi)
+    angle = math.sqrt(px * px + py * py + pz * pz)
+    if angle < 1e-12:
+        return quaternion_normalize((1.0, 0.5 * px, 0.5 * py, 0.5 * pz))
+    s = math.sin(0.5 * angle) / angle
+    return (math.cos(0.5 * angle), s * px, s * py, s * pz)
+
+
+def rotation_matrix(q: Sequence[float]) -> np.ndarray:
+    """R(q): sensor to world."""
+    w, x, y, z = q
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def quaternion_from_euler(roll: float, pitch: float, yaw: float) -> Quaternion:
+    """ZYX Euler angles (rad) to a quaternion."""
+    cr, sr = math.cos(0.5 * roll), math.sin(0.5 * roll)
+    cp, sp = math.cos(0.5 * pitch), math.sin(0.5 * pitch)
+    cy, sy = math.cos(0.5 * yaw), math.sin(0.5 * yaw)
+    return quaternion_normalize(
+        (
+            cr * cp * cy + sr * sp * sy,
+            sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy,
+        )
+    )
+
+
+def euler_from_quaternion(q: Sequence[float]) -> Vector3:
+    """ZYX Euler angles (roll, pitch, yaw) in rad; yaw in (-pi, pi]."""
+    w, x, y, z = q
+    roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x))))
+    yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    return (roll, pitch, yaw)
+
+
+def tilt_from_accel(accel_g: Sequence[float]) -> tuple[float, float]:
+    """Roll and pitch (rad) of a sensor at rest from its specific force."""
+    fx, fy, fz = (float(v) for v in accel_g)
+    roll = math.atan2(-fy, -fz)
+    pitch = math.atan2(fx, math.hypot(fy, fz))
+    return roll, pitch
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    a = np.array(a, dtype=float)
+    a.setflags(write=False)
+    return a
+
+
+# ---------------------------------------------------------------- filter
+
+
+def initial_state(
+    t: float,
+    config: AttitudeConfig = AttitudeConfig(),
+    accel_g: Sequence[float] | None = None,
+    yaw: float = 0.0,
+) -> AttitudeState:
+    """Start at ``yaw``; level, or tilted as the accelerometer says when it is given."""
+    roll = pitch = 0.0
+    if accel_g is not None and all(math.isfinite(float(v)) for v in accel_g):
+        roll, pitch = tilt_from_accel(accel_g)
+    cov = np.diag(
+        [config.initial_attitude_std**2] * 3 + [config.initial_bias_std**2] * 3
+    )
+    return AttitudeState(float(t), quaternion_from_euler(roll, pitch, yaw), (0.0, 0.0, 0.0), _frozen(cov))
+
+
+def predict(
+    state: AttitudeState, t: float, gyro: Sequence[float], config: AttitudeConfig = AttitudeConfig()
+) -> AttitudeState:
+    """Propagate to time ``t`` with the rate ``gyro`` (rad/s) held over the step.
+
+    A step back in time is ignored; a gap longer than ``max_dt`` grows the uncertainty
+    without moving the estimate (the rate over the gap is unknown).
+    """
+    dt = float(t) - state.t
+    if not dt > 0.0:
+        return state
+    g = np.array([float(v) for v in gyro])
+    if not np.all(np.isfinite(g)):
+        raise ValueError(f"gyro: {tuple(gyro)!r} is not finite")
+    q_noise = config.gyro_noise**2 * dt
+    b_noise = config.gyro_bias_walk**2 * dt
+    Q = np.diag([q_noise] * 3 + [b_noise] * 3)
+    P = np.array(state.cov)
+    if dt > config.max_dt:
+        gap = np.diag([config.gyro_noise**2 * dt + (0.1 * dt) ** 2] * 3 + [b_noise] * 3)
+        return AttitudeState(float(t), state.q, state.bias, _frozen(P + gap))
+    w = g - np.array(state.bias)
+    phi = w * dt
+    q = quaternion_normalize(quaternion_multiply(state.q, quaternion_from_rotation_vector(phi)))
+    # error dynamics: d(dtheta)/dt = -[w x] dtheta - dbias
+    F = np.eye(6)
+    F[:3, :3] = rotation_matrix(quaternion_from_rotation_vector(phi)).T
+    F[:3, 3:] = -np.eye(3) * dt
+    P = F @ P @ F.T + Q
+    return AttitudeState(float(t), q, state.bias, _frozen(0.5 * (P + P.T)))
+
+
+def correct(
+    state: AttitudeState, accel_g: Sequence[float], config: AttitudeConfig = AttitudeConfig()
+) -> AttitudeState:
+    """Correct roll and pitch (and the gyro bias) with the specific-force direction."""
+    a = np.array([float(v) for v in accel_g])
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"accel: {tuple(accel_g)!r} is not finite")
+    norm = float(np.linalg.norm(a))
+    if abs(norm - 1.0) > config.accel_gate:
+        return state
+    z = a / norm
+    R = rotation_matrix(state.q)
+    h = R.T @ _GRAVITY_DIRECTION_NED
+    H = np.zeros((3, 6))
+    H[:, :3] = _skew(h)
+    P = np.array(state.cov)
+    Rn = np.eye(3) * config.accel_noise**2
+    S = H @ P @ H.T + Rn
+    K = np.linalg.solve(S, H @ P).T  # P H^T S^-1 (S and P symmetric)
+    dx = K @ (z - h)
+    q = quaternion_normalize(quaternion_multiply(state.q, quaternion_from_rotation_vector(dx[:3])))
+    bias = np.array(state.bias) + dx[3:]
+    I_KH = np.eye(6) - K @ H
+    P = I_KH @ P @ I_KH.T + K @ Rn @ K.T
+    return AttitudeState(
+        state.t, q, (float(bias[0]), float(bias[1]), float(bias[2])), _frozen(0.5 * (P + P.T))
+    )
+
+
+def step(
+    state: AttitudeState,
+    t: float,
+    accel_g: Sequence[float],
+    gyro: Sequence[float],
+    config: AttitudeConfig = AttitudeConfig(),
+) -> AttitudeState:
+    """One IMU sample: predict to ``t`` with ``gyro``, then correct with ``accel_g``."""
+    return correct(predict(state, t, gyro, config), accel_g, config)
+
+
+class AttitudeEstimator:
+    """Holds the state between samples; the first sample initialises the tilt."""
+
+    def __init__(self, config: AttitudeConfig = AttitudeConfig(), initial_yaw: float = 0.0) -> None:
+        self.config = config
+        self._yaw0 = initial_yaw
+        self.state: AttitudeState | None = None
+
+    def update(self, reading: ImuReading) -> AttitudeState:
+        if self.state is None:
+            self.state = initial_state(reading.t, self.config, reading.accel_g, self._yaw0)
+            return self.state
+        self.state = step(self.state, reading.t, reading.accel_g, reading.gyro, self.config)
+        return self.state
+
+    def reset(self, initial_yaw: float = 0.0) -> None:
+        self._yaw0 = initial_yaw
+        self.state = None

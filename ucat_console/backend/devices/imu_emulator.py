@@ -1,0 +1,306 @@
+"""A 3DM-CX5 on a pty: answers MIP commands and streams data set 0x80.
+
+The driver opens :attr:`ImuEmulator.port` (the pty's slave path) as it would open the
+real IMU. Commands answered as the device does, each with the ACK/NACK field
+``[0x04, 0xF1, command, code]``:
+
+* base set 0x01: ping 0x01, idle 0x02 (streaming pauses), resume 0x06;
+* 3DM set 0x0C: IMU base rate 0x06 (reply field 0x83, u16 Hz), IMU message format 0x08
+  (apply, read with reply field 0x80, save/load/default), enable stream 0x11;
+* anything else: NACK 0x01 (unknown command). Packets with a bad checksum are ignored.
+
+With ``orientation_supported=False`` it behaves as the IMU-only CX5: a message format
+naming quaternion 0x0A or Euler 0x0C is NACKed with 0x03 (invalid parameter) and the
+previous format stays.
+
+Samples come from ``source(t)`` (``t``: seconds since :meth:`start`), which returns an
+object with ``accel_g`` and ``gyro`` (and optionally ``quaternion``, ``euler``) such as
+:class:`ImuReading`, or None for "no sample now". A requested orientation field the truth
+does not carry is left out of the packet.
+
+Faults (:mod:`.faults`): ``silence`` sends nothing and answers nothing; ``corrupt`` breaks
+the checksum of outgoing packets and puts garbage bytes before them; ``invalid`` streams
+NaN accelerations; ``slow`` delays replies by ``slow_delay_s``.
+"""
+
+from __future__ import annotations
+
+import heapq
+import logging
+import math
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any, Callable
+
+from ucat_console.backend.devices import mip
+from ucat_console.backend.devices.faults import Fault, FaultInjectable, FaultSet, FaultSettings
+from ucat_console.backend.devices.pty_port import PtyPort
+from ucat_console.control.params import _Config
+from ucat_console.typedconf import param
+
+log = logging.getLogger(__name__)
+
+_GARBAGE = b"\x00\x75\xff\x13\x65"  # includes a lone sync byte, to exercise resynchronisation
+
+
+@dataclass(frozen=True)
+class ImuEmulatorConfig(_Config):
+    """Behaviour of the emulated 3DM-CX5."""
+
+    base_rate_hz: int = param(1000, lo=1, hi=4000, unit="Hz", doc="IMU data base rate")
+    orientation_supported: bool = param(
+        True, doc="False: the IMU-only CX5, which NACKs quaternion/Euler fields"
+    )
+    power_up_streaming: bool = param(
+        True, doc="stream accel + gyro at power-up (as a device with saved settings does)"
+    )
+    power_up_decimation: int = param(10, lo=1, hi=65535, doc="decimation of the power-up stream")
+    faults: FaultSettings = FaultSettings()
+
+
+class ImuEmulator(FaultInjectable):
+    """3DM-CX5 emulator over a pty pair; use as a context manager or start()/stop()."""
+
+    def __init__(
+        self,
+        source: Callable[[float], Any],
+        config: ImuEmulatorConfig = ImuEmulatorConfig(),
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.config = config
+        self._source = source
+        self._clock = clock
+        self.faults = FaultSet(clock)
+        self._pty = PtyPort()
+        self._parser = mip.MipStreamParser()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._t0 = 0.0
+        self._lock = threading.Lock()
+        self._pending: list[tuple[float, int, bytes]] = []  # delayed replies (due, seq, bytes)
+        self._seq = 0
+        self._sent = 0
+        # device state
+        self.idle = False
+        self.stream_enabled = bool(config.power_up_streaming)
+        self.message_format: tuple[int, ...] = (
+            (mip.FIELD_ACCEL, mip.FIELD_GYRO) if config.power_up_streaming else ()
+        )
+        self.decimation = config.power_up_decimation
+        self.commands: list[tuple[int, int]] = []  # (descriptor set, command) received
+
+    @property
+    def port(self) -> str:
+        """Serial port path for the driver."""
+        return self._pty.path
+
+    @property
+    def rate_hz(self) -> float:
+        return self.config.base_rate_hz / self.decimation
+
+    @property
+    def streaming(self) -> bool:
+        return self.stream_enabled and not self.idle and bool(self.message_format)
+
+    def start(self) -> "ImuEmulator":
+        if self._thread is not None:
+            return self
+        self._t0 = self._clock()
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name="imu-emulator", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+        self._pty.close()
+
+    def __enter__(self) -> "ImuEmulator":
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def send_raw(self, data: bytes) -> None:
+        """Put arbitrary bytes on the line (line noise, a foreign device)."""
+        self._pty.write(data)
+
+    # ------------------------------------------------------------ output
+
+    def _send(self, packet: bytes) -> None:
+        if self.faults.active(Fault.SILENCE):
+            return
+        self._sent += 1
+        if self.faults.active(Fault.CORRUPT) and self._sent % self.config.faults.corrupt_every == 0:
+            bad = bytearray(packet)
+            bad[-1] ^= 0x5A
+            packet = _GARBAGE + bytes(bad)
+        self._pty.write(packet)
+
+    def _reply(self, packet: bytes) -> None:
+        if self.faults.active(Fault.SLOW):
+            with self._lock:
+                self._seq += 1
+                heapq.heappush(
+                    self._pending, (self._clock() + self.config.faults.slow_delay_s, self._seq, packet)
+                )
+            return
+        self._send(packet)
+
+    # ------------------------------------------------------------ main loop
+
+    def _run(self) -> None:
+        next_sample = self._clock()
+        while not self._stop.is_set():
+            now = self._clock()
+            period = self.decimation / self.config.base_rate_hz
+            wait = 0.05
+            if self.streaming:
+                wait = min(wait, max(0.0, next_sample - now))
+            with self._lock:
+                if self._pending:
+                    wait = min(wait, max(0.0, self._pending[0][0] - now))
+            try:
+                if self._pty.wait_readable(wait):
+                    data = self._pty.read()
+                    if data:
+                        self._handle_input(data)
+                now = self._clock()
+                self._flush_pending(now)
+                if self.streaming:
+                    if now >= next_sample:
+                        self._stream_sample(now)
+                        next_sample += period
+                        if next_sample < now - period:  # fell behind: do not burst
+                            next_sample = now + period
+                else:
+                    next_sample = now
+            except OSError as e:
+                if self._stop.is_set():
+                    break
+                log.warning("imu emulator: pty error %s", e)
+                self._stop.wait(0.05)
+            except Exception:
+                log.exception("imu emulator: unexpected error")
+                self._stop.wait(0.05)
+
+    def _flush_pending(self, now: float) -> None:
+        due: list[bytes] = []
+        with self._lock:
+            while self._pending and self._pending[0][0] <= now:
+                due.append(heapq.heappop(self._pending)[2])
+        for packet in due:
+            self._send(packet)
+
+    def _stream_sample(self, now: float) -> None:
+        truth = self._source(now - self._t0)
+        if truth is None:
+            return
+        accel = tuple(getattr(truth, "accel_g"))
+        gyro = tuple(getattr(truth, "gyro"))
+        if self.faults.active(Fault.INVALID):
+            accel = (math.nan, math.nan, math.nan)
+        values = {
+            mip.FIELD_ACCEL: accel,
+            mip.FIELD_GYRO: gyro,
+            mip.FIELD_QUATERNION: getattr(truth, "quaternion", None),
+            mip.FIELD_EULER: getattr(truth, "euler", None),
+        }
+        fields = []
+        for d in self.message_format:
+            v = values.get(d)
+            if v is None:
+                continue
+            if d == mip.FIELD_QUATERNION:
+                fields.append(mip.quaternion_field(v))
+            else:
+                fields.append(mip.vector3_field(d, v))
+        if fields:
+            self._send(mip.build_packet(mip.SENSOR_SET, fields))
+
+    # ------------------------------------------------------------ commands
+
+    def _handle_input(self, data: bytes) -> None:
+        for item in self._parser.feed(data):
+            if isinstance(item, mip.ParseIssue):
+                continue  # the device ignores what it cannot read
+            if self.faults.active(Fault.SILENCE):
+                continue
+            for field in item.fields:
+                self._command(item.descriptor_set, field)
+
+    def _command(self, dset: int, field: mip.Field) -> None:
+        cmd = field.descriptor
+        self.commands.append((dset, cmd))
+        if dset == mip.BASE_SET:
+            if cmd == mip.CMD_PING:
+                self._reply(mip.reply(dset, cmd))
+            elif cmd == mip.CMD_IDLE:
+                self.idle = True
+                self._reply(mip.reply(dset, cmd))
+            elif cmd == mip.CMD_RESUME:
+                self.idle = False
+                self._reply(mip.reply(dset, cmd))
+            else:
+                self._reply(mip.reply(dset, cmd, mip.NACK_UNKNOWN_COMMAND))
+        elif dset == mip.SET_3DM:
+            if cmd == mip.CMD_IMU_BASE_RATE:
+                rate = mip.Field(mip.FIELD_IMU_BASE_RATE, self.config.base_rate_hz.to_bytes(2, "big"))
+                self._reply(mip.reply(dset, cmd, extra=[rate]))
+            elif cmd == mip.CMD_IMU_MESSAGE_FORMAT:
+                self._reply(mip.reply(dset, cmd, *self._message_format(field.data)))
+            elif cmd == mip.CMD_ENABLE_STREAM:
+                self._reply(mip.reply(dset, cmd, *self._enable_stream(field.data)))
+            else:
+                self._reply(mip.reply(dset, cmd, mip.NACK_UNKNOWN_COMMAND))
+        else:
+            self._reply(mip.reply(dset, cmd, mip.NACK_UNKNOWN_COMMAND))
+
+    def _message_format(self, data: bytes) -> tuple[int, list[mip.Field]]:
+        try:
+            function, entries = mip.decode_imu_message_format(data)
+        except mip.MipError:
+            return mip.NACK_INVALID_PARAM, []
+        if function == mip.FUNCTION_READ:
+            body = bytes((len(self.message_format),)) + b"".join(
+                bytes((d,)) + self.decimation.to_bytes(2, "big") for d in self.message_format
+            )
+            return mip.ACK_OK, [mip.Field(mip.FIELD_IMU_MESSAGE_FORMAT, body)]
+        if function in (mip.FUNCTION_SAVE, mip.FUNCTION_LOAD, mip.FUNCTION_DEFAULT):
+            return mip.ACK_OK, []
+        if function != mip.FUNCTION_APPLY:
+            return mip.NACK_INVALID_PARAM, []
+        supported = {mip.FIELD_ACCEL, mip.FIELD_GYRO, mip.FIELD_GPS_TIME}
+        if self.config.orientation_supported:
+            supported |= set(mip.ORIENTATION_FIELDS)
+        decimations = {r for _, r in entries}
+        if any(d not in supported for d, _ in entries) or any(r < 1 for r in decimations):
+            return mip.NACK_INVALID_PARAM, []
+        if len(decimations) > 1:  # the emulator streams all fields in one packet
+            return mip.NACK_INVALID_PARAM, []
+        self.message_format = tuple(d for d, _ in entries)
+        if decimations:
+            self.decimation = decimations.pop()
+        return mip.ACK_OK, []
+
+    def _enable_stream(self, data: bytes) -> tuple[int, list[mip.Field]]:
+        if len(data) < 2:
+            return mip.NACK_INVALID_PARAM, []
+        function, device = data[0], data[1]
+        if device not in (mip.STREAM_DEVICE_IMU, mip.SENSOR_SET):
+            return mip.NACK_INVALID_PARAM, []
+        if function == mip.FUNCTION_READ:
+            state = bytes((device, 1 if self.stream_enabled else 0))
+            return mip.ACK_OK, [mip.Field(mip.FIELD_STREAM_ENABLED, state)]
+        if function == mip.FUNCTION_APPLY:
+            if len(data) != 3:
+                return mip.NACK_INVALID_PARAM, []
+            self.stream_enabled = bool(data[2])
+            return mip.ACK_OK, []
+        if function in (mip.FUNCTION_SAVE, mip.FUNCTION_LOAD, mip.FUNCTION_DEFAULT):
+            return mip.ACK_OK, []
+        return mip.NACK_INVALID_PARAM, []

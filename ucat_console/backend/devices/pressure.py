@@ -1,0 +1,341 @@
+"""Gems 3101P pressure transducer (4-20 mA) read through a serial ADC; depth from pressure.
+
+ADC line format (one reading per line, ASCII)::
+
+    I=<current>mA\\r\\n        e.g.  I=12.345mA\\r\\n
+
+``<current>`` is the loop current in mA as a decimal number; ``\\n`` alone also ends a
+line. Anything else on a line is a malformed line.
+
+Conversions (one definition each, with their inverses for the emulator):
+
+* gauge pressure ``p = p_min + (I - 4 mA) / 16 mA * span``;
+* depth ``d = (p - p_surface) / (rho g)`` with ``g = 9.80665 m/s^2`` and ``rho``
+  configured (997 kg/m^3 fresh water, 1029 salt water).
+
+``p_surface`` starts at ``surface_pressure_pa`` and is set by :meth:`PressureDriver.zero`
+(zero-offset calibration at the surface: the mean pressure of the next readings).
+
+A current below ``loop_min_ma`` (3.8 mA) or above ``loop_max_ma`` (20.5 mA) means a
+broken or shorted loop: it is reported as a ``broken_loop`` Event (and ``recovered``
+when it ends) and never turned into a depth. Other Events (source ``"pressure"``):
+``malformed_line``, ``overlong_line``, ``silence``, ``port_error``, ``reconnected``,
+``zeroed``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import re
+import threading
+import time
+from dataclasses import dataclass
+from typing import Callable, Literal
+
+import serial
+
+from ucat_console.backend.devices.lines import LineSplitter, Overlong
+from ucat_console.backend.devices.readings import DepthReading
+from ucat_console.backend.devices.reporting import EventReporter
+from ucat_console.backend.devices.serial_link import BAUD_RATES, SERIAL_ERRORS, open_serial
+from ucat_console.control.params import _Config
+from ucat_console.telemetry.events import EventSink
+from ucat_console.typedconf import param
+
+log = logging.getLogger(__name__)
+
+SOURCE = "pressure"
+GRAVITY = 9.80665  # m/s^2, standard gravity
+LOOP_ZERO_MA = 4.0
+LOOP_SPAN_MA = 16.0
+RHO_FRESH = 997.0
+RHO_SALT = 1029.0
+
+_LINE = re.compile(rb"^\s*I=([+-]?(?:\d+(?:\.\d*)?|\.\d+))\s*mA\s*$")
+
+
+@dataclass(frozen=True)
+class PressureConfig(_Config):
+    """Serial ADC link, transducer scaling, water density and fault limits."""
+
+    port: str = param("/dev/ttyUSB0", doc="serial device of the ADC")
+    baud: int = param(115200, choices=BAUD_RATES, unit="baud", doc="serial line rate")
+    p_min_pa: float = param(0.0, lo=-1.0e5, hi=1.0e7, unit="Pa", doc="gauge pressure at 4 mA")
+    span_pa: float = param(
+        1.0e6, lo=0.0, hi=1.0e8, lo_open=True, unit="Pa", doc="pressure span from 4 to 20 mA"
+    )
+    rho: float = param(
+        RHO_FRESH, lo=900.0, hi=1100.0, unit="kg/m3", doc="water density (997 fresh, 1029 salt)"
+    )
+    surface_pressure_pa: float = param(
+        0.0, lo=-1.0e5, hi=1.0e7, unit="Pa", doc="gauge pressure at the surface until zeroed"
+    )
+    loop_min_ma: float = param(3.8, lo=0.0, hi=4.0, unit="mA", doc="lower current: broken loop")
+    loop_max_ma: float = param(20.5, lo=20.0, hi=30.0, unit="mA", doc="higher current: shorted loop")
+    zero_samples: int = param(20, lo=1, hi=10000, doc="readings averaged by the surface zeroing")
+    silence_timeout_s: float = param(
+        1.0, lo=0.01, hi=60.0, unit="s", doc="report silence after this long without a reading"
+    )
+    reopen_interval_s: float = param(
+        1.0, lo=0.05, hi=60.0, unit="s", doc="retry opening a failed port this often"
+    )
+    read_timeout_s: float = param(0.05, lo=0.001, hi=1.0, unit="s", doc="serial read timeout")
+
+
+# ---------------------------------------------------------------- conversions
+
+
+def current_to_pressure(current_ma: float, p_min_pa: float, span_pa: float) -> float:
+    """Gauge pressure (Pa) from loop current (mA)."""
+    return p_min_pa + (current_ma - LOOP_ZERO_MA) / LOOP_SPAN_MA * span_pa
+
+
+def pressure_to_current(pressure_pa: float, p_min_pa: float, span_pa: float) -> float:
+    """Loop current (mA) for a gauge pressure (Pa); inverse of :func:`current_to_pressure`."""
+    return LOOP_ZERO_MA + (pressure_pa - p_min_pa) / span_pa * LOOP_SPAN_MA
+
+
+def pressure_to_depth(pressure_pa: float, surface_pressure_pa: float, rho: float) -> float:
+    """Depth (m, positive down) below the zeroed surface."""
+    return (pressure_pa - surface_pressure_pa) / (rho * GRAVITY)
+
+
+def depth_to_pressure(depth_m: float, surface_pressure_pa: float, rho: float) -> float:
+    """Gauge pressure (Pa) at a depth; inverse of :func:`pressure_to_depth`."""
+    return surface_pressure_pa + depth_m * rho * GRAVITY
+
+
+class AdcLineError(ValueError):
+    """An ADC line that is not ``I=<number>mA``."""
+
+
+def parse_adc_line(line: bytes) -> float:
+    """Loop current (mA) from one line without its terminator."""
+    m = _LINE.match(line)
+    if m is None:
+        raise AdcLineError(f"ADC line {line[:40]!r} is not of the form I=<number>mA")
+    value = float(m.group(1))
+    if not math.isfinite(value):
+        raise AdcLineError(f"ADC line {line[:40]!r}: current is not finite")
+    return value
+
+
+def format_adc_line(current_ma: float) -> bytes:
+    """One ADC line for a current (what the ADC sends)."""
+    return f"I={current_ma:.4f}mA\r\n".encode()
+
+
+@dataclass(frozen=True)
+class AdcIssue:
+    kind: Literal["malformed_line", "overlong_line"]
+    detail: str
+
+
+class AdcLineParser:
+    """Incremental: ``feed(bytes)`` returns currents (mA) and :class:`AdcIssue`."""
+
+    def __init__(self, max_line_bytes: int = 256) -> None:
+        self._lines = LineSplitter(max_line_bytes)
+
+    def reset(self) -> None:
+        self._lines.reset()
+
+    def feed(self, data: bytes) -> list[float | AdcIssue]:
+        out: list[float | AdcIssue] = []
+        for line in self._lines.feed(data):
+            if isinstance(line, Overlong):
+                out.append(AdcIssue("overlong_line", f"line of more than {line.nbytes - 1} bytes dropped"))
+                continue
+            try:
+                out.append(parse_adc_line(line))
+            except AdcLineError as e:
+                out.append(AdcIssue("malformed_line", str(e)))
+        return out
+
+
+# ---------------------------------------------------------------- driver
+
+
+class PressureDriver:
+    """Reads the ADC, converts to depth and delivers :class:`DepthReading`."""
+
+    def __init__(
+        self,
+        config: PressureConfig,
+        on_reading: Callable[[DepthReading], None],
+        on_event: EventSink,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.config = config
+        self._on_reading = on_reading
+        self._clock = clock
+        self.events = EventReporter(SOURCE, on_event, clock)
+        self._parser = AdcLineParser()
+        self._serial: serial.Serial | None = None
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._surface = config.surface_pressure_pa
+        self._last_reading = 0.0
+        self._zero_samples: list[float] | None = None
+        self._zero_target = 0
+        self._zero_done = threading.Event()
+        self.readings = 0
+
+    # ------------------------------------------------------------ lifecycle
+
+    def start(self) -> bool:
+        """Open the port and start the reader; False (and an Event) when the port fails.
+
+        The reader keeps trying to open the port, so a late device is picked up.
+        """
+        if self._thread is not None:
+            raise RuntimeError("PressureDriver already started")
+        self._stop.clear()
+        opened = self._open()
+        self._last_reading = self._clock()
+        self._thread = threading.Thread(target=self._run, name="pressure-reader", daemon=True)
+        self._thread.start()
+        return opened
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+        self._close()
+
+    def __enter__(self) -> "PressureDriver":
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    @property
+    def surface_pressure_pa(self) -> float:
+        return self._surface
+
+    def set_surface_pressure(self, pressure_pa: float) -> None:
+        if not math.isfinite(pressure_pa):
+            raise ValueError(f"surface pressure: {pressure_pa!r} is not finite")
+        self._surface = float(pressure_pa)
+
+    def zero(self, samples: int | None = None, timeout_s: float = 5.0) -> float | None:
+        """Zero-offset calibration at the surface: mean pressure of the next readings.
+
+        Returns the new surface pressure, or None (and an Event) when not enough valid
+        readings arrive within ``timeout_s``; the old zero then stays.
+        """
+        n = self.config.zero_samples if samples is None else int(samples)
+        if n < 1:
+            raise ValueError(f"samples: {n!r} must be at least 1")
+        with self._lock:
+            self._zero_target = n
+            self._zero_samples = []
+            self._zero_done.clear()
+        finished = self._zero_done.wait(timeout_s)
+        with self._lock:
+            got, self._zero_samples = self._zero_samples or [], None
+        if not finished or len(got) < n:
+            self.events.emit(
+                "zero_failed", f"surface zeroing got {len(got)} of {n} readings in {timeout_s:g} s",
+                "warning",
+            )
+            return None
+        p = sum(got) / len(got)
+        self._surface = p
+        self.events.emit("zeroed", f"surface pressure set to {p:.1f} Pa", "info", surface_pressure_pa=p)
+        return p
+
+    # ------------------------------------------------------------ port
+
+    def _open(self) -> bool:
+        try:
+            ser = open_serial(self.config.port, self.config.baud, self.config.read_timeout_s)
+        except SERIAL_ERRORS as e:
+            self.events.throttled("port_error", f"cannot open {self.config.port}: {e}", "error")
+            return False
+        self._serial = ser
+        self._parser.reset()
+        return True
+
+    def _close(self) -> None:
+        ser, self._serial = self._serial, None
+        if ser is not None:
+            try:
+                ser.close()
+            except SERIAL_ERRORS:
+                pass
+
+    def _run(self) -> None:
+        next_open = 0.0
+        while not self._stop.is_set():
+            ser = self._serial
+            if ser is None:
+                now = self._clock()
+                if now >= next_open:
+                    next_open = now + self.config.reopen_interval_s
+                    if self._open():
+                        self.events.emit("reconnected", f"reopened {self.config.port}", "info")
+                        continue
+                self._stop.wait(0.05)
+                self._check_silence()
+                continue
+            try:
+                data = ser.read(max(1, ser.in_waiting))
+            except SERIAL_ERRORS as e:
+                self.events.emit("port_error", f"read from {self.config.port} failed: {e}", "error")
+                self._close()
+                next_open = self._clock() + self.config.reopen_interval_s
+                continue
+            if data:
+                try:
+                    self._handle(data)
+                except Exception:
+                    log.exception("pressure: unexpected error while handling input")
+                    self.events.throttled("internal_error", "unexpected error handling input", "error")
+            self._check_silence()
+
+    def _check_silence(self) -> None:
+        if self._clock() - self._last_reading > self.config.silence_timeout_s:
+            self.events.condition(
+                "silence", True, f"no ADC line for more than {self.config.silence_timeout_s:g} s",
+                "error", timeout_s=self.config.silence_timeout_s,
+            )
+
+    def _handle(self, data: bytes) -> None:
+        for item in self._parser.feed(data):
+            now = self._clock()
+            if isinstance(item, AdcIssue):
+                self.events.throttled(item.kind, item.detail)
+                continue
+            self._last_reading = now
+            if self.events.is_active("silence"):
+                self.events.condition("silence", False, "ADC lines arrive again")
+            self._current(item, now)
+
+    def _current(self, current_ma: float, now: float) -> None:
+        cfg = self.config
+        broken = not cfg.loop_min_ma <= current_ma <= cfg.loop_max_ma
+        self.events.condition(
+            "broken_loop", broken,
+            f"loop current {current_ma:.3f} mA outside [{cfg.loop_min_ma}, {cfg.loop_max_ma}] mA"
+            if broken else f"loop current back in range ({current_ma:.3f} mA)",
+            "error", current_ma=current_ma,
+        )
+        if broken:
+            return
+        p = current_to_pressure(current_ma, cfg.p_min_pa, cfg.span_pa)
+        with self._lock:
+            if self._zero_samples is not None and len(self._zero_samples) < self._zero_target:
+                self._zero_samples.append(p)
+                if len(self._zero_samples) >= self._zero_target:
+                    self._zero_done.set()
+        reading = DepthReading(t=now, depth_m=pressure_to_depth(p, self._surface, cfg.rho), pressure_pa=p)
+        self.readings += 1
+        try:
+            self._on_reading(reading)
+        except Exception:
+            log.exception("pressure: reading callback failed")

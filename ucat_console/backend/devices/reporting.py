@@ -1,0 +1,100 @@
+"""How a driver turns device faults into typed :class:`Event` messages.
+
+One :class:`EventReporter` per driver stamps events with the driver's clock and source
+name, limits repeated events of one code (a noisy line must not flood the stream; the next
+event carries how many were suppressed), reports lasting conditions (silence, broken
+loop) once when they start and once when they end, and never lets a failing sink stop the
+reader thread.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from typing import Any, Callable
+
+from ucat_console.telemetry.events import Event, EventSink
+
+log = logging.getLogger(__name__)
+
+_LOG_LEVELS = {
+    "debug": logging.DEBUG,
+    "info": logging.INFO,
+    "warning": logging.WARNING,
+    "error": logging.ERROR,
+    "fatal": logging.CRITICAL,
+}
+
+
+class EventReporter:
+    """Typed, timestamped, rate-limited events for one source (``"imu"``, ``"dvl"`` ...)."""
+
+    def __init__(
+        self,
+        source: str,
+        sink: EventSink,
+        clock: Callable[[], float],
+        min_interval_s: float = 1.0,
+    ) -> None:
+        self.source = source
+        self._log = logging.getLogger(f"ucat_console.backend.devices.{source}")
+        self._sink = sink
+        self._clock = clock
+        self._min_interval = float(min_interval_s)
+        self._lock = threading.Lock()
+        self._last: dict[str, float] = {}
+        self._suppressed: dict[str, int] = {}
+        self._conditions: set[str] = set()
+
+    def emit(self, code: str, message: str, level: str = "warning", /, **data: Any) -> Event:
+        """Send one event now."""
+        event = Event(
+            t=self._clock(), source=self.source, code=code, message=message, level=level,
+            data=dict(data),
+        )
+        self._log.log(_LOG_LEVELS.get(level, logging.WARNING), "%s: %s", code, message)
+        try:
+            self._sink(event)
+        except Exception:  # a broken sink must not stop a reader thread
+            log.exception("%s: event sink failed on %s", self.source, code)
+        return event
+
+    def throttled(self, code: str, message: str, level: str = "warning", /, **data: Any) -> bool:
+        """Send an event unless one of this code went out less than ``min_interval_s`` ago.
+
+        Returns True when the event was sent; suppressed events are counted and the count
+        travels with the next one as ``data["suppressed"]``.
+        """
+        now = self._clock()
+        with self._lock:
+            last = self._last.get(code)
+            if last is not None and now - last < self._min_interval:
+                self._suppressed[code] = self._suppressed.get(code, 0) + 1
+                return False
+            self._last[code] = now
+            suppressed = self._suppressed.pop(code, 0)
+        if suppressed:
+            data["suppressed"] = suppressed
+        self.emit(code, message, level, **data)
+        return True
+
+    def condition(
+        self, code: str, active: bool, message: str, level: str = "warning", /, **data: Any
+    ) -> None:
+        """Report a lasting condition on its edges: ``code`` when it starts, ``recovered`` when it ends."""
+        with self._lock:
+            was = code in self._conditions
+            if active == was:
+                return
+            if active:
+                self._conditions.add(code)
+            else:
+                self._conditions.discard(code)
+        if active:
+            self.emit(code, message, level, **data)
+        else:
+            self.emit("recovered", message, "info", fault=code, **data)
+
+    def is_active(self, code: str) -> bool:
+        with self._lock:
+            return code in self._conditions

@@ -1,0 +1,84 @@
+"""``ucat-console bench mpc``: Table IV of the paper, for the compiled solver and the
+scipy reference on the same protocol, plus fixed-case quality and first-call latency."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    bench = sub.add_parser("bench", help="benchmarks (figures for the README)")
+    kinds = bench.add_subparsers(dest="bench", required=True, metavar="BENCH")
+    p = kinds.add_parser("mpc", help="MPC solve time and cost, numba vs scipy (Table IV)")
+    p.add_argument("--n", type=int, nargs="+", default=None, metavar="N",
+                   help="sample counts (default: the paper's 250 500 1000 1500 2000 5000)")
+    p.add_argument("--solvers", nargs="+", choices=("numba", "scipy"), default=["numba", "scipy"])
+    p.add_argument("--stages", nargs="+", choices=("sampling", "two_stage"),
+                   default=["sampling", "two_stage"])
+    p.add_argument("--seed", type=int, default=0, help="planner seed of every run")
+    p.add_argument("--cpu", type=int, default=None, help="CPU to pin to (default: the last one)")
+    p.add_argument("--gap-cases", type=int, default=40,
+                   help="fixed cases for the quality gap (0: skip)")
+    p.add_argument("--no-first-call", action="store_true", help="skip the first-call latency")
+    p.add_argument("--json", type=Path, default=None, help="write the results as JSON")
+    p.set_defaults(func=run_mpc)
+
+
+def run_mpc(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from ucat_console.bench import mpc as B
+    from ucat_console.bench.machine import machine_info, pin_to_one_core
+    from ucat_console.control import FinMpc, MpcConfig
+
+    ns = args.n or list(B.PAPER_NS)
+    for n in ns:
+        if n < 1:
+            raise ValueError(f"--n: {n} must be at least 1")
+    if args.gap_cases < 0:
+        raise ValueError(f"--gap-cases: {args.gap_cases} must be >= 0")
+    if args.json is not None and not args.json.parent.exists():
+        raise ValueError(f"--json: directory {args.json.parent} does not exist")
+    cpu = pin_to_one_core(args.cpu)
+    base = MpcConfig()
+    # compile / load every kernel before timing anything
+    for solver in args.solvers:
+        FinMpc(base.replace(solver=solver)).plan((-0.5, 0.5), 0.3, 0.0, B.U_PREV0)
+    first_call = {} if args.no_first_call else B.first_call_latency()
+
+    runs = []
+    total = len(ns) * len(args.solvers) * len(args.stages) * 121 * B.CYCLES
+    with tqdm(total=total, desc="bench mpc", unit="solve", file=sys.stderr) as bar:
+        for n in ns:
+            for solver in args.solvers:
+                for stage in args.stages:
+                    cfg = base.replace(n_samples=n, solver=solver)
+                    res = B.run_protocol(cfg, refine=stage == "two_stage", seed=args.seed,
+                                         on_solve=lambda: bar.update())
+                    runs.append(res.row())
+    gap = {}
+    if args.gap_cases:
+        cases = B.fixed_cases(args.gap_cases)
+        gap = B.quality_gap(
+            {f"{s}_n{base.n_samples}": base.replace(solver=s) for s in args.solvers}, cases
+        )
+
+    print(B.format_table(runs))
+    if first_call:
+        print(f"\nfirst plan in a fresh process: {first_call['cached_first_plan_s'] * 1e3:.0f} ms "
+              f"with the compiled cache, {first_call['cold_first_plan_s']:.1f} s cold (compiling)")
+    if gap:
+        print(f"\nfixed cases ({args.gap_cases} cases x 3 seeds), cost above the exhaustive best:")
+        for name, g in gap.items():
+            print(f"  {name:>12}: mean {g['mean_gap']:.4f}  p90 {g['p90_gap']:.4f}  "
+                  f"max {g['max_gap']:.4f}")
+    if args.json:
+        doc = {"runs": runs, "machine": machine_info(cpu), "first_call": first_call,
+               "quality_gap": gap, "protocol": {"v_body": B.V_BODY, "cycles": B.CYCLES,
+                                                "targets": 121, "u_prev0": B.U_PREV0}}
+        args.json.write_text(json.dumps(doc, indent=2))
+        print(f"\nwrote {args.json}")
+    return 0
