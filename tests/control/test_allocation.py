@@ -122,13 +122,14 @@ def test_depth_sign_and_front_lift():
     ctl = BodyController(body_cfg())
     ctl.on_depth(DepthReading(t=0.0, depth_m=1.95, pressure_pa=0.0))
     cmd = ctl.update(0.0, BodySetpoints(depth=2.0))
-    # too shallow by 0.05 m: F_y* = +5 * 0.05 = 0.25, half on each front fin
-    assert cmd.fy == pytest.approx(0.25)
+    # too shallow by 0.05 m: the default asks for a downward force (f_y > 0 lifts):
+    # F_y* = -5 * 0.05 = -0.25, half on each front fin
+    assert cmd.fy == pytest.approx(-0.25)
     fins = cmd.allocation.per_fin()
-    assert fins[0][1] == fins[1][1] == pytest.approx(0.125)
-    flipped = BodyController(body_cfg(depth_sign=-1.0))
+    assert fins[0][1] == fins[1][1] == pytest.approx(-0.125)
+    flipped = BodyController(body_cfg(depth_sign=1.0))
     flipped.on_depth(DepthReading(t=0.0, depth_m=1.95, pressure_pa=0.0))
-    assert flipped.update(0.0, BodySetpoints(depth=2.0)).fy == pytest.approx(-0.25)
+    assert flipped.update(0.0, BodySetpoints(depth=2.0)).fy == pytest.approx(0.25)
 
 
 def test_yaw_rate_command_turns_to_starboard():

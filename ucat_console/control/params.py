@@ -118,8 +118,8 @@ class BodyConfig(_Config):
     yaw_rate: PidGains = PidGains(kp=3.0, ki=0.2, kd=0.0, limit=0.5)
     median_window: int = param(5, lo=1, hi=101, doc="median filter length for DVL and depth")
     depth_sign: float = param(
-        1.0, choices=(1.0, -1.0),
-        doc="sign from depth error to front-fin f_y (+1: positive f_y drives the hull down)",
+        -1.0, choices=(1.0, -1.0),
+        doc="F_y* = depth_sign * PID(depth error); -1 because a positive f_y lifts the hull",
     )
 
 

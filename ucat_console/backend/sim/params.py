@@ -1,0 +1,299 @@
+"""Parameters of the simulated U-CAT (plant.md): the plant's own, never read by the controller.
+
+One frozen dataclass per block, nested under :class:`PlantConfig`. Defaults come from the
+TalTech eeUVsim U-CAT model (plant.md table) unless a field's doc says otherwise.
+
+Frames and conventions (kept by every module of ``backend/sim``):
+
+* World frame NED (x north, y east, z down). Body frame FRD (x forward, y starboard,
+  z down), Fossen's convention. Attitude is the unit quaternion (w, x, y, z) rotating body
+  vectors into NED.
+* The plant's fins are numbered front-right 0, back-right 1, back-left 2, front-left 3
+  (:data:`FIN_NAMES`). The paper's allocation numbers its fins so that 0 and 1 are the front
+  pair; :data:`PAPER_TO_PLANT_FIN` maps them: paper 0 -> FR 0, paper 1 -> FL 3,
+  paper 2 -> BR 1, paper 3 -> BL 2.
+* Each fin works in its own 2-D plane (the controller's fin model, control.md section 1):
+  ``x_m`` is horizontal, pointing to the body's rear at the mounting angle alpha from the
+  body's -x axis (towards the inside for the front fins, the outside for the rear fins, as
+  in eeUVsim's surge/sway maps); ``y_m`` is vertical, pointing up (towards the surface).
+  Forward propulsion is ``f_x < 0``; ``f_y > 0`` is an upward force. A model force
+  (f_x, f_y) acts on the body as (-f_x cos(alpha), s_y f_x sin(alpha), -f_y) with s_y from
+  :func:`fin_signs`; alpha = 0 gives exactly (-f_x, 0, -f_y).
+* Fin angle theta = 0 is the fin's neutral (horizontal) position; theta > 0 turns the fin
+  from ``x_m`` towards ``y_m`` (tip up).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from ucat_console.backend.devices.pressure import GRAVITY
+from ucat_console.control.params import _Config
+from ucat_console.typedconf import param
+
+#: Standard gravity (m/s2), the project's one value (the pressure driver's): weight,
+#: pressure and the IMU's g unit all use it.
+STANDARD_GRAVITY = GRAVITY
+
+#: Plant fin order.
+FIN_NAMES: tuple[str, str, str, str] = ("front_right", "back_right", "back_left", "front_left")
+N_FINS = 4
+
+#: Plant fin index for each of the paper's allocation indices 0..3 (paper 0, 1 = front pair).
+PAPER_TO_PLANT_FIN: tuple[int, int, int, int] = (0, 3, 1, 2)
+
+#: Names of the fin coefficient sets (see :class:`FinHydroConfig`).
+COEFFICIENT_SETS = ("paper", "eeuvsim", "soft_fin", "custom")
+WAKE_OPTIONS = ("quasi_steady", "strouhal_wake")
+
+
+def _check_vec3(name: str, value: tuple[float, ...]) -> None:
+    if len(value) != 3 or not all(
+        isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value
+    ):
+        raise ValueError(f"{name}: expected three finite numbers, got {value!r}")
+
+
+@dataclass(frozen=True)
+class VehicleConfig(_Config):
+    """Rigid body and hull hydrodynamics (Fossen), plant.md 'Vehicle'.
+
+    Inertias are about the centre of gravity (the CAD values); the dynamics move them to the
+    body origin (the centre of buoyancy) with the parallel-axis theorem. Added-mass and
+    damping coefficients use Fossen's signs (negative: resistive). The centre of gravity is
+    given in the FRD body frame, z down: eeUVsim lists (0, 0, -0.1) m with restoring terms
+    of the opposite sign to Fossen's, i.e. its CG lies 0.1 m *below* the CB; here that is
+    (0, 0, +0.1).
+    """
+
+    mass: float = param(22.0, lo=0.0, hi=500.0, lo_open=True, unit="kg", doc="dry mass (paper Table II)")
+    ixx: float = param(0.1574, lo=0.0, hi=100.0, lo_open=True, unit="kg m2", doc="roll inertia about the CG")
+    iyy: float = param(0.66, lo=0.0, hi=100.0, lo_open=True, unit="kg m2", doc="pitch inertia about the CG")
+    izz: float = param(0.70, lo=0.0, hi=100.0, lo_open=True, unit="kg m2", doc="yaw inertia about the CG")
+    x_udot: float = param(-40.0, lo=-1000.0, hi=0.0, unit="kg", doc="added mass X_u'")
+    y_vdot: float = param(-21.0, lo=-1000.0, hi=0.0, unit="kg", doc="added mass Y_v'")
+    z_wdot: float = param(-2.0, lo=-1000.0, hi=0.0, unit="kg", doc="added mass Z_w'")
+    k_pdot: float = param(-0.1269, lo=-100.0, hi=0.0, unit="kg m2", doc="added inertia K_p'")
+    m_qdot: float = param(-1.2052, lo=-100.0, hi=0.0, unit="kg m2", doc="added inertia M_q'")
+    n_rdot: float = param(-2.3064, lo=-100.0, hi=0.0, unit="kg m2", doc="added inertia N_r'")
+    x_u: float = param(-6.542, lo=-1000.0, hi=0.0, unit="N s/m", doc="linear surge damping X_u")
+    y_v: float = param(-100.7, lo=-1000.0, hi=0.0, unit="N s/m", doc="linear sway damping Y_v")
+    z_w: float = param(-30.61, lo=-1000.0, hi=0.0, unit="N s/m", doc="linear heave damping Z_w")
+    k_p: float = param(0.0, lo=-100.0, hi=0.0, unit="N m s", doc="linear roll damping K_p")
+    m_q: float = param(0.0, lo=-100.0, hi=0.0, unit="N m s", doc="linear pitch damping M_q")
+    n_r: float = param(-0.313, lo=-100.0, hi=0.0, unit="N m s", doc="linear yaw damping N_r")
+    x_uu: float = param(-2.98, lo=-1000.0, hi=0.0, unit="N s2/m2", doc="quadratic surge damping X_uu")
+    y_vv: float = param(-260.0, lo=-1000.0, hi=0.0, unit="N s2/m2", doc="quadratic sway damping Y_vv")
+    z_ww: float = param(-161.0, lo=-1000.0, hi=0.0, unit="N s2/m2", doc="quadratic heave damping Z_ww")
+    k_pp: float = param(-3.4244, lo=-100.0, hi=0.0, unit="N m s2", doc="quadratic roll damping K_pp")
+    m_qq: float = param(-2.1014, lo=-100.0, hi=0.0, unit="N m s2", doc="quadratic pitch damping M_qq")
+    n_rr: float = param(-0.7226, lo=-100.0, hi=0.0, unit="N m s2", doc="quadratic yaw damping N_rr")
+    cg: tuple[float, float, float] = param((0.0, 0.0, 0.1), unit="m", doc="centre of gravity, body FRD")
+    cb: tuple[float, float, float] = param((0.0, 0.0, 0.0), unit="m", doc="centre of buoyancy, body FRD")
+    buoyancy_ratio: float = param(
+        1.0, lo=0.5, hi=1.5, doc="buoyancy / weight (1.0: neutral, the default)"
+    )
+    current_ned: tuple[float, float, float] = param(
+        (0.0, 0.0, 0.0), unit="m/s", doc="constant water current, world NED"
+    )
+    disturbance_ned: tuple[float, float, float] = param(
+        (0.0, 0.0, 0.0), unit="N", doc="constant disturbance force at the body origin, world NED"
+    )
+    hull_size: tuple[float, float, float] = param(
+        (0.57, 0.30, 0.25), unit="m", doc="hull box length, width, height (3-D view only)"
+    )
+
+    def _check(self) -> None:
+        for name in ("cg", "cb", "current_ned", "disturbance_ned", "hull_size"):
+            _check_vec3(name, getattr(self, name))
+        if min(self.hull_size) <= 0.0:
+            raise ValueError(f"hull_size: sizes must be positive, got {self.hull_size!r}")
+
+
+@dataclass(frozen=True)
+class FinGeometryConfig(_Config):
+    """Where the fins' forces act (eeUVsim ``finDynamics``): mounting angle and moment arms.
+
+    Roll and pitch moments come from each fin's vertical force times the roll/pitch arm,
+    the yaw moment from its horizontal in-plane force times the yaw arm (the perpendicular
+    distance of that force's line of action from the body origin).
+    """
+
+    mounting_angle_deg: float = param(
+        30.0, lo=0.0, hi=89.0, unit="deg", doc="fin plane's horizontal axis from the body x axis"
+    )
+    arm_roll: float = param(0.1502, lo=0.0, hi=2.0, unit="m", doc="roll moment arm of the vertical force")
+    arm_pitch: float = param(0.25753, lo=0.0, hi=2.0, unit="m", doc="pitch moment arm of the vertical force")
+    arm_yaw: float = param(0.2981, lo=0.0, hi=2.0, unit="m", doc="yaw moment arm of the horizontal force")
+    fin_inertia: float = param(
+        2.8e-5, lo=0.0, hi=1.0, unit="kg m2", doc="fin inertia about its axis (true shaft power)"
+    )
+
+
+@dataclass(frozen=True)
+class FinCoefficients(_Config):
+    """One quasi-steady coefficient set: v = r_c |w|, D = rho C_D A v^2 / 2, L = rho C_L A v^2 / 2."""
+
+    rho: float = param(1000.0, lo=1.0, hi=2000.0, lo_open=True, unit="kg/m3", doc="water density")
+    c_d: float = param(0.70, lo=0.0, hi=20.0, doc="drag coefficient C_D")
+    c_l: float = param(0.25, lo=0.0, hi=20.0, doc="lift coefficient C_L")
+    area: float = param(0.020, lo=0.0, hi=1.0, lo_open=True, unit="m2", doc="fin planform area A_f")
+    r_c: float = param(0.10, lo=0.0, hi=2.0, lo_open=True, unit="m", doc="radius of gyration r_c")
+    fin_length: float = param(0.10, lo=0.0, hi=2.0, lo_open=True, unit="m", doc="fin length L_f (Strouhal)")
+    thrust_gain: float = param(
+        1.0, lo=0.0, hi=100.0, lo_open=True, doc="thrust multiplier over the quasi-steady model"
+    )
+
+
+#: The paper's coefficients (its Table I), as the controller uses them.
+PAPER_COEFFICIENTS = FinCoefficients()
+#: eeUVsim's lift/drag values (model-mismatch case). A_f and r_c are not part of that set;
+#: the paper's values are kept so only the coefficients, the length and rho differ.
+EEUVSIM_COEFFICIENTS = FinCoefficients(rho=997.0, c_d=3.2, c_l=1.65, fin_length=0.18)
+#: Soft fins for the ``strouhal_wake`` plant: the paper's coefficients with a thrust gain of
+#: 4.6, fixed before any run; the check and the literature behind it are in the module
+#: docstring of ``ucat_console.backend.sim.fin_hydro``.
+SOFT_FIN_COEFFICIENTS = FinCoefficients(thrust_gain=4.6)
+
+_PRESETS = {
+    "paper": PAPER_COEFFICIENTS,
+    "eeuvsim": EEUVSIM_COEFFICIENTS,
+    "soft_fin": SOFT_FIN_COEFFICIENTS,
+}
+
+
+@dataclass(frozen=True)
+class FinHydroConfig(_Config):
+    """Fin hydrodynamics in the plant (plant.md): coefficient set and wake option.
+
+    The wake factor (``strouhal_wake``) is a split Gaussian in the fin's current Strouhal
+    number with a floor; see :func:`ucat_console.backend.sim.fin_hydro.wake_factor`.
+    """
+
+    coefficients: str = param("soft_fin", choices=COEFFICIENT_SETS, doc="fin coefficient set")
+    custom: FinCoefficients = FinCoefficients()
+    wake: str = param("strouhal_wake", choices=WAKE_OPTIONS, doc="wake option")
+    st_peak: float = param(0.30, lo=0.25, hi=0.35, doc="Strouhal number of the wake factor's peak")
+    sigma_low: float = param(0.08, lo=0.005, hi=1.0, doc="width of the wake factor below the peak")
+    sigma_high: float = param(0.20, lo=0.005, hi=2.0, doc="width of the wake factor above the peak")
+    floor: float = param(0.25, lo=0.0, hi=1.0, doc="wake factor far from the peak")
+    v_floor: float = param(0.05, lo=0.001, hi=5.0, unit="m/s", doc="speed floor for the fin's Strouhal number")
+    tau_rate: float = param(
+        0.3, lo=0.001, hi=10.0, unit="s", doc="time constant of the fin's mean |rate| (wake memory)"
+    )
+
+    def _check(self) -> None:
+        if not self.sigma_low < self.sigma_high:
+            raise ValueError(
+                "sigma_low/sigma_high: the wake factor must fall faster below its peak than "
+                f"above (sigma_low < sigma_high), got {self.sigma_low} >= {self.sigma_high}"
+            )
+
+    def resolved(self) -> FinCoefficients:
+        """The coefficient set in use."""
+        return self.custom if self.coefficients == "custom" else _PRESETS[self.coefficients]
+
+
+@dataclass(frozen=True)
+class ServoConfig(_Config):
+    """Fin servos in profile-position mode, as an EPOS2 runs them."""
+
+    acceleration: float = param(
+        64.0, lo=0.0, hi=10000.0, lo_open=True, unit="rad/s2", doc="profile acceleration = deceleration"
+    )
+    max_rate: float = param(10.0, lo=0.0, hi=200.0, lo_open=True, unit="rad/s", doc="maximum fin rate")
+    encoder_lines: int = param(
+        512, lo=1, hi=1_000_000, unit="lines/turn", doc="encoder lines per motor turn (quadcounts = 4 x lines)"
+    )
+    gear_ratio: float = param(
+        35.0, lo=1.0, hi=10000.0, doc="motor turns per fin turn (assumed; not in the sources)"
+    )
+    feedback_rate: float = param(100.0, lo=1.0, hi=1000.0, unit="Hz", doc="encoder feedback (PDO) rate")
+
+
+@dataclass(frozen=True)
+class DvlConfig(_Config):
+    """Water Linked DVL A50: bottom-track velocity in the body frame."""
+
+    rate: float = param(8.0, lo=2.0, hi=15.0, unit="Hz", doc="velocity report rate")
+    noise_std: float = param(0.005, lo=0.0, hi=1.0, unit="m/s", doc="velocity noise per axis")
+    dropout_probability: float = param(0.01, lo=0.0, hi=1.0, doc="chance a report is invalid in range")
+    altitude_min: float = param(0.05, lo=0.0, hi=100.0, unit="m", doc="shortest valid altitude")
+    altitude_max: float = param(50.0, lo=0.0, hi=1000.0, unit="m", doc="longest valid altitude")
+    bottom_depth: float = param(
+        10.0, lo=0.0, hi=10000.0, unit="m", doc="depth of the flat bottom (the paper's pool: 1.65)"
+    )
+
+    def _check(self) -> None:
+        if not self.altitude_min < self.altitude_max:
+            raise ValueError(
+                f"altitude_min/altitude_max: need min < max, got {self.altitude_min} >= {self.altitude_max}"
+            )
+
+
+@dataclass(frozen=True)
+class PressureConfig(_Config):
+    """Gems 3101P 4-20 mA transducer read by an ADC (gauge pressure, zero at the surface)."""
+
+    rate: float = param(20.0, lo=1.0, hi=1000.0, unit="Hz", doc="ADC reading rate")
+    water_density: float = param(997.0, lo=900.0, hi=1100.0, unit="kg/m3", doc="true water density")
+    span_pa: float = param(250_000.0, lo=1000.0, hi=1e8, unit="Pa", doc="gauge pressure at 20 mA")
+    noise_std_pa: float = param(20.0, lo=0.0, hi=1e5, unit="Pa", doc="transducer noise")
+    adc_bits: int = param(16, lo=4, hi=32, doc="ADC resolution")
+    adc_full_scale_ma: float = param(25.0, lo=20.0, hi=100.0, unit="mA", doc="ADC full-scale current")
+
+
+@dataclass(frozen=True)
+class ImuConfig(_Config):
+    """Microstrain 3DM-CX5: gyro, accelerometer (in g) and attitude."""
+
+    rate: float = param(100.0, lo=1.0, hi=1000.0, unit="Hz", doc="sample rate")
+    gyro_noise_std: float = param(0.001, lo=0.0, hi=1.0, unit="rad/s", doc="gyro white noise")
+    gyro_bias_std: float = param(0.0005, lo=0.0, hi=1.0, unit="rad/s", doc="spread of the constant gyro bias")
+    accel_noise_std: float = param(0.001, lo=0.0, hi=1.0, unit="g", doc="accelerometer white noise")
+    accel_bias_std: float = param(0.002, lo=0.0, hi=1.0, unit="g", doc="spread of the constant accel bias")
+    attitude_noise_std: float = param(0.002, lo=0.0, hi=1.0, unit="rad", doc="attitude noise per axis")
+
+
+@dataclass(frozen=True)
+class SensorsConfig(_Config):
+    dvl: DvlConfig = DvlConfig()
+    pressure: PressureConfig = PressureConfig()
+    imu: ImuConfig = ImuConfig()
+
+
+@dataclass(frozen=True)
+class PlantConfig(_Config):
+    """The simulated U-CAT."""
+
+    vehicle: VehicleConfig = VehicleConfig()
+    fins: FinGeometryConfig = FinGeometryConfig()
+    hydro: FinHydroConfig = FinHydroConfig()
+    servo: ServoConfig = ServoConfig()
+    sensors: SensorsConfig = SensorsConfig()
+    dt: float = param(0.001, lo=1e-5, hi=0.001, unit="s", doc="physics time step (1 kHz or finer)")
+    seed: int = param(0, lo=0, hi=2**63 - 1, doc="seed of the sensor noise")
+
+
+def fin_signs(fin: int) -> tuple[float, float, float]:
+    """(s_lat, s_long, s_y) of a plant fin: +1 starboard / +1 front / lateral sign of x_m.
+
+    x_m = (-cos(alpha), s_y sin(alpha), 0) in the body frame; s_y = -s_lat * s_long, so the
+    front fins' x_m points inwards and the rear fins' outwards.
+    """
+    if fin not in range(N_FINS):
+        raise ValueError(f"fin: {fin!r} is not a plant fin index 0..3")
+    s_lat = (1.0, 1.0, -1.0, -1.0)[fin]
+    s_long = (1.0, -1.0, -1.0, 1.0)[fin]
+    return s_lat, s_long, -s_lat * s_long
+
+
+def fin_plane_axes(geometry: FinGeometryConfig, fin: int) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """Body-frame unit vectors (x_m, y_m) of a fin's working plane (for the 3-D view).
+
+    The fin's chord direction at angle theta is cos(theta) x_m + sin(theta) y_m.
+    """
+    _, _, s_y = fin_signs(fin)
+    a = math.radians(geometry.mounting_angle_deg)
+    return (-math.cos(a), s_y * math.sin(a), 0.0), (0.0, 0.0, -1.0)

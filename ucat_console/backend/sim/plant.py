@@ -1,0 +1,367 @@
+"""The simulated U-CAT: four fin servos, fin hydrodynamics, the 6-DOF hull and its sensors.
+
+:class:`Plant` is the imperative shell the closed loop and the device emulators drive; under
+it, :func:`advance_steps` is the functional core: one compiled call runs many physics steps
+(state arrays in, state arrays out, nothing allocated in the loop). Each step:
+
+1. every fin servo moves one step along its profile (``servo``), the fin's stroke start,
+   mean |rate| and true shaft power are updated;
+2. each fin's force follows from its angle and rate (``fin_hydro``) and adds its wrench;
+3. the hull takes one semi-implicit Euler step (``vehicle``).
+
+The plant never reads the controller's parameters; it has its own (``params``).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time as _time
+
+import numpy as np
+from numba import njit
+
+from ucat_console.backend.sim.fin_hydro import (
+    H_CD,
+    H_RC,
+    H_RHO,
+    H_AREA,
+    H_TAU,
+    add_fin_wrench,
+    fin_force,
+    fin_sign_table,
+    fin_strouhal,
+    hydro_params,
+)
+from ucat_console.backend.sim.params import N_FINS, PlantConfig
+from ucat_console.backend.sim.sensors import Reading, SensorSuite
+from ucat_console.backend.sim.servo import encoder_reading, servo_step
+from ucat_console.backend.sim.vehicle import (
+    NU,
+    NWORK,
+    NX,
+    POS,
+    QUAT,
+    body_current,
+    euler_to_quat,
+    initial_state,
+    quat_to_euler,
+    quat_to_rot,
+    vehicle_matrices,
+    vehicle_params,
+    vehicle_step,
+)
+
+log = logging.getLogger(__name__)
+
+# fin state layout: one row per fin
+F_THETA = 0  # angle (rad)
+F_OMEGA = 1  # rate (rad/s)
+F_THETA_START = 2  # angle where the current stroke began
+F_RATE_MEAN = 3  # filtered |rate| (Strouhal)
+F_FX = 4  # last fin-frame force f_x (N)
+F_FY = 5  # last fin-frame force f_y (N)
+F_ST = 6  # last Strouhal number
+F_THRUST_FACTOR = 7  # last thrust factor (gain x wake)
+F_ALPHA = 8  # last angular acceleration (rad/s2)
+F_POWER = 9  # last true shaft power (W), no regeneration
+F_ENERGY = 10  # shaft energy since reset (J)
+NF = 11
+
+# command layout: one row per fin
+C_TARGET = 0
+C_PROFILE_VELOCITY = 1
+
+
+@njit(cache=True)
+def advance_steps(
+    xv_in: np.ndarray,
+    xf_in: np.ndarray,
+    cmd: np.ndarray,
+    mrb: np.ndarray,
+    ma: np.ndarray,
+    minv: np.ndarray,
+    pv: np.ndarray,
+    ph: np.ndarray,
+    signs: np.ndarray,
+    acceleration: float,
+    max_rate: float,
+    fin_inertia: float,
+    dt: float,
+    n_steps: int,
+    xv_out: np.ndarray,
+    xf_out: np.ndarray,
+) -> bool:
+    """Run ``n_steps`` physics steps from (xv_in, xf_in) into (xv_out, xf_out).
+
+    The outputs may be the inputs themselves (the Plant steps in place). ``cmd`` holds each
+    fin's target angle and profile velocity, held over the call. Returns False when the
+    vehicle state is no longer finite.
+    """
+    for j in range(xv_in.shape[0]):
+        xv_out[j] = xv_in[j]
+    for i in range(xf_in.shape[0]):
+        for j in range(xf_in.shape[1]):
+            xf_out[i, j] = xf_in[i, j]
+    r = np.empty((3, 3))
+    work = np.empty(NWORK)
+    tau = np.empty(6)
+    nuc = np.empty(3)
+    k_rate = dt / ph[H_TAU]
+    k_drag = 0.5 * ph[H_RHO] * ph[H_CD] * ph[H_AREA] * ph[H_RC] ** 3
+    for _ in range(n_steps):
+        # 1. servos, stroke tracking, mean |rate|, shaft power
+        for i in range(4):
+            th0 = xf_out[i, F_THETA]
+            om0 = xf_out[i, F_OMEGA]
+            th, om, al = servo_step(
+                th0, om0, cmd[i, C_TARGET], cmd[i, C_PROFILE_VELOCITY], acceleration, max_rate, dt
+            )
+            xf_out[i, F_THETA] = th
+            xf_out[i, F_OMEGA] = om
+            xf_out[i, F_ALPHA] = al
+            if om == 0.0 or om * om0 < 0.0:
+                xf_out[i, F_THETA_START] = th
+            xf_out[i, F_RATE_MEAN] += (abs(om) - xf_out[i, F_RATE_MEAN]) * k_rate
+            p = fin_inertia * al * om + k_drag * abs(om) ** 3
+            if p < 0.0:
+                p = 0.0
+            xf_out[i, F_POWER] = p
+            xf_out[i, F_ENERGY] += p * dt
+        # 2. fin forces -> body wrench
+        quat_to_rot(xv_out[QUAT : QUAT + 4], r)
+        body_current(r, pv, nuc)
+        surge_rel = xv_out[NU] - nuc[0]
+        for j in range(6):
+            tau[j] = 0.0
+        for i in range(4):
+            st = fin_strouhal(xf_out[i, F_RATE_MEAN], surge_rel, ph)
+            fx, fy, scale = fin_force(
+                xf_out[i, F_THETA], xf_out[i, F_OMEGA], xf_out[i, F_THETA_START], st, ph
+            )
+            xf_out[i, F_FX] = fx
+            xf_out[i, F_FY] = fy
+            xf_out[i, F_ST] = st
+            xf_out[i, F_THRUST_FACTOR] = scale
+            add_fin_wrench(fx, fy, signs[i, 0], signs[i, 1], signs[i, 2], ph, tau)
+        # 3. hull
+        vehicle_step(xv_out, tau, mrb, ma, minv, pv, dt, r, work)
+    total = 0.0
+    for j in range(xv_out.shape[0]):
+        total += xv_out[j]
+    return math.isfinite(total)
+
+
+def _finite(name: str, values: tuple[float, ...] | list[float], n: int) -> tuple[float, ...]:
+    try:
+        out = tuple(float(v) for v in values)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}: expected {n} numbers, got {values!r}") from None
+    if len(out) != n or not all(math.isfinite(v) for v in out):
+        raise ValueError(f"{name}: expected {n} finite numbers, got {values!r}")
+    return out
+
+
+class Plant:
+    """The simulated U-CAT (plant.md). Deterministic for a given configuration and seed."""
+
+    def __init__(self, cfg: PlantConfig | None = None) -> None:
+        self._cfg = cfg if cfg is not None else PlantConfig()
+        c = self._cfg
+        self._mrb, self._ma, self._minv = vehicle_matrices(c.vehicle)
+        self._tau_ext = (0.0,) * 6
+        self._pv = vehicle_params(c.vehicle, self._tau_ext)
+        self._ph = hydro_params(c.hydro, c.fins)
+        self._signs = fin_sign_table()
+        self._acc = float(c.servo.acceleration)
+        self._max_rate = float(c.servo.max_rate)
+        self._fin_inertia = float(c.fins.fin_inertia)
+        self._sensors = SensorSuite(c.sensors, c.servo, c.seed)
+        self._xv = np.zeros(NX)
+        self._xf = np.zeros((N_FINS, NF))
+        self._cmd = np.zeros((N_FINS, 2))
+        self._steps = 0
+        self._t_goal = 0.0
+        self.reset()
+
+    # ------------------------------------------------------------------ setup
+    @property
+    def cfg(self) -> PlantConfig:
+        return self._cfg
+
+    @property
+    def time(self) -> float:
+        """Simulated time (s) since the last reset: a whole number of physics steps."""
+        return self._steps * self._cfg.dt
+
+    def reset(
+        self,
+        position_ned: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        euler: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        quaternion: tuple[float, float, float, float] | None = None,
+        body_velocity: tuple[float, ...] = (0.0,) * 6,
+        fin_angles: tuple[float, ...] = (0.0,) * N_FINS,
+        seed: int | None = None,
+    ) -> None:
+        """Start again at time 0: pose, body velocity, fins at rest holding ``fin_angles``.
+
+        The sensor noise restarts from ``seed`` (default: the configured seed); the extra body
+        wrench of :meth:`set_body_wrench` is kept.
+        """
+        if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
+            raise ValueError(f"seed: expected a non-negative integer, got {seed!r}")
+        if quaternion is None:
+            r, p, y = _finite("euler", euler, 3)
+            quaternion = euler_to_quat(r, p, y)
+        self._xv[:] = initial_state(position_ned, quaternion, body_velocity)
+        angles = _finite("fin_angles", fin_angles, N_FINS)
+        self._xf[:, :] = 0.0
+        self._xf[:, F_THETA] = angles
+        self._xf[:, F_THETA_START] = angles
+        self._cmd[:, C_TARGET] = angles
+        self._cmd[:, C_PROFILE_VELOCITY] = self._cfg.servo.max_rate
+        self._steps = 0
+        self._t_goal = 0.0
+        self._sensors.reset(self._cfg.seed if seed is None else seed)
+
+    # --------------------------------------------------------------- commands
+    def command_fin(self, i: int, target_rad: float, profile_velocity_rad_s: float) -> None:
+        """New profile-position set-point for fin ``i`` (acts at once, as 'change set immediately')."""
+        if not isinstance(i, (int, np.integer)) or not 0 <= i < N_FINS:
+            raise ValueError(f"fin: {i!r} is not a plant fin index 0..3")
+        if not math.isfinite(target_rad):
+            raise ValueError(f"target_rad: fin {i} target must be finite, got {target_rad!r}")
+        if not math.isfinite(profile_velocity_rad_s) or profile_velocity_rad_s <= 0.0:
+            raise ValueError(
+                f"profile_velocity_rad_s: fin {i} needs a positive finite profile velocity, "
+                f"got {profile_velocity_rad_s!r}"
+            )
+        v = min(profile_velocity_rad_s, self._cfg.servo.max_rate)
+        if v < profile_velocity_rad_s:
+            log.debug("fin %d: profile velocity %.3f clipped to %.3f rad/s", i, profile_velocity_rad_s, v)
+        self._cmd[i, C_TARGET] = target_rad
+        self._cmd[i, C_PROFILE_VELOCITY] = v
+
+    def set_body_wrench(
+        self, force: tuple[float, float, float] = (0.0, 0.0, 0.0), moment: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    ) -> None:
+        """A constant extra wrench at the body origin, body frame (tests and experiments)."""
+        self._tau_ext = _finite("force", force, 3) + _finite("moment", moment, 3)
+        self._pv = vehicle_params(self._cfg.vehicle, self._tau_ext)
+
+    # ---------------------------------------------------------------- stepping
+    def advance(self, duration_s: float) -> None:
+        """Run the physics for ``duration_s``: whole steps, the remainder carries over to the
+        next call, so the simulated time is the sum of the durations rounded down to a step."""
+        if not math.isfinite(duration_s) or duration_s < 0.0:
+            raise ValueError(f"duration_s: expected a finite non-negative duration, got {duration_s!r}")
+        self._t_goal += duration_s
+        self._run(math.floor((self._t_goal - self.time) / self._cfg.dt + 1e-6))
+
+    def advance_to(self, t: float) -> None:
+        """Run whole steps up to the first step at or after time ``t`` (e.g. the next sensor time)."""
+        if not math.isfinite(t):
+            raise ValueError(f"t: expected a finite time, got {t!r}")
+        self._run(math.ceil((t - self.time) / self._cfg.dt - 1e-6))
+        self._t_goal = self.time
+
+    def _run(self, n: int) -> None:
+        if n <= 0:
+            return
+        dt = self._cfg.dt
+        ok = advance_steps(
+            self._xv, self._xf, self._cmd, self._mrb, self._ma, self._minv, self._pv, self._ph,
+            self._signs, self._acc, self._max_rate, self._fin_inertia, dt, n, self._xv, self._xf,
+        )
+        self._steps += n
+        if not ok:
+            raise FloatingPointError(f"plant state diverged at t={self.time:.3f} s: {self._xv!r}")
+
+    # ----------------------------------------------------------------- sensors
+    def sample_sensors(self, t: float | None = None) -> list[Reading]:
+        """Readings due at ``t`` (default: plant time), sampled from the present state."""
+        return self._sensors.sample(
+            self.time if t is None else t, self._xv, self._xf[:, F_THETA], self._xf[:, F_OMEGA]
+        )
+
+    def next_sensor_time(self) -> float:
+        """When the next sensor sample is due (advance to it for exact sensor rates)."""
+        return self._sensors.next_due()
+
+    def fin_feedback(self, i: int) -> tuple[float, float]:
+        """Fin ``i``'s encoder angle and rate, quantised as the EPOS2 reports them."""
+        if not 0 <= i < N_FINS:
+            raise ValueError(f"fin: {i!r} is not a plant fin index 0..3")
+        return encoder_reading(float(self._xf[i, F_THETA]), float(self._xf[i, F_OMEGA]), self._cfg.servo)
+
+    # -------------------------------------------------------------- true state
+    def pose(self) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
+        """(position NED, quaternion w,x,y,z body->NED) for the 3-D view."""
+        p = self._xv[POS : POS + 3]
+        q = self._xv[QUAT : QUAT + 4]
+        return (float(p[0]), float(p[1]), float(p[2])), (float(q[0]), float(q[1]), float(q[2]), float(q[3]))
+
+    def euler(self) -> tuple[float, float, float]:
+        """Roll, pitch, yaw (rad, ZYX)."""
+        return quat_to_euler(self._xv[QUAT : QUAT + 4])
+
+    def body_velocity(self) -> tuple[float, float, float, float, float, float]:
+        """(u, v, w, p, q, r) over ground, body frame."""
+        v = self._xv[NU : NU + 6]
+        return tuple(float(x) for x in v)  # type: ignore[return-value]
+
+    def depth(self) -> float:
+        return float(self._xv[POS + 2])
+
+    def fin_angles(self) -> tuple[float, ...]:
+        return tuple(float(x) for x in self._xf[:, F_THETA])
+
+    def fin_rates(self) -> tuple[float, ...]:
+        return tuple(float(x) for x in self._xf[:, F_OMEGA])
+
+    def fin_forces(self) -> np.ndarray:
+        """(4, 2) fin-frame forces (f_x, f_y) of the last step (N)."""
+        return self._xf[:, F_FX : F_FY + 1].copy()
+
+    def fin_strouhal(self) -> tuple[float, ...]:
+        return tuple(float(x) for x in self._xf[:, F_ST])
+
+    def fin_thrust_factor(self) -> tuple[float, ...]:
+        """Thrust gain x wake factor applied to each fin's forward force in the last step."""
+        return tuple(float(x) for x in self._xf[:, F_THRUST_FACTOR])
+
+    def fin_energy(self) -> tuple[float, ...]:
+        """True shaft energy per fin since reset (J): I alpha w + drag power, no regeneration."""
+        return tuple(float(x) for x in self._xf[:, F_ENERGY])
+
+    def state_arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """Copies of the vehicle and fin state arrays (layouts in ``vehicle`` and here)."""
+        return self._xv.copy(), self._xf.copy()
+
+
+def measure_realtime_factor(seconds: float = 20.0, chunk_s: float = 0.01, sensors: bool = True) -> float:
+    """Simulated seconds per wall-clock second of the plant alone, fins beating at 2 Hz.
+
+    The plant is advanced in chunks of ``chunk_s`` (sampling the sensors after each chunk
+    when ``sensors``), as a closed loop would drive it. Compilation is done before timing.
+    """
+    plant = Plant()
+    plant.advance(0.01)
+    plant.sample_sensors()
+    plant.reset()
+    n = max(1, round(seconds / chunk_s))
+    half_period = 0.25
+    sign = 1.0
+    next_flip = 0.0
+    start = _time.perf_counter()
+    for _ in range(n):
+        if plant.time >= next_flip:
+            for i in range(N_FINS):
+                plant.command_fin(i, 0.6 * sign, 6.0)
+            sign = -sign
+            next_flip += half_period
+        plant.advance(chunk_s)
+        if sensors:
+            plant.sample_sensors()
+    wall = _time.perf_counter() - start
+    return plant.time / wall

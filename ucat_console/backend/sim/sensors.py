@@ -1,0 +1,272 @@
+"""Sensor models of the simulated U-CAT: DVL, pressure transducer, IMU and fin encoders.
+
+Each sensor samples the plant's true state at its own rate and returns the reading types the
+drivers deliver (``backend/devices/readings.py``). Noise comes from numpy Generators seeded
+from one seed (one independent stream per sensor), so a run is repeatable and a change in
+one sensor's sampling does not shift another's noise.
+
+* DVL (A50): bottom-track velocity over ground in the body frame, white noise per axis. The
+  altitude is the vertical distance to a flat bottom; outside the valid altitude range, or
+  on a random dropout, the report has ``valid=False`` and NaN velocities (missing data,
+  never zeros).
+* Pressure (Gems 3101P behind an ADC): gauge pressure rho g z plus noise, turned into the
+  4-20 mA loop current (saturating at 3.8 and 20.5 mA, NAMUR NE 43), quantised by the ADC,
+  and converted back to pressure and depth (the conversions are the pressure driver's).
+* IMU (3DM-CX5): gyro = body rate + constant bias + noise; accel in g = specific force
+  (a - g) / g0 in the body frame (level and at rest: (0, 0, -1)) + bias + noise; attitude
+  = the true quaternion turned by a small random rotation, with its ZYX Euler angles.
+* Encoders: fin angle and rate quantised as the EPOS2 reports them (``servo``), at the
+  feedback (PDO) rate.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from ucat_console.backend.devices.pressure import (
+    current_to_pressure,
+    depth_to_pressure,
+    pressure_to_current,
+    pressure_to_depth,
+)
+from ucat_console.backend.devices.readings import DepthReading, DvlVelocity, FinFeedback, ImuReading
+from ucat_console.backend.sim.params import (
+    N_FINS,
+    STANDARD_GRAVITY,
+    PressureConfig,
+    SensorsConfig,
+    ServoConfig,
+)
+from ucat_console.backend.sim.servo import counts_per_fin_radian, quantise, rate_quantum
+from ucat_console.backend.sim.vehicle import NU, NU_DOT, POS, QUAT
+
+Reading = ImuReading | DvlVelocity | DepthReading | FinFeedback
+
+#: 4-20 mA loop current limits of a saturating transmitter (NAMUR NE 43)
+LOOP_MIN_MA = 3.8
+LOOP_MAX_MA = 20.5
+
+
+def current_from_pressure(gauge_pa: float, cfg: PressureConfig) -> float:
+    """Loop current (mA) of the transducer at a gauge pressure, saturating at the NE 43 limits."""
+    i = pressure_to_current(gauge_pa, 0.0, cfg.span_pa)
+    return min(max(i, LOOP_MIN_MA), LOOP_MAX_MA)
+
+
+def adc_quantise(current_ma: float, cfg: PressureConfig) -> float:
+    """The current the ADC reports: a whole code of ``adc_bits`` over 0..full scale."""
+    full = (1 << cfg.adc_bits) - 1
+    code = min(max(round(current_ma / cfg.adc_full_scale_ma * full), 0), full)
+    return code * cfg.adc_full_scale_ma / full
+
+
+@njit(cache=True)
+def imu_kernel(
+    xv: np.ndarray, noise: np.ndarray, gyro_bias: np.ndarray, accel_bias: np.ndarray, out: np.ndarray
+) -> None:
+    """IMU outputs from the true state into ``out`` (13): accel in g (3), gyro (3), q (4), euler (3).
+
+    ``noise`` (9) holds the scaled accel, gyro and attitude noise of this sample.
+    """
+    w, x, y, z = xv[QUAT], xv[QUAT + 1], xv[QUAT + 2], xv[QUAT + 3]
+    # NED down axis in body coordinates (third row of R)
+    g0x = 2.0 * (x * z - w * y)
+    g0y = 2.0 * (y * z + w * x)
+    g0z = 1.0 - 2.0 * (x * x + y * y)
+    u, v, ww = xv[NU], xv[NU + 1], xv[NU + 2]
+    p, q, r = xv[NU + 3], xv[NU + 4], xv[NU + 5]
+    ax = xv[NU_DOT] + (q * ww - r * v)
+    ay = xv[NU_DOT + 1] + (r * u - p * ww)
+    az = xv[NU_DOT + 2] + (p * v - q * u)
+    out[0] = ax / STANDARD_GRAVITY - g0x + accel_bias[0] + noise[0]
+    out[1] = ay / STANDARD_GRAVITY - g0y + accel_bias[1] + noise[1]
+    out[2] = az / STANDARD_GRAVITY - g0z + accel_bias[2] + noise[2]
+    out[3] = p + gyro_bias[0] + noise[3]
+    out[4] = q + gyro_bias[1] + noise[4]
+    out[5] = r + gyro_bias[2] + noise[5]
+    # attitude: q (x) exp(n / 2)
+    nx, ny, nz = noise[6], noise[7], noise[8]
+    a = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if a > 1e-15:
+        c = math.cos(0.5 * a)
+        s = math.sin(0.5 * a) / a
+    else:
+        c = 1.0
+        s = 0.5
+    dw, dx, dy, dz = c, s * nx, s * ny, s * nz
+    qw = w * dw - x * dx - y * dy - z * dz
+    qx = w * dx + x * dw + y * dz - z * dy
+    qy = w * dy - x * dz + y * dw + z * dx
+    qz = w * dz + x * dy - y * dx + z * dw
+    norm = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+    qw, qx, qy, qz = qw / norm, qx / norm, qy / norm, qz / norm
+    out[6] = qw
+    out[7] = qx
+    out[8] = qy
+    out[9] = qz
+    out[10] = math.atan2(2.0 * (qw * qx + qy * qz), 1.0 - 2.0 * (qx * qx + qy * qy))
+    sp = 2.0 * (qw * qy - qz * qx)
+    out[11] = math.asin(max(-1.0, min(1.0, sp)))
+    out[12] = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+
+
+class _Noise:
+    """Rows of scaled standard normals drawn from one Generator in blocks, used in order."""
+
+    def __init__(self, rng: np.random.Generator, scale: list[float], block: int = 512) -> None:
+        self._rng = rng
+        self._scale = np.asarray(scale, dtype=float)
+        self._block = block
+        self._i = block
+        self._buf = np.empty((0, len(scale)))
+        self._rows: list[list[float]] = []
+
+    def _refill(self) -> None:
+        self._buf = self._rng.standard_normal((self._block, len(self._scale))) * self._scale
+        self._rows = self._buf.tolist()
+        self._i = 0
+
+    def next_array(self) -> np.ndarray:
+        if self._i >= self._block:
+            self._refill()
+        row = self._buf[self._i]
+        self._i += 1
+        return row
+
+    def next_list(self) -> list[float]:
+        if self._i >= self._block:
+            self._refill()
+        row = self._rows[self._i]
+        self._i += 1
+        return row
+
+
+@dataclass
+class _Schedule:
+    period: float
+    t0: float = 0.0
+    k: int = 0
+
+    @property
+    def due(self) -> float:
+        return self.t0 + self.k * self.period
+
+    def take(self, t: float) -> bool:
+        """True when a sample is due at time t; moves past t (missed samples are skipped)."""
+        if t + 1e-9 < self.due:
+            return False
+        self.k = max(self.k + 1, math.floor((t - self.t0) / self.period + 1e-9) + 1)
+        return True
+
+
+class SensorSuite:
+    """All sensors of the plant; :meth:`sample` returns the readings due at a time."""
+
+    def __init__(self, cfg: SensorsConfig, servo: ServoConfig, seed: int) -> None:
+        self._cfg = cfg
+        self._servo = servo
+        self._counts_per_rad = counts_per_fin_radian(servo)
+        self._rate_quantum = rate_quantum(servo)
+        self.reset(seed)
+
+    def reset(self, seed: int, t0: float = 0.0) -> None:
+        """New noise streams and biases from ``seed``; the first samples are due at ``t0``."""
+        imu_ss, dvl_ss, p_ss = np.random.SeedSequence(seed).spawn(3)
+        rng_imu = np.random.default_rng(imu_ss)
+        icfg = self._cfg.imu
+        self.gyro_bias = rng_imu.normal(0.0, icfg.gyro_bias_std, 3)
+        self.accel_bias = rng_imu.normal(0.0, icfg.accel_bias_std, 3)
+        self._imu_noise = _Noise(
+            rng_imu, [icfg.accel_noise_std] * 3 + [icfg.gyro_noise_std] * 3 + [icfg.attitude_noise_std] * 3
+        )
+        self._imu_out = np.empty(13)
+        dcfg = self._cfg.dvl
+        # the fourth column stays a standard normal: it decides dropouts
+        self._dvl_noise = _Noise(np.random.default_rng(dvl_ss), [dcfg.noise_std] * 3 + [1.0])
+        self._p_noise = _Noise(np.random.default_rng(p_ss), [self._cfg.pressure.noise_std_pa])
+        self._imu = _Schedule(1.0 / icfg.rate, t0)
+        self._dvl = _Schedule(1.0 / self._cfg.dvl.rate, t0)
+        self._pressure = _Schedule(1.0 / self._cfg.pressure.rate, t0)
+        self._fins = _Schedule(1.0 / self._servo.feedback_rate, t0)
+        self._last_t = -math.inf
+
+    def next_due(self) -> float:
+        """Earliest time at which some sensor has a sample due."""
+        return min(self._imu.due, self._dvl.due, self._pressure.due, self._fins.due)
+
+    def sample(
+        self, t: float, xv: np.ndarray, fin_theta: np.ndarray, fin_omega: np.ndarray
+    ) -> list[Reading]:
+        """Readings due at time ``t`` from the true state (vehicle state ``xv``, fin angles/rates)."""
+        if not math.isfinite(t):
+            raise ValueError(f"t: sensor time must be finite, got {t!r}")
+        if t < self._last_t:
+            raise ValueError(f"t: sensor time went backwards ({t} < {self._last_t})")
+        self._last_t = t
+        out: list[Reading] = []
+        if t + 1e-9 < self.next_due():
+            return out
+        if self._imu.take(t):
+            out.append(self._imu_reading(t, xv))
+        if self._pressure.take(t):
+            out.append(self._depth_reading(t, xv))
+        if self._dvl.take(t):
+            out.append(self._dvl_reading(t, xv))
+        if self._fins.take(t):
+            k, q = self._counts_per_rad, self._rate_quantum
+            th = fin_theta.tolist()
+            om = fin_omega.tolist()
+            for i in range(N_FINS):
+                out.append(FinFeedback(t, i, *quantise(th[i], om[i], k, q)))
+        return out
+
+    def _imu_reading(self, t: float, xv: np.ndarray) -> ImuReading:
+        o = self._imu_out
+        imu_kernel(xv, self._imu_noise.next_array(), self.gyro_bias, self.accel_bias, o)
+        v = o.tolist()
+        return ImuReading(
+            t=t,
+            accel_g=(v[0], v[1], v[2]),
+            gyro=(v[3], v[4], v[5]),
+            quaternion=(v[6], v[7], v[8], v[9]),
+            euler=(v[10], v[11], v[12]),
+        )
+
+    def _depth_reading(self, t: float, xv: np.ndarray) -> DepthReading:
+        c = self._cfg.pressure
+        gauge = depth_to_pressure(float(xv[POS + 2]), 0.0, c.water_density)
+        gauge += self._p_noise.next_list()[0]
+        measured = current_to_pressure(adc_quantise(current_from_pressure(gauge, c), c), 0.0, c.span_pa)
+        return DepthReading(
+            t=t, depth_m=pressure_to_depth(measured, 0.0, c.water_density), pressure_pa=measured
+        )
+
+    def _dvl_reading(self, t: float, xv: np.ndarray) -> DvlVelocity:
+        c = self._cfg.dvl
+        n = self._dvl_noise.next_list()  # drawn every time: the stream ignores validity
+        drop = 0.5 * math.erfc(-n[3] / math.sqrt(2.0)) < c.dropout_probability  # uniform via the normal CDF
+        altitude = c.bottom_depth - float(xv[POS + 2])
+        in_range = c.altitude_min <= altitude <= c.altitude_max
+        if not in_range or drop:
+            return DvlVelocity(
+                t=t,
+                vx=math.nan,
+                vy=math.nan,
+                vz=math.nan,
+                valid=False,
+                altitude=altitude if in_range else math.nan,
+                fom=math.nan,
+            )
+        return DvlVelocity(
+            t=t,
+            vx=float(xv[NU]) + n[0],
+            vy=float(xv[NU + 1]) + n[1],
+            vz=float(xv[NU + 2]) + n[2],
+            valid=True,
+            altitude=altitude,
+            fom=c.noise_std,
+        )

@@ -1,0 +1,60 @@
+"""The telemetry stream: publish typed messages on named channels, subscribe to them.
+
+Publishing calls each subscriber in the publisher's thread, in subscription order, so
+subscribers must return quickly (the UI copies into ring buffers, the recorder enqueues
+for its writer thread). A subscriber that raises is logged and kept; it never breaks
+the publisher. The same stream object is fed by the supervisor (live) or by the session
+player (from a file): subscribers cannot tell which.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from typing import Any, Callable, Iterable
+
+from ucat_console.telemetry.channels import message_type
+
+log = logging.getLogger(__name__)
+
+Subscriber = Callable[[str, Any], None]
+
+
+class TelemetryStream:
+    def __init__(self, validate: bool = True) -> None:
+        self._lock = threading.Lock()
+        self._subs: tuple[tuple[Subscriber, frozenset[str] | None], ...] = ()
+        self._validate = validate
+
+    def subscribe(self, callback: Subscriber, channels: Iterable[str] | None = None) -> Callable[[], None]:
+        """Call ``callback(channel, message)`` for each message (of ``channels`` only,
+        when given). Returns a function that unsubscribes."""
+        chans = None
+        if channels is not None:
+            chans = frozenset(channels)
+            for c in chans:
+                message_type(c)
+        entry = (callback, chans)
+        with self._lock:
+            self._subs = self._subs + (entry,)
+
+        def unsubscribe() -> None:
+            with self._lock:
+                self._subs = tuple(s for s in self._subs if s is not entry)
+
+        return unsubscribe
+
+    def publish(self, channel: str, message: Any) -> None:
+        if self._validate:
+            expected = message_type(channel)
+            if type(message) is not expected:
+                raise TypeError(
+                    f"channel {channel!r} carries {expected.__name__}, got {type(message).__name__}"
+                )
+        for callback, chans in self._subs:  # a snapshot: tuples are immutable
+            if chans is not None and channel not in chans:
+                continue
+            try:
+                callback(channel, message)
+            except Exception:  # a broken subscriber must not stop the publisher
+                log.exception("telemetry subscriber %r failed on %s", callback, channel)
