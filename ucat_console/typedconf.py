@@ -12,6 +12,7 @@ out-of-range values raise :class:`ValueError` naming the dotted key and the allo
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import tomllib
 import types
@@ -93,11 +94,25 @@ def check_value(f: dataclasses.Field, value: Any, prefix: str = "") -> None:
 
 
 def validate(obj: Any, prefix: str = "") -> None:
-    """Check every bounded field of a dataclass instance (call from ``__post_init__``)."""
+    """Check every field of a dataclass instance (call from ``__post_init__``): numbers
+    must be of the annotated kind (an int where an int is declared; an int given for a
+    float becomes a float) and inside their declared range."""
+    hints = _field_types(type(obj))
     for f in dataclasses.fields(obj):
-        check_value(f, getattr(obj, f.name), prefix)
+        value = getattr(obj, f.name)
+        tp = hints.get(f.name)
+        if tp is int and (isinstance(value, bool) or not isinstance(value, int)):
+            raise ValueError(f"{prefix}{f.name}: expected an integer, got {value!r}")
+        if tp is float:
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise ValueError(f"{prefix}{f.name}: expected a number, got {value!r}")
+            if not isinstance(value, float):
+                value = float(value)
+                object.__setattr__(obj, f.name, value)
+        check_value(f, value, prefix)
 
 
+@functools.cache
 def _field_types(cls: type) -> dict[str, Any]:
     return typing.get_type_hints(cls)
 

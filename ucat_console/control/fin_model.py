@@ -105,15 +105,16 @@ class ForceTable:
     def load(cls, path: str | Path) -> ForceTable:
         p = Path(path)
         try:
-            with np.load(p) as z:
-                missing = [k for k in ("d", "w", "fx", "fy") if k not in z.files]
-                if missing:
-                    raise ValueError(f"{p}: force table lacks array(s) {', '.join(missing)}")
-                arrays = {k: np.asarray(z[k], dtype=np.float64) for k in ("d", "w", "fx", "fy")}
+            with np.load(p, allow_pickle=False) as z:
+                files = z.files
+                arrays = {k: np.asarray(z[k], dtype=np.float64) for k in ("d", "w", "fx", "fy") if k in files}
         except FileNotFoundError:
             raise ValueError(f"{p}: force table file not found") from None
-        except (OSError, EOFError) as e:
+        except (OSError, EOFError, ValueError) as e:
             raise ValueError(f"{p}: not a readable .npz force table: {e}") from None
+        missing = [k for k in ("d", "w", "fx", "fy") if k not in arrays]
+        if missing:
+            raise ValueError(f"{p}: force table lacks array(s) {', '.join(missing)}")
         try:
             return cls(**arrays)
         except ValueError as e:

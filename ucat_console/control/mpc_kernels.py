@@ -152,7 +152,7 @@ def exp_neg(y):
     return e * _bits_to_float((np.int64(n) + np.int64(1023)) << np.int64(52))
 
 
-@_jit
+@_inline
 def _sgn(x):
     if x > 0.0:
         return 1.0
@@ -162,13 +162,13 @@ def _sgn(x):
 
 
 @_inline
-def stroke_force(p, gx_tab, gy_tab, d, w, cd, sd):
+def stroke_force(p, gx_tab, gy_tab, d, w, cd, sd, table):
     """Stroke-frame force g and its partial derivatives at (d, w).
 
     ``cd, sd`` are cos d and sin d (shared with the caller). Returns
     (gx, gy, dgx/dd, dgy/dd, dgx/dw, dgy/dw).
     """
-    if p[P_MODE] == MODE_ANALYTIC:
+    if not table:
         qw2 = p[P_Q] * w * w
         gx = -qw2 * p[P_CL] * cd
         gy = -qw2 * (p[P_CL] * sd + p[P_CD])
@@ -209,19 +209,19 @@ def stroke_force(p, gx_tab, gy_tab, d, w, cd, sd):
 
 
 @_inline
-def cost_eval(p, q, gx_tab, gy_tab, d1, d2, w1, w2, want_grad):
+def cost_eval(p, q, gx_tab, gy_tab, d1, d2, w1, w2, want_grad, table):
     """J at u = (d1, d2, w1, w2) as a tuple of scalars: (J, c_force, c_St, c_amp,
     c_diff, St, f_bar_x, f_bar_y, dJ/dd1, dJ/dd2, dJ/dw1, dJ/dw2); the gradient is zero
-    unless ``want_grad``. Inlined, so a constant flag removes the gradient code and
-    unused terms cost nothing."""
+    unless ``want_grad``; ``table`` selects the tabulated force model. Inlined, so
+    constant flags remove the code they switch off, and unused terms cost nothing."""
     a1 = abs(d1)
     a2 = abs(d2)
     s1 = _sgn(d1)
     s2 = _sgn(d2)
     sn1, c1 = sincos(d1)
     sn2, c2 = sincos(d2)
-    g1x, g1y, g1x_d, g1y_d, g1x_w, g1y_w = stroke_force(p, gx_tab, gy_tab, d1, w1, c1, sn1)
-    g2x, g2y, g2x_d, g2y_d, g2x_w, g2y_w = stroke_force(p, gx_tab, gy_tab, d2, w2, c2, sn2)
+    g1x, g1y, g1x_d, g1y_d, g1x_w, g1y_w = stroke_force(p, gx_tab, gy_tab, d1, w1, c1, sn1, table)
+    g2x, g2y, g2x_d, g2y_d, g2x_w, g2y_w = stroke_force(p, gx_tab, gy_tab, d2, w2, c2, sn2, table)
     # second stroke rotated by the first: h2 = R(d1) g2
     h2x = c1 * g2x - sn1 * g2y
     h2y = sn1 * g2x + c1 * g2y
@@ -332,9 +332,9 @@ def cost_eval(p, q, gx_tab, gy_tab, d1, d2, w1, w2, want_grad):
 
 
 @_inline
-def cost_grad(p, q, gx_tab, gy_tab, x, grad):
+def cost_grad(p, q, gx_tab, gy_tab, x, grad, table):
     """J at x (len 4) with its gradient written to ``grad``."""
-    r = cost_eval(p, q, gx_tab, gy_tab, x[0], x[1], x[2], x[3], True)
+    r = cost_eval(p, q, gx_tab, gy_tab, x[0], x[1], x[2], x[3], True, table)
     grad[0] = r[8]
     grad[1] = r[9]
     grad[2] = r[10]
@@ -364,8 +364,8 @@ FTOL = 2.220446049250313e-09  # scipy's L-BFGS-B default factr * eps
 PGTOL = 1e-5
 
 
-@_jit
-def sample_stage(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block):
+@_inline
+def sample_stage(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, table):
     """Stage 1: n admissible samples; keeps the best len(best_j) (sorted) in best_u.
 
     Samples are drawn and costed in blocks of SAMPLE_BLOCK (``block`` is a (5, B)
@@ -398,7 +398,7 @@ def sample_stage(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block):
                 bd1[i] = -a1
                 bd2[i] = a2
         for i in range(m):
-            bj[i] = cost_eval(p, q, gx_tab, gy_tab, bd1[i], bd2[i], bw1[i], bw2[i], False)[0]
+            bj[i] = cost_eval(p, q, gx_tab, gy_tab, bd1[i], bd2[i], bw1[i], bw2[i], False, table)[0]
         for i in range(m):
             j = bj[i]
             if j < best_j[k - 1]:
@@ -429,12 +429,12 @@ def _box(p, x0, lo, hi):
         hi[2 + k] = p[P_WMAX]
 
 
-@_jit
-def refine(p, q, gx_tab, gy_tab, x, j0, max_iter, work, hinv):
+@_inline
+def refine(p, q, gx_tab, gy_tab, x, max_iter, work, hinv, table):
     """Stage 2: projected BFGS from x (updated in place) inside its sign box.
 
     ``work`` is an (8, 4) scratch array (rows 0-6 used), ``hinv`` a (4, 4) one. Returns the final cost,
-    which is never above ``j0`` (the cost at the start)."""
+    which is never above the cost at the start."""
     lo = work[0]
     hi = work[1]
     g = work[2]
@@ -443,7 +443,7 @@ def refine(p, q, gx_tab, gy_tab, x, j0, max_iter, work, hinv):
     dirn = work[5]
     yv = work[6]
     _box(p, x, lo, hi)
-    j = cost_grad(p, q, gx_tab, gy_tab, x, g)
+    j = cost_grad(p, q, gx_tab, gy_tab, x, g, table)
     for a in range(4):
         for b in range(4):
             hinv[a, b] = 1.0 if a == b else 0.0
@@ -489,7 +489,7 @@ def refine(p, q, gx_tab, gy_tab, x, j0, max_iter, work, hinv):
                 dec += g[a] * (v - x[a])
             if not moved:
                 break
-            jn = cost_grad(p, q, gx_tab, gy_tab, xn, gn)
+            jn = cost_grad(p, q, gx_tab, gy_tab, xn, gn, table)
             if jn <= j + 1e-4 * dec and jn < j:
                 accepted = True
                 break
@@ -549,14 +549,14 @@ def refine(p, q, gx_tab, gy_tab, x, j0, max_iter, work, hinv):
     return j
 
 
-@_jit
-def plan_kernel(p, q, gx_tab, gy_tab, n, max_iter, rng, best_u, best_j, block, work, hinv, u_out, terms):
+@_inline
+def _plan(p, q, gx_tab, gy_tab, n, max_iter, rng, best_u, best_j, block, work, hinv, u_out, terms, table):
     """One solve: sampling, refinement of the best len(best_j) samples, final terms.
 
     Returns the durations of the two stages in nanoseconds.
     """
     t0 = monotonic_ns()
-    sample_stage(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block)
+    sample_stage(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, table)
     t_mid = monotonic_ns()
     for c in range(4):
         u_out[c] = best_u[0, c]
@@ -568,17 +568,34 @@ def plan_kernel(p, q, gx_tab, gy_tab, n, max_iter, rng, best_u, best_j, block, w
                 break
             for c in range(4):
                 x[c] = best_u[s, c]
-            j = refine(p, q, gx_tab, gy_tab, x, best_j[s], max_iter, work, hinv)
+            j = refine(p, q, gx_tab, gy_tab, x, max_iter, work, hinv, table)
             if j < j_best:
                 j_best = j
                 for c in range(4):
                     u_out[c] = x[c]
-    write_terms(cost_eval(p, q, gx_tab, gy_tab, u_out[0], u_out[1], u_out[2], u_out[3], False), terms)
+    write_terms(cost_eval(p, q, gx_tab, gy_tab, u_out[0], u_out[1], u_out[2], u_out[3], False, table), terms)
     return t_mid - t0, monotonic_ns() - t_mid
+
+
+@_jit
+def plan_kernel(p, q, gx_tab, gy_tab, n, max_iter, rng, best_u, best_j, block, work, hinv, u_out, terms):
+    """One solve (see :func:`_plan`), compiled once per force model."""
+    if p[P_MODE] == MODE_TABLE:
+        return _plan(p, q, gx_tab, gy_tab, n, max_iter, rng, best_u, best_j, block, work, hinv, u_out, terms, True)
+    return _plan(p, q, gx_tab, gy_tab, n, max_iter, rng, best_u, best_j, block, work, hinv, u_out, terms, False)
+
+
+@_jit
+def refine_kernel(p, q, gx_tab, gy_tab, x, max_iter, work, hinv):
+    """Stage 2 alone from the start point x (updated in place); returns the cost."""
+    if p[P_MODE] == MODE_TABLE:
+        return refine(p, q, gx_tab, gy_tab, x, max_iter, work, hinv, True)
+    return refine(p, q, gx_tab, gy_tab, x, max_iter, work, hinv, False)
 
 
 @_jit
 def cost_kernel(p, q, gx_tab, gy_tab, u, grad, terms):
     """J, its gradient and its terms at one point (for callers outside the solver)."""
-    write_terms(cost_eval(p, q, gx_tab, gy_tab, u[0], u[1], u[2], u[3], False), terms)
-    return cost_grad(p, q, gx_tab, gy_tab, u, grad)
+    table = p[P_MODE] == MODE_TABLE
+    write_terms(cost_eval(p, q, gx_tab, gy_tab, u[0], u[1], u[2], u[3], False, table), terms)
+    return cost_grad(p, q, gx_tab, gy_tab, u, grad, table)

@@ -1,0 +1,137 @@
+"""The two-stage planner: both solvers, bounds, signs, determinism, bad input."""
+
+import math
+
+import numpy as np
+import pytest
+
+from ucat_console.control import FinMpc, MpcConfig
+
+CFG = MpcConfig()
+U_PREV = (0.5, -0.5, 2.0, 2.0)
+
+
+def admissible(plan, cfg=CFG):
+    d1, d2, w1, w2 = plan.u
+    return (
+        all(math.isfinite(x) for x in plan.u)
+        and cfg.d_eps - 1e-12 <= abs(d1) <= cfg.d_max + 1e-12
+        and cfg.d_eps - 1e-12 <= abs(d2) <= cfg.d_max + 1e-12
+        and cfg.w_min - 1e-12 <= w1 <= cfg.w_max + 1e-12
+        and cfg.w_min - 1e-12 <= w2 <= cfg.w_max + 1e-12
+    )
+
+
+@pytest.mark.parametrize("solver", ["numba", "scipy"])
+def test_plan_is_admissible_keeps_warm_start_signs_and_never_worse(solver):
+    mpc = FinMpc(CFG.replace(solver=solver, n_samples=200), seed=4)
+    rng = np.random.default_rng(0)
+    for _ in range(25 if solver == "numba" else 6):
+        f = rng.uniform([-1.0, 0.0], [0.0, 1.0])
+        plan = mpc.plan(f, rng.uniform(0.1, 0.5), rng.uniform(-3, 3), U_PREV)
+        assert admissible(plan)
+        assert np.sign(plan.u[0]) == np.sign(plan.warm_start[0]) != 0
+        assert np.sign(plan.u[1]) == np.sign(plan.warm_start[1]) != 0
+        assert np.sign(plan.u[0]) == -np.sign(plan.u[1])  # opposite strokes (stage 1 pairs)
+        assert plan.cost.total <= plan.warm_start_cost + 1e-12
+
+
+def test_reported_cost_and_commands_belong_to_the_plan():
+    mpc = FinMpc(CFG, seed=1)
+    f, v, th = (-0.5, 0.5), 0.3, 0.7
+    plan = mpc.plan(f, v, th, U_PREV)
+    again = mpc.cost(plan.u, f, v, th, U_PREV)
+    assert again.total == pytest.approx(plan.cost.total, abs=1e-12)
+    d1, d2, w1, w2 = plan.u
+    assert plan.commands == pytest.approx((th + d1, w1, th + d1 + d2, w2))
+    assert plan.sample_time_s > 0 and plan.refine_time_s >= 0
+
+
+def test_refinement_improves_on_sampling_alone():
+    mpc = FinMpc(CFG, seed=2)
+    f, v, th = (-0.5, 0.5), 0.3, 0.0
+    sampled = mpc.plan(f, v, th, U_PREV, seed=9, refine=False)
+    refined = mpc.plan(f, v, th, U_PREV, seed=9)
+    assert refined.warm_start == sampled.u
+    assert refined.cost.total < sampled.cost.total
+
+
+def test_numba_and_scipy_reach_comparable_costs():
+    # on the paper's Fig. 3 case both solvers end far below their samples
+    f, v, th = (-0.5, 0.5), 0.3, 0.0
+    a = FinMpc(CFG, seed=0).plan(f, v, th, U_PREV)
+    b = FinMpc(CFG.replace(solver="scipy"), seed=0).plan(f, v, th, U_PREV)
+    assert a.cost.total <= b.cost.total + 0.02
+
+
+def test_fixed_seed_is_deterministic():
+    f, v, th = (-0.3, 0.8), 0.25, 1.0
+    p1 = FinMpc(CFG).plan(f, v, th, U_PREV, seed=123)
+    p2 = FinMpc(CFG).plan(f, v, th, U_PREV, seed=123)
+    assert p1.u == p2.u and p1.cost == p2.cost
+    p3 = FinMpc(CFG).plan(f, v, th, U_PREV, seed=124)
+    assert p3.warm_start != p1.warm_start
+    # a planner's own stream is reproducible from its constructor seed
+    a, b = FinMpc(CFG, seed=5), FinMpc(CFG, seed=5)
+    assert [a.plan(f, v, th, U_PREV).u for _ in range(3)] == [b.plan(f, v, th, U_PREV).u for _ in range(3)]
+
+
+def test_table_model_plans_like_the_analytic_one():
+    f, v, th = (-0.5, 0.5), 0.3, 0.0
+    a = FinMpc(CFG).plan(f, v, th, U_PREV, seed=3)
+    t = FinMpc(CFG.replace(force_model="table")).plan(f, v, th, U_PREV, seed=3)
+    assert t.cost.total == pytest.approx(a.cost.total, abs=5e-3)
+
+
+def test_loaded_table_is_used(tmp_path):
+    from ucat_console.control.fin_model import ForceTable
+
+    table = ForceTable.from_model(CFG)
+    # a fin twice as strong as the model: the mean force of a plan doubles
+    ForceTable(table.d, table.w, 2 * table.fx, 2 * table.fy).save(tmp_path / "strong.npz")
+    strong = FinMpc(CFG.replace(force_model="table", table_path=str(tmp_path / "strong.npz")))
+    base = FinMpc(CFG)
+    u = (0.6, -0.6, 3.0, 3.0)
+    fs = strong.cost(u, (0, 0), 0.3, 0.0, U_PREV).mean_force
+    fb = base.cost(u, (0, 0), 0.3, 0.0, U_PREV).mean_force
+    assert fs[0] == pytest.approx(2 * fb[0], rel=1e-3)
+    assert fs[1] == pytest.approx(2 * fb[1], rel=1e-3)
+
+
+def test_table_not_covering_the_box_is_refused(tmp_path):
+    from ucat_console.control.fin_model import ForceTable
+
+    small = ForceTable.from_model(CFG.replace(d_max=0.5, table_n_d=11, table_n_w=11))
+    small.save(tmp_path / "small.npz")
+    with pytest.raises(ValueError, match="table_path"):
+        FinMpc(CFG.replace(force_model="table", table_path=str(tmp_path / "small.npz")))
+
+
+@pytest.mark.parametrize(
+    "kwargs, field",
+    [
+        ({"f_target": (math.nan, 0.0)}, "f_target"),
+        ({"f_target": (0.0, math.inf)}, "f_target"),
+        ({"f_target": (0.0, 500.0)}, "f_target"),
+        ({"f_target": (0.0, 0.1, 0.2)}, "f_target"),
+        ({"f_target": "ab"}, "f_target"),
+        ({"v_body": math.nan}, "v_body"),
+        ({"v_body": 50.0}, "v_body"),
+        ({"theta0": math.inf}, "theta0"),
+        ({"theta0": 100.0}, "theta0"),
+        ({"u_prev": (0.5, -0.5, 2.0)}, "u_prev"),
+        ({"u_prev": (0.5, -0.5, 2.0, math.nan)}, "u_prev"),
+    ],
+)
+def test_bad_planner_input_names_the_field(kwargs, field):
+    args = {"f_target": (-0.5, 0.5), "v_body": 0.3, "theta0": 0.0, "u_prev": U_PREV}
+    args.update(kwargs)
+    with pytest.raises(ValueError, match=field):
+        FinMpc(CFG).plan(**args)
+
+
+def test_bad_cost_point_names_the_component():
+    with pytest.raises(ValueError, match=r"u\[0\]"):
+        FinMpc(CFG).cost((0.0, -0.5, 2.0, 2.0), (0, 0), 0.3, 0.0, U_PREV)
+    with pytest.raises(ValueError, match=r"u\[3\]"):
+        FinMpc(CFG).cost((0.5, -0.5, 2.0, 9.0), (0, 0), 0.3, 0.0, U_PREV)

@@ -1,0 +1,211 @@
+"""Session benchmarks: recorder throughput and seek latency (figures, never test assertions).
+
+- Throughput: messages published as fast as one thread can into a :class:`Recorder`
+  whose queue holds them all; the rate counts from the first publish until ``stop()``
+  returns with the file closed, and the run reports the drops (the target is >= 20,000
+  messages/s with none).
+- Seek latency: a synthetic session of ``hours`` at a realistic channel mix
+  (:data:`MIX`, about 400 messages/s) is recorded, then ``state_at`` is timed at random
+  times (the target is <= 50 ms in a one-hour session).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import random
+import shutil
+import statistics
+import tempfile
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+from ucat_console.backend.devices.readings import DepthReading, DvlVelocity, ImuReading
+from ucat_console.backend.sessions.reader import SessionReader
+from ucat_console.backend.sessions.recorder import Recorder, RecorderConfig
+from ucat_console.telemetry import channels as C
+from ucat_console.telemetry.events import Event
+from ucat_console.telemetry.messages import (
+    BodyCommand,
+    BodyState,
+    FinPlan,
+    FinState,
+    Power,
+    Setpoints,
+    Status,
+)
+from ucat_console.telemetry.stream import TelemetryStream
+
+
+def _body(t: float) -> BodyState:
+    return BodyState(t, (0.3 * t, 0.01 * t, 1.0), (1.0, 0.0, 0.0, 0.0), (0.3, 0.0, 0.0),
+                     (0.0, 0.0, 0.01), 1.0)
+
+
+def _fin_state(fin: int) -> Callable[[float], FinState]:
+    return lambda t: FinState(t, fin, math.sin(t), math.cos(t), 0.5, 2.0)
+
+
+def _fin_plan(fin: int) -> Callable[[float], FinPlan]:
+    return lambda t: FinPlan(t, fin, "mpc", (-0.5, 0.2), 0.3, 0.1, (0.5, -0.5, 2.0, 2.0),
+                             (0.6, -0.6, 2.5, 2.5), (0.7, 2.5, 0.1, 2.5), 1.2, 0.1, 0.2, 0.0,
+                             0.05, 0.31, (-0.45, 0.18), 0.004, False)
+
+
+#: channel -> (rate Hz, message factory of t)
+MIX: dict[str, tuple[float, Callable[[float], Any]]] = {
+    C.BODY_STATE: (50.0, _body),
+    **{C.fin_state(i): (50.0, _fin_state(i)) for i in range(C.N_FINS)},
+    **{C.fin_plan(i): (2.0, _fin_plan(i)) for i in range(C.N_FINS)},
+    C.POWER: (10.0, lambda t: Power(t, (0.1, 0.1, 0.1, 0.1), 0.4, 0.4, 0.4 * t, 0.3 * t, 1.3)),
+    C.SETPOINTS: (1.0, lambda t: Setpoints(t, 0.3, 1.0, 0.0)),
+    C.BODY_COMMAND: (10.0, lambda t: BodyCommand(t, -0.5, 0.1, 0.0)),
+    C.STATUS: (1.0, lambda t: Status(t, True, "mpc", "pilot", (), 0, "sim")),
+    C.IMU: (100.0, lambda t: ImuReading(t, (0.0, 0.0, -1.0), (0.0, 0.0, 0.01))),
+    C.DVL: (5.0, lambda t: DvlVelocity(t, 0.3, 0.0, 0.0, True, 2.0, 0.01)),
+    C.DEPTH: (20.0, lambda t: DepthReading(t, 1.0, 110_000.0)),
+    C.EVENTS: (1 / 60.0, lambda t: Event(t, "operator", "marker", "every minute", "info")),
+}
+
+
+def record_synthetic(directory: Path, duration: float, epoch_offset: float = 1.7e9) -> Path:
+    """Record :func:`synthetic_messages` of ``duration`` s into ``directory``; the file."""
+    stream = TelemetryStream(validate=False)
+    n_total = sum(int(duration * rate) for rate, _ in MIX.values())
+    cfg = RecorderConfig(queue_size=200_000, split_duration=max(1.0, duration + 1.0))
+    rec = Recorder(stream, cfg, directory=directory, epoch_offset=epoch_offset)
+    rec.start(label="synthetic", notes=f"synthetic {duration:.0f} s session")
+    publish = stream.publish
+    k = 0
+    for start in range(0, int(math.ceil(duration)), 60):
+        for _, channel, msg in synthetic_messages_between(start, min(duration, start + 60)):
+            publish(channel, msg)
+            k += 1
+        while rec.stats().queued > cfg.queue_size // 2:  # let the writer catch up: no drops
+            time.sleep(0.01)
+    paths = rec.stop()
+    stats = rec.stats()
+    if stats.dropped or len(paths) != 1:
+        raise RuntimeError(f"synthetic session: {stats.dropped} dropped, {len(paths)} parts")
+    assert k <= n_total
+    return paths[0]
+
+
+def synthetic_messages_between(t0: float, t1: float) -> list[tuple[float, str, Any]]:
+    """(t, channel, message) of the :data:`MIX` with ``t0 <= t < t1``, in time order."""
+    out = []
+    for channel, (rate, make) in MIX.items():
+        k0, k1 = math.ceil(t0 * rate), math.ceil(t1 * rate)
+        out += [(k / rate, channel, make(k / rate)) for k in range(k0, k1)]
+    out.sort(key=lambda x: x[0])
+    return out
+
+
+def recorder_throughput(n: int = 100_000, directory: Path | None = None) -> dict[str, Any]:
+    """Messages/s through a recorder whose queue holds them all (drops reported)."""
+    per_s = sum(rate for rate, _ in MIX.values())
+    msgs = synthetic_messages_between(0.0, n / per_s + 1.0)[:n]
+    tmp = Path(tempfile.mkdtemp(prefix="bench-sessions-", dir=directory))
+    try:
+        stream = TelemetryStream()
+        rec = Recorder(stream, RecorderConfig(queue_size=max(1, n)), directory=tmp,
+                       epoch_offset=1.7e9)
+        rec.start(label="throughput")
+        t0 = time.perf_counter()
+        for _, channel, msg in msgs:
+            stream.publish(channel, msg)
+        t1 = time.perf_counter()
+        paths = rec.stop()
+        t2 = time.perf_counter()
+        stats = rec.stats()
+        size = sum(p.stat().st_size for p in paths)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return {
+        "messages": len(msgs),
+        "written": stats.written,
+        "dropped": stats.dropped,
+        "rejected": stats.rejected,
+        "rate_msgs_per_s": len(msgs) / (t2 - t0),
+        "publish_us_per_msg": (t1 - t0) / len(msgs) * 1e6,
+        "bytes": size,
+    }
+
+
+def seek_latency(
+    hours: float = 1.0, seeks: int = 50, seed: int = 0, directory: Path | None = None,
+    keep: bool = False,
+) -> dict[str, Any]:
+    """``state_at`` latency at random times in a synthetic session of ``hours``."""
+    tmp = Path(tempfile.mkdtemp(prefix="bench-sessions-", dir=directory))
+    try:
+        t0 = time.perf_counter()
+        path = record_synthetic(tmp, hours * 3600.0)
+        t_record = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        reader = SessionReader(path, tmp)
+        t_open = time.perf_counter() - t0
+        rng = random.Random(seed)
+        lat = []
+        with reader:
+            for _ in range(seeks):
+                t = rng.uniform(reader.start, reader.end)
+                t0 = time.perf_counter()
+                state = reader.state_at(t)
+                lat.append(time.perf_counter() - t0)
+                if C.BODY_STATE not in state:
+                    raise RuntimeError(f"state_at({t}) has no body state")
+            chunks = len(reader._summary.chunk_indexes)
+            n = reader.message_count
+        size = path.stat().st_size
+    finally:
+        if not keep:
+            shutil.rmtree(tmp, ignore_errors=True)
+    lat.sort()
+    return {
+        "hours": hours,
+        "messages": n,
+        "bytes": size,
+        "chunks": chunks,
+        "record_s": t_record,
+        "open_s": t_open,
+        "seeks": seeks,
+        "median_ms": statistics.median(lat) * 1e3,
+        "p95_ms": lat[min(len(lat) - 1, int(0.95 * len(lat)))] * 1e3,
+        "max_ms": lat[-1] * 1e3,
+    }
+
+
+# ---------------------------------------------------------------------- command line
+def register(kinds: argparse._SubParsersAction) -> None:
+    """Add ``bench sessions`` to the ``bench`` command's sub-commands."""
+    p = kinds.add_parser("sessions", help="recorder throughput and seek latency")
+    p.add_argument("--messages", type=int, default=100_000, help="throughput run length")
+    p.add_argument("--hours", type=float, default=1.0, help="synthetic session length")
+    p.add_argument("--seeks", type=int, default=50, help="state_at calls timed")
+    p.add_argument("--dir", type=Path, default=None, help="scratch directory (default: /tmp)")
+    p.add_argument("--json", type=Path, default=None, help="write the results as JSON")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.messages < 1:
+        raise ValueError(f"--messages: {args.messages} must be at least 1")
+    if not 0.0 < args.hours <= 24.0:
+        raise ValueError(f"--hours: {args.hours} must be in (0, 24]")
+    if args.seeks < 1:
+        raise ValueError(f"--seeks: {args.seeks} must be at least 1")
+    thr = recorder_throughput(args.messages, args.dir)
+    print(f"recorder: {thr['rate_msgs_per_s']:,.0f} messages/s "
+          f"({thr['messages']} messages, {thr['dropped']} dropped, "
+          f"{thr['publish_us_per_msg']:.1f} us per publish)")
+    seek = seek_latency(args.hours, args.seeks, directory=args.dir)
+    print(f"seek: {seek['hours']} h, {seek['messages']:,} messages, {seek['chunks']} chunks, "
+          f"{seek['bytes'] / 1e6:.1f} MB; open {seek['open_s'] * 1e3:.0f} ms; state_at median "
+          f"{seek['median_ms']:.1f} ms, p95 {seek['p95_ms']:.1f} ms, max {seek['max_ms']:.1f} ms")
+    if args.json:
+        args.json.write_text(json.dumps({"throughput": thr, "seek": seek}, indent=2))
+        print(f"wrote {args.json}")
+    return 0
