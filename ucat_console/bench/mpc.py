@@ -51,6 +51,10 @@ class RunResult:
     costs: list[float] = field(default_factory=list)
     times_s: list[float] = field(default_factory=list)
 
+    def merge(self, other: RunResult) -> RunResult:
+        return RunResult(self.n, self.solver, self.stage, self.costs + other.costs,
+                         self.times_s + other.times_s)
+
     def row(self) -> dict:
         t = np.asarray(self.times_s) * 1e6
         return {

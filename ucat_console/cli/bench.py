@@ -18,7 +18,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--solvers", nargs="+", choices=("numba", "scipy"), default=["numba", "scipy"])
     p.add_argument("--stages", nargs="+", choices=("sampling", "two_stage"),
                    default=["sampling", "two_stage"])
-    p.add_argument("--seed", type=int, default=0, help="planner seed of every run")
+    p.add_argument("--seeds", type=int, default=1,
+                   help="protocol runs per row, with planner seeds 0..S-1 (costs and times pooled)")
     p.add_argument("--cpu", type=int, default=None, help="CPU to pin to (default: the last one)")
     p.add_argument("--gap-cases", type=int, default=40,
                    help="fixed cases for the quality gap (0: skip)")
@@ -50,14 +51,19 @@ def run_mpc(args: argparse.Namespace) -> int:
     first_call = {} if args.no_first_call else B.first_call_latency()
 
     runs = []
-    total = len(ns) * len(args.solvers) * len(args.stages) * 121 * B.CYCLES
+    if args.seeds < 1:
+        raise ValueError(f"--seeds: {args.seeds} must be at least 1")
+    total = len(ns) * len(args.solvers) * len(args.stages) * 121 * B.CYCLES * args.seeds
     with tqdm(total=total, desc="bench mpc", unit="solve", file=sys.stderr) as bar:
         for n in ns:
             for solver in args.solvers:
                 for stage in args.stages:
                     cfg = base.replace(n_samples=n, solver=solver)
-                    res = B.run_protocol(cfg, refine=stage == "two_stage", seed=args.seed,
-                                         on_solve=lambda: bar.update())
+                    res = None
+                    for seed in range(args.seeds):
+                        r = B.run_protocol(cfg, refine=stage == "two_stage", seed=seed,
+                                           on_solve=lambda: bar.update())
+                        res = r if res is None else res.merge(r)
                     runs.append(res.row())
     gap = {}
     if args.gap_cases:
@@ -78,7 +84,8 @@ def run_mpc(args: argparse.Namespace) -> int:
     if args.json:
         doc = {"runs": runs, "machine": machine_info(cpu), "first_call": first_call,
                "quality_gap": gap, "protocol": {"v_body": B.V_BODY, "cycles": B.CYCLES,
-                                                "targets": 121, "u_prev0": B.U_PREV0}}
+                                                "targets": 121, "u_prev0": B.U_PREV0,
+                                                "seeds": args.seeds}}
         args.json.write_text(json.dumps(doc, indent=2))
         print(f"\nwrote {args.json}")
     return 0

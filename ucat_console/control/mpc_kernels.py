@@ -342,10 +342,13 @@ def cost_grad(p, q, gx_tab, gy_tab, x, grad, table):
     return r[0]
 
 
-@_inline
-def write_terms(r, terms):
+@_jit
+def cost_terms_at(p, q, gx_tab, gy_tab, u, terms, table):
+    """Write J and its terms at u (len 4) to ``terms``; returns J."""
+    r = cost_eval(p, q, gx_tab, gy_tab, u[0], u[1], u[2], u[3], False, table)
     for i in range(N_TERMS):
         terms[i] = r[i]
+    return r[0]
 
 
 @_jit
@@ -573,7 +576,7 @@ def _plan(p, q, gx_tab, gy_tab, n, max_iter, rng, best_u, best_j, block, work, h
                 j_best = j
                 for c in range(4):
                     u_out[c] = x[c]
-    write_terms(cost_eval(p, q, gx_tab, gy_tab, u_out[0], u_out[1], u_out[2], u_out[3], False, table), terms)
+    cost_terms_at(p, q, gx_tab, gy_tab, u_out, terms, table)
     return t_mid - t0, monotonic_ns() - t_mid
 
 
@@ -588,14 +591,18 @@ def plan_kernel(p, q, gx_tab, gy_tab, n, max_iter, rng, best_u, best_j, block, w
 @_jit
 def refine_kernel(p, q, gx_tab, gy_tab, x, max_iter, work, hinv):
     """Stage 2 alone from the start point x (updated in place); returns the cost."""
-    if p[P_MODE] == MODE_TABLE:
-        return refine(p, q, gx_tab, gy_tab, x, max_iter, work, hinv, True)
-    return refine(p, q, gx_tab, gy_tab, x, max_iter, work, hinv, False)
+    return refine(p, q, gx_tab, gy_tab, x, max_iter, work, hinv, p[P_MODE] == MODE_TABLE)
 
 
 @_jit
 def cost_kernel(p, q, gx_tab, gy_tab, u, grad, terms):
     """J, its gradient and its terms at one point (for callers outside the solver)."""
     table = p[P_MODE] == MODE_TABLE
-    write_terms(cost_eval(p, q, gx_tab, gy_tab, u[0], u[1], u[2], u[3], False, table), terms)
+    cost_terms_at(p, q, gx_tab, gy_tab, u, terms, table)
+    return cost_grad_at(p, q, gx_tab, gy_tab, u, grad, table)
+
+
+@_jit
+def cost_grad_at(p, q, gx_tab, gy_tab, u, grad, table):
+    """J at u with its gradient written to ``grad`` (not inlined)."""
     return cost_grad(p, q, gx_tab, gy_tab, u, grad, table)

@@ -52,7 +52,7 @@ class MpcConfig(_Config):
     n_samples: int = param(500, lo=1, hi=100_000, doc="stage-1 samples N")
     max_iter: int = param(60, lo=0, hi=10_000, doc="stage-2 iteration limit k_max")
     refine_starts: int = param(
-        4, lo=1, hi=64, doc="best samples refined by the production solver (the paper refines 1)"
+        6, lo=1, hi=64, doc="best samples refined by the production solver (the paper refines 1)"
     )
     solver: str = param("numba", choices=("numba", "scipy"), doc="stage-2 implementation")
     force_model: str = param("analytic", choices=("analytic", "table"), doc="fin force model")
