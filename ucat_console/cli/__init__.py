@@ -12,7 +12,7 @@ import logging
 import sys
 
 #: sub-command modules under ucat_console.cli
-COMMANDS = ["bench", "devices"]
+COMMANDS = ["bench", "devices", "sessions", "replay"]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -41,6 +41,9 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:  # output piped into e.g. `head`
+        sys.stderr.close()
+        return 0
 
 
 if __name__ == "__main__":

@@ -27,6 +27,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", type=Path, default=None, help="write the results as JSON")
     p.set_defaults(func=run_mpc)
 
+    from ucat_console.bench import sessions as bench_sessions
+
+    bench_sessions.register(kinds)
+
 
 def run_mpc(args: argparse.Namespace) -> int:
     from tqdm import tqdm

@@ -1,1 +1,18 @@
-"""Session recording and reading (MCAP), index, repair and export."""
+"""Session recording and reading (MCAP), index, repair, export, playback and replay.
+
+The recorder and the player are the two ends of the one telemetry stream: the recorder
+writes what is published, the player publishes what was written.
+
+    schema     JSON Schemas derived from the message dataclasses (and the NaN encoding)
+    codec      message <-> JSON bytes; stream seconds <-> file nanoseconds
+    foxglove   foxglove.FrameTransform / foxglove.Log written beside our channels
+    files      the sessions directory, file names, metadata record names
+    recorder   Recorder: stream -> crash-safe MCAP parts
+    reader     SessionReader: messages, time ranges, state_at, events
+    repair     rewrite a truncated file fully indexed
+    index      list sessions from their summaries
+    export     CSV per channel
+    markers    review markers in a sidecar file
+    player     Player: file -> stream, with its own clock
+    replay     counterfactual replay of recorded fin plans with other MPC weights
+"""

@@ -1,0 +1,89 @@
+"""Helpers of the session tests: example messages, recording, NaN-aware equality."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import typing
+from pathlib import Path
+from typing import Any, Iterable
+
+from ucat_console.backend.sessions.recorder import Recorder, RecorderConfig
+from ucat_console.telemetry.events import LEVELS
+from ucat_console.telemetry.stream import TelemetryStream
+
+FIXTURES = Path(__file__).parent / "fixtures"
+
+
+def _value(tp: Any, name: str, k: int, nan: bool) -> Any:
+    """A value of annotated type ``tp`` built from the type alone (no per-class code)."""
+    origin = typing.get_origin(tp)
+    args = typing.get_args(tp)
+    if origin in (typing.Union, getattr(__import__("types"), "UnionType")):
+        inner = [a for a in args if a is not type(None)][0]
+        return _value(inner, name, k, nan)
+    if tp is float:
+        return math.nan if nan and k % 3 == 1 else 0.25 * k + 0.1
+    if tp is bool:
+        return k % 2 == 0
+    if tp is int:
+        return k % 4
+    if tp is str:
+        return LEVELS[k % len(LEVELS)] if name == "level" else f"{name}-{k}"
+    if origin is tuple:
+        if len(args) == 2 and args[1] is Ellipsis:
+            return tuple(_value(args[0], name, k + i, nan) for i in range(3))
+        return tuple(
+            math.nan if nan and i == 1 and a is float else _value(a, name, k + i, False)
+            for i, a in enumerate(args)
+        )
+    if origin is dict:
+        return {"k": k, "note": f"{name}-{k}", "list": [1, 2.5, "x"], "nested": {"a": True}}
+    raise TypeError(f"no example value for {tp!r}")
+
+
+def example_message(cls: type, k: int = 1, t: float | None = None, nan: bool = True) -> Any:
+    """One message of ``cls`` built from its type hints; ``nan`` puts NaN in some floats
+    and in the second element of every float tuple."""
+    hints = typing.get_type_hints(cls)
+    kwargs = {}
+    for i, f in enumerate(dataclasses.fields(cls)):
+        kwargs[f.name] = _value(hints[f.name], f.name, k + i, nan)
+    if t is not None:
+        kwargs["t"] = t
+    return cls(**kwargs)
+
+
+def same(a: Any, b: Any) -> bool:
+    """Equality that takes NaN == NaN (dataclasses, tuples, dicts, floats)."""
+    if dataclasses.is_dataclass(a) and dataclasses.is_dataclass(b):
+        return type(a) is type(b) and all(
+            same(getattr(a, f.name), getattr(b, f.name)) for f in dataclasses.fields(a)
+        )
+    if isinstance(a, float) and isinstance(b, float):
+        return (math.isnan(a) and math.isnan(b)) or a == b
+    if isinstance(a, (tuple, list)) and isinstance(b, (tuple, list)):
+        return type(a) is type(b) and len(a) == len(b) and all(same(x, y) for x, y in zip(a, b))
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(same(a[k], b[k]) for k in a)
+    return type(a) is type(b) and a == b
+
+
+def record(
+    directory: Path,
+    items: Iterable[tuple[str, Any]],
+    config: RecorderConfig | None = None,
+    epoch_offset: float = 1_700_000_000.0,
+    **start: Any,
+) -> list[Path]:
+    """Record ``(channel, message)`` items through a real stream and recorder."""
+    stream = TelemetryStream()
+    rec = Recorder(stream, config or RecorderConfig(), directory=directory,
+                   epoch_offset=epoch_offset)
+    rec.start(**start)
+    for channel, msg in items:
+        stream.publish(channel, msg)
+    paths = rec.stop()
+    stats = rec.stats()
+    assert stats.dropped == 0 and stats.rejected == 0 and not stats.error
+    return paths

@@ -1,0 +1,82 @@
+"""``ucat-console sessions ...`` and ``ucat-console replay``."""
+
+from __future__ import annotations
+
+import csv
+
+from session_helpers import record
+
+from ucat_console.backend.sessions.recorder import RecorderConfig
+from ucat_console.cli import main
+from ucat_console.telemetry import channels as C
+from ucat_console.telemetry.events import Event
+from ucat_console.telemetry.messages import FinPlan, Setpoints
+
+
+def _session(sessions):
+    items = [(C.SETPOINTS, Setpoints(0.5 * k, 0.1 * k, 1.0, 0.0)) for k in range(10)]
+    items.append((C.EVENTS, Event(5.0, "operator", "marker", "here", "info")))
+    return record(sessions, items, label="cli", notes="from the cli test",
+                  wall_time=1_700_000_000.0)
+
+
+def test_list_info_export(sessions, tmp_path, capsys):
+    [path] = _session(sessions)
+    assert main(["sessions", "list", "--dir", str(sessions)]) == 0
+    out = capsys.readouterr().out
+    assert "20231114-221320-cli" in out and "from the cli test" in out
+    assert "0:00:05" in out  # messages from t=0 to the event at t=5.0
+    assert main(["sessions", "info", "20231114-221320-cli", "--dir", str(sessions)]) == 0
+    out = capsys.readouterr().out
+    assert "body/setpoints" in out and "11 messages" in out
+    dest = tmp_path / "out"
+    assert main(["sessions", "export", path.name, "--topics", "body/setpoints,events",
+                 "--format", "csv", "--out", str(dest), "--dir", str(sessions)]) == 0
+    with open(dest / "body_setpoints.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [float(r["velocity"]) for r in rows] == [0.1 * k for k in range(10)]
+    assert (dest / "events.csv").exists()
+
+
+def test_errors_are_reported_with_exit_status_2(sessions, tmp_path, capsys):
+    (sessions / "junk.mcap").write_text("junk")
+    assert main(["sessions", "info", "junk.mcap", "--dir", str(sessions)]) == 2
+    assert "not an MCAP file" in capsys.readouterr().err
+    outside = tmp_path / "outside.mcap"
+    outside.write_text("x")
+    assert main(["sessions", "info", str(outside), "--dir", str(sessions)]) == 2
+    assert "outside the sessions directory" in capsys.readouterr().err
+    [path] = _session(sessions)
+    assert main(["replay", str(path), "--weights", "lam_q=1", "--dir", str(sessions)]) == 2
+    assert "lam_q: unknown weight" in capsys.readouterr().err
+
+
+def test_repair_command(sessions, capsys):
+    items = [(C.SETPOINTS, Setpoints(0.01 * k, 0.0, 1.0, 0.0)) for k in range(3000)]
+    [path] = record(sessions, items, RecorderConfig(chunk_size=4096))
+    assert main(["sessions", "repair", str(path), "--dir", str(sessions)]) == 0
+    assert "nothing to repair" in capsys.readouterr().out
+    path.write_bytes(path.read_bytes()[:20_000])
+    assert main(["sessions", "list", "--dir", str(sessions)]) == 0
+    assert "truncated" in capsys.readouterr().out
+    assert main(["sessions", "repair", str(path), "--dir", str(sessions)]) == 0
+    out = capsys.readouterr().out
+    assert "repaired" in out and ".orig" in out
+
+
+def test_replay_command_prints_a_table_and_writes_csv(sessions, tmp_path, capsys):
+    plan = FinPlan(0.0, 1, "mpc", (-0.4, 0.1), 0.3, 0.0, (0.5, -0.5, 2.0, 2.0),
+                   (0.6, -0.6, 3.0, 3.0), (0.6, 3.0, 0.0, 3.0), 1.0, 0.1, 0.1, 0.0, 0.1, 0.3,
+                   (-0.3, 0.1), 0.002, False)
+    [path] = record(sessions, [(C.fin_plan(1), plan)],
+                    config_toml="[mpc]\nn_samples = 32\nmax_iter = 5\n")
+    out_csv = tmp_path / "cf.csv"
+    assert main(["replay", str(path), "--weights", "lam_st=2.0", "--out", str(out_csv),
+                 "--dir", str(sessions)]) == 0
+    out = capsys.readouterr().out
+    assert "lam_st=2" in out and "St rec" in out and "all" in out
+    with open(out_csv, newline="") as fh:
+        [row] = list(csv.DictReader(fh))
+    assert row["fin"] == "1" and float(row["recorded_st"]) == 0.3
+    # recorded power from the recorded plan: both strokes at 3 rad/s -> 7 * 0.3^3 W
+    assert abs(float(row["recorded_power"]) - 7 * 0.3**3) < 1e-12

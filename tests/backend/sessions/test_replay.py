@@ -1,0 +1,121 @@
+"""Counterfactual replay of recorded fin plans."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from session_helpers import record
+
+from ucat_console.backend.sessions.reader import SessionReader
+from ucat_console.backend.sessions.replay import (
+    counterfactual,
+    parse_weights,
+    predicted_power,
+    recorded_config,
+    replay_config,
+)
+from ucat_console.control import FinMpc, MpcConfig
+from ucat_console.telemetry import channels as C
+from ucat_console.telemetry.messages import FinPlan
+
+SEED = 1234
+CFG = MpcConfig(n_samples=64, max_iter=10, lam_st=3.0, lam_f=2.0)
+
+
+def recorded_plans() -> list[tuple[str, FinPlan]]:
+    """Plans made by actually running the planner, as the supervisor records them."""
+    items = []
+    planners = {f: FinMpc(CFG) for f in range(4)}
+    u_prev = {f: (0.5, -0.5, 2.0, 2.0) for f in range(4)}
+    theta = {f: 0.0 for f in range(4)}
+    t = 0.0
+    for cycle in range(5):
+        for fin in range(4):
+            target = (-0.2 * (1 + cycle % 3), 0.1 * (fin - 1.5))
+            v = 0.1 + 0.05 * cycle
+            plan = planners[fin].plan(target, v, theta[fin], u_prev[fin], seed=SEED)
+            c = plan.cost
+            items.append((C.fin_plan(fin), FinPlan(
+                t=t, fin=fin, mode="mpc", target=target, v_body=v, theta0=theta[fin],
+                u_prev=u_prev[fin], u=plan.u, commands=plan.commands, cost_total=c.total,
+                cost_force=c.force, cost_strouhal=c.strouhal_penalty, cost_amplitude=c.amplitude,
+                cost_smoothness=c.smoothness, st=c.st, mean_force=c.mean_force,
+                solve_time=plan.solve_time_s, late=False,
+            )))
+            u_prev[fin] = plan.u
+            theta[fin] = plan.commands[2]
+            t += 0.1
+    return items
+
+
+@pytest.fixture(scope="module")
+def plans():
+    return recorded_plans()
+
+
+@pytest.fixture
+def session(sessions, plans):
+    [path] = record(sessions, plans, config_toml="[mpc]\n" + CFG.to_toml(),
+                    weights=dict(zip(("lam_f", "lam_st", "lam_a", "lam_d"), CFG.weights)))
+    return path
+
+
+def test_recorded_configuration_is_read_back(session, sessions):
+    with SessionReader(session, sessions) as r:
+        assert recorded_config(r) == CFG
+
+
+def test_replay_with_the_recorded_weights_reproduces_the_recorded_plans(session, sessions, plans):
+    with SessionReader(session, sessions) as r:
+        res = counterfactual(r, {}, seed=SEED)
+    assert res.skipped == 0 and len(res.rows) == len(plans)
+    for row, (_, msg) in zip(sorted(res.rows, key=lambda x: x.t), plans):
+        assert row.t == msg.t and row.fin == msg.fin
+        assert row.u == msg.u == row.recorded_u
+        assert row.st == msg.st == row.recorded_st
+        assert row.force_error == msg.cost_force
+        assert row.cost == msg.cost_total
+        assert row.power == row.recorded_power
+
+
+def test_replay_with_other_weights_is_the_planner_with_those_weights(session, sessions, plans):
+    with SessionReader(session, sessions) as r:
+        res = counterfactual(r, parse_weights("lam_st=40, lam_f=0.5"), seed=SEED)
+    assert (res.config.lam_st, res.config.lam_f, res.config.lam_a) == (40.0, 0.5, CFG.lam_a)
+    planner = FinMpc(CFG.replace(lam_st=40.0, lam_f=0.5))
+    rows = sorted(res.rows, key=lambda x: x.t)
+    for row, (_, msg) in zip(rows, plans):
+        direct = planner.plan(msg.target, msg.v_body, msg.theta0, msg.u_prev, seed=SEED)
+        assert row.u == direct.u and row.st == direct.cost.st
+        assert row.recorded_st == msg.st
+    assert any(row.u != row.recorded_u for row in rows)
+    summary = res.summary()
+    assert [s["fin"] for s in summary] == ["0", "1", "2", "3", "all"]
+    assert summary[-1]["plans"] == len(plans)
+    assert summary[-1]["st"] == pytest.approx(sum(r.st for r in rows) / len(rows))
+
+
+def test_predicted_power_hand_computed():
+    # P_k = 0.5 * 1000 * 0.7 * 0.02 * (0.1 w_k)^3: 0.056 W at 2 rad/s, 0.448 W at 4 rad/s;
+    # strokes last 0.5/2 = 0.25 s and 0.5/4 = 0.125 s
+    expected = (0.056 * 0.25 + 0.448 * 0.125) / 0.375
+    assert predicted_power((0.5, -0.5, 2.0, 4.0), MpcConfig()) == pytest.approx(expected)
+    assert math.isnan(predicted_power((0.5, -0.5, 0.0, 4.0), MpcConfig()))
+
+
+def test_weights_parse_and_refusals():
+    assert parse_weights("lam_st=2.0,lam_f=1.5") == {"lam_st": 2.0, "lam_f": 1.5}
+    assert parse_weights("") == {}
+    with pytest.raises(ValueError, match="lam_x: unknown weight"):
+        parse_weights("lam_x=1")
+    with pytest.raises(ValueError, match="lam_st: 'abc' is not a number"):
+        parse_weights("lam_st=abc")
+    with pytest.raises(ValueError, match="lam_st: 'nan' is not finite"):
+        parse_weights("lam_st=nan")
+    with pytest.raises(ValueError, match="lam_f: given twice"):
+        parse_weights("lam_f=1,lam_f=2")
+    with pytest.raises(ValueError, match="not name=value"):
+        parse_weights("lam_f")
+    with pytest.raises(ValueError, match="lam_st"):
+        replay_config(MpcConfig(), {"lam_st": 500.0})  # above the parameter's range

@@ -1,0 +1,80 @@
+"""Where session files live, what they are called, and the metadata records they hold.
+
+One session is one or more MCAP files (parts) in the sessions directory, named
+``<session id>_<part>.mcap`` with a three-digit part number from 001; the session id is
+``YYYYmmdd-HHMMSS`` (UTC, at the start) followed by ``-<label>`` when one is given. Review
+markers live beside them in ``<session id>.markers.json``.
+
+Metadata records (MCAP metadata, string values), written at the start of every part:
+
+    session   id, part, started_ns (wall clock), epoch_offset (s, repr), clock
+    config    toml: the run's configuration as TOML text
+    weights   one key per MPC weight (lam_f, lam_st, lam_a, lam_d), values repr(float)
+    version   ucat_console, mcap, python
+    notes     text: the operator's notes (a later record replaces an earlier one)
+"""
+
+from __future__ import annotations
+
+import re
+import time
+from pathlib import Path
+
+import ucat_console
+
+#: the project root (the directory holding the package) and its sessions directory
+PROJECT_ROOT = Path(ucat_console.__file__).resolve().parent.parent
+DEFAULT_SESSIONS_DIR = PROJECT_ROOT / "sessions"
+
+SUFFIX = ".mcap"
+MARKERS_SUFFIX = ".markers.json"
+PROFILE = "ucat_console"
+
+META_SESSION = "session"
+META_CONFIG = "config"
+META_WEIGHTS = "weights"
+META_VERSION = "version"
+META_NOTES = "notes"
+
+_LABEL = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
+_PART = re.compile(r"^(?P<session>.+)_(?P<part>\d{3,})\.mcap$")
+
+
+def new_session_id(wall_time: float | None = None, label: str = "") -> str:
+    """A session id from the wall clock (UTC) and an optional label."""
+    if label and not _LABEL.match(label):
+        raise ValueError(
+            f"label: {label!r} must be 1-64 letters, digits, '_', '.' or '-', starting "
+            "with a letter or digit"
+        )
+    wall = time.time() if wall_time is None else wall_time
+    stamp = time.strftime("%Y%m%d-%H%M%S", time.gmtime(wall))
+    return f"{stamp}-{label}" if label else stamp
+
+
+def part_name(session_id: str, part: int) -> str:
+    return f"{session_id}_{part:03d}{SUFFIX}"
+
+
+def parse_part_name(path: str | Path) -> tuple[str, int] | None:
+    """(session id, part) from a part file's name, None when it is not one."""
+    m = _PART.match(Path(path).name)
+    return (m["session"], int(m["part"])) if m else None
+
+
+def markers_path(directory: Path, session_id: str) -> Path:
+    return directory / f"{session_id}{MARKERS_SUFFIX}"
+
+
+def sessions_dir(directory: str | Path | None = None) -> Path:
+    """The sessions directory (default: ``sessions/`` at the project root), resolved."""
+    return Path(DEFAULT_SESSIONS_DIR if directory is None else directory).expanduser().resolve()
+
+
+def inside_sessions(path: str | Path, directory: str | Path | None = None) -> Path:
+    """``path`` resolved, or ValueError when it lies outside the sessions directory."""
+    root = sessions_dir(directory)
+    p = Path(path).expanduser().resolve()
+    if not p.is_relative_to(root):
+        raise ValueError(f"{path}: outside the sessions directory {root}")
+    return p

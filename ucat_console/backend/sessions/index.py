@@ -1,0 +1,152 @@
+"""The session index: what is in the sessions directory, read from summaries only.
+
+A finished part is described from its summary section and metadata records (a few
+kilobytes read from the end of the file); a truncated part from the metadata records at its
+start (the recorder writes them before any message), with its duration unknown until it is
+repaired. No message is decoded.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+from mcap.records import Chunk, Metadata
+from mcap.stream_reader import StreamReader
+
+from ucat_console.backend.sessions import files
+from ucat_console.backend.sessions.reader import MAGIC, SessionReader, TruncatedSessionError
+from ucat_console.telemetry.channels import EVENTS
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class PartInfo:
+    path: Path
+    session_id: str
+    part: int
+    size: int  # bytes
+    truncated: bool  # no summary: needs ``repair``
+    start: float | None  # UNIX seconds of the first message (None when unknown)
+    duration: float | None  # s (None when truncated)
+    messages: int | None
+    events: int | None
+    notes: str
+    error: str = ""  # why the part could not be read ("" when it could)
+
+
+@dataclass(frozen=True)
+class SessionInfo:
+    session_id: str
+    parts: tuple[PartInfo, ...]
+
+    @property
+    def size(self) -> int:
+        return sum(p.size for p in self.parts)
+
+    @property
+    def duration(self) -> float | None:
+        """Sum of the parts' durations (None when any part is truncated)."""
+        if any(p.duration is None for p in self.parts):
+            return None
+        return sum(p.duration for p in self.parts if p.duration is not None)
+
+    @property
+    def truncated(self) -> bool:
+        return any(p.truncated for p in self.parts)
+
+    @property
+    def events(self) -> int | None:
+        if any(p.events is None for p in self.parts):
+            return None
+        return sum(p.events for p in self.parts if p.events is not None)
+
+    @property
+    def notes(self) -> str:
+        for p in reversed(self.parts):
+            if p.notes:
+                return p.notes
+        return ""
+
+    @property
+    def start(self) -> float | None:
+        return self.parts[0].start if self.parts else None
+
+
+def _leading_metadata(path: Path) -> dict[str, dict[str, str]]:
+    """Metadata records before the first chunk (read without the summary)."""
+    out: dict[str, dict[str, str]] = {}
+    with open(path, "rb") as fh:
+        try:
+            for rec in StreamReader(fh, emit_chunks=True).records:
+                if isinstance(rec, Metadata):
+                    out[rec.name] = dict(rec.metadata)
+                elif isinstance(rec, Chunk):
+                    break
+        except Exception:  # a file cut inside its first records
+            pass
+    return out
+
+
+def part_info(path: str | Path, directory: str | Path | None = None) -> PartInfo:
+    """Describe one session file from its summary (or its first records when truncated)."""
+    p = files.inside_sessions(path, directory)
+    size = p.stat().st_size
+    parsed = files.parse_part_name(p) or (p.stem, 1)
+    try:
+        with SessionReader(p, p.parent) as r:
+            counts = r.message_counts()
+            return PartInfo(
+                path=p, session_id=r.session_id, part=r.part, size=size, truncated=False,
+                start=r.start_ns * 1e-9 if r.message_count else None,
+                duration=r.duration, messages=r.message_count,
+                events=counts.get(EVENTS, 0), notes=r.notes,
+            )
+    except TruncatedSessionError:
+        with open(p, "rb") as fh:
+            is_mcap = fh.read(len(MAGIC)) == MAGIC
+        meta = _leading_metadata(p) if is_mcap else {}
+        session = meta.get(files.META_SESSION, {})
+        started = session.get("started_ns", "")
+        return PartInfo(
+            path=p, session_id=session.get("id", parsed[0]),
+            part=int(session["part"]) if session.get("part", "").isdigit() else parsed[1],
+            size=size, truncated=True,
+            start=int(started) * 1e-9 if started.isdigit() else None,
+            duration=None, messages=None, events=None,
+            notes=meta.get(files.META_NOTES, {}).get("text", ""),
+        )
+    except ValueError as e:
+        return PartInfo(p, parsed[0], parsed[1], size, False, None, None, None, None, "", str(e))
+
+
+def list_sessions(directory: str | Path | None = None) -> list[SessionInfo]:
+    """Every session in the directory, oldest first, parts in order."""
+    root = files.sessions_dir(directory)
+    if not root.is_dir():
+        return []
+    by_id: dict[str, list[PartInfo]] = {}
+    for path in sorted(root.glob("*" + files.SUFFIX)):
+        if not path.is_file():
+            continue
+        info = part_info(path, root)
+        by_id.setdefault(info.session_id, []).append(info)
+    sessions = [
+        SessionInfo(sid, tuple(sorted(ps, key=lambda x: x.part))) for sid, ps in by_id.items()
+    ]
+    return sorted(sessions, key=lambda s: (s.start is None, s.start or 0.0, s.session_id))
+
+
+def session_parts(session_id: str, directory: str | Path | None = None) -> list[Path]:
+    """The part files of a session, in order (ValueError when there are none)."""
+    root = files.sessions_dir(directory)
+    parts = []
+    for path in root.glob(f"{session_id}_*{files.SUFFIX}"):
+        parsed = files.parse_part_name(path)
+        if parsed and parsed[0] == session_id:
+            parts.append((parsed[1], path))
+    if not parts:
+        raise ValueError(f"session {session_id!r}: no files in {root}")
+    return [p for _, p in sorted(parts)]

@@ -1,0 +1,373 @@
+"""Reading session files: messages decoded back to the telemetry dataclasses.
+
+:class:`SessionReader` opens one session file (part) and refuses, with a ValueError naming
+the problem: a path outside the sessions directory, a file that is not MCAP, a truncated
+file (no summary: run ``ucat-console sessions repair``), a corrupted file, and a foreign
+MCAP file (a channel or schema that is not ours).
+
+Times given to and returned by the reader are seconds on the recorded stream's clock (the
+messages' ``t``); the file's ``epoch_offset`` converts them to the file's nanoseconds.
+Time ranges are half-open, ``[start, end)``, as mcap's ``starting_at``/``ending_before``.
+"""
+
+from __future__ import annotations
+
+import bisect
+import json
+import logging
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO, Any, Iterable, Iterator
+
+from mcap.reader import SeekingReader
+from mcap.records import Channel, ChunkIndex, Message, Schema
+from mcap.summary import Summary
+
+from ucat_console.backend.sessions import codec, files, foxglove
+from ucat_console.backend.sessions.schema import (
+    MESSAGE_ENCODING,
+    SCHEMA_ENCODING,
+    field_specs,
+    schema_name,
+)
+from ucat_console.telemetry.channels import CHANNELS, EVENTS
+from ucat_console.telemetry.events import Event
+
+log = logging.getLogger(__name__)
+
+MAGIC = b"\x89MCAP0\r\n"
+
+
+class TruncatedSessionError(ValueError):
+    """The file has no readable summary (a killed recorder): ``repair`` recovers it."""
+
+
+@dataclass(frozen=True)
+class Record:
+    """One decoded message with its file time."""
+
+    channel: str
+    log_time_ns: int
+    message: Any
+
+
+def _check_schema(topic: str, schema: Schema | None, channel: Channel, path: Path) -> None:
+    """ValueError unless ``channel`` is one of ours with our schema."""
+    if topic in CHANNELS:
+        cls = CHANNELS[topic]
+        want = schema_name(cls)
+        if schema is None or schema.name != want or schema.encoding != SCHEMA_ENCODING:
+            got = "no schema" if schema is None else f"schema {schema.name!r} ({schema.encoding})"
+            raise ValueError(f"{path}: not a session file: channel {topic!r} has {got}, "
+                             f"expected {want!r} (jsonschema)")
+        if channel.message_encoding != MESSAGE_ENCODING:
+            raise ValueError(f"{path}: not a session file: channel {topic!r} is encoded "
+                             f"{channel.message_encoding!r}, expected 'json'")
+        try:
+            doc = json.loads(schema.data)
+            props = set(doc["properties"])
+        except (ValueError, KeyError, TypeError):
+            raise ValueError(
+                f"{path}: channel {topic!r}: schema is not a JSON Schema object"
+            ) from None
+        fields = {s.name for s in field_specs(cls)}
+        if not props <= fields:
+            raise ValueError(f"{path}: channel {topic!r}: schema fields "
+                             f"{sorted(props - fields)} are not fields of {cls.__name__}")
+        return
+    for ftopic, name, _ in foxglove.DERIVED:
+        if topic == ftopic:
+            if schema is None or schema.name != name:
+                raise ValueError(f"{path}: not a session file: channel {topic!r} is not {name}")
+            return
+    raise ValueError(f"{path}: not a session file: foreign channel {topic!r}"
+                     + (f" (schema {schema.name!r})" if schema is not None else ""))
+
+
+class SessionReader:
+    """One session file, opened for reading (use as a context manager or ``close()``)."""
+
+    def __init__(self, path: str | Path, directory: str | Path | None = None) -> None:
+        self.path = files.inside_sessions(path, directory)
+        p = self.path
+        if not p.is_file():
+            raise ValueError(f"{path}: no such session file")
+        self._file: IO[bytes] = open(p, "rb")
+        try:
+            self._open()
+        except BaseException:
+            self._file.close()
+            raise
+
+    def _open(self) -> None:
+        p = self.path
+        head = self._file.read(len(MAGIC))
+        if head != MAGIC:
+            raise ValueError(f"{p}: not an MCAP file (it does not start with the MCAP magic)")
+        self._file.seek(0)
+        self._reader = SeekingReader(self._file, validate_crcs=True)
+        try:
+            summary = self._reader.get_summary()
+        except Exception as e:
+            raise TruncatedSessionError(
+                f"{p}: truncated or corrupted (no readable summary: {e}); "
+                "`ucat-console sessions repair` recovers its complete records"
+            ) from None
+        if summary is None or summary.statistics is None:
+            raise TruncatedSessionError(
+                f"{p}: has no summary section; `ucat-console sessions repair` "
+                "rewrites it fully indexed"
+            )
+        self._summary: Summary = summary
+        channels = summary.channels
+        if not channels:
+            raise ValueError(f"{p}: not a session file: it has no channels")
+        self._topic_ids: dict[str, int] = {}
+        for cid, ch in channels.items():
+            schema = summary.schemas.get(ch.schema_id) if ch.schema_id else None
+            _check_schema(ch.topic, schema, ch, p)
+            self._topic_ids[ch.topic] = cid
+        if not any(t in CHANNELS for t in self._topic_ids):
+            raise ValueError(
+                f"{p}: not a session file: none of its channels is a telemetry channel"
+            )
+        try:
+            self.metadata: dict[str, dict[str, str]] = {}
+            for m in self._reader.iter_metadata():  # later records replace earlier ones
+                self.metadata[m.name] = dict(m.metadata)
+        except Exception as e:
+            raise ValueError(f"{p}: corrupted metadata ({e})") from None
+        session = self.metadata.get(files.META_SESSION, {})
+        try:
+            self.epoch_offset = float(session.get("epoch_offset", "0.0"))
+            self.part = int(session.get("part", "1"))
+        except ValueError:
+            raise ValueError(f"{p}: bad session metadata {session!r}") from None
+        if not math.isfinite(self.epoch_offset):
+            raise ValueError(f"{p}: bad session metadata: epoch_offset {self.epoch_offset!r}")
+        parsed = files.parse_part_name(p)
+        self.session_id = session.get("id") or (parsed[0] if parsed else p.stem)
+        stats = summary.statistics
+        self.message_count = sum(
+            n for cid, n in stats.channel_message_counts.items()
+            if channels[cid].topic in CHANNELS
+        )
+        self.start_ns = stats.message_start_time
+        self.end_ns = stats.message_end_time
+
+    # ------------------------------------------------------------------ properties
+    def close(self) -> None:
+        self._file.close()
+
+    def __enter__(self) -> SessionReader:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    @property
+    def start(self) -> float:
+        """Time of the first message (stream seconds)."""
+        return codec.from_ns(self.start_ns, self.epoch_offset)
+
+    @property
+    def end(self) -> float:
+        """Time of the last message (stream seconds)."""
+        return codec.from_ns(self.end_ns, self.epoch_offset)
+
+    @property
+    def duration(self) -> float:
+        return (self.end_ns - self.start_ns) * 1e-9 if self.message_count else 0.0
+
+    @property
+    def notes(self) -> str:
+        return self.metadata.get(files.META_NOTES, {}).get("text", "")
+
+    @property
+    def config_toml(self) -> str:
+        return self.metadata.get(files.META_CONFIG, {}).get("toml", "")
+
+    @property
+    def weights(self) -> dict[str, float]:
+        out = {}
+        for k, v in self.metadata.get(files.META_WEIGHTS, {}).items():
+            try:
+                out[k] = float(v)
+            except ValueError:
+                raise ValueError(
+                    f"{self.path}: weights metadata: {k}={v!r} is not a number"
+                ) from None
+        return out
+
+    @property
+    def version(self) -> str:
+        return self.metadata.get(files.META_VERSION, {}).get("ucat_console", "")
+
+    @property
+    def channels(self) -> list[str]:
+        """Telemetry channels registered in the file."""
+        return [t for t in self._topic_ids if t in CHANNELS]
+
+    def message_counts(self) -> dict[str, int]:
+        stats = self._summary.statistics
+        assert stats is not None
+        counts = {t: 0 for t in self.channels}
+        for cid, n in stats.channel_message_counts.items():
+            topic = self._summary.channels[cid].topic
+            if topic in counts:
+                counts[topic] = n
+        return counts
+
+    def to_ns(self, t: float) -> int:
+        return codec.to_ns(t, self.epoch_offset)
+
+    def from_ns(self, ns: int) -> float:
+        return codec.from_ns(ns, self.epoch_offset)
+
+    # ------------------------------------------------------------------ messages
+    def _topics(self, channels: Iterable[str] | None) -> list[str]:
+        if channels is None:
+            return self.channels
+        out = []
+        for c in channels:
+            if c not in CHANNELS:
+                raise ValueError(f"unknown telemetry channel {c!r}")
+            if c in self._topic_ids:
+                out.append(c)
+        return out
+
+    def _iter(
+        self, topics: list[str], starting_at: int | None, ending_before: int | None,
+        reverse: bool = False, ordered: bool = True,
+    ) -> Iterator[tuple[Channel, Message]]:
+        if not topics:
+            return
+        if starting_at is not None and ending_before is not None and starting_at >= ending_before:
+            return
+        try:
+            for _, channel, message in self._reader.iter_messages(
+                topics=topics, starting_at=starting_at, ending_before=ending_before,
+                reverse=reverse, log_time_order=ordered,
+            ):
+                yield channel, message
+        except Exception as e:  # CRC, decompression, record structure: the file is damaged
+            raise ValueError(f"{self.path}: corrupted data ({type(e).__name__}: {e})") from None
+
+    def _decode(self, channel: Channel, message: Message) -> Record:
+        cls = CHANNELS[channel.topic]
+        try:
+            msg = codec.decode(cls, message.data)
+        except ValueError as e:
+            raise ValueError(
+                f"{self.path}: channel {channel.topic!r}, message at {message.log_time} ns: {e}"
+            ) from None
+        return Record(channel.topic, message.log_time, msg)
+
+    def records(
+        self,
+        channels: Iterable[str] | None = None,
+        start: float | None = None,
+        end: float | None = None,
+        *,
+        start_ns: int | None = None,
+        end_ns: int | None = None,
+        reverse: bool = False,
+    ) -> Iterator[Record]:
+        """Decoded messages in time order (``reverse``: latest first) within
+        ``[start, end)`` (stream seconds) or ``[start_ns, end_ns)`` (file nanoseconds)."""
+        lo = start_ns if start is None else self.to_ns(start)
+        hi = end_ns if end is None else self.to_ns(end)
+        for channel, message in self._iter(self._topics(channels), lo, hi, reverse):
+            yield self._decode(channel, message)
+
+    def messages(
+        self,
+        channels: Iterable[str] | None = None,
+        start: float | None = None,
+        end: float | None = None,
+    ) -> Iterator[tuple[str, Any]]:
+        """``(channel, message)`` in time order within ``[start, end)``."""
+        for r in self.records(channels, start, end):
+            yield r.channel, r.message
+
+    def state_at(self, t: float, channels: Iterable[str] | None = None) -> dict[str, Any]:
+        """The latest message of each channel at or before ``t`` (channels with none are
+        left out)."""
+        return {c: r.message for c, r in self.state_records_at_ns(self.to_ns(t), channels).items()}
+
+    def state_records_at_ns(
+        self, ns: int, channels: Iterable[str] | None = None
+    ) -> dict[str, Record]:
+        """:meth:`state_at` for a file time ``ns``, with the messages' file times.
+
+        Guided by the chunk index: walking back from the chunk that holds ``ns``, each
+        chunk that holds a channel still missing is read once, in file order, over
+        ``[chunk start, ns]`` for those channels, keeping each channel's latest message
+        (a chunk overlapping that range is read with it, so out-of-order writes are
+        covered). A typical call decodes the chunk at ``ns`` plus one for each rare
+        channel (events): a few milliseconds at 64 KiB chunks, where a ``reverse=True``
+        read would pass every message of those chunks through its ordering heap.
+        """
+        topics = self._topics(channels)
+        ids = {t: self._topic_ids[t] for t in topics}
+        pending = set(self._present_before(topics, ns))
+        latest: dict[str, tuple[Channel, Message]] = {}
+        chunks, starts = self._chunks_by_start()
+        i = bisect.bisect_right(starts, ns) - 1
+        while pending and i >= 0:
+            ci = chunks[i]
+            i -= 1
+            offsets = ci.message_index_offsets
+            want = [t for t in pending if not offsets or ids[t] in offsets]
+            if not want:
+                continue
+            for channel, message in self._iter(
+                want, ci.message_start_time, ns + 1, ordered=False
+            ):
+                best = latest.get(channel.topic)
+                if best is None or message.log_time >= best[1].log_time:
+                    latest[channel.topic] = (channel, message)
+            pending.difference_update(latest)
+        return {c: self._decode(*latest[c]) for c in topics if c in latest}
+
+    def _chunks_by_start(self) -> tuple[list[ChunkIndex], list[int]]:
+        if getattr(self, "_by_start", None) is None:
+            chunks = sorted(self._summary.chunk_indexes, key=lambda c: c.message_start_time)
+            self._by_start = (chunks, [c.message_start_time for c in chunks])
+        return self._by_start
+
+    def _present_before(self, topics: list[str], ns: int) -> list[str]:
+        """Topics with a chunk that starts at or before ``ns`` (they may have a message then)."""
+        first = self._first_chunk_ns()
+        return [t for t in topics if first.get(t, ns + 1) <= ns]
+
+    def _first_chunk_ns(self) -> dict[str, int]:
+        """For each topic, the start time of the earliest chunk holding it (from the index)."""
+        if getattr(self, "_first_ns", None) is None:
+            names = {cid: ch.topic for cid, ch in self._summary.channels.items()}
+            first: dict[str, int] = {}
+            for ci in self._summary.chunk_indexes:
+                if not ci.message_index_offsets:  # unindexed chunk: any topic may be in it
+                    for topic in names.values():
+                        first[topic] = min(first.get(topic, 1 << 63), ci.message_start_time)
+                    continue
+                for cid in ci.message_index_offsets:
+                    topic = names.get(cid)
+                    if topic is not None and ci.message_start_time < first.get(topic, 1 << 63):
+                        first[topic] = ci.message_start_time
+            self._first_ns: dict[str, int] | None = first
+        assert self._first_ns is not None
+        return self._first_ns
+
+    def events(self, start: float | None = None, end: float | None = None) -> list[Event]:
+        """The recorded events within ``[start, end)``, in time order."""
+        return [m for _, m in self.messages([EVENTS], start, end)]
+
+    def event_times_ns(self) -> list[int]:
+        return [r.log_time_ns for r in self.records([EVENTS])]
+
+
+def open_session(path: str | Path, directory: str | Path | None = None) -> SessionReader:
+    """Open a session file inside ``directory`` (default: the project's ``sessions/``)."""
+    return SessionReader(path, directory)

@@ -1,0 +1,469 @@
+"""The recorder: one end of the telemetry stream, writing it to MCAP session files.
+
+The recorder subscribes to a :class:`~ucat_console.telemetry.TelemetryStream`. Its
+callback only appends to a bounded queue (it never blocks the publisher); a writer thread
+encodes the messages and writes them. When the queue is full a message is dropped and
+counted, and the writer reports the count as an ``Event`` (source ``"recorder"``, code
+``"queue_overflow"``) on the stream and in the log: a drop is never silent.
+
+Crash safety: chunks hold at most ``chunk_size`` bytes (<= 256 KiB) and the open chunk is
+also closed and handed to the OS every ``flush_interval`` (0.5 s), so a killed process
+loses about the last half second (plus what was queued); ``repair`` re-indexes the rest.
+
+A session is split into parts (new file, same session id, next part number) when a part
+exceeds ``split_size`` bytes or ``split_duration`` seconds of recorded time. Each part is
+self-contained: every channel registered with its schema and every metadata record.
+"""
+
+from __future__ import annotations
+
+import collections
+import logging
+import math
+import sys
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Mapping
+
+import mcap
+from mcap.writer import CompressionType, Writer
+
+import ucat_console
+from ucat_console.backend.sessions import codec, files, foxglove
+from ucat_console.backend.sessions.schema import (
+    MESSAGE_ENCODING,
+    SCHEMA_ENCODING,
+    json_schema_bytes,
+    schema_name,
+)
+from ucat_console.control.params import _Config
+from ucat_console.telemetry.channels import BODY_STATE, CHANNELS, EVENTS
+from ucat_console.telemetry.events import Event, EventSink
+from ucat_console.telemetry.stream import TelemetryStream
+from ucat_console.typedconf import param
+
+log = logging.getLogger(__name__)
+
+_COMPRESSION = {
+    "zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE,
+}
+_IDLE_SLEEP = 0.005  # s, writer poll period when the queue is empty
+_SIZE_CHECK_EVERY = 256  # messages between part-size checks
+
+
+@dataclass(frozen=True)
+class RecorderConfig(_Config):
+    """Session recording (console.md, Sessions)."""
+
+    chunk_size: int = param(
+        64 * 1024, lo=4096, hi=256 * 1024, unit="B",
+        doc="largest chunk, uncompressed (a seek decodes about one to three chunks)",
+    )
+    flush_interval: float = param(
+        0.5, lo=0.05, hi=1.0, unit="s", doc="the open chunk is closed and written this often"
+    )
+    queue_size: int = param(
+        200_000, lo=1, hi=10_000_000, doc="messages waiting for the writer thread"
+    )
+    split_size: int = param(
+        2 * 1024**3, lo=64 * 1024, hi=2**40, unit="B", doc="start a new part beyond this size"
+    )
+    split_duration: float = param(
+        3600.0, lo=1.0, hi=7 * 86400.0, unit="s", doc="start a new part after this recorded time"
+    )
+    compression: str = param("zstd", choices=("zstd", "lz4", "none"), doc="chunk compression")
+    foxglove: bool = param(True, doc="also write foxglove.FrameTransform and foxglove.Log")
+
+
+@dataclass(frozen=True)
+class RecorderStats:
+    session_id: str
+    part: int
+    paths: tuple[Path, ...]
+    written: int  # messages written (our channels)
+    dropped: int  # queue overflows
+    rejected: int  # messages that could not be encoded
+    queued: int
+    error: str  # the writer's failure, "" when none
+
+
+class _Part:
+    """One open MCAP file."""
+
+    def __init__(self, path: Path, cfg: RecorderConfig) -> None:
+        self.path = path
+        self.file = open(path, "xb")
+        self.writer = Writer(
+            self.file, chunk_size=cfg.chunk_size, compression=_COMPRESSION[cfg.compression]
+        )
+        self.writer.start(
+            profile=files.PROFILE,
+            library=f"ucat_console {ucat_console.__version__}; mcap {mcap.__version__}",
+        )
+        self.channel_ids: dict[str, int] = {}
+        self.sequence: dict[int, int] = collections.defaultdict(int)
+        self.first_ns: int | None = None
+        self.dirty = False
+
+    def register(self, foxglove_channels: bool) -> None:
+        w = self.writer
+        schema_ids: dict[type, int] = {}
+        for topic, cls in CHANNELS.items():
+            if cls not in schema_ids:
+                schema_ids[cls] = w.register_schema(
+                    schema_name(cls), SCHEMA_ENCODING, json_schema_bytes(cls)
+                )
+            self.channel_ids[topic] = w.register_channel(topic, MESSAGE_ENCODING, schema_ids[cls])
+        if foxglove_channels:
+            for topic, name, schema in foxglove.DERIVED:
+                sid = w.register_schema(name, SCHEMA_ENCODING, foxglove.schema_bytes(schema))
+                self.channel_ids[topic] = w.register_channel(topic, MESSAGE_ENCODING, sid)
+
+    def add(self, topic: str, ns: int, data: bytes) -> None:
+        cid = self.channel_ids[topic]
+        seq = self.sequence[cid]
+        self.sequence[cid] = seq + 1
+        self.writer.add_message(cid, log_time=ns, data=data, publish_time=ns, sequence=seq)
+        if self.first_ns is None:
+            self.first_ns = ns
+        self.dirty = True
+
+    def flush(self) -> None:
+        if self.dirty:
+            self.writer.flush()
+            self.dirty = False
+
+    def size(self) -> int:
+        return self.file.tell()
+
+    def close(self) -> None:
+        try:
+            self.writer.finish()
+        finally:
+            self.file.close()
+
+
+class Recorder:
+    """Records a telemetry stream to session files; ``start()`` and ``stop()`` on demand.
+
+    ``epoch_offset`` (s) is added to the messages' ``t`` to make UNIX time: 0 for a
+    wall-clock stream, the run's start time for a headless run in simulated seconds.
+    ``event_sink`` also receives the recorder's own events (overflow, write failure).
+    """
+
+    def __init__(
+        self,
+        stream: TelemetryStream,
+        config: RecorderConfig | None = None,
+        directory: str | Path | None = None,
+        epoch_offset: float = 0.0,
+        event_sink: EventSink | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        if not math.isfinite(epoch_offset):
+            raise ValueError(f"epoch_offset: {epoch_offset!r} is not finite")
+        self.stream = stream
+        self.config = config or RecorderConfig()
+        self.directory = files.sessions_dir(directory)
+        self.epoch_offset = float(epoch_offset)
+        self._event_sink = event_sink
+        self._clock = clock
+        self._lock = threading.Lock()
+        self._thread: threading.Thread | None = None
+        self._unsubscribe: Callable[[], None] | None = None
+        self._reset()
+
+    def _reset(self) -> None:
+        self._queue: collections.deque = collections.deque()
+        self._maxlen = self.config.queue_size
+        self._dropped = 0
+        self._dropped_reported = 0
+        self._drop_lock = threading.Lock()
+        self._rejected = 0
+        self._rejected_reported = 0
+        self._written = 0
+        self._stopping = False
+        self._error = ""
+        self._session_id = ""
+        self._part: _Part | None = None
+        self._part_no = 0
+        self._paths: list[Path] = []
+        self._meta: dict[str, dict[str, str]] = {}
+        self._last_ns = 0
+        self._last_t = 0.0
+
+    # ------------------------------------------------------------------ control
+    @property
+    def recording(self) -> bool:
+        return self._thread is not None
+
+    @property
+    def session_id(self) -> str:
+        return self._session_id
+
+    @property
+    def paths(self) -> list[Path]:
+        return list(self._paths)
+
+    def stats(self) -> RecorderStats:
+        return RecorderStats(
+            session_id=self._session_id,
+            part=self._part_no,
+            paths=tuple(self._paths),
+            written=self._written,
+            dropped=self._dropped,
+            rejected=self._rejected,
+            queued=len(self._queue),
+            error=self._error,
+        )
+
+    def start(
+        self,
+        *,
+        label: str = "",
+        notes: str = "",
+        config_toml: str = "",
+        weights: Mapping[str, float] | None = None,
+        wall_time: float | None = None,
+    ) -> str:
+        """Open a new session and start recording; returns the session id.
+
+        ``config_toml`` (the run's configuration), ``weights`` (the MPC weights in force)
+        and ``notes`` are stored as metadata records of every part.
+        """
+        with self._lock:
+            if self._thread is not None:
+                raise RuntimeError(f"already recording session {self._session_id}")
+            self._reset()
+            self.directory.mkdir(parents=True, exist_ok=True)
+            wall = time.time() if wall_time is None else wall_time
+            base = files.new_session_id(wall, label)
+            sid, n = base, 1
+            while any(self.directory.glob(f"{sid}_*{files.SUFFIX}")):
+                n += 1
+                sid = f"{base}-{n}"
+            self._session_id = sid
+            w = {}
+            for k, v in (weights or {}).items():
+                if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                    raise ValueError(f"weights.{k}: expected a finite number, got {v!r}")
+                w[str(k)] = repr(float(v))
+            for name, text in (("notes", notes), ("config_toml", config_toml)):
+                if not isinstance(text, str):
+                    raise ValueError(f"{name}: expected text, got {type(text).__name__}")
+            self._meta = {
+                files.META_SESSION: {
+                    "id": sid,
+                    "part": "1",
+                    "started_ns": str(int(wall * 1e9)),
+                    "epoch_offset": repr(self.epoch_offset),
+                    "clock": "wall" if self.epoch_offset == 0.0 else "offset",
+                },
+                files.META_CONFIG: {"toml": config_toml},
+                files.META_WEIGHTS: w,
+                files.META_VERSION: {
+                    "ucat_console": ucat_console.__version__,
+                    "mcap": mcap.__version__,
+                    "python": sys.version.split()[0],
+                },
+                files.META_NOTES: {"text": notes},
+            }
+            self._open_part()  # in this thread: a bad directory fails here, loudly
+            self._unsubscribe = self.stream.subscribe(self._on_message)
+            self._thread = threading.Thread(
+                target=self._run, name=f"recorder-{sid}", daemon=True
+            )
+            self._thread.start()
+            log.info("recording session %s to %s", sid, self._paths[-1])
+            return sid
+
+    def set_notes(self, notes: str) -> None:
+        """Replace the operator's notes (written at once as a metadata record)."""
+        if not isinstance(notes, str):
+            raise ValueError(f"notes: expected text, got {notes!r}")
+        if self._thread is None:
+            raise RuntimeError("not recording")
+        self._queue.append((None, notes))  # commands bypass the bound: they are few
+
+    def stop(self, notes: str | None = None) -> list[Path]:
+        """Stop recording, write everything queued, close the file; returns its parts."""
+        with self._lock:
+            if self._thread is None:
+                return list(self._paths)
+            if notes is not None:
+                self._queue.append((None, notes))
+            if self._unsubscribe is not None:
+                self._unsubscribe()
+                self._unsubscribe = None
+            self._stopping = True
+            self._thread.join()
+            self._thread = None
+            log.info(
+                "session %s stopped: %d messages, %d dropped, %d rejected",
+                self._session_id, self._written, self._dropped, self._rejected,
+            )
+            return list(self._paths)
+
+    def __enter__(self) -> Recorder:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.stop()
+
+    # ------------------------------------------------------------------ publisher side
+    def _on_message(self, channel: str, msg: Any) -> None:
+        if len(self._queue) >= self._maxlen:
+            with self._drop_lock:
+                self._dropped += 1
+            return
+        self._queue.append((channel, msg))
+
+    # ------------------------------------------------------------------ writer thread
+    def _open_part(self) -> None:
+        self._part_no += 1
+        path = self.directory / files.part_name(self._session_id, self._part_no)
+        part = _Part(path, self.config)
+        self._meta[files.META_SESSION]["part"] = str(self._part_no)
+        for name, data in self._meta.items():
+            part.writer.add_metadata(name, dict(data))
+        part.register(self.config.foxglove)
+        self._part = part
+        self._paths.append(path)
+
+    def _next_part(self) -> None:
+        assert self._part is not None
+        self._part.close()
+        self._part = None
+        self._open_part()
+        log.info("session %s: part %d", self._session_id, self._part_no)
+
+    def _run(self) -> None:
+        cfg = self.config
+        popleft = self._queue.popleft
+        split_ns = round(cfg.split_duration * 1e9)
+        last_flush = self._clock()
+        count = 0
+        try:
+            while True:
+                try:
+                    channel, msg = popleft()
+                except IndexError:
+                    last_flush = self._tick(last_flush, force=False)
+                    if self._stopping and not self._queue:
+                        break
+                    time.sleep(_IDLE_SLEEP)
+                    continue
+                if channel is None:
+                    self._write_notes(msg)
+                    continue
+                part = self._part
+                assert part is not None
+                ns = self._write(part, channel, msg)
+                if ns is not None and part.first_ns is not None and ns - part.first_ns >= split_ns:
+                    self._next_part()
+                count += 1
+                if count % _SIZE_CHECK_EVERY == 0:
+                    if self._part is not None and self._part.size() >= cfg.split_size:
+                        self._next_part()
+                    last_flush = self._tick(last_flush, force=False)
+            self._tick(last_flush, force=True)
+        except Exception as e:  # disk full, permissions ...: report, stop recording
+            self._error = f"{type(e).__name__}: {e}"
+            log.exception("session %s: writing failed", self._session_id)
+            if self._unsubscribe is not None:
+                self._unsubscribe()
+            self._report(Event(
+                t=self._last_t, source="recorder", code="write_failed",
+                message=f"recording stopped: {self._error}", level="error",
+                data={"session": self._session_id, "path": str(self._paths[-1])},
+            ))
+        finally:
+            if self._part is not None:
+                try:
+                    self._part.close()
+                except Exception:
+                    log.exception(
+                        "session %s: closing %s failed", self._session_id, self._part.path
+                    )
+                self._part = None
+
+    def _write(self, part: _Part, channel: str, msg: Any) -> int | None:
+        try:
+            data = codec.encode(msg)
+            t = msg.t
+        except Exception as e:
+            self._rejected += 1
+            if self._rejected == 1:
+                log.warning("session %s: cannot record a %s message: %s",
+                            self._session_id, channel, e)
+            return None
+        if isinstance(t, (int, float)) and not isinstance(t, bool) and math.isfinite(t):
+            ns = codec.to_ns(t, self.epoch_offset)
+            self._last_ns, self._last_t = ns, t
+        else:  # no usable time: keep the message at the last time seen
+            ns = self._last_ns
+        if channel not in part.channel_ids:
+            self._rejected += 1
+            return None
+        part.add(channel, ns, data)
+        self._written += 1
+        if self.config.foxglove:
+            if channel == BODY_STATE:
+                tf = foxglove.frame_transform(msg, ns)
+                if tf is not None:
+                    part.add(foxglove.TF_TOPIC, ns, foxglove.encode(tf))
+            elif channel == EVENTS:
+                part.add(foxglove.LOG_TOPIC, ns, foxglove.encode(foxglove.log_message(msg, ns)))
+        return ns
+
+    def _write_notes(self, notes: str) -> None:
+        self._meta[files.META_NOTES] = {"text": notes}
+        if self._part is not None:
+            self._part.writer.add_metadata(files.META_NOTES, {"text": notes})
+
+    def _tick(self, last_flush: float, force: bool) -> float:
+        now = self._clock()
+        if not force and now - last_flush < self.config.flush_interval:
+            return last_flush
+        part = self._part
+        if part is not None:
+            part.flush()
+            if not force and part.size() >= self.config.split_size:
+                self._next_part()
+        self._report_losses()
+        return now
+
+    def _report_losses(self) -> None:
+        dropped = self._dropped
+        if dropped > self._dropped_reported:
+            n = dropped - self._dropped_reported
+            self._dropped_reported = dropped
+            self._report(Event(
+                t=self._last_t, source="recorder", code="queue_overflow",
+                message=f"recorder queue full: {n} messages dropped ({dropped} this session)",
+                level="error",
+                data={"dropped": n, "total": dropped, "queue_size": self._maxlen},
+            ))
+        rejected = self._rejected
+        if rejected > self._rejected_reported:
+            n = rejected - self._rejected_reported
+            self._rejected_reported = rejected
+            self._report(Event(
+                t=self._last_t, source="recorder", code="bad_message",
+                message=f"{n} messages could not be recorded ({rejected} this session)",
+                level="error", data={"rejected": n, "total": rejected},
+            ))
+
+    def _report(self, event: Event) -> None:
+        log.warning("%s", event.message)
+        if self._event_sink is not None:
+            try:
+                self._event_sink(event)
+            except Exception:
+                log.exception("recorder event sink failed")
+        try:
+            self.stream.publish(EVENTS, event)
+        except Exception:
+            log.exception("publishing the recorder's event failed")

@@ -1,0 +1,151 @@
+"""Repair a truncated session file (a killed recorder leaves no footer or summary).
+
+Every complete record (schemas, channels, messages, metadata, attachments) is read
+sequentially with mcap's ``StreamReader`` (the record reader under ``NonSeekingReader``,
+which stops with an error at the cut; chunk CRCs are checked, so a half-written chunk is
+left out) and copied into a new ``Writer``, which writes the chunk,
+message and metadata indexes and the summary: the result opens like any finished file.
+The copy goes to a temporary file beside the original and then atomically replaces it;
+the original is kept as ``FILE.orig`` unless told otherwise.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+
+from mcap.exceptions import McapError
+from mcap.reader import NonSeekingReader
+from mcap.records import Attachment, Channel, DataEnd, Message, Metadata, Schema
+from mcap.stream_reader import StreamReader
+from mcap.writer import CompressionType, Writer
+
+from ucat_console.backend.sessions import files
+from ucat_console.backend.sessions.reader import MAGIC, SessionReader, TruncatedSessionError
+
+log = logging.getLogger(__name__)
+
+ORIG_SUFFIX = ".orig"
+_CHUNK_SIZE = 256 * 1024
+
+
+@dataclass(frozen=True)
+class RepairReport:
+    path: Path
+    repaired: bool  # False: the file was already complete, nothing was written
+    messages: int  # messages in the repaired file
+    metadata: int  # metadata records copied
+    stop_reason: str  # why reading stopped ("" for a complete file)
+    original: Path | None  # where the original was kept
+
+
+def needs_repair(path: str | Path) -> bool:
+    """True when the file has no readable summary (it opens only after a repair)."""
+    p = Path(path)
+    try:
+        SessionReader(p, p.resolve().parent).close()
+    except TruncatedSessionError:
+        return True
+    except ValueError:
+        return False
+    return False
+
+
+def repair(
+    path: str | Path,
+    directory: str | Path | None = None,
+    *,
+    keep_original: bool = True,
+    force: bool = False,
+) -> RepairReport:
+    """Rewrite ``path`` fully indexed from its complete records.
+
+    A file that already opens is left alone (``repaired`` False) unless ``force``.
+    """
+    p = files.inside_sessions(path, directory)
+    if not p.is_file():
+        raise ValueError(f"{path}: no such session file")
+    with open(p, "rb") as fh:
+        if fh.read(len(MAGIC)) != MAGIC:
+            raise ValueError(f"{p}: not an MCAP file (it does not start with the MCAP magic)")
+    if not force and not needs_repair(p):
+        with SessionReader(p, p.parent) as r:
+            return RepairReport(p, False, r.message_count, len(r.metadata), "", None)
+
+    with open(p, "rb") as fh:
+        try:
+            header = NonSeekingReader(fh).get_header()
+        except Exception as e:
+            raise ValueError(f"{p}: not repairable: no complete MCAP header ({e})") from None
+
+    tmp = p.with_name(p.name + ".repair-tmp")
+    counts = {"messages": 0, "metadata": 0}
+    stop = ""
+    try:
+        with open(p, "rb") as src, open(tmp, "wb") as out:
+            w = Writer(out, chunk_size=_CHUNK_SIZE, compression=CompressionType.ZSTD)
+            w.start(profile=header.profile, library=header.library)
+            stop = _copy_records(StreamReader(src, validate_crcs=True), w, counts)
+            w.finish()
+            out.flush()
+            os.fsync(out.fileno())
+        original = _keep(p) if keep_original else None
+        os.replace(tmp, p)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    n = counts["messages"]
+    log.info("repaired %s: %d messages recovered (%s)", p, n, stop or "complete")
+    return RepairReport(p, True, n, counts["metadata"], stop, original)
+
+
+def _copy_records(reader: StreamReader, w: Writer, counts: dict[str, int]) -> str:
+    """Copy schemas, channels, messages, metadata and attachments until the records end
+    (a finished file) or break off (the cut); returns why reading stopped."""
+    schema_ids: dict[int, int] = {}
+    channel_ids: dict[int, int] = {}
+    try:
+        for rec in reader.records:
+            if isinstance(rec, Schema):
+                if rec.id not in schema_ids:
+                    schema_ids[rec.id] = w.register_schema(rec.name, rec.encoding, rec.data)
+            elif isinstance(rec, Channel):
+                if rec.id not in channel_ids:
+                    if rec.schema_id and rec.schema_id not in schema_ids:
+                        raise McapError(f"channel {rec.topic!r}: no schema record {rec.schema_id}")
+                    channel_ids[rec.id] = w.register_channel(
+                        rec.topic, rec.message_encoding, schema_ids.get(rec.schema_id, 0),
+                        dict(rec.metadata),
+                    )
+            elif isinstance(rec, Message):
+                if rec.channel_id not in channel_ids:
+                    raise McapError(f"message on unknown channel {rec.channel_id}")
+                w.add_message(
+                    channel_ids[rec.channel_id], log_time=rec.log_time, data=rec.data,
+                    publish_time=rec.publish_time, sequence=rec.sequence,
+                )
+                counts["messages"] += 1
+            elif isinstance(rec, Metadata):
+                w.add_metadata(rec.name, dict(rec.metadata))
+                counts["metadata"] += 1
+            elif isinstance(rec, Attachment):
+                w.add_attachment(rec.create_time, rec.log_time, rec.name, rec.media_type, rec.data)
+            elif isinstance(rec, DataEnd):
+                return ""
+    except Exception as e:  # the cut, or a damaged record
+        return f"{type(e).__name__}: {e}"
+    return ""
+
+
+def _keep(p: Path) -> Path:
+    """Keep the original as FILE.orig (an earlier one, from a first repair, is kept)."""
+    original = p.with_name(p.name + ORIG_SUFFIX)
+    if not original.exists():
+        try:
+            os.link(p, original)
+        except OSError:
+            shutil.copy2(p, original)
+    return original

@@ -1,0 +1,158 @@
+"""``ucat-console sessions list|info|export|repair``: the recorded sessions.
+
+FILE is a session file, a file name inside the sessions directory, or a session id (all
+its parts, in order). ``--dir`` names the sessions directory (default: ``sessions/`` at
+the project root); files outside it are refused.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+
+def _add_dir(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--dir", type=Path, default=None,
+                   help="sessions directory (default: sessions/ at the project root)")
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    sessions = sub.add_parser("sessions", help="recorded sessions: list, info, export, repair")
+    kinds = sessions.add_subparsers(dest="sessions", required=True, metavar="ACTION")
+
+    p = kinds.add_parser("list", help="every session: start, duration, size, events, notes")
+    _add_dir(p)
+    p.set_defaults(func=run_list)
+
+    p = kinds.add_parser("info", help="one session's channels, counts and metadata")
+    p.add_argument("file", metavar="FILE", help="session file or session id")
+    _add_dir(p)
+    p.set_defaults(func=run_info)
+
+    p = kinds.add_parser("export", help="CSV files of a set of channels")
+    p.add_argument("file", metavar="FILE", help="session file or session id")
+    p.add_argument("--topics", nargs="+", required=True, metavar="CHANNEL",
+                   help="channels to export (e.g. body/state fin/0/state; 'all' for every one)")
+    p.add_argument("--format", choices=("csv",), default="csv", help="output format")
+    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory")
+    p.add_argument("--start", type=float, default=None, help="from this time (stream s)")
+    p.add_argument("--end", type=float, default=None, help="before this time (stream s)")
+    _add_dir(p)
+    p.set_defaults(func=run_export)
+
+    p = kinds.add_parser("repair", help="re-index a truncated file (a killed recorder)")
+    p.add_argument("file", metavar="FILE", help="session file")
+    p.add_argument("--no-keep", action="store_true", help="do not keep the original as FILE.orig")
+    p.add_argument("--force", action="store_true", help="rewrite even a file that opens")
+    _add_dir(p)
+    p.set_defaults(func=run_repair)
+
+
+def resolve(arg: str, directory: Path | None) -> list[Path]:
+    """Session files named by ``arg`` (a path, a file name in the directory, or an id)."""
+    from ucat_console.backend.sessions import files, index
+
+    root = files.sessions_dir(directory)
+    p = Path(arg)
+    if p.is_file():
+        return [p]
+    if (root / arg).is_file():
+        return [root / arg]
+    return index.session_parts(arg, root)
+
+
+def _fmt_duration(s: float | None) -> str:
+    if s is None:
+        return "?"
+    m, sec = divmod(int(round(s)), 60)
+    h, m = divmod(m, 60)
+    return f"{h:d}:{m:02d}:{sec:02d}"
+
+
+def _fmt_size(n: int) -> str:
+    for unit in ("B", "kB", "MB", "GB"):
+        if n < 1000 or unit == "GB":
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1000
+    return f"{n} B"
+
+
+def run_list(args: argparse.Namespace) -> int:
+    from ucat_console.backend.sessions import files, index
+
+    sessions = index.list_sessions(args.dir)
+    if not sessions:
+        print(f"no sessions in {files.sessions_dir(args.dir)}")
+        return 0
+    print(f"{'session':<28} {'started (UTC)':<19} {'parts':>5} {'duration':>9} "
+          f"{'size':>9} {'events':>6}  notes")
+    for s in sessions:
+        start = time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(s.start)) if s.start else "?"
+        events = "?" if s.events is None else str(s.events)
+        flag = "  [truncated: run `sessions repair`]" if s.truncated else ""
+        errors = [p.error for p in s.parts if p.error]
+        note = s.notes.replace("\n", " ")
+        if len(note) > 40:
+            note = note[:39] + "…"
+        print(f"{s.session_id:<28} {start:<19} {len(s.parts):>5} {_fmt_duration(s.duration):>9} "
+              f"{_fmt_size(s.size):>9} {events:>6}  {note}{flag}")
+        for e in errors:
+            print(f"    unreadable: {e}")
+    return 0
+
+
+def run_info(args: argparse.Namespace) -> int:
+    from ucat_console.backend.sessions.reader import SessionReader
+
+    for path in resolve(args.file, args.dir):
+        with SessionReader(path, args.dir) as r:
+            print(f"{r.path}")
+            print(f"  session {r.session_id}, part {r.part}, software {r.version or '?'}")
+            print(f"  {r.message_count} messages, {r.duration:.1f} s "
+                  f"(t {r.start:.3f} .. {r.end:.3f}), epoch offset {r.epoch_offset!r}")
+            if r.weights:
+                print("  weights: " + ", ".join(f"{k}={v:g}" for k, v in r.weights.items()))
+            if r.notes:
+                print(f"  notes: {r.notes}")
+            for channel, n in r.message_counts().items():
+                print(f"    {channel:<20} {n:>9}")
+    return 0
+
+
+def run_export(args: argparse.Namespace) -> int:
+    from ucat_console.backend.sessions.export import export_csv
+    from ucat_console.backend.sessions.reader import SessionReader
+    from ucat_console.telemetry.channels import CHANNELS
+
+    topics = [t for arg in args.topics for t in arg.split(",") if t]
+    if "all" in topics:
+        topics = list(CHANNELS)
+    readers = [SessionReader(p, args.dir) for p in resolve(args.file, args.dir)]
+    try:
+        result = export_csv(readers, topics, args.out, args.start, args.end)
+    finally:
+        for r in readers:
+            r.close()
+    for channel, (path, rows) in result.items():
+        print(f"{channel:<20} {rows:>9} rows -> {path}")
+    return 0
+
+
+def run_repair(args: argparse.Namespace) -> int:
+    from ucat_console.backend.sessions.repair import repair
+
+    paths = resolve(args.file, args.dir)
+    if len(paths) != 1:
+        raise ValueError(f"{args.file}: names {len(paths)} files; repair one file at a time")
+    report = repair(paths[0], args.dir, keep_original=not args.no_keep, force=args.force)
+    if not report.repaired:
+        print(f"{report.path}: complete, nothing to repair ({report.messages} messages)")
+        return 0
+    print(f"{report.path}: repaired, {report.messages} messages and {report.metadata} "
+          f"metadata records recovered")
+    if report.stop_reason:
+        print(f"  reading stopped at: {report.stop_reason}")
+    if report.original:
+        print(f"  original kept as {report.original}")
+    return 0
