@@ -4,8 +4,9 @@ The probe connects, configures the device as the supervisor does, prints each de
 message and fault for ``--duration`` seconds and, with ``--json FILE``, writes one JSON
 object per line: ``{"kind": ..., "t": ...}`` plus the device's fields, and
 ``{"kind": "fault", "reason": <event code>, ...}`` for each fault Event (``"event"`` for
-informational ones). With ``--emulate`` (imu, dvl, pressure) the matching emulator runs
-on a pty or on 127.0.0.1 with a synthetic source, so the command works without hardware.
+informational ones). With ``--emulate`` the matching emulator runs with a synthetic
+source (the EPOS2 node on python-can's in-process ``virtual`` bus, the IMU and the
+pressure ADC on a pty, the DVL on 127.0.0.1), so the command works without hardware.
 The exit status is 0 when the device delivered data, 1 when it never did (2 for bad
 arguments).
 """
@@ -20,11 +21,19 @@ import threading
 import time
 from contextlib import ExitStack
 from pathlib import Path
-from typing import IO, Any, Callable
+from typing import IO, Any, Callable, Protocol, TypeVar
 
 from ucat_console.telemetry.events import Event
 
 Emit = Callable[[dict[str, Any]], None]
+
+
+class _Emulator(Protocol):
+    def start(self) -> Any: ...
+    def stop(self) -> None: ...
+
+
+_E = TypeVar("_E", bound=_Emulator)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -51,19 +60,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                            help="probe a local emulator with a synthetic source instead of hardware")
         p.set_defaults(func=run_probe)
 
+    def serial_port(p: argparse.ArgumentParser, defaults: ImuConfig | PressureConfig) -> None:
+        p.add_argument("--port", default=defaults.port, help=f"serial port (default {defaults.port})")
+        p.add_argument("--baud", type=int, default=defaults.baud, choices=BAUD_RATES, metavar="BAUD",
+                       help=f"line rate (default {defaults.baud})")
+        common(p)
+
     epos = psub.add_parser("epos", help="Maxon EPOS2 over CANopen")
     epos.add_argument("--interface", default="socketcan", help="python-can interface (default socketcan)")
     epos.add_argument("--channel", default="can0", help="CAN channel (default can0)")
     epos.add_argument("--node", type=int, default=1, help="CANopen node id (default 1)")
     epos.add_argument("--bitrate", type=int, default=None, help="CAN bitrate (interface default if omitted)")
-    common(epos, emulate=False)
+    common(epos)
 
-    imu_defaults = ImuConfig()
-    imu = psub.add_parser("imu", help="Microstrain 3DM-CX5 (MIP over serial)")
-    imu.add_argument("--port", default=imu_defaults.port, help=f"serial port (default {imu_defaults.port})")
-    imu.add_argument("--baud", type=int, default=imu_defaults.baud, choices=BAUD_RATES, metavar="BAUD",
-                     help=f"line rate (default {imu_defaults.baud})")
-    common(imu)
+    serial_port(psub.add_parser("imu", help="Microstrain 3DM-CX5 (MIP over serial)"), ImuConfig())
 
     dvl_defaults = DvlConfig()
     dvl = psub.add_parser("dvl", help="Water Linked DVL A50 (JSON over TCP)")
@@ -72,12 +82,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                      help=f"TCP port (default {dvl_defaults.port})")
     common(dvl)
 
-    pr_defaults = PressureConfig()
-    pressure = psub.add_parser("pressure", help="Gems 3101P through the serial ADC")
-    pressure.add_argument("--port", default=pr_defaults.port, help=f"serial port (default {pr_defaults.port})")
-    pressure.add_argument("--baud", type=int, default=pr_defaults.baud, choices=BAUD_RATES, metavar="BAUD",
-                          help=f"line rate (default {pr_defaults.baud})")
-    common(pressure)
+    serial_port(psub.add_parser("pressure", help="Gems 3101P through the serial ADC"), PressureConfig())
 
 
 # ---------------------------------------------------------------- output
@@ -172,9 +177,16 @@ def _probe_epos(args: argparse.Namespace, out: _Output, stack: ExitStack) -> int
         print(f"ucat-console: error: the EPOS2 driver is not available: {e}", file=sys.stderr)
         return 2
 
+    interface = args.interface
+    if getattr(args, "emulate", False):
+        from ucat_console.backend.devices.epos2_emulator import start_emulated_nodes
+
+        interface = "virtual"  # the emulated node lives on the in-process bus
+        nodes = start_emulated_nodes(args.channel, [args.node], interface=interface)
+        stack.callback(nodes.close)
     return int(
         probe(
-            interface=args.interface, channel=args.channel, node=args.node,
+            interface=interface, channel=args.channel, node=args.node,
             bitrate=args.bitrate, duration=args.duration, emit=out,
         )
     )
@@ -188,9 +200,7 @@ def _probe_imu(args: argparse.Namespace, out: _Output, stack: ExitStack) -> int:
     if args.emulate:
         from ucat_console.backend.devices.imu_emulator import ImuEmulator
 
-        emulator = ImuEmulator(synthetic_imu).start()
-        stack.callback(emulator.stop)
-        port = emulator.port
+        port = _started(ImuEmulator(synthetic_imu), stack).port
 
     def on_reading(r: ImuReading) -> None:
         record: dict[str, Any] = {"kind": "imu", "t": r.t, "accel": list(r.accel_g), "gyro": list(r.gyro)}
@@ -200,11 +210,7 @@ def _probe_imu(args: argparse.Namespace, out: _Output, stack: ExitStack) -> int:
             record["euler"] = list(r.euler)
         out(record)
 
-    driver = ImuDriver(ImuConfig(port=port, baud=args.baud), on_reading, _event_sink(out))
-    stack.callback(driver.stop)
-    driver.start()
-    time.sleep(args.duration)
-    return 0 if driver.readings else 1
+    return _listen(ImuDriver(ImuConfig(port=port, baud=args.baud), on_reading, _event_sink(out)), args, stack)
 
 
 def _probe_dvl(args: argparse.Namespace, out: _Output, stack: ExitStack) -> int:
@@ -215,9 +221,7 @@ def _probe_dvl(args: argparse.Namespace, out: _Output, stack: ExitStack) -> int:
     if args.emulate:
         from ucat_console.backend.devices.dvl_emulator import DvlEmulator
 
-        emulator = DvlEmulator(synthetic_dvl).start()
-        stack.callback(emulator.stop)
-        host, port = emulator.address
+        host, port = _started(DvlEmulator(synthetic_dvl), stack).address
 
     def on_velocity(v: DvlVelocity) -> None:
         out({"kind": "dvl_velocity", "t": v.t, "vx": v.vx, "vy": v.vy, "vz": v.vz,
@@ -247,14 +251,24 @@ def _probe_pressure(args: argparse.Namespace, out: _Output, stack: ExitStack) ->
     if args.emulate:
         from ucat_console.backend.devices.pressure_emulator import PressureEmulator
 
-        emulator = PressureEmulator(synthetic_depth).start()
-        stack.callback(emulator.stop)
-        port = emulator.port
+        port = _started(PressureEmulator(synthetic_depth), stack).port
 
     def on_reading(r: DepthReading) -> None:
         out({"kind": "pressure", "t": r.t, "depth_m": r.depth_m, "pressure_pa": r.pressure_pa})
 
     driver = PressureDriver(PressureConfig(port=port, baud=args.baud), on_reading, _event_sink(out))
+    return _listen(driver, args, stack)
+
+
+def _started(emulator: _E, stack: ExitStack) -> _E:
+    """Start an emulator and stop it when the probe ends."""
+    emulator.start()
+    stack.callback(emulator.stop)
+    return emulator
+
+
+def _listen(driver: Any, args: argparse.Namespace, stack: ExitStack) -> int:
+    """Start a serial driver, listen for ``--duration`` seconds: 0 when it delivered readings."""
     stack.callback(driver.stop)
     driver.start()
     time.sleep(args.duration)

@@ -418,6 +418,13 @@ def sample_stage(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, table):
                 best_u[pos, 3] = bw2[i]
 
 
+@_inline
+def _identity(m):
+    for a in range(m.shape[0]):
+        for b in range(m.shape[1]):
+            m[a, b] = 1.0 if a == b else 0.0
+
+
 @_jit
 def _box(p, x0, lo, hi):
     """The sign-constrained box around a warm start."""
@@ -447,9 +454,7 @@ def refine(p, q, gx_tab, gy_tab, x, max_iter, work, hinv, table):
     yv = work[6]
     _box(p, x, lo, hi)
     j = cost_grad(p, q, gx_tab, gy_tab, x, g, table)
-    for a in range(4):
-        for b in range(4):
-            hinv[a, b] = 1.0 if a == b else 0.0
+    _identity(hinv)
     fresh = True
     for _ in range(max_iter):
         # free variables: not held at a bound by the gradient
@@ -469,9 +474,7 @@ def refine(p, q, gx_tab, gy_tab, x, max_iter, work, hinv, table):
         if not slope < 0.0:
             if fresh:
                 break
-            for a in range(4):
-                for b in range(4):
-                    hinv[a, b] = 1.0 if a == b else 0.0
+            _identity(hinv)
             fresh = True
             continue
         alpha = 1.0
@@ -500,9 +503,7 @@ def refine(p, q, gx_tab, gy_tab, x, max_iter, work, hinv, table):
         if not accepted:
             if fresh:
                 break
-            for a in range(4):
-                for b in range(4):
-                    hinv[a, b] = 1.0 if a == b else 0.0
+            _identity(hinv)
             fresh = True
             continue
         # BFGS update of the inverse Hessian with s = xn - x, y = gn - g

@@ -37,7 +37,7 @@ from typing import Any, Callable, Literal
 
 from ucat_console.backend.devices.lines import LineSplitter, Overlong
 from ucat_console.backend.devices.readings import DvlPosition, DvlVelocity
-from ucat_console.backend.devices.reporting import EventReporter
+from ucat_console.backend.devices.reporting import EventReporter, SilenceWatch
 from ucat_console.control.params import _Config
 from ucat_console.telemetry.events import EventSink
 from ucat_console.typedconf import param
@@ -223,7 +223,7 @@ class DvlClient:
         self._pending: dict[str, collections.deque[_Pending]] = {}
         self._connected = threading.Event()
         self._ever_connected = False
-        self._last_rx = 0.0
+        self._silence = SilenceWatch(self.events, clock, config.silence_timeout_s, "message", "messages")
         self.connections = 0
         self.messages = 0
 
@@ -370,7 +370,7 @@ class DvlClient:
             with self._send_lock:
                 self._sock = sock
             self._parser.reset()
-            self._last_rx = self._clock()
+            self._silence.reset()
             self.connections += 1
             self._connected.set()
             if self._ever_connected:
@@ -397,20 +397,13 @@ class DvlClient:
             if data == b"":
                 return "closed by the DVL"
             if data:
-                self._last_rx = self._clock()
-                if self.events.is_active("silence"):
-                    self.events.condition("silence", False, "messages arrive again")
+                self._silence.received(self._clock())
                 try:
                     self._handle(data)
                 except Exception:
                     log.exception("dvl: unexpected error while handling input")
                     self.events.throttled("internal_error", "unexpected error handling input", "error")
-            quiet = self._clock() - self._last_rx
-            if quiet > self.config.silence_timeout_s:
-                self.events.condition(
-                    "silence", True, f"no message for more than {self.config.silence_timeout_s:g} s",
-                    "error", timeout_s=self.config.silence_timeout_s,
-                )
+            quiet = self._silence.check()
             if self.config.silence_reconnect_s > 0 and quiet > self.config.silence_reconnect_s:
                 return f"silent for {quiet:.1f} s"
         return "stopped"

@@ -16,23 +16,19 @@ by ``slow_delay_s``.
 
 from __future__ import annotations
 
-import heapq
 import json
-import logging
 import math
 import select
 import socket
-import threading
 import time
 from dataclasses import dataclass
 from typing import Any, Callable
 
-from ucat_console.backend.devices.faults import Fault, FaultInjectable, FaultSet, FaultSettings
+from ucat_console.backend.devices.emulator_base import DelayedOutput, EmulatorThread, next_tick
+from ucat_console.backend.devices.faults import Fault, FaultSettings
 from ucat_console.backend.devices.lines import LineSplitter, Overlong
 from ucat_console.control.params import _Config
 from ucat_console.typedconf import param
-
-log = logging.getLogger(__name__)
 
 FORMAT = "json_v3.1"
 _BEAM_TILT = math.radians(22.5)  # transducer tilt from the DVL's z axis
@@ -84,8 +80,11 @@ class _Client:
         self.lines = LineSplitter(65536)
 
 
-class DvlEmulator(FaultInjectable):
+class DvlEmulator(EmulatorThread):
     """A50 emulator serving any number of clients on 127.0.0.1."""
+
+    _name = "dvl emulator"
+    _io_errors = (OSError, ValueError)
 
     def __init__(
         self,
@@ -93,17 +92,16 @@ class DvlEmulator(FaultInjectable):
         config: DvlEmulatorConfig = DvlEmulatorConfig(),
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
+        super().__init__(clock, config.faults)
         self.config = config
         self._source = source
-        self._clock = clock
-        self.faults = FaultSet(clock)
         self._server: socket.socket | None = None
         self._clients: list[_Client] = []
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-        self._pending: list[tuple[float, int, _Client, bytes]] = []
-        self._seq = 0
-        self._t0 = 0.0
+        self._delayed: DelayedOutput[tuple[_Client, bytes]] = DelayedOutput()  # held back by 'slow'
+        self._next_vel = 0.0
+        self._next_pos = 0.0
+        self._vel_period = 1.0 / config.velocity_rate_hz
+        self._pos_period = 1.0 / config.position_rate_hz
         self._last_velocity_t: float | None = None
         self._origin = (0.0, 0.0, 0.0)
         self._last_truth: DvlTruth | None = None
@@ -122,9 +120,7 @@ class DvlEmulator(FaultInjectable):
 
     # ------------------------------------------------------------ lifecycle
 
-    def start(self) -> "DvlEmulator":
-        if self._thread is not None:
-            return self
+    def _open(self) -> None:
         srv = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         srv.bind((self.config.host, self.port))
@@ -132,29 +128,14 @@ class DvlEmulator(FaultInjectable):
         srv.setblocking(False)
         self._server = srv
         self.port = srv.getsockname()[1]
-        self._t0 = self._clock()
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._run, name="dvl-emulator", daemon=True)
-        self._thread.start()
-        return self
 
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
-            self._thread = None
+    def _close(self) -> None:
         for c in self._clients:
             _close(c.sock)
         self._clients.clear()
         if self._server is not None:
             _close(self._server)
             self._server = None
-
-    def __enter__(self) -> "DvlEmulator":
-        return self.start()
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
 
     @property
     def address(self) -> tuple[str, int]:
@@ -170,45 +151,38 @@ class DvlEmulator(FaultInjectable):
 
     # ------------------------------------------------------------ main loop
 
-    def _run(self) -> None:
+    def _begin(self, now: float) -> None:
+        self._next_vel = now
+        self._next_pos = now
+        self._vel_period = 1.0 / self.config.velocity_rate_hz
+        self._pos_period = 1.0 / self.config.position_rate_hz
+
+    def _step(self) -> None:
+        if self._drop_requested:
+            self._drop_requested = False
+            for c in list(self._clients):
+                self._remove(c)
         now = self._clock()
-        next_vel = now
-        next_pos = now
-        vel_period = 1.0 / self.config.velocity_rate_hz
-        pos_period = 1.0 / self.config.position_rate_hz
-        while not self._stop.is_set():
-            try:
-                if self._drop_requested:
-                    self._drop_requested = False
-                    for c in list(self._clients):
-                        self._remove(c)
-                now = self._clock()
-                due = min(next_vel, next_pos, self._pending[0][0] if self._pending else math.inf)
-                timeout = min(0.05, max(0.0, due - now))
-                socks: list[Any] = [self._server] + [c.sock for c in self._clients]
-                readable, _, _ = select.select(socks, [], [], timeout)
-                for s in readable:
-                    if s is self._server:
-                        self._accept()
-                    else:
-                        client = next((c for c in self._clients if c.sock is s), None)
-                        if client is not None:
-                            self._read(client)
-                now = self._clock()
-                while self._pending and self._pending[0][0] <= now:
-                    _, _, client, data = heapq.heappop(self._pending)
-                    self._send(client, data)
-                if now >= next_vel:
-                    self._velocity(now)
-                    next_vel = max(next_vel + vel_period, now - vel_period)
-                if now >= next_pos:
-                    self._position(now)
-                    next_pos = max(next_pos + pos_period, now - pos_period)
-            except (OSError, ValueError) as e:
-                if self._stop.is_set():
-                    break
-                log.warning("dvl emulator: %s", e)
-                self._stop.wait(0.05)
+        due = min(self._next_vel, self._next_pos, self._delayed.next_due())
+        timeout = min(0.05, max(0.0, due - now))
+        socks: list[Any] = [self._server] + [c.sock for c in self._clients]
+        readable, _, _ = select.select(socks, [], [], timeout)
+        for s in readable:
+            if s is self._server:
+                self._accept()
+            else:
+                client = next((c for c in self._clients if c.sock is s), None)
+                if client is not None:
+                    self._read(client)
+        now = self._clock()
+        for client, data in self._delayed.pop_due(now):
+            self._send(client, data)
+        if now >= self._next_vel:
+            self._velocity(now)
+            self._next_vel = next_tick(self._next_vel, self._vel_period, now)
+        if now >= self._next_pos:
+            self._position(now)
+            self._next_pos = next_tick(self._next_pos, self._pos_period, now)
 
     def _accept(self) -> None:
         assert self._server is not None
@@ -354,11 +328,7 @@ class DvlEmulator(FaultInjectable):
                 "type": "response",
             }
         )
-        delay = self.config.faults.slow_delay_s if self.faults.active(Fault.SLOW) else 0.0
-        if delay > 0.0:
-            self._seq += 1
-            heapq.heappush(self._pending, (self._clock() + delay, self._seq, client, data))
-        else:
+        if not self._held_back(self._clock(), (client, data), self._delayed):
             self._send(client, data)
 
     def _command(self, client: _Client, line: bytes) -> None:

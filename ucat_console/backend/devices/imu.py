@@ -25,12 +25,10 @@ import time
 from dataclasses import dataclass
 from typing import Callable
 
-import serial
-
 from ucat_console.backend.devices import mip
 from ucat_console.backend.devices.readings import ImuReading
-from ucat_console.backend.devices.reporting import EventReporter
-from ucat_console.backend.devices.serial_link import BAUD_RATES, SERIAL_ERRORS, open_serial
+from ucat_console.backend.devices.serial_link import BAUD_RATES, SERIAL_ERRORS
+from ucat_console.backend.devices.serial_reader import SerialReader
 from ucat_console.control.params import _Config
 from ucat_console.telemetry.events import EventSink
 from ucat_console.typedconf import param
@@ -89,8 +87,10 @@ class _Waiter:
         self.reply: CommandReply | None = None
 
 
-class ImuDriver:
+class ImuDriver(SerialReader[ImuReading]):
     """3DM-CX5 over a serial port; ``start()`` opens, configures and streams."""
+
+    config: ImuConfig
 
     def __init__(
         self,
@@ -99,23 +99,14 @@ class ImuDriver:
         on_event: EventSink,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
-        self.config = config
-        self._on_reading = on_reading
-        self._clock = clock
-        self.events = EventReporter(SOURCE, on_event, clock)
+        super().__init__(config, SOURCE, on_reading, on_event, clock, ("packet", "packets"))
+        self._silence.disarm()  # watched once streaming is configured
         self._parser = mip.MipStreamParser()
-        self._serial: serial.Serial | None = None
-        self._serial_lock = threading.Lock()  # writes and open/close
         self._command_lock = threading.Lock()  # one command in flight
         self._waiter: _Waiter | None = None
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-        self._last_packet = 0.0
-        self._watch_silence = False
         self._configured = False
         self.streamed_fields: tuple[int, ...] = ()
         self.decimation: int | None = None
-        self.readings = 0
 
     # ------------------------------------------------------------ lifecycle
 
@@ -126,30 +117,9 @@ class ImuDriver:
         no reply, NACK) are reported as events; the reader keeps running and reopens the
         port, so a device that appears later is picked up.
         """
-        if self._thread is not None:
-            raise RuntimeError("ImuDriver already started")
-        self._stop.clear()
-        opened = self._open()
-        self._last_packet = self._clock()
-        self._thread = threading.Thread(target=self._run, name="imu-reader", daemon=True)
-        self._thread.start()
-        if not opened:
+        if not super().start():
             return False
         return self.configure()
-
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
-            self._thread = None
-        self._close()
-
-    def __enter__(self) -> "ImuDriver":
-        self.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
 
     @property
     def configured(self) -> bool:
@@ -165,27 +135,8 @@ class ImuDriver:
 
     # ------------------------------------------------------------ serial port
 
-    def _open(self) -> bool:
-        try:
-            ser = open_serial(self.config.port, self.config.baud, self.config.read_timeout_s)
-        except SERIAL_ERRORS as e:
-            self.events.throttled(
-                "port_error", f"cannot open {self.config.port}: {e}", "error", port=self.config.port
-            )
-            return False
-        with self._serial_lock:
-            self._serial = ser
-        self._parser.reset()
-        return True
-
-    def _close(self) -> None:
-        with self._serial_lock:
-            ser, self._serial = self._serial, None
-        if ser is not None:
-            try:
-                ser.close()
-            except SERIAL_ERRORS:
-                pass
+    def _reopened(self) -> None:
+        threading.Thread(target=self.configure, name="imu-configure", daemon=True).start()
 
     def _write(self, data: bytes) -> bool:
         with self._serial_lock:
@@ -237,7 +188,7 @@ class ImuDriver:
     def configure(self) -> bool:
         """Idle, read the base rate, set the message format, enable the stream, resume."""
         self._configured = False
-        self._watch_silence = False
+        self._silence.disarm()
         if self._expect_ack(mip.set_idle(), mip.BASE_SET, mip.CMD_IDLE, "idle") is None:
             return False
         base = self._base_rate()
@@ -274,8 +225,7 @@ class ImuDriver:
                 return False
         self.streamed_fields = tuple(accepted)
         self.decimation = decimation
-        self._last_packet = self._clock()
-        self._watch_silence = True
+        self._silence.arm()
         self._configured = True
         self.events.emit(
             "configured",
@@ -301,47 +251,6 @@ class ImuDriver:
 
     # ------------------------------------------------------------ reader
 
-    def _run(self) -> None:
-        next_open = 0.0
-        while not self._stop.is_set():
-            with self._serial_lock:
-                ser = self._serial
-            if ser is None:
-                now = self._clock()
-                if now >= next_open:
-                    next_open = now + self.config.reopen_interval_s
-                    if self._open():
-                        self.events.emit("reconnected", f"reopened {self.config.port}", "info")
-                        threading.Thread(target=self.configure, name="imu-configure", daemon=True).start()
-                        continue
-                self._stop.wait(min(0.05, self.config.reopen_interval_s))
-                self._check_silence()
-                continue
-            try:
-                data = ser.read(max(1, ser.in_waiting))
-            except SERIAL_ERRORS as e:
-                self.events.emit("port_error", f"read from {self.config.port} failed: {e}", "error")
-                self._close()
-                next_open = self._clock() + self.config.reopen_interval_s
-                continue
-            if data:
-                try:
-                    self._handle(data)
-                except Exception:  # never let a surprise stop the reader
-                    log.exception("imu: unexpected error while handling input")
-                    self.events.throttled("internal_error", "unexpected error handling input", "error")
-            self._check_silence()
-
-    def _check_silence(self) -> None:
-        if not self._watch_silence:
-            return
-        quiet = self._clock() - self._last_packet
-        if quiet > self.config.silence_timeout_s:
-            self.events.condition(
-                "silence", True, f"no packet for more than {self.config.silence_timeout_s:g} s",
-                "error", timeout_s=self.config.silence_timeout_s,
-            )
-
     def _handle(self, data: bytes) -> None:
         items = self._parser.feed(data)
         now = self._clock()
@@ -349,9 +258,7 @@ class ImuDriver:
             if isinstance(item, mip.ParseIssue):
                 self._report_issue(item)
                 continue
-            self._last_packet = now
-            if self.events.is_active("silence"):
-                self.events.condition("silence", False, "packets arrive again")
+            self._silence.received(now)
             if item.descriptor_set == mip.SENSOR_SET:
                 self._handle_data(item, now)
             else:
@@ -385,11 +292,7 @@ class ImuDriver:
         reading = ImuReading(
             t=now, accel_g=data.accel, gyro=data.gyro, quaternion=data.quaternion, euler=data.euler
         )
-        self.readings += 1
-        try:
-            self._on_reading(reading)
-        except Exception:
-            log.exception("imu: reading callback failed")
+        self._deliver(reading)
 
     def _handle_reply(self, packet: mip.Packet) -> None:
         ack_at = next((i for i, f in enumerate(packet.fields) if f.descriptor == mip.FIELD_ACK), None)

@@ -25,21 +25,17 @@ NaN accelerations; ``slow`` delays replies by ``slow_delay_s``.
 
 from __future__ import annotations
 
-import heapq
-import logging
 import math
-import threading
 import time
 from dataclasses import dataclass
 from typing import Any, Callable
 
 from ucat_console.backend.devices import mip
-from ucat_console.backend.devices.faults import Fault, FaultInjectable, FaultSet, FaultSettings
+from ucat_console.backend.devices.emulator_base import DelayedOutput, EmulatorThread
+from ucat_console.backend.devices.faults import Fault, FaultSettings
 from ucat_console.backend.devices.pty_port import PtyPort
 from ucat_console.control.params import _Config
 from ucat_console.typedconf import param
-
-log = logging.getLogger(__name__)
 
 _GARBAGE = b"\x00\x75\xff\x13\x65"  # includes a lone sync byte, to exercise resynchronisation
 
@@ -59,8 +55,10 @@ class ImuEmulatorConfig(_Config):
     faults: FaultSettings = FaultSettings()
 
 
-class ImuEmulator(FaultInjectable):
+class ImuEmulator(EmulatorThread):
     """3DM-CX5 emulator over a pty pair; use as a context manager or start()/stop()."""
+
+    _name = "imu emulator"
 
     def __init__(
         self,
@@ -68,18 +66,13 @@ class ImuEmulator(FaultInjectable):
         config: ImuEmulatorConfig = ImuEmulatorConfig(),
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
+        super().__init__(clock, config.faults)
         self.config = config
         self._source = source
-        self._clock = clock
-        self.faults = FaultSet(clock)
         self._pty = PtyPort()
         self._parser = mip.MipStreamParser()
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-        self._t0 = 0.0
-        self._lock = threading.Lock()
-        self._pending: list[tuple[float, int, bytes]] = []  # delayed replies (due, seq, bytes)
-        self._seq = 0
+        self._delayed: DelayedOutput[bytes] = DelayedOutput()  # replies held back by 'slow'
+        self._next_sample = 0.0
         self._sent = 0
         # device state
         self.idle = False
@@ -103,27 +96,8 @@ class ImuEmulator(FaultInjectable):
     def streaming(self) -> bool:
         return self.stream_enabled and not self.idle and bool(self.message_format)
 
-    def start(self) -> "ImuEmulator":
-        if self._thread is not None:
-            return self
-        self._t0 = self._clock()
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._run, name="imu-emulator", daemon=True)
-        self._thread.start()
-        return self
-
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
-            self._thread = None
+    def _close(self) -> None:
         self._pty.close()
-
-    def __enter__(self) -> "ImuEmulator":
-        return self.start()
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
 
     def send_raw(self, data: bytes) -> None:
         """Put arbitrary bytes on the line (line noise, a foreign device)."""
@@ -142,59 +116,36 @@ class ImuEmulator(FaultInjectable):
         self._pty.write(packet)
 
     def _reply(self, packet: bytes) -> None:
-        if self.faults.active(Fault.SLOW):
-            with self._lock:
-                self._seq += 1
-                heapq.heappush(
-                    self._pending, (self._clock() + self.config.faults.slow_delay_s, self._seq, packet)
-                )
-            return
-        self._send(packet)
+        if not self._held_back(self._clock(), packet, self._delayed):
+            self._send(packet)
 
     # ------------------------------------------------------------ main loop
 
-    def _run(self) -> None:
-        next_sample = self._clock()
-        while not self._stop.is_set():
-            now = self._clock()
-            period = self.decimation / self.config.base_rate_hz
-            wait = 0.05
-            if self.streaming:
-                wait = min(wait, max(0.0, next_sample - now))
-            with self._lock:
-                if self._pending:
-                    wait = min(wait, max(0.0, self._pending[0][0] - now))
-            try:
-                if self._pty.wait_readable(wait):
-                    data = self._pty.read()
-                    if data:
-                        self._handle_input(data)
-                now = self._clock()
-                self._flush_pending(now)
-                if self.streaming:
-                    if now >= next_sample:
-                        self._stream_sample(now)
-                        next_sample += period
-                        if next_sample < now - period:  # fell behind: do not burst
-                            next_sample = now + period
-                else:
-                    next_sample = now
-            except OSError as e:
-                if self._stop.is_set():
-                    break
-                log.warning("imu emulator: pty error %s", e)
-                self._stop.wait(0.05)
-            except Exception:
-                log.exception("imu emulator: unexpected error")
-                self._stop.wait(0.05)
+    def _begin(self, now: float) -> None:
+        self._next_sample = now
 
-    def _flush_pending(self, now: float) -> None:
-        due: list[bytes] = []
-        with self._lock:
-            while self._pending and self._pending[0][0] <= now:
-                due.append(heapq.heappop(self._pending)[2])
-        for packet in due:
+    def _step(self) -> None:
+        now = self._clock()
+        period = self.decimation / self.config.base_rate_hz
+        wait = 0.05
+        if self.streaming:
+            wait = min(wait, max(0.0, self._next_sample - now))
+        wait = min(wait, max(0.0, self._delayed.next_due() - now))
+        if self._pty.wait_readable(wait):
+            data = self._pty.read()
+            if data:
+                self._handle_input(data)
+        now = self._clock()
+        for packet in self._delayed.pop_due(now):
             self._send(packet)
+        if self.streaming:
+            if now >= self._next_sample:
+                self._stream_sample(now)
+                self._next_sample += period
+                if self._next_sample < now - period:  # fell behind: do not burst
+                    self._next_sample = now + period
+        else:
+            self._next_sample = now
 
     def _stream_sample(self, now: float) -> None:
         truth = self._source(now - self._t0)

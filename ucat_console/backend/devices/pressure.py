@@ -25,7 +25,6 @@ when it ends) and never turned into a depth. Other Events (source ``"pressure"``
 
 from __future__ import annotations
 
-import logging
 import math
 import re
 import threading
@@ -33,17 +32,14 @@ import time
 from dataclasses import dataclass
 from typing import Callable, Literal
 
-import serial
-
 from ucat_console.backend.devices.lines import LineSplitter, Overlong
 from ucat_console.backend.devices.readings import DepthReading
-from ucat_console.backend.devices.reporting import EventReporter
-from ucat_console.backend.devices.serial_link import BAUD_RATES, SERIAL_ERRORS, open_serial
+from ucat_console.backend.devices.serial_link import BAUD_RATES
+from ucat_console.backend.devices.serial_reader import SerialReader
 from ucat_console.control.params import _Config
 from ucat_console.telemetry.events import EventSink
 from ucat_console.typedconf import param
 
-log = logging.getLogger(__name__)
 
 SOURCE = "pressure"
 GRAVITY = 9.80665  # m/s^2, standard gravity
@@ -157,8 +153,13 @@ class AdcLineParser:
 # ---------------------------------------------------------------- driver
 
 
-class PressureDriver:
-    """Reads the ADC, converts to depth and delivers :class:`DepthReading`."""
+class PressureDriver(SerialReader[DepthReading]):
+    """Reads the ADC, converts to depth and delivers :class:`DepthReading`.
+
+    ``start``/``stop`` and the reader thread come from :class:`SerialReader`.
+    """
+
+    config: PressureConfig
 
     def __init__(
         self,
@@ -167,51 +168,13 @@ class PressureDriver:
         on_event: EventSink,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
-        self.config = config
-        self._on_reading = on_reading
-        self._clock = clock
-        self.events = EventReporter(SOURCE, on_event, clock)
+        super().__init__(config, SOURCE, on_reading, on_event, clock, ("ADC line", "ADC lines"))
         self._parser = AdcLineParser()
-        self._serial: serial.Serial | None = None
-        self._lock = threading.Lock()
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
+        self._lock = threading.Lock()  # zeroing
         self._surface = config.surface_pressure_pa
-        self._last_reading = 0.0
         self._zero_samples: list[float] | None = None
         self._zero_target = 0
         self._zero_done = threading.Event()
-        self.readings = 0
-
-    # ------------------------------------------------------------ lifecycle
-
-    def start(self) -> bool:
-        """Open the port and start the reader; False (and an Event) when the port fails.
-
-        The reader keeps trying to open the port, so a late device is picked up.
-        """
-        if self._thread is not None:
-            raise RuntimeError("PressureDriver already started")
-        self._stop.clear()
-        opened = self._open()
-        self._last_reading = self._clock()
-        self._thread = threading.Thread(target=self._run, name="pressure-reader", daemon=True)
-        self._thread.start()
-        return opened
-
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
-            self._thread = None
-        self._close()
-
-    def __enter__(self) -> "PressureDriver":
-        self.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
 
     @property
     def surface_pressure_pa(self) -> float:
@@ -249,61 +212,7 @@ class PressureDriver:
         self.events.emit("zeroed", f"surface pressure set to {p:.1f} Pa", "info", surface_pressure_pa=p)
         return p
 
-    # ------------------------------------------------------------ port
-
-    def _open(self) -> bool:
-        try:
-            ser = open_serial(self.config.port, self.config.baud, self.config.read_timeout_s)
-        except SERIAL_ERRORS as e:
-            self.events.throttled("port_error", f"cannot open {self.config.port}: {e}", "error")
-            return False
-        self._serial = ser
-        self._parser.reset()
-        return True
-
-    def _close(self) -> None:
-        ser, self._serial = self._serial, None
-        if ser is not None:
-            try:
-                ser.close()
-            except SERIAL_ERRORS:
-                pass
-
-    def _run(self) -> None:
-        next_open = 0.0
-        while not self._stop.is_set():
-            ser = self._serial
-            if ser is None:
-                now = self._clock()
-                if now >= next_open:
-                    next_open = now + self.config.reopen_interval_s
-                    if self._open():
-                        self.events.emit("reconnected", f"reopened {self.config.port}", "info")
-                        continue
-                self._stop.wait(0.05)
-                self._check_silence()
-                continue
-            try:
-                data = ser.read(max(1, ser.in_waiting))
-            except SERIAL_ERRORS as e:
-                self.events.emit("port_error", f"read from {self.config.port} failed: {e}", "error")
-                self._close()
-                next_open = self._clock() + self.config.reopen_interval_s
-                continue
-            if data:
-                try:
-                    self._handle(data)
-                except Exception:
-                    log.exception("pressure: unexpected error while handling input")
-                    self.events.throttled("internal_error", "unexpected error handling input", "error")
-            self._check_silence()
-
-    def _check_silence(self) -> None:
-        if self._clock() - self._last_reading > self.config.silence_timeout_s:
-            self.events.condition(
-                "silence", True, f"no ADC line for more than {self.config.silence_timeout_s:g} s",
-                "error", timeout_s=self.config.silence_timeout_s,
-            )
+    # ------------------------------------------------------------ input
 
     def _handle(self, data: bytes) -> None:
         for item in self._parser.feed(data):
@@ -311,9 +220,7 @@ class PressureDriver:
             if isinstance(item, AdcIssue):
                 self.events.throttled(item.kind, item.detail)
                 continue
-            self._last_reading = now
-            if self.events.is_active("silence"):
-                self.events.condition("silence", False, "ADC lines arrive again")
+            self._silence.received(now)
             self._current(item, now)
 
     def _current(self, current_ma: float, now: float) -> None:
@@ -334,8 +241,4 @@ class PressureDriver:
                 if len(self._zero_samples) >= self._zero_target:
                     self._zero_done.set()
         reading = DepthReading(t=now, depth_m=pressure_to_depth(p, self._surface, cfg.rho), pressure_pa=p)
-        self.readings += 1
-        try:
-            self._on_reading(reading)
-        except Exception:
-            log.exception("pressure: reading callback failed")
+        self._deliver(reading)

@@ -11,14 +11,12 @@ broken-loop current (0 mA); ``slow`` delays every line by ``slow_delay_s``.
 
 from __future__ import annotations
 
-import collections
-import logging
-import threading
 import time
 from dataclasses import dataclass
 from typing import Callable
 
-from ucat_console.backend.devices.faults import Fault, FaultInjectable, FaultSet, FaultSettings
+from ucat_console.backend.devices.emulator_base import DelayedOutput, EmulatorThread, next_tick
+from ucat_console.backend.devices.faults import Fault, FaultSettings
 from ucat_console.backend.devices.pressure import (
     PressureConfig,
     depth_to_pressure,
@@ -28,8 +26,6 @@ from ucat_console.backend.devices.pressure import (
 from ucat_console.backend.devices.pty_port import PtyPort
 from ucat_console.control.params import _Config
 from ucat_console.typedconf import param
-
-log = logging.getLogger(__name__)
 
 BROKEN_LOOP_MA = 0.0
 
@@ -45,8 +41,10 @@ class PressureEmulatorConfig(_Config):
     faults: FaultSettings = FaultSettings()
 
 
-class PressureEmulator(FaultInjectable):
+class PressureEmulator(EmulatorThread):
     """Serial ADC emulator over a pty; the driver opens :attr:`port`."""
+
+    _name = "pressure emulator"
 
     def __init__(
         self,
@@ -55,16 +53,14 @@ class PressureEmulator(FaultInjectable):
         transducer: PressureConfig = PressureConfig(),
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
+        super().__init__(clock, config.faults)
         self.config = config
         self.transducer = transducer
         self._source = source
-        self._clock = clock
-        self.faults = FaultSet(clock)
         self._pty = PtyPort()
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-        self._t0 = 0.0
-        self._delayed: collections.deque[tuple[float, bytes]] = collections.deque()
+        self._delayed: DelayedOutput[bytes] = DelayedOutput()  # lines held back by 'slow'
+        self._period = 1.0 / config.rate_hz
+        self._next_line = 0.0
         self._lines = 0
 
     @property
@@ -77,51 +73,24 @@ class PressureEmulator(FaultInjectable):
         p = depth_to_pressure(depth_m, self.config.surface_offset_pa, tr.rho)
         return pressure_to_current(p, tr.p_min_pa, tr.span_pa)
 
-    def start(self) -> "PressureEmulator":
-        if self._thread is not None:
-            return self
-        self._t0 = self._clock()
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._run, name="pressure-emulator", daemon=True)
-        self._thread.start()
-        return self
-
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
-            self._thread = None
+    def _close(self) -> None:
         self._pty.close()
 
-    def __enter__(self) -> "PressureEmulator":
-        return self.start()
+    def _begin(self, now: float) -> None:
+        self._period = 1.0 / self.config.rate_hz
+        self._next_line = now
 
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
-
-    def _run(self) -> None:
-        period = 1.0 / self.config.rate_hz
-        next_line = self._clock()
-        while not self._stop.is_set():
-            try:
-                now = self._clock()
-                if now >= next_line:
-                    self._sample(now)
-                    next_line = max(next_line + period, now - period)
-                while self._delayed and self._delayed[0][0] <= now:
-                    self._write(self._delayed.popleft()[1])
-                if self._pty.wait_readable(0.0):
-                    self._pty.read()  # the ADC ignores input
-                wake = next_line if not self._delayed else min(next_line, self._delayed[0][0])
-                self._stop.wait(max(0.0, min(0.05, wake - self._clock())))
-            except OSError as e:
-                if self._stop.is_set():
-                    break
-                log.warning("pressure emulator: pty error %s", e)
-                self._stop.wait(0.05)
-            except Exception:
-                log.exception("pressure emulator: unexpected error")
-                self._stop.wait(0.05)
+    def _step(self) -> None:
+        now = self._clock()
+        if now >= self._next_line:
+            self._sample(now)
+            self._next_line = next_tick(self._next_line, self._period, now)
+        for line in self._delayed.pop_due(now):
+            self._write(line)
+        if self._pty.wait_readable(0.0):
+            self._pty.read()  # the ADC ignores input
+        wake = min(self._next_line, self._delayed.next_due())
+        self._stop.wait(max(0.0, min(0.05, wake - self._clock())))
 
     def _sample(self, now: float) -> None:
         depth = self._source(now - self._t0)
@@ -132,10 +101,8 @@ class PressureEmulator(FaultInjectable):
         self._lines += 1
         if self.faults.active(Fault.CORRUPT) and self._lines % self.config.faults.corrupt_every == 0:
             line = b"I=1\xff2.3#A" + line[len(line) // 2 :]
-        if self.faults.active(Fault.SLOW):
-            self._delayed.append((now + self.config.faults.slow_delay_s, line))
-            return
-        self._write(line)
+        if not self._held_back(now, line, self._delayed):
+            self._write(line)
 
     def _write(self, line: bytes) -> None:
         if self.faults.active(Fault.SILENCE):

@@ -4,7 +4,8 @@ One :class:`EventReporter` per driver stamps events with the driver's clock and 
 name, limits repeated events of one code (a noisy line must not flood the stream; the next
 event carries how many were suppressed), reports lasting conditions (silence, broken
 loop) once when they start and once when they end, and never lets a failing sink stop the
-reader thread.
+reader thread. A :class:`SilenceWatch` turns "nothing arrived for a while" into such a
+condition.
 """
 
 from __future__ import annotations
@@ -98,3 +99,56 @@ class EventReporter:
     def is_active(self, code: str) -> bool:
         with self._lock:
             return code in self._conditions
+
+
+class SilenceWatch:
+    """The ``silence`` condition of one input: nothing valid arrived for ``timeout_s``.
+
+    ``received`` marks an arrival (and ends a reported silence with ``recovered``);
+    ``check`` reports the start of a silence while the watch is armed. ``noun``/``nouns``
+    name what arrives (``"packet"``, ``"packets"``) in the event messages.
+    """
+
+    def __init__(
+        self,
+        events: EventReporter,
+        clock: Callable[[], float],
+        timeout_s: float,
+        noun: str,
+        nouns: str,
+        armed: bool = True,
+    ) -> None:
+        self._events = events
+        self._clock = clock
+        self.timeout_s = float(timeout_s)
+        self._noun = noun
+        self._nouns = nouns
+        self.armed = armed
+        self._last = 0.0
+
+    def reset(self) -> None:
+        """Count the silence from now (a port opened, a connection made)."""
+        self._last = self._clock()
+
+    def arm(self) -> None:
+        """Count from now and report silence from here on."""
+        self.reset()
+        self.armed = True
+
+    def disarm(self) -> None:
+        self.armed = False
+
+    def received(self, now: float) -> None:
+        self._last = now
+        if self._events.is_active("silence"):
+            self._events.condition("silence", False, f"{self._nouns} arrive again")
+
+    def check(self) -> float:
+        """Report silence when armed and quiet too long; returns the seconds since the last arrival."""
+        quiet = self._clock() - self._last
+        if self.armed and quiet > self.timeout_s:
+            self._events.condition(
+                "silence", True, f"no {self._noun} for more than {self.timeout_s:g} s",
+                "error", timeout_s=self.timeout_s,
+            )
+        return quiet
