@@ -69,13 +69,15 @@ class RunResult:
 
 
 def run_protocol(
-    cfg: MpcConfig, refine: bool, seed: int = 0, on_solve: Callable[[], None] | None = None
+    cfg: MpcConfig, refine: bool, seed: int = 0, on_solve: Callable[[], None] | None = None,
+    targets: Iterable[tuple[float, float]] | None = None,
 ) -> RunResult:
-    """Section 11's sequential protocol for one configuration."""
+    """Section 11's sequential protocol for one configuration (``targets``: a subset of the
+    121, for reduced runs)."""
     mpc = FinMpc(cfg, seed=seed)
     result = RunResult(cfg.n_samples, cfg.solver, "two_stage" if refine else "sampling")
     clock = time.perf_counter
-    for f_target in protocol_targets():
+    for f_target in protocol_targets() if targets is None else targets:
         theta, u_prev = 0.0, U_PREV0
         for _ in range(CYCLES):
             t0 = clock()

@@ -12,7 +12,7 @@ import logging
 import sys
 
 #: sub-command modules under ucat_console.cli
-COMMANDS = ["bench", "devices", "sessions", "replay"]
+COMMANDS = ["bench", "devices", "sessions", "replay", "experiment", "sweep"]
 
 
 def build_parser() -> argparse.ArgumentParser:

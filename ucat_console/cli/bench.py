@@ -26,6 +26,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-first-call", action="store_true", help="skip the first-call latency")
     p.add_argument("--json", type=Path, default=None, help="write the results as JSON")
     p.set_defaults(func=run_mpc)
+    q = kinds.add_parser("sim", help="headless real-time factor of the closed loop (1 kHz physics)")
+    q.add_argument("--seconds", type=float, default=30.0, help="simulated seconds timed per mode")
+    q.add_argument("--modes", nargs="+", choices=("mpc", "mpc_sync", "baseline"),
+                   default=["mpc", "mpc_sync", "baseline"])
+    q.add_argument("--cpu", type=int, default=None, help="CPU to pin to (default: the last one)")
+    q.add_argument("--json", type=Path, default=None, help="write the results as JSON")
+    q.set_defaults(func=run_sim)
 
     from ucat_console.bench import sessions as bench_sessions
 
@@ -92,4 +99,24 @@ def run_mpc(args: argparse.Namespace) -> int:
                                                 "seeds": args.seeds}}
         args.json.write_text(json.dumps(doc, indent=2))
         print(f"\nwrote {args.json}")
+    return 0
+
+
+def run_sim(args: argparse.Namespace) -> int:
+    from ucat_console.backend.loop.bench import measure_realtime_factor
+    from ucat_console.bench.machine import machine_info, pin_to_one_core
+
+    if not 0.0 < args.seconds <= 3600.0:
+        raise ValueError(f"--seconds: {args.seconds} must be in (0, 3600]")
+    if args.json is not None and not args.json.parent.exists():
+        raise ValueError(f"--json: directory {args.json.parent} does not exist")
+    cpu = pin_to_one_core(args.cpu)
+    factors = {}
+    for mode in args.modes:
+        factors[mode] = measure_realtime_factor(mode, args.seconds)
+        print(f"closed loop, {mode:>8}: {factors[mode]:,.0f}x real time (one core, 1 kHz physics)")
+    if args.json:
+        args.json.write_text(json.dumps({"realtime_factor": factors, "seconds": args.seconds,
+                                         "machine": machine_info(cpu)}, indent=2))
+        print(f"wrote {args.json}")
     return 0

@@ -76,6 +76,8 @@ class PowerEstimator:
     def __init__(self, pcfg: PowerConfig, mcfg: MpcConfig) -> None:
         self.pcfg = pcfg
         self.mcfg = mcfg
+        # drag_power's constant, so the per-sample update stays scalar (it runs at the PDO rate)
+        self._k_drag = 0.5 * mcfg.rho * mcfg.c_d * mcfg.fin_area * mcfg.r_c**3
         self._w_lp = LowPass(pcfg.filter_tau)
         self._a_lp = LowPass(pcfg.filter_tau)
         self.reset()
@@ -116,7 +118,7 @@ class PowerEstimator:
             return None
         alpha = self._a_lp.update((w - w_prev) / dt, t)
         p_inert = self.pcfg.fin_inertia * alpha * w
-        p_drag = float(drag_power(w, self.mcfg))
+        p_drag = self._k_drag * abs(w) ** 3
         sample = PowerSample(t, w, alpha, p_inert, p_drag, max(0.0, p_inert) + p_drag)
         if self._last is not None:
             span = t - self._last.t

@@ -1,0 +1,394 @@
+"""The robot behind the closed loop: in-process simulator, simulated rig through the drivers,
+drivers on configured endpoints; fault injection; start-up errors naming the key."""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+import tomllib
+import uuid
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any, Callable
+
+import pytest
+
+from ucat_console.backend.devices.config import DevicesConfig, SimStartConfig
+from ucat_console.backend.devices.device_robot_io import DeviceRobotIO, DeviceTime
+from ucat_console.backend.devices.dvl import DvlConfig
+from ucat_console.backend.devices.dvl_emulator import DvlEmulator
+from ucat_console.backend.devices.epos2 import Epos2Config
+from ucat_console.backend.devices.epos2_emulator import Epos2EmulatorConfig, start_emulated_nodes
+from ucat_console.backend.devices.imu import ImuConfig
+from ucat_console.backend.devices.imu_emulator import ImuEmulator
+from ucat_console.backend.devices.pressure import PressureConfig
+from ucat_console.backend.devices.pressure_emulator import PressureEmulator
+from ucat_console.backend.devices.readings import DepthReading, DvlVelocity, FinFeedback, ImuReading
+from ucat_console.backend.devices.units import DriveUnits
+from ucat_console.backend.loop.clock import PacedClock
+from ucat_console.backend.loop.closed_loop import ClosedLoop
+from ucat_console.backend.loop.config import LoopConfig
+from ucat_console.backend.loop.robot_io import SimRobotIO
+from ucat_console.backend.rig import build_robot_io, connect_events, rig_of
+from ucat_console.cli.devices import synthetic_depth, synthetic_dvl, synthetic_imu
+from ucat_console.control.allocation import BodySetpoints
+from ucat_console.telemetry import channels as ch
+from ucat_console.telemetry.events import Event
+from ucat_console.telemetry.stream import TelemetryStream
+
+ROOT = Path(__file__).resolve().parents[2]
+# the plant's encoder: 512 lines, gear 35 -> 71680 qc per fin turn
+UNITS = DriveUnits(encoder_lines=512, gear_ratio=35.0)
+START_DEPTH = 1.0
+SETPOINTS = BodySetpoints(velocity=0.3, depth=1.5)
+
+
+class Sink:
+    """Thread-safe event sink."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self.events: list[Event] = []
+
+    def __call__(self, event: Event) -> None:
+        with self._lock:
+            self.events.append(event)
+
+    def find(self, source: str, codes: tuple[str, ...], after: int = 0) -> Event | None:
+        with self._lock:
+            return next((e for e in self.events[after:] if e.source == source and e.code in codes), None)
+
+    def __len__(self) -> int:
+        with self._lock:
+            return len(self.events)
+
+
+def wait_for(predicate: Callable[[], Any], timeout: float = 5.0, what: str = "condition") -> Any:
+    """Poll until ``predicate()`` is truthy; fail (not a timing assertion) if it never is."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            pytest.fail(f"gave up waiting for {what}")
+        time.sleep(0.01)
+
+
+def sim_devices_config(**changes: Any) -> DevicesConfig:
+    return DevicesConfig(
+        robot="sim-devices", enable_at_start=True,
+        epos2=Epos2Config(units=UNITS, heartbeat_ms=100, heartbeat_timeout_periods=2.5),
+        pressure=PressureConfig(silence_timeout_s=0.3),
+        start=SimStartConfig(depth=START_DEPTH, seed=7),
+        **changes,
+    )
+
+
+class LoopThread:
+    """A closed loop on the paced clock in its own thread, recording any exception."""
+
+    def __init__(self, loop: ClosedLoop, duration: float) -> None:
+        self.loop = loop
+        self.error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, args=(duration,), daemon=True)
+        self._thread.start()
+
+    def _run(self, duration: float) -> None:
+        try:
+            self.loop.run(duration)
+        except BaseException as e:  # reported by the test
+            self.error = e
+
+    def stop(self) -> None:
+        self.loop.stop()
+        self._thread.join(timeout=5.0)
+        assert not self._thread.is_alive()
+
+
+# ---------------------------------------------------------------------- time base
+
+
+def test_device_time_maps_the_wall_clock_to_loop_time_at_the_pace() -> None:
+    clock = DeviceTime(pace=2.0)
+    clock.anchor(2.0, 100.0)
+    # 1.5 s of wall clock at pace 2 is 3 s of loop time
+    assert clock.to_loop(101.5) == pytest.approx(5.0)
+    assert clock.to_wall(5.0) == pytest.approx(101.5)
+    assert clock.to_wall(clock.to_loop(123.456)) == pytest.approx(123.456)
+    with pytest.raises(ValueError, match="pace"):
+        DeviceTime(pace=0.0)
+
+
+# ---------------------------------------------------------------------- robot = sim
+
+
+def test_sim_robot_is_the_in_process_simulator_at_the_configured_start() -> None:
+    io, close = build_robot_io(DevicesConfig(robot="sim", start=SimStartConfig(depth=2.5, yaw=0.5)))
+    try:
+        assert isinstance(io, SimRobotIO)
+        truth = io.truth()
+        assert truth.depth == pytest.approx(2.5)
+        assert truth.euler[2] == pytest.approx(0.5)
+        assert rig_of(io) is None
+        connect_events(io, Sink())()  # nothing to connect, nothing fails
+    finally:
+        close()
+
+
+# ---------------------------------------------------------------------- robot = sim-devices
+
+
+def test_simulated_robot_runs_closed_loop_through_drivers_and_emulators() -> None:
+    # reference: the same loop on the in-process simulator, same start and seed
+    ref_io = SimRobotIO(depth=START_DEPTH, seed=7)
+    with ClosedLoop(LoopConfig(mode="baseline"), ref_io, setpoints=SETPOINTS) as ref:
+        ref.run(3.0)
+        ref_truth = ref_io.truth()
+    ref_dive, ref_speed = ref_truth.depth - START_DEPTH, ref_truth.velocity[0]
+
+    sink = Sink()
+    io, close = build_robot_io(sim_devices_config(), event_sink=sink)
+    stream = TelemetryStream()
+    got: dict[str, list[Any]] = {ch.IMU: [], ch.DVL: [], ch.DEPTH: []}
+    stream.subscribe(lambda c, m: got[c].append(m), channels=list(got))
+    loop = ClosedLoop(LoopConfig(mode="baseline"), io, stream, PacedClock(1.0), setpoints=SETPOINTS,
+                      source="sim-devices")
+    try:
+        assert isinstance(io, DeviceRobotIO)
+        rig = rig_of(io)
+        assert rig is not None
+        start = io.truth()
+        loop.run(3.0)
+        end = io.truth()
+        commands = [loop.fin_command(f) for f in range(4)]
+
+        # depth and forward velocity move towards the setpoints, as on the in-process robot
+        dive, speed = end.depth - start.depth, end.velocity[0] - start.velocity[0]
+        assert 0.001 < dive < SETPOINTS.depth - START_DEPTH
+        assert 0.002 < speed < SETPOINTS.velocity
+        assert dive > 0.25 * ref_dive
+        assert speed > 0.25 * ref_speed
+
+        # every fin took its strokes through CANopen: new set-points (controlword 0x003F)
+        # reached its node, whose target is the loop's last command, and the plant's fin
+        # (the node's servo) settles there once the loop stops commanding
+        for fin, node in enumerate(io.config.epos2.node_ids):
+            emulator = rig.nodes[node]
+            assert emulator.controlword_log.count(0x003F) >= 2
+            target = commands[fin][0]
+            wait_for(lambda: emulator.target_quadcounts == UNITS.to_quadcounts(target), what=f"fin {fin} target")
+            wait_for(lambda: abs(rig.truth().fin_angles[fin] - target) < 2e-3, what=f"fin {fin} angle")
+
+        # the sensors reached the loop through their drivers and agree with the plant
+        assert got[ch.IMU] and got[ch.DVL] and got[ch.DEPTH]
+        recent_depths = [r.depth_m for r in got[ch.DEPTH] if r.t > loop.time - 0.5]
+        assert recent_depths
+        assert sum(recent_depths) / len(recent_depths) == pytest.approx(end.depth, abs=0.02)
+        valid = [r for r in got[ch.DVL] if r.valid and r.t > loop.time - 1.0]
+        assert valid and abs(valid[-1].vx - end.velocity[0]) < 0.03
+        # readings reached the loop in its own time
+        # (ahead of the loop by at most the re-alignment threshold when the loop lags)
+        assert all(0.0 <= r.t <= loop.time + io.config.resync_s + 0.05 for r in got[ch.IMU])
+
+        bad = [(e.source, e.code) for e in sink.events if e.level in ("error", "fatal")]
+        assert not bad
+    finally:
+        loop.close()
+        close()
+
+
+# device, fault, arguments, source and codes of the fault's event, code of its end
+FAULTS = [
+    ("epos2", "emcy", {"fin": 1, "code": 0x2310}, "epos2.2", ("emcy",), "fault_cleared"),
+    ("epos2", "heartbeat_loss", {"fin": 2}, "epos2.3", ("heartbeat_lost",), "heartbeat_restored"),
+    ("imu", "corrupt", {}, "imu", ("checksum", "garbage"), None),
+    ("dvl", "invalid", {}, "dvl", ("bottom_lock_lost",), "recovered"),
+    ("pressure", "silence", {}, "pressure", ("silence",), "recovered"),
+]
+
+
+@pytest.mark.parametrize("device, fault, kw, source, codes, end", FAULTS, ids=[f"{d}-{f}" for d, f, *_ in FAULTS])
+def test_injected_fault_surfaces_as_an_event_and_the_loop_keeps_running(
+    device: str, fault: str, kw: dict, source: str, codes: tuple[str, ...], end: str | None
+) -> None:
+    io, close = build_robot_io(sim_devices_config())
+    sink = Sink()
+    connect_events(io, sink)
+    loop = ClosedLoop(LoopConfig(mode="baseline"), io, clock=PacedClock(1.0), setpoints=SETPOINTS)
+    runner = LoopThread(loop, 30.0)
+    try:
+        wait_for(lambda: loop.time > 0.3, what="the loop running")
+        assert sink.find(source, codes) is None
+        t_inject = loop.time
+        injected = rig_of(io).inject(device, fault, **kw)
+        assert injected.code == "fault_injected" and injected.data["fault"] == fault
+
+        event = wait_for(lambda: sink.find(source, codes), what=f"{source} {codes}")
+        assert isinstance(event, Event) and event.level in ("warning", "error")
+        # stamped in the loop's time, after the injection
+        assert t_inject - 0.05 <= event.t <= loop.time + 0.05
+        if fault == "emcy":
+            assert event.data["code"] == 0x2310
+        # the injection itself is on the sink too
+        assert sink.find("rig", ("fault_injected",)) is not None
+
+        t_event = loop.time
+        wait_for(lambda: loop.time > t_event + 0.3, what="the loop going on after the fault")
+        assert runner.error is None
+
+        # the fault ends when its cause does: the emulator's fault cleared, or the drive reset
+        seen = len(sink)
+        if fault == "emcy":
+            assert io.fault_reset(kw["fin"])
+        else:
+            rig_of(io).clear(device, fault)
+        if end is not None:
+            wait_for(lambda: sink.find(source, (end,), after=seen), what=f"{source} {end}")
+    finally:
+        runner.stop()
+        loop.close()
+        close()
+    assert runner.error is None
+
+
+def test_fault_injection_refuses_unknown_devices_faults_and_arguments() -> None:
+    io, close = build_robot_io(sim_devices_config())
+    try:
+        rig = rig_of(io)
+        with pytest.raises(ValueError, match="device: 'sonar'"):
+            rig.inject("sonar", "silence")
+        with pytest.raises(ValueError, match="fault: 'emcy' is not a fault of imu"):
+            rig.inject("imu", "emcy")
+        with pytest.raises(ValueError, match="fin: 7"):
+            rig.inject("epos2", "emcy", fin=7)
+        with pytest.raises(ValueError, match="colour: not an argument"):
+            rig.inject("dvl", "slow", colour="red")
+        with pytest.raises(ValueError, match="duration"):
+            rig.inject("pressure", "silence", duration=-1.0)
+    finally:
+        close()
+
+
+# ---------------------------------------------------------------------- robot = hardware
+
+
+@pytest.fixture
+def stand_ins():
+    """Emulators standing in for the robot's devices at addresses given in a hardware config."""
+    channel = f"rig-hw-{uuid.uuid4().hex[:8]}"
+    nodes = start_emulated_nodes(channel, (1, 2, 3, 4), config=Epos2EmulatorConfig(units=UNITS))
+    imu = ImuEmulator(synthetic_imu).start()
+    dvl = DvlEmulator(synthetic_dvl).start()
+    pressure = PressureEmulator(synthetic_depth).start()
+    config = DevicesConfig(
+        robot="hardware",
+        epos2=Epos2Config(interface="virtual", channel=channel, units=UNITS, boot_timeout=0.2),
+        imu=ImuConfig(port=imu.port),
+        dvl=DvlConfig(host="127.0.0.1", port=dvl.port, connect_timeout_s=0.2),
+        pressure=PressureConfig(port=pressure.port),
+    )
+    yield config
+    for emulator in (imu, dvl, pressure):
+        emulator.stop()
+    nodes.close()
+
+
+def test_hardware_robot_uses_the_configured_endpoints(stand_ins: DevicesConfig) -> None:
+    io, close = build_robot_io(stand_ins)
+    try:
+        assert isinstance(io, DeviceRobotIO)
+        assert io.truth() is None and rig_of(io) is None
+        assert io.enable_drives()
+        io.command_fin(0, 0.3, 2.0)
+        seen: list[Any] = []
+        t = 0.0
+        last_per_kind: dict[object, float] = {}
+
+        def collect() -> bool:
+            nonlocal t
+            t += 0.02
+            batch = io.advance_to(t)
+            assert [r.t for r in batch] == sorted(r.t for r in batch)
+            for r in batch:
+                key = (FinFeedback, r.fin) if isinstance(r, FinFeedback) else type(r)
+                assert r.t > last_per_kind.get(key, -math.inf)
+                last_per_kind[key] = r.t
+            seen.extend(batch)
+            fin0 = [r for r in seen if isinstance(r, FinFeedback) and r.fin == 0]
+            kinds = {type(r) for r in seen}
+            return kinds == {FinFeedback, ImuReading, DvlVelocity, DepthReading} and fin0 and \
+                abs(fin0[-1].position_rad - 0.3) < 1e-3
+
+        wait_for(collect, what="readings of every kind and fin 0 at 0.3 rad")
+        depths = [r.depth_m for r in seen if isinstance(r, DepthReading)]
+        assert all(0.79 < d < 1.21 for d in depths)  # synthetic depth: 1 m +- 0.2 m
+        dvl = [r for r in seen if isinstance(r, DvlVelocity)]
+        assert all(r.valid and r.vx == pytest.approx(0.3, abs=1e-6) for r in dvl)
+        imu = [r for r in seen if isinstance(r, ImuReading)]
+        assert imu[-1].accel_g == pytest.approx((0.0, 0.0, -1.0), abs=1e-6)
+    finally:
+        close()
+
+
+# ---------------------------------------------------------------------- bad configuration
+
+
+@pytest.mark.parametrize("data, key", [
+    ({"epos2": {"interface": "carrier-pigeon"}}, "epos2.interface"),
+    ({"epos2": {"node_ids": [1, 2, 3, 128]}}, r"epos2.node_ids\[3\]"),
+    ({"epos2": {"node_ids": [0, 2, 3, 4]}}, r"epos2.node_ids\[0\]"),
+    ({"robot": "submarine"}, "robot"),
+    ({"imu": {"baud": 1234}}, "imu.baud"),
+    ({"rig": {"pace": 0.0}}, "rig.pace"),
+])
+def test_bad_configuration_values_name_the_key(data: dict, key: str) -> None:
+    with pytest.raises(ValueError, match=f"^{key}"):
+        DevicesConfig.from_dict(data)
+
+
+def test_application_config_must_name_a_robot_behind_the_drivers() -> None:
+    with pytest.raises(ValueError, match="^devices: expected"):
+        build_robot_io(SimpleNamespace(robot="rig"))
+    with pytest.raises(ValueError, match="^devices.robot: 'sim'"):
+        build_robot_io(SimpleNamespace(robot="rig", devices=DevicesConfig(robot="sim")))
+
+
+def _threads() -> set[str]:
+    return {t.name for t in threading.enumerate()}
+
+
+def test_start_up_errors_name_the_key_and_leave_nothing_running(stand_ins: DevicesConfig) -> None:
+    good = stand_ins
+    closed = DvlEmulator(synthetic_dvl).start()
+    closed_port = closed.port
+    closed.stop()  # nobody listens there any more
+    before = _threads()
+    cases = [
+        (good.replace(imu=good.imu.replace(port="/dev/ucat-no-such-imu")), r"^imu\.port"),
+        (good.replace(pressure=good.pressure.replace(port="/dev/ucat-no-such-adc")), r"^pressure\.port"),
+        (good.replace(dvl=good.dvl.replace(port=closed_port)), r"^dvl\.host"),
+        (good.replace(epos2=good.epos2.replace(interface="socketcan", channel="ucatnocan9")), r"^epos2\.channel"),
+        (good.replace(epos2=good.epos2.replace(channel=f"empty-{uuid.uuid4().hex[:6]}", boot_timeout=0.05)),
+         r"^epos2\.node_ids\[0\]"),
+    ]
+    for config, key in cases:
+        with pytest.raises(ValueError, match=key):
+            build_robot_io(config)
+        assert not {"dvl-client", "imu-reader", "pressure-reader", "epos2-supervision"} & (_threads() - before)
+
+
+# ---------------------------------------------------------------------- configuration files
+
+
+@pytest.mark.parametrize("name, robot", [("robot.toml", "hardware"), ("sim-devices.toml", "sim-devices")])
+def test_shipped_configuration_files_hold_valid_device_blocks(name: str, robot: str) -> None:
+    with open(ROOT / "config" / name, "rb") as fh:
+        data = tomllib.load(fh)
+    assert data["robot"] == "rig"  # the application's device rig
+    devices = DevicesConfig.from_dict(data["devices"])
+    assert devices.robot == robot
+    if robot == "hardware":
+        assert (devices.epos2.interface, devices.epos2.channel) == ("socketcan", "can0")
+        assert devices.epos2.bitrate == 1_000_000

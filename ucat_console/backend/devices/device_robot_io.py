@@ -1,0 +1,367 @@
+"""The closed loop's robot reached through the device drivers: :class:`DeviceRobotIO`.
+
+It implements ``loop.robot_io.RobotIO`` with the drivers only: :class:`FinDrives` for the
+four EPOS2 nodes, :class:`ImuDriver`, :class:`DvlClient` and :class:`PressureDriver`. It
+does not know whether the other ends are the robot's devices or the emulators of the
+simulated rig; the configuration's endpoints decide.
+
+Time. The drivers stamp readings and events on the wall clock (``time.monotonic``); the
+loop runs in its own time, which a paced clock ties to the wall clock at ``pace``
+simulated seconds per second. The first :meth:`DeviceRobotIO.advance_to` call anchors the
+mapping (loop time ``t`` is now), later calls wait until the device clock reaches ``t``
+(so a loop without a paced clock is paced by the devices), and the mapping is re-anchored
+when the device clock runs ahead of the loop by more than ``resync_s`` (the loop was
+paused). Readings leave :meth:`advance_to` in loop time and in time order (a reading may
+carry a stamp a little after ``t``: the devices do not wait for the loop), each sensor's
+stamps strictly increasing; what queued up before the loop started (or while it was
+paused) is reduced to the latest reading of each kind, stamped ``t``.
+
+Events. Every driver fault is an :class:`Event` (source ``epos2.<node>``, ``imu``, ``dvl``,
+``pressure``) stamped in loop time and handed to each sink added with
+:meth:`DeviceRobotIO.add_event_sink` (the supervisor connects its telemetry stream); the
+latest events are kept so a sink added after start-up sees them too. Besides the
+drivers' own events, a run of ``dvl_invalid_after`` velocity reports without bottom lock
+is reported as ``bottom_lock_lost`` (and ``recovered``), since a single invalid report is
+normal missing data.
+"""
+
+from __future__ import annotations
+
+import collections
+import dataclasses
+import logging
+import math
+import threading
+import time
+from typing import Callable
+
+from ucat_console.backend.devices.canbus import CanBusError
+from ucat_console.backend.devices.config import DevicesConfig
+from ucat_console.backend.devices.dvl import DvlClient
+from ucat_console.backend.devices.epos2 import Epos2NoAnswer, FinDrives
+from ucat_console.backend.devices.imu import ImuDriver
+from ucat_console.backend.devices.pressure import PressureDriver
+from ucat_console.backend.devices.readings import DvlPosition, DvlVelocity, FinFeedback
+from ucat_console.backend.devices.reporting import EventReporter
+from ucat_console.backend.devices.serial_link import SERIAL_ERRORS, open_serial
+from ucat_console.backend.loop.robot_io import Reading, RobotIO, RobotTruth
+from ucat_console.telemetry.events import Event, EventSink
+
+log = logging.getLogger(__name__)
+
+#: events kept for sinks added late
+EVENT_BACKLOG = 500
+#: s; the smallest step between two readings of one sensor
+_TICK = 1e-6
+
+
+class DeviceTime:
+    """Wall clock (s) <-> loop time (s): ``t_loop = t0 + pace * (wall - wall0)``."""
+
+    def __init__(self, pace: float = 1.0) -> None:
+        if not math.isfinite(pace) or pace <= 0.0:
+            raise ValueError(f"pace: {pace!r} must be a positive number")
+        self.pace = float(pace)
+        self._anchor: tuple[float, float] | None = None  # (t0, wall0)
+
+    @property
+    def anchored(self) -> bool:
+        return self._anchor is not None
+
+    def anchor(self, t: float, wall: float) -> None:
+        """Loop time ``t`` is wall-clock time ``wall``."""
+        self._anchor = (float(t), float(wall))
+
+    def to_loop(self, wall: float) -> float:
+        anchor = self._anchor
+        if anchor is None:
+            return 0.0
+        t0, wall0 = anchor
+        return t0 + self.pace * (wall - wall0)
+
+    def to_wall(self, t: float) -> float:
+        anchor = self._anchor
+        if anchor is None:
+            raise RuntimeError("device time is not anchored yet")
+        t0, wall0 = anchor
+        return wall0 + (t - t0) / self.pace
+
+
+class DeviceRobotIO(RobotIO):
+    """Fin commands out and readings in through the device drivers.
+
+    ``config`` gives every driver's endpoint and settings (``config.robot`` is not read
+    here). ``pace`` is the loop's pace (simulated seconds per wall-clock second; 1 on the
+    robot). ``truth``, when given, supplies the simulator's true state (the simulated rig
+    passes its plant's); it is None on the robot. Call :meth:`start` before the loop runs.
+    """
+
+    def __init__(
+        self,
+        config: DevicesConfig,
+        *,
+        pace: float = 1.0,
+        truth: Callable[[], RobotTruth | None] | None = None,
+        on_event: EventSink | None = None,
+        wall_clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.config = config
+        self.time = DeviceTime(pace)
+        self._wall = wall_clock
+        self._truth = truth
+        self._lock = threading.Lock()
+        self._pending: list[Reading] = []
+        self._t = 0.0
+        self._started_loop = False
+        self._last_t: dict[object, float] = {}
+        self._closed = False
+        self._wake = threading.Event()
+        self._sinks: tuple[EventSink, ...] = (on_event,) if on_event is not None else ()
+        self._backlog: collections.deque[Event] = collections.deque(maxlen=EVENT_BACKLOG)
+        self._dvl_invalid_run = 0
+        self.last_dvl_position: DvlPosition | None = None
+        #: the simulated rig behind the drivers (robot = sim-devices), for fault injection
+        #: from the console; this class never uses it
+        self.rig: object | None = None
+        self._dvl_events = EventReporter("dvl", self._on_event, wall_clock)
+        self.drives = FinDrives(config.epos2, self._on_reading, self._on_event, clock=wall_clock)
+        self.imu = ImuDriver(config.imu, self._on_reading, self._on_event, clock=wall_clock)
+        self.dvl = DvlClient(
+            config.dvl, self._on_dvl_velocity, self._on_dvl_position, self._on_event, clock=wall_clock
+        )
+        self.pressure = PressureDriver(config.pressure, self._on_reading, self._on_event, clock=wall_clock)
+        self._running: list[Callable[[], None]] = []
+
+    # ------------------------------------------------------------------ start-up
+    def start(self) -> None:
+        """Check the endpoints, then start every driver.
+
+        Raises ValueError naming the configuration key when an endpoint is unusable: a
+        serial device that is missing or cannot be opened (``imu.port``,
+        ``pressure.port``), a DVL that cannot be reached (``dvl.host``), a CAN channel
+        that cannot be opened (``epos2.channel``) or an EPOS2 node that never answers
+        (``epos2.node_ids[i]``). Whatever was started is stopped again first; other
+        start-up failures of the drives raise ``Epos2Error``.
+        """
+        cfg = self.config
+        _check_serial("imu.port", cfg.imu.port, cfg.imu.baud)
+        _check_serial("pressure.port", cfg.pressure.port, cfg.pressure.baud)
+        try:
+            self._start_dvl()
+            self._start_drives()
+            self.imu.start()
+            self._running.append(self.imu.stop)
+            self.pressure.start()
+            self._running.append(self.pressure.stop)
+        except BaseException:
+            self._stop_drivers()
+            raise
+        if cfg.enable_at_start and not self.drives.enable_all():
+            log.warning("not every EPOS2 reached operation enabled at start (see the events)")
+
+    def _start_dvl(self) -> None:
+        cfg = self.config.dvl
+        self.dvl.start()
+        self._running.append(self.dvl.stop)
+        if not self.dvl.wait_connected(cfg.connect_timeout_s + 0.5):
+            raise ValueError(
+                f"dvl.host: cannot reach the DVL at {cfg.host}:{cfg.port} within "
+                f"{cfg.connect_timeout_s + 0.5:g} s (dvl.host / dvl.port)"
+            )
+
+    def _start_drives(self) -> None:
+        cfg = self.config.epos2
+        try:
+            self.drives.connect()
+        except CanBusError as e:
+            raise ValueError(f"epos2.channel: {e} (epos2.interface = {cfg.interface!r})") from None
+        except Epos2NoAnswer:
+            silent = [fin for fin, d in sorted(self.drives.drivers.items()) if not d.started] or [0]
+            nodes = [cfg.node_ids[fin] for fin in silent]
+            more = f" (nor did nodes {', '.join(map(str, nodes[1:]))})" if len(nodes) > 1 else ""
+            raise ValueError(
+                f"epos2.node_ids[{silent[0]}]: EPOS2 node {nodes[0]} did not answer within "
+                f"{cfg.boot_timeout:g} s of reset communication{more}; check the node ids and "
+                f"epos2.bitrate ({cfg.bitrate} bit/s) on {cfg.interface} {cfg.channel!r}"
+            ) from None
+        self._running.append(lambda: self.drives.close(disable=True))
+
+    # ------------------------------------------------------------------ RobotIO
+    def command_fin(self, fin: int, target_rad: float, profile_velocity_rad_s: float) -> None:
+        if fin not in self.drives.drivers:
+            raise ValueError(f"fin: {fin!r} is not a fin with a drive (fins: {sorted(self.drives.drivers)})")
+        self.drives.command(fin, target_rad, profile_velocity_rad_s)
+
+    def next_reading_time(self) -> float:
+        return self._t + self.config.poll_period_s
+
+    def advance_to(self, t: float) -> list[Reading]:
+        if not math.isfinite(t):
+            raise ValueError(f"t: expected a finite time, got {t!r}")
+        clock = self.time
+        now = self._wall()
+        reset = not self._started_loop
+        if reset:
+            clock.anchor(t, now)
+            self._started_loop = True
+        else:
+            ahead = clock.to_loop(now) - t
+            if ahead > self.config.resync_s:
+                log.info("device clock %.3f s ahead of the loop: re-aligned", ahead)
+                clock.anchor(t, now)
+                reset = True
+            elif ahead < 0.0 and not self._closed:
+                self._wake.wait(-ahead / clock.pace)
+        with self._lock:
+            batch, self._pending = self._pending, []
+        self._t = t
+        if reset:  # what queued up while the loop was not running: the latest of each kind, now
+            batch = _latest_of_each_kind(batch)
+        last = self._last_t
+        out = []
+        for r in batch:
+            key = _kind(r)
+            tl = t if reset else clock.to_loop(r.t)
+            prev = last.get(key)
+            if prev is not None and tl <= prev:  # keep each sensor's stamps increasing
+                tl = prev + _TICK
+            last[key] = tl
+            out.append(dataclasses.replace(r, t=tl))
+        out.sort(key=_reading_time)
+        return out
+
+    def truth(self) -> RobotTruth | None:
+        if self._truth is None:
+            return None
+        tr = self._truth()
+        if tr is None:
+            return None
+        return dataclasses.replace(tr, t=self.time.to_loop(self._wall()) if self.time.anchored else self._t)
+
+    def close(self) -> None:
+        """Disable the drives, stop every driver (safe to call more than once)."""
+        self._closed = True
+        self._wake.set()
+        self._stop_drivers()
+
+    def _stop_drivers(self) -> None:
+        while self._running:
+            stop = self._running.pop()
+            try:
+                stop()
+            except Exception:
+                log.exception("stopping a driver failed")
+
+    # ------------------------------------------------------------------ drives
+    def enable_drives(self) -> bool:
+        """Every EPOS2 to operation enabled (on arming); False (with events) on failure."""
+        return self.drives.enable_all()
+
+    def disable_drives(self) -> bool:
+        """Power stages off (on disarming)."""
+        return self.drives.disable_all()
+
+    def quick_stop(self) -> bool:
+        return self.drives.quick_stop_all()
+
+    def fault_reset(self, fin: int) -> bool:
+        """Reset a drive's fault and enable it again."""
+        return self.drives.fault_reset(fin)
+
+    def zero_depth(self, samples: int | None = None) -> float | None:
+        """Zero the depth at the surface (the pressure driver's calibration)."""
+        return self.pressure.zero(samples)
+
+    # ------------------------------------------------------------------ events
+    def add_event_sink(self, sink: EventSink, replay: bool = True) -> Callable[[], None]:
+        """Send every event to ``sink`` (with the kept ones first when ``replay``).
+
+        Returns a function that removes the sink.
+        """
+        with self._lock:
+            self._sinks = self._sinks + (sink,)
+            past = list(self._backlog) if replay else []
+        for event in past:
+            _deliver(sink, event)
+
+        def remove() -> None:
+            with self._lock:
+                self._sinks = tuple(s for s in self._sinks if s is not sink)
+
+        return remove
+
+    def recent_events(self) -> list[Event]:
+        with self._lock:
+            return list(self._backlog)
+
+    def publish_event(self, event: Event) -> None:
+        """An event raised beside the drivers (the simulated rig), stamped on the wall clock."""
+        self._on_event(event)
+
+    def _on_event(self, event: Event) -> None:
+        if self.time.anchored:
+            event = dataclasses.replace(event, t=self.time.to_loop(event.t))
+        else:
+            event = dataclasses.replace(event, t=self._t)
+        with self._lock:
+            self._backlog.append(event)
+            sinks = self._sinks
+        for sink in sinks:
+            _deliver(sink, event)
+
+    # ------------------------------------------------------------------ readings
+    def _on_reading(self, reading: Reading) -> None:
+        with self._lock:
+            self._pending.append(reading)
+
+    def _on_dvl_velocity(self, v: DvlVelocity) -> None:
+        if v.valid:
+            self._dvl_invalid_run = 0
+            self._dvl_events.condition("bottom_lock_lost", False, "DVL bottom lock back")
+        else:
+            self._dvl_invalid_run += 1
+            if self._dvl_invalid_run >= self.config.dvl_invalid_after:
+                self._dvl_events.condition(
+                    "bottom_lock_lost", True,
+                    f"{self._dvl_invalid_run} DVL velocity reports without bottom lock",
+                    "warning", reports=self._dvl_invalid_run,
+                )
+        self._on_reading(v)
+
+    def _on_dvl_position(self, p: DvlPosition) -> None:
+        self.last_dvl_position = p
+
+
+def _deliver(sink: EventSink, event: Event) -> None:
+    try:
+        sink(event)
+    except Exception:
+        log.exception("event sink failed on %s/%s", event.source, event.code)
+
+
+def _reading_time(r: Reading) -> float:
+    return r.t
+
+
+def _kind(r: Reading) -> object:
+    return (FinFeedback, r.fin) if type(r) is FinFeedback else type(r)
+
+
+def _latest_of_each_kind(batch: list[Reading]) -> list[Reading]:
+    latest: dict[object, Reading] = {}
+    for r in batch:
+        latest[_kind(r)] = r
+    return list(latest.values())
+
+
+def _check_serial(key: str, port: str, baud: int) -> None:
+    """ValueError naming ``key`` unless ``port`` can be opened."""
+    try:
+        ser = open_serial(port, baud, 0.01)
+    except SERIAL_ERRORS as e:
+        raise ValueError(f"{key}: cannot open serial device {port!r}: {e}") from None
+    try:
+        ser.close()
+    except SERIAL_ERRORS:
+        pass
+

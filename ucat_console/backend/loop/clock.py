@@ -1,0 +1,79 @@
+"""The two clocks the same closed loop runs under.
+
+* :class:`SimulatedClock` (headless): simulated time only, as fast as the machine goes,
+  planners called inline in the loop's thread.
+* :class:`PacedClock` (real time): simulated time paced to the wall clock (``pace`` times
+  faster than real time; 1.0 for the console), planners in their own threads.
+
+The loop's trajectory is defined in simulated time alone (a plan requested at ``t`` is
+handed over at ``t + plan_latency``), so both clocks give the same trajectory for the same
+seed; the paced clock only adds waiting, and detects wall-clock deadlines that were missed.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from abc import ABC, abstractmethod
+
+
+class Clock(ABC):
+    """Maps the loop's simulated time to the wall clock."""
+
+    #: True when planners run in their own threads under this clock
+    threaded: bool = False
+
+    def start(self, t0: float) -> None:
+        """The loop is at simulated time ``t0`` now."""
+
+    @abstractmethod
+    def wait_until(self, t: float) -> None:
+        """Return when simulated time ``t`` is due (at once when headless)."""
+
+    def wall_deadline(self, t: float) -> float:
+        """The wall-clock time (``time.perf_counter``) at which simulated ``t`` is due."""
+        return math.inf
+
+    def interrupt(self) -> None:
+        """Wake a :meth:`wait_until` in progress (the loop is being stopped)."""
+
+
+class SimulatedClock(Clock):
+    """Headless: no waiting, planners inline."""
+
+    threaded = False
+
+    def wait_until(self, t: float) -> None:
+        return None
+
+
+class PacedClock(Clock):
+    """Real time, ``pace`` times faster than the wall clock (1.0: real time)."""
+
+    threaded = True
+
+    def __init__(self, pace: float = 1.0) -> None:
+        if not math.isfinite(pace) or not 0.0 < pace <= 1000.0:
+            raise ValueError(f"pace: {pace!r} is out of range; allowed: (0, 1000]")
+        self.pace = float(pace)
+        self._wall0 = time.perf_counter()
+        self._wake = threading.Event()
+        self.lag_max = 0.0  # s of wall time the loop has been behind, at most
+
+    def start(self, t0: float) -> None:
+        self._wall0 = time.perf_counter() - t0 / self.pace
+        self._wake.clear()
+
+    def wall_deadline(self, t: float) -> float:
+        return self._wall0 + t / self.pace
+
+    def wait_until(self, t: float) -> None:
+        delay = self.wall_deadline(t) - time.perf_counter()
+        if delay > 0.0:
+            self._wake.wait(delay)
+        else:
+            self.lag_max = max(self.lag_max, -delay)
+
+    def interrupt(self) -> None:
+        self._wake.set()

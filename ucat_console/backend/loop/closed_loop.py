@@ -1,0 +1,683 @@
+"""The closed loop: body-frame PIDs -> allocation -> fin planners -> executors -> robot.
+
+One :class:`ClosedLoop` runs everything between the robot's readings and its fin
+commands (control.md sections 7-9)::
+
+    readings --> BodyController (median filters, PIDs) --> allocate --> per-fin targets
+    FinFeedback --> FinExecutor (Algorithm 2) --> SendToServo --> RobotIO.command_fin
+                      | PlanRequest                  ^ plan at t + plan_latency
+                      v                              |
+                   planner (MPC / MPC sync / baseline), inline or in its own thread
+
+and publishes what it does on a :class:`TelemetryStream` (channels of
+``telemetry.channels``): sensors as sampled, BodyState / FinState / BodyCommand at
+``state_rate`` / ``control_rate``, Power at ``power_rate``, each plan as it is made
+(``FinPlan`` with every planner input), Setpoints and Status on change and at
+``status_rate``, and Events (``mode``, ``tuning``, ``late_plan``, ``plan_overrun``,
+``stroke_timeout``).
+
+Time. Everything happens at simulated event times: sensor samples (the robot says when the
+next is due), control / telemetry ticks, and plan hand-overs. A plan requested at ``t`` is
+handed to its executor at ``t + plan_latency``, whatever the clock, so the headless clock
+(planners inline) and the paced clock (one planner thread per logical fin, waiting for a
+thread that is not done) give the same trajectory for the same seed. A plan whose solve
+took longer than the hand-over allows (headless: solve time > plan_latency; paced: done
+after the wall-clock deadline) is counted in ``plan_overruns``; a plan arriving after its
+fin went idle is counted in ``late_plans`` (the executor's LatePlan). Neither stalls the
+loop in simulated time.
+
+Mode switches are bumpless: a fin's stroke in flight is never interrupted. The old
+executors finish the plans they hold (their plan requests are no longer served) while the
+new controller's first plan is made at once from where that fin will be (the end angle of
+its last plan) with the last executed plan as u_prev; the new executor takes over when the
+old ones are idle. Tuning (MPC weights, PID gains) applies from the next plan / PID step.
+Mutators may be called from any thread: they are validated at once and applied by the
+loop's thread at its next event.
+
+Fins: the controller uses the paper's order (0 front-starboard, 1 front-port,
+2 rear-starboard, 3 rear-port); the robot and the telemetry use the robot's order,
+mapped by ``PAPER_TO_PLANT_FIN``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import queue
+from dataclasses import fields
+from typing import Any, Callable
+
+import numpy as np
+
+from ucat_console.backend.devices.attitude import AttitudeEstimator
+from ucat_console.backend.devices.readings import DepthReading, DvlVelocity, FinFeedback, ImuReading
+from ucat_console.backend.loop.clock import Clock, SimulatedClock
+from ucat_console.backend.loop.config import MODES, LoopConfig
+from ucat_console.backend.loop.planners import (
+    BaselineFinPlanner,
+    MpcFinPlanner,
+    PlanInputs,
+    PlanJob,
+    PlanningService,
+    PlanOutcome,
+    Planner,
+    ThreadedPlanning,
+)
+from ucat_console.backend.loop.robot_io import RobotIO, RobotTruth
+from ucat_console.backend.sim.params import PAPER_TO_PLANT_FIN
+from ucat_console.control.allocation import (
+    INDEPENDENT_FINS,
+    SYNC_FINS,
+    BodyController,
+    BodySetpoints,
+    allocate,
+)
+from ucat_console.control.executor import (
+    CycleComplete,
+    FinExecutor,
+    LatePlan,
+    PlanRequest,
+    SendToServo,
+    StrokeTimeout,
+)
+from ucat_console.control.params import BaselineConfig, MpcConfig, PidGains
+from ucat_console.control.power import PowerEstimator
+from ucat_console.telemetry import channels as ch
+from ucat_console.telemetry.events import Event
+from ucat_console.telemetry.messages import (
+    BodyCommand,
+    BodyState,
+    FinPlan,
+    FinState,
+    Power,
+    Setpoints,
+    Status,
+)
+from ucat_console.telemetry.stream import TelemetryStream
+
+log = logging.getLogger(__name__)
+
+N_FINS = 4
+#: robot (plant) fin index -> paper fin index
+PLANT_TO_PAPER: tuple[int, ...] = tuple(PAPER_TO_PLANT_FIN.index(i) for i in range(N_FINS))
+#: events closer than this (s) are simultaneous
+_EPS = 1e-7
+PID_LOOPS = ("velocity", "depth", "yaw_rate")
+
+
+def check_setpoints(cfg: LoopConfig, sp: BodySetpoints) -> BodySetpoints:
+    """``sp`` if it lies inside the envelope of ``cfg``, else ValueError naming the value."""
+    if abs(sp.velocity) > cfg.max_velocity:
+        raise ValueError(
+            f"velocity: {sp.velocity!r} m/s is outside the envelope; allowed: "
+            f"[-{cfg.max_velocity}, {cfg.max_velocity}] m/s"
+        )
+    if not 0.0 <= sp.depth <= cfg.max_depth:
+        raise ValueError(f"depth: {sp.depth!r} m is outside the envelope; allowed: [0, {cfg.max_depth}] m")
+    if abs(sp.yaw_rate) > cfg.max_yaw_rate:
+        raise ValueError(
+            f"yaw_rate: {sp.yaw_rate!r} rad/s is outside the envelope; allowed: "
+            f"[-{cfg.max_yaw_rate}, {cfg.max_yaw_rate}] rad/s"
+        )
+    return sp
+
+
+class _Actuator:
+    """One logical fin: its executor, its planner, and the plan hand-over state."""
+
+    __slots__ = (
+        "index", "key", "fins", "executor", "planner", "mode", "u_prev", "job", "t_deliver",
+        "running_end", "pending_end", "active", "predecessors", "ready", "requested", "retiring",
+    )
+
+    def __init__(self, index: int, fins: tuple[int, ...], executor: FinExecutor, planner: Planner,
+                 mode: str, u_prev: tuple[float, float, float, float]) -> None:
+        self.index = index  # position in the mode's allocation
+        self.key = "fin" + "".join(str(f) for f in fins)  # planner thread
+        self.fins = fins  # paper indices
+        self.executor = executor
+        self.planner = planner
+        self.mode = mode
+        self.u_prev = u_prev
+        self.job: PlanJob | None = None
+        self.t_deliver = math.inf
+        self.running_end: float | None = None  # last target of the running plan
+        self.pending_end: float | None = None  # last target of the loaded, waiting plan
+        self.active = True
+        self.predecessors: list[_Actuator] = []
+        self.ready: tuple[PlanInputs, PlanOutcome] | None = None
+        self.requested = False
+        self.retiring = False
+
+    @property
+    def idle(self) -> bool:
+        return not self.executor.running and not self.executor.has_pending
+
+    def end_angle(self) -> float | None:
+        return self.pending_end if self.pending_end is not None else self.running_end
+
+
+class ClosedLoop:
+    """The controller side of the robot, driven by a :class:`Clock` (module docstring)."""
+
+    def __init__(
+        self,
+        cfg: LoopConfig,
+        io: RobotIO,
+        stream: TelemetryStream | None = None,
+        clock: Clock | None = None,
+        *,
+        setpoints: BodySetpoints | None = None,
+        source: str = "sim",
+    ) -> None:
+        self.cfg = cfg
+        self.io = io
+        self.stream = stream if stream is not None else TelemetryStream()
+        self.clock = clock if clock is not None else SimulatedClock()
+        self._planning: PlanningService = ThreadedPlanning() if self.clock.threaded else PlanningService()
+        self._source = source
+        self.body = BodyController(cfg.body)
+        self._mpc_cfg = cfg.mpc
+        self._baseline_cfg = cfg.baseline
+        self._setpoints = self.check_setpoints(setpoints or BodySetpoints())
+        self._mode = cfg.mode
+        self._commands: queue.SimpleQueue[Callable[[float], None]] = queue.SimpleQueue()
+        self._stop = False
+        self._t = 0.0
+        # fin state, robot order
+        self._fb_angle = [math.nan] * N_FINS
+        self._fb_rate = [0.0] * N_FINS
+        self._cmd_angle = [0.0] * N_FINS
+        self._cmd_rate = [0.0] * N_FINS
+        self._power = [PowerEstimator(cfg.power, cfg.mpc) for _ in range(N_FINS)]
+        # estimate
+        self._attitude = AttitudeEstimator()
+        self._q: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
+        self._gyro: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        self._dvl_v: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        self._dvl_t: float | None = None
+        self._xy = [0.0, 0.0]
+        self._depth = 0.0
+        self.distance = 0.0
+        # body command and allocation
+        self._fx = self._fy = self._yaw = 0.0
+        self._v_body = 0.0
+        self._have_command = False
+        self._targets: tuple[tuple[float, float], ...] = allocate(0.0, 0.0, 0.0, sync=self._sync).targets
+        # counters
+        self.late_plans = 0
+        self.plan_overruns = 0
+        self.stroke_timeouts = 0
+        self.plans_made = 0
+        # timers (counts of ticks done; the next tick is at count / rate)
+        self._n_control = self._n_state = self._n_power = self._n_status = 0
+        self._generation = 0
+        self._actuators = self._new_actuators(self._mode)
+        self._owner: list[_Actuator] = [None] * N_FINS  # type: ignore[list-item]
+        for act in self._actuators:
+            for p in act.fins:
+                self._owner[p] = act
+        self._handover = False
+
+    # ------------------------------------------------------------------ public state
+    @property
+    def time(self) -> float:
+        """Simulated time of the last event processed (s)."""
+        return self._t
+
+    @property
+    def mode(self) -> str:
+        return self._mode
+
+    @property
+    def setpoints(self) -> BodySetpoints:
+        return self._setpoints
+
+    @property
+    def mpc_config(self) -> MpcConfig:
+        return self._mpc_cfg
+
+    @property
+    def planner_threads(self) -> int:
+        """Planner threads started so far (0 when headless)."""
+        return self._planning.threads if isinstance(self._planning, ThreadedPlanning) else 0
+
+    def truth(self) -> RobotTruth | None:
+        return self.io.truth()
+
+    def fin_command(self, fin: int) -> tuple[float, float]:
+        """(target angle, profile velocity) last sent to robot fin ``fin``."""
+        return self._cmd_angle[fin], self._cmd_rate[fin]
+
+    @property
+    def _sync(self) -> bool:
+        return self._mode == "mpc_sync"
+
+    # ------------------------------------------------------------------ mutators
+    def check_setpoints(self, sp: BodySetpoints) -> BodySetpoints:
+        """``sp`` if it lies inside the configured envelope, else ValueError naming the value."""
+        return check_setpoints(self.cfg, sp)
+
+    def set_setpoints(
+        self, velocity: float | None = None, depth: float | None = None, yaw_rate: float | None = None
+    ) -> None:
+        """New setpoints (unchanged where None), checked against the envelope now."""
+        cur = self._setpoints
+        sp = self.check_setpoints(BodySetpoints(
+            velocity=cur.velocity if velocity is None else velocity,
+            depth=cur.depth if depth is None else depth,
+            yaw_rate=cur.yaw_rate if yaw_rate is None else yaw_rate,
+        ))
+        self._commands.put(lambda t: self._apply_setpoints(sp, t))
+
+    def set_mode(self, mode: str) -> None:
+        """Switch the fin controller while swimming (bumpless; an Event with code "mode")."""
+        if mode not in MODES:
+            raise ValueError(f"mode: {mode!r} is not one of {', '.join(MODES)}")
+        self._commands.put(lambda t: self._apply_mode(mode, t))
+
+    def set_mpc_config(self, cfg: MpcConfig) -> None:
+        """New MPC configuration (e.g. ``loop.mpc_config.replace(lam_st=2.0)``) from the next plan."""
+        if not isinstance(cfg, MpcConfig):
+            raise ValueError(f"mpc config: expected an MpcConfig, got {type(cfg).__name__}")
+        MpcFinPlanner(cfg, 0)  # a configuration the planner refuses fails here, in the caller
+        self._commands.put(lambda t: self._apply_mpc(cfg, t))
+
+    def set_baseline_config(self, cfg: BaselineConfig) -> None:
+        if not isinstance(cfg, BaselineConfig):
+            raise ValueError(f"baseline config: expected a BaselineConfig, got {type(cfg).__name__}")
+        self._commands.put(lambda t: self._apply_baseline(cfg, t))
+
+    def set_pid_gains(self, loop: str, gains: PidGains) -> None:
+        """New gains of one body-frame PID ("velocity", "depth" or "yaw_rate")."""
+        if loop not in PID_LOOPS:
+            raise ValueError(f"loop: {loop!r} is not one of {', '.join(PID_LOOPS)}")
+        if not isinstance(gains, PidGains):
+            raise ValueError(f"gains: expected PidGains, got {type(gains).__name__}")
+        self._commands.put(lambda t: self._apply_gains(loop, gains, t))
+
+    def stop(self) -> None:
+        """Make :meth:`run_until` return at its next event (any thread)."""
+        self._stop = True
+        self.clock.interrupt()
+
+    def close(self) -> None:
+        """Stop the planner threads and release the robot."""
+        self._planning.close()
+        self.io.close()
+
+    def __enter__(self) -> ClosedLoop:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ running
+    def run(self, duration: float) -> None:
+        """Run for ``duration`` simulated seconds from the present time."""
+        if not math.isfinite(duration) or duration < 0.0:
+            raise ValueError(f"duration: expected a finite duration >= 0 s, got {duration!r}")
+        self.run_until(self._t + duration)
+
+    def run_until(self, t_end: float) -> None:
+        """Process every event up to simulated time ``t_end`` (s)."""
+        if not math.isfinite(t_end):
+            raise ValueError(f"t_end: expected a finite time, got {t_end!r}")
+        self._stop = False
+        self.clock.start(self._t)
+        io = self.io
+        cfg = self.cfg
+        p_control, p_state = 1.0 / cfg.control_rate, 1.0 / cfg.state_rate
+        p_power, p_status = 1.0 / cfg.power_rate, 1.0 / cfg.status_rate
+        commands = self._commands
+        while not self._stop:
+            if not commands.empty():
+                self._drain_commands()
+            t_control = self._n_control * p_control
+            t_state = self._n_state * p_state
+            t_power = self._n_power * p_power
+            t_status = self._n_status * p_status
+            t_next = min(io.next_reading_time(), t_control, t_state, t_power, t_status)
+            for act in self._actuators:
+                if act.t_deliver < t_next:
+                    t_next = act.t_deliver
+            if t_next > t_end + _EPS:
+                if t_end > self._t:  # the robot reaches t_end; nothing is due before then
+                    readings = io.advance_to(t_end)
+                    self._t = t_end
+                    if readings:
+                        self._on_readings(readings, t_end)
+                break
+            self.clock.wait_until(t_next)
+            readings = io.advance_to(t_next)
+            t = t_next if t_next > self._t else self._t
+            self._t = t
+            lim = t + _EPS
+            # 1. plan hand-overs
+            for act in self._actuators:
+                if act.t_deliver <= lim:
+                    self._deliver(act, t)
+            # 2. readings
+            if readings:
+                self._on_readings(readings, t)
+            if self._handover:
+                self._check_handovers(t)
+            # 3. control and telemetry ticks
+            if t_control <= lim:
+                self._n_control += 1
+                self._control(t)
+            if t_state <= lim:
+                self._n_state += 1
+                self._publish_state(t)
+            if t_power <= lim:
+                self._n_power += 1
+                self._publish_power(t)
+            if t_status <= lim:
+                self._n_status += 1
+                self._publish_status(t)
+
+    def _drain_commands(self) -> None:
+        while True:
+            try:
+                fn = self._commands.get_nowait()
+            except queue.Empty:
+                return
+            fn(self._t)
+
+    # ------------------------------------------------------------------ readings
+    def _on_readings(self, readings: list, t: float) -> None:
+        stream = self.stream
+        for r in readings:
+            tp = type(r)
+            if tp is FinFeedback:
+                pf = r.fin
+                p = PLANT_TO_PAPER[pf]
+                self._fb_angle[pf] = r.position_rad
+                self._fb_rate[pf] = r.velocity_rad_s
+                self._power[pf].update(r.t, r.position_rad)
+                owner = self._owner[p]
+                t_now = t if t >= r.t else r.t
+                actions = owner.executor.on_feedback(
+                    r.t, r.velocity_rad_s, t_now, fin=p, theta_fb=r.position_rad
+                )
+                if actions:
+                    self._handle(owner, actions, t_now)
+            elif tp is ImuReading:
+                self.body.on_imu(r)
+                self._gyro = r.gyro
+                if self.cfg.attitude == "imu" and r.quaternion is not None:
+                    self._q = r.quaternion
+                else:
+                    self._q = self._attitude.update(r).q
+                stream.publish(ch.IMU, r)
+            elif tp is DepthReading:
+                self.body.on_depth(r)
+                stream.publish(ch.DEPTH, r)
+            elif tp is DvlVelocity:
+                self.body.on_dvl(r)
+                if r.valid:
+                    self._dead_reckon(r)
+                stream.publish(ch.DVL, r)
+            else:
+                raise ValueError(f"reading: unexpected type {tp.__name__} from the robot")
+
+    def _dead_reckon(self, r: DvlVelocity) -> None:
+        if self._dvl_t is not None:
+            dt = min(max(r.t - self._dvl_t, 0.0), 1.0)
+            w, x, y, z = self._q
+            vx, vy, vz = r.vx, r.vy, r.vz
+            # body -> NED, rows x and y of R(q)
+            self._xy[0] += dt * ((1 - 2 * (y * y + z * z)) * vx + 2 * (x * y - w * z) * vy + 2 * (x * z + w * y) * vz)
+            self._xy[1] += dt * (2 * (x * y + w * z) * vx + (1 - 2 * (x * x + z * z)) * vy + 2 * (y * z - w * x) * vz)
+            self.distance += dt * math.hypot(vx, vy)
+        self._dvl_t = r.t
+        self._dvl_v = (r.vx, r.vy, r.vz)
+
+    # ------------------------------------------------------------------ control
+    def _control(self, t: float) -> None:
+        cmd = self.body.update(t, self._setpoints, sync=self._sync)
+        self._fx, self._fy, self._yaw = cmd.fx, cmd.fy, cmd.yaw
+        self._targets = cmd.allocation.targets
+        if cmd.velocity is not None:
+            self._v_body = cmd.velocity
+        if cmd.depth is not None:
+            self._depth = cmd.depth
+        self.stream.publish(ch.BODY_COMMAND, BodyCommand(t, cmd.fx, cmd.fy, cmd.yaw))
+        for act in self._actuators:
+            if not act.requested and act.active:
+                angle = self._fb_angle[PAPER_TO_PLANT_FIN[act.fins[0]]]
+                if not math.isnan(angle):
+                    self._request(act, t, angle)
+
+    def _request(self, act: _Actuator, t: float, theta0: float) -> None:
+        inputs = PlanInputs(
+            t=t, fins=act.fins, target=self._targets[act.index], v_body=self._v_body,
+            theta0=theta0, u_prev=act.u_prev,
+        )
+        act.job = self._planning.submit(act.key, act.planner, inputs)
+        act.t_deliver = t + self.cfg.plan_latency
+        act.requested = True
+
+    def _deliver(self, act: _Actuator, t: float) -> None:
+        job = act.job
+        assert job is not None
+        deadline = act.t_deliver
+        act.job = None
+        act.t_deliver = math.inf
+        outcome = job.wait()
+        if self._planning.threaded:
+            overrun = job.done_wall > self.clock.wall_deadline(deadline)
+        else:
+            overrun = outcome.solve_time > self.cfg.plan_latency
+        act.u_prev = outcome.u
+        self.plans_made += 1
+        if overrun:
+            self.plan_overruns += 1
+            self._event(t, "plan_overrun", f"plan for fins {list(act.fins)} took "
+                        f"{outcome.solve_time * 1e3:.2f} ms, over the {self.cfg.plan_latency * 1e3:.1f} ms hand-over",
+                        "warning", {"fins": list(act.fins), "solve_time": outcome.solve_time,
+                                    "plan_latency": self.cfg.plan_latency})
+        if not act.active:
+            act.ready = (job.inputs, outcome)
+            return
+        self._load(act, job.inputs, outcome, t)
+
+    def _load(self, act: _Actuator, inputs: PlanInputs, outcome: PlanOutcome, t: float) -> None:
+        was_running = act.executor.running
+        actions = act.executor.load(outcome.commands, t, theta_start=inputs.theta0)
+        if was_running:
+            act.pending_end = outcome.commands[2]
+        else:
+            act.running_end = outcome.commands[2]
+            act.pending_end = None
+        late = False
+        for a in actions:
+            if type(a) is LatePlan:
+                late = True
+        publish = self.stream.publish
+        for p in act.fins:
+            pf = PAPER_TO_PLANT_FIN[p]
+            publish(ch.fin_plan(pf), FinPlan(
+                t=t, fin=pf, mode=act.mode, target=inputs.target, v_body=inputs.v_body,
+                theta0=inputs.theta0, u_prev=inputs.u_prev, u=outcome.u, commands=outcome.commands,
+                cost_total=outcome.cost_total, cost_force=outcome.cost_force,
+                cost_strouhal=outcome.cost_strouhal, cost_amplitude=outcome.cost_amplitude,
+                cost_smoothness=outcome.cost_smoothness, st=outcome.st, mean_force=outcome.mean_force,
+                solve_time=outcome.solve_time, late=late, amplitude=outcome.amplitude,
+                centre=outcome.centre,
+            ))
+        self._handle(act, actions, t)
+
+    def _handle(self, act: _Actuator, actions: list, t: float) -> None:
+        for a in actions:
+            tp = type(a)
+            if tp is SendToServo:
+                pf = PAPER_TO_PLANT_FIN[a.fin]
+                self.io.command_fin(pf, a.theta_ref, a.w_ref)
+                self._cmd_angle[pf] = a.theta_ref
+                self._cmd_rate[pf] = a.w_ref
+            elif tp is PlanRequest:
+                if not act.retiring:
+                    self._request(act, t, a.theta_start)
+            elif tp is CycleComplete:
+                if not a.idle:
+                    act.running_end = act.pending_end
+                    act.pending_end = None
+                elif act.retiring:
+                    self._handover = True
+            elif tp is LatePlan:
+                self.late_plans += 1
+                self._event(t, "late_plan", f"plan for fins {list(a.fins)} arrived "
+                            f"{a.lateness * 1e3:.1f} ms after the fin went idle", "warning",
+                            {"fins": list(a.fins), "lateness": a.lateness})
+            elif tp is StrokeTimeout:
+                self.stroke_timeouts += 1
+                self._event(t, "stroke_timeout", f"fin {a.fin} stroke ended by its timeout",
+                            "info", {"fin": a.fin, "elapsed": a.elapsed, "planned": a.planned})
+
+    # ------------------------------------------------------------------ modes and tuning
+    def _new_actuators(self, mode: str) -> list[_Actuator]:
+        groups = SYNC_FINS if mode == "mpc_sync" else INDEPENDENT_FINS
+        self._generation += 1
+        out = []
+        for i, fins in enumerate(groups):
+            ex = FinExecutor.synced(self.cfg.executor, fins) if len(fins) == 2 else FinExecutor(self.cfg.executor, fins[0])
+            out.append(_Actuator(i, fins, ex, self._make_planner(mode, i), mode, self.cfg.initial_u_prev))
+        return out
+
+    def _make_planner(self, mode: str, index: int) -> Planner:
+        if mode == "baseline":
+            return BaselineFinPlanner(self._mpc_cfg, self._baseline_cfg)
+        seed = int(np.random.SeedSequence([self.cfg.planner_seed, self._generation, index]).generate_state(1)[0])
+        return MpcFinPlanner(self._mpc_cfg, seed)
+
+    def _apply_mode(self, mode: str, t: float) -> None:
+        if mode == self._mode:
+            return
+        old = self._mode
+        self._mode = mode
+        self._targets = allocate(self._fx, self._fy, self._yaw, sync=self._sync).targets
+        for act in self._actuators:  # no more plans for the old controller
+            act.retiring = True
+            act.job = None
+            act.t_deliver = math.inf
+        news = self._new_actuators(mode)
+        for n in news:
+            preds: list[_Actuator] = []
+            for p in n.fins:
+                if self._owner[p] not in preds:
+                    preds.append(self._owner[p])
+            n.predecessors = preds
+            n.active = False
+            ref = self._owner[n.fins[0]]
+            theta0 = ref.end_angle()
+            if theta0 is None:
+                a = self._fb_angle[PAPER_TO_PLANT_FIN[n.fins[0]]]
+                theta0 = 0.0 if math.isnan(a) else a
+            n.u_prev = ref.u_prev
+            self._request(n, t, theta0)
+        self._actuators = news
+        self._handover = True
+        self._event(t, "mode", f"controller {old} -> {mode}", "info", {"from": old, "to": mode})
+        self._check_handovers(t)
+        self._publish_status(t)
+
+    def _check_handovers(self, t: float) -> None:
+        waiting = False
+        for n in self._actuators:
+            if n.active:
+                continue
+            if all(p.idle for p in n.predecessors):
+                n.active = True
+                n.predecessors = []
+                for p in n.fins:
+                    self._owner[p] = n
+                if n.ready is not None:
+                    inputs, outcome = n.ready
+                    n.ready = None
+                    self._load(n, inputs, outcome, t)
+            else:
+                waiting = True
+        self._handover = waiting
+
+    def _apply_mpc(self, cfg: MpcConfig, t: float) -> None:
+        old, self._mpc_cfg = self._mpc_cfg, cfg
+        self._generation += 1
+        for act in self._actuators:
+            act.planner = self._make_planner(act.mode, act.index)
+        self._tuning_event(t, "mpc", old, cfg)
+
+    def _apply_baseline(self, cfg: BaselineConfig, t: float) -> None:
+        old, self._baseline_cfg = self._baseline_cfg, cfg
+        for act in self._actuators:
+            if act.mode == "baseline":
+                act.planner = self._make_planner("baseline", act.index)
+        self._tuning_event(t, "baseline", old, cfg)
+
+    def _apply_gains(self, loop: str, gains: PidGains, t: float) -> None:
+        pid = {"velocity": self.body.velocity_pid, "depth": self.body.depth_pid,
+               "yaw_rate": self.body.yaw_pid}[loop]
+        old = pid.gains
+        pid.set_gains(gains)
+        self._tuning_event(t, f"pid.{loop}", old, gains)
+
+    def _tuning_event(self, t: float, block: str, old: Any, new: Any) -> None:
+        changes = {}
+        for f in fields(new):
+            a, b = getattr(old, f.name), getattr(new, f.name)
+            if a != b:
+                changes[f.name] = [_jsonable(a), _jsonable(b)]
+        text = ", ".join(f"{k} {v[0]} -> {v[1]}" for k, v in changes.items()) or "no change"
+        self._event(t, "tuning", f"{block}: {text}", "info", {"block": block, "changes": changes})
+
+    def _apply_setpoints(self, sp: BodySetpoints, t: float) -> None:
+        self._setpoints = sp
+        self.stream.publish(ch.SETPOINTS, Setpoints(t, sp.velocity, sp.depth, sp.yaw_rate))
+
+    # ------------------------------------------------------------------ telemetry
+    def _event(self, t: float, code: str, message: str, level: str, data: dict) -> None:
+        self.stream.publish(ch.EVENTS, Event(t=t, source="loop", code=code, message=message, level=level, data=data))
+
+    def _publish_state(self, t: float) -> None:
+        publish = self.stream.publish
+        g = self._gyro
+        publish(ch.BODY_STATE, BodyState(
+            t=t, position=(self._xy[0], self._xy[1], self._depth), orientation=self._q,
+            velocity=self._dvl_v, rates=g, depth=self._depth,
+        ))
+        ang, rate, ca, cr = self._fb_angle, self._fb_rate, self._cmd_angle, self._cmd_rate
+        for pf in range(N_FINS):
+            a = ang[pf]
+            publish(ch.fin_state(pf), FinState(t, pf, 0.0 if a != a else a, rate[pf], ca[pf], cr[pf]))
+
+    def _publish_power(self, t: float) -> None:
+        per = []
+        energy = 0.0
+        mean = 0.0
+        for est in self._power:
+            last = est.last
+            per.append(last.p_fin if last is not None else 0.0)
+            energy += est.energy
+            m = est.mean_power
+            mean += m if m is not None else 0.0
+        d = self.distance
+        self.stream.publish(ch.POWER, Power(
+            t=t, per_fin=(per[0], per[1], per[2], per[3]), total=sum(per), mean_total=mean,
+            energy=energy, distance=d, energy_per_metre=energy / d if d > 0.0 else math.nan,
+        ))
+
+    def _publish_status(self, t: float) -> None:
+        sp = self._setpoints
+        self.stream.publish(ch.STATUS, Status(
+            t=t, armed=True, mode=self._mode, pilot="", failsafes=(), late_plans=self.late_plans,
+            source=self._source,
+        ))
+        self.stream.publish(ch.SETPOINTS, Setpoints(t, sp.velocity, sp.depth, sp.yaw_rate))
+
+
+def _jsonable(v: Any) -> Any:
+    if isinstance(v, tuple):
+        return [_jsonable(x) for x in v]
+    if isinstance(v, (int, float, str, bool)) or v is None:
+        return v
+    return str(v)

@@ -1,0 +1,211 @@
+"""Fin planners behind one interface, and the services that run them.
+
+A planner turns :class:`PlanInputs` (everything a plan depends on, which is also what a
+``FinPlan`` message carries so a recording can be replayed) into a :class:`PlanOutcome`:
+
+* :class:`MpcFinPlanner`: the Strouhal-aware MPC (``control.mpc.FinMpc``), for the modes
+  "mpc" and "mpc_sync";
+* :class:`BaselineFinPlanner`: the inverse-model baseline (``control.baseline``), whose
+  plan is scored with the MPC's cost so St and force error are reported the same way.
+
+Services decide where a planner runs: :class:`InlinePlanning` calls it at once in the
+loop's thread (headless), :class:`ThreadedPlanning` gives each logical fin its own thread
+(real time, as the console runs it). Either way the loop collects the result at its
+hand-over time; the service only reports whether the solve met its wall-clock deadline.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass
+from typing import Callable, Hashable
+
+import numpy as np
+
+from ucat_console.control.baseline import BaselinePlanner, wrap_angle
+from ucat_console.control.cost import cost_terms
+from ucat_console.control.mpc import FinMpc
+from ucat_console.control.params import BaselineConfig, MpcConfig
+
+Vec4 = tuple[float, float, float, float]
+
+
+@dataclass(frozen=True)
+class PlanInputs:
+    """What one plan depends on: the replayable inputs of a ``FinPlan``."""
+
+    t: float  # request time, s
+    fins: tuple[int, ...]  # paper fin indices driven by this plan
+    target: tuple[float, float]  # (f_x*, f_y*) per physical fin, N
+    v_body: float  # median-filtered forward speed, m/s
+    theta0: float  # angle the plan starts from, rad
+    u_prev: Vec4  # the fin's previous plan
+
+
+@dataclass(frozen=True)
+class PlanOutcome:
+    """A plan in the MPC's format with its cost terms (the baseline's scored alike)."""
+
+    u: Vec4
+    commands: Vec4
+    cost_total: float
+    cost_force: float
+    cost_strouhal: float
+    cost_amplitude: float
+    cost_smoothness: float
+    st: float
+    mean_force: tuple[float, float]
+    solve_time: float  # s, wall clock
+    amplitude: float = 0.0  # baseline only
+    centre: float = 0.0  # baseline only
+
+
+def _wrapped(theta0: float) -> tuple[float, float]:
+    """(theta0 wrapped to (-pi, pi], the whole turns taken off)."""
+    w = wrap_angle(theta0)
+    return w, theta0 - w
+
+
+def _shift(commands: Vec4, offset: float) -> Vec4:
+    return (commands[0] + offset, commands[1], commands[2] + offset, commands[3])
+
+
+class MpcFinPlanner:
+    """One fin's MPC (not thread-safe: one planner per logical fin).
+
+    The fin may turn through whole revolutions; the plan is made from ``theta0`` wrapped to
+    (-pi, pi] (the force model is periodic in the angle, and the solver's inputs are
+    bounded) and its commands are shifted back by the whole turns, so the servo never
+    makes an extra revolution. The baseline does the same.
+    """
+
+    def __init__(self, cfg: MpcConfig, seed: int) -> None:
+        self.cfg = cfg
+        self._mpc = FinMpc(cfg, seed=seed)
+
+    def __call__(self, x: PlanInputs) -> PlanOutcome:
+        t0 = time.perf_counter()
+        theta, offset = _wrapped(x.theta0)
+        p = self._mpc.plan(x.target, x.v_body, theta, x.u_prev)
+        c = p.cost
+        return PlanOutcome(
+            u=p.u, commands=_shift(p.commands, offset), cost_total=c.total, cost_force=c.force,
+            cost_strouhal=c.strouhal_penalty, cost_amplitude=c.amplitude,
+            cost_smoothness=c.smoothness, st=c.st, mean_force=c.mean_force,
+            solve_time=time.perf_counter() - t0,
+        )
+
+
+class BaselineFinPlanner:
+    """The inverse-model baseline; its plan is scored with the MPC cost of ``cfg``."""
+
+    def __init__(self, cfg: MpcConfig, bcfg: BaselineConfig) -> None:
+        self.cfg = cfg
+        self._planner = BaselinePlanner(cfg, bcfg)
+
+    def __call__(self, x: PlanInputs) -> PlanOutcome:
+        t0 = time.perf_counter()
+        theta, offset = _wrapped(x.theta0)
+        b = self._planner.plan(x.target[0], x.target[1], theta)
+        u = b.u
+        commands = _shift(b.commands, offset)
+        if min(abs(u[0]), abs(u[1])) < 1e-9:  # holding still: no stroke, no frequency
+            st, fbx, fby = 0.0, 0.0, 0.0
+            force = abs(x.target[0]) + abs(x.target[1])
+            terms = None
+        else:
+            terms = cost_terms(np.asarray(u), np.asarray(x.target), x.v_body, theta, np.asarray(x.u_prev), self.cfg)
+            st, fbx, fby = float(terms["st"]), float(terms["fbx"]), float(terms["fby"])
+            force = float(terms["force"])
+        solve = time.perf_counter() - t0
+        if terms is None:
+            return PlanOutcome(u, commands, self.cfg.lam_f * force, force, 0.0, 0.0, 0.0, st,
+                               (fbx, fby), solve, b.amplitude, b.centre)
+        return PlanOutcome(
+            u=u, commands=commands, cost_total=float(terms["total"]), cost_force=force,
+            cost_strouhal=float(terms["strouhal_penalty"]), cost_amplitude=float(terms["amplitude"]),
+            cost_smoothness=float(terms["smoothness"]), st=st, mean_force=(fbx, fby),
+            solve_time=solve, amplitude=b.amplitude, centre=b.centre,
+        )
+
+
+Planner = Callable[[PlanInputs], PlanOutcome]
+
+
+class PlanJob:
+    """One submitted plan: its result once done, and when it was done (wall clock)."""
+
+    __slots__ = ("inputs", "outcome", "error", "done_wall", "_future")
+
+    def __init__(self, inputs: PlanInputs) -> None:
+        self.inputs = inputs
+        self.outcome: PlanOutcome | None = None
+        self.error: BaseException | None = None
+        self.done_wall = math.inf
+        self._future: Future | None = None
+
+    def run(self, planner: Planner) -> None:
+        try:
+            self.outcome = planner(self.inputs)
+        except BaseException as e:  # handed to the loop's thread by wait()
+            self.error = e
+        self.done_wall = time.perf_counter()
+
+    def wait(self) -> PlanOutcome:
+        """The outcome (blocking until the planner is done); a planner error is raised here."""
+        if self._future is not None:
+            self._future.result()
+        if self.error is not None:
+            raise self.error
+        assert self.outcome is not None
+        return self.outcome
+
+
+class PlanningService:
+    """Runs planners: inline (headless) or one thread per logical fin (real time)."""
+
+    threaded = False
+
+    def submit(self, key: Hashable, planner: Planner, inputs: PlanInputs) -> PlanJob:
+        job = PlanJob(inputs)
+        job.run(planner)
+        return job
+
+    def close(self) -> None:
+        pass
+
+
+InlinePlanning = PlanningService
+
+
+class ThreadedPlanning(PlanningService):
+    """One worker thread per logical fin (``key``); jobs of one fin run in order."""
+
+    threaded = True
+
+    def __init__(self) -> None:
+        self._pools: dict[Hashable, ThreadPoolExecutor] = {}
+        self._lock = threading.Lock()
+
+    def submit(self, key: Hashable, planner: Planner, inputs: PlanInputs) -> PlanJob:
+        with self._lock:
+            pool = self._pools.get(key)
+            if pool is None:
+                pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"planner-{key}")
+                self._pools[key] = pool
+        job = PlanJob(inputs)
+        job._future = pool.submit(job.run, planner)
+        return job
+
+    @property
+    def threads(self) -> int:
+        return len(self._pools)
+
+    def close(self) -> None:
+        with self._lock:
+            pools, self._pools = list(self._pools.values()), {}
+        for pool in pools:
+            pool.shutdown(wait=True, cancel_futures=True)

@@ -1,0 +1,127 @@
+"""The robot behind the closed loop, built from configuration: :func:`build_robot_io`.
+
+Three robots share one interface (``loop.robot_io.RobotIO``), picked by
+``DevicesConfig.robot``::
+
+    sim          SimRobotIO ------------------------------------> Plant (in process)
+    sim-devices  DeviceRobotIO -> drivers -> virtual CAN / pty / 127.0.0.1 -> emulators -> Plant
+    hardware     DeviceRobotIO -> drivers -> socketcan can0 / /dev/tty* / DVL address -> devices
+
+The closed loop cannot tell them apart; the supervisor connects the robot's fault events
+to its telemetry stream with :func:`connect_events` and reaches the simulated rig (for
+fault injection from the developer panel) with :func:`rig_of`.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any, Callable
+
+from ucat_console.backend.devices.config import DevicesConfig
+from ucat_console.backend.devices.device_robot_io import DeviceRobotIO
+from ucat_console.backend.devices.sim_rig import SimRig
+from ucat_console.backend.loop.robot_io import RobotIO, SimRobotIO
+from ucat_console.backend.sim.params import PlantConfig
+from ucat_console.telemetry.events import EventSink
+
+log = logging.getLogger(__name__)
+
+Close = Callable[[], None]
+
+
+def devices_config_of(config: Any) -> DevicesConfig:
+    """The :class:`DevicesConfig` itself, or the ``devices`` block of an application config.
+
+    An application config whose ``robot`` is ``"rig"`` (the device rig) must pick a robot
+    behind the drivers: ``devices.robot`` ``"sim-devices"`` or ``"hardware"``.
+    """
+    if isinstance(config, DevicesConfig):
+        return config
+    devices = getattr(config, "devices", None)
+    if not isinstance(devices, DevicesConfig):
+        raise ValueError(
+            f"devices: expected a DevicesConfig or a configuration with a 'devices' block, "
+            f"got {type(config).__name__}"
+        )
+    if getattr(config, "robot", None) == "rig" and devices.robot == "sim":
+        raise ValueError(
+            "devices.robot: 'sim' is the in-process simulator; the device rig (robot = 'rig') "
+            "drives 'sim-devices' or 'hardware'"
+        )
+    return devices
+
+
+def _plant_config_of(config: Any, plant: PlantConfig | None) -> PlantConfig | None:
+    if plant is not None:
+        return plant
+    found = getattr(config, "plant", None)
+    return found if isinstance(found, PlantConfig) else None
+
+
+def build_robot_io(
+    config: Any,
+    *,
+    plant: PlantConfig | None = None,
+    event_sink: EventSink | None = None,
+) -> tuple[RobotIO, Close]:
+    """The robot of ``config`` (a DevicesConfig or an application config with ``devices``,
+    and optionally ``plant``), started, and the function that shuts it down.
+
+    * ``sim``: the in-process :class:`SimRobotIO` (no devices, no events);
+    * ``sim-devices``: a :class:`SimRig` (plant + emulators) and a :class:`DeviceRobotIO`
+      on the rig's endpoints, at the rig's pace;
+    * ``hardware``: a :class:`DeviceRobotIO` on the configured endpoints.
+
+    ``plant`` (or ``config.plant``) configures the simulated plant. ``event_sink`` receives
+    the robot's fault events from the start (more sinks: :func:`connect_events`). Bad configuration fails here with a
+    ValueError naming the key (see :meth:`DeviceRobotIO.start`); nothing is left running.
+    """
+    cfg = devices_config_of(config)
+    plant_cfg = _plant_config_of(config, plant)
+    if cfg.robot == "sim":
+        s = cfg.start
+        io = SimRobotIO(plant_cfg, depth=s.depth, yaw=s.yaw, velocity=s.velocity,
+                        seed=None if s.seed < 0 else s.seed)
+        return io, io.close
+    if cfg.robot == "sim-devices":
+        rig = SimRig(cfg, plant_cfg)
+        driver_cfg = rig.start()
+        try:
+            dev = DeviceRobotIO(driver_cfg, pace=cfg.rig.pace, truth=rig.truth, on_event=event_sink)
+            dev.rig = rig
+            rig.on_event = dev.publish_event
+            dev.start()
+        except BaseException:
+            rig.stop()
+            raise
+
+        def close_sim_devices() -> None:
+            try:
+                dev.close()
+            finally:
+                rig.stop()
+
+        log.info("robot: simulated U-CAT behind the device emulators (pace %g)", cfg.rig.pace)
+        return dev, close_sim_devices
+    dev = DeviceRobotIO(cfg, pace=1.0, on_event=event_sink)
+    dev.start()
+    log.info("robot: hardware (CAN %s %s, IMU %s, DVL %s:%d, pressure %s)", cfg.epos2.interface,
+             cfg.epos2.channel, cfg.imu.port, cfg.dvl.host, cfg.dvl.port, cfg.pressure.port)
+    return dev, dev.close
+
+
+def connect_events(robot_io: RobotIO, sink: EventSink) -> Close:
+    """Send the robot's fault events to ``sink`` (e.g. publishing them on the telemetry
+    stream's events channel); returns the function that disconnects. The in-process
+    simulator raises none."""
+    add = getattr(robot_io, "add_event_sink", None)
+    if add is None:
+        return lambda: None
+    return add(sink)
+
+
+def rig_of(robot_io: RobotIO) -> SimRig | None:
+    """The simulated rig behind a ``sim-devices`` robot (its ``inject``/``clear`` start and
+    end emulator faults); None for the other robots."""
+    rig = getattr(robot_io, "rig", None)
+    return rig if isinstance(rig, SimRig) else None

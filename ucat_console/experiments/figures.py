@@ -1,0 +1,131 @@
+"""PNG figures of the experiments (matplotlib, Agg backend: no display needed)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Sequence
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+CORRIDOR_COLOUR = "#cfe8cf"
+MODE_COLOURS = {"baseline": "tab:gray", "mpc": "tab:blue", "mpc_sync": "tab:orange"}
+
+
+def _save(fig: Any, path: Path) -> str:
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path.name
+
+
+def e1_figure(res: dict[str, Any], out: Path) -> str:
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4))
+    for solver, ls in (("numba", "-"), ("scipy", "--")):
+        for stage, mk in (("sampling", "o"), ("two_stage", "s")):
+            rows = [r for r in res["rows"] if r["solver"] == solver and r["stage"] == stage]
+            ns = [r["n"] for r in rows]
+            a.plot(ns, [r["mean_cost"] for r in rows], ls, marker=mk, label=f"{solver} {stage}")
+            b.plot(ns, [r["p50_ms"] for r in rows], ls, marker=mk, label=f"{solver} {stage}")
+    pr = res["paper"]["rows"]
+    a.plot([r["n"] for r in pr], [r["sampling_cost"] for r in pr], "k:", marker="o", label="paper sampling")
+    a.plot([r["n"] for r in pr], [r["two_stage_cost"] for r in pr], "k:", marker="s", label="paper two-stage")
+    b.plot([r["n"] for r in pr], [r["two_stage_ms"] for r in pr], "k:", marker="s", label="paper two-stage")
+    a.set_xscale("log"), b.set_xscale("log"), b.set_yscale("log")
+    a.set_xlabel("samples N"), b.set_xlabel("samples N")
+    a.set_ylabel("mean final cost"), b.set_ylabel("median solve time (ms)")
+    a.legend(fontsize=7), b.legend(fontsize=7)
+    return _save(fig, out / "e1_cost_time.png")
+
+
+def e2_figure(points: Sequence[dict[str, Any]], speeds: Sequence[float], st_band: tuple[float, float],
+              out: Path) -> str:
+    fig, axes = plt.subplots(1, len(speeds), figsize=(4 * len(speeds), 3.6), sharey=True)
+    for ax, v in zip(axes, speeds):
+        ax.axhspan(*st_band, color=CORRIDOR_COLOUR, label="St corridor")
+        for ctrl, c in (("baseline", "tab:gray"), ("mpc", "tab:blue")):
+            pts = [p for p in points if p["v"] == v and p["controller"] == ctrl]
+            ax.scatter([p["requested"] for p in pts], [p["st"] for p in pts], s=6, color=c, label=ctrl, alpha=0.6)
+        ax.set_title(f"V = {v} m/s")
+        ax.set_xlabel("requested fin force |f*| (N)")
+    axes[0].set_ylabel("Strouhal number of the plan")
+    axes[0].legend(fontsize=7)
+    return _save(fig, out / "e2_st_corridor.png")
+
+
+def e3_figure(res: dict[str, Any], out: Path) -> str:
+    rows = res["rows"]
+    x = range(len(rows))
+    fig, ax = plt.subplots(figsize=(8, 3.6))
+    ax.bar([i - 0.2 for i in x], [r["in_range_pct"] for r in rows], 0.4, label="ours")
+    ax.bar([i + 0.2 for i in x], [r["paper_in_range_pct"] for r in rows], 0.4, label="paper", color="k", alpha=0.5)
+    ax.set_xticks(list(x), [r["config"] for r in rows], rotation=15, fontsize=8)
+    ax.set_ylabel("St in corridor (%)")
+    ax.legend()
+    return _save(fig, out / "e3_ablation.png")
+
+
+def e4_timeseries(traces: dict[str, Any], speed: float, st_band: tuple[float, float], out: Path) -> str:
+    fig, axes = plt.subplots(2, 2, figsize=(10, 6), sharex=True)
+    (ad, av), (ap, ast) = axes
+    for mode, tr in traces.items():
+        c = MODE_COLOURS.get(mode)
+        ad.plot(tr["t"], tr["depth"], color=c, label=mode)
+        av.plot(tr["t"], tr["velocity"], color=c, label=mode)
+        ap.plot(tr["t"], tr["power"], color=c, label=mode)
+        ast.plot(tr["t"], tr["st_mean"], color=c, label=mode)
+    av.axhline(speed, color="k", ls="--", lw=0.8)
+    ast.axhspan(*st_band, color=CORRIDOR_COLOUR)
+    ad.set_ylabel("depth (m)"), av.set_ylabel("forward velocity (m/s)")
+    ap.set_ylabel("total mechanical power (W)"), ast.set_ylabel("mean fin St (plant)")
+    ap.set_xlabel("time (s)"), ast.set_xlabel("time (s)")
+    ad.invert_yaxis()
+    av.legend(fontsize=7)
+    return _save(fig, out / "e4_timeseries.png")
+
+
+def e4_power(res: dict[str, Any], out: Path) -> str:
+    plants = list(res["plants"])
+    fig, axes = plt.subplots(1, len(plants), figsize=(4 * len(plants), 3.6), sharey=True)
+    for ax, plant in zip(axes, plants):
+        for mode, c in MODE_COLOURS.items():
+            rows = [r for r in res["rows"] if r["plant"] == plant and r["mode"] == mode]
+            ax.errorbar([r["v_ref"] for r in rows], [r["power_est"] for r in rows],
+                        yerr=[r["power_est_sd"] for r in rows], color=c, marker="o", label=mode, capsize=3)
+        ax.set_title(plant)
+        ax.set_xlabel("reference velocity (m/s)")
+    axes[0].set_ylabel("mean mechanical power (W)")
+    axes[0].legend(fontsize=7)
+    return _save(fig, out / "e4_power.png")
+
+
+def e5_figure(traces: dict[str, Any], res: dict[str, Any], out: Path) -> str:
+    p = res["protocol"]
+    fig, axes = plt.subplots(2, 2, figsize=(10, 7))
+    (axy, ad), (av, ar) = axes
+    for plant, tr in traces.items():
+        axy.plot(tr["y"], tr["x"], label=plant)
+        ad.plot(tr["t"], tr["depth"], label=plant)
+        av.plot(tr["t"], tr["velocity_dvl"], label=plant)
+        ar.plot(tr["t"], tr["yaw_rate"], label=plant)
+    axy.set_xlabel("east (m)"), axy.set_ylabel("north (m)"), axy.set_aspect("equal", adjustable="datalim")
+    ad.axhline(p["depth"], color="k", ls="--", lw=0.8), ad.invert_yaxis(), ad.set_ylabel("depth (m)")
+    av.axhline(p["v_ref"], color="k", ls="--", lw=0.8), av.set_ylabel("DVL forward velocity (m/s)")
+    ar.axhline(p["yaw_rate"], color="k", ls="--", lw=0.8), ar.set_ylabel("yaw rate (rad/s)")
+    for ax in (ad, av, ar):
+        ax.set_xlabel("time (s)")
+    axy.legend(fontsize=7)
+    return _save(fig, out / "e5_field.png")
+
+
+def sweep_figure(res: dict[str, Any], out: Path) -> str:
+    fig, ax = plt.subplots(figsize=(6, 4.5))
+    for r in res["rows"]:
+        label = "baseline" if r["mode"] == "baseline" else f"st {r['lam_st']:g} d {r['lam_d']:g}"
+        ax.scatter(r["velocity_mae"], r["power_est"], color=MODE_COLOURS.get(r["mode"]), s=18)
+        ax.annotate(f"{label} @{r['v_ref']:g}", (r["velocity_mae"], r["power_est"]), fontsize=6)
+    ax.set_xlabel("velocity MAE (m/s)")
+    ax.set_ylabel("mean mechanical power (W)")
+    return _save(fig, out / "sweep_power_vs_error.png")

@@ -1,0 +1,214 @@
+"""report.md from results.json: every number shown is read from the JSON document.
+
+:func:`render` takes the parsed ``results.json`` (nothing else) and returns Markdown, so the
+report and the JSON cannot disagree. Tables hold one number per cell, formatted by
+:func:`num` with a fixed number of decimals per column.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Sequence
+
+TITLES = {
+    "E1": "E1: two-stage solver benchmark (paper Table IV)",
+    "E2": "E2: Strouhal corridor, baseline vs MPC (paper Fig. 6)",
+    "E3": "E3: cost-term ablation (paper Table III)",
+    "E4": "E4: closed loop, power and tracking (paper Table V, Fig. 7)",
+    "E5": "E5: field-style circle at 3 m with a current (paper Fig. 8)",
+    "sweep": "Weight sweep over the E4 protocol",
+}
+
+
+def num(x: Any, digits: int) -> str:
+    """A number with ``digits`` decimals; "n/a" for None / NaN."""
+    if x is None or (isinstance(x, float) and math.isnan(x)):
+        return "n/a"
+    if isinstance(x, bool):
+        return "yes" if x else "no"
+    return f"{x:.{digits}f}"
+
+
+def yes_no(x: bool) -> str:
+    return "yes" if x else "no"
+
+
+def table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    lines += ["| " + " | ".join(r) + " |" for r in rows]
+    return "\n".join(lines) + "\n"
+
+
+def _claims(claims: Sequence[dict[str, Any]], with_plant: bool = False) -> str:
+    header = (["plant"] if with_plant else []) + ["claim", "paper", "ours", "reproduced"]
+    rows = [([c["plant"]] if with_plant else []) + [c["claim"], c["paper"], c["ours"], yes_no(c["reproduced"])]
+            for c in claims]
+    return table(header, rows)
+
+
+def _figures(res: dict[str, Any]) -> str:
+    return "".join(f"![{f}]({f})\n\n" for f in res.get("figures", []))
+
+
+def _findings(res: dict[str, Any]) -> str:
+    items = res.get("findings", [])
+    return "".join(f"- {f}\n" for f in items) + ("\n" if items else "")
+
+
+def _e1(res: dict[str, Any]) -> str:
+    p = res["protocol"]
+    out = [f"Protocol: {p['targets']} targets ({p['targets_scipy']} for the scipy reference) x "
+           f"{p['cycles']} cycles at V_B = {p['v_body']} m/s, planner seed {p['seed']}; solve time is "
+           f"the wall time of one plan call on this machine.\n\n"]
+    by = {(r["n"], r["solver"], r["stage"]): r for r in res["rows"]}
+    prow = {r["n"]: r for r in res["paper"]["rows"]}
+    red = {(r["n"], r["solver"]): r["reduction_pct"] for r in res["reduction"]}
+    rows = []
+    for n in p["ns"]:
+        pr = prow.get(n, {})
+        rows.append([
+            str(n), num(pr.get("sampling_cost"), 4), num(by[(n, "numba", "sampling")]["mean_cost"], 4),
+            num(by[(n, "scipy", "sampling")]["mean_cost"], 4), num(pr.get("two_stage_cost"), 4),
+            num(by[(n, "numba", "two_stage")]["mean_cost"], 4), num(by[(n, "scipy", "two_stage")]["mean_cost"], 4),
+            num(pr.get("reduction_pct"), 1), num(red[(n, "numba")], 1), num(red[(n, "scipy")], 1),
+        ])
+    out.append(table(["N", "paper sampling cost", "ours sampling (numba)", "ours sampling (scipy)",
+                      "paper two-stage cost", "ours two-stage (numba)", "ours two-stage (scipy)",
+                      "paper reduction %", "ours reduction % (numba)", "ours reduction % (scipy)"], rows))
+    rows = []
+    for n in p["ns"]:
+        pr = prow.get(n, {})
+        rows.append([str(n), num(pr.get("sampling_ms"), 2), num(by[(n, "numba", "sampling")]["p50_ms"], 3),
+                     num(by[(n, "scipy", "sampling")]["p50_ms"], 3), num(pr.get("two_stage_ms"), 2),
+                     num(by[(n, "numba", "two_stage")]["p50_ms"], 3), num(by[(n, "numba", "two_stage")]["p99_ms"], 3),
+                     num(by[(n, "scipy", "two_stage")]["p50_ms"], 3)])
+    out.append("\nSolve time (ms):\n\n")
+    out.append(table(["N", "paper sampling", "ours sampling p50 (numba)", "ours sampling p50 (scipy)",
+                      "paper two-stage", "ours two-stage p50 (numba)", "ours two-stage p99 (numba)",
+                      "ours two-stage p50 (scipy)"], rows))
+    return "".join(out)
+
+
+def _e2(res: dict[str, Any]) -> str:
+    p = res["protocol"]
+    out = [f"Protocol: {p['demands']} body force demands (the E1 grid as F*), allocated to four fins "
+           f"(control.md section 7), {p['cycles']} cycles per fin from theta = 0, first plan excluded, "
+           f"planner seed {p['seed']}. St is the plan's Strouhal number at the given speed; force error "
+           f"the plan's c_force per fin and the four fins' summed force against the demand.\n\n"]
+    rows = []
+    for v, per in res["by_speed"].items():
+        for ctrl in ("baseline", "mpc"):
+            r = per[ctrl]
+            rows.append([v, ctrl, num(r["st_mean"], 3), num(r["st_max"], 3), num(r["st_in_range_pct"], 1),
+                         num(r["st_slope_per_n"], 3), num(r["st_force_corr"], 3), num(r["force_error_fin"], 3),
+                         num(r["force_error_fin_max"], 3), num(r["force_error_body"], 3)])
+    out.append(table(["V (m/s)", "controller", "St mean", "St max", "St in band %", "St slope per N",
+                      "St-force correlation", "force error per fin (N)", "max per fin (N)",
+                      "body force error (N)"], rows))
+    return "".join(out)
+
+
+def _e3(res: dict[str, Any]) -> str:
+    p = res["protocol"]
+    out = [f"Protocol: {p['targets']} targets x speeds {', '.join(str(v) for v in p['speeds'])} m/s x "
+           f"{p['cycles']} cycles, first plan excluded, seeds {', '.join(str(s) for s in p['seeds'])}.\n\n"]
+    rows = [[r["config"], num(r["paper_force_error"], 4), num(r["force_error"], 4),
+             num(r["paper_st_deviation"], 4), num(r["st_deviation"], 4), num(r["paper_in_range_pct"], 1),
+             num(r["in_range_pct"], 1), num(r["paper_stability"], 3), num(r["stability"], 3)]
+            for r in res["rows"]]
+    out.append(table(["configuration", "paper force error (N)", "ours force error (N)", "paper St deviation",
+                      "ours St deviation", "paper in range %", "ours in range %", "paper stability",
+                      "ours stability"], rows))
+    return "".join(out)
+
+
+def _plants(plants: dict[str, Any]) -> str:
+    rows = [[name, a["wake"], a["coefficients"], num(a["rho"], 1), num(a["c_d"], 3), num(a["c_l"], 3),
+             num(a["area"], 3), num(a["r_c"], 3), num(a["fin_length"], 3), num(a["thrust_gain"], 2),
+             num(a["st_peak"], 2), num(a["sigma_low"], 2), num(a["sigma_high"], 2), num(a["wake_floor"], 2)]
+            for name, a in plants.items()]
+    return table(["plant", "wake", "coefficients", "rho", "C_D", "C_L", "A_f", "r_c", "L_f", "thrust gain",
+                  "wake St peak", "sigma low", "sigma high", "wake floor"], rows)
+
+
+def _e4(res: dict[str, Any]) -> str:
+    p = res["protocol"]
+    out = [f"Protocol: depth {p['depth']} m, references {', '.join(str(v) for v in p['speeds'])} m/s, "
+           f"controllers {', '.join(p['controllers'])}, seeds {', '.join(str(s) for s in p['seeds'])}; "
+           f"each run starts cruising at its reference, settles {p['settle_s']:g} s and is measured over "
+           f"{p['window_s']:g} s. Power is the encoder-based estimate of control.md section 9 (the paper's "
+           f"method); true power is the plant's shaft power. Savings are against the baseline at the same "
+           f"reference, where the baseline reached it (>= {p['reached_share']:g} of the reference).\n\n"
+           "Plant assumptions:\n\n", _plants(res["plants"]), "\n"]
+    for plant in res["plants"]:
+        out.append(f"\nPlant `{plant}`:\n\n")
+        rows = []
+        for r in (r for r in res["rows"] if r["plant"] == plant):
+            rows.append([num(r["v_ref"], 1), r["mode"], num(r["paper_power"], 3), num(r["power_est"], 4),
+                         num(r["power_est_sd"], 4), num(r["power_true"], 4), num(r["paper_saving"], 1),
+                         num(r["saving_est"], 1), num(r["saving_true"], 1), num(r["paper_velocity_mae"], 4),
+                         num(r["velocity_mae"], 4), num(r["velocity_mean"], 3), yes_no(r["reached"]),
+                         num(r["paper_st_mae"], 4), num(r["st_mae"], 4), num(r["st_plant_mae"], 4),
+                         num(r["depth_mae"], 4), num(r["late_plans"], 1)])
+        out.append(table(["v_ref (m/s)", "controller", "paper power (W)", "ours power (W)", "sd (W)",
+                          "ours true power (W)", "paper saving %", "ours saving %", "ours true saving %",
+                          "paper vel MAE", "ours vel MAE", "mean speed", "reached", "paper St MAE",
+                          "ours St MAE (plans)", "ours St MAE (plant)", "depth MAE (m)", "late plans"], rows))
+        out.append("\n" + _claims(res["claims"][plant]))
+    return "".join(out)
+
+
+def _e5(res: dict[str, Any]) -> str:
+    p = res["protocol"]
+    out = [f"Protocol: {p['mode']}, depth {p['depth']} m (start {p['start_depth']} m), "
+           f"{p['v_ref']} m/s, yaw rate {p['yaw_rate']} rad/s, {p['duration_s']:g} s, current "
+           f"{p['current_ned']} m/s (NED), seed {p['seed']}; metrics over the second half "
+           f"(from {p['measured_from_s']:g} s). Yaw rate is positive clockwise seen from above (NED, z down).\n\n",
+           "Plant assumptions:\n\n", _plants(res["plants"]), "\n"]
+    rows = [[r["plant"], num(r["depth_mae"], 4), num(r["depth_final"], 3), num(r["velocity_mae"], 4),
+             num(r["velocity_err_p95"], 4), num(r["velocity_within_0025_pct"], 1), num(r["yaw_rate_mean"], 4),
+             num(r["yaw_rate_mae"], 4), num(r["turn_deg"], 1), num(r["radius_m"], 2),
+             yes_no(r["clockwise_from_above"]), num(r["power_est"], 4)] for r in res["rows"]]
+    out.append(table(["plant", "depth MAE (m)", "final depth (m)", "vel MAE (m/s)", "vel error p95 (m/s)",
+                      "within band %", "mean yaw rate", "yaw rate MAE", "turned (deg)", "radius (m)",
+                      "clockwise from above", "power (W)"], rows))
+    out.append("\n" + _claims(res["claims"], with_plant=True))
+    return "".join(out)
+
+
+def _sweep(res: dict[str, Any]) -> str:
+    p = res["protocol"]
+    out = [f"Protocol: the E4 protocol on plant `{p['plant']}`, references "
+           f"{', '.join(str(v) for v in p['speeds'])} m/s, seeds {', '.join(str(s) for s in p['seeds'])}, "
+           f"lam_st in {p['lam_st']}, lam_d in {p['lam_d']}, settle {p['settle_s']:g} s, window {p['window_s']:g} s.\n\n"]
+    out.append(sweep_table(res))
+    return "".join(out)
+
+
+def sweep_table(res: dict[str, Any]) -> str:
+    rows = [[num(r["v_ref"], 1), r["mode"], num(r["lam_st"], 2), num(r["lam_d"], 2), num(r["power_est"], 4),
+             num(r["saving_est"], 1), num(r["velocity_mae"], 4), num(r["st_mae"], 4), num(r["depth_mae"], 4)]
+            for r in sorted(res["rows"], key=lambda r: (r["v_ref"], r["mode"], r["lam_st"] or 0.0, r["lam_d"] or 0.0))]
+    return table(["v_ref (m/s)", "controller", "lam_st", "lam_d", "power (W)", "saving %", "vel MAE (m/s)",
+                  "St MAE", "depth MAE (m)"], rows)
+
+
+_SECTIONS = {"E1": _e1, "E2": _e2, "E3": _e3, "E4": _e4, "E5": _e5, "sweep": _sweep}
+
+
+def render(doc: dict[str, Any]) -> str:
+    """The whole report from the parsed results.json."""
+    m = doc["meta"]
+    out = [f"# {m['title']}\n\n",
+           f"Command: `{m['command']}`; {'quick (reduced) runs' if m['quick'] else 'full runs'}; "
+           f"base seed {m['seed']}; executor: {m['executor']}; finished {m['finished']}.\n\n"]
+    rt = [[name, num(res["runtime_s"], 1)] for name, res in doc["experiments"].items()]
+    out.append(table(["experiment", "runtime (s)"], rt))
+    for name, res in doc["experiments"].items():
+        out.append(f"\n## {TITLES[name]}\n\n")
+        out.append(_SECTIONS[name](res))
+        if "claims" in res and name in ("E1", "E2", "E3"):
+            out.append("\n" + _claims(res["claims"]))
+        out.append("\n" + _findings(res))
+        out.append(_figures(res))
+    return "".join(out)
