@@ -1,0 +1,122 @@
+"""Access: one pilot, the token, explicit hand-over, lockout after wrong tokens."""
+
+from __future__ import annotations
+
+import pytest
+
+from ucat_console.backend.access import LOCAL, AccessControl, AccessDenied
+from ucat_console.config import AccessConfig
+
+TOKEN = "correct-horse-battery"
+
+
+class FakeClock:
+    def __init__(self) -> None:
+        self.t = 100.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+@pytest.fixture
+def clock() -> FakeClock:
+    return FakeClock()
+
+
+@pytest.fixture
+def access(clock: FakeClock) -> AccessControl:
+    a = AccessControl(AccessConfig(token=TOKEN, max_failures=3, lockout=30.0), clock=clock)
+    for c in (1, 2, 3):
+        a.connect(c)
+    return a
+
+
+def test_random_tokens_differ_and_a_fixed_one_is_kept() -> None:
+    a, b = AccessControl(), AccessControl()
+    assert a.token != b.token and len(a.token) >= 16
+    assert AccessControl(AccessConfig(token=TOKEN)).token == TOKEN
+
+
+def test_right_token_makes_the_first_client_pilot(access: AccessControl) -> None:
+    assert access.pilot is None
+    assert access.request_control(1, TOKEN) is True
+    assert access.pilot == 1
+    assert access.is_pilot(1) and not access.is_pilot(2)
+
+
+def test_wrong_token_or_wrong_type_is_refused(access: AccessControl) -> None:
+    for bad in ("wrong", "", None, 12345, TOKEN + "x"):
+        with pytest.raises(AccessDenied):
+            access.request_control(1, bad)
+    assert access.pilot is None
+
+
+def test_taking_control_from_a_pilot_needs_the_pilots_hand_over(access: AccessControl) -> None:
+    access.request_control(1, TOKEN)
+    assert access.request_control(2, TOKEN) is False  # waits
+    assert access.pilot == 1 and access.pending == 2
+    with pytest.raises(AccessDenied):
+        access.hand_over(2, 2)  # the asker cannot hand over to itself
+    with pytest.raises(AccessDenied):
+        access.hand_over(1, 3)  # client 3 did not ask
+    access.hand_over(1, 2)
+    assert access.pilot == 2 and access.pending is None
+
+
+def test_decline_keeps_the_pilot(access: AccessControl) -> None:
+    access.request_control(1, TOKEN)
+    access.request_control(2, TOKEN)
+    access.decline(1)
+    assert access.pilot == 1 and access.pending is None
+    with pytest.raises(AccessDenied):
+        access.hand_over(1, 2)
+
+
+def test_require_pilot_refuses_viewers_and_allows_the_console(access: AccessControl) -> None:
+    access.request_control(1, TOKEN)
+    access.require_pilot(1, "arm")
+    access.require_pilot(LOCAL, "arm")
+    with pytest.raises(AccessDenied, match="read-only"):
+        access.require_pilot(2, "arm")
+
+
+def test_pilot_leaving_leaves_nobody_in_control(access: AccessControl) -> None:
+    access.request_control(1, TOKEN)
+    assert access.disconnect(3) is False
+    assert access.disconnect(1) is True
+    assert access.pilot is None
+    assert access.request_control(2, TOKEN) is True
+
+
+def test_release_only_by_the_pilot(access: AccessControl) -> None:
+    access.request_control(1, TOKEN)
+    with pytest.raises(AccessDenied):
+        access.release(2)
+    access.release(1)
+    assert access.pilot is None
+
+
+def test_wrong_tokens_lock_token_entry_for_everyone(access: AccessControl, clock: FakeClock) -> None:
+    for _ in range(3):
+        with pytest.raises(AccessDenied, match="wrong"):
+            access.request_control(2, "guess")
+    with pytest.raises(AccessDenied, match="locked"):
+        access.request_control(3, TOKEN)  # even the right token, from another page
+    clock.t += 31.0
+    assert access.request_control(3, TOKEN) is True
+
+
+def test_failures_spread_beyond_the_window_do_not_lock(access: AccessControl, clock: FakeClock) -> None:
+    for _ in range(4):
+        with pytest.raises(AccessDenied, match="wrong"):
+            access.request_control(2, "guess")
+        clock.t += 20.0  # only two failures ever fall within 30 s
+    assert access.request_control(2, TOKEN) is True
+
+
+def test_listeners_see_every_change(access: AccessControl) -> None:
+    seen = []
+    access.add_listener(lambda st: seen.append(st.pilot))
+    access.request_control(1, TOKEN)
+    access.disconnect(1)
+    assert seen == [1, None]

@@ -1,0 +1,173 @@
+"""Failsafes: each triggers after its timeout, reports its action, latches until its cause clears."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from ucat_console.backend.devices.readings import DepthReading, DvlVelocity, ImuReading
+from ucat_console.backend.safety import SafetyMonitor
+from ucat_console.config import FailsafeConfig, FailsafeRule
+from ucat_console.telemetry import channels as ch
+from ucat_console.telemetry.events import Event
+
+
+def dvl(t: float, valid: bool = True, vx: float = 0.1) -> DvlVelocity:
+    return DvlVelocity(t, vx, 0.0, 0.0, valid, 5.0, 0.01)
+
+
+def imu(t: float, gyro_z: float = 0.0) -> ImuReading:
+    return ImuReading(t, (0.0, 0.0, 1.0), (0.0, 0.0, gyro_z))
+
+
+def depth(t: float, d: float = 1.0) -> DepthReading:
+    return DepthReading(t, d, 1e4 * d)
+
+
+def feed_all(m: SafetyMonitor, t: float) -> None:
+    m.on_message(ch.IMU, imu(t))
+    m.on_message(ch.DVL, dvl(t))
+    m.on_message(ch.DEPTH, depth(t))
+
+
+def names(transitions) -> list[tuple[str, bool]]:
+    return [(tr.name, tr.active) for tr in transitions]
+
+
+def test_pilot_gone_triggers_after_its_timeout_and_latches_until_a_pilot_returns() -> None:
+    cfg = FailsafeConfig(pilot_gone=FailsafeRule("surface", 2.0))
+    m = SafetyMonitor(cfg)
+    m.pilot_present()
+    for t in (0.5, 1.0):
+        feed_all(m, t)
+        assert m.check(t) == []
+    m.pilot_left()  # stamped 1.0, the last check
+    feed_all(m, 2.9)
+    assert m.check(2.9) == []  # 1.9 s gone
+    feed_all(m, 3.0)
+    (tr,) = m.check(3.0)
+    assert (tr.name, tr.active, tr.action, tr.t) == ("pilot_gone", True, "surface", 3.0)
+    for t in (5.0, 30.0):
+        feed_all(m, t)
+        assert m.check(t) == [] and m.active() == ("pilot_gone",)
+    m.pilot_present()
+    assert names(m.check(30.1)) == [("pilot_gone", False)]
+    assert m.active() == ()
+
+
+def test_no_pilot_ever_means_no_pilot_gone() -> None:
+    m = SafetyMonitor()
+    m.pilot_left(0.0)
+    for t in (1.0, 10.0):
+        feed_all(m, t)
+        assert m.check(t) == []
+
+
+def test_released_control_is_not_a_pilot_gone() -> None:
+    m = SafetyMonitor()
+    m.pilot_present()
+    m.pilot_released()
+    m.pilot_left(0.0)
+    feed_all(m, 10.0)
+    assert m.check(10.0) == []
+
+
+def test_dvl_with_only_invalid_reports_triggers_then_clears_with_a_valid_one() -> None:
+    cfg = FailsafeConfig(dvl=FailsafeRule("hold", 2.0))
+    m = SafetyMonitor(cfg)
+    t = 0.0
+    while t <= 1.0 + 1e-9:  # valid up to 1.0
+        m.on_message(ch.DVL, dvl(t))
+        m.on_message(ch.IMU, imu(t))
+        m.on_message(ch.DEPTH, depth(t))
+        m.check(t)
+        t += 0.125
+    # from here the DVL reports come, but invalid
+    while t <= 3.5:
+        m.on_message(ch.DVL, dvl(t, valid=False))
+        m.on_message(ch.IMU, imu(t))
+        m.on_message(ch.DEPTH, depth(t))
+        m.check(t)
+        if t - 1.0 <= 2.0:
+            assert "dvl" not in m.active(), t
+        t += 0.125
+    assert m.active() == ("dvl",)
+    (state,) = [s for s in m.states() if s.name == "dvl"]
+    assert state.action == "hold" and "invalid" in state.cause
+    m.on_message(ch.DVL, dvl(t))
+    assert names(m.check(t)) == [("dvl", False)]
+
+
+def test_a_silent_sensor_triggers_its_own_failsafe_only() -> None:
+    cfg = FailsafeConfig(imu=FailsafeRule("disarm", 1.0), depth=FailsafeRule("disarm", 1.0))
+    m = SafetyMonitor(cfg)
+    for k in range(30):  # 3 s: IMU and DVL talk, the depth sensor is silent
+        t = 0.1 * k
+        m.on_message(ch.IMU, imu(t))
+        m.on_message(ch.DVL, dvl(t))
+        m.check(t)
+    assert m.active() == ("depth",)
+    (state,) = [s for s in m.states() if s.name == "depth"]
+    assert "silent" in state.cause and state.action == "disarm"
+
+
+def test_non_finite_imu_values_are_invalid() -> None:
+    m = SafetyMonitor(FailsafeConfig(imu=FailsafeRule("disarm", 0.5)))
+    for k in range(10):
+        t = 0.1 * k
+        m.on_message(ch.IMU, imu(t, gyro_z=math.nan))
+        m.on_message(ch.DVL, dvl(t))
+        m.on_message(ch.DEPTH, depth(t))
+        m.check(t)
+    assert m.active() == ("imu",)
+
+
+def test_motor_fault_from_a_motor_controller_disarms_at_once_and_clears_when_reported_cleared() -> None:
+    m = SafetyMonitor()  # motor: disarm, timeout 0
+    feed_all(m, 0.0)
+    m.check(0.0)
+    m.on_message(ch.EVENTS, Event(5.0, "dvl", "heartbeat_lost", "not a motor"))
+    m.on_message(ch.EVENTS, Event(5.0, "epos2.3", "mode", "not a fault", "info"))
+    feed_all(m, 0.1)
+    assert m.check(0.1) == []
+    m.on_message(ch.EVENTS, Event(123.0, "epos2.3", "heartbeat_lost", "no heartbeat"))
+    (tr,) = m.check(0.1)
+    assert (tr.name, tr.active, tr.action) == ("motor", True, "disarm")
+    assert "epos2.3 heartbeat_lost" in tr.cause
+    m.on_message(ch.EVENTS, Event(124.0, "epos2.3", "fault_cleared", "not this one", "info"))
+    feed_all(m, 0.2)
+    assert m.check(0.2) == [] and m.active() == ("motor",)
+    m.on_message(ch.EVENTS, Event(125.0, "epos2.3", "heartbeat_restored", "back", "info"))
+    assert names(m.check(0.2)) == [("motor", False)]
+
+
+def test_a_motor_fault_shorter_than_the_timeout_does_not_trigger() -> None:
+    m = SafetyMonitor(FailsafeConfig(motor=FailsafeRule("disarm", 1.0)))
+    feed_all(m, 0.0)
+    m.check(0.0)
+    m.on_message(ch.EVENTS, Event(0.0, "epos2.1", "fault", "fault"))
+    feed_all(m, 0.5)
+    assert m.check(0.5) == []
+    m.on_message(ch.EVENTS, Event(0.0, "epos2.1", "fault_cleared", "ok", "info"))
+    feed_all(m, 2.0)
+    assert m.check(2.0) == []
+
+
+def test_planner_late_counts_late_plans_in_its_window() -> None:
+    cfg = FailsafeConfig(planner_late=FailsafeRule("warn", 10.0), late_plans=3)
+    m = SafetyMonitor(cfg)
+    for t in (0.0, 1.0, 2.0):
+        feed_all(m, t)
+        m.check(t)
+        m.on_message(ch.EVENTS, Event(t, "loop", "late_plan", "late"))
+    feed_all(m, 3.0)
+    (tr,) = m.check(3.0)
+    assert (tr.name, tr.active, tr.action) == ("planner_late", True, "warn")
+    feed_all(m, 11.5)  # the first late plan (stamped 0.0) left the window
+    assert names(m.check(11.5)) == [("planner_late", False)]
+
+
+def test_unknown_failsafe_name_is_an_error() -> None:
+    with pytest.raises(ValueError, match="failsafe"):
+        SafetyMonitor().rule("gremlins")

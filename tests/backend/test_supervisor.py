@@ -1,0 +1,389 @@
+"""The supervisor without a browser: arming, access, refused values, failsafes, shutdown.
+
+The loop runs headless (SimulatedClock) in the test's thread through ``Supervisor.step``;
+one test runs it in its own thread under a paced clock.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import pytest
+
+from ucat_console.backend.access import LOCAL, AccessDenied
+from ucat_console.backend.devices.readings import DepthReading
+from ucat_console.backend.loop.clock import SimulatedClock
+from ucat_console.backend.loop.robot_io import SimRobotIO
+from ucat_console.backend.sessions.reader import SessionReader
+from ucat_console.backend.supervisor import CommandRefused, SteadyPacedClock, Supervisor
+from ucat_console.config import AccessConfig, AppConfig, ConsoleConfig, FailsafeConfig, FailsafeRule
+from ucat_console.telemetry import channels as ch
+from ucat_console.telemetry.events import Event
+
+TOKEN = "pool-side-token"
+PILOT, VIEWER = 1, 2
+
+
+def make_config(**failsafes: FailsafeRule) -> AppConfig:
+    return AppConfig(
+        console=ConsoleConfig(supervise_period=0.05, record_tail=1.0),
+        access=AccessConfig(token=TOKEN),
+        failsafe=FailsafeConfig(**failsafes),
+    )
+
+
+class Events:
+    """Every event and status published on the public stream."""
+
+    def __init__(self, sup: Supervisor) -> None:
+        self.events: list[Event] = []
+        self.status: list = []
+        sup.stream.subscribe(lambda c, m: (self.events if c == ch.EVENTS else self.status).append(m),
+                             [ch.EVENTS, ch.STATUS])
+
+    def codes(self, source: str) -> list[str]:
+        return [e.code for e in self.events if e.source == source]
+
+
+@pytest.fixture
+def sup(tmp_path: Path):
+    s = Supervisor(make_config(), clock=SimulatedClock(), sessions_dir=tmp_path)
+    s.client_connected(PILOT)
+    s.client_connected(VIEWER)
+    assert s.take_control(PILOT, TOKEN) is True
+    yield s
+    s.stop()
+
+
+def fins_moved(sup: Supervisor) -> float:
+    return max(abs(a) for a in sup.loop.truth().fin_angles)
+
+
+def test_motors_stay_still_until_arming_is_confirmed(sup: Supervisor) -> None:
+    sup.set_setpoints(PILOT, velocity=0.3)
+    sup.step(1.5)
+    assert not sup.armed
+    assert fins_moved(sup) == 0.0  # the fins start at 0 and were never commanded
+    nonce = sup.request_arm(PILOT)
+    sup.step(1.0)
+    assert not sup.armed and fins_moved(sup) == 0.0
+    with pytest.raises(CommandRefused):
+        sup.confirm_arm(PILOT, "not-the-nonce")
+    with pytest.raises(CommandRefused):  # the wrong nonce used the request up
+        sup.confirm_arm(PILOT, nonce)
+    nonce = sup.request_arm(PILOT)
+    sup.confirm_arm(PILOT, nonce)
+    assert sup.armed
+    sup.step(2.0)
+    assert fins_moved(sup) > 0.1
+
+
+def test_a_viewer_can_neither_arm_nor_confirm_the_pilots_request(sup: Supervisor) -> None:
+    with pytest.raises(AccessDenied):
+        sup.request_arm(VIEWER)
+    nonce = sup.request_arm(PILOT)
+    with pytest.raises(AccessDenied):
+        sup.confirm_arm(VIEWER, nonce)
+    assert not sup.armed
+
+
+def test_a_viewer_can_change_nothing(sup: Supervisor) -> None:
+    before = (sup.mode, sup.setpoints, sup.tuning(), sup.armed)
+    refused = [
+        lambda: sup.set_mode(VIEWER, "baseline"),
+        lambda: sup.set_setpoints(VIEWER, velocity=0.1),
+        lambda: sup.set_param(VIEWER, "mpc.lam_st", 2.0),
+        lambda: sup.revert_tuning(VIEWER),
+        lambda: sup.disarm(VIEWER),
+        lambda: sup.start_recording(VIEWER),
+        lambda: sup.add_marker(VIEWER, "hi"),
+        lambda: sup.release(VIEWER),
+    ]
+    for fn in refused:
+        with pytest.raises(AccessDenied):
+            fn()
+    sup.step(0.5)
+    assert (sup.mode, sup.setpoints, sup.tuning(), sup.armed) == before
+    assert sup.loop.mode == before[0]
+    assert sup.loop.mpc_config == before[2]["mpc"]
+    assert not sup.recorder.recording
+
+
+@pytest.mark.parametrize(
+    "changes, match",
+    [
+        ({"mpc.lam_st": 500.0}, "out of range"),
+        ({"mpc.lam_st": -0.1}, "out of range"),
+        ({"mpc.lam_st": math.nan}, "not a finite"),
+        ({"mpc.lam_st": math.inf}, "not a finite"),
+        ({"mpc.lam_st": "2.0"}, "expected a number"),
+        ({"mpc.lam_st": True}, "expected a number"),
+        ({"mpc.lam_st": None}, "expected a number"),
+        ({"mpc.n_samples": 2.5}, "integer"),
+        ({"mpc.n_samples": 0}, "out of range"),
+        ({"mpc.st_low": 0.4}, "st_low"),  # above st_high = 0.35
+        ({"mpc.solver": "scipy"}, "not a tunable"),
+        ({"mpc.rho": 1000.0}, "not a tunable"),
+        ({"pid.depth.kp": -1.0}, "out of range"),
+        ({"pid.roll.kp": 1.0}, "not a tunable"),
+        ({"mpc.lam_f": 2.0, "mpc.lam_st": 500.0}, "out of range"),  # all or nothing
+        ({}, "no changes"),
+    ],
+)
+def test_bad_tuning_is_refused_and_changes_nothing(sup: Supervisor, changes: dict, match: str) -> None:
+    before = sup.tuning()
+    journal = len(sup.journal())
+    with pytest.raises(CommandRefused, match=match):
+        sup.set_params(PILOT, changes)
+    sup.step(0.2)
+    assert sup.tuning() == before
+    assert sup.loop.mpc_config == before["mpc"]
+    assert sup.loop.body.depth_pid.gains == before["pid.depth"]
+    assert len(sup.journal()) == journal
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"velocity": 0.6}, "velocity"),  # envelope 0.5 m/s
+        ({"depth": -0.5}, "depth"),
+        ({"yaw_rate": math.nan}, "yaw_rate"),
+        ({"velocity": "fast"}, "velocity"),
+        ({"depth": True}, "depth"),
+    ],
+)
+def test_bad_setpoints_are_refused_and_change_nothing(sup: Supervisor, kwargs: dict, match: str) -> None:
+    before = sup.setpoints
+    with pytest.raises(CommandRefused, match=match):
+        sup.set_setpoints(PILOT, **kwargs)
+    sup.step(0.2)
+    assert sup.setpoints == before and sup.loop.setpoints == before
+
+
+def test_bad_mode_is_refused(sup: Supervisor) -> None:
+    for bad in ("turbo", 1, None):
+        with pytest.raises(CommandRefused):
+            sup.set_mode(PILOT, bad)
+    assert sup.mode == "mpc"
+
+
+def test_tuning_reaches_the_loop_is_journalled_and_reverts_in_one_step(sup: Supervisor) -> None:
+    ev = Events(sup)
+    sup.set_params(PILOT, {"mpc.lam_st": 2.0, "pid.depth.kp": 7.0})
+    sup.step(0.2)
+    assert sup.loop.mpc_config.lam_st == 2.0
+    assert sup.loop.body.depth_pid.gains.kp == 7.0
+    entries = {e.key: e for e in sup.journal()}
+    assert (entries["mpc.lam_st"].who, entries["mpc.lam_st"].old, entries["mpc.lam_st"].new) == (
+        f"client {PILOT}", 5.0, 2.0)
+    assert (entries["pid.depth.kp"].old, entries["pid.depth.kp"].new) == (5.0, 7.0)
+    assert "tuning" in ev.codes("operator") and "tuning" in ev.codes("loop")
+    sup.revert_tuning(PILOT)
+    sup.step(0.2)
+    assert sup.loop.mpc_config.lam_st == 5.0
+    assert sup.loop.body.depth_pid.gains.kp == 5.0
+    assert sup.journal()[-1].new in (5.0,)
+
+
+def test_mode_switch_reaches_the_loop_and_is_an_event(sup: Supervisor) -> None:
+    ev = Events(sup)
+    sup.set_mode(PILOT, "baseline")
+    sup.step(0.5)
+    assert sup.loop.mode == "baseline"
+    assert "mode" in ev.codes("loop") and "mode" in ev.codes("operator")
+
+
+def test_status_messages_carry_arming_pilot_and_failsafes(sup: Supervisor) -> None:
+    ev = Events(sup)
+    sup.step(1.2)  # the loop publishes its status at 1 Hz
+    assert ev.status and all(s.armed is False and s.pilot == str(PILOT) for s in ev.status)
+    sup.arm(PILOT)
+    sup.step(1.2)
+    assert ev.status[-1].armed is True
+
+
+def test_pilot_page_gone_holds_depth_and_stops_after_its_timeout(tmp_path: Path) -> None:
+    sup = Supervisor(make_config(pilot_gone=FailsafeRule("hold", 2.0)), clock=SimulatedClock(),
+                     sessions_dir=tmp_path)
+    try:
+        ev = Events(sup)
+        for c in (PILOT, VIEWER):
+            sup.client_connected(c)
+        sup.take_control(PILOT, TOKEN)
+        sup.set_setpoints(PILOT, velocity=0.3, yaw_rate=0.1, depth=0.8)
+        sup.arm(PILOT)
+        sup.step(3.0)
+        t_gone = sup.loop.time
+        sup.client_disconnected(PILOT)
+        sup.step(1.9)
+        assert sup.safety.active() == ()
+        assert sup.setpoints.velocity == 0.3
+        sup.step(0.3)
+        assert sup.safety.active() == ("pilot_gone",)
+        (trig,) = [e for e in ev.events if e.source == "failsafe" and e.code == "pilot_gone"]
+        assert trig.t - t_gone >= 2.0 - 1e-9
+        assert trig.data["action"] == "hold"
+        depth_now = sup.loop.truth().depth
+        sp = sup.setpoints
+        assert sp.velocity == 0.0 and sp.yaw_rate == 0.0
+        assert abs(sp.depth - depth_now) < 0.2  # held where the robot is, not the old 0.8 target
+        assert sup.armed  # hold keeps the fins working
+        # latched: the cause (no pilot) is still there
+        sup.step(2.0)
+        assert sup.safety.active() == ("pilot_gone",)
+        # a new pilot: the cause clears, and the setpoints are the pilot's again
+        with pytest.raises(CommandRefused, match="pilot_gone"):
+            sup.set_setpoints(LOCAL, velocity=0.1)
+        sup.take_control(VIEWER, TOKEN)
+        sup.step(0.1)
+        assert sup.safety.active() == ()
+        assert "cleared" in ev.codes("failsafe")
+        sup.set_setpoints(VIEWER, velocity=0.1)
+        assert sup.setpoints.velocity == 0.1
+    finally:
+        sup.stop()
+
+
+def test_motor_fault_disarms_and_blocks_arming_until_cleared(sup: Supervisor) -> None:
+    ev = Events(sup)
+    sup.arm(PILOT)
+    sup.step(0.5)
+    sup.report_event(Event(0.0, "epos2.2", "fault", "node in fault state", "error"))
+    sup.step(0.1)
+    assert not sup.armed
+    assert "motor" in ev.codes("failsafe")
+    assert "disarmed" in ev.codes("supervisor")
+    with pytest.raises(CommandRefused, match="motor"):
+        sup.request_arm(PILOT)
+    sup.report_event(Event(0.0, "epos2.2", "fault_cleared", "fault cleared", "info"))
+    sup.step(0.1)
+    sup.arm(PILOT)
+    assert sup.armed
+
+
+class NaNDepthRobot(SimRobotIO):
+    """The simulator, whose pressure sensor returns NaN after 1 s."""
+
+    def advance_to(self, t: float):
+        out = []
+        for r in super().advance_to(t):
+            if isinstance(r, DepthReading) and r.t > 1.0:
+                r = DepthReading(r.t, math.nan, math.nan)
+            out.append(r)
+        return out
+
+
+def test_invalid_sensor_values_never_reach_the_loop_and_trigger_the_failsafe(tmp_path: Path) -> None:
+    cfg = make_config(depth=FailsafeRule("disarm", 0.5))
+    sup = Supervisor(cfg, clock=SimulatedClock(), sessions_dir=tmp_path,
+                     robot_factory=lambda c, ev: (NaNDepthRobot(c.plant, depth=0.5), lambda: None))
+    try:
+        sup.arm(LOCAL)
+        sup.step(1.3)
+        assert sup.armed and sup.safety.active() == ()
+        sup.step(0.5)
+        assert sup.safety.active() == ("depth",)
+        assert not sup.armed
+        assert sup.fault == ""  # the loop kept running
+        assert sup.gate.dropped_readings > 0
+        with pytest.raises(CommandRefused, match="depth"):
+            sup.arm(LOCAL)
+    finally:
+        sup.stop()
+
+
+def test_hand_over_and_release(sup: Supervisor) -> None:
+    assert sup.take_control(VIEWER, TOKEN) is False
+    sup.hand_over(PILOT, VIEWER)
+    assert sup.access.pilot == VIEWER
+    with pytest.raises(AccessDenied):
+        sup.set_mode(PILOT, "baseline")
+    sup.arm(VIEWER)
+    with pytest.raises(CommandRefused, match="disarm first"):
+        sup.release(VIEWER)
+    sup.disarm(VIEWER)
+    sup.release(VIEWER)
+    assert sup.access.pilot is None
+
+
+def test_arming_records_and_stop_disarms_and_closes_the_file(tmp_path: Path) -> None:
+    sup = Supervisor(make_config(), clock=SimulatedClock(), sessions_dir=tmp_path)
+    sup.client_connected(PILOT)
+    sup.take_control(PILOT, TOKEN)
+    sup.arm(PILOT)
+    assert sup.recorder.recording
+    sup.add_marker(PILOT, "first lap")
+    sup.step(1.0)
+    paths = sup.recorder.paths
+    sup.stop()
+    assert not sup.armed and not sup.recorder.recording
+    with SessionReader(paths[0], tmp_path) as r:
+        events = [(e.source, e.code) for e in r.events()]
+        assert ("supervisor", "armed") in events
+        assert ("operator", "marker") in events
+        assert ("supervisor", "disarmed") in events
+        assert r.message_counts()[ch.BODY_STATE] > 20
+
+
+def test_automatic_recording_stops_after_the_tail(sup: Supervisor) -> None:
+    sup.arm(PILOT)
+    sup.step(0.5)
+    sup.disarm(PILOT)
+    sup.step(0.5)
+    assert sup.recorder.recording
+    sup.step(1.0)  # record_tail = 1 s: the recorder is told to stop (it closes in its own thread)
+    deadline = time.monotonic() + 10.0
+    while sup.recorder.recording and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert not sup.recorder.recording
+    assert sup.recorder.paths[0].stat().st_size > 0
+
+
+def test_the_loop_runs_in_its_own_thread_and_commands_cross_over(tmp_path: Path) -> None:
+    sup = Supervisor(make_config(), clock=SteadyPacedClock(pace=10.0), sessions_dir=tmp_path)
+    sup.client_connected(PILOT)
+    sup.take_control(PILOT, TOKEN)
+    sup.start()
+    try:
+        sup.arm(PILOT)  # applied by the loop's thread between chunks
+        assert sup.armed
+        sup.set_param(PILOT, "mpc.lam_a", 2.0)
+        deadline = time.monotonic() + 10.0
+        while sup.loop.mpc_config.lam_a != 2.0 and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert sup.loop.mpc_config.lam_a == 2.0
+        assert sup.loop.planner_threads >= 1
+    finally:
+        sup.stop()
+    assert not sup.armed and not sup.running
+
+
+class FailingRobot(SimRobotIO):
+    """The simulator, until its link breaks at 0.5 s."""
+
+    def advance_to(self, t: float):
+        if t > 0.5:
+            raise OSError("link to the robot lost")
+        return super().advance_to(t)
+
+
+def test_a_failing_loop_disarms_and_is_reported(tmp_path: Path) -> None:
+    sup = Supervisor(make_config(), clock=SimulatedClock(), sessions_dir=tmp_path,
+                     robot_factory=lambda c, ev: (FailingRobot(c.plant), lambda: None))
+    ev = Events(sup)
+    sup.arm(LOCAL)
+    sup.start()  # as fast as it goes: the robot fails at once
+    try:
+        deadline = time.monotonic() + 10.0
+        while sup.running and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert not sup.running
+        assert "link to the robot lost" in sup.fault
+        assert not sup.armed
+        assert "loop_fault" in ev.codes("supervisor")
+        with pytest.raises(CommandRefused, match="loop"):
+            sup.arm(LOCAL)
+    finally:
+        sup.stop()

@@ -1,0 +1,66 @@
+"""AppConfig: composition of the blocks, TOML in and out, errors naming the key."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from ucat_console.config import AppConfig, FailsafeRule, load_config
+
+
+def test_defaults_are_the_blocks_defaults() -> None:
+    app = AppConfig()
+    assert app.robot == "sim"
+    assert app.console.host == "127.0.0.1"
+    assert app.console.port == 8080
+    assert app.failsafe.pilot_gone == FailsafeRule("hold", 2.0)
+
+
+def test_loop_always_runs_the_top_level_controller_blocks() -> None:
+    app = AppConfig()
+    changed = app.replace(mpc=app.mpc.replace(lam_st=2.0), body=app.body.replace(median_window=7))
+    assert changed.loop.mpc.lam_st == 2.0
+    assert changed.loop.body.median_window == 7
+
+
+def test_toml_round_trip_keeps_every_value(tmp_path: Path) -> None:
+    app = AppConfig().replace(robot="rig")
+    app = app.replace(mpc=app.mpc.replace(lam_f=3.0), console=app.console.replace(port=0))
+    path = tmp_path / "run.toml"
+    path.write_text(app.to_toml())
+    back = load_config(path)
+    assert back == app
+    assert back.loop.mpc.lam_f == 3.0
+    # the loop's table holds only its own values
+    assert "[loop.mpc]" not in app.to_toml()
+
+
+def test_partial_file_keeps_defaults_elsewhere(tmp_path: Path) -> None:
+    path = tmp_path / "pool.toml"
+    path.write_text('[failsafe.pilot_gone]\naction = "surface"\ntimeout = 3.5\n[loop]\nmode = "baseline"\n')
+    app = load_config(path)
+    assert app.failsafe.pilot_gone == FailsafeRule("surface", 3.5)
+    assert app.failsafe.dvl == AppConfig().failsafe.dvl
+    assert app.loop.mode == "baseline"
+
+
+@pytest.mark.parametrize(
+    "text, key",
+    [
+        ('[failsafe.motor]\naction = "explode"\n', "failsafe.motor.action"),
+        ("[console]\nport = 70000\n", "console.port"),
+        ("[console]\nsupervise_period = 0.0\n", "console.supervise_period"),
+        ('[console]\nplot_rate = "fast"\n', "console.plot_rate"),
+        ("[access]\ntoken = \"short\"\n", "token"),
+        ("[loop.mpc]\nlam_st = 1.0\n", "loop.mpc"),
+        ('robot = "boat"\n', "robot"),
+        ("[console]\nnope = 1\n", "console.nope"),
+    ],
+)
+def test_bad_values_are_refused_naming_the_key(tmp_path: Path, text: str, key: str) -> None:
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=key.replace(".", r"\.")) as e:
+        load_config(path)
+    assert str(path) in str(e.value)

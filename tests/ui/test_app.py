@@ -1,0 +1,129 @@
+"""The console app without a browser: a viser server on port 0, page callbacks run from code.
+
+A ControlPanel built on the server's GUI stands in for one page; ``panel.act`` runs a
+command exactly as the page's callback does (refusals shown, inputs reverted).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from ucat_console.backend.loop.clock import SimulatedClock
+from ucat_console.backend.supervisor import Supervisor
+from ucat_console.config import AccessConfig, AppConfig
+from ucat_console.ui.app import ConsoleApp, is_loopback
+from ucat_console.ui.panels import ControlPanel, esc, param_specs, step_for
+
+TOKEN = "pool-side-token"
+
+
+@pytest.fixture
+def app(tmp_path: Path):
+    sup = Supervisor(AppConfig(access=AccessConfig(token=TOKEN)), clock=SimulatedClock(), sessions_dir=tmp_path)
+    a = ConsoleApp(sup, port=0)
+    yield a
+    a.stop()
+    sup.stop()
+
+
+def page(app: ConsoleApp, cid: int, pilot: bool) -> ControlPanel:
+    app.sup.client_connected(cid)
+    if pilot:
+        assert app.sup.take_control(cid, TOKEN)
+    return ControlPanel(app, cid, app.server.gui)
+
+
+def test_server_binds_loopback_on_a_real_port(app: ConsoleApp) -> None:
+    assert app.host == "127.0.0.1"
+    assert app.port > 0 and app.url == f"http://127.0.0.1:{app.port}"
+    assert is_loopback("127.0.0.1") and is_loopback("::1") and is_loopback("localhost")
+    assert not is_loopback("0.0.0.0") and not is_loopback("192.168.1.10")
+
+
+def test_a_viewers_controls_are_disabled_and_refused_server_side(app: ConsoleApp) -> None:
+    viewer = page(app, 7, pilot=False)
+    assert viewer.arm.disabled and viewer.disarm.disabled and viewer.mode.disabled
+    assert all(h.disabled for h in viewer.params.values())
+    assert not viewer.take.disabled  # but it may ask for control
+    # a page that sends anyway (the controls are disabled only in its browser)
+    assert viewer.act(viewer._request_arm) is False
+    assert "read-only" in viewer.messages[-1]
+    assert not app.sup.armed
+    viewer.mode.value = "baseline"
+    assert viewer.act(lambda: app.sup.set_mode(viewer.cid, viewer.mode.value)) is False
+    assert app.sup.mode == "mpc" and viewer.mode.value == "mpc"  # reverted on the page
+
+
+def test_out_of_range_tuning_is_refused_shown_and_reverted(app: ConsoleApp) -> None:
+    pilot = page(app, 3, pilot=True)
+    assert not pilot.arm.disabled and not pilot.params["mpc.lam_st"].disabled
+    pilot.params["mpc.lam_st"].value = 500.0
+    assert pilot.act(pilot._apply_tuning, tuning=True) is False
+    assert "out of range" in pilot.messages[-1]
+    assert "Refused" in pilot.tuning_message.content
+    assert pilot.params["mpc.lam_st"].value == 5.0
+    assert app.sup.tuning()["mpc"].lam_st == 5.0
+    pilot.params["mpc.n_samples"].value = 250.5
+    assert pilot.act(pilot._apply_tuning, tuning=True) is False
+    assert "integer" in pilot.messages[-1]
+    assert app.sup.tuning()["mpc"].n_samples == 500
+
+
+def test_applied_tuning_shows_on_every_page(app: ConsoleApp) -> None:
+    pilot = page(app, 3, pilot=True)
+    viewer = page(app, 4, pilot=False)
+    pilot.params["mpc.lam_st"].value = 2.5
+    pilot.params["pid.depth.kd"].value = 0.01
+    assert pilot.act(pilot._apply_tuning, tuning=True) is True
+    assert app.sup.tuning()["mpc"].lam_st == 2.5
+    assert app.sup.tuning()["pid.depth"].kd == 0.01
+    viewer.refresh()
+    assert viewer.params["mpc.lam_st"].value == 2.5
+    assert viewer.params["pid.depth.kd"].value == 0.01
+
+
+def test_a_pilots_draft_is_not_overwritten_by_unrelated_refreshes(app: ConsoleApp) -> None:
+    pilot = page(app, 3, pilot=True)
+    pilot.params["mpc.lam_a"].value = 4.0  # typed, not applied yet
+    app.sup.set_mode(3, "baseline")
+    pilot.refresh()
+    assert pilot.params["mpc.lam_a"].value == 4.0
+    assert pilot.mode.value == "baseline"
+
+
+def test_arming_from_the_page_takes_a_confirmation(app: ConsoleApp) -> None:
+    pilot = page(app, 3, pilot=True)
+    assert pilot.act(pilot._request_arm) is True
+    assert not app.sup.armed  # only the modal's confirm arms
+    app.sup.confirm_arm(3, pilot._arm_nonce)
+    assert app.sup.armed
+    pilot.refresh()
+    assert pilot.arm.disabled and not pilot.disarm.disabled
+    assert pilot.act(lambda: app.sup.disarm(3)) is True
+    assert not app.sup.armed
+
+
+def test_plot_history_is_the_pilots_and_bounded(app: ConsoleApp) -> None:
+    pilot = page(app, 3, pilot=True)
+    viewer = page(app, 4, pilot=False)
+    assert viewer.act(lambda: app.set_history(4, 60.0)) is False
+    assert pilot.act(lambda: app.set_history(3, 1e6)) is False
+    assert pilot.act(lambda: app.set_history(3, 60.0)) is True
+    assert app.history == 60.0
+
+
+def test_tuning_inputs_come_from_the_field_metadata() -> None:
+    specs = param_specs(Supervisor._tuning_from(AppConfig()))
+    lam_st = next(s for s in specs["mpc"] if s.key == "mpc.lam_st")
+    assert "[0.0, 100.0]" in lam_st.label and "Strouhal" in lam_st.hint
+    n = next(s for s in specs["mpc"] if s.key == "mpc.n_samples")
+    assert n.is_int and n.step == 10.0
+    assert step_for(0.3, False) == pytest.approx(0.01)
+    assert {s.key for s in specs["pid.yaw_rate"]} == {f"pid.yaw_rate.{k}" for k in ("kp", "ki", "kd", "limit")}
+
+
+def test_page_text_is_escaped() -> None:
+    assert "<" not in esc("<script>alert(1)</script>")
+    assert esc("**bold**") == "\\*\\*bold\\*\\*"

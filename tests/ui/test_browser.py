@@ -1,0 +1,208 @@
+"""End to end in headless Chromium: the live page, the pilot, a viewer, hand-over, failsafe.
+
+One console (supervisor on the simulated robot in real time, web page on a free loopback
+port) serves the whole module; the tests run in order and share it. A screenshot of the
+live page is saved under ``test-artifacts/``.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import time
+from pathlib import Path
+from typing import Callable, Iterator
+
+import pytest
+
+playwright_api = pytest.importorskip("playwright.sync_api")
+from playwright.sync_api import Browser, Locator, Page, expect, sync_playwright  # noqa: E402
+
+from ucat_console.backend.supervisor import Supervisor  # noqa: E402
+from ucat_console.config import (  # noqa: E402
+    AccessConfig,
+    AppConfig,
+    ConsoleConfig,
+    FailsafeConfig,
+    FailsafeRule,
+)
+from ucat_console.telemetry import channels as ch  # noqa: E402
+from ucat_console.ui.app import ConsoleApp  # noqa: E402
+
+pytestmark = [pytest.mark.browser, pytest.mark.slow]
+
+CHROMIUM = os.environ.get("UCAT_CHROMIUM", "/usr/bin/chromium")
+CHROMIUM_ARGS = [
+    "--no-sandbox", "--use-gl=swiftshader", "--enable-unsafe-swiftshader",
+    "--disable-background-networking", "--disable-component-update", "--disable-sync", "--no-first-run",
+]
+ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
+TOKEN = "browser-test-token"
+PILOT_GONE_TIMEOUT = 1.5
+
+
+def wait_for(cond: Callable[[], bool], timeout: float = 10.0, what: str = "condition") -> None:
+    deadline = time.monotonic() + timeout
+    while not cond():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out waiting for {what}")
+        time.sleep(0.05)
+
+
+class Console:
+    def __init__(self, tmp: Path) -> None:
+        cfg = AppConfig(
+            access=AccessConfig(token=TOKEN),
+            console=ConsoleConfig(port=0, record_on_arm=False, scene_rate=15.0, plot_rate=5.0),
+            failsafe=FailsafeConfig(pilot_gone=FailsafeRule("hold", PILOT_GONE_TIMEOUT)),
+        )
+        self.sup = Supervisor(cfg, sessions_dir=tmp)
+        self.events: list = []
+        self.sup.stream.subscribe(lambda c, m: self.events.append(m), [ch.EVENTS])
+        self.app = ConsoleApp(self.sup)
+        self.app.start()
+        self.sup.start()
+
+    def stop(self) -> None:
+        self.sup.stop()
+        self.app.stop()
+
+
+@pytest.fixture(scope="module")
+def console(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Console]:
+    c = Console(tmp_path_factory.mktemp("sessions"))
+    yield c
+    c.stop()
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[Browser]:
+    if not Path(CHROMIUM).exists() and shutil.which("chromium") is None:
+        pytest.skip(f"no Chromium at {CHROMIUM}")
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        yield b
+        b.close()
+
+
+PAGES: dict[str, tuple[Page, int]] = {}
+
+
+def open_page(browser: Browser, console: Console, width: int = 1400, height: int = 900) -> tuple[Page, int]:
+    before = set(console.sup.access.clients)
+    page = browser.new_page(viewport={"width": width, "height": height})
+    page.goto(console.app.url)
+    page.wait_for_function("() => !document.body.innerText.includes('Connecting...')", timeout=20_000)
+    wait_for(lambda: set(console.sup.access.clients) - before, what="the page's connection")
+    (cid,) = set(console.sup.access.clients) - before
+    expect(page.get_by_role("button", name="Take control")).to_be_visible(timeout=15_000)
+    return page, cid
+
+
+def gui_input(page: Page, label: str) -> Locator:
+    """The input of the GUI row whose label starts with ``label``."""
+    label_el = page.locator("label", has_text=re.compile("^" + re.escape(label))).first
+    row = label_el.locator("xpath=ancestor::div[contains(@class, 'Flex-root')][1]")
+    return row.locator("input:not([type='hidden'])").first
+
+
+def take_control(page: Page) -> None:
+    gui_input(page, "Pilot token").fill(TOKEN)
+    page.get_by_role("button", name="Take control").click()
+
+
+def test_the_page_loads_and_shows_the_robot(browser: Browser, console: Console) -> None:
+    page, cid = open_page(browser, console)
+    PAGES["a"] = (page, cid)
+    page.wait_for_function(
+        "() => { const t = window.__viserSceneTree; return t && t.getState()['/ned/ucat/hull'] !== undefined; }",
+        timeout=15_000,
+    )
+    for name in ("/ned/ucat/fin0/blade/plate", "/ned/ucat/fin3/ghost/plate", "/surface", "/ned/trail"):
+        assert page.evaluate(f"() => window.__viserSceneTree.getState()['{name}'] !== undefined"), name
+    expect(page.get_by_text("Strouhal number per fin")).to_be_visible()
+    expect(page.get_by_text("Energy per metre (J/m)")).to_be_visible()
+    wait_for(lambda: page.locator(".uplot").count() >= 6, what="six plots")
+    expect(page.get_by_text("disarmed", exact=False).first).to_be_visible()
+    page.wait_for_timeout(2500)  # a few seconds of plot history
+    close = page.get_by_role("alert").get_by_role("button")  # the software-WebGL notice
+    if close.count():
+        close.first.click()
+        page.wait_for_timeout(300)
+    ARTIFACTS.mkdir(exist_ok=True)
+    page.screenshot(path=str(ARTIFACTS / "console-live.png"))
+
+
+def test_the_pilot_arms_switches_mode_and_tunes(console: Console) -> None:
+    page, cid = PAGES["a"]
+    sup = console.sup
+    take_control(page)
+    expect(page.get_by_text("You are the pilot")).to_be_visible(timeout=5_000)
+    assert sup.access.pilot == cid
+    page.get_by_role("button", name="Arm motors").click()
+    confirm = page.get_by_role("button", name="Confirm arm")
+    expect(confirm).to_be_visible(timeout=5_000)
+    assert not sup.armed  # asking is not arming
+    confirm.click()
+    wait_for(lambda: sup.armed, what="arming")
+    gui_input(page, "Mode").click()
+    page.get_by_role("option", name="baseline").click()
+    wait_for(lambda: sup.loop.mode == "baseline", what="the loop's mode")
+    gui_input(page, "lam_st [").fill("2.5")
+    page.get_by_role("button", name="Apply tuning").click()
+    wait_for(lambda: sup.loop.mpc_config.lam_st == 2.5, what="lam_st in the loop")
+    assert sup.journal()[-1].key == "mpc.lam_st" and sup.journal()[-1].who == f"client {cid}"
+
+
+def test_a_second_page_cannot_arm_or_tune(browser: Browser, console: Console) -> None:
+    page, cid = open_page(browser, console, 1100, 800)
+    PAGES["b"] = (page, cid)
+    expect(page.get_by_text("Read-only")).to_be_visible(timeout=5_000)
+    for name in ("Arm motors", "DISARM", "Apply tuning", "Apply setpoints"):
+        expect(page.get_by_role("button", name=name)).to_be_disabled()
+    expect(gui_input(page, "lam_st [")).to_be_disabled()
+    expect(gui_input(page, "lam_st [")).to_have_value("2.5")  # it sees the pilot's change
+    assert console.sup.access.pilot == PAGES["a"][1]
+
+
+def test_an_out_of_range_value_typed_in_the_page_is_refused(console: Console) -> None:
+    page, _ = PAGES["a"]
+    box = gui_input(page, "lam_st [")
+    box.fill("500")
+    page.get_by_role("button", name="Apply tuning").click()
+    expect(page.get_by_text("out of range").first).to_be_visible(timeout=5_000)
+    expect(box).to_have_value("2.5", timeout=5_000)
+    assert console.sup.tuning()["mpc"].lam_st == 2.5
+    time.sleep(0.3)
+    assert console.sup.loop.mpc_config.lam_st == 2.5
+
+
+def test_the_token_hands_control_over(console: Console) -> None:
+    (a, a_id), (b, b_id) = PAGES["a"], PAGES["b"]
+    take_control(b)
+    expect(b.get_by_text("Waiting for the pilot's hand-over")).to_be_visible(timeout=5_000)
+    assert console.sup.access.pilot == a_id
+    handover = a.get_by_role("button", name=f"Hand over to client {b_id}")
+    expect(handover).to_be_visible(timeout=5_000)
+    handover.click()
+    wait_for(lambda: console.sup.access.pilot == b_id, what="the hand-over")
+    expect(b.get_by_text("You are the pilot")).to_be_visible(timeout=5_000)
+    expect(a.get_by_role("button", name="DISARM")).to_be_disabled(timeout=5_000)
+    expect(b.get_by_role("button", name="DISARM")).to_be_enabled()
+
+
+def test_closing_the_pilot_page_triggers_the_failsafe(console: Console) -> None:
+    (a, _), (b, b_id) = PAGES["a"], PAGES["b"]
+    sup = console.sup
+    assert sup.access.pilot == b_id and sup.armed
+    b.close()
+    wait_for(lambda: "pilot_gone" in sup.safety.active(), timeout=PILOT_GONE_TIMEOUT + 5.0,
+             what="the pilot_gone failsafe")
+    left = next(e for e in console.events if e.source == "access" and e.code == "pilot_left")
+    fired = next(e for e in console.events if e.source == "failsafe" and e.code == "pilot_gone")
+    assert fired.t - left.t >= PILOT_GONE_TIMEOUT - sup.cfg.console.supervise_period
+    assert fired.data["action"] == "hold"
+    assert sup.setpoints.velocity == 0.0 and sup.setpoints.yaw_rate == 0.0
+    expect(a.get_by_text("FAILSAFE: pilot_gone")).to_be_visible(timeout=5_000)
+    a.screenshot(path=str(ARTIFACTS / "console-failsafe.png"))

@@ -1,0 +1,207 @@
+"""``ucat-console bench ui``: the live page under load, measured in headless Chromium.
+
+The console runs as it does at the pool (supervisor on the simulated robot in real time,
+armed and swimming; web page on a free loopback port) with ``pages`` headless Chromium
+pages open on it. After a warm-up, for ``duration`` seconds:
+
+* pose updates per second reaching each page: the app's probe element (``probe=True``)
+  changes in the same message batch as every pose update and carries the update's
+  sequence number; the page counts distinct numbers (a MutationObserver);
+* plot refreshes per second: the page counts uPlot redraws (its ``clearRect`` calls on
+  canvases inside ``.uplot``) per chart;
+* telemetry-message-to-page latency: the probe carries the wall-clock time at which the
+  BodyState it shows was published on the stream; the page records ``Date.now()`` when
+  the probe changes (same machine, same clock); p50 / p95 / max;
+* supervisor CPU: the console process's CPU time over the wall time (100 % = one core),
+  which includes the loop, the planner threads, the UI thread and the web server.
+
+The figures depend on the machine and its load (reported with them); they are for the
+README, never test assertions.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+import statistics
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+log = logging.getLogger(__name__)
+
+CHROMIUM = "/usr/bin/chromium"
+CHROMIUM_ARGS = [
+    "--no-sandbox", "--use-gl=swiftshader", "--enable-unsafe-swiftshader",
+    "--disable-background-networking", "--disable-component-update", "--disable-sync", "--no-first-run",
+]
+#: pages of one headless browser count as hidden: keep their timers and rendering at full rate
+UNTHROTTLED = ["--disable-background-timer-throttling", "--disable-renderer-backgrounding",
+               "--disable-backgrounding-occluded-windows"]
+
+#: page-side instrumentation, installed before the page's own scripts
+PAGE_PROBE = """
+(() => {
+  const b = window.__ucatBench = {probe: [], redraws: 0, counting: false};
+  const clear = CanvasRenderingContext2D.prototype.clearRect;
+  CanvasRenderingContext2D.prototype.clearRect = function (...args) {
+    if (b.counting && this.canvas && this.canvas.closest && this.canvas.closest('.uplot')) b.redraws++;
+    return clear.apply(this, args);
+  };
+  let last = null;
+  new MutationObserver(() => {
+    if (!b.counting) return;
+    const el = document.getElementById('ucat-probe');
+    if (!el) return;
+    const seq = el.dataset.seq;
+    if (seq !== last) { last = seq; b.probe.push([Date.now(), Number(seq), Number(el.dataset.wall)]); }
+  }).observe(document, {subtree: true, childList: true, attributes: true, characterData: true});
+})();
+"""
+
+
+_START_COUNTING = "() => { const b = window.__ucatBench; b.probe = []; b.redraws = 0; b.counting = true; }"
+
+
+def _percentile(xs: list[float], q: float) -> float:
+    if not xs:
+        return float("nan")
+    s = sorted(xs)
+    k = min(len(s) - 1, max(0, round(q * (len(s) - 1))))
+    return s[k]
+
+
+def measure_ui(duration: float = 20.0, pages: int = 2, warmup: float = 5.0, velocity: float = 0.2,
+               chromium: str = CHROMIUM, viewport: tuple[int, int] = (1400, 900)) -> dict[str, Any]:
+    """Run the console with ``pages`` headless pages and measure (module docstring)."""
+    from playwright.sync_api import sync_playwright
+
+    from ucat_console.backend.access import LOCAL
+    from ucat_console.backend.supervisor import Supervisor
+    from ucat_console.config import AppConfig, ConsoleConfig
+    from ucat_console.ui.app import ConsoleApp
+
+    if duration <= 0 or pages < 1:
+        raise ValueError(f"duration must be > 0 and pages >= 1, got {duration}, {pages}")
+    cfg = AppConfig(console=ConsoleConfig(port=0, record_on_arm=False))
+    with tempfile.TemporaryDirectory() as tmp:
+        sup = Supervisor(cfg, sessions_dir=tmp)
+        app = ConsoleApp(sup, probe=True)
+        app.start()
+        sup.start()
+        try:
+            sup.set_setpoints(LOCAL, velocity=velocity)
+            sup.arm(LOCAL)
+            with sync_playwright() as p:
+                browser = p.chromium.launch(executable_path=chromium, args=CHROMIUM_ARGS + UNTHROTTLED)
+                opened = []
+                for _ in range(pages):
+                    page = browser.new_page(viewport={"width": viewport[0], "height": viewport[1]})
+                    page.add_init_script(PAGE_PROBE)
+                    page.goto(app.url)
+                    page.wait_for_function("() => !document.body.innerText.includes('Connecting...')",
+                                           timeout=60_000)
+                    opened.append(page)
+                for page in opened:
+                    page.wait_for_function("() => document.querySelectorAll('.uplot').length >= 6",
+                                           timeout=60_000)
+                time.sleep(warmup)
+                for page in opened:
+                    page.evaluate(_START_COUNTING)
+                scene0, plots0 = app.scene.updates, app.plots.updates
+                cpu0, wall0 = time.process_time(), time.perf_counter()
+                load0 = os.getloadavg()[0]
+                time.sleep(duration)
+                cpu1, wall1 = time.process_time(), time.perf_counter()
+                scene1, plots1 = app.scene.updates, app.plots.updates
+                results = [page.evaluate("() => { const b = window.__ucatBench; b.counting = false; return b; }")
+                           for page in opened]
+                n_plots = opened[0].evaluate("() => document.querySelectorAll('.uplot').length")
+                browser.close()
+            health = sup.health()
+        finally:
+            sup.stop()
+            app.stop()
+    elapsed = wall1 - wall0
+    per_page = []
+    for r in results:
+        probe = r["probe"]
+        lat = [now - wall for now, _, wall in probe]
+        per_page.append({
+            "pose_updates_per_s": len(probe) / elapsed,
+            "plot_refresh_per_s": r["redraws"] / max(n_plots, 1) / elapsed,
+            "latency_ms_p50": _percentile(lat, 0.50),
+            "latency_ms_p95": _percentile(lat, 0.95),
+            "latency_ms_max": max(lat) if lat else float("nan"),
+            "samples": len(lat),
+        })
+    return {
+        "duration_s": elapsed,
+        "pages": per_page,
+        "plots": n_plots,
+        "server_scene_updates_per_s": (scene1 - scene0) / elapsed,
+        "server_plot_updates_per_s": (plots1 - plots0) / elapsed,
+        "configured_scene_rate": cfg.console.scene_rate,
+        "configured_plot_rate": cfg.console.plot_rate,
+        "supervisor_cpu_percent": 100.0 * (cpu1 - cpu0) / elapsed,
+        "loop_lag_max_ms": health.lag_max * 1e3,
+        "late_plans": health.late_plans,
+        "plan_overruns": health.plan_overruns,
+        "load_average_1min": load0,
+        "cpus": os.cpu_count(),
+    }
+
+
+def format_result(r: dict[str, Any]) -> str:
+    lines = [
+        f"console page benchmark: {len(r['pages'])} headless pages, {r['duration_s']:.0f} s, "
+        f"{r['cpus']} CPUs, load average {r['load_average_1min']:.1f}",
+        f"server pushes: scene {r['server_scene_updates_per_s']:.1f}/s (configured {r['configured_scene_rate']:g}), "
+        f"plots {r['server_plot_updates_per_s']:.1f}/s (configured {r['configured_plot_rate']:g})",
+        f"{'page':>4} {'pose/s':>7} {'plot/s':>7} {'lat p50':>8} {'lat p95':>8} {'lat max':>8}",
+    ]
+    for i, p in enumerate(r["pages"]):
+        lines.append(f"{i:>4} {p['pose_updates_per_s']:7.1f} {p['plot_refresh_per_s']:7.1f} "
+                     f"{p['latency_ms_p50']:6.0f}ms {p['latency_ms_p95']:6.0f}ms {p['latency_ms_max']:6.0f}ms")
+    lines.append(f"supervisor CPU {r['supervisor_cpu_percent']:.0f} % of one core; loop lag max "
+                 f"{r['loop_lag_max_ms']:.0f} ms; late plans {r['late_plans']}, hand-over overruns "
+                 f"{r['plan_overruns']}")
+    return "\n".join(lines)
+
+
+def register_bench(kinds: argparse._SubParsersAction) -> None:
+    """Add ``ui`` to ``ucat-console bench``."""
+    p = kinds.add_parser("ui", help="console page: pose and plot rates, latency, supervisor CPU (headless Chromium)")
+    p.add_argument("--duration", type=float, default=20.0, help="measured seconds (after the warm-up)")
+    p.add_argument("--pages", type=int, default=2, help="headless pages open on the console")
+    p.add_argument("--warmup", type=float, default=5.0, help="seconds before measuring")
+    p.add_argument("--chromium", default=CHROMIUM, help="Chromium executable")
+    p.add_argument("--json", type=Path, default=None, help="write the results as JSON")
+    p.set_defaults(func=run_ui)
+
+
+def run_ui(args: argparse.Namespace) -> int:
+    if args.json is not None and not args.json.parent.exists():
+        raise ValueError(f"--json: directory {args.json.parent} does not exist")
+    if not Path(args.chromium).exists():
+        raise ValueError(f"--chromium: {args.chromium} not found")
+    r = measure_ui(duration=args.duration, pages=args.pages, warmup=args.warmup, chromium=args.chromium)
+    print(format_result(r))
+    if args.json is not None:
+        args.json.write_text(json.dumps(r, indent=2))
+        print(f"wrote {args.json}")
+    return 0
+
+
+def summary(r: dict[str, Any]) -> dict[str, float]:
+    """The figures the README quotes (means over the pages)."""
+    pages = r["pages"]
+    return {
+        "pose_updates_per_s": statistics.fmean(p["pose_updates_per_s"] for p in pages),
+        "plot_refresh_per_s": statistics.fmean(p["plot_refresh_per_s"] for p in pages),
+        "latency_ms_p95": max(p["latency_ms_p95"] for p in pages),
+        "supervisor_cpu_percent": r["supervisor_cpu_percent"],
+    }

@@ -1,0 +1,125 @@
+"""``ucat-console run``: the console (supervisor, robot, web page), or a headless run.
+
+    ucat-console run                         # simulated robot, page on http://127.0.0.1:8080
+    ucat-console run --config pool.toml --port 0
+    ucat-console run --headless --duration 60 --mode mpc_sync --velocity 0.2 --depth 1 --record
+
+With the page, the motors stay disarmed until the pilot (the page that entered the token
+printed below) arms them. ``--headless`` runs without a page and arms at once with the
+given setpoints, for ``--duration`` seconds of robot time (real time; ``--fast`` runs the
+simulator as fast as it goes). Ctrl-C disarms, stops the motors and closes the files.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import signal
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from ucat_console.backend.loop.config import MODES
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("run", help="run the console: supervisor, robot (simulated by default), web page")
+    p.add_argument("--config", type=Path, default=None, metavar="FILE", help="configuration (TOML)")
+    p.add_argument("--host", default=None, help="address to bind (default 127.0.0.1; others are warned about)")
+    p.add_argument("--port", type=int, default=None, help="port (default 8080; 0: any free port)")
+    p.add_argument("--headless", action="store_true", help="no web page: arm at once and run --duration s")
+    p.add_argument("--fast", action="store_true", help="headless simulator runs as fast as it can")
+    p.add_argument("--duration", type=float, default=None, metavar="S", help="stop after S s of robot time")
+    p.add_argument("--mode", choices=MODES, default=None, help="fin controller")
+    p.add_argument("--velocity", type=float, default=None, help="forward velocity setpoint, m/s")
+    p.add_argument("--depth", type=float, default=None, help="depth setpoint, m")
+    p.add_argument("--yaw-rate", type=float, default=None, help="yaw rate setpoint, rad/s")
+    p.add_argument("--record", action="store_true", help="record the whole run")
+    p.set_defaults(func=run)
+
+
+def _config(args: argparse.Namespace) -> Any:
+    from ucat_console.config import load_config
+
+    cfg = load_config(args.config)
+    console = cfg.console
+    if args.host is not None:
+        console = console.replace(host=args.host)
+    if args.port is not None:
+        console = console.replace(port=args.port)
+    loop = cfg.loop if args.mode is None else cfg.loop.replace(mode=args.mode)
+    return cfg.replace(console=console, loop=loop)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ucat_console.backend.access import LOCAL
+    from ucat_console.backend.loop.clock import SimulatedClock
+    from ucat_console.backend.supervisor import Supervisor
+    from ucat_console.telemetry import channels as ch
+    from ucat_console.ui.app import is_loopback
+
+    if args.duration is not None and (not math.isfinite(args.duration) or args.duration <= 0):
+        raise ValueError(f"--duration: expected a positive number of seconds, got {args.duration}")
+    if args.fast and not args.headless:
+        raise ValueError("--fast: only with --headless")
+    cfg = _config(args)
+    if args.fast and cfg.robot != "sim":
+        raise ValueError("--fast: only with the simulated robot")
+    if not args.headless and not is_loopback(cfg.console.host):
+        print(f"WARNING: binding to {cfg.console.host}: the page is reachable from other machines "
+              "(control still needs the pilot token)", file=sys.stderr)
+
+    def on_term(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, on_term)
+    sup = Supervisor(cfg, clock=SimulatedClock() if args.fast else None)
+    app = None
+    last_power: list[Any] = [None]
+    sup.stream.subscribe(lambda c, m: last_power.__setitem__(0, m), [ch.POWER])
+    try:
+        sup.set_setpoints(LOCAL, velocity=args.velocity, depth=args.depth, yaw_rate=args.yaw_rate)
+        if not args.headless:
+            from ucat_console.ui.app import ConsoleApp
+
+            app = ConsoleApp(sup)
+            app.start()
+        sup.start()
+        if args.record:
+            print(f"recording session {sup.start_recording(LOCAL)}")
+        if app is not None:
+            print(f"U-CAT console on {app.url}  (port {app.port})")
+            print(f"pilot token: {sup.access.token}")
+        else:
+            sup.arm(LOCAL)
+            print(f"headless run: mode {sup.mode}, setpoints {sup.setpoints}, motors armed")
+        period = cfg.console.health_period
+        next_health = time.monotonic() + period
+        while sup.running:
+            if args.duration is not None and sup.loop.time >= args.duration:
+                break
+            time.sleep(0.1 if not args.fast else 0.02)
+            if time.monotonic() >= next_health:
+                next_health += period
+                print(sup.health().line(), flush=True)
+        if sup.fault:
+            print(f"the closed loop stopped: {sup.fault}", file=sys.stderr)
+    except KeyboardInterrupt:
+        print("\nstopping: disarming and closing files", file=sys.stderr)
+    finally:
+        paths = sup.recorder.paths
+        h = sup.health()
+        sup.stop()
+        if app is not None:
+            app.stop()
+        signal.signal(signal.SIGTERM, previous)
+    p = last_power[0]
+    print(h.line())
+    if p is not None:
+        epm = f"{p.energy_per_metre:.1f} J/m" if math.isfinite(p.energy_per_metre) else "n/a"
+        print(f"distance {p.distance:.2f} m, energy {p.energy:.1f} J, energy per metre {epm}, "
+              f"mean power {p.mean_total:.2f} W")
+    for path in paths:
+        print(f"recorded {path}")
+    return 1 if sup.fault else 0

@@ -1,0 +1,194 @@
+"""The whole application's configuration: one frozen :class:`AppConfig`, TOML in and out.
+
+:class:`AppConfig` composes the blocks defined beside the code that uses them (the
+controller's ``mpc``, ``body``, ``baseline``, ``executor``, ``power``; the closed loop's
+``loop``; the simulated robot's ``plant``; the ``recorder``) with the console's own
+blocks defined here: ``console`` (web server, plots, supervision), ``access`` (pilot
+token) and ``failsafe`` (one rule per failsafe). ``robot`` picks the robot the
+supervisor drives: ``"sim"`` (the in-process simulator) or ``"rig"`` (the device drivers).
+
+One TOML file configures a run; every table is optional::
+
+    robot = "sim"
+    [mpc]
+    lam_st = 2.0
+    [loop]
+    mode = "mpc_sync"
+    [failsafe.pilot_gone]
+    action = "surface"
+    timeout = 3.0
+
+The controller blocks are top-level tables only: ``[loop]`` holds the loop's own values,
+and the :class:`LoopConfig` handed to the closed loop (``app.loop``) always carries the
+top-level ``mpc``, ``body``, ``baseline``, ``executor`` and ``power``. Errors name the
+dotted key and the allowed range.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Self
+
+import tomli_w
+
+from ucat_console.backend.loop.config import LoopConfig
+from ucat_console.backend.sessions.recorder import RecorderConfig
+from ucat_console.backend.sim.params import PlantConfig
+from ucat_console.control.params import (
+    BaselineConfig,
+    BodyConfig,
+    ExecutorConfig,
+    MpcConfig,
+    PowerConfig,
+    _Config,
+)
+from ucat_console.typedconf import from_dict, param, to_dict
+
+#: robots the supervisor can drive
+ROBOTS = ("sim", "rig")
+#: what a failsafe does when it triggers
+FAILSAFE_ACTIONS = ("hold", "surface", "disarm", "warn")
+#: the controller blocks shared by the app (top level) and the loop (nested)
+LOOP_BLOCKS = ("mpc", "baseline", "body", "executor", "power")
+
+
+@dataclass(frozen=True)
+class ConsoleConfig(_Config):
+    """The console process: web server, live view, supervision (console.md)."""
+
+    host: str = param(
+        "127.0.0.1", doc="address the web server binds; anything but loopback is warned about"
+    )
+    port: int = param(8080, lo=0, hi=65535, doc="web server port (0: any free port)")
+    scene_rate: float = param(30.0, lo=1.0, hi=60.0, unit="Hz", doc="3-D view update rate")
+    plot_rate: float = param(10.0, lo=1.0, hi=30.0, unit="Hz", doc="plot refresh rate")
+    history: float = param(30.0, lo=5.0, hi=600.0, unit="s", doc="initial plot history window")
+    shadows: bool = param(False, doc="shadows in the 3-D view (costly where the browser renders in software)")
+    environment_map: bool = param(
+        False, doc="image-based lighting in the 3-D view (costly where the browser renders in software)"
+    )
+    max_history: float = param(600.0, lo=5.0, hi=3600.0, unit="s", doc="longest history window")
+    max_plot_points: int = param(
+        600, lo=50, hi=10_000, doc="points per series sent on each plot refresh (longer windows are decimated)"
+    )
+    trail_points: int = param(600, lo=10, hi=100_000, doc="points in the 3-D trail")
+    trail_spacing: float = param(0.05, lo=0.001, hi=10.0, unit="m", doc="distance between trail points")
+    supervise_period: float = param(
+        0.05, lo=0.005, hi=0.5, unit="s",
+        doc="the loop runs in chunks of this length; arming, failsafes and status act between chunks",
+    )
+    health_period: float = param(5.0, lo=0.5, hi=3600.0, unit="s", doc="terminal health line period")
+    record_on_arm: bool = param(True, doc="start recording when the motors are armed")
+    record_tail: float = param(
+        5.0, lo=0.0, hi=3600.0, unit="s",
+        doc="a recording started by arming stops this long after disarming",
+    )
+    sessions_dir: str = param("", doc="where recordings go; empty: sessions/ at the project root")
+    sim_depth: float = param(0.5, lo=0.0, hi=100.0, unit="m", doc="depth the simulated robot starts at")
+
+
+@dataclass(frozen=True)
+class AccessConfig(_Config):
+    """One pilot, everyone else read-only (console.md, Safety and access)."""
+
+    token: str = param("", doc="pilot token; empty: a new random token at every start")
+    max_failures: int = param(5, lo=1, hi=1000, doc="wrong tokens before token entry is locked")
+    lockout: float = param(30.0, lo=0.0, hi=3600.0, unit="s", doc="how long token entry stays locked")
+    confirm_timeout: float = param(
+        20.0, lo=1.0, hi=600.0, unit="s", doc="an arm request must be confirmed within this time"
+    )
+
+    def _check(self) -> None:
+        if self.token and len(self.token) < 8:
+            raise ValueError(f"token: a fixed token needs at least 8 characters, got {len(self.token)}")
+
+
+@dataclass(frozen=True)
+class FailsafeRule(_Config):
+    """What one failsafe does, and after how long its cause triggers it."""
+
+    action: str = param(
+        "hold", choices=FAILSAFE_ACTIONS,
+        doc="hold: stop and hold the present depth; surface: stop and rise to 0 m; "
+        "disarm: motors off; warn: show and record only",
+    )
+    timeout: float = param(2.0, lo=0.0, hi=3600.0, unit="s", doc="how long the cause lasts before it triggers")
+
+
+@dataclass(frozen=True)
+class FailsafeConfig(_Config):
+    """Every failsafe; each is shown, recorded, and latched until its cause clears."""
+
+    pilot_gone: FailsafeRule = FailsafeRule("hold", 2.0)
+    imu: FailsafeRule = FailsafeRule("disarm", 1.0)
+    dvl: FailsafeRule = FailsafeRule("hold", 2.0)
+    depth: FailsafeRule = FailsafeRule("disarm", 1.0)
+    motor: FailsafeRule = FailsafeRule("disarm", 0.0)
+    planner_late: FailsafeRule = FailsafeRule("hold", 10.0)
+    late_plans: int = param(
+        10, lo=1, hi=100_000, doc="late plans within planner_late.timeout that trigger planner_late"
+    )
+
+
+@dataclass(frozen=True)
+class AppConfig(_Config):
+    """Everything one run of the console needs (module docstring)."""
+
+    robot: str = param("sim", choices=ROBOTS, doc="the robot to drive: the simulator or the device rig")
+    mpc: MpcConfig = MpcConfig()
+    baseline: BaselineConfig = BaselineConfig()
+    body: BodyConfig = BodyConfig()
+    executor: ExecutorConfig = ExecutorConfig()
+    power: PowerConfig = PowerConfig()
+    loop: LoopConfig = LoopConfig()
+    plant: PlantConfig = PlantConfig()
+    recorder: RecorderConfig = RecorderConfig()
+    console: ConsoleConfig = ConsoleConfig()
+    access: AccessConfig = AccessConfig()
+    failsafe: FailsafeConfig = FailsafeConfig()
+
+    def _check(self) -> None:
+        # the loop always runs the app's controller blocks
+        nested = {name: getattr(self, name) for name in LOOP_BLOCKS}
+        if any(getattr(self.loop, k) != v for k, v in nested.items()):
+            object.__setattr__(self, "loop", self.loop.replace(**nested))
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Self:
+        loop = data.get("loop") if isinstance(data, dict) else None
+        if isinstance(loop, dict):
+            for name in LOOP_BLOCKS:
+                if name in loop:
+                    raise ValueError(f"loop.{name}: set it in the top-level [{name}] table")
+        return from_dict(cls, data)
+
+    @classmethod
+    def from_toml(cls, path: str | Path) -> Self:
+        p = Path(path)
+        try:
+            with p.open("rb") as fh:
+                data = tomllib.load(fh)
+        except FileNotFoundError:
+            raise ValueError(f"{p}: configuration file not found") from None
+        except tomllib.TOMLDecodeError as e:
+            raise ValueError(f"{p}: not valid TOML: {e}") from None
+        try:
+            return cls.from_dict(data)
+        except ValueError as e:
+            raise ValueError(f"{p}: {e}") from None
+
+    def to_dict(self) -> dict[str, Any]:
+        d = to_dict(self)
+        for name in LOOP_BLOCKS:
+            d["loop"].pop(name, None)
+        return d
+
+    def to_toml(self) -> str:
+        return tomli_w.dumps(self.to_dict())
+
+
+def load_config(path: str | Path | None) -> AppConfig:
+    """The configuration in ``path`` (defaults everywhere when None)."""
+    return AppConfig() if path is None else AppConfig.from_toml(path)

@@ -1,0 +1,237 @@
+"""Live plots: a stream subscriber fills fixed-size ring buffers; uPlot charts show a window.
+
+:class:`PlotFeeder` subscribes to the telemetry stream and keeps only the latest value of
+each plotted quantity (O(1) per message, whatever the rate). At each refresh the UI thread
+calls :meth:`PlotFeeder.sample`, which appends one row (time, values) to a
+:class:`RingBuffer` of fixed capacity (the longest history window times the refresh
+rate). :class:`LivePlots` then sends the rows of the chosen history window, decimated to
+at most ``max_plot_points`` per series: the size of a plot update is bounded by the
+configuration, never by the length of the session.
+
+Charts (one shared time axis, seconds of stream time, with synchronised cursors):
+
+* Strouhal number of each fin's last plan, the optimal corridor shaded (a uPlot band);
+* depth and its target; forward velocity and its target; yaw rate and its target;
+* power per fin and in total, with the running mean of the total;
+* energy per metre travelled.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from ucat_console.telemetry import channels as ch
+from ucat_console.telemetry.messages import BodyState, FinPlan, Power, Setpoints
+
+N_FINS = ch.N_FINS
+
+#: the columns of a row
+COLUMNS: tuple[str, ...] = (
+    "t",
+    *(f"st{i}" for i in range(N_FINS)),
+    "depth", "depth_sp",
+    "velocity", "velocity_sp",
+    "yaw_rate", "yaw_rate_sp",
+    *(f"p{i}" for i in range(N_FINS)),
+    "p_total", "p_mean",
+    "energy_per_metre",
+)
+COL = {name: i for i, name in enumerate(COLUMNS)}
+#: the channels the feeder reads
+CHANNELS = (ch.BODY_STATE, ch.SETPOINTS, ch.POWER, *(ch.fin_plan(i) for i in range(N_FINS)))
+
+FIN_COLOURS = ("#d62728", "#1f77b4", "#2ca02c", "#ff7f0e")
+_PLANS = {ch.fin_plan(i): i for i in range(N_FINS)}
+
+
+class RingBuffer:
+    """A fixed number of rows of floats; the oldest row is overwritten when full."""
+
+    def __init__(self, capacity: int, columns: int) -> None:
+        if capacity < 1 or columns < 1:
+            raise ValueError(f"capacity and columns must be >= 1, got {capacity}, {columns}")
+        self._data = np.full((capacity, columns), np.nan)
+        self._next = 0
+        self._count = 0
+        self._lock = threading.Lock()
+
+    @property
+    def capacity(self) -> int:
+        return self._data.shape[0]
+
+    def __len__(self) -> int:
+        return self._count
+
+    def append(self, row: Sequence[float]) -> None:
+        with self._lock:
+            self._data[self._next] = row
+            self._next = (self._next + 1) % self._data.shape[0]
+            self._count = min(self._count + 1, self._data.shape[0])
+
+    def last(self, n: int, max_points: int | None = None) -> np.ndarray:
+        """The last ``n`` rows, oldest first (a copy), keeping at most ``max_points`` of
+        them: every k-th row counted back from the newest, so the newest is always shown."""
+        with self._lock:
+            n = max(0, min(int(n), self._count))
+            cap = self._data.shape[0]
+            idx = (self._next - n + np.arange(n)) % cap
+            if max_points is not None and n > max_points > 0:
+                step = math.ceil(n / max_points)
+                idx = idx[::-1][::step][::-1]
+            return self._data[idx].copy()
+
+
+class PlotFeeder:
+    """Stream subscriber holding the latest plotted values; rows into a ring buffer."""
+
+    def __init__(self, capacity: int) -> None:
+        self.buffer = RingBuffer(capacity, len(COLUMNS))
+        self._latest = [math.nan] * len(COLUMNS)
+        self._t_last_row = -math.inf
+
+    @property
+    def latest(self) -> list[float]:
+        return list(self._latest)
+
+    def on_message(self, channel: str, msg: Any) -> None:
+        row = self._latest
+        fin = _PLANS.get(channel)
+        if fin is not None:
+            plan: FinPlan = msg
+            row[1 + fin] = plan.st
+            return
+        if channel == ch.BODY_STATE:
+            b: BodyState = msg
+            row[0] = b.t
+            row[COL["depth"]] = b.depth
+            row[COL["velocity"]] = b.velocity[0]
+            row[COL["yaw_rate"]] = b.rates[2]
+        elif channel == ch.SETPOINTS:
+            s: Setpoints = msg
+            row[COL["depth_sp"]] = s.depth
+            row[COL["velocity_sp"]] = s.velocity
+            row[COL["yaw_rate_sp"]] = s.yaw_rate
+        elif channel == ch.POWER:
+            p: Power = msg
+            base = COL["p0"]
+            for i in range(N_FINS):
+                row[base + i] = p.per_fin[i]
+            row[COL["p_total"]] = p.total
+            row[COL["p_mean"]] = p.mean_total
+            row[COL["energy_per_metre"]] = p.energy_per_metre
+        if msg.t > row[0] or row[0] != row[0]:
+            row[0] = msg.t
+
+    def sample(self) -> bool:
+        """Append the latest values as one row; False when no time has passed since the last."""
+        row = list(self._latest)
+        t = row[0]
+        if not t > self._t_last_row:  # NaN or not advanced
+            return False
+        self._t_last_row = t
+        self.buffer.append(row)
+        return True
+
+    def reset(self) -> None:
+        """Forget everything (e.g. a new source starts from t = 0)."""
+        self.buffer = RingBuffer(self.buffer.capacity, len(COLUMNS))
+        self._latest = [math.nan] * len(COLUMNS)
+        self._t_last_row = -math.inf
+
+
+def filled(a: np.ndarray) -> np.ndarray:
+    """``a`` with NaN replaced by the last finite value before it (leading NaN by the first
+    finite value; zeros when there is none): uPlot takes NaN for data, not for a gap."""
+    ok = np.isfinite(a)
+    if ok.all():
+        return a
+    if not ok.any():
+        return np.zeros_like(a)
+    idx = np.where(ok, np.arange(len(a)), 0)
+    np.maximum.accumulate(idx, out=idx)
+    out = a[idx]
+    first = int(np.argmax(ok))
+    out[:first] = a[first]
+    return out
+
+
+def _series(label: str, stroke: str, width: float = 1.5, dash: tuple[float, ...] | None = None) -> dict:
+    s: dict[str, Any] = {"label": label, "stroke": stroke, "width": width, "points": {"show": False}}
+    if dash:
+        s["dash"] = dash
+    return s
+
+
+_X = {"label": "t (s)"}
+_SCALES = {"x": {"time": False}}
+_CURSOR = {"sync": {"key": "ucat"}}
+
+
+class LivePlots:
+    """The uPlot charts of the live view (server-wide: every page sees the same plots)."""
+
+    def __init__(self, gui: Any, feeder: PlotFeeder, *, rate: float, max_points: int,
+                 corridor: Callable[[], tuple[float, float]], height: int = 170) -> None:
+        self.feeder = feeder
+        self.rate = float(rate)
+        self.max_points = int(max_points)
+        self.corridor = corridor
+        self.updates = 0
+        empty = np.zeros(0)
+        fins = range(N_FINS)
+        common = dict(scales=_SCALES, cursor=_CURSOR, height=height)
+        self.st = gui.add_uplot(
+            (empty,) * (2 + N_FINS + 1),
+            (_X, _series("St high", "#2ca02c", 1.0, (4, 4)), _series("St low", "#2ca02c", 1.0, (4, 4)),
+             *(_series(f"St fin {i}", FIN_COLOURS[i]) for i in fins)),
+            bands=({"series": (1, 2), "fill": "rgba(44, 160, 44, 0.15)"},),
+            title="Strouhal number per fin (corridor shaded)",
+            axes=({}, {"label": "St"}), **common,
+        )
+        self.depth = gui.add_uplot(
+            (empty,) * 3, (_X, _series("depth", "#1f77b4"), _series("target", "#555", 1.0, (6, 3))),
+            title="Depth (m)", axes=({}, {"label": "m"}), **common,
+        )
+        self.velocity = gui.add_uplot(
+            (empty,) * 3, (_X, _series("u", "#d62728"), _series("target", "#555", 1.0, (6, 3))),
+            title="Forward velocity (m/s)", axes=({}, {"label": "m/s"}), **common,
+        )
+        self.yaw_rate = gui.add_uplot(
+            (empty,) * 3, (_X, _series("r", "#9467bd"), _series("target", "#555", 1.0, (6, 3))),
+            title="Yaw rate (rad/s)", axes=({}, {"label": "rad/s"}), **common,
+        )
+        self.power = gui.add_uplot(
+            (empty,) * (1 + N_FINS + 2),
+            (_X, *(_series(f"fin {i}", FIN_COLOURS[i], 1.0) for i in fins),
+             _series("total", "#000", 2.0), _series("running mean", "#8c564b", 1.5, (6, 3))),
+            title="Power (W)", axes=({}, {"label": "W"}), **common,
+        )
+        self.energy = gui.add_uplot(
+            (empty,) * 2, (_X, _series("energy per metre", "#17becf")),
+            title="Energy per metre (J/m)", axes=({}, {"label": "J/m"}), **common,
+        )
+
+    def rows(self, window: float) -> np.ndarray:
+        """The rows of the last ``window`` seconds, decimated to ``max_points``."""
+        return self.feeder.buffer.last(int(math.ceil(window * self.rate)) + 1, self.max_points)
+
+    def refresh(self, window: float) -> None:
+        """Send the last ``window`` seconds to every page."""
+        r = self.rows(window)
+        for j in range(1, r.shape[1]):
+            r[:, j] = filled(r[:, j])
+        t = r[:, 0]
+        lo, hi = self.corridor()
+        c = COL
+        self.st.data = (t, np.full_like(t, hi), np.full_like(t, lo),
+                        *(r[:, c[f"st{i}"]] for i in range(N_FINS)))
+        self.depth.data = (t, r[:, c["depth"]], r[:, c["depth_sp"]])
+        self.velocity.data = (t, r[:, c["velocity"]], r[:, c["velocity_sp"]])
+        self.yaw_rate.data = (t, r[:, c["yaw_rate"]], r[:, c["yaw_rate_sp"]])
+        self.power.data = (t, *(r[:, c[f"p{i}"]] for i in range(N_FINS)), r[:, c["p_total"]], r[:, c["p_mean"]])
+        self.energy.data = (t, r[:, c["energy_per_metre"]])
+        self.updates += 1
