@@ -2,7 +2,7 @@
 
 :class:`AppConfig` composes the blocks defined beside the code that uses them (the
 controller's ``mpc``, ``body``, ``baseline``, ``executor``, ``power``; the closed loop's
-``loop``; the simulated robot's ``plant``; the ``recorder``) with the console's own
+``loop``; the simulated robot's ``plant``; the ``recorder``; the drivers' ``devices``) with the console's own
 blocks defined here: ``console`` (web server, plots, supervision), ``access`` (pilot
 token) and ``failsafe`` (one rule per failsafe). ``robot`` picks the robot the
 supervisor drives: ``"sim"`` (the in-process simulator) or ``"rig"`` (the device drivers).
@@ -33,6 +33,7 @@ from typing import Any, Self
 
 import tomli_w
 
+from ucat_console.backend.devices.config import DevicesConfig
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.backend.sessions.recorder import RecorderConfig
 from ucat_console.backend.sim.params import PlantConfig
@@ -148,6 +149,7 @@ class AppConfig(_Config):
     console: ConsoleConfig = ConsoleConfig()
     access: AccessConfig = AccessConfig()
     failsafe: FailsafeConfig = FailsafeConfig()
+    devices: DevicesConfig = DevicesConfig()
 
     def _check(self) -> None:
         # the loop always runs the app's controller blocks

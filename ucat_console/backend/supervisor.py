@@ -34,7 +34,6 @@ rig, ``ucat_console.backend.rig.build_robot_io``).
 
 from __future__ import annotations
 
-import inspect
 import logging
 import math
 import queue
@@ -90,14 +89,9 @@ def sim_robot(cfg: AppConfig, events: EventSink) -> tuple[RobotIO, Callable[[], 
 
 def rig_robot(cfg: AppConfig, events: EventSink) -> tuple[RobotIO, Callable[[], None]]:
     """The device rig (drivers on emulators or the robot), from ``backend.rig``."""
-    try:
-        from ucat_console.backend import rig  # type: ignore[attr-defined]
-    except ImportError as e:
-        raise ValueError(f"robot: 'rig' is not available in this installation ({e})") from None
-    build = rig.build_robot_io
-    if "event_sink" in inspect.signature(build).parameters:
-        return build(cfg, event_sink=events)
-    return build(cfg)
+    from ucat_console.backend import rig
+
+    return rig.build_robot_io(cfg, event_sink=events)
 
 
 ROBOT_FACTORIES: dict[str, RobotFactory] = {"sim": sim_robot, "rig": rig_robot}

@@ -34,6 +34,8 @@ def main(argv: list[str] | None = None) -> int:
         level=logging.DEBUG if args.verbose else logging.INFO,
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
     )
+    if not args.verbose:  # the CANopen stack logs every NMT step at INFO
+        logging.getLogger("canopen").setLevel(logging.WARNING)
     try:
         return int(args.func(args) or 0)
     except ValueError as e:

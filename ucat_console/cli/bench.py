@@ -35,8 +35,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     q.set_defaults(func=run_sim)
 
     from ucat_console.bench import sessions as bench_sessions
+    from ucat_console.bench import ui as bench_ui
 
     bench_sessions.register(kinds)
+    bench_ui.register_bench(kinds)
 
 
 def run_mpc(args: argparse.Namespace) -> int:

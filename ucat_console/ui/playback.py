@@ -1,0 +1,597 @@
+"""The review panel: browse recorded sessions, play them back, mark them, replay them with
+other MPC weights.
+
+Playback is the other end of the telemetry stream: a
+:class:`~ucat_console.backend.sessions.player.Player` publishes a session onto a
+:class:`~ucat_console.telemetry.TelemetryStream` of its own, and the review view is the
+live view's code on that stream -- a :class:`~ucat_console.ui.scene.RobotScene` (its nodes
+under ``/review``, beside the live vehicle) and :class:`~ucat_console.ui.plots.LivePlots`
+with their :class:`~ucat_console.ui.plots.PlotFeeder` (in a "Review" tab of the plot
+panel). The live view keeps its own stream, scene and plots and never stops.
+
+Rows of the review plots are taken on the recording's clock (one row per
+``1 / plot_rate`` s of stream time, holding every message up to that time,
+:class:`StreamSampler`), so the plots do not depend on the playback speed. After a jump
+(seek, step back, event) the plot buffer is rebuilt from the file for the history window
+before the new position.
+
+Playback controls do not move the robot, so every page may use them; the review is shared
+by every page (like the live view). The player's own thread plays; a small UI thread here
+pushes the review scene (on each new body state, at most ``scene_rate``), the plots (at
+``plot_rate``) and the timeline and status (4 Hz) while a session is open.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+from ucat_console.backend.sessions import files, index, repair
+from ucat_console.backend.sessions.markers import Marker
+from ucat_console.backend.sessions.player import MAX_SPEED, MIN_SPEED, Player, check_speed
+from ucat_console.backend.sessions.reader import SessionReader
+from ucat_console.backend.sessions.replay import ReplayResult, counterfactual, parse_weights
+from ucat_console.backend.sim.params import PlantConfig
+from ucat_console.telemetry import channels as ch
+from ucat_console.telemetry.events import Event
+from ucat_console.telemetry.messages import BodyState, FinState
+from ucat_console.telemetry.stream import TelemetryStream
+from ucat_console.ui.panels import esc
+from ucat_console.ui.plots import CHANNELS as PLOT_CHANNELS
+from ucat_console.ui.plots import LivePlots, PlotFeeder
+from ucat_console.ui.scene import RobotScene
+
+log = logging.getLogger(__name__)
+
+N_FINS = ch.N_FINS
+SCENE_ROOT = "/review"
+#: where the reviewed vehicle is drawn (viser world, m): beside the live one
+SCENE_OFFSET = (0.0, 1.2, 0.0)
+DEFAULT_WEIGHTS = "lam_st=2.0"
+_SLOW_PERIOD = 0.25  # s, timeline, status, label, trail
+_TICK = 1.0 / 30.0  # s, UI thread period
+_GLOBAL_SCENE_CALLS = frozenset({
+    "set_up_direction", "configure_default_lights", "configure_environment_map", "add_light_hemisphere",
+})
+
+
+class PrefixedScene:
+    """A viser scene API whose ``add_*`` node names are put under ``root``; the calls that set
+    up the whole scene (up direction, lights, environment) are left to the live view."""
+
+    def __init__(self, scene: Any, root: str) -> None:
+        self._scene = scene
+        self.root = root.rstrip("/")
+
+    def __getattr__(self, name: str) -> Any:
+        if name in _GLOBAL_SCENE_CALLS:
+            return lambda *args, **kwargs: None
+        attr = getattr(self._scene, name)
+        if not name.startswith("add_"):
+            return attr
+
+        def add(node: str, *args: Any, **kwargs: Any) -> Any:
+            return attr(self.root + "/" + node.lstrip("/"), *args, **kwargs)
+
+        return add
+
+
+class StreamSampler:
+    """A stream subscriber feeding a :class:`PlotFeeder` with rows on the stream's clock.
+
+    When a message newer than every message seen arrives and at least ``period`` s of stream
+    time have passed since the last row, the feeder's latest values (every message up to
+    then) become a row, before the new message is applied. The rows depend on the messages
+    and their times only, not on when or how fast they are published.
+    """
+
+    def __init__(self, feeder: PlotFeeder, period: float) -> None:
+        if not period > 0.0:
+            raise ValueError(f"period: {period!r} must be a positive number of seconds")
+        self.feeder = feeder
+        self.period = float(period)
+        self._lock = threading.Lock()
+        self._t_max = -math.inf
+        self._t_row = -math.inf
+        self.rows = 0
+
+    def on_message(self, channel: str, msg: Any) -> None:
+        with self._lock:
+            t = msg.t
+            if t > self._t_max:
+                if math.isfinite(self._t_max) and self._t_max >= self._t_row + self.period:
+                    if self.feeder.sample():
+                        self._t_row = self._t_max
+                        self.rows += 1
+                self._t_max = t
+            self.feeder.on_message(channel, msg)
+
+    def flush(self) -> bool:
+        """A row of everything seen so far (the position reached); False when nothing new."""
+        with self._lock:
+            if self.feeder.sample():
+                self._t_row = self._t_max
+                self.rows += 1
+                return True
+            return False
+
+    def reset(self) -> None:
+        with self._lock:
+            self.feeder.reset()
+            self._t_max = self._t_row = -math.inf
+
+
+def _size(n: int) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB"):
+        if n < 1024 or unit == "GiB":
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1024  # type: ignore[assignment]
+    return f"{n} B"
+
+
+def _opt(v: float | int | None, fmt: str) -> str:
+    return "?" if v is None else format(v, fmt)
+
+
+def sessions_markdown(sessions: list[index.SessionInfo]) -> str:
+    """The session browser's table."""
+    if not sessions:
+        return "No recorded sessions."
+    lines = ["| session | part | duration | size | events | notes |", "|---|---|---|---|---|---|"]
+    for s in sessions:
+        for p in s.parts:
+            dur = "truncated (repair)" if p.truncated else (f"{p.duration:.1f} s" if p.duration is not None else "?")
+            if p.error:
+                dur = "unreadable: " + p.error
+            lines.append(f"| {esc(s.session_id)} | {p.part} | {esc(dur)} | {_size(p.size)} | "
+                         f"{_opt(p.events, 'd')} | {esc(p.notes)} |")
+    return "\n".join(lines)
+
+
+def replay_markdown(result: ReplayResult, weights: dict[str, float]) -> str:
+    """Recorded and counterfactual St, force error and predicted power, per fin and overall."""
+    changed = ", ".join(f"{k} = {v:g}" for k, v in weights.items()) or "the recorded weights"
+    head = f"Counterfactual with {esc(changed)}: {len(result.rows)} plans"
+    if result.skipped:
+        head += f", {result.skipped} not replayed (see the log)"
+    if not result.rows:
+        return head + "; no fin plans in this session."
+    lines = [head, "",
+             "| fin | plans | St rec | St new | force err rec (N) | force err new (N) | P rec (W) | P new (W) |",
+             "|---|---|---|---|---|---|---|---|"]
+    for r in result.summary():
+        lines.append(
+            f"| {r['fin']} | {r['plans']} | {r['recorded_st']:.3f} | {r['st']:.3f} | "
+            f"{r['recorded_force_error']:.4f} | {r['force_error']:.4f} | "
+            f"{r['recorded_power']:.3f} | {r['power']:.3f} |"
+        )
+    return "\n".join(lines)
+
+
+def _describe(what: Event | Marker) -> str:
+    if isinstance(what, Marker):
+        return f"marker at {what.t:.2f} s: {what.note or '(no note)'}"
+    return f"event at {what.t:.2f} s: {what.source}/{what.code} {what.message}"
+
+
+class PlaybackPanel:
+    """The review tab: session browser, playback controls, markers, counterfactual replay.
+
+    ``gui``/``scene``: the viser APIs to build on (server-wide in the console);
+    ``container``: where the controls go (a tab); ``plot_container``: where the review plots go.
+    Every command is a method (``open``, ``seek``, ``set_speed``, ...) raising ValueError on
+    bad input; the page's callbacks run them through :meth:`act`, which shows a refusal.
+    """
+
+    def __init__(
+        self,
+        gui: Any,
+        scene: Any,
+        plant: PlantConfig,
+        *,
+        directory: str | Path | None = None,
+        plot_rate: float = 10.0,
+        scene_rate: float = 30.0,
+        max_plot_points: int = 400,
+        history: Callable[[], float] = lambda: 30.0,
+        max_history: float = 300.0,
+        corridor: Callable[[], tuple[float, float]] = lambda: (0.2, 0.4),
+        trail_points: int = 500,
+        trail_spacing: float = 0.02,
+        container: Any = None,
+        plot_container: Any = None,
+    ) -> None:
+        self.directory = files.sessions_dir(directory)
+        self.gui = gui
+        self.plot_rate = float(plot_rate)
+        self.scene_rate = float(scene_rate)
+        self.history = history
+        self.messages: list[str] = []
+        self.stream = TelemetryStream()
+        self.reader: SessionReader | None = None
+        self.player: Player | None = None
+        self.last_replay: ReplayResult | None = None
+        self._lock = threading.RLock()
+        self._body: BodyState | None = None
+        self._body_seq = 0
+        self._fins: list[FinState | None] = [None] * N_FINS
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.tick_errors = 0
+
+        self.root = scene.add_frame(SCENE_ROOT, show_axes=False, position=SCENE_OFFSET, visible=False)
+        self._new_scene: Callable[[], RobotScene] = lambda: RobotScene(
+            PrefixedScene(scene, SCENE_ROOT), plant, trail_points=trail_points, trail_spacing=trail_spacing)
+        self.scene = self._new_scene()
+        self.feeder = PlotFeeder(int(math.ceil(max_history * plot_rate)) + 2)
+        self.sampler = StreamSampler(self.feeder, 1.0 / self.plot_rate)
+        with _within(plot_container):
+            self.plots = LivePlots(gui, self.feeder, rate=plot_rate, max_points=max_plot_points,
+                                   corridor=corridor)
+        self._unsubs = [
+            self.stream.subscribe(self.sampler.on_message, PLOT_CHANNELS),
+            self.stream.subscribe(self._on_message, [ch.BODY_STATE, *(ch.fin_state(i) for i in range(N_FINS))]),
+        ]
+
+        with _within(container):
+            with gui.add_folder("Sessions", order=1.0):
+                self.browser = gui.add_markdown("")
+                self.choice = gui.add_dropdown("Session file", ("",), initial_value="")
+                self.refresh_list = gui.add_button("Refresh list")
+                self.open_button = gui.add_button("Open", color="blue")
+                self.repair_button = gui.add_button("Repair", color="orange",
+                                                    hint="rewrite a truncated file fully indexed (the original is kept)")
+                self.close_button = gui.add_button("Close")
+            with gui.add_folder("Playback", order=2.0):
+                self.status = gui.add_markdown("No session open.")
+                self.timeline = gui.add_slider("Time (s)", 0.0, 1.0, 0.01, 0.0, disabled=True)
+                self.play_button = gui.add_button("Play", color="green")
+                self.pause_button = gui.add_button("Pause")
+                self.speed = gui.add_number(f"Speed [{MIN_SPEED:g}, {MAX_SPEED:g}]", 1.0, step=0.1,
+                                            hint="playback speed, times real time")
+                self.loop = gui.add_checkbox("Loop", False)
+                self.step_back = gui.add_button("Frame back")
+                self.step_fwd = gui.add_button("Frame forward")
+                self.prev_button = gui.add_button("Previous event")
+                self.next_button = gui.add_button("Next event")
+                self.note = gui.add_text("Marker note", "")
+                self.marker_button = gui.add_button("Add marker", hint="saved beside the session; the file is untouched")
+                self.message = gui.add_markdown("")
+            with gui.add_folder("Counterfactual replay", order=3.0, expand_by_default=False):
+                self.weights = gui.add_text("Weights", DEFAULT_WEIGHTS,
+                                            hint="e.g. lam_st=2.0,lam_f=1.5 (lam_f, lam_st, lam_a, lam_d)")
+                self.replay_button = gui.add_button("Replay with these weights")
+                self.replay_table = gui.add_markdown("")
+        self._wire()
+        self.refresh_sessions()
+        self._set_enabled()
+
+    # ------------------------------------------------------------------ callbacks
+    def _wire(self) -> None:
+        self.refresh_list.on_click(self._page(self.refresh_sessions))
+        self.open_button.on_click(self._page(lambda: self.open(self.choice.value)))
+        self.repair_button.on_click(self._page(lambda: self.repair(self.choice.value)))
+        self.close_button.on_click(self._page(self.close_session))
+        self.timeline.on_update(self._page(lambda: self.seek(self.timeline.value)))
+        self.play_button.on_click(self._page(self.play))
+        self.pause_button.on_click(self._page(self.pause))
+        self.speed.on_update(self._page(lambda: self.set_speed(self.speed.value)))
+        self.loop.on_update(self._page(lambda: self.set_loop(self.loop.value)))
+        self.step_back.on_click(self._page(lambda: self.step(-1)))
+        self.step_fwd.on_click(self._page(lambda: self.step(1)))
+        self.prev_button.on_click(self._page(self.prev_event))
+        self.next_button.on_click(self._page(self.next_event))
+        self.marker_button.on_click(self._page(lambda: self.add_marker(self.note.value)))
+        self.replay_button.on_click(self._page(lambda: self.run_counterfactual(self.weights.value)))
+
+    def _page(self, fn: Callable[[], Any]) -> Callable[[Any], None]:
+        """A viser callback: page events only (values set from code are ignored)."""
+
+        def cb(event: Any) -> None:
+            if getattr(event, "client_id", None) is None and getattr(event, "client", None) is None:
+                return
+            self.act(fn)
+
+        return cb
+
+    def act(self, fn: Callable[[], Any]) -> bool:
+        """Run one command; a refusal (ValueError) is shown and the inputs show the state."""
+        try:
+            fn()
+        except (ValueError, RuntimeError, OSError) as e:
+            self.show(str(e), error=True)
+            self._sync_inputs()
+            return False
+        except Exception as e:
+            log.exception("playback command failed")
+            self.show(f"internal error: {e}", error=True)
+            return False
+        return True
+
+    def show(self, text: str, error: bool = False) -> None:
+        self.messages.append(text)
+        self.message.content = time.strftime("%H:%M:%S ") + ("**Refused:** " if error else "") + esc(text)
+
+    # ------------------------------------------------------------------ browser
+    def refresh_sessions(self) -> list[index.SessionInfo]:
+        sessions = index.list_sessions(self.directory)
+        self.browser.content = sessions_markdown(sessions)
+        names = tuple(p.path.name for s in sessions for p in s.parts) or ("",)
+        current = self.choice.value
+        self.choice.options = names
+        self.choice.value = current if current in names else names[-1]
+        self.repair_button.disabled = not any(p.truncated for s in sessions for p in s.parts)
+        return sessions
+
+    def _path(self, name: str) -> Path:
+        if not isinstance(name, str) or not name or "/" in name or "\\" in name:
+            raise ValueError(f"session file: {name!r} is not a file name in {self.directory}")
+        p = files.inside_sessions(self.directory / name, self.directory)
+        if not p.is_file():
+            raise ValueError(f"{name}: no such session file in {self.directory}")
+        return p
+
+    def repair(self, name: str) -> repair.RepairReport:
+        report = repair.repair(self._path(name), self.directory)
+        self.refresh_sessions()
+        if report.repaired:
+            self.show(f"repaired {name}: {report.messages} messages recovered")
+        else:
+            self.show(f"{name} was complete; nothing to repair")
+        return report
+
+    # ------------------------------------------------------------------ open / close
+    def open(self, name: str) -> Player:
+        """Open a session file for review at its start (paused)."""
+        path = self._path(name)
+        reader = SessionReader(path, self.directory)  # a truncated file: TruncatedSessionError
+        try:
+            player = Player(reader, self.stream, speed=self._checked_speed(), loop=bool(self.loop.value))
+        except BaseException:
+            reader.close()
+            raise
+        self.close_session(quiet=True)
+        with self._lock:
+            self.reader, self.player = reader, player
+            self._body, self._fins = None, [None] * N_FINS
+            self.scene = self._new_scene()  # the same node names: a fresh trail
+        self.timeline.min = 0.0
+        self.timeline.max = max(player.end - player.start, 0.01)
+        self.root.visible = True
+        self._jumped(player.seek(player.start))
+        self._set_enabled()
+        self._start_ui()
+        self.show(f"opened {name}: {reader.duration:.1f} s, notes: {reader.notes or '-'}")
+        return player
+
+    def close_session(self, quiet: bool = False) -> None:
+        with self._lock:
+            player, reader = self.player, self.reader
+            self.player = self.reader = None
+        self._stop_ui()
+        if player is not None:
+            player.close()
+        if reader is not None:
+            reader.close()
+        self.root.visible = False
+        self._set_enabled()
+        if player is not None and not quiet:
+            self.show("session closed")
+
+    def stop(self) -> None:
+        """Close the session and let go of the stream (the app is stopping)."""
+        self.close_session(quiet=True)
+        for unsub in self._unsubs:
+            unsub()
+        self._unsubs = []
+
+    # ------------------------------------------------------------------ playback
+    def _need(self) -> Player:
+        if self.player is None:
+            raise ValueError("no session open: choose one and press Open")
+        return self.player
+
+    def _checked_speed(self) -> float:
+        try:
+            return check_speed(self.speed.value)
+        except ValueError:
+            return 1.0
+
+    def play(self) -> None:
+        self._need().play()
+
+    def pause(self) -> None:
+        p = self._need()
+        p.pause()
+        self.sampler.flush()
+
+    def set_speed(self, speed: object) -> None:
+        v = check_speed(speed)  # type: ignore[arg-type]
+        if self.player is not None:
+            self.player.speed = v
+        self.speed.value = v
+
+    def set_loop(self, loop: object) -> None:
+        if not isinstance(loop, bool):
+            raise ValueError(f"loop: expected true or false, got {loop!r}")
+        if self.player is not None:
+            self.player.loop = loop
+        self.loop.value = loop
+
+    def seek(self, t: object) -> None:
+        """Go to ``t`` seconds from the session's start (clamped to the session)."""
+        if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t):
+            raise ValueError(f"time: expected a number of seconds, got {t!r}")
+        p = self._need()
+        self._moved(lambda: p.seek(p.start + float(t)))
+
+    def step(self, n: int) -> bool:
+        p = self._need()
+        if n not in (1, -1):
+            raise ValueError(f"step: {n!r} must be +1 or -1")
+        if n > 0:
+            ok = p.step(1)
+            self.sampler.flush()
+        else:
+            ok = self._moved(lambda: p.step(-1))
+        if not ok:
+            self.show("no frame " + ("after" if n > 0 else "before") + " this one")
+        return ok
+
+    def next_event(self) -> Event | Marker | None:
+        p = self._need()
+        what = self._moved(p.next_event)
+        self.show(_describe(what) if what is not None else "no event after this one")
+        return what
+
+    def prev_event(self) -> Event | Marker | None:
+        p = self._need()
+        what = self._moved(p.prev_event)
+        self.show(_describe(what) if what is not None else "no event before this one")
+        return what
+
+    def add_marker(self, note: object) -> Marker:
+        if not isinstance(note, str):
+            raise ValueError(f"marker note: expected text, got {note!r}")
+        m = self._need().add_marker(note)
+        self.note.value = ""
+        self.show(f"marker at {m.t - self._need().start:.2f} s saved to {self._need().markers.path.name}")
+        return m
+
+    def _moved(self, fn: Callable[[], Any]) -> Any:
+        """Run a jump with playback paused, then rebuild the plots before the new position."""
+        p = self._need()
+        was_playing = p.playing
+        p.pause()
+        with self._lock:
+            self.sampler.reset()
+            out = fn()
+            self._jumped(out)
+        if was_playing:
+            p.play()
+        return out
+
+    def _jumped(self, _: Any) -> None:
+        """The plots after a jump: the history window before the position, from the file."""
+        p, r = self.player, self.reader
+        if p is None or r is None:
+            return
+        self.sampler.reset()
+        window = max(float(self.history()), 1.0 / self.plot_rate)
+        pos = r.to_ns(p.position)
+        for rec in r.records(PLOT_CHANNELS, start_ns=r.to_ns(p.position - window), end_ns=pos + 1):
+            self.sampler.on_message(rec.channel, rec.message)
+        for c, rec in r.state_records_at_ns(pos, PLOT_CHANNELS).items():  # values older than the window
+            self.sampler.on_message(c, rec.message)
+        self.sampler.flush()
+
+    # ------------------------------------------------------------------ counterfactual
+    def run_counterfactual(self, text: object, seed: int | None = 0) -> ReplayResult:
+        if self.reader is None:
+            raise ValueError("no session open: choose one and press Open")
+        weights = parse_weights(text)  # type: ignore[arg-type]
+        result = counterfactual(self.reader, weights, seed=seed)
+        self.last_replay = result
+        self.replay_table.content = replay_markdown(result, weights)
+        self.show(f"counterfactual replay: {len(result.rows)} plans")
+        return result
+
+    # ------------------------------------------------------------------ stream side and UI thread
+    def _on_message(self, channel: str, msg: Any) -> None:
+        if type(msg) is BodyState:
+            self._body = msg
+            self._body_seq += 1
+        elif type(msg) is FinState:
+            self._fins[msg.fin] = msg
+
+    def _start_ui(self) -> None:
+        if self._thread is not None:
+            return
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name="playback-ui", daemon=True)
+        self._thread.start()
+
+    def _stop_ui(self) -> None:
+        self._stop.set()
+        t, self._thread = self._thread, None
+        if t is not None and t is not threading.current_thread():
+            t.join(timeout=5.0)
+
+    def _run(self) -> None:
+        next_plot = next_slow = next_scene = time.perf_counter()
+        last_seq = -1
+        last_rows = -1
+        while not self._stop.is_set():
+            now = time.perf_counter()
+            try:
+                if self._body_seq != last_seq and now >= next_scene:
+                    last_seq = self._body_seq
+                    next_scene = now + 1.0 / self.scene_rate
+                    self.tick_scene()
+                if now >= next_plot:
+                    next_plot = now + 1.0 / self.plot_rate
+                    if self.sampler.rows != last_rows:
+                        last_rows = self.sampler.rows
+                        self.plots.refresh(float(self.history()))
+                if now >= next_slow:
+                    next_slow = now + _SLOW_PERIOD
+                    self.tick_slow()
+            except Exception:
+                self.tick_errors += 1
+                log.exception("review update failed")
+            self._stop.wait(_TICK)
+
+    def tick_scene(self) -> None:
+        self.scene.update_pose(self._body, list(self._fins))
+
+    def tick_slow(self) -> None:
+        self.scene.update_label(self._body)
+        self.scene.update_trail()
+        self._sync_inputs()
+
+    def _sync_inputs(self) -> None:
+        """Timeline, speed, loop and status show the player's state (set from code)."""
+        p = self.player
+        if p is None:
+            self.status.content = "No session open."
+            return
+        rel = min(max(p.position - p.start, 0.0), p.end - p.start)
+        if abs(self.timeline.value - rel) > 1e-9:
+            self.timeline.value = rel
+        if self.speed.value != p.speed:
+            self.speed.value = p.speed
+        if self.loop.value != p.loop:
+            self.loop.value = p.loop
+        r = self.reader
+        state = "playing" if p.playing else "paused"
+        name = r.path.name if r is not None else ""
+        self.status.content = (f"**{esc(name)}** {state} at {rel:.2f} / {p.end - p.start:.2f} s, "
+                               f"speed {p.speed:g}x{', loop' if p.loop else ''}; "
+                               f"{len(p.markers.markers)} review markers")
+
+    def _set_enabled(self) -> None:
+        closed = self.player is None
+        for h in (self.timeline, self.play_button, self.pause_button, self.step_back, self.step_fwd,
+                  self.prev_button, self.next_button, self.note, self.marker_button, self.replay_button,
+                  self.close_button):
+            h.disabled = closed
+        self._sync_inputs()
+
+
+class _within:
+    """``with container:`` when one is given, nothing otherwise."""
+
+    def __init__(self, container: Any) -> None:
+        self.c = container
+
+    def __enter__(self) -> None:
+        if self.c is not None:
+            self.c.__enter__()
+
+    def __exit__(self, *exc: Any) -> None:
+        if self.c is not None:
+            self.c.__exit__(*exc)
