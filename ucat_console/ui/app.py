@@ -38,6 +38,7 @@ from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.messages import BodyState, FinPlan, FinState
 from ucat_console.ui import panels
 from ucat_console.ui.plots import CHANNELS as PLOT_CHANNELS
+from ucat_console.ui.playback import PlaybackPanel
 from ucat_console.ui.plots import LivePlots, PlotFeeder
 from ucat_console.ui.scene import RobotScene
 
@@ -105,6 +106,7 @@ class ConsoleApp:
         self.tab_mpc = self.tabs.add_tab("MPC")
         self.tab_safety = self.tabs.add_tab("Safety")
         self.tab_session = self.tabs.add_tab("Session")
+        self.tab_review = self.tabs.add_tab("Review")
         with self.tab_tuning:
             self.journal = gui.add_markdown("Journal: no changes yet.", order=100.0)
         with self.tab_mpc:
@@ -119,6 +121,14 @@ class ConsoleApp:
         with self.plot_panel.add_tab("Plots"):
             self.plots = LivePlots(gui, self.feeder, rate=cfg.plot_rate, max_points=cfg.max_plot_points,
                                    corridor=self._corridor)
+        # review of recorded sessions: the same scene and plot code on the player's stream
+        self.playback = PlaybackPanel(
+            gui, server.scene, supervisor.cfg.plant, directory=supervisor.recorder.directory,
+            plot_rate=cfg.plot_rate, scene_rate=cfg.scene_rate, max_plot_points=cfg.max_plot_points,
+            history=lambda: self.history, max_history=cfg.max_history, corridor=self._corridor,
+            trail_points=cfg.trail_points, trail_spacing=cfg.trail_spacing,
+            container=self.tab_review, plot_container=self.plot_panel.add_tab("Review plots"),
+        )
         self.plot_panel.dock_left()
         self.plot_panel.set_width(460)
 
@@ -157,6 +167,7 @@ class ConsoleApp:
             self._thread.join(timeout=5.0)
         for unsub in self._unsubs:
             unsub()
+        self.playback.stop()
         self.server.stop()
 
     # ------------------------------------------------------------------ stream side

@@ -219,6 +219,7 @@ class PlaybackPanel:
         self._body: BodyState | None = None
         self._body_seq = 0
         self._fins: list[FinState | None] = [None] * N_FINS
+        self._speed = 1.0  # the last speed accepted
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.tick_errors = 0
@@ -350,7 +351,7 @@ class PlaybackPanel:
         path = self._path(name)
         reader = SessionReader(path, self.directory)  # a truncated file: TruncatedSessionError
         try:
-            player = Player(reader, self.stream, speed=self._checked_speed(), loop=bool(self.loop.value))
+            player = Player(reader, self.stream, speed=self._speed, loop=bool(self.loop.value))
         except BaseException:
             reader.close()
             raise
@@ -395,12 +396,6 @@ class PlaybackPanel:
             raise ValueError("no session open: choose one and press Open")
         return self.player
 
-    def _checked_speed(self) -> float:
-        try:
-            return check_speed(self.speed.value)
-        except ValueError:
-            return 1.0
-
     def play(self) -> None:
         self._need().play()
 
@@ -413,7 +408,9 @@ class PlaybackPanel:
         v = check_speed(speed)  # type: ignore[arg-type]
         if self.player is not None:
             self.player.speed = v
-        self.speed.value = v
+        self._speed = v
+        if self.speed.value != v:
+            self.speed.value = v
 
     def set_loop(self, loop: object) -> None:
         if not isinstance(loop, bool):
@@ -483,10 +480,12 @@ class PlaybackPanel:
         self.sampler.reset()
         window = max(float(self.history()), 1.0 / self.plot_rate)
         pos = r.to_ns(p.position)
-        for rec in r.records(PLOT_CHANNELS, start_ns=r.to_ns(p.position - window), end_ns=pos + 1):
+        first = r.to_ns(p.position - window)
+        before = r.state_records_at_ns(first - 1, PLOT_CHANNELS)  # values from before the window
+        for rec in sorted(before.values(), key=lambda x: x.log_time_ns):
             self.sampler.on_message(rec.channel, rec.message)
-        for c, rec in r.state_records_at_ns(pos, PLOT_CHANNELS).items():  # values older than the window
-            self.sampler.on_message(c, rec.message)
+        for rec in r.records(PLOT_CHANNELS, start_ns=first, end_ns=pos + 1):
+            self.sampler.on_message(rec.channel, rec.message)
         self.sampler.flush()
 
     # ------------------------------------------------------------------ counterfactual
@@ -558,6 +557,8 @@ class PlaybackPanel:
         p = self.player
         if p is None:
             self.status.content = "No session open."
+            if self.speed.value != self._speed:
+                self.speed.value = self._speed
             return
         rel = min(max(p.position - p.start, 0.0), p.end - p.start)
         if abs(self.timeline.value - rel) > 1e-9:
