@@ -26,7 +26,6 @@ dotted key and the allowed range.
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Self
@@ -165,21 +164,6 @@ class AppConfig(_Config):
                 if name in loop:
                     raise ValueError(f"loop.{name}: set it in the top-level [{name}] table")
         return from_dict(cls, data)
-
-    @classmethod
-    def from_toml(cls, path: str | Path) -> Self:
-        p = Path(path)
-        try:
-            with p.open("rb") as fh:
-                data = tomllib.load(fh)
-        except FileNotFoundError:
-            raise ValueError(f"{p}: configuration file not found") from None
-        except tomllib.TOMLDecodeError as e:
-            raise ValueError(f"{p}: not valid TOML: {e}") from None
-        try:
-            return cls.from_dict(data)
-        except ValueError as e:
-            raise ValueError(f"{p}: {e}") from None
 
     def to_dict(self) -> dict[str, Any]:
         d = to_dict(self)

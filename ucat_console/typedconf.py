@@ -207,7 +207,8 @@ def to_dict(obj: Any) -> dict[str, Any]:
 
 
 def load_toml(cls: type[T], path: str | Path) -> T:
-    """Read a config dataclass from a TOML file, naming the file in any error."""
+    """Read a config dataclass from a TOML file, naming the file in any error (through
+    ``cls.from_dict`` when the class defines one)."""
     p = Path(path)
     try:
         with p.open("rb") as fh:
@@ -216,8 +217,9 @@ def load_toml(cls: type[T], path: str | Path) -> T:
         raise ValueError(f"{p}: configuration file not found") from None
     except tomllib.TOMLDecodeError as e:
         raise ValueError(f"{p}: not valid TOML: {e}") from None
+    build = getattr(cls, "from_dict", None) or (lambda d: from_dict(cls, d))
     try:
-        return from_dict(cls, data)
+        return build(data)
     except ValueError as e:
         raise ValueError(f"{p}: {e}") from None
 

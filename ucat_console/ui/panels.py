@@ -16,6 +16,8 @@ and each field's ``param`` metadata gives the label's range, the unit, the hint 
 
 from __future__ import annotations
 
+import contextlib
+
 import html
 import logging
 import math
@@ -113,7 +115,7 @@ class ControlPanel:
         sup = self.sup
         env = sup.cfg.loop
 
-        with _within(c.get("pilot")):
+        with within(c.get("pilot")):
             with gui.add_folder("Pilot", order=1.0):
                 self.role = gui.add_markdown("")
                 self.token = gui.add_text("Pilot token", "", hint="printed on the console's terminal at start-up")
@@ -138,7 +140,7 @@ class ControlPanel:
                 self.message = gui.add_markdown("")
 
         self.params: dict[str, Any] = {}
-        with _within(c.get("tuning")):
+        with within(c.get("tuning")):
             with gui.add_folder("Live tuning", order=10.0):
                 self.apply_tuning = gui.add_button("Apply tuning", color="blue")
                 self.revert = gui.add_button("Revert to saved")
@@ -151,7 +153,7 @@ class ControlPanel:
                             value = float(getattr(tuning[block], s.key.rpartition(".")[2]))
                             self.params[s.key] = gui.add_number(s.label, value, step=s.step, hint=s.hint)
 
-        with _within(c.get("session")):
+        with within(c.get("session")):
             with gui.add_folder("View and recording", order=20.0):
                 cfg = sup.cfg.console
                 self.history = gui.add_number(f"Plot history s [5, {cfg.max_history:g}]", float(app.history),
@@ -337,19 +339,9 @@ class ControlPanel:
 _UNSET = object()
 
 
-class _within:
-    """``with container:`` when one is given, nothing otherwise."""
-
-    def __init__(self, container: Any) -> None:
-        self.c = container
-
-    def __enter__(self) -> None:
-        if self.c is not None:
-            self.c.__enter__()
-
-    def __exit__(self, *exc: Any) -> None:
-        if self.c is not None:
-            self.c.__exit__(*exc)
+def within(container: Any) -> Any:
+    """``with within(container):`` enters the container when one is given."""
+    return contextlib.nullcontext() if container is None else container
 
 
 # ---------------------------------------------------------------------- shared panels

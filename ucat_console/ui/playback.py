@@ -40,7 +40,7 @@ from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.messages import BodyState, FinState
 from ucat_console.telemetry.stream import TelemetryStream
-from ucat_console.ui.panels import esc
+from ucat_console.ui.panels import esc, within
 from ucat_console.ui.plots import CHANNELS as PLOT_CHANNELS
 from ucat_console.ui.plots import LivePlots, PlotFeeder
 from ucat_console.ui.scene import RobotScene
@@ -230,7 +230,7 @@ class PlaybackPanel:
         self.scene = self._new_scene()
         self.feeder = PlotFeeder(int(math.ceil(max_history * plot_rate)) + 2)
         self.sampler = StreamSampler(self.feeder, 1.0 / self.plot_rate)
-        with _within(plot_container):
+        with within(plot_container):
             self.plots = LivePlots(gui, self.feeder, rate=plot_rate, max_points=max_plot_points,
                                    corridor=corridor)
         self._unsubs = [
@@ -238,7 +238,7 @@ class PlaybackPanel:
             self.stream.subscribe(self._on_message, [ch.BODY_STATE, *(ch.fin_state(i) for i in range(N_FINS))]),
         ]
 
-        with _within(container):
+        with within(container):
             with gui.add_folder("Sessions", order=1.0):
                 self.browser = gui.add_markdown("")
                 self.choice = gui.add_dropdown("Session file", ("",), initial_value="")
@@ -581,18 +581,3 @@ class PlaybackPanel:
                   self.close_button):
             h.disabled = closed
         self._sync_inputs()
-
-
-class _within:
-    """``with container:`` when one is given, nothing otherwise."""
-
-    def __init__(self, container: Any) -> None:
-        self.c = container
-
-    def __enter__(self) -> None:
-        if self.c is not None:
-            self.c.__enter__()
-
-    def __exit__(self, *exc: Any) -> None:
-        if self.c is not None:
-            self.c.__exit__(*exc)
