@@ -36,6 +36,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--depth", type=float, default=None, help="depth setpoint, m")
     p.add_argument("--yaw-rate", type=float, default=None, help="yaw rate setpoint, rad/s")
     p.add_argument("--record", action="store_true", help="record the whole run")
+    p.add_argument("--playback", default=None, metavar="FILE",
+                   help="open this session file (in the sessions directory) in the Review tab")
     p.set_defaults(func=run)
 
 
@@ -61,6 +63,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.duration is not None and (not math.isfinite(args.duration) or args.duration <= 0):
         raise ValueError(f"--duration: expected a positive number of seconds, got {args.duration}")
+    if args.playback is not None and args.headless:
+        raise ValueError("--playback: only with the web page (not --headless)")
     if args.fast and not args.headless:
         raise ValueError("--fast: only with --headless")
     cfg = _config(args)
@@ -85,6 +89,12 @@ def run(args: argparse.Namespace) -> int:
 
             app = ConsoleApp(sup)
             app.start()
+            if args.playback is not None:
+                name = Path(args.playback).name
+                if Path(args.playback).resolve().parent != app.playback.directory.resolve():
+                    raise ValueError(f"--playback: {args.playback} is not in the sessions "
+                                     f"directory {app.playback.directory}")
+                app.playback.open(name)
         sup.start()
         if args.record:
             print(f"recording session {sup.start_recording(LOCAL)}")
