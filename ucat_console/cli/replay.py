@@ -17,7 +17,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("file", metavar="FILE", help="session file or session id")
     p.add_argument("--weights", required=True, metavar="W",
                    help="changed weights, e.g. lam_st=2.0,lam_f=1.5 (lam_f, lam_st, lam_a, lam_d)")
-    p.add_argument("--seed", type=int, default=0, help="planner seed of every plan")
+    p.add_argument("--seed", type=int, default=None,
+                   help="one planner seed for every plan (default: each plan's recorded seed)")
     p.add_argument("--fins", type=int, nargs="+", default=None, metavar="FIN",
                    help="fins to replay (default: all)")
     p.add_argument("--out", type=Path, default=None, metavar="CSV", help="write every row as CSV")
@@ -48,7 +49,12 @@ def format_summary(summary: list[dict]) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from ucat_console.backend.sessions.reader import SessionReader
-    from ucat_console.backend.sessions.replay import ReplayResult, counterfactual, parse_weights
+    from ucat_console.backend.sessions.replay import (
+        ReplayResult,
+        counterfactual,
+        parse_weights,
+        recorded_seed,
+    )
     from ucat_console.cli.sessions import resolve
 
     weights = parse_weights(args.weights)
@@ -59,7 +65,8 @@ def run(args: argparse.Namespace) -> int:
     config = None
     for path in resolve(args.file, args.dir):
         with SessionReader(path, args.dir) as r:
-            res = counterfactual(r, weights, seed=args.seed, fins=args.fins)
+            res = counterfactual(r, weights, seed=recorded_seed if args.seed is None else args.seed,
+                                     fins=args.fins)
         rows += res.rows
         skipped += res.skipped
         config = res.config

@@ -82,6 +82,7 @@ class FinPlan:
     late: bool  # the plan arrived after its fin went idle
     amplitude: float = 0.0  # baseline only: theta_max, rad
     centre: float = 0.0  # baseline only: oscillation centre, rad
+    seed: int = -1  # the planner's seed for this plan (-1: none), so a replay is exact
 
 
 @dataclass(frozen=True)

@@ -34,7 +34,13 @@ from ucat_console.backend.sessions import files, index, repair
 from ucat_console.backend.sessions.markers import Marker
 from ucat_console.backend.sessions.player import MAX_SPEED, MIN_SPEED, Player, check_speed
 from ucat_console.backend.sessions.reader import SessionReader
-from ucat_console.backend.sessions.replay import ReplayResult, counterfactual, parse_weights
+from ucat_console.backend.sessions.replay import (
+    ReplayResult,
+    SeedRule,
+    counterfactual,
+    parse_weights,
+    recorded_seed,
+)
 from ucat_console.backend.sim.params import PlantConfig
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event
@@ -489,7 +495,7 @@ class PlaybackPanel:
         self.sampler.flush()
 
     # ------------------------------------------------------------------ counterfactual
-    def run_counterfactual(self, text: object, seed: int | None = 0) -> ReplayResult:
+    def run_counterfactual(self, text: object, seed: SeedRule = recorded_seed) -> ReplayResult:
         if self.reader is None:
             raise ValueError("no session open: choose one and press Open")
         weights = parse_weights(text)  # type: ignore[arg-type]

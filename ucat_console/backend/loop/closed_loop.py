@@ -504,7 +504,7 @@ class ClosedLoop:
                 cost_strouhal=outcome.cost_strouhal, cost_amplitude=outcome.cost_amplitude,
                 cost_smoothness=outcome.cost_smoothness, st=outcome.st, mean_force=outcome.mean_force,
                 solve_time=outcome.solve_time, late=late, amplitude=outcome.amplitude,
-                centre=outcome.centre,
+                centre=outcome.centre, seed=outcome.seed,
             ))
         self._handle(act, actions, t)
 

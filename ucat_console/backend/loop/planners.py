@@ -61,6 +61,7 @@ class PlanOutcome:
     solve_time: float  # s, wall clock
     amplitude: float = 0.0  # baseline only
     centre: float = 0.0  # baseline only
+    seed: int = -1  # the MPC's seed for this plan (-1: not seeded)
 
 
 def _wrapped(theta0: float) -> tuple[float, float]:
@@ -84,18 +85,23 @@ class MpcFinPlanner:
 
     def __init__(self, cfg: MpcConfig, seed: int) -> None:
         self.cfg = cfg
-        self._mpc = FinMpc(cfg, seed=seed)
+        self._mpc = FinMpc(cfg)
+        self._seed_base = seed << 32
+        self._count = 0
 
     def __call__(self, x: PlanInputs) -> PlanOutcome:
         t0 = time.perf_counter()
         theta, offset = _wrapped(x.theta0)
-        p = self._mpc.plan(x.target, x.v_body, theta, x.u_prev)
+        # every plan gets its own seed (recorded in FinPlan), so a recording replays exactly
+        seed = self._seed_base + self._count
+        self._count += 1
+        p = self._mpc.plan(x.target, x.v_body, theta, x.u_prev, seed=seed)
         c = p.cost
         return PlanOutcome(
             u=p.u, commands=_shift(p.commands, offset), cost_total=c.total, cost_force=c.force,
             cost_strouhal=c.strouhal_penalty, cost_amplitude=c.amplitude,
             cost_smoothness=c.smoothness, st=c.st, mean_force=c.mean_force,
-            solve_time=time.perf_counter() - t0,
+            solve_time=time.perf_counter() - t0, seed=seed,
         )
 
 

@@ -155,11 +155,16 @@ class ReplayResult:
 SeedRule = int | None | Callable[[FinPlan, int], int | None]
 
 
+def recorded_seed(plan: FinPlan, index: int) -> int | None:
+    """The seed the live planner used for this plan (None when it recorded none)."""
+    return plan.seed if plan.seed >= 0 else None
+
+
 def counterfactual(
     reader: SessionReader,
     weights: Mapping[str, float],
     *,
-    seed: SeedRule = 0,
+    seed: SeedRule = recorded_seed,
     base: MpcConfig | None = None,
     fins: Iterable[int] | None = None,
     start: float | None = None,
@@ -168,7 +173,8 @@ def counterfactual(
     """Re-plan every recorded FinPlan with ``weights`` changed.
 
     ``seed``: one seed for every plan, None (each fin's planner continues its random
-    stream), or a function ``(plan, index) -> seed``. ``base``: the configuration before
+    stream), or a function ``(plan, index) -> seed``; by default each plan's recorded seed,
+    so the recorded weights reproduce the recorded plans exactly. ``base``: the configuration before
     the change (default: the recorded one).
     """
     record_cfg = base if base is not None else recorded_config(reader)
