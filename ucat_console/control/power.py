@@ -29,10 +29,14 @@ from ucat_console.control.filters import LowPass
 from ucat_console.control.params import MpcConfig, PowerConfig
 
 
+def drag_coefficient(cfg: MpcConfig) -> float:
+    """k in P_drag = k |w|^3: 0.5 rho C_D A_f r_c^3."""
+    return 0.5 * cfg.rho * cfg.c_d * cfg.fin_area * cfg.r_c**3
+
+
 def drag_power(w: ArrayLike, cfg: MpcConfig) -> NDArray[np.float64]:
     """P_drag = 0.5 rho C_D A_f (r_c |w|)^3 (W) for fin rates ``w`` (rad/s)."""
-    v = cfg.r_c * np.abs(np.asarray(w, dtype=float))
-    return 0.5 * cfg.rho * cfg.c_d * cfg.fin_area * v**3
+    return drag_coefficient(cfg) * np.abs(np.asarray(w, dtype=float)) ** 3
 
 
 def fin_power(
@@ -76,8 +80,8 @@ class PowerEstimator:
     def __init__(self, pcfg: PowerConfig, mcfg: MpcConfig) -> None:
         self.pcfg = pcfg
         self.mcfg = mcfg
-        # drag_power's constant, so the per-sample update stays scalar (it runs at the PDO rate)
-        self._k_drag = 0.5 * mcfg.rho * mcfg.c_d * mcfg.fin_area * mcfg.r_c**3
+        # scalar per-sample update (it runs at the PDO rate)
+        self._k_drag = drag_coefficient(mcfg)
         self._w_lp = LowPass(pcfg.filter_tau)
         self._a_lp = LowPass(pcfg.filter_tau)
         self.reset()
