@@ -206,3 +206,34 @@ def test_closing_the_pilot_page_triggers_the_failsafe(console: Console) -> None:
     assert sup.setpoints.velocity == 0.0 and sup.setpoints.yaw_rate == 0.0
     expect(a.get_by_text("FAILSAFE: pilot_gone")).to_be_visible(timeout=5_000)
     a.screenshot(path=str(ARTIFACTS / "console-failsafe.png"))
+
+
+def test_a_recorded_session_is_reviewed_in_the_page(console: Console) -> None:
+    from ucat_console.backend.access import LOCAL
+
+    a, _ = PAGES["a"]
+    sup = console.sup
+    sup.start_recording(LOCAL, "browser review")
+    time.sleep(2.0)
+    [path] = sup.stop_recording(LOCAL)
+    panel = console.app.playback
+    panel.refresh_sessions()
+    a.get_by_role("tab", name="Review", exact=True).click()
+    expect(a.get_by_text("browser review").first).to_be_visible(timeout=5_000)  # listed, with notes
+    panel.choice.value = path.name
+    a.get_by_role("button", name="Open").click()
+    wait_for(lambda: panel.player is not None, what="the session opening")
+    expect(a.get_by_text(f"opened {path.name}").first).to_be_visible(timeout=5_000)
+    a.wait_for_function(  # the review vehicle is drawn by the live scene code
+        "() => window.__viserSceneTree.getState()['/review/ned/ucat/hull'] !== undefined", timeout=10_000
+    )
+    start = panel.player.position
+    a.get_by_role("button", name="Play").click()
+    wait_for(lambda: panel.player.position > start + 0.3, what="playback advancing")
+    a.get_by_role("button", name="Pause").click()
+    box = gui_input(a, "Speed [")
+    box.fill("9")
+    box.press("Enter")
+    expect(a.get_by_text(re.compile(r"speed: 9(\.0)? is out of range")).first).to_be_visible(timeout=5_000)
+    wait_for(lambda: panel.player.speed == 1.0, what="the speed left unchanged")
+    a.screenshot(path=str(ARTIFACTS / "console-review.png"))
