@@ -228,6 +228,14 @@ def dump_toml(obj: Any) -> str:
     return tomli_w.dumps(to_dict(obj))
 
 
+def require_below(obj: Any, lo: str, hi: str, why: str = "") -> None:
+    """Raise ValueError naming both fields unless ``obj.lo < obj.hi``."""
+    a, b = getattr(obj, lo), getattr(obj, hi)
+    if not a < b:
+        reason = f" ({why})" if why else ""
+        raise ValueError(f"{lo}/{hi}: need {lo} < {hi}{reason}, got {a} >= {b}")
+
+
 def bounded_fields(cls_or_obj: Any) -> list[dataclasses.Field]:
     """Fields that carry range metadata (what a tuning panel shows)."""
     return [f for f in dataclasses.fields(cls_or_obj) if f.metadata]

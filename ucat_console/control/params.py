@@ -10,7 +10,14 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Self
 
-from ucat_console.typedconf import dump_toml, from_dict, load_toml, param, validate
+from ucat_console.typedconf import (
+    dump_toml,
+    from_dict,
+    load_toml,
+    param,
+    require_below,
+    validate,
+)
 
 
 class _Config:
@@ -80,14 +87,9 @@ class MpcConfig(_Config):
     a_min: float = param(0.03, lo=0.0, hi=1.0, unit="m", doc="amplitude penalty threshold A_min")
 
     def _check(self) -> None:
-        if not self.d_eps < self.d_max:
-            raise ValueError(f"d_eps/d_max: need d_eps < d_max, got {self.d_eps} >= {self.d_max}")
-        if not self.w_min < self.w_max:
-            raise ValueError(f"w_min/w_max: need w_min < w_max, got {self.w_min} >= {self.w_max}")
-        if not self.st_low < self.st_high:
-            raise ValueError(
-                f"st_low/st_high: need st_low < st_high, got {self.st_low} >= {self.st_high}"
-            )
+        require_below(self, "d_eps", "d_max")
+        require_below(self, "w_min", "w_max")
+        require_below(self, "st_low", "st_high")
 
     @property
     def weights(self) -> tuple[float, float, float, float]:

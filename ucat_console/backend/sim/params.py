@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 from ucat_console.backend.devices.pressure import GRAVITY
 from ucat_console.control.params import _Config
-from ucat_console.typedconf import param
+from ucat_console.typedconf import param, require_below
 
 #: Standard gravity (m/s2), the project's one value (the pressure driver's): weight,
 #: pressure and the IMU's g unit all use it.
@@ -184,11 +184,8 @@ class FinHydroConfig(_Config):
     )
 
     def _check(self) -> None:
-        if not self.sigma_low < self.sigma_high:
-            raise ValueError(
-                "sigma_low/sigma_high: the wake factor must fall faster below its peak than "
-                f"above (sigma_low < sigma_high), got {self.sigma_low} >= {self.sigma_high}"
-            )
+        require_below(self, "sigma_low", "sigma_high",
+                      "the wake factor must fall faster below its peak than above")
 
     def resolved(self) -> FinCoefficients:
         """The coefficient set in use."""
@@ -226,10 +223,7 @@ class DvlConfig(_Config):
     )
 
     def _check(self) -> None:
-        if not self.altitude_min < self.altitude_max:
-            raise ValueError(
-                f"altitude_min/altitude_max: need min < max, got {self.altitude_min} >= {self.altitude_max}"
-            )
+        require_below(self, "altitude_min", "altitude_max")
 
 
 @dataclass(frozen=True)
