@@ -13,6 +13,7 @@ from types import SimpleNamespace
 from typing import Any, Callable
 
 import pytest
+from support import Collector, wait_for
 
 from ucat_console.backend.devices.config import DevicesConfig, SimStartConfig
 from ucat_console.backend.devices.device_robot_io import DeviceRobotIO, DeviceTime
@@ -42,38 +43,6 @@ ROOT = Path(__file__).resolve().parents[2]
 UNITS = DriveUnits(encoder_lines=512, gear_ratio=35.0)
 START_DEPTH = 1.0
 SETPOINTS = BodySetpoints(velocity=0.3, depth=1.5)
-
-
-class Sink:
-    """Thread-safe event sink."""
-
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self.events: list[Event] = []
-
-    def __call__(self, event: Event) -> None:
-        with self._lock:
-            self.events.append(event)
-
-    def find(self, source: str, codes: tuple[str, ...], after: int = 0) -> Event | None:
-        with self._lock:
-            return next((e for e in self.events[after:] if e.source == source and e.code in codes), None)
-
-    def __len__(self) -> int:
-        with self._lock:
-            return len(self.events)
-
-
-def wait_for(predicate: Callable[[], Any], timeout: float = 5.0, what: str = "condition") -> Any:
-    """Poll until ``predicate()`` is truthy; fail (not a timing assertion) if it never is."""
-    deadline = time.monotonic() + timeout
-    while True:
-        value = predicate()
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            pytest.fail(f"gave up waiting for {what}")
-        time.sleep(0.01)
 
 
 def sim_devices_config(**changes: Any) -> DevicesConfig:
@@ -132,7 +101,7 @@ def test_sim_robot_is_the_in_process_simulator_at_the_configured_start() -> None
         assert truth.depth == pytest.approx(2.5)
         assert truth.euler[2] == pytest.approx(0.5)
         assert rig_of(io) is None
-        connect_events(io, Sink())()  # nothing to connect, nothing fails
+        connect_events(io, Collector())()  # nothing to connect, nothing fails
     finally:
         close()
 
@@ -148,7 +117,7 @@ def test_simulated_robot_runs_closed_loop_through_drivers_and_emulators() -> Non
         ref_truth = ref_io.truth()
     ref_dive, ref_speed = ref_truth.depth - START_DEPTH, ref_truth.velocity[0]
 
-    sink = Sink()
+    sink = Collector()
     io, close = build_robot_io(sim_devices_config(), event_sink=sink)
     stream = TelemetryStream()
     got: dict[str, list[Any]] = {ch.IMU: [], ch.DVL: [], ch.DEPTH: []}
@@ -192,7 +161,7 @@ def test_simulated_robot_runs_closed_loop_through_drivers_and_emulators() -> Non
         # (ahead of the loop by at most the re-alignment threshold when the loop lags)
         assert all(0.0 <= r.t <= loop.time + io.config.resync_s + 0.05 for r in got[ch.IMU])
 
-        bad = [(e.source, e.code) for e in sink.events if e.level in ("error", "fatal")]
+        bad = [(e.source, e.code) for e in sink.items if e.level in ("error", "fatal")]
         assert not bad
     finally:
         loop.close()
@@ -214,7 +183,7 @@ def test_injected_fault_surfaces_as_an_event_and_the_loop_keeps_running(
     device: str, fault: str, kw: dict, source: str, codes: tuple[str, ...], end: str | None
 ) -> None:
     io, close = build_robot_io(sim_devices_config())
-    sink = Sink()
+    sink = Collector()
     connect_events(io, sink)
     loop = ClosedLoop(LoopConfig(mode="baseline"), io, clock=PacedClock(1.0), setpoints=SETPOINTS)
     runner = LoopThread(loop, 30.0)

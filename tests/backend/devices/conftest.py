@@ -2,52 +2,11 @@
 
 from __future__ import annotations
 
-import threading
-import time
 from typing import Any, Callable
 
 import pytest
-
-from ucat_console.telemetry.events import Event
-
-
-class Collector:
-    """Thread-safe list used as a reading callback or an event sink."""
-
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self._items: list[Any] = []
-
-    def __call__(self, item: Any) -> None:
-        with self._lock:
-            self._items.append(item)
-
-    @property
-    def items(self) -> list[Any]:
-        with self._lock:
-            return list(self._items)
-
-    def __len__(self) -> int:
-        with self._lock:
-            return len(self._items)
-
-    def codes(self) -> list[str]:
-        return [e.code for e in self.items if isinstance(e, Event)]
-
-    def with_code(self, code: str) -> list[Event]:
-        return [e for e in self.items if isinstance(e, Event) and e.code == code]
-
-
-def _wait_for(predicate: Callable[[], Any], timeout: float = 5.0, what: str = "condition") -> Any:
-    """Poll until ``predicate()`` is truthy; fail the test (not a timing assertion) if it never is."""
-    deadline = time.monotonic() + timeout
-    while True:
-        value = predicate()
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            pytest.fail(f"gave up waiting for {what}")
-        time.sleep(0.01)
+from support import Collector
+from support import wait_for as _wait_for
 
 
 @pytest.fixture

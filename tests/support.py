@@ -1,0 +1,55 @@
+"""Helpers shared by the tests: waiting on a condition, collecting events and readings."""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Any, Callable
+
+import pytest
+
+from ucat_console.telemetry.events import Event
+
+
+class Collector:
+    """Thread-safe list used as a reading callback or an event sink."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._items: list[Any] = []
+
+    def __call__(self, item: Any) -> None:
+        with self._lock:
+            self._items.append(item)
+
+    @property
+    def items(self) -> list[Any]:
+        with self._lock:
+            return list(self._items)
+
+    def __len__(self) -> int:
+        with self._lock:
+            return len(self._items)
+
+    def codes(self) -> list[str]:
+        return [e.code for e in self.items if isinstance(e, Event)]
+
+    def with_code(self, code: str) -> list[Event]:
+        return [e for e in self.items if isinstance(e, Event) and e.code == code]
+
+    def find(self, source: str, codes: tuple[str, ...], after: int = 0) -> Event | None:
+        """The first event from ``source`` with one of ``codes``, from item ``after`` on."""
+        return next((e for e in self.items[after:]
+                     if isinstance(e, Event) and e.source == source and e.code in codes), None)
+
+
+def wait_for(predicate: Callable[[], Any], timeout: float = 10.0, what: str = "condition") -> Any:
+    """Poll until ``predicate()`` is truthy; fail the test (not a timing assertion) if it never is."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            pytest.fail(f"gave up waiting for {what}")
+        time.sleep(0.01)
