@@ -120,7 +120,7 @@ def test_simulated_robot_runs_closed_loop_through_drivers_and_emulators() -> Non
     sink = Collector()
     io, close = build_robot_io(sim_devices_config(), event_sink=sink)
     stream = TelemetryStream()
-    got: dict[str, list[Any]] = {ch.IMU: [], ch.DVL: [], ch.DEPTH: []}
+    got: dict[str, list[Any]] = {ch.IMU: [], ch.DVL: [], ch.DEPTH: [], ch.EVENTS: [], ch.fin_state(0): []}
     stream.subscribe(lambda c, m: got[c].append(m), channels=list(got))
     loop = ClosedLoop(LoopConfig(mode="baseline"), io, stream, PacedClock(1.0), setpoints=SETPOINTS,
                       source="sim-devices")
@@ -145,7 +145,12 @@ def test_simulated_robot_runs_closed_loop_through_drivers_and_emulators() -> Non
         # (the node's servo) settles there once the loop stops commanding
         for fin, node in enumerate(io.config.epos2.node_ids):
             emulator = rig.nodes[node]
-            assert emulator.controlword_log.count(0x003F) >= 2
+            assert emulator.controlword_log.count(0x003F) >= 2, (
+                f"fin {fin}: controlwords {emulator.controlword_log}; "
+                f"loop events {[(e.t, e.source, e.code) for e in got[ch.EVENTS]]}; "
+                f"robot events {[(e.t, e.source, e.code) for e in sink.items]}; "
+                f"fin 0 states {got[ch.fin_state(0)][::10]}"
+            )
             target = commands[fin][0]
             wait_for(lambda: emulator.target_quadcounts == UNITS.to_quadcounts(target), what=f"fin {fin} target")
             wait_for(lambda: abs(rig.truth().fin_angles[fin] - target) < 2e-3, what=f"fin {fin} angle")
