@@ -21,6 +21,7 @@ playwright_api = pytest.importorskip("playwright.sync_api")
 from playwright.sync_api import Browser, Locator, Page, expect, sync_playwright  # noqa: E402
 
 from ucat_console.backend.supervisor import Supervisor  # noqa: E402
+from ucat_console.bench.ui import CHROMIUM_ARGS  # noqa: E402
 from ucat_console.config import (  # noqa: E402
     AccessConfig,
     AppConfig,
@@ -34,10 +35,6 @@ from ucat_console.ui.app import ConsoleApp  # noqa: E402
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
 CHROMIUM = os.environ.get("UCAT_CHROMIUM", "/usr/bin/chromium")
-CHROMIUM_ARGS = [
-    "--no-sandbox", "--use-gl=swiftshader", "--enable-unsafe-swiftshader",
-    "--disable-background-networking", "--disable-component-update", "--disable-sync", "--no-first-run",
-]
 ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
 TOKEN = "browser-test-token"
 PILOT_GONE_TIMEOUT = 1.5

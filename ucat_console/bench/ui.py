@@ -4,16 +4,26 @@ The console runs as it does at the pool (supervisor on the simulated robot in re
 armed and swimming; web page on a free loopback port) with ``pages`` headless Chromium
 pages open on it. After a warm-up, for ``duration`` seconds:
 
-* pose updates per second reaching each page: the app's probe element (``probe=True``)
-  changes in the same message batch as every pose update and carries the update's
-  sequence number; the page counts distinct numbers (a MutationObserver);
+* pose updates per second reaching each page, counted at two points: *delivered*, when
+  the batch carrying the update leaves viser's websocket worker for the page's main
+  thread (what the server and the network achieve), and *displayed*, when the page
+  applies it in a rendered frame (viser applies queued messages once per frame, so
+  updates that arrive between two frames are shown together: this is bounded by how fast
+  the browser renders). The app's probe element (``probe=True``) changes in the same
+  message batch as every pose update and carries the update's sequence number; the page
+  counts distinct numbers (a hook on the worker's messages; a MutationObserver);
 * plot refreshes per second: the page counts uPlot redraws (its ``clearRect`` calls on
   canvases inside ``.uplot``) per chart;
 * telemetry-message-to-page latency: the probe carries the wall-clock time at which the
   BodyState it shows was published on the stream; the page records ``Date.now()`` when
-  the probe changes (same machine, same clock); p50 / p95 / max;
+  the probe changes on screen (same machine, same clock); p50 / p95 / max;
 * supervisor CPU: the console process's CPU time over the wall time (100 % = one core),
-  which includes the loop, the planner threads, the UI thread and the web server.
+  which includes the loop, the planner threads, the UI thread, the web server and the
+  recorder (recording starts on arming, as at the pool);
+* browser CPU (Linux): the same for the Chromium processes started for the pages, split
+  into the GPU process (where software GL draws the 3-D view when there is no GPU), the
+  page renderers and the rest; with the supervisor's share it tells whether the machine
+  was saturated.
 
 The figures depend on the machine and its load (reported with them); they are for the
 README, never test assertions.
@@ -43,9 +53,24 @@ UNTHROTTLED = ["--disable-background-timer-throttling", "--disable-renderer-back
                "--disable-backgrounding-occluded-windows"]
 
 #: page-side instrumentation, installed before the page's own scripts
-PAGE_PROBE = """
+PAGE_PROBE = r"""
 (() => {
-  const b = window.__ucatBench = {probe: [], redraws: 0, counting: false};
+  const b = window.__ucatBench = {probe: [], delivered: [], redraws: 0, counting: false};
+  const NativeWorker = window.Worker;
+  window.Worker = class extends NativeWorker {
+    constructor(...args) {
+      super(...args);
+      this.addEventListener('message', (e) => {
+        const d = e.data;
+        if (!b.counting || !d || d.type !== 'message_batch') return;
+        for (const m of d.messages) {
+          if (m.type !== 'GuiUpdateMessage' || typeof m.updates.content !== 'string') continue;
+          const seq = /id="ucat-probe" data-seq="(\d+)"/.exec(m.updates.content);
+          if (seq) b.delivered.push(Number(seq[1]));
+        }
+      });
+    }
+  };
   const clear = CanvasRenderingContext2D.prototype.clearRect;
   CanvasRenderingContext2D.prototype.clearRect = function (...args) {
     if (b.counting && this.canvas && this.canvas.closest && this.canvas.closest('.uplot')) b.redraws++;
@@ -63,7 +88,8 @@ PAGE_PROBE = """
 """
 
 
-_START_COUNTING = "() => { const b = window.__ucatBench; b.probe = []; b.redraws = 0; b.counting = true; }"
+_START_COUNTING = ("() => { const b = window.__ucatBench; b.probe = []; b.delivered = []; b.redraws = 0; "
+                   "b.counting = true; }")
 
 
 def _percentile(xs: list[float], q: float) -> float:
@@ -72,6 +98,35 @@ def _percentile(xs: list[float], q: float) -> float:
     s = sorted(xs)
     k = min(len(s) - 1, max(0, round(q * (len(s) - 1))))
     return s[k]
+
+
+def _descendant_cpu_seconds() -> dict[str, float]:
+    """CPU seconds of this process's descendant Chromium processes by kind (Linux /proc)."""
+    procs: dict[int, tuple[int, str, float]] = {}
+    tick = os.sysconf("SC_CLK_TCK")
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            stat = (entry / "stat").read_text()
+            cmdline = (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+        except OSError:
+            continue
+        fields = stat.rsplit(")", 1)[1].split()
+        procs[int(entry.name)] = (int(fields[1]), cmdline, (int(fields[11]) + int(fields[12])) / tick)
+    mine, frontier = set(), {os.getpid()}
+    while frontier:
+        frontier = {pid for pid, (ppid, _, _) in procs.items() if ppid in frontier} - mine
+        mine |= frontier
+    out = {"gpu": 0.0, "renderer": 0.0, "other": 0.0}
+    for pid in mine:
+        _, cmdline, cpu = procs[pid]
+        if "chrom" not in cmdline:
+            continue
+        kind = ("gpu" if "--type=gpu-process" in cmdline
+                else "renderer" if "--type=renderer" in cmdline else "other")
+        out[kind] += cpu
+    return out
 
 
 def measure_ui(duration: float = 20.0, pages: int = 2, warmup: float = 5.0, velocity: float = 0.2,
@@ -86,7 +141,7 @@ def measure_ui(duration: float = 20.0, pages: int = 2, warmup: float = 5.0, velo
 
     if duration <= 0 or pages < 1:
         raise ValueError(f"duration must be > 0 and pages >= 1, got {duration}, {pages}")
-    cfg = AppConfig(console=ConsoleConfig(port=0, record_on_arm=False))
+    cfg = AppConfig(console=ConsoleConfig(port=0))
     with tempfile.TemporaryDirectory() as tmp:
         sup = Supervisor(cfg, sessions_dir=tmp)
         app = ConsoleApp(sup, probe=True)
@@ -113,9 +168,11 @@ def measure_ui(duration: float = 20.0, pages: int = 2, warmup: float = 5.0, velo
                     page.evaluate(_START_COUNTING)
                 scene0, plots0 = app.scene.updates, app.plots.updates
                 cpu0, wall0 = time.process_time(), time.perf_counter()
+                browser0 = _descendant_cpu_seconds()
                 load0 = os.getloadavg()[0]
                 time.sleep(duration)
                 cpu1, wall1 = time.process_time(), time.perf_counter()
+                browser1 = _descendant_cpu_seconds()
                 scene1, plots1 = app.scene.updates, app.plots.updates
                 results = [page.evaluate("() => { const b = window.__ucatBench; b.counting = false; return b; }")
                            for page in opened]
@@ -131,6 +188,7 @@ def measure_ui(duration: float = 20.0, pages: int = 2, warmup: float = 5.0, velo
         probe = r["probe"]
         lat = [now - wall for now, _, wall in probe]
         per_page.append({
+            "pose_updates_delivered_per_s": len(set(r["delivered"])) / elapsed,
             "pose_updates_per_s": len(probe) / elapsed,
             "plot_refresh_per_s": r["redraws"] / max(n_plots, 1) / elapsed,
             "latency_ms_p50": _percentile(lat, 0.50),
@@ -147,6 +205,8 @@ def measure_ui(duration: float = 20.0, pages: int = 2, warmup: float = 5.0, velo
         "configured_scene_rate": cfg.console.scene_rate,
         "configured_plot_rate": cfg.console.plot_rate,
         "supervisor_cpu_percent": 100.0 * (cpu1 - cpu0) / elapsed,
+        "browser_cpu_percent": {k: 100.0 * (browser1[k] - browser0[k]) / elapsed for k in browser0},
+        "recording": health.recording,
         "loop_lag_max_ms": health.lag_max * 1e3,
         "late_plans": health.late_plans,
         "plan_overruns": health.plan_overruns,
@@ -161,11 +221,16 @@ def format_result(r: dict[str, Any]) -> str:
         f"{r['cpus']} CPUs, load average {r['load_average_1min']:.1f}",
         f"server pushes: scene {r['server_scene_updates_per_s']:.1f}/s (configured {r['configured_scene_rate']:g}), "
         f"plots {r['server_plot_updates_per_s']:.1f}/s (configured {r['configured_plot_rate']:g})",
-        f"{'page':>4} {'pose/s':>7} {'plot/s':>7} {'lat p50':>8} {'lat p95':>8} {'lat max':>8}",
+        "pose updates per second: delivered to the page / displayed in a rendered frame",
+        f"{'page':>4} {'pose/s':>13} {'plot/s':>7} {'lat p50':>8} {'lat p95':>8} {'lat max':>8}",
     ]
     for i, p in enumerate(r["pages"]):
-        lines.append(f"{i:>4} {p['pose_updates_per_s']:7.1f} {p['plot_refresh_per_s']:7.1f} "
+        pose = f"{p['pose_updates_delivered_per_s']:.1f} / {p['pose_updates_per_s']:.1f}"
+        lines.append(f"{i:>4} {pose:>13} {p['plot_refresh_per_s']:7.1f} "
                      f"{p['latency_ms_p50']:6.0f}ms {p['latency_ms_p95']:6.0f}ms {p['latency_ms_max']:6.0f}ms")
+    b = r["browser_cpu_percent"]
+    lines.append(f"browser CPU: GPU process (software GL) {b['gpu']:.0f} %, page renderers "
+                 f"{b['renderer']:.0f} %, other {b['other']:.0f} % of one core")
     lines.append(f"supervisor CPU {r['supervisor_cpu_percent']:.0f} % of one core; loop lag max "
                  f"{r['loop_lag_max_ms']:.0f} ms; late plans {r['late_plans']}, hand-over overruns "
                  f"{r['plan_overruns']}")
@@ -200,6 +265,7 @@ def summary(r: dict[str, Any]) -> dict[str, float]:
     """The figures the README quotes (means over the pages)."""
     pages = r["pages"]
     return {
+        "pose_updates_delivered_per_s": statistics.fmean(p["pose_updates_delivered_per_s"] for p in pages),
         "pose_updates_per_s": statistics.fmean(p["pose_updates_per_s"] for p in pages),
         "plot_refresh_per_s": statistics.fmean(p["plot_refresh_per_s"] for p in pages),
         "latency_ms_p95": max(p["latency_ms_p95"] for p in pages),
