@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 import pytest
+from support import wait_for
 
 from ucat_console.backend.access import LOCAL, AccessDenied
 from ucat_console.backend.devices.readings import DepthReading
@@ -18,10 +19,11 @@ from ucat_console.backend.loop.clock import SimulatedClock
 from ucat_console.backend.loop.robot_io import SimRobotIO
 from ucat_console.backend.sessions.reader import SessionReader
 from ucat_console.backend.supervisor import CommandRefused, SteadyPacedClock, Supervisor
-from ucat_console.config import AccessConfig, AppConfig, ConsoleConfig, FailsafeConfig, FailsafeRule
+from ucat_console.config import AccessConfig, AppConfig, ConsoleConfig, FailsafeConfig, FailsafeRule, load_config
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event
 
+ROOT = Path(__file__).resolve().parents[2]
 TOKEN = "pool-side-token"
 PILOT, VIEWER = 1, 2
 
@@ -100,6 +102,8 @@ def test_a_viewer_can_change_nothing(sup: Supervisor) -> None:
         lambda: sup.start_recording(VIEWER),
         lambda: sup.add_marker(VIEWER, "hi"),
         lambda: sup.release(VIEWER),
+        lambda: sup.inject_fault(VIEWER, "pressure", "silence"),
+        lambda: sup.clear_fault(VIEWER, "pressure"),
     ]
     for fn in refused:
         with pytest.raises(AccessDenied):
@@ -385,5 +389,54 @@ def test_a_failing_loop_disarms_and_is_reported(tmp_path: Path) -> None:
         assert "loop_fault" in ev.codes("supervisor")
         with pytest.raises(CommandRefused, match="loop"):
             sup.arm(LOCAL)
+    finally:
+        sup.stop()
+
+
+def test_faults_are_injected_only_on_the_simulated_rig(sup: Supervisor) -> None:
+    assert sup.rig is None
+    with pytest.raises(CommandRefused, match="only the simulated robot behind the device emulators"):
+        sup.inject_fault(PILOT, "pressure", "silence")
+    with pytest.raises(CommandRefused, match="only the simulated robot"):
+        sup.clear_fault(PILOT, "pressure")
+
+
+def test_the_pilot_rehearses_a_silent_pressure_sensor_on_the_simulated_rig(tmp_path: Path) -> None:
+    cfg = load_config(ROOT / "config" / "sim-devices.toml")
+    cfg = cfg.replace(access=AccessConfig(token=TOKEN),
+                      failsafe=cfg.failsafe.replace(depth=FailsafeRule("hold", 0.5)))
+    sup = Supervisor(cfg, sessions_dir=tmp_path)
+    ev = Events(sup)
+    sup.start()
+    try:
+        sup.client_connected(PILOT)
+        sup.client_connected(VIEWER)
+        assert sup.take_control(PILOT, TOKEN)
+        assert sup.rig is not None
+        wait_for(lambda: sup.loop.time > 1.0, what="the loop running on the rig")
+        assert "depth" not in sup.safety.active()
+
+        # bad entries are refused, naming what is wrong, and inject nothing
+        for args, kw, match in [
+            (("sonar", "silence"), {}, "sonar"),
+            (("pressure", "emcy"), {}, "not a fault of pressure"),
+            (("epos2", "emcy"), {"fin": 7}, "fin"),
+            (("epos2", "emcy"), {"code": 0x12345}, "16-bit"),
+            (("pressure", "silence"), {"duration": -1.0}, "duration"),
+            ((["pressure"], "silence"), {}, "names"),
+        ]:
+            with pytest.raises(CommandRefused, match=match):
+                sup.inject_fault(PILOT, *args, **kw)
+        assert "fault_injected" not in ev.codes("rig")
+
+        injected = sup.inject_fault(PILOT, "pressure", "silence")
+        assert injected.code == "fault_injected" and injected.data["device"] == "pressure"
+        wait_for(lambda: "depth" in sup.safety.active(), what="the depth failsafe")
+        wait_for(lambda: "fault_injected" in ev.codes("rig"), what="the injection on the events channel")
+        assert "depth" in ev.codes("failsafe")
+
+        sup.clear_fault(PILOT, "pressure")
+        wait_for(lambda: "depth" not in sup.safety.active(), what="the depth failsafe clearing")
+        assert "fault_cleared" in ev.codes("rig")
     finally:
         sup.stop()

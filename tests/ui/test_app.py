@@ -9,13 +9,15 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from support import wait_for
 
 from ucat_console.backend.loop.clock import SimulatedClock
 from ucat_console.backend.supervisor import Supervisor
-from ucat_console.config import AccessConfig, AppConfig
+from ucat_console.config import AccessConfig, AppConfig, load_config
 from ucat_console.ui.app import ConsoleApp, is_loopback
 from ucat_console.ui.panels import ControlPanel, esc, param_specs, step_for
 
+ROOT = Path(__file__).resolve().parents[2]
 TOKEN = "pool-side-token"
 
 
@@ -127,3 +129,48 @@ def test_tuning_inputs_come_from_the_field_metadata() -> None:
 def test_page_text_is_escaped() -> None:
     assert "<" not in esc("<script>alert(1)</script>")
     assert esc("**bold**") == "\\*\\*bold\\*\\*"
+
+
+def test_rig_fault_inputs_only_where_the_robot_is_the_simulated_rig(app: ConsoleApp) -> None:
+    assert page(app, 3, pilot=True).faults is None
+
+
+def test_the_pilot_injects_rig_faults_from_the_page_and_bad_entries_are_refused(tmp_path: Path) -> None:
+    cfg = load_config(ROOT / "config" / "sim-devices.toml").replace(access=AccessConfig(token=TOKEN))
+    sup = Supervisor(cfg, sessions_dir=tmp_path)
+    a = ConsoleApp(sup, port=0)
+    sup.start()
+    try:
+        pilot, viewer = page(a, 3, pilot=True), page(a, 4, pilot=False)
+        assert pilot.faults is not None and viewer.faults is not None
+        assert not pilot.faults.inject.disabled and viewer.faults.inject.disabled
+        f = pilot.faults
+
+        # the fault list follows the device
+        f.device.value = "pressure"
+        f.show_faults_of_device()
+        assert set(f.fault.options) == {"silence", "corrupt", "invalid", "slow"} and f.fault.value == "silence"
+        f.device.value = "epos2"
+        f.show_faults_of_device()
+        assert "emcy" in f.fault.options and f.fault.value == "silence"  # still a fault of the drive
+        f.fault.value = "emcy"
+
+        f.code.value = "overcurrent"
+        assert pilot.act(pilot._inject_fault) is False
+        assert "EMCY code" in pilot.messages[-1] and "0x2310" in pilot.messages[-1]
+        f.fin.value = 7  # past the input's bound, as a page that sends anyway
+        f.code.value = "0x2310"
+        assert pilot.act(pilot._inject_fault) is False
+        assert "fin" in pilot.messages[-1]
+        assert viewer.act(viewer._inject_fault) is False
+        assert "read-only" in viewer.messages[-1]
+
+        f.fin.value = 2
+        assert pilot.act(pilot._inject_fault) is True
+        assert "emcy injected" in pilot.messages[-1]
+        node = cfg.devices.epos2.node_ids[2]
+        wait_for(lambda: sup.rig.nodes[node].state == "fault", what="the drive in fault")
+        assert pilot.act(pilot._clear_faults) is True
+    finally:
+        a.stop()
+        sup.stop()

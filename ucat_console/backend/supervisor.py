@@ -42,7 +42,7 @@ import threading
 import time
 from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import TYPE_CHECKING, Any, Callable, Mapping
 
 from ucat_console.backend.access import LOCAL, AccessControl, AccessDenied, AccessState, Actor, actor_name
 from ucat_console.backend.arming import ArmingGate
@@ -61,6 +61,9 @@ from ucat_console.telemetry.events import Event, EventSink
 from ucat_console.telemetry.messages import BodyState, FinState, Status
 from ucat_console.telemetry.stream import TelemetryStream
 from ucat_console.typedconf import check_value
+
+if TYPE_CHECKING:
+    from ucat_console.backend.devices.sim_rig import SimRig
 
 log = logging.getLogger(__name__)
 
@@ -95,6 +98,15 @@ def rig_robot(cfg: AppConfig, events: EventSink) -> tuple[RobotIO, Callable[[], 
 
 
 ROBOT_FACTORIES: dict[str, RobotFactory] = {"sim": sim_robot, "rig": rig_robot}
+
+
+def simulated_rig(robot_io: RobotIO) -> SimRig | None:
+    """The simulated rig behind ``robot_io`` (fault injection), None for any other robot."""
+    if getattr(robot_io, "rig", None) is None:
+        return None  # no device stack to import for the in-process simulator
+    from ucat_console.backend.rig import rig_of
+
+    return rig_of(robot_io)
 
 
 class SteadyPacedClock(PacedClock):
@@ -206,6 +218,8 @@ class Supervisor:
         self.safety = SafetyMonitor(cfg.failsafe)
         factory = robot_factory or ROBOT_FACTORIES[cfg.robot]
         inner, self._close_robot = factory(cfg, self.report_event)
+        #: the simulated rig behind the drivers (robot "rig" on "sim-devices"), else None
+        self.rig: SimRig | None = simulated_rig(inner)
         try:
             self.gate = ArmingGate(inner, on_invalid=self._on_invalid_reading)
             self.clock: Clock = clock if clock is not None else SteadyPacedClock(1.0)
@@ -845,6 +859,44 @@ class Supervisor:
         except Exception:
             log.exception("stopping the recording failed")
         self._notify()
+
+    # ================================================================== rig faults
+    def inject_fault(self, who: Actor, device: object, fault: object, **kw: Any) -> Event:
+        """Start an emulator fault on the simulated rig (the pilot rehearsing a failsafe).
+
+        Arguments as :meth:`SimRig.inject`; its ``fault_injected`` event and every event the
+        fault causes reach the events channel (and the recording)."""
+        self.access.require_pilot(who, "fault injection")
+        rig = self._require_rig("fault injection")
+        if not isinstance(device, str) or not isinstance(fault, str):
+            raise CommandRefused(f"fault injection: device and fault must be names, got {device!r}, {fault!r}")
+        try:
+            event = rig.inject(device, fault, **kw)
+        except ValueError as e:
+            raise CommandRefused(f"fault injection: {e}") from None
+        self._notify()
+        return event
+
+    def clear_fault(self, who: Actor, device: object, fault: object = None) -> None:
+        """End one emulator fault of ``device`` on the simulated rig, or all of its faults."""
+        self.access.require_pilot(who, "fault injection")
+        rig = self._require_rig("fault injection")
+        if not isinstance(device, str) or not (fault is None or isinstance(fault, str)):
+            raise CommandRefused(f"fault injection: device and fault must be names, got {device!r}, {fault!r}")
+        try:
+            rig.clear(device, fault)
+        except ValueError as e:
+            raise CommandRefused(f"fault injection: {e}") from None
+        self._notify()
+
+    def _require_rig(self, what: str) -> SimRig:
+        if self.rig is None:
+            raise CommandRefused(
+                f"{what}: only the simulated robot behind the device emulators takes faults "
+                f"(robot = 'rig' with devices.robot = 'sim-devices'); this console runs robot "
+                f"{self.cfg.robot!r}"
+            )
+        return self.rig
 
     def add_marker(self, who: Actor, note: object = "") -> Event:
         """A marker with a note on the events channel (recorded when recording)."""

@@ -193,7 +193,7 @@ class ConsoleApp:
     def _on_connect(self, client: viser.ClientHandle) -> None:
         cid = client.client_id
         self.sup.client_connected(cid)
-        containers = {"tuning": self.tab_tuning, "session": self.tab_session}
+        containers = {"tuning": self.tab_tuning, "session": self.tab_session, "safety": self.tab_safety}
         panel = panels.ControlPanel(self, cid, client.gui, client, containers)
         with self._lock:
             self.panels[cid] = panel
