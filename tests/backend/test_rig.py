@@ -46,13 +46,13 @@ SETPOINTS = BodySetpoints(velocity=0.3, depth=1.5)
 
 
 def sim_devices_config(**changes: Any) -> DevicesConfig:
-    return DevicesConfig(
-        robot="sim-devices", enable_at_start=True,
+    """The rig with quick supervision (short heartbeat, 0.3 s pressure silence) unless changed."""
+    blocks: dict[str, Any] = dict(
         epos2=Epos2Config(units=UNITS, heartbeat_ms=100, heartbeat_timeout_periods=2.5),
         pressure=PressureConfig(silence_timeout_s=0.3),
         start=SimStartConfig(depth=START_DEPTH, seed=7),
-        **changes,
     )
+    return DevicesConfig(robot="sim-devices", enable_at_start=True, **{**blocks, **changes})
 
 
 class LoopThread:
@@ -118,7 +118,9 @@ def test_simulated_robot_runs_closed_loop_through_drivers_and_emulators() -> Non
     ref_dive, ref_speed = ref_truth.depth - START_DEPTH, ref_truth.velocity[0]
 
     sink = Collector()
-    io, close = build_robot_io(sim_devices_config(), event_sink=sink)
+    # no fault is injected here: the default silence timeout, so that a busy machine's
+    # scheduling hiccup is not reported as a silent sensor
+    io, close = build_robot_io(sim_devices_config(pressure=PressureConfig()), event_sink=sink)
     stream = TelemetryStream()
     got: dict[str, list[Any]] = {ch.IMU: [], ch.DVL: [], ch.DEPTH: [], ch.EVENTS: [], ch.fin_state(0): []}
     stream.subscribe(lambda c, m: got[c].append(m), channels=list(got))
