@@ -210,10 +210,12 @@ def test_a_recorded_session_is_reviewed_in_the_page(console: Console) -> None:
     panel.refresh_sessions()
     a.get_by_role("tab", name="Review", exact=True).click()
     expect(a.get_by_text("browser review").first).to_be_visible(timeout=5_000)  # listed, with notes
-    panel.choice.value = path.name
+    session_id = path.name.rsplit("_", 1)[0]  # <session id>_001.mcap
+    assert session_id in panel.choice.options  # the chooser lists sessions, not part files
+    panel.choice.value = session_id
     a.get_by_role("button", name="Open").click()
     wait_for(lambda: panel.player is not None, what="the session opening")
-    expect(a.get_by_text(f"opened {path.name}").first).to_be_visible(timeout=5_000)
+    expect(a.get_by_text(f"opened {session_id}").first).to_be_visible(timeout=5_000)
     a.wait_for_function(  # the review vehicle is drawn by the live scene code
         "() => window.__viserSceneTree.getState()['/review/ned/ucat/hull'] !== undefined", timeout=10_000
     )

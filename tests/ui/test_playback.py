@@ -1,8 +1,10 @@
 """The review panel: playback reproduces the live plots; the controls from code; markers
-beside the file; counterfactual replay from the panel.
+beside the file; counterfactual replay from the panel; a session split into parts reviewed
+as one.
 
 A short simulated run (headless, simulated clock) is recorded once per module by the
-supervisor's recorder while a plot feeder takes the live stream.
+supervisor's recorder while a plot feeder takes the live stream; a second one, recorded in
+parts of one second, is reviewed across its part boundaries.
 """
 
 from __future__ import annotations
@@ -10,6 +12,7 @@ from __future__ import annotations
 import hashlib
 import math
 import statistics
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -19,7 +22,9 @@ import viser
 
 from ucat_console.backend.access import LOCAL
 from ucat_console.backend.loop.clock import SimulatedClock
+from ucat_console.backend.sessions import files
 from ucat_console.backend.sessions.reader import SessionReader
+from ucat_console.backend.sessions.recorder import RecorderConfig
 from ucat_console.backend.supervisor import Supervisor
 from ucat_console.config import AppConfig
 from ucat_console.telemetry import channels as ch
@@ -40,6 +45,10 @@ class Run:
     live: np.ndarray  # the live plot rows
     plans: list  # the live FinPlans, in order
     weights: dict[str, float]
+
+    @property
+    def session_id(self) -> str:
+        return files.parse_part_name(self.path)[0]
 
 
 def live_sampler() -> StreamSampler:
@@ -116,7 +125,9 @@ def test_playback_reproduces_the_live_plot_values(run: Run) -> None:
 
 
 def test_the_browser_lists_the_session_with_its_notes(panel: PlaybackPanel, run: Run) -> None:
-    assert run.path.name in panel.choice.options
+    assert panel.choice.options == (run.session_id,)  # sessions, not their files
+    assert panel.choice.value == run.session_id
+    assert f"| {run.session_id} | 1 |" in panel.browser.content  # the table shows the part
     assert "review test run" in panel.browser.content
     assert panel.repair_button.disabled  # nothing truncated
     assert panel.play_button.disabled  # nothing open yet
@@ -186,8 +197,6 @@ def test_playing_moves_the_position_and_pauses(panel: PlaybackPanel, run: Run) -
     for _ in range(200):
         if p.position > p.start + 0.5:
             break
-        import time
-
         time.sleep(0.01)
     panel.pause()
     pos = p.position
@@ -259,9 +268,199 @@ def test_the_console_mounts_the_review_tab(run: Run, tmp_path: Path) -> None:
     app = ConsoleApp(sup, port=0)
     try:
         assert app.playback.directory == run.directory.resolve()
-        assert run.path.name in app.playback.choice.options
+        assert run.session_id in app.playback.choice.options
         assert app.playback.act(lambda: app.playback.open(run.path.name))
         assert not math.isnan(app.playback.feeder.latest[0])
     finally:
         app.stop()
         sup.stop()
+
+
+# ------------------------------------------------------------------ a session in parts
+@dataclass
+class SplitRun:
+    directory: Path
+    paths: list[Path]  # the part files, in order
+
+    @property
+    def session_id(self) -> str:
+        return files.parse_part_name(self.paths[0])[0]
+
+    def records(self, channels=None) -> list:
+        """(channel, message, stream time) of every part read alone, in part order."""
+        out = []
+        for p in self.paths:
+            with SessionReader(p, self.directory) as r:
+                out += [(x.channel, x.message, r.from_ns(x.log_time_ns)) for x in r.records(channels)]
+        return out
+
+    def spans(self) -> list[tuple[float, float]]:
+        out = []
+        for p in self.paths:
+            with SessionReader(p, self.directory) as r:
+                out.append((r.start, r.end))
+        return out
+
+
+@pytest.fixture(scope="module")
+def split_run(tmp_path_factory: pytest.TempPathFactory) -> SplitRun:
+    d = tmp_path_factory.mktemp("split_sessions")
+    cfg = AppConfig().replace(recorder=RecorderConfig(split_duration=1.0))
+    sup = Supervisor(cfg, clock=SimulatedClock(), sessions_dir=d)
+    try:
+        sup.set_setpoints(LOCAL, velocity=0.2)
+        sup.start_recording(LOCAL, "split review run")
+        sup.arm(LOCAL)
+        sup.step(1.5)
+        sup.add_marker(LOCAL, "in a later part")
+        sup.step(2.0)
+        paths = sup.stop_recording(LOCAL)
+    finally:
+        sup.stop()
+    assert len(paths) >= 3
+    return SplitRun(d, paths)
+
+
+@pytest.fixture
+def split_panel(server: viser.ViserServer, split_run: SplitRun):
+    p = PlaybackPanel(server.gui, server.scene, AppConfig().plant, directory=split_run.directory,
+                      plot_rate=PLOT_RATE, max_history=60.0, history=lambda: 60.0)
+    yield p
+    p.stop()
+    for f in split_run.directory.glob("*.markers.json"):
+        f.unlink()
+
+
+class Sink:
+    def __init__(self, stream: TelemetryStream) -> None:
+        self.got: list = []
+        stream.subscribe(lambda c, m: self.got.append((c, m)))
+
+    def take(self) -> list:
+        out, self.got = self.got, []
+        return out
+
+
+def test_a_split_session_is_listed_by_part_and_opened_whole(split_panel: PlaybackPanel,
+                                                             split_run: SplitRun) -> None:
+    panel, sid = split_panel, split_run.session_id
+    assert panel.choice.options == (sid,)
+    rows = [line for line in panel.browser.content.splitlines() if line.startswith(f"| {sid} |")]
+    assert [int(r.split("|")[2]) for r in rows] == list(range(1, len(split_run.paths) + 1))
+    assert panel.act(lambda: panel.open(panel.choice.value))
+    r = panel.reader
+    assert r is not None and r.paths == tuple(split_run.paths)
+    spans = split_run.spans()
+    first, last = spans[0][0], spans[-1][1]
+    assert panel.timeline.max == pytest.approx(last - first)
+    assert f"opened {sid}: {len(split_run.paths)} parts" in panel.messages[-1]
+    assert f"part 1 of {len(split_run.paths)}" in panel.status.content
+    # a part file's name opens the whole session too (as `run --playback FILE` does)
+    assert panel.act(lambda: panel.open(split_run.paths[1].name))
+    assert panel.reader is not None and panel.reader.paths == tuple(split_run.paths)
+
+
+def test_playing_crosses_the_part_boundaries(split_panel: PlaybackPanel, split_run: SplitRun) -> None:
+    panel = split_panel
+    panel.open(split_run.session_id)
+    p = panel.player
+    assert p is not None
+    every = split_run.records()
+    spans = split_run.spans()
+    start = spans[0][0]
+    sink = Sink(panel.stream)
+    for k in range(1, len(spans)):
+        boundary = spans[k][0]
+        # driven step by step: exactly the messages in between, once, in order
+        panel.seek(boundary - 0.3 - start)
+        sink.take()
+        from_t = p.position
+        while p.position < boundary + 0.3:
+            p.advance(0.05)
+        between = [(c, m, t) for c, m, t in every if from_t + 1e-9 < t <= p.position + 1e-9]
+        assert between[0][2] < boundary <= between[-1][2]  # from part k into part k + 1
+        assert sink.take() == [(c, m) for c, m, _ in between]
+        panel._sync_inputs()
+        assert f"part {k + 1} of {len(spans)}" in panel.status.content
+    # played by the player's thread across the first boundary
+    panel.seek(spans[1][0] - 0.25 - start)
+    sink.take()
+    from_t = p.position
+    panel.set_speed(2.0)
+    panel.play()
+    for _ in range(500):
+        if p.position > spans[1][0] + 0.25:
+            break
+        time.sleep(0.01)
+    panel.pause()
+    assert p.position > spans[1][0] + 0.25
+    got = sink.take()
+    assert got == [(c, m) for c, m, t in every if from_t + 1e-9 < t <= p.position + 1e-9]
+    assert panel.tick_errors == 0
+
+
+def test_seek_step_events_plots_and_replay_across_parts(split_panel: PlaybackPanel,
+                                                       split_run: SplitRun) -> None:
+    panel = split_panel
+    panel.open(split_run.session_id)
+    p = panel.player
+    assert p is not None
+    spans = split_run.spans()
+    start = spans[0][0]
+    bodies = [t for c, _, t in split_run.records([ch.BODY_STATE])]
+    # frame steps over the boundary between parts 1 and 2
+    before = max(t for t in bodies if t < spans[1][0])
+    after = min(t for t in bodies if t >= spans[1][0])
+    panel.seek(before - start)
+    assert p.position == pytest.approx(before)
+    assert panel.step(1) and p.position == pytest.approx(after)
+    assert panel.step(-1) and p.position == pytest.approx(before)
+    # a seek into the last part: the plots rebuilt from every part before it
+    panel.seek(spans[-1][0] + 0.05 - start)
+    rows = panel.feeder.buffer.last(CAPACITY)
+    assert rows[-1, 0] == pytest.approx(max(t for t in bodies if t <= spans[-1][0] + 0.05 + 1e-9))
+    assert rows[0, 0] < spans[1][0]  # the history window reaches back into part 1
+    # every recorded event, of every part, is a jump target
+    events = [m for c, m, _ in split_run.records([ch.EVENTS])]
+    assert any(e.code == "marker" and e.message == "in a later part" for e in events)
+    assert any(t >= spans[1][0] for c, _, t in split_run.records([ch.EVENTS]))
+    panel.seek(-1.0)
+    first = p.position
+    seen = []
+    while (what := panel.next_event()) is not None:
+        seen.append(what)
+    assert seen == [e for e in events if e.t > first + 1e-9]
+    # counterfactual replay: every fin plan of every part
+    plans = [m for c, m, _ in split_run.records([ch.fin_plan(i) for i in range(ch.N_FINS)])]
+    assert plans
+    res = panel.run_counterfactual("lam_st=2.0")
+    assert len(res.rows) + res.skipped == len(plans)
+    assert sorted(r.t for r in res.rows) == sorted(m.t for m in plans)
+
+
+def test_a_truncated_part_is_repaired_from_the_session_chooser(
+    server: viser.ViserServer, split_run: SplitRun, tmp_path: Path
+) -> None:
+    d = tmp_path / "sessions"
+    d.mkdir()
+    for path in split_run.paths:
+        (d / path.name).write_bytes(path.read_bytes())
+    cut = d / split_run.paths[1].name
+    data = cut.read_bytes()
+    cut.write_bytes(data[: len(data) // 2])
+    p = PlaybackPanel(server.gui, server.scene, AppConfig().plant, directory=d, plot_rate=PLOT_RATE)
+    try:
+        assert not p.repair_button.disabled and "truncated" in p.browser.content
+        assert p.act(lambda: p.open(p.choice.value)) is False
+        assert cut.name in p.messages[-1] and "repair" in p.messages[-1]
+        assert p.act(lambda: p.repair(p.choice.value))
+        assert f"repaired {cut.name}" in p.messages[-1]
+        assert p.repair_button.disabled and "truncated" not in p.browser.content
+        assert p.act(lambda: p.open(p.choice.value))
+        assert p.reader is not None and len(p.reader.parts) == len(split_run.paths)
+        # the other parts were left alone
+        for path in split_run.paths:
+            if path.name != cut.name:
+                assert digest(d / path.name) == digest(path)
+    finally:
+        p.stop()

@@ -1,5 +1,6 @@
-"""``ucat-console replay FILE --weights lam_st=2.0,...``: counterfactual replay.
+"""``ucat-console replay SESSION --weights lam_st=2.0,...``: counterfactual replay.
 
+SESSION is a session id or any one of its part files; every part is replayed, in order.
 Re-plans every recorded fin plan with the given weights and prints recorded and
 counterfactual Strouhal number, force error and predicted power side by side (means per
 fin); ``--out`` writes every plan's row as CSV.
@@ -14,7 +15,7 @@ from pathlib import Path
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("replay", help="counterfactual replay of a session with other MPC weights")
-    p.add_argument("file", metavar="FILE", help="session file or session id")
+    p.add_argument("file", metavar="SESSION", help="session id or any part file of it")
     p.add_argument("--weights", required=True, metavar="W",
                    help="changed weights, e.g. lam_st=2.0,lam_f=1.5 (lam_f, lam_st, lam_a, lam_d)")
     p.add_argument("--seed", type=int, default=None,
@@ -48,32 +49,19 @@ def format_summary(summary: list[dict]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ucat_console.backend.sessions.reader import SessionReader
-    from ucat_console.backend.sessions.replay import (
-        ReplayResult,
-        counterfactual,
-        parse_weights,
-        recorded_seed,
-    )
-    from ucat_console.cli.sessions import resolve
+    from ucat_console.backend.sessions.reader import SessionParts
+    from ucat_console.backend.sessions.replay import counterfactual, parse_weights, recorded_seed
 
     weights = parse_weights(args.weights)
     if args.out is not None and not args.out.parent.exists():
         raise ValueError(f"--out: directory {args.out.parent} does not exist")
-    rows = []
-    skipped = 0
-    config = None
-    for path in resolve(args.file, args.dir):
-        with SessionReader(path, args.dir) as r:
-            res = counterfactual(r, weights, seed=recorded_seed if args.seed is None else args.seed,
-                                     fins=args.fins)
-        rows += res.rows
-        skipped += res.skipped
-        config = res.config
-    if config is None or not rows:
+    with SessionParts(args.file, args.dir) as s:
+        result = counterfactual(s, weights, seed=recorded_seed if args.seed is None else args.seed,
+                                fins=args.fins)
+    rows, skipped, config = result.rows, result.skipped, result.config
+    if not rows:
         print("no fin plans to replay")
         return 0
-    result = ReplayResult(config, tuple(rows), skipped)
     print(f"weights: lam_f={config.lam_f:g} lam_st={config.lam_st:g} lam_a={config.lam_a:g} "
           f"lam_d={config.lam_d:g}; {len(rows)} plans replayed, {skipped} refused")
     print(format_summary(result.summary()))

@@ -1,8 +1,9 @@
 """``ucat-console sessions list|info|export|repair``: the recorded sessions.
 
-FILE is a session file, a file name inside the sessions directory, or a session id (all
-its parts, in order). ``--dir`` names the sessions directory (default: ``sessions/`` at
-the project root); files outside it are refused.
+SESSION is a session id or any one of its part files (a path, or a file name inside the
+sessions directory): ``info`` and ``export`` cover every part of the session, in order, as
+one recording; ``repair`` takes one file. ``--dir`` names the sessions directory (default:
+``sessions/`` at the project root); files outside it are refused.
 """
 
 from __future__ import annotations
@@ -25,13 +26,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     _add_dir(p)
     p.set_defaults(func=run_list)
 
-    p = kinds.add_parser("info", help="one session's channels, counts and metadata")
-    p.add_argument("file", metavar="FILE", help="session file or session id")
+    p = kinds.add_parser("info", help="one session's parts, channels, counts and metadata")
+    p.add_argument("file", metavar="SESSION", help="session id or any part file of it")
     _add_dir(p)
     p.set_defaults(func=run_info)
 
-    p = kinds.add_parser("export", help="CSV files of a set of channels")
-    p.add_argument("file", metavar="FILE", help="session file or session id")
+    p = kinds.add_parser("export", help="CSV files of a set of channels (every part)")
+    p.add_argument("file", metavar="SESSION", help="session id or any part file of it")
     p.add_argument("--topics", nargs="+", required=True, metavar="CHANNEL",
                    help="channels to export (e.g. body/state fin/0/state; 'all' for every one)")
     p.add_argument("--format", choices=("csv",), default="csv", help="output format")
@@ -103,37 +104,35 @@ def run_list(args: argparse.Namespace) -> int:
 
 
 def run_info(args: argparse.Namespace) -> int:
-    from ucat_console.backend.sessions.reader import SessionReader
+    from ucat_console.backend.sessions.reader import SessionParts
 
-    for path in resolve(args.file, args.dir):
-        with SessionReader(path, args.dir) as r:
-            print(f"{r.path}")
-            print(f"  session {r.session_id}, part {r.part}, software {r.version or '?'}")
-            print(f"  {r.message_count} messages, {r.duration:.1f} s "
-                  f"(t {r.start:.3f} .. {r.end:.3f}), epoch offset {r.epoch_offset!r}")
-            if r.weights:
-                print("  weights: " + ", ".join(f"{k}={v:g}" for k, v in r.weights.items()))
-            if r.notes:
-                print(f"  notes: {r.notes}")
-            for channel, n in r.message_counts().items():
-                print(f"    {channel:<20} {n:>9}")
+    with SessionParts(args.file, args.dir) as s:
+        print(f"session {s.session_id}: {len(s.parts)} part{'s' if len(s.parts) > 1 else ''} "
+              f"in {s.directory}, software {s.version or '?'}")
+        print(f"  {s.message_count} messages, {s.duration:.1f} s "
+              f"(t {s.start:.3f} .. {s.end:.3f}), epoch offset {s.epoch_offset!r}")
+        if s.weights:
+            print("  weights: " + ", ".join(f"{k}={v:g}" for k, v in s.weights.items()))
+        if s.notes:
+            print(f"  notes: {s.notes}")
+        for n, r in enumerate(s.parts, 1):
+            print(f"  part {n}: {r.path.name}, {r.message_count} messages, "
+                  f"{r.duration:.1f} s (t {r.start:.3f} .. {r.end:.3f})")
+        for channel, n in s.message_counts().items():
+            print(f"    {channel:<20} {n:>9}")
     return 0
 
 
 def run_export(args: argparse.Namespace) -> int:
     from ucat_console.backend.sessions.export import export_csv
-    from ucat_console.backend.sessions.reader import SessionReader
+    from ucat_console.backend.sessions.reader import SessionParts
     from ucat_console.telemetry.channels import CHANNELS
 
     topics = [t for arg in args.topics for t in arg.split(",") if t]
     if "all" in topics:
         topics = list(CHANNELS)
-    readers = [SessionReader(p, args.dir) for p in resolve(args.file, args.dir)]
-    try:
-        result = export_csv(readers, topics, args.out, args.start, args.end)
-    finally:
-        for r in readers:
-            r.close()
+    with SessionParts(args.file, args.dir) as s:
+        result = export_csv(s, topics, args.out, args.start, args.end)
     for channel, (path, rows) in result.items():
         print(f"{channel:<20} {rows:>9} rows -> {path}")
     return 0

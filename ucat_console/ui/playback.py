@@ -15,6 +15,13 @@ Rows of the review plots are taken on the recording's clock (one row per
 (seek, step back, event) the plot buffer is rebuilt from the file for the history window
 before the new position.
 
+The session chooser opens a whole session: a session split into parts
+(``<id>_001.mcap``, ``_002`` ...) is read as one recording
+(:class:`~ucat_console.backend.sessions.reader.SessionParts`), so the timeline, playing,
+seeking, frame steps, event jumps and counterfactual replay run across the part
+boundaries; the browser's table lists every part, and a truncated part is repaired from
+here (the session then opens).
+
 Playback controls do not move the robot, so every page may use them; the review is shared
 by every page (like the live view). The player's own thread plays; a small UI thread here
 pushes the review scene (on each new body state, at most ``scene_rate``), the plots (at
@@ -33,7 +40,7 @@ from typing import Any, Callable
 from ucat_console.backend.sessions import files, index, repair
 from ucat_console.backend.sessions.markers import Marker
 from ucat_console.backend.sessions.player import MAX_SPEED, MIN_SPEED, Player, check_speed
-from ucat_console.backend.sessions.reader import SessionReader
+from ucat_console.backend.sessions.reader import SessionParts, part_paths
 from ucat_console.backend.sessions.replay import (
     ReplayResult,
     SeedRule,
@@ -218,7 +225,7 @@ class PlaybackPanel:
         self.history = history
         self.messages: list[str] = []
         self.stream = TelemetryStream()
-        self.reader: SessionReader | None = None
+        self.reader: SessionParts | None = None
         self.player: Player | None = None
         self.last_replay: ReplayResult | None = None
         self._lock = threading.RLock()
@@ -247,11 +254,13 @@ class PlaybackPanel:
         with within(container):
             with gui.add_folder("Sessions", order=1.0):
                 self.browser = gui.add_markdown("")
-                self.choice = gui.add_dropdown("Session file", ("",), initial_value="")
+                self.choice = gui.add_dropdown("Session", ("",), initial_value="",
+                                               hint="a session, every part of it")
                 self.refresh_list = gui.add_button("Refresh list")
                 self.open_button = gui.add_button("Open", color="blue")
                 self.repair_button = gui.add_button("Repair", color="orange",
-                                                    hint="rewrite a truncated file fully indexed (the original is kept)")
+                                                    hint="rewrite the session's truncated files fully indexed "
+                                                         "(the originals are kept)")
                 self.close_button = gui.add_button("Close")
             with gui.add_folder("Playback", order=2.0):
                 self.status = gui.add_markdown("No session open.")
@@ -325,37 +334,56 @@ class PlaybackPanel:
 
     # ------------------------------------------------------------------ browser
     def refresh_sessions(self) -> list[index.SessionInfo]:
+        """List the sessions (the table shows every part; the chooser, the sessions)."""
         sessions = index.list_sessions(self.directory)
         self.browser.content = sessions_markdown(sessions)
-        names = tuple(p.path.name for s in sessions for p in s.parts) or ("",)
+        names = tuple(s.session_id for s in sessions) or ("",)
         current = self.choice.value
         self.choice.options = names
         self.choice.value = current if current in names else names[-1]
         self.repair_button.disabled = not any(p.truncated for s in sessions for p in s.parts)
         return sessions
 
+    def _name(self, name: object) -> str:
+        """``name`` when it is a plain name (a session id or a file name), else ValueError."""
+        if not isinstance(name, str) or not name or "/" in name or "\\" in name or name in (".", ".."):
+            raise ValueError(f"session: {name!r} is not a session or a file name in {self.directory}")
+        return name
+
     def _path(self, name: str) -> Path:
-        if not isinstance(name, str) or not name or "/" in name or "\\" in name:
-            raise ValueError(f"session file: {name!r} is not a file name in {self.directory}")
-        p = files.inside_sessions(self.directory / name, self.directory)
+        p = files.inside_sessions(self.directory / self._name(name), self.directory)
         if not p.is_file():
             raise ValueError(f"{name}: no such session file in {self.directory}")
         return p
 
-    def repair(self, name: str) -> repair.RepairReport:
-        report = repair.repair(self._path(name), self.directory)
+    def _files(self, name: str) -> list[Path]:
+        """The files ``name`` names: a part file, or every part of a session id."""
+        if self._name(name).endswith(files.SUFFIX):
+            return [self._path(name)]
+        parts = part_paths(name, self.directory)
+        if not parts:
+            raise ValueError(f"session {name!r}: no files in {self.directory}")
+        return [p for _, p in sorted(parts.items())]
+
+    def repair(self, name: str) -> list[repair.RepairReport]:
+        """Repair the truncated files of a session (or one named part file)."""
+        paths = self._files(name)
+        todo = [p for p in paths if len(paths) == 1 or repair.needs_repair(p)]
+        reports = [repair.repair(p, self.directory) for p in todo]
         self.refresh_sessions()
-        if report.repaired:
-            self.show(f"repaired {name}: {report.messages} messages recovered")
+        done = [r for r in reports if r.repaired]
+        if done:
+            self.show("; ".join(f"repaired {r.path.name}: {r.messages} messages recovered" for r in done))
         else:
             self.show(f"{name} was complete; nothing to repair")
-        return report
+        return reports
 
     # ------------------------------------------------------------------ open / close
     def open(self, name: str) -> Player:
-        """Open a session file for review at its start (paused)."""
-        path = self._path(name)
-        reader = SessionReader(path, self.directory)  # a truncated file: TruncatedSessionError
+        """Open a session for review at its start (paused): every part of the session named
+        by its id or by any one of its part files."""
+        target: str | Path = self._path(name) if self._name(name).endswith(files.SUFFIX) else name
+        reader = SessionParts(target, self.directory)  # a truncated part: TruncatedSessionError
         try:
             player = Player(reader, self.stream, speed=self._speed, loop=bool(self.loop.value))
         except BaseException:
@@ -372,7 +400,10 @@ class PlaybackPanel:
         self._jumped(player.seek(player.start))
         self._set_enabled()
         self._start_ui()
-        self.show(f"opened {name}: {reader.duration:.1f} s, notes: {reader.notes or '-'}")
+        n = len(reader.parts)
+        what = "" if name == reader.session_id else f" (session {reader.session_id})"
+        self.show(f"opened {name}{what}: {n} part{'s' if n > 1 else ''}, {reader.duration:.1f} s, "
+                  f"notes: {reader.notes or '-'}")
         return player
 
     def close_session(self, quiet: bool = False) -> None:
@@ -575,7 +606,11 @@ class PlaybackPanel:
             self.loop.value = p.loop
         r = self.reader
         state = "playing" if p.playing else "paused"
-        name = r.path.name if r is not None else ""
+        name = ""
+        if r is not None:
+            name = r.session_id
+            if len(r.parts) > 1:
+                name += f" (part {r.part_at_ns(r.to_ns(p.position))} of {len(r.parts)})"
         self.status.content = (f"**{esc(name)}** {state} at {rel:.2f} / {p.end - p.start:.2f} s, "
                                f"speed {p.speed:g}x{', loop' if p.loop else ''}; "
                                f"{len(p.markers.markers)} review markers")

@@ -80,3 +80,49 @@ def test_replay_command_prints_a_table_and_writes_csv(sessions, tmp_path, capsys
     assert row["fin"] == "1" and float(row["recorded_st"]) == 0.3
     # recorded power from the recorded plan: both strokes at 3 rad/s -> 7 * 0.3^3 W
     assert abs(float(row["recorded_power"]) - 7 * 0.3**3) < 1e-12
+
+
+def _split_session(sessions):
+    """Setpoints every 0.25 s for 4 s and a fin plan every 0.5 s, in parts of 1 s."""
+    plans = [FinPlan(0.5 * k + 0.1, 1, "mpc", (-0.4, 0.1), 0.3, 0.0, (0.5, -0.5, 2.0, 2.0),
+                     (0.6, -0.6, 3.0, 3.0), (0.6, 3.0, 0.0, 3.0), 1.0, 0.1, 0.1, 0.0, 0.1, 0.3,
+                     (-0.3, 0.1), 0.002, False, seed=k) for k in range(8)]
+    items = [(C.SETPOINTS, Setpoints(0.25 * k, 0.1 * k, 1.0, 0.0)) for k in range(17)]
+    items += [(C.fin_plan(1), p) for p in plans]
+    items.sort(key=lambda x: x[1].t)
+    paths = record(sessions, items, RecorderConfig(split_duration=1.0), label="split",
+                   config_toml="[mpc]\nn_samples = 32\nmax_iter = 5\n", wall_time=1_700_000_000.0)
+    assert len(paths) >= 3
+    return paths, plans
+
+
+def test_info_export_and_replay_cover_every_part_of_a_split_session(sessions, tmp_path, capsys):
+    paths, plans = _split_session(sessions)
+    sid = "20231114-221320-split"
+    for arg in (sid, paths[1].name, str(paths[-1])):
+        assert main(["sessions", "info", arg, "--dir", str(sessions)]) == 0
+        out = capsys.readouterr().out
+        assert f"session {sid}: {len(paths)} parts" in out
+        assert "25 messages" in out  # 17 setpoints and 8 plans, over every part
+        assert all(p.name in out for p in paths)
+    dest = tmp_path / "out"
+    assert main(["sessions", "export", paths[2].name, "--topics", "body/setpoints",
+                 "--out", str(dest), "--dir", str(sessions)]) == 0
+    with open(dest / "body_setpoints.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [float(r["t"]) for r in rows] == [0.25 * k for k in range(17)]
+    out_csv = tmp_path / "cf.csv"
+    assert main(["replay", str(paths[0]), "--weights", "lam_st=2.0", "--out", str(out_csv),
+                 "--dir", str(sessions)]) == 0
+    assert f"{len(plans)} plans replayed" in capsys.readouterr().out
+    with open(out_csv, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [float(r["t"]) for r in rows] == [p.t for p in plans]
+
+
+def test_a_split_session_with_a_missing_part_is_refused_by_the_cli(sessions, capsys):
+    paths, _ = _split_session(sessions)
+    paths[1].unlink()
+    assert main(["sessions", "info", "20231114-221320-split", "--dir", str(sessions)]) == 2
+    err = capsys.readouterr().err
+    assert paths[1].name in err and "missing" in err

@@ -8,7 +8,8 @@ writes what is published, the player publishes what was written.
     foxglove   foxglove.FrameTransform / foxglove.Log written beside our channels
     files      the sessions directory, file names, metadata record names
     recorder   Recorder: stream -> crash-safe MCAP parts
-    reader     SessionReader: messages, time ranges, state_at, events
+    reader     SessionReader (one part file) and SessionParts (every part of a session as one
+               recording): messages, time ranges, state_at, events
     repair     rewrite a truncated file fully indexed
     index      list sessions from their summaries
     export     CSV per channel

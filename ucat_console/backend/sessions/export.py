@@ -21,7 +21,7 @@ import json
 from pathlib import Path
 from typing import Any, Iterable, Sequence
 
-from ucat_console.backend.sessions.reader import SessionReader
+from ucat_console.backend.sessions.reader import SessionParts, SessionReader, SessionSource
 from ucat_console.backend.sessions.schema import BOOL, FLOAT, FLOATS, JSON, SEQ, field_specs
 from ucat_console.telemetry.channels import message_type
 
@@ -70,18 +70,19 @@ def row(msg: Any, log_time_ns: int) -> list[str]:
 
 
 def export_csv(
-    readers: SessionReader | Sequence[SessionReader],
+    readers: SessionSource | Sequence[SessionSource],
     channels: Iterable[str],
     out_dir: str | Path,
     start: float | None = None,
     end: float | None = None,
 ) -> dict[str, tuple[Path, int]]:
-    """Write one CSV per channel (all parts in the order given) into ``out_dir``.
+    """Write one CSV per channel into ``out_dir``: the messages of ``readers`` (a part, a
+    whole session as :class:`SessionParts`, or several of them, in the order given).
 
     Returns channel -> (file, rows). Unknown channel names raise ValueError; a channel
     with no messages gets a file with its header only.
     """
-    if isinstance(readers, SessionReader):
+    if isinstance(readers, (SessionReader, SessionParts)):
         readers = [readers]
     chans = list(dict.fromkeys(channels))
     if not chans:

@@ -16,7 +16,12 @@ from mcap.records import Chunk, Metadata
 from mcap.stream_reader import StreamReader
 
 from ucat_console.backend.sessions import files
-from ucat_console.backend.sessions.reader import MAGIC, SessionReader, TruncatedSessionError
+from ucat_console.backend.sessions.reader import (
+    MAGIC,
+    SessionReader,
+    TruncatedSessionError,
+    part_paths,
+)
 from ucat_console.telemetry.channels import EVENTS
 
 log = logging.getLogger(__name__)
@@ -140,13 +145,13 @@ def list_sessions(directory: str | Path | None = None) -> list[SessionInfo]:
 
 
 def session_parts(session_id: str, directory: str | Path | None = None) -> list[Path]:
-    """The part files of a session, in order (ValueError when there are none)."""
+    """The part files of a session, in order (ValueError when there are none).
+
+    Lists what is there; :class:`~ucat_console.backend.sessions.reader.SessionParts`, which
+    reads a session as one, also refuses a gap in the part numbers.
+    """
     root = files.sessions_dir(directory)
-    parts = []
-    for path in root.glob(f"{session_id}_*{files.SUFFIX}"):
-        parsed = files.parse_part_name(path)
-        if parsed and parsed[0] == session_id:
-            parts.append((parsed[1], path))
+    parts = part_paths(session_id, root)
     if not parts:
         raise ValueError(f"session {session_id!r}: no files in {root}")
-    return [p for _, p in sorted(parts)]
+    return [p for _, p in sorted(parts.items())]

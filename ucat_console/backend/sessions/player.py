@@ -1,8 +1,11 @@
-"""The player: the other end of the telemetry stream, publishing a session file onto it.
+"""The player: the other end of the telemetry stream, publishing a session onto it.
 
 A :class:`Player` publishes a session's messages onto a
 :class:`~ucat_console.telemetry.TelemetryStream` on its own clock, so every subscriber
-(the 3-D view, the plots, the metrics) shows a recording exactly as it showed live.
+(the 3-D view, the plots, the metrics) shows a recording exactly as it showed live. It
+reads one part file, or every part of a split session as one recording through
+:class:`~ucat_console.backend.sessions.reader.SessionParts` (playing, seeking, stepping
+and jumping across the part boundaries).
 
 Playback position ``position`` is on the recorded stream's clock (seconds, the messages'
 ``t``). Invariant: every message with a time at or before the position has been
@@ -11,7 +14,7 @@ published (or summarised by the state published on a seek). Controls: ``play``/`
 channel at ``t`` first), ``step(+1/-1)`` (one frame: the next/previous message on the
 frame channel, by default the body state), ``next_event``/``prev_event`` (recorded events
 and review markers). Markers added during review go to a sidecar file
-(:mod:`ucat_console.backend.sessions.markers`); the session file is never modified.
+(:mod:`ucat_console.backend.sessions.markers`); the session files are never modified.
 
 :meth:`Player.advance` is the whole playback clock: the playing thread calls it with the
 wall time elapsed; tests and offline tools may call it directly.
@@ -26,7 +29,7 @@ import time
 from typing import Any, Callable, Iterator
 
 from ucat_console.backend.sessions.markers import Marker, MarkerStore
-from ucat_console.backend.sessions.reader import Record, SessionReader
+from ucat_console.backend.sessions.reader import Record, SessionSource
 from ucat_console.telemetry.channels import BODY_STATE, CHANNELS, EVENTS
 from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.stream import TelemetryStream
@@ -47,11 +50,12 @@ def check_speed(speed: float) -> float:
 
 
 class Player:
-    """Plays one session file onto ``stream``. Thread-safe; ``close()`` when done."""
+    """Plays a session (a :class:`SessionReader` or :class:`SessionParts`) onto ``stream``.
+    Thread-safe; ``close()`` when done (the reader stays open: its owner closes it)."""
 
     def __init__(
         self,
-        reader: SessionReader,
+        reader: SessionSource,
         stream: TelemetryStream,
         *,
         speed: float = 1.0,

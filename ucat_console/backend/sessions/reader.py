@@ -5,6 +5,12 @@ the problem: a path outside the sessions directory, a file that is not MCAP, a t
 file (no summary: run ``ucat-console sessions repair``), a corrupted file, and a foreign
 MCAP file (a channel or schema that is not ours).
 
+:class:`SessionParts` opens every part of one session (``<id>_001.mcap``, ``_002`` ...)
+and reads them as one recording with the same interface: records in time order across
+part boundaries, the state at any time, the events of every part. It refuses a gap in
+the part numbers and parts that disagree on the session or its ``epoch_offset``;
+:func:`open_session` opens a session by id or by any of its part files.
+
 Times given to and returned by the reader are seconds on the recorded stream's clock (the
 messages' ``t``); the file's ``epoch_offset`` converts them to the file's nanoseconds.
 Time ranges are half-open, ``[start, end)``, as mcap's ``starting_at``/``ending_before``.
@@ -13,12 +19,13 @@ Time ranges are half-open, ``[start, end)``, as mcap's ``starting_at``/``ending_
 from __future__ import annotations
 
 import bisect
+import heapq
 import json
 import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, Any, Iterable, Iterator
+from typing import IO, Any, Iterable, Iterator, Sequence
 
 from mcap.reader import SeekingReader
 from mcap.records import Channel, ChunkIndex, Message, Schema
@@ -368,6 +375,338 @@ class SessionReader:
         return [r.log_time_ns for r in self.records([EVENTS])]
 
 
-def open_session(path: str | Path, directory: str | Path | None = None) -> SessionReader:
-    """Open a session file inside ``directory`` (default: the project's ``sessions/``)."""
-    return SessionReader(path, directory)
+# ---------------------------------------------------------------------- whole sessions
+def part_paths(session_id: str, directory: str | Path | None = None) -> dict[int, Path]:
+    """The part files of ``session_id`` in ``directory``, by part number (empty when none).
+
+    Two files naming the same part (``_001`` and ``_0001``) raise ValueError naming both.
+    """
+    root = files.sessions_dir(directory)
+    found: dict[int, Path] = {}
+    if not root.is_dir():
+        return found
+    for path in sorted(root.iterdir()):
+        parsed = files.parse_part_name(path)
+        if parsed is None or parsed[0] != session_id or not path.is_file():
+            continue
+        if parsed[1] in found:
+            raise ValueError(f"{path}: part {parsed[1]} of session {session_id!r} is also "
+                             f"{found[parsed[1]].name}; keep one of the two")
+        found[parsed[1]] = path
+    return found
+
+
+def _sequence(session_id: str, folder: Path) -> list[Path]:
+    """The part files of a session in part order; ValueError naming the first missing one."""
+    found = part_paths(session_id, folder)
+    if not found:
+        raise ValueError(f"session {session_id!r}: no files in {folder}")
+    for n in range(1, max(found) + 1):
+        if n not in found:
+            have = ", ".join(p.name for _, p in sorted(found.items()))
+            raise ValueError(f"{folder / files.part_name(session_id, n)}: no such file: part {n} "
+                             f"of session {session_id!r} is missing (found {have})")
+    return [found[n] for n in sorted(found)]
+
+
+def _named_file(session: str | Path, root: Path) -> Path | None:
+    """The file ``session`` names (as given, else inside ``root``), None when it names none.
+
+    A ``Path``, or text holding a path separator or ending in ``.mcap``, names a file
+    (ValueError when there is none); any other text is a session id (None).
+    """
+    text = str(session)
+    is_path = isinstance(session, Path) or "/" in text or "\\" in text
+    if not is_path and not text.endswith(files.SUFFIX):
+        return None
+    p = Path(text).expanduser()
+    for candidate in (p,) if p.is_absolute() else (p, root / p):
+        if candidate.is_file():
+            return candidate
+    raise ValueError(f"{session}: no such session file")
+
+
+def _paths_of(session: str | Path, root: Path) -> tuple[str | None, list[Path]]:
+    """(session id, part files in order) named by a session id or by one of its parts;
+    the id is None for a file whose name is not a part name (it is read alone)."""
+    given = _named_file(session, root)
+    if given is None:
+        sid = str(session)
+        if not sid:
+            raise ValueError("session: no session id given")
+        return sid, _sequence(sid, root)
+    p = files.inside_sessions(given, root)
+    parsed = files.parse_part_name(p)
+    if parsed is None:
+        return None, [p]
+    return parsed[0], _sequence(parsed[0], p.parent)
+
+
+def _check_parts(readers: Sequence[SessionReader], session_id: str | None) -> None:
+    """ValueError naming the part that does not belong with the first: another session id
+    or part number in its metadata than in its name, or another ``epoch_offset``."""
+    first = readers[0]
+    for n, r in enumerate(readers, 1):
+        meta = r.metadata.get(files.META_SESSION, {})
+        if session_id is not None and meta.get("id", session_id) != session_id:
+            raise ValueError(f"{r.path}: its metadata names session {meta['id']!r}, "
+                             f"not {session_id!r}")
+        if session_id is not None and "part" in meta and r.part != n:
+            raise ValueError(f"{r.path}: its metadata names part {r.part}, not {n}")
+        if r.epoch_offset != first.epoch_offset:
+            raise ValueError(
+                f"{r.path}: epoch_offset {r.epoch_offset!r} differs from {first.path.name}'s "
+                f"{first.epoch_offset!r}; the parts of one session share their clock"
+            )
+
+
+def _by_time(rec: Record) -> int:
+    return rec.log_time_ns
+
+
+class SessionParts:
+    """Every part of one session, read as one recording (``close()`` or a context manager).
+
+    Opened from a session id (its parts in the sessions ``directory``) or from the path of
+    any one part (its parts beside it); a file whose name is not a part name is read
+    alone. Holds one :class:`SessionReader` per part in part order (``parts``) and offers
+    their interface over the whole session, so the player, the review panel, the export
+    and counterfactual replay read a split session as one file:
+
+    * times: ``start_ns``/``end_ns`` span every part; the parts share the session's
+      ``epoch_offset``, so ``to_ns``/``from_ns`` are those of any part;
+    * ``records``/``messages``: every part's messages in time order (the parts follow each
+      other in time; parts that overlap are merged), at equal times the earlier part first;
+    * ``state_at``/``state_records_at_ns``: the latest message of each channel at or before
+      a time, from the part holding that time and, for channels with no message there yet,
+      from the parts before it;
+    * ``metadata``: the first part's records with the latest part's ``notes``; the
+      configuration, weights and version are the first part's.
+
+    ``path`` is the first part's file (its directory holds the review markers, which are
+    per session); ``paths`` every part's.
+    """
+
+    def __init__(self, session: str | Path, directory: str | Path | None = None) -> None:
+        root = files.sessions_dir(directory)
+        sid, paths = _paths_of(session, root)
+        readers: list[SessionReader] = []
+        try:
+            for path in paths:  # a truncated part: TruncatedSessionError naming it
+                readers.append(SessionReader(path, root))
+            _check_parts(readers, sid)
+        except BaseException:
+            for r in readers:
+                r.close()
+            raise
+        self.parts: tuple[SessionReader, ...] = tuple(readers)
+        first = readers[0]
+        self.session_id: str = sid if sid is not None else first.session_id
+        self.path: Path = first.path
+        self.paths: tuple[Path, ...] = tuple(r.path for r in readers)
+        self.epoch_offset: float = first.epoch_offset
+        self._filled = [r for r in readers if r.message_count > 0]
+        self.message_count: int = sum(r.message_count for r in readers)
+        self.start_ns: int = min((r.start_ns for r in self._filled), default=first.start_ns)
+        self.end_ns: int = max((r.end_ns for r in self._filled), default=first.end_ns)
+
+    # ------------------------------------------------------------------ properties
+    def close(self) -> None:
+        for r in self.parts:
+            r.close()
+
+    def __enter__(self) -> SessionParts:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    @property
+    def directory(self) -> Path:
+        """The directory holding the parts (and the session's review markers)."""
+        return self.path.parent
+
+    @property
+    def start(self) -> float:
+        """Time of the first message of the session (stream seconds)."""
+        return self.from_ns(self.start_ns)
+
+    @property
+    def end(self) -> float:
+        """Time of the last message of the session (stream seconds)."""
+        return self.from_ns(self.end_ns)
+
+    @property
+    def duration(self) -> float:
+        """From the first message to the last, across every part (s)."""
+        return (self.end_ns - self.start_ns) * 1e-9 if self.message_count else 0.0
+
+    @property
+    def metadata(self) -> dict[str, dict[str, str]]:
+        """The first part's metadata records with the latest part's notes."""
+        out = {name: dict(data) for name, data in self.parts[0].metadata.items()}
+        notes = self.parts[-1].metadata.get(files.META_NOTES)
+        if notes is not None:
+            out[files.META_NOTES] = dict(notes)
+        return out
+
+    @property
+    def notes(self) -> str:
+        """The operator's notes as the latest part holds them."""
+        return self.parts[-1].notes
+
+    @property
+    def config_toml(self) -> str:
+        return self.parts[0].config_toml
+
+    @property
+    def weights(self) -> dict[str, float]:
+        return self.parts[0].weights
+
+    @property
+    def version(self) -> str:
+        return self.parts[0].version
+
+    @property
+    def channels(self) -> list[str]:
+        """Telemetry channels registered in any part, in order of first registration."""
+        return list(dict.fromkeys(c for r in self.parts for c in r.channels))
+
+    def message_counts(self) -> dict[str, int]:
+        """Messages per channel over every part."""
+        counts = {c: 0 for c in self.channels}
+        for r in self.parts:
+            for c, n in r.message_counts().items():
+                counts[c] += n
+        return counts
+
+    def to_ns(self, t: float) -> int:
+        return codec.to_ns(t, self.epoch_offset)
+
+    def from_ns(self, ns: int) -> float:
+        return codec.from_ns(ns, self.epoch_offset)
+
+    def part_at_ns(self, ns: int) -> int:
+        """The part number (from 1) holding file time ``ns``: the last part with a message
+        at or before it (1 before the first message)."""
+        number = 1
+        for n, r in enumerate(self.parts, 1):
+            if r.message_count and r.start_ns <= ns:
+                number = n
+        return number
+
+    # ------------------------------------------------------------------ messages
+    def _topics(self, channels: Iterable[str] | None) -> list[str] | None:
+        if channels is None:
+            return None
+        out = list(channels)
+        for c in out:
+            if c not in CHANNELS:
+                raise ValueError(f"unknown telemetry channel {c!r}")
+        return out
+
+    def _runs(self, lo: int | None, hi: int | None) -> list[list[SessionReader]]:
+        """The parts with messages in ``[lo, hi)``, in runs that follow each other in time:
+        a run's parts overlap, and every message of a run is at or after the previous
+        run's. Parts in a run are in part order."""
+        parts = [
+            r for r in self._filled
+            if (hi is None or r.start_ns < hi) and (lo is None or r.end_ns >= lo)
+        ]
+        order = sorted(range(len(parts)), key=lambda i: (parts[i].start_ns, i))
+        runs: list[list[int]] = []
+        run_end = 0
+        for i in order:
+            r = parts[i]
+            if runs and r.start_ns < run_end:
+                runs[-1].append(i)
+                run_end = max(run_end, r.end_ns)
+            else:
+                runs.append([i])
+                run_end = r.end_ns
+        return [[parts[i] for i in sorted(run)] for run in runs]
+
+    def records(
+        self,
+        channels: Iterable[str] | None = None,
+        start: float | None = None,
+        end: float | None = None,
+        *,
+        start_ns: int | None = None,
+        end_ns: int | None = None,
+        reverse: bool = False,
+    ) -> Iterator[Record]:
+        """Decoded messages of every part in time order (``reverse``: latest first) within
+        ``[start, end)`` (stream seconds) or ``[start_ns, end_ns)`` (file nanoseconds)."""
+        topics = self._topics(channels)
+        lo = start_ns if start is None else self.to_ns(start)
+        hi = end_ns if end is None else self.to_ns(end)
+        runs = self._runs(lo, hi)
+        for run in reversed(runs) if reverse else runs:
+            its = [
+                r.records(topics, start_ns=lo, end_ns=hi, reverse=reverse)
+                for r in (reversed(run) if reverse else run)
+            ]
+            if len(its) == 1:
+                yield from its[0]
+            else:
+                yield from heapq.merge(*its, key=_by_time, reverse=reverse)
+
+    def messages(
+        self,
+        channels: Iterable[str] | None = None,
+        start: float | None = None,
+        end: float | None = None,
+    ) -> Iterator[tuple[str, Any]]:
+        """``(channel, message)`` of every part in time order within ``[start, end)``."""
+        for r in self.records(channels, start, end):
+            yield r.channel, r.message
+
+    def state_at(self, t: float, channels: Iterable[str] | None = None) -> dict[str, Any]:
+        """The latest message of each channel at or before ``t`` in any part (channels with
+        none are left out)."""
+        return {c: r.message for c, r in self.state_records_at_ns(self.to_ns(t), channels).items()}
+
+    def state_records_at_ns(
+        self, ns: int, channels: Iterable[str] | None = None
+    ) -> dict[str, Record]:
+        """:meth:`state_at` for a file time ``ns``, with the messages' file times.
+
+        The part holding ``ns`` is asked first; the parts before it only for the channels
+        it has no message of by then (or, where parts overlap, one older than their end).
+        At equal times the later part's message is the latest, as in :meth:`records`.
+        """
+        topics = self._topics(channels)
+        wanted = self.channels if topics is None else list(dict.fromkeys(topics))
+        latest: dict[str, Record] = {}
+        for r in reversed(self._filled):
+            if r.start_ns > ns:
+                continue
+            ask = [c for c in wanted if c not in latest or latest[c].log_time_ns < r.end_ns]
+            if not ask:
+                continue
+            for c, rec in r.state_records_at_ns(ns, ask).items():
+                if c not in latest or rec.log_time_ns > latest[c].log_time_ns:
+                    latest[c] = rec
+        return {c: latest[c] for c in wanted if c in latest}
+
+    def events(self, start: float | None = None, end: float | None = None) -> list[Event]:
+        """The recorded events of every part within ``[start, end)``, in time order."""
+        return [m for _, m in self.messages([EVENTS], start, end)]
+
+    def event_times_ns(self) -> list[int]:
+        return [r.log_time_ns for r in self.records([EVENTS])]
+
+
+#: what the player, the review panel, the export and counterfactual replay read from
+SessionSource = SessionReader | SessionParts
+
+
+def open_session(session: str | Path, directory: str | Path | None = None) -> SessionParts:
+    """Open a whole session inside ``directory`` (default: the project's ``sessions/``).
+
+    ``session``: a session id, or the path or file name of any one of its parts (every
+    part is opened); a file whose name is not a part name is opened alone. A one-part
+    session reads exactly as its file does with :class:`SessionReader`.
+    """
+    return SessionParts(session, directory)

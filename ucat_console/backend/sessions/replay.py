@@ -27,7 +27,7 @@ from typing import Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
-from ucat_console.backend.sessions.reader import SessionReader
+from ucat_console.backend.sessions.reader import SessionSource
 from ucat_console.control import FinMpc, MpcConfig
 from ucat_console.control.power import drag_power
 from ucat_console.telemetry.channels import N_FINS, fin_plan
@@ -70,9 +70,9 @@ def parse_weights(text: str) -> dict[str, float]:
     return out
 
 
-def recorded_config(reader: SessionReader) -> MpcConfig:
+def recorded_config(reader: SessionSource) -> MpcConfig:
     """The MPC configuration in force when the session was recorded (defaults for what
-    the file does not say)."""
+    the file does not say; of a split session, its first part's)."""
     cfg = MpcConfig()
     text = reader.config_toml
     if text.strip():
@@ -161,7 +161,7 @@ def recorded_seed(plan: FinPlan, index: int) -> int | None:
 
 
 def counterfactual(
-    reader: SessionReader,
+    reader: SessionSource,
     weights: Mapping[str, float],
     *,
     seed: SeedRule = recorded_seed,
@@ -170,7 +170,8 @@ def counterfactual(
     start: float | None = None,
     end: float | None = None,
 ) -> ReplayResult:
-    """Re-plan every recorded FinPlan with ``weights`` changed.
+    """Re-plan every recorded FinPlan with ``weights`` changed (of every part, in time
+    order, when ``reader`` is a whole split session).
 
     ``seed``: one seed for every plan, None (each fin's planner continues its random
     stream), or a function ``(plan, index) -> seed``; by default each plan's recorded seed,
