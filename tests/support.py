@@ -1,4 +1,5 @@
-"""Helpers shared by the tests: waiting on a condition, collecting events and readings."""
+"""Helpers shared by the tests: waiting on a condition, collecting events, readings and
+stream messages."""
 
 from __future__ import annotations
 
@@ -41,6 +42,25 @@ class Collector:
         """The first event from ``source`` with one of ``codes``, from item ``after`` on."""
         return next((e for e in self.items[after:]
                      if isinstance(e, Event) and e.source == source and e.code in codes), None)
+
+
+class StreamSink:
+    """Every ``(channel, message)`` published on a telemetry stream, taken in batches."""
+
+    def __init__(self, stream: Any) -> None:
+        self.got: list[tuple[str, object]] = []
+        self._lock = threading.Lock()
+        stream.subscribe(self)
+
+    def __call__(self, channel: str, msg: object) -> None:
+        with self._lock:
+            self.got.append((channel, msg))
+
+    def take(self) -> list[tuple[str, object]]:
+        """What arrived since the last take."""
+        with self._lock:
+            out, self.got = self.got, []
+        return out
 
 
 def wait_for(predicate: Callable[[], Any], timeout: float = 10.0, what: str = "condition") -> Any:

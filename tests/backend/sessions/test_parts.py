@@ -8,11 +8,11 @@ from __future__ import annotations
 import hashlib
 import json
 import re
-import threading
 import time
 from pathlib import Path
 
 import pytest
+from support import StreamSink
 from mcap.records import Attachment, Channel, DataEnd, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 from mcap.writer import Writer
@@ -78,22 +78,6 @@ def part_spans(paths: list[Path], directory: Path) -> list[tuple[float, float]]:
         with SessionReader(p, directory) as r:
             out.append((r.start, r.end))
     return out
-
-
-class Sink:
-    def __init__(self, stream: TelemetryStream) -> None:
-        self.got: list[tuple[str, object]] = []
-        self._lock = threading.Lock()
-        stream.subscribe(self)
-
-    def __call__(self, channel, msg) -> None:
-        with self._lock:
-            self.got.append((channel, msg))
-
-    def take(self) -> list[tuple[str, object]]:
-        with self._lock:
-            out, self.got = self.got, []
-        return out
 
 
 @pytest.fixture
@@ -239,7 +223,7 @@ def test_state_just_after_each_boundary_includes_channels_of_earlier_parts(split
 def test_player_publishes_every_message_once_in_order_across_parts(split, sessions):
     sid, paths, items = split
     stream = TelemetryStream()
-    sink = Sink(stream)
+    sink = StreamSink(stream)
     with SessionParts(sid, sessions) as s:
         p = Player(s, stream)
         n = 0
@@ -255,7 +239,7 @@ def test_player_seek_step_and_advance_across_a_boundary(split, sessions):
     bodies = [m.t for c, m in items if c == C.BODY_STATE]
     spans = part_spans(paths, sessions)
     stream = TelemetryStream()
-    sink = Sink(stream)
+    sink = StreamSink(stream)
     with SessionParts(sid, sessions) as s:
         p = Player(s, stream)
         for k in range(1, len(paths)):
@@ -283,7 +267,7 @@ def test_player_seek_step_and_advance_across_a_boundary(split, sessions):
 def test_playing_thread_crosses_the_boundaries(split, sessions):
     sid, paths, items = split
     stream = TelemetryStream()
-    sink = Sink(stream)
+    sink = StreamSink(stream)
     with SessionParts(sid, sessions) as s:
         p = Player(s, stream, speed=5.0)
         p.seek(0.5)
@@ -467,7 +451,7 @@ def test_an_empty_last_part_is_left_out_of_the_times(sessions):
         assert list(s.messages()) == items
         assert s.state_at(5.0) == {C.SETPOINTS: items[-1][1]}
         stream = TelemetryStream()
-        sink = Sink(stream)
+        sink = StreamSink(stream)
         p = Player(s, stream)
         while not p.at_end:
             p.advance(0.1)

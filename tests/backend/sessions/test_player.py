@@ -5,10 +5,10 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import threading
 import time
 
 import pytest
+from support import StreamSink
 from session_helpers import record
 
 from ucat_console.backend.sessions.player import Player
@@ -46,22 +46,6 @@ def session(sessions):
     return path, items
 
 
-class Sink:
-    def __init__(self, stream: TelemetryStream) -> None:
-        self.got: list[tuple[str, object]] = []
-        self._lock = threading.Lock()
-        stream.subscribe(self)
-
-    def __call__(self, channel, msg) -> None:
-        with self._lock:
-            self.got.append((channel, msg))
-
-    def take(self) -> list[tuple[str, object]]:
-        with self._lock:
-            out, self.got = self.got, []
-        return out
-
-
 def brute_state(items, t):
     state = {}
     for ch, m in items:
@@ -74,7 +58,7 @@ def brute_state(items, t):
 def player(session, sessions):
     path, items = session
     stream = TelemetryStream()
-    sink = Sink(stream)
+    sink = StreamSink(stream)
     reader = SessionReader(path, sessions)
     p = Player(reader, stream)
     yield p, sink, items

@@ -25,7 +25,7 @@ import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, Any, Iterable, Iterator, Sequence
+from typing import IO, Any, Iterable, Iterator, Self, Sequence
 
 from mcap.reader import SeekingReader
 from mcap.records import Channel, ChunkIndex, Message, Schema
@@ -92,7 +92,104 @@ def _check_schema(topic: str, schema: Schema | None, channel: Channel, path: Pat
                      + (f" (schema {schema.name!r})" if schema is not None else ""))
 
 
-class SessionReader:
+class _Recording:
+    """What a recording offers on top of its ``records`` and ``state_records_at_ns``: times
+    in stream seconds, metadata by name, messages, state and events (shared by one part
+    file and a whole session)."""
+
+    path: Path
+    metadata: dict[str, dict[str, str]]
+    epoch_offset: float
+    message_count: int
+    start_ns: int
+    end_ns: int
+
+    def close(self) -> None:
+        raise NotImplementedError
+
+    def records(self, channels: Iterable[str] | None = None, start: float | None = None,
+                end: float | None = None, *, start_ns: int | None = None, end_ns: int | None = None,
+                reverse: bool = False) -> Iterator[Record]:
+        raise NotImplementedError
+
+    def state_records_at_ns(self, ns: int, channels: Iterable[str] | None = None) -> dict[str, Record]:
+        raise NotImplementedError
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    @property
+    def start(self) -> float:
+        """Time of the first message (stream seconds)."""
+        return self.from_ns(self.start_ns)
+
+    @property
+    def end(self) -> float:
+        """Time of the last message (stream seconds)."""
+        return self.from_ns(self.end_ns)
+
+    @property
+    def duration(self) -> float:
+        """From the first message to the last (s)."""
+        return (self.end_ns - self.start_ns) * 1e-9 if self.message_count else 0.0
+
+    @property
+    def notes(self) -> str:
+        return self.metadata.get(files.META_NOTES, {}).get("text", "")
+
+    @property
+    def config_toml(self) -> str:
+        return self.metadata.get(files.META_CONFIG, {}).get("toml", "")
+
+    @property
+    def weights(self) -> dict[str, float]:
+        out = {}
+        for k, v in self.metadata.get(files.META_WEIGHTS, {}).items():
+            try:
+                out[k] = float(v)
+            except ValueError:
+                raise ValueError(
+                    f"{self.path}: weights metadata: {k}={v!r} is not a number"
+                ) from None
+        return out
+
+    @property
+    def version(self) -> str:
+        return self.metadata.get(files.META_VERSION, {}).get("ucat_console", "")
+
+    def to_ns(self, t: float) -> int:
+        return codec.to_ns(t, self.epoch_offset)
+
+    def from_ns(self, ns: int) -> float:
+        return codec.from_ns(ns, self.epoch_offset)
+
+    def messages(
+        self,
+        channels: Iterable[str] | None = None,
+        start: float | None = None,
+        end: float | None = None,
+    ) -> Iterator[tuple[str, Any]]:
+        """``(channel, message)`` in time order within ``[start, end)``."""
+        for r in self.records(channels, start, end):
+            yield r.channel, r.message
+
+    def state_at(self, t: float, channels: Iterable[str] | None = None) -> dict[str, Any]:
+        """The latest message of each channel at or before ``t`` (channels with none are
+        left out)."""
+        return {c: r.message for c, r in self.state_records_at_ns(self.to_ns(t), channels).items()}
+
+    def events(self, start: float | None = None, end: float | None = None) -> list[Event]:
+        """The recorded events within ``[start, end)``, in time order."""
+        return [m for _, m in self.messages([EVENTS], start, end)]
+
+    def event_times_ns(self) -> list[int]:
+        return [r.log_time_ns for r in self.records([EVENTS])]
+
+
+class SessionReader(_Recording):
     """One session file, opened for reading (use as a context manager or ``close()``)."""
 
     def __init__(self, path: str | Path, directory: str | Path | None = None) -> None:
@@ -167,50 +264,6 @@ class SessionReader:
     def close(self) -> None:
         self._file.close()
 
-    def __enter__(self) -> SessionReader:
-        return self
-
-    def __exit__(self, *exc: Any) -> None:
-        self.close()
-
-    @property
-    def start(self) -> float:
-        """Time of the first message (stream seconds)."""
-        return codec.from_ns(self.start_ns, self.epoch_offset)
-
-    @property
-    def end(self) -> float:
-        """Time of the last message (stream seconds)."""
-        return codec.from_ns(self.end_ns, self.epoch_offset)
-
-    @property
-    def duration(self) -> float:
-        return (self.end_ns - self.start_ns) * 1e-9 if self.message_count else 0.0
-
-    @property
-    def notes(self) -> str:
-        return self.metadata.get(files.META_NOTES, {}).get("text", "")
-
-    @property
-    def config_toml(self) -> str:
-        return self.metadata.get(files.META_CONFIG, {}).get("toml", "")
-
-    @property
-    def weights(self) -> dict[str, float]:
-        out = {}
-        for k, v in self.metadata.get(files.META_WEIGHTS, {}).items():
-            try:
-                out[k] = float(v)
-            except ValueError:
-                raise ValueError(
-                    f"{self.path}: weights metadata: {k}={v!r} is not a number"
-                ) from None
-        return out
-
-    @property
-    def version(self) -> str:
-        return self.metadata.get(files.META_VERSION, {}).get("ucat_console", "")
-
     @property
     def channels(self) -> list[str]:
         """Telemetry channels registered in the file."""
@@ -225,12 +278,6 @@ class SessionReader:
             if topic in counts:
                 counts[topic] = n
         return counts
-
-    def to_ns(self, t: float) -> int:
-        return codec.to_ns(t, self.epoch_offset)
-
-    def from_ns(self, ns: int) -> float:
-        return codec.from_ns(ns, self.epoch_offset)
 
     # ------------------------------------------------------------------ messages
     def _topics(self, channels: Iterable[str] | None) -> list[str]:
@@ -287,21 +334,6 @@ class SessionReader:
         hi = end_ns if end is None else self.to_ns(end)
         for channel, message in self._iter(self._topics(channels), lo, hi, reverse):
             yield self._decode(channel, message)
-
-    def messages(
-        self,
-        channels: Iterable[str] | None = None,
-        start: float | None = None,
-        end: float | None = None,
-    ) -> Iterator[tuple[str, Any]]:
-        """``(channel, message)`` in time order within ``[start, end)``."""
-        for r in self.records(channels, start, end):
-            yield r.channel, r.message
-
-    def state_at(self, t: float, channels: Iterable[str] | None = None) -> dict[str, Any]:
-        """The latest message of each channel at or before ``t`` (channels with none are
-        left out)."""
-        return {c: r.message for c, r in self.state_records_at_ns(self.to_ns(t), channels).items()}
 
     def state_records_at_ns(
         self, ns: int, channels: Iterable[str] | None = None
@@ -366,13 +398,6 @@ class SessionReader:
             self._first_ns: dict[str, int] | None = first
         assert self._first_ns is not None
         return self._first_ns
-
-    def events(self, start: float | None = None, end: float | None = None) -> list[Event]:
-        """The recorded events within ``[start, end)``, in time order."""
-        return [m for _, m in self.messages([EVENTS], start, end)]
-
-    def event_times_ns(self) -> list[int]:
-        return [r.log_time_ns for r in self.records([EVENTS])]
 
 
 # ---------------------------------------------------------------------- whole sessions
@@ -464,7 +489,7 @@ def _by_time(rec: Record) -> int:
     return rec.log_time_ns
 
 
-class SessionParts:
+class SessionParts(_Recording):
     """Every part of one session, read as one recording (``close()`` or a context manager).
 
     Opened from a session id (its parts in the sessions ``directory``) or from the path of
@@ -515,31 +540,10 @@ class SessionParts:
         for r in self.parts:
             r.close()
 
-    def __enter__(self) -> SessionParts:
-        return self
-
-    def __exit__(self, *exc: Any) -> None:
-        self.close()
-
     @property
     def directory(self) -> Path:
         """The directory holding the parts (and the session's review markers)."""
         return self.path.parent
-
-    @property
-    def start(self) -> float:
-        """Time of the first message of the session (stream seconds)."""
-        return self.from_ns(self.start_ns)
-
-    @property
-    def end(self) -> float:
-        """Time of the last message of the session (stream seconds)."""
-        return self.from_ns(self.end_ns)
-
-    @property
-    def duration(self) -> float:
-        """From the first message to the last, across every part (s)."""
-        return (self.end_ns - self.start_ns) * 1e-9 if self.message_count else 0.0
 
     @property
     def metadata(self) -> dict[str, dict[str, str]]:
@@ -549,23 +553,6 @@ class SessionParts:
         if notes is not None:
             out[files.META_NOTES] = dict(notes)
         return out
-
-    @property
-    def notes(self) -> str:
-        """The operator's notes as the latest part holds them."""
-        return self.parts[-1].notes
-
-    @property
-    def config_toml(self) -> str:
-        return self.parts[0].config_toml
-
-    @property
-    def weights(self) -> dict[str, float]:
-        return self.parts[0].weights
-
-    @property
-    def version(self) -> str:
-        return self.parts[0].version
 
     @property
     def channels(self) -> list[str]:
@@ -579,12 +566,6 @@ class SessionParts:
             for c, n in r.message_counts().items():
                 counts[c] += n
         return counts
-
-    def to_ns(self, t: float) -> int:
-        return codec.to_ns(t, self.epoch_offset)
-
-    def from_ns(self, ns: int) -> float:
-        return codec.from_ns(ns, self.epoch_offset)
 
     def part_at_ns(self, ns: int) -> int:
         """The part number (from 1) holding file time ``ns``: the last part with a message
@@ -652,21 +633,6 @@ class SessionParts:
             else:
                 yield from heapq.merge(*its, key=_by_time, reverse=reverse)
 
-    def messages(
-        self,
-        channels: Iterable[str] | None = None,
-        start: float | None = None,
-        end: float | None = None,
-    ) -> Iterator[tuple[str, Any]]:
-        """``(channel, message)`` of every part in time order within ``[start, end)``."""
-        for r in self.records(channels, start, end):
-            yield r.channel, r.message
-
-    def state_at(self, t: float, channels: Iterable[str] | None = None) -> dict[str, Any]:
-        """The latest message of each channel at or before ``t`` in any part (channels with
-        none are left out)."""
-        return {c: r.message for c, r in self.state_records_at_ns(self.to_ns(t), channels).items()}
-
     def state_records_at_ns(
         self, ns: int, channels: Iterable[str] | None = None
     ) -> dict[str, Record]:
@@ -689,13 +655,6 @@ class SessionParts:
                 if c not in latest or rec.log_time_ns > latest[c].log_time_ns:
                     latest[c] = rec
         return {c: latest[c] for c in wanted if c in latest}
-
-    def events(self, start: float | None = None, end: float | None = None) -> list[Event]:
-        """The recorded events of every part within ``[start, end)``, in time order."""
-        return [m for _, m in self.messages([EVENTS], start, end)]
-
-    def event_times_ns(self) -> list[int]:
-        return [r.log_time_ns for r in self.records([EVENTS])]
 
 
 #: what the player, the review panel, the export and counterfactual replay read from
