@@ -158,6 +158,13 @@ class BodyController:
         self._new_v = self._new_z = self._new_r = False
         self._fx = self._fy = self._yaw = 0.0
 
+    @property
+    def sensors_reported(self) -> bool:
+        """A depth and a DVL report (with or without bottom lock) have arrived since the
+        reset: the loops have seen what the robot can measure, and a speed still missing is
+        the DVL's reported fault, not the start-up's."""
+        return self.last_depth_t is not None and (self.last_dvl_t is not None or self.dvl_missing > 0)
+
     def on_dvl(self, reading: DvlVelocity) -> None:
         if not reading.valid:
             self.dvl_missing += 1

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 
+from ucat_console.backend.devices.readings import DvlVelocity
 from ucat_console.backend.loop.clock import PacedClock
 from ucat_console.backend.loop.closed_loop import PLANT_TO_PAPER, ClosedLoop
 from ucat_console.backend.loop.config import LoopConfig
@@ -202,3 +204,46 @@ def test_telemetry_rates_and_replayable_baseline_plans() -> None:
         assert out.u == p.u and out.commands == p.commands
     assert PAPER_TO_PLANT_FIN[PLANT_TO_PAPER[2]] == 2
     assert math.isfinite(log.get(ch.POWER)[-1].energy) and log.get(ch.POWER)[-1].energy > 0.0
+
+
+class LateDvlRobot(SimRobotIO):
+    """The simulator whose DVL reports only from ``dvl_from`` s on, without bottom lock
+    when ``lock`` is False (as a DVL still connecting, or too close to the surface)."""
+
+    def __init__(self, dvl_from: float, lock: bool, **kw) -> None:
+        super().__init__(**kw)
+        self.dvl_from, self.lock = dvl_from, lock
+        self.first_dvl_t: float | None = None
+
+    def advance_to(self, t: float):
+        out = []
+        for r in super().advance_to(t):
+            if isinstance(r, DvlVelocity):
+                if r.t < self.dvl_from:
+                    continue
+                if not self.lock:
+                    r = dataclasses.replace(r, valid=False)
+                if self.first_dvl_t is None:
+                    self.first_dvl_t = r.t
+            out.append(r)
+        return out
+
+
+@pytest.mark.parametrize("lock", [True, False], ids=["bottom-lock", "no-bottom-lock"])
+def test_the_first_plans_wait_for_the_first_dvl_report(lock: bool) -> None:
+    io = LateDvlRobot(0.6, lock, depth=0.5, seed=3)
+    stream = TelemetryStream()
+    log = Log(stream)
+    loop = ClosedLoop(LoopConfig(mode="baseline"), io, stream, setpoints=BodySetpoints(velocity=0.2, depth=1.0))
+    loop.run(3.0)
+    plans = log.plans()
+    assert io.first_dvl_t is not None and plans
+    # no fin moved on a command made before the DVL had reported
+    assert min(p.t for p in plans) >= io.first_dvl_t
+    assert all(s.angle_cmd == 0.0 for c in (ch.fin_state(f) for f in range(4))
+               for s in log.get(c) if s.t < io.first_dvl_t)
+    # and from then on the fins stroke, on the depth loop's command even without bottom lock
+    assert any(s.angle_cmd != 0.0 for s in log.get(ch.fin_state(0)) if s.t > io.first_dvl_t)
+    assert max(abs(p.target[1]) for p in plans) > 0.05
+    if not lock:
+        assert all(c.force_x == 0.0 for c in log.get(ch.BODY_COMMAND))  # no speed measured: no surge command

@@ -24,8 +24,9 @@ thread that is not done) give the same trajectory for the same seed. A plan whos
 took longer than the hand-over allows (headless: solve time > plan_latency; paced: done
 after the wall-clock deadline) is counted in ``plan_overruns``; a plan arriving after its
 fin went idle is counted in ``late_plans`` (the executor's LatePlan). Neither stalls the
-loop in simulated time. The first plans wait until the body controller has had a speed
-(DVL) and a depth: a fin never starts a stroke from a command that assumed either.
+loop in simulated time. The first plans wait until the body controller has had a DVL
+report and a depth: a fin never starts a stroke from a command that assumed either (a DVL
+without bottom lock counts as reported: its fault is then shown and the depth loop runs).
 
 Mode switches are bumpless: a fin's stroke in flight is never interrupted. The old
 executors finish the plans they hold (their plan requests are no longer served) while the
@@ -443,8 +444,8 @@ class ClosedLoop:
         if cmd.depth is not None:
             self._depth = cmd.depth
         self.stream.publish(ch.BODY_COMMAND, BodyCommand(t, cmd.fx, cmd.fy, cmd.yaw))
-        if cmd.velocity is None or cmd.depth is None:
-            return  # the first plans wait for the first speed and depth: no stroke from a guess
+        if not self.body.sensors_reported:
+            return  # the first plans wait for the first DVL and depth reports: no stroke from a guess
         for act in self._actuators:
             if not act.requested and act.active:
                 angle = self._fb_angle[PAPER_TO_PLANT_FIN[act.fins[0]]]
