@@ -198,7 +198,7 @@ class ControlPanel:
             f = self.faults
             f.device.on_update(lambda _: f.show_faults_of_device())
             f.inject.on_click(self._guard(self._inject_fault))
-            f.clear.on_click(self._guard(lambda: self._clear_faults()))
+            f.clear.on_click(self._guard(self._clear_faults))
 
     def _guard(self, fn: Callable[[], Any], tuning: bool = False) -> Callable[[Any], None]:
         """A viser callback: page events only (not values set from code), refusals shown."""
