@@ -109,6 +109,19 @@ def test_sim_robot_is_the_in_process_simulator_at_the_configured_start() -> None
 # ---------------------------------------------------------------------- robot = sim-devices
 
 
+@pytest.mark.parametrize("configured, expected", [(0.3, 1.0), (2.0, 2.0)])
+def test_drivers_give_the_emulated_drives_the_rigs_sdo_timeout(configured: float, expected: float) -> None:
+    epos2 = Epos2Config(units=UNITS, sdo_timeout=configured)
+    io, close = build_robot_io(sim_devices_config(epos2=epos2))
+    try:
+        assert io.config.epos2.sdo_timeout == expected  # the rig's 1 s at least, a longer one kept
+        for driver in io.drives.drivers.values():
+            assert driver.node.sdo.RESPONSE_TIMEOUT == expected
+    finally:
+        close()
+
+
+
 def test_simulated_robot_runs_closed_loop_through_drivers_and_emulators() -> None:
     # reference: the same loop on the in-process simulator, same start and seed
     ref_io = SimRobotIO(depth=START_DEPTH, seed=7)

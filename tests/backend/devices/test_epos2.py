@@ -84,7 +84,8 @@ class Rig:
         self.emulators = start_emulated_nodes(
             self.channel, node_ids, config=Epos2EmulatorConfig(units=UNITS)
         )
-        settings = dict(interface="virtual", channel=self.channel, units=UNITS,
+        # the emulated nodes answer from Python threads: a busy machine's 1 s, as on the rig
+        settings = dict(interface="virtual", channel=self.channel, units=UNITS, sdo_timeout=1.0,
                         heartbeat_ms=HEARTBEAT_MS, node_ids=(11, 12, 13, 14))
         settings.update(overrides)
         self.config = Epos2Config(**settings)
@@ -442,7 +443,8 @@ def test_drive_without_event_timer_falls_back_to_on_change_feedback():
 
     group[21].node.add_write_callback(refuse_event_timer)
     rec = Recorder()
-    cfg = Epos2Config(interface="virtual", channel=channel, units=UNITS, node_ids=(11, 12, 13, 14))
+    cfg = Epos2Config(interface="virtual", channel=channel, units=UNITS, node_ids=(11, 12, 13, 14),
+                      sdo_timeout=1.0)
     drives = FinDrives(cfg, rec.on_feedback, rec.on_event, fins={0: 21})
     try:
         drives.connect()

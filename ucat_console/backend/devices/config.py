@@ -62,6 +62,12 @@ class SimRigConfig(_Config):
     can_channel: str = param(
         "", doc="name of the virtual CAN bus; empty: a fresh name for each rig"
     )
+    sdo_timeout_s: float = param(
+        1.0, lo=0.01, hi=5.0, unit="s",
+        doc="the drivers wait at least this long for an SDO reply from the emulated drives, "
+        "which answer from Python threads on this computer: a busy machine delays them "
+        "beyond a real EPOS2's answer (epos2.sdo_timeout)",
+    )
     imu: ImuEmulatorConfig = ImuEmulatorConfig()
     dvl: DvlEmulatorConfig = DvlEmulatorConfig()
     pressure: PressureEmulatorConfig = PressureEmulatorConfig()

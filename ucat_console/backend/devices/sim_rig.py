@@ -152,7 +152,8 @@ class SimRig:
         log.info("simulated rig: CAN %r, IMU %s, DVL %s:%d, pressure %s",
                  channel, self.imu.port, host, port, self.pressure.port)
         return cfg.replace(
-            epos2=cfg.epos2.replace(interface="virtual", channel=channel),
+            epos2=cfg.epos2.replace(interface="virtual", channel=channel,
+                                    sdo_timeout=max(cfg.epos2.sdo_timeout, cfg.rig.sdo_timeout_s)),
             imu=cfg.imu.replace(port=self.imu.port),
             dvl=cfg.dvl.replace(host=host, port=port),
             pressure=cfg.pressure.replace(port=self.pressure.port),
@@ -261,7 +262,8 @@ class SimRig:
           (meaning per emulator: see its docstring); ``duration`` (s) ends it by itself.
         * ``epos2`` (``fin`` 0-3, default 0, or ``node``): ``emcy`` (``code``, default
           0x2310 overcurrent; ``register``), ``heartbeat_loss``, ``silence`` (the node
-          stops answering), ``slow`` (``delay_s`` on each SDO reply, default 1 s); each
+          stops answering), ``slow`` (``delay_s`` on each SDO reply, default 2 s: beyond the
+          drivers' SDO timeout on the rig, ``rig.sdo_timeout_s``); each
           but ``emcy`` takes ``duration`` (s). An EMCY fault stays until the drive's fault
           is reset, as on the EPOS2.
 
@@ -330,7 +332,7 @@ class SimRig:
             emulator.silence()
             self._after(duration, emulator.unsilence)
         else:
-            delay = kw.get("delay_s", 1.0)
+            delay = kw.get("delay_s", 2.0)
             if isinstance(delay, bool) or not isinstance(delay, (int, float)) or not 0.0 < delay <= 60.0:
                 raise ValueError(f"delay_s: {delay!r} is out of range; allowed: (0, 60] s")
             emulator.slow_replies(float(delay))
