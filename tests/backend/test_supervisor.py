@@ -404,7 +404,7 @@ def test_faults_are_injected_only_on_the_simulated_rig(sup: Supervisor) -> None:
 def test_the_pilot_rehearses_a_silent_pressure_sensor_on_the_simulated_rig(tmp_path: Path) -> None:
     cfg = load_config(ROOT / "config" / "sim-devices.toml")
     cfg = cfg.replace(access=AccessConfig(token=TOKEN),
-                      failsafe=cfg.failsafe.replace(depth=FailsafeRule("hold", 0.5)))
+                      failsafe=cfg.failsafe.replace(depth=FailsafeRule("hold", 1.0)))
     sup = Supervisor(cfg, sessions_dir=tmp_path)
     ev = Events(sup)
     sup.start()
