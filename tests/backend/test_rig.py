@@ -271,7 +271,9 @@ def stand_ins():
     pressure = PressureEmulator(synthetic_depth).start()
     config = DevicesConfig(
         robot="hardware",
-        epos2=Epos2Config(interface="virtual", channel=channel, units=UNITS, boot_timeout=0.2),
+        # margins for drives emulated in this process on a busy machine (a real EPOS2: 0.3 s)
+        epos2=Epos2Config(interface="virtual", channel=channel, units=UNITS, boot_timeout=1.0,
+                          sdo_timeout=1.0),
         imu=ImuConfig(port=imu.port),
         dvl=DvlConfig(host="127.0.0.1", port=dvl.port, connect_timeout_s=0.2),
         pressure=PressureConfig(port=pressure.port),

@@ -433,10 +433,10 @@ def test_the_pilot_rehearses_a_silent_pressure_sensor_on_the_simulated_rig(tmp_p
         assert injected.code == "fault_injected" and injected.data["device"] == "pressure"
         wait_for(lambda: "depth" in sup.safety.active(), what="the depth failsafe")
         wait_for(lambda: "fault_injected" in ev.codes("rig"), what="the injection on the events channel")
-        assert "depth" in ev.codes("failsafe")
+        wait_for(lambda: "depth" in ev.codes("failsafe"), what="the failsafe on the events channel")
 
         sup.clear_fault(PILOT, "pressure")
         wait_for(lambda: "depth" not in sup.safety.active(), what="the depth failsafe clearing")
-        assert "fault_cleared" in ev.codes("rig")
+        wait_for(lambda: "fault_cleared" in ev.codes("rig"), what="the clearing on the events channel")
     finally:
         sup.stop()

@@ -187,10 +187,11 @@ def test_closing_the_pilot_page_triggers_the_failsafe(console: Console) -> None:
     sup = console.sup
     assert sup.access.pilot == b_id and sup.armed
     b.close()
-    wait_for(lambda: "pilot_gone" in sup.safety.active(), timeout=PILOT_GONE_TIMEOUT + 5.0,
-             what="the pilot_gone failsafe")
+    fired = wait_for(lambda: next((e for e in console.events
+                                   if e.source == "failsafe" and e.code == "pilot_gone"), None),
+                     timeout=PILOT_GONE_TIMEOUT + 5.0, what="the pilot_gone failsafe event")
+    assert "pilot_gone" in sup.safety.active()
     left = next(e for e in console.events if e.source == "access" and e.code == "pilot_left")
-    fired = next(e for e in console.events if e.source == "failsafe" and e.code == "pilot_gone")
     assert fired.t - left.t >= PILOT_GONE_TIMEOUT - sup.cfg.console.supervise_period
     assert fired.data["action"] == "hold"
     assert sup.setpoints.velocity == 0.0 and sup.setpoints.yaw_rate == 0.0
