@@ -275,7 +275,7 @@ def stand_ins():
         epos2=Epos2Config(interface="virtual", channel=channel, units=UNITS, boot_timeout=1.0,
                           sdo_timeout=1.0),
         imu=ImuConfig(port=imu.port),
-        dvl=DvlConfig(host="127.0.0.1", port=dvl.port, connect_timeout_s=0.2),
+        dvl=DvlConfig(host="127.0.0.1", port=dvl.port, connect_timeout_s=1.0),
         pressure=PressureConfig(port=pressure.port),
     )
     yield config
