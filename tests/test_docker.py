@@ -2,10 +2,13 @@
 accepts, on a configuration that loads, with the devices that configuration names.
 
 No container engine runs where the tests run, so the image itself is not built here; these
-checks catch the files drifting apart (docker/README.md says how to build and run it)."""
+checks catch the files drifting apart (docker/README.md says how to build and run it), and
+check that ``docker/check_rootfs.py``, which carries the Dockerfile out in a Debian root by
+hand, reads the whole Dockerfile and the build context as docker would."""
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import re
 from pathlib import Path
@@ -17,6 +20,9 @@ from ucat_console.config import load_config
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCKER = ROOT / "docker"
+_spec = importlib.util.spec_from_file_location("check_rootfs", DOCKER / "check_rootfs.py")
+check_rootfs = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(check_rootfs)
 
 
 def dockerfile_instruction(name: str) -> str:
@@ -73,3 +79,25 @@ def test_the_image_installs_the_project_and_keeps_sessions_outside() -> None:
     volume = json.loads(dockerfile_instruction("VOLUME"))
     assert volume == [f"{workdir}/sessions"]
     assert any(v.endswith(f":{workdir}/sessions") for v in compose_service()["volumes"])
+
+
+def test_the_rootfs_check_knows_every_instruction_of_the_dockerfile() -> None:
+    steps = check_rootfs.instructions(DOCKER / "Dockerfile")
+    assert steps[0] == ("FROM", check_rootfs.BASE)
+    assert {word for word, _ in steps} <= {"FROM", "ENV", "WORKDIR", "COPY", "RUN", "VOLUME",
+                                          "ENTRYPOINT", "CMD"}
+    runs = [rest for word, rest in steps if word == "RUN"]
+    assert any(r.startswith("apt-get update") and "can-utils" in r for r in runs)  # joined lines
+    assert any("warm_up()" in r for r in runs)  # the planners are compiled into the image
+    assert ("ENTRYPOINT", dockerfile_instruction("ENTRYPOINT")) in steps
+
+
+def test_the_build_context_leaves_out_only_what_the_dockerignore_names() -> None:
+    files = set(check_rootfs.context_files())
+    assert {"pyproject.toml", "config/robot.toml", "ucat_console/backend/sessions/reader.py",
+            "ucat_console/backend/devices/epos2.eds"} <= files
+    assert not any(f.startswith(("tests/", "docker/", "benchmarks/", "sessions/")) for f in files)
+    ignore = ["sessions", "**/__pycache__", ".git"]
+    assert check_rootfs.ignored("sessions/x_001.mcap", ignore)
+    assert not check_rootfs.ignored("ucat_console/backend/sessions/reader.py", ignore)  # rooted
+    assert check_rootfs.ignored("ucat_console/control/__pycache__/mpc.cpython-311.pyc", ignore)

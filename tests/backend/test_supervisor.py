@@ -20,6 +20,7 @@ from ucat_console.backend.loop.robot_io import SimRobotIO
 from ucat_console.backend.sessions.reader import SessionReader
 from ucat_console.backend.supervisor import CommandRefused, SteadyPacedClock, Supervisor
 from ucat_console.config import AccessConfig, AppConfig, ConsoleConfig, FailsafeConfig, FailsafeRule, load_config
+from ucat_console.control.params import MpcConfig
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event
 
@@ -362,6 +363,30 @@ def test_the_loop_runs_in_its_own_thread_and_commands_cross_over(tmp_path: Path)
     finally:
         sup.stop()
     assert not sup.armed and not sup.running
+
+
+def test_the_planners_are_compiled_before_the_robot_starts(tmp_path: Path, monkeypatch) -> None:
+    """A compile holds the interpreter for minutes: the drives' heartbeats must not be
+    supervised yet (their loss would be reported as a fault)."""
+    from ucat_console.backend import supervisor as supervisor_module
+
+    order: list[str] = []
+    warm_up = supervisor_module.warm_up
+
+    def spy(cfg):
+        order.append("planners")
+        assert cfg.mpc == cfg_in.mpc and cfg.baseline == cfg_in.baseline
+        return warm_up(cfg)
+
+    def robot(c, ev):
+        order.append("robot")
+        return SimRobotIO(c.plant), lambda: None
+
+    cfg_in = make_config().replace(mpc=MpcConfig(n_samples=200))
+    monkeypatch.setattr(supervisor_module, "warm_up", spy)
+    sup = Supervisor(cfg_in, clock=SimulatedClock(), sessions_dir=tmp_path, robot_factory=robot)
+    sup.stop()
+    assert order == ["planners", "robot"]
 
 
 class FailingRobot(SimRobotIO):

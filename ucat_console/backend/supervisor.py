@@ -49,7 +49,7 @@ from ucat_console.backend.arming import ArmingGate
 from ucat_console.backend.loop.clock import Clock, PacedClock
 from ucat_console.backend.loop.closed_loop import PID_LOOPS, ClosedLoop
 from ucat_console.backend.loop.config import MODES
-from ucat_console.backend.loop.planners import BaselineFinPlanner, MpcFinPlanner, PlanInputs
+from ucat_console.backend.loop.planners import MpcFinPlanner, warm_up
 from ucat_console.backend.loop.robot_io import RobotIO, SimRobotIO
 from ucat_console.backend.safety import CHANNELS as SAFETY_CHANNELS
 from ucat_console.backend.safety import SafetyMonitor, Transition
@@ -216,6 +216,9 @@ class Supervisor:
         self._listeners: list[Callable[[], None]] = []
         self.access = AccessControl(cfg.access)
         self.safety = SafetyMonitor(cfg.failsafe)
+        # the compiled solver first: a compile holds the interpreter for a minute or more,
+        # which the drivers' heartbeat supervision would read as silent drives
+        log.debug("planners warmed up in %.2f s", warm_up(cfg.loop))
         factory = robot_factory or ROBOT_FACTORIES[cfg.robot]
         inner, self._close_robot = factory(cfg, self.report_event)
         #: the simulated rig behind the drivers (robot "rig" on "sim-devices"), else None
@@ -273,21 +276,11 @@ class Supervisor:
             raise RuntimeError("the supervisor is already running")
         if self._closed:
             raise RuntimeError("the supervisor has been stopped")
-        self._warm_up()
         self.wall0 = time.time() - self.loop.time
         self.recorder.epoch_offset = self.wall0
         self._thread = threading.Thread(target=self._run, name="supervisor-loop", daemon=True)
         self._thread.start()
         log.info("supervisor started (robot %s, mode %s)", self.cfg.robot, self._mode)
-
-    def _warm_up(self) -> None:
-        """One plan of each kind before real time starts (the compiled solver loads on first use)."""
-        x = PlanInputs(t=0.0, fins=(0,), target=(-0.3, 0.0), v_body=0.0, theta0=0.0,
-                       u_prev=self.cfg.loop.initial_u_prev)
-        t0 = time.perf_counter()
-        MpcFinPlanner(self.cfg.mpc, 0)(x)
-        BaselineFinPlanner(self.cfg.mpc, self.cfg.baseline)(x)
-        log.debug("planners warmed up in %.2f s", time.perf_counter() - t0)
 
     def step(self, duration: float) -> None:
         """Run the loop for ``duration`` s in the calling thread (tests; no thread started)."""

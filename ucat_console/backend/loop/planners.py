@@ -25,6 +25,7 @@ from typing import Callable, Hashable
 
 import numpy as np
 
+from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.control.baseline import BaselinePlanner, wrap_angle
 from ucat_console.control.cost import cost_terms
 from ucat_console.control.mpc import FinMpc
@@ -139,6 +140,18 @@ class BaselineFinPlanner:
 
 
 Planner = Callable[[PlanInputs], PlanOutcome]
+
+
+def warm_up(cfg: LoopConfig | None = None) -> float:
+    """One plan of each kind: loads the compiled solver from numba's on-disk cache, or
+    compiles it (over a minute, once per machine) and fills that cache. Seconds taken."""
+    cfg = cfg or LoopConfig()
+    x = PlanInputs(t=0.0, fins=(0,), target=(-0.3, 0.0), v_body=0.0, theta0=0.0,
+                   u_prev=cfg.initial_u_prev)
+    t0 = time.perf_counter()
+    MpcFinPlanner(cfg.mpc, 0)(x)
+    BaselineFinPlanner(cfg.mpc, cfg.baseline)(x)
+    return time.perf_counter() - t0
 
 
 class PlanJob:
