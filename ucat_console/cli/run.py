@@ -78,6 +78,8 @@ def run(args: argparse.Namespace) -> int:
         raise KeyboardInterrupt
 
     previous = signal.signal(signal.SIGTERM, on_term)
+    print("loading the planners (the first start on a machine compiles them, about a minute)",
+          flush=True)
     sup = Supervisor(cfg, clock=SimulatedClock() if args.fast else None)
     app = None
     last_power: list[Any] = [None]

@@ -1,0 +1,28 @@
+"""`ucat-console run --headless`: the supervisor without the page, armed at once, on the
+simulated robot, as an unattended run starts it."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+from ucat_console.backend.sessions import files
+from ucat_console.backend.sessions.reader import SessionReader
+from ucat_console.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_a_headless_run_swims_records_and_reports(tmp_path: Path, monkeypatch, capsys) -> None:
+    monkeypatch.setattr(files, "DEFAULT_SESSIONS_DIR", tmp_path)
+    code = main(["run", "--config", str(ROOT / "config" / "sim-tuned.toml"), "--headless", "--fast",
+                 "--duration", "10", "--mode", "baseline", "--velocity", "0.2", "--depth", "0.5"])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    assert out.index("loading the planners") < out.index("headless run: mode baseline")
+    distance = float(re.search(r"distance ([0-9.]+) m", out).group(1))
+    assert distance > 0.4  # it swam: 10 s towards 0.2 m/s from rest (noise alone: < 0.1 m)
+    (recorded,) = re.findall(r"recorded (\S+)", out)  # armed at once: recorded from arming
+    assert Path(recorded).parent == tmp_path.resolve()
+    with SessionReader(recorded, tmp_path) as r:
+        assert r.duration > 9.0
