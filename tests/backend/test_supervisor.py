@@ -365,6 +365,36 @@ def test_the_loop_runs_in_its_own_thread_and_commands_cross_over(tmp_path: Path)
     assert not sup.armed and not sup.running
 
 
+def test_arming_after_a_wait_swims_as_arming_at_once_and_distance_counts_only_armed(
+        tmp_path: Path) -> None:
+    """At the pool the robot waits disarmed before the pilot arms: the strokes the loop ran
+    meanwhile were never executed, and must not hold the fins once armed."""
+    cfg = load_config(ROOT / "config" / "sim-tuned.toml")  # swims from rest (README "Findings")
+    cfg = cfg.replace(loop=cfg.loop.replace(mode="baseline"))
+
+    def swim(wait: float) -> float:
+        sup = Supervisor(cfg, clock=SimulatedClock(), sessions_dir=tmp_path / str(wait))
+        ev = Events(sup)
+        try:
+            sup.step(wait)  # at rest, disarmed: the DVL's noise is no distance travelled
+            assert sup.loop.distance == 0.0
+            sup.set_setpoints(LOCAL, velocity=0.2)
+            sup.arm(LOCAL)
+            sup.step(10.0)
+            assert "restarted" in ev.codes("loop")
+            swum = sup.loop.distance
+            sup.disarm(LOCAL)
+            sup.step(3.0)
+            assert sup.loop.distance == swum
+            return swum
+        finally:
+            sup.stop()
+
+    at_once, after_wait = swim(0.0), swim(5.0)
+    assert at_once > 0.4
+    assert after_wait > 0.8 * at_once
+
+
 def test_the_planners_are_compiled_before_the_robot_starts(tmp_path: Path, monkeypatch) -> None:
     """A compile holds the interpreter for minutes: the drives' heartbeats must not be
     supervised yet (their loss would be reported as a fault)."""

@@ -230,7 +230,7 @@ class Supervisor:
             self._setpoints = BodySetpoints(depth=min(start_depth, cfg.loop.max_depth))
             self.loop = ClosedLoop(
                 cfg.loop, self.gate, self._loop_stream, self.clock, setpoints=self._setpoints,
-                source=cfg.robot,
+                source=cfg.robot, driving=lambda: self.gate.armed,
             )
         except BaseException:
             inner.close()
@@ -612,9 +612,6 @@ class Supervisor:
         if self.gate.armed:
             return
         self._check_can_arm()
-        body = self.loop.body
-        for pid in (body.velocity_pid, body.depth_pid, body.yaw_pid):
-            pid.reset()  # the integrators wound up while the fins were held
         if self.cfg.console.record_on_arm and not self.recorder.recording:
             try:  # first, so the recording holds the moment of arming
                 self._start_recording(label="armed", notes="started on arming")
@@ -622,6 +619,7 @@ class Supervisor:
             except Exception as e:  # recording must never stop arming
                 log.exception("automatic recording failed")
                 self._publish_event("recorder", "start_failed", f"recording did not start: {e}", "error")
+        self.loop.restart()  # nothing the loop did while the fins were held carries over
         self.gate.arm()
         self._armed_at = self.loop.time
         self._disarmed_at = None

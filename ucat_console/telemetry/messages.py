@@ -94,7 +94,7 @@ class Power:
     total: float  # W
     mean_total: float  # running mean since the run started, W
     energy: float  # J
-    distance: float  # m travelled
+    distance: float  # m travelled while the fins were driven (armed)
     energy_per_metre: float  # J/m (NaN until the vehicle has moved)
 
 

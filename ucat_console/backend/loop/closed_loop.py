@@ -171,8 +171,12 @@ class ClosedLoop:
         *,
         setpoints: BodySetpoints | None = None,
         source: str = "sim",
+        driving: Callable[[], bool] | None = None,
     ) -> None:
         self.cfg = cfg
+        # whether the fins are being driven (the supervisor: armed); the distance travelled,
+        # and so the energy per metre, counts only then, not DVL noise or drift at rest
+        self._driving = driving or (lambda: True)
         self.io = io
         self.stream = stream if stream is not None else TelemetryStream()
         self.clock = clock if clock is not None else SimulatedClock()
@@ -213,12 +217,8 @@ class ClosedLoop:
         # timers (counts of ticks done; the next tick is at count / rate)
         self._n_control = self._n_state = self._n_power = self._n_status = 0
         self._generation = 0
-        self._actuators = self._new_actuators(self._mode)
         self._owner: list[_Actuator] = [None] * N_FINS  # type: ignore[list-item]
-        for act in self._actuators:
-            for p in act.fins:
-                self._owner[p] = act
-        self._handover = False
+        self._install_actuators(self._new_actuators(self._mode))
 
     # ------------------------------------------------------------------ public state
     @property
@@ -296,6 +296,14 @@ class ClosedLoop:
         if not isinstance(gains, PidGains):
             raise ValueError(f"gains: expected PidGains, got {type(gains).__name__}")
         self._commands.put(lambda t: self._apply_gains(loop, gains, t))
+
+    def restart(self) -> None:
+        """Start the body loops and every fin afresh, as at start-up (an Event with code
+        "restarted"): the PIDs and filters are reset, and each fin's first plan waits for new
+        depth and DVL reports and starts from its measured angle. The supervisor calls it on
+        arming: the strokes run while the motors were held never happened (each fin would
+        wait for its stroke timeout), and the loops' outputs were held ones."""
+        self._commands.put(self._apply_restart)
 
     def stop(self) -> None:
         """Make :meth:`run_until` return at its next event (any thread)."""
@@ -430,7 +438,8 @@ class ClosedLoop:
             # body -> NED, rows x and y of R(q)
             self._xy[0] += dt * ((1 - 2 * (y * y + z * z)) * vx + 2 * (x * y - w * z) * vy + 2 * (x * z + w * y) * vz)
             self._xy[1] += dt * (2 * (x * y + w * z) * vx + (1 - 2 * (x * x + z * z)) * vy + 2 * (y * z - w * x) * vz)
-            self.distance += dt * math.hypot(vx, vy)
+            if self._driving():
+                self.distance += dt * math.hypot(vx, vy)
         self._dvl_t = r.t
         self._dvl_v = (r.vx, r.vy, r.vz)
 
@@ -547,6 +556,25 @@ class ClosedLoop:
             ex = FinExecutor.synced(self.cfg.executor, fins) if len(fins) == 2 else FinExecutor(self.cfg.executor, fins[0])
             out.append(_Actuator(i, fins, ex, self._make_planner(mode, i), mode, self.cfg.initial_u_prev))
         return out
+
+    def _install_actuators(self, actuators: list[_Actuator]) -> None:
+        self._actuators = actuators
+        for act in actuators:
+            for p in act.fins:
+                self._owner[p] = act
+        self._handover = False
+
+    def _apply_restart(self, t: float) -> None:
+        self.body.reset()
+        for act in self._actuators:  # plans still being made are not wanted any more
+            act.job = None
+            act.t_deliver = math.inf
+        news = self._new_actuators(self._mode)
+        for n in news:
+            n.u_prev = self._owner[n.fins[0]].u_prev
+        self._install_actuators(news)  # _control requests their first plans
+        self._event(t, "restarted", "body loops and fins start afresh from the measured state",
+                    "info", {"mode": self._mode})
 
     def _make_planner(self, mode: str, index: int) -> Planner:
         if mode == "baseline":
