@@ -62,7 +62,7 @@ class ConsoleConfig(_Config):
         "127.0.0.1", doc="address the web server binds; anything but loopback is warned about"
     )
     port: int = param(8080, lo=0, hi=65535, doc="web server port (0: any free port)")
-    scene_rate: float = param(30.0, lo=1.0, hi=60.0, unit="Hz", doc="3-D view update rate")
+    scene_rate: float = param(40.0, lo=1.0, hi=60.0, unit="Hz", doc="3-D view update rate")
     plot_rate: float = param(10.0, lo=1.0, hi=30.0, unit="Hz", doc="plot refresh rate")
     history: float = param(30.0, lo=5.0, hi=600.0, unit="s", doc="initial plot history window")
     shadows: bool = param(False, doc="shadows in the 3-D view (costly where the browser renders in software)")
