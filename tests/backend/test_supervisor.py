@@ -365,7 +365,7 @@ def test_the_loop_runs_in_its_own_thread_and_commands_cross_over(tmp_path: Path)
     assert not sup.armed and not sup.running
 
 
-def test_arming_after_a_wait_swims_as_arming_at_once_and_distance_counts_only_armed(
+def test_arming_after_a_wait_swims_as_arming_at_once_and_power_counts_only_armed(
         tmp_path: Path) -> None:
     """At the pool the robot waits disarmed before the pilot arms: the strokes the loop ran
     meanwhile were never executed, and must not hold the fins once armed."""
@@ -375,17 +375,23 @@ def test_arming_after_a_wait_swims_as_arming_at_once_and_distance_counts_only_ar
     def swim(wait: float) -> float:
         sup = Supervisor(cfg, clock=SimulatedClock(), sessions_dir=tmp_path / str(wait))
         ev = Events(sup)
+        power: list = []
+        sup.stream.subscribe(lambda c, m: power.append(m), [ch.POWER])
         try:
             sup.step(wait)  # at rest, disarmed: the DVL's noise is no distance travelled
             assert sup.loop.distance == 0.0
+            assert all(p.energy == 0.0 for p in power)
             sup.set_setpoints(LOCAL, velocity=0.2)
             sup.arm(LOCAL)
             sup.step(10.0)
             assert "restarted" in ev.codes("loop")
-            swum = sup.loop.distance
+            swum, armed = sup.loop.distance, power[-1]
+            assert armed.energy > 0.0 and armed.mean_total > 0.0
             sup.disarm(LOCAL)
-            sup.step(3.0)
+            sup.step(3.0)  # the fins stop and rest: neither is the robot's propulsion
             assert sup.loop.distance == swum
+            assert (power[-1].energy, power[-1].mean_total) == pytest.approx(
+                (armed.energy, armed.mean_total), rel=0.02)  # the last armed span
             return swum
         finally:
             sup.stop()

@@ -80,6 +80,26 @@ def test_streaming_equals_batch():
     assert est.mean_power == pytest.approx(tr.mean_power)
 
 
+def test_spans_left_out_count_in_neither_energy_nor_mean():
+    """The fins' energy and mean power cover only the driven (armed) time."""
+    t, theta = sinusoid(periods=2, dt=1e-3)
+    half = len(t) // 2
+    pcfg = PowerConfig()
+    whole, first_half, gapped = (PowerEstimator(pcfg, MCFG) for _ in range(3))
+    for i, (a, b) in enumerate(zip(t, theta)):
+        s_whole = whole.update(float(a), float(b))
+        if i <= half:
+            first_half.update(float(a), float(b))
+        # the second period left out (as if disarmed), as is the first span after it
+        s_gapped = gapped.update(float(a), float(b), accumulate=i <= half)
+        if s_whole is not None:  # the estimate itself is the same
+            assert s_gapped.p_fin == s_whole.p_fin
+    assert gapped.energy == pytest.approx(first_half.energy, rel=1e-12)
+    assert gapped.duration == pytest.approx(first_half.duration, rel=1e-12)
+    assert gapped.mean_power == pytest.approx(first_half.mean_power, rel=1e-12)
+    assert whole.energy > 1.5 * gapped.energy  # the left-out period did spend energy
+
+
 def test_fleet_mean_per_fin_and_total():
     t, theta = sinusoid()
     angles = np.column_stack([theta, np.zeros_like(theta), theta])

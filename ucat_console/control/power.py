@@ -92,7 +92,7 @@ class PowerEstimator:
         self._t: float | None = None
         self._theta = 0.0
         self._w: float | None = None
-        self.energy = 0.0  # J, trapezoidal integral of P_fin since the first estimate
+        self.energy = 0.0  # J, trapezoidal integral of P_fin over the accumulated spans
         self.duration = 0.0  # s covered by ``energy``
         self._last: PowerSample | None = None
 
@@ -102,11 +102,15 @@ class PowerEstimator:
 
     @property
     def mean_power(self) -> float | None:
-        """Mean P_fin (W) since the first estimate, None before two estimates."""
+        """Mean P_fin (W) over the accumulated spans, None before one was accumulated."""
         return self.energy / self.duration if self.duration > 0.0 else None
 
-    def update(self, t: float, theta: float) -> PowerSample | None:
-        """Add an encoder angle sample; returns the estimate (None for the first two samples)."""
+    def update(self, t: float, theta: float, accumulate: bool = True) -> PowerSample | None:
+        """Add an encoder angle sample; returns the estimate (None for the first two samples).
+
+        With ``accumulate`` False the span since the last estimate is left out of ``energy``
+        and ``duration`` (the fin is not driven: moved by the water or stopping after a
+        disarm); the estimate itself is made as always."""
         t = finite("t", t)
         theta = finite("theta", theta)
         if self._t is None:
@@ -124,7 +128,7 @@ class PowerEstimator:
         p_inert = self.pcfg.fin_inertia * alpha * w
         p_drag = self._k_drag * abs(w) ** 3
         sample = PowerSample(t, w, alpha, p_inert, p_drag, max(0.0, p_inert) + p_drag)
-        if self._last is not None:
+        if self._last is not None and accumulate:
             span = t - self._last.t
             self.energy += 0.5 * (sample.p_fin + self._last.p_fin) * span
             self.duration += span

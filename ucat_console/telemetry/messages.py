@@ -92,9 +92,9 @@ class Power:
     t: float
     per_fin: Vec4  # W
     total: float  # W
-    mean_total: float  # running mean since the run started, W
-    energy: float  # J
-    distance: float  # m travelled while the fins were driven (armed)
+    mean_total: float  # running mean over the time the fins were driven (armed), W
+    energy: float  # J spent while armed
+    distance: float  # m travelled while armed
     energy_per_metre: float  # J/m (NaN until the vehicle has moved)
 
 

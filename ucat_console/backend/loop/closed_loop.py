@@ -174,8 +174,8 @@ class ClosedLoop:
         driving: Callable[[], bool] | None = None,
     ) -> None:
         self.cfg = cfg
-        # whether the fins are being driven (the supervisor: armed); the distance travelled,
-        # and so the energy per metre, counts only then, not DVL noise or drift at rest
+        # whether the fins are being driven (the supervisor: armed); the distance travelled
+        # and the fins' energy and mean power count only then, not DVL noise or drift at rest
         self._driving = driving or (lambda: True)
         self.io = io
         self.stream = stream if stream is not None else TelemetryStream()
@@ -396,6 +396,7 @@ class ClosedLoop:
     # ------------------------------------------------------------------ readings
     def _on_readings(self, readings: list, t: float) -> None:
         stream = self.stream
+        driving = self._driving()
         for r in readings:
             tp = type(r)
             if tp is FinFeedback:
@@ -403,7 +404,7 @@ class ClosedLoop:
                 p = PLANT_TO_PAPER[pf]
                 self._fb_angle[pf] = r.position_rad
                 self._fb_rate[pf] = r.velocity_rad_s
-                self._power[pf].update(r.t, r.position_rad)
+                self._power[pf].update(r.t, r.position_rad, accumulate=driving)
                 owner = self._owner[p]
                 t_now = t if t >= r.t else r.t
                 actions = owner.executor.on_feedback(
@@ -425,12 +426,12 @@ class ClosedLoop:
             elif tp is DvlVelocity:
                 self.body.on_dvl(r)
                 if r.valid:
-                    self._dead_reckon(r)
+                    self._dead_reckon(r, driving)
                 stream.publish(ch.DVL, r)
             else:
                 raise ValueError(f"reading: unexpected type {tp.__name__} from the robot")
 
-    def _dead_reckon(self, r: DvlVelocity) -> None:
+    def _dead_reckon(self, r: DvlVelocity, driving: bool) -> None:
         if self._dvl_t is not None:
             dt = min(max(r.t - self._dvl_t, 0.0), 1.0)
             w, x, y, z = self._q
@@ -438,7 +439,7 @@ class ClosedLoop:
             # body -> NED, rows x and y of R(q)
             self._xy[0] += dt * ((1 - 2 * (y * y + z * z)) * vx + 2 * (x * y - w * z) * vy + 2 * (x * z + w * y) * vz)
             self._xy[1] += dt * (2 * (x * y + w * z) * vx + (1 - 2 * (x * x + z * z)) * vy + 2 * (y * z - w * x) * vz)
-            if self._driving():
+            if driving:
                 self.distance += dt * math.hypot(vx, vy)
         self._dvl_t = r.t
         self._dvl_v = (r.vx, r.vy, r.vz)
