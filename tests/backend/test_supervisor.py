@@ -425,6 +425,56 @@ def test_the_planners_are_compiled_before_the_robot_starts(tmp_path: Path, monke
     assert order == ["planners", "robot"]
 
 
+def robot_like_rig(tmp_path: Path, **failsafes: FailsafeRule) -> Supervisor:
+    """The device rig configured as the robot is: the drives are powered only while armed."""
+    cfg = load_config(ROOT / "config" / "sim-devices.toml")
+    cfg = cfg.replace(access=AccessConfig(token=TOKEN), devices=cfg.devices.replace(enable_at_start=False),
+                      failsafe=cfg.failsafe.replace(**failsafes))
+    return Supervisor(cfg, sessions_dir=tmp_path)
+
+
+def drive_states(sup: Supervisor) -> set[str]:
+    nodes = sup.rig.nodes
+    return {nodes[n].state for n in sup.cfg.devices.epos2.node_ids}
+
+
+def test_arming_powers_the_drives_and_disarming_stops_them_and_turns_them_off(tmp_path: Path) -> None:
+    sup = robot_like_rig(tmp_path)
+    sup.start()
+    try:
+        wait_for(lambda: sup.loop.time > 1.0, what="the loop running on the rig")
+        assert drive_states(sup) == {"switch_on_disabled"}  # unpowered until armed
+        sup.set_setpoints(LOCAL, velocity=0.2)
+        for _ in range(2):  # and again after a disarm
+            sup.arm(LOCAL)
+            assert drive_states(sup) == {"operation_enabled"}
+            wait_for(lambda: max(abs(a) for a in sup.loop.truth().fin_angles) > 0.2,
+                     what="the fins swimming")
+            sup.disarm(LOCAL)
+            wait_for(lambda: drive_states(sup) == {"switch_on_disabled"},
+                     what="every drive stopped and its power stage off")
+            wait_for(lambda: max(abs(w) for w in sup.loop.truth().fin_rates) < 1e-3,
+                     what="the fins at rest")
+    finally:
+        sup.stop()
+
+
+def test_arming_is_refused_when_a_drive_cannot_be_powered(tmp_path: Path) -> None:
+    sup = robot_like_rig(tmp_path, motor=FailsafeRule("disarm", 60.0))  # the drive, not the failsafe, refuses
+    sup.start()
+    try:
+        sup.client_connected(PILOT)
+        assert sup.take_control(PILOT, TOKEN)
+        wait_for(lambda: sup.loop.time > 1.0, what="the loop running on the rig")
+        sup.inject_fault(PILOT, "epos2", "emcy", fin=0)
+        wait_for(lambda: "fault" in drive_states(sup), what="the emulated drive in fault")
+        with pytest.raises(CommandRefused, match="not every fin drive reached operation enabled"):
+            sup.arm(PILOT)
+        assert not sup.armed and not sup.recorder.recording
+    finally:
+        sup.stop()
+
+
 class FailingRobot(SimRobotIO):
     """The simulator, until its link breaks at 0.5 s."""
 

@@ -3,9 +3,11 @@
 The closed loop keeps running while the motors are disarmed (the estimator, the plots and
 the failsafes need the readings), so the gate sits between it and the robot:
 
-* disarmed: fin commands are dropped; on disarming, every fin is sent one set-point at
-  its last measured angle (the servo decelerates and stops there), so a fin never keeps
-  swimming towards an old target;
+* disarmed: fin commands are dropped; on disarming, a robot with drives stops them on
+  their quick-stop ramp and turns their power stages off (they are powered again on
+  arming, :meth:`RobotIO.enable_drives`); the simulator's fins are each sent one set-point
+  at their last measured angle (the servo decelerates and stops there). Either way a fin
+  never keeps swimming towards an old target;
 * armed: commands pass unchanged;
 * readings with non-finite values are dropped before they reach the loop (they would stop
   it) and reported through ``on_invalid(sensor, description)``; the failsafes then see
@@ -89,6 +91,12 @@ class ArmingGate(RobotIO):
             pending, self._stop_pending = self._stop_pending, False
         if not pending:
             return
+        if self.inner.has_drives:
+            if self.inner.stop_drives():
+                log.info("fin drives stopped on their quick-stop ramp, power stages off")
+            else:
+                log.error("a fin drive did not confirm its stop (see its events)")
+            return
         for fin in range(N_FINS):
             angle = self.measured[fin]
             if math.isnan(angle):
@@ -106,6 +114,16 @@ class ArmingGate(RobotIO):
             return
         self.inner.command_fin(fin, target_rad, profile_velocity_rad_s)
         self.sent[fin] = (target_rad, profile_velocity_rad_s)
+
+    @property
+    def has_drives(self) -> bool:  # type: ignore[override]
+        return self.inner.has_drives
+
+    def enable_drives(self) -> bool:
+        return self.inner.enable_drives()
+
+    def stop_drives(self) -> bool:
+        return self.inner.stop_drives()
 
     def next_reading_time(self) -> float:
         return self.inner.next_reading_time()

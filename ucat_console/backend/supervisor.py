@@ -612,6 +612,9 @@ class Supervisor:
         if self.gate.armed:
             return
         self._check_can_arm()
+        if not self.gate.enable_drives():
+            raise CommandRefused("arm: not every fin drive reached operation enabled (see its "
+                                 "events); the robot stays disarmed")
         if self.cfg.console.record_on_arm and not self.recorder.recording:
             try:  # first, so the recording holds the moment of arming
                 self._start_recording(label="armed", notes="started on arming")

@@ -253,16 +253,16 @@ class DeviceRobotIO(RobotIO):
                 log.exception("stopping a driver failed")
 
     # ------------------------------------------------------------------ drives
+    has_drives = True
+
     def enable_drives(self) -> bool:
         """Every EPOS2 to operation enabled (on arming); False (with events) on failure."""
         return self.drives.enable_all()
 
-    def disable_drives(self) -> bool:
-        """Power stages off (on disarming)."""
-        return self.drives.disable_all()
-
-    def quick_stop(self) -> bool:
-        return self.drives.quick_stop_all()
+    def stop_drives(self) -> bool:
+        """Quick stop on every EPOS2, then its power stage off (on disarming)."""
+        stopped = self.drives.quick_stop_all()
+        return self.drives.disable_all() and stopped
 
     def fault_reset(self, fin: int) -> bool:
         """Reset a drive's fault and enable it again."""

@@ -69,6 +69,19 @@ class RobotIO(ABC):
     def advance_to(self, t: float) -> list[Reading]:
         """Let the robot reach time ``t`` (s); the readings taken since the last call."""
 
+    #: the fins are moved by motor drives with power stages, powered only while armed
+    has_drives: bool = False
+
+    def enable_drives(self) -> bool:
+        """Power the fin drives for set-points (on arming); False when a drive did not come
+        up (its events say why). The simulator has nothing to power."""
+        return True
+
+    def stop_drives(self) -> bool:
+        """Stop every fin drive on its quick-stop ramp and turn its power stage off (on
+        disarming); False when a drive did not confirm (its events say why)."""
+        return True
+
     def truth(self) -> RobotTruth | None:
         """The simulator's true state; None when the robot is real."""
         return None
