@@ -228,7 +228,7 @@ def test_injected_fault_surfaces_as_an_event_and_the_loop_keeps_running(
         # the fault ends when its cause does: the emulator's fault cleared, or the drive reset
         seen = len(sink)
         if fault == "emcy":
-            assert io.fault_reset(kw["fin"])
+            assert io.reset_drive_faults()
         else:
             rig_of(io).clear(device, fault)
         if end is not None:

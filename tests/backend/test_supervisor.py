@@ -459,7 +459,7 @@ def test_arming_powers_the_drives_and_disarming_stops_them_and_turns_them_off(tm
         sup.stop()
 
 
-def test_arming_is_refused_when_a_drive_cannot_be_powered(tmp_path: Path) -> None:
+def test_arming_is_refused_when_a_drive_is_in_fault_until_the_fault_is_reset(tmp_path: Path) -> None:
     sup = robot_like_rig(tmp_path, motor=FailsafeRule("disarm", 60.0))  # the drive, not the failsafe, refuses
     sup.start()
     try:
@@ -471,6 +471,17 @@ def test_arming_is_refused_when_a_drive_cannot_be_powered(tmp_path: Path) -> Non
         with pytest.raises(CommandRefused, match="not every fin drive reached operation enabled"):
             sup.arm(PILOT)
         assert not sup.armed and not sup.recorder.recording
+        assert drive_states(sup) == {"fault", "switch_on_disabled"}  # none left powered
+        # the pool-side recovery: reset the drive's fault (disarmed), then arm
+        sup.client_connected(VIEWER)
+        with pytest.raises(AccessDenied):
+            sup.reset_drive_faults(VIEWER)
+        sup.reset_drive_faults(PILOT)
+        assert drive_states(sup) == {"switch_on_disabled"}  # reset, and off until armed
+        sup.arm(PILOT)
+        assert sup.armed and drive_states(sup) == {"operation_enabled"}
+        with pytest.raises(CommandRefused, match="disarm first"):
+            sup.reset_drive_faults(PILOT)
     finally:
         sup.stop()
 

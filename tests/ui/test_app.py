@@ -12,7 +12,7 @@ import pytest
 from support import wait_for
 
 from ucat_console.backend.loop.clock import SimulatedClock
-from ucat_console.backend.supervisor import Supervisor
+from ucat_console.backend.supervisor import CommandRefused, Supervisor
 from ucat_console.config import AccessConfig, AppConfig, load_config
 from ucat_console.ui.app import ConsoleApp, is_loopback
 from ucat_console.ui.panels import ControlPanel, esc, param_specs, step_for
@@ -132,7 +132,10 @@ def test_page_text_is_escaped() -> None:
 
 
 def test_rig_fault_inputs_only_where_the_robot_is_the_simulated_rig(app: ConsoleApp) -> None:
-    assert page(app, 3, pilot=True).faults is None
+    p = page(app, 3, pilot=True)
+    assert p.faults is None and p.reset_drives is None  # the simulator has no drives
+    with pytest.raises(CommandRefused, match="no motor drives"):
+        app.sup.reset_drive_faults(3)
 
 
 def test_the_pilot_injects_rig_faults_from_the_page_and_bad_entries_are_refused(tmp_path: Path) -> None:
@@ -171,6 +174,17 @@ def test_the_pilot_injects_rig_faults_from_the_page_and_bad_entries_are_refused(
         node = cfg.devices.epos2.node_ids[2]
         wait_for(lambda: sup.rig.nodes[node].state == "fault", what="the drive in fault")
         assert pilot.act(pilot._clear_faults) is True
+        wait_for(lambda: "motor" in sup.safety.active(), what="the motor failsafe")
+        assert sup.rig.nodes[node].state == "fault"  # clearing the emulator does not reset a drive
+
+        # the drive's fault is reset from the page, by the pilot only, and it stays off
+        assert not pilot.reset_drives.disabled and viewer.reset_drives.disabled
+        assert viewer.act(viewer._reset_drive_faults) is False
+        assert sup.rig.nodes[node].state == "fault"
+        assert pilot.act(pilot._reset_drive_faults) is True
+        assert "drive faults reset" in pilot.messages[-1]
+        assert sup.rig.nodes[node].state == "switch_on_disabled"
+        wait_for(lambda: "motor" not in sup.safety.active(), what="the motor failsafe clearing")
     finally:
         a.stop()
         sup.stop()

@@ -125,6 +125,9 @@ class ArmingGate(RobotIO):
     def stop_drives(self) -> bool:
         return self.inner.stop_drives()
 
+    def reset_drive_faults(self) -> bool:
+        return self.inner.reset_drive_faults()
+
     def next_reading_time(self) -> float:
         return self.inner.next_reading_time()
 

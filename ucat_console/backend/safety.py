@@ -45,11 +45,12 @@ log = logging.getLogger(__name__)
 #: every failsafe, in display order
 FAILSAFES = ("pilot_gone", "imu", "dvl", "depth", "motor", "planner_late")
 SENSORS = ("imu", "dvl", "depth")
-#: motor controller event codes that start a fault
-MOTOR_FAULTS = frozenset({"fault", "emcy", "heartbeat_lost", "quick_stop"})
+#: motor controller event codes that start a fault (a ``quick_stop`` event is the other
+#: drives' safe-state reaction to one of these, which the failsafe already counts)
+MOTOR_FAULTS = frozenset({"fault", "emcy", "heartbeat_lost"})
 #: event codes that clear motor faults, and which
 MOTOR_CLEARS: dict[str, frozenset[str]] = {
-    "fault_cleared": frozenset({"fault", "emcy", "quick_stop"}),
+    "fault_cleared": frozenset({"fault", "emcy"}),
     "emcy_reset": frozenset({"emcy"}),
     "heartbeat_restored": frozenset({"heartbeat_lost"}),
 }

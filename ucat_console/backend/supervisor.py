@@ -613,6 +613,7 @@ class Supervisor:
             return
         self._check_can_arm()
         if not self.gate.enable_drives():
+            self.gate.stop_drives()  # those that came up go off again: nothing is half-armed
             raise CommandRefused("arm: not every fin drive reached operation enabled (see its "
                                  "events); the robot stays disarmed")
         if self.cfg.console.record_on_arm and not self.recorder.recording:
@@ -882,6 +883,27 @@ class Supervisor:
         except ValueError as e:
             raise CommandRefused(f"fault injection: {e}") from None
         self._notify()
+
+    # ================================================================== drives
+    @property
+    def has_drives(self) -> bool:
+        """The fins are moved by motor drives (the robot, or the rig's emulated EPOS2s)."""
+        return self.gate.has_drives
+
+    def reset_drive_faults(self, who: Actor) -> None:
+        """Reset the drives in fault (after an EMCY), disarmed; they are powered at arming."""
+        self.access.require_pilot(who, "drive fault reset")
+        if not self.has_drives:
+            raise CommandRefused(f"drive fault reset: robot {self.cfg.robot!r} has no motor drives")
+        if self.gate.armed:
+            raise CommandRefused("drive fault reset: disarm first")
+        ok = self._in_loop(self.gate.reset_drive_faults)
+        self._publish_event("operator", "drive_fault_reset",
+                            f"{actor_name(who)} reset the drive faults" + ("" if ok else ": not every drive left its fault"),
+                            "info" if ok else "error", {"who": str(who), "ok": ok})
+        self._notify()
+        if not ok:
+            raise CommandRefused("drive fault reset: not every drive left its fault (see its events)")
 
     def _require_rig(self, what: str) -> SimRig:
         if self.rig is None:

@@ -163,6 +163,13 @@ class ControlPanel:
                 self.rec_stop = gui.add_button("Stop recording")
                 self.note = gui.add_text("Marker note", "")
                 self.marker = gui.add_button("Add marker", hint="or press M")
+        self.reset_drives = None
+        if sup.has_drives:
+            with within(c.get("safety")):
+                with gui.add_folder("Fin drives", order=40.0):
+                    self.reset_drives = gui.add_button(
+                        "Reset drive faults", color="orange",
+                        hint="after a drive fault (EMCY): reset it; the drive stays off until the next arming")
         self.faults: RigFaultInputs | None = None
         if sup.rig is not None:
             with within(c.get("safety")):
@@ -194,6 +201,8 @@ class ControlPanel:
         self.rec_stop.on_click(self._guard(lambda: sup.stop_recording(cid)))
         self.marker.on_click(self._guard(self._add_marker))
         self.marker_key.on_trigger(self._guard(self._add_marker))
+        if self.reset_drives is not None:
+            self.reset_drives.on_click(self._guard(self._reset_drive_faults))
         if self.faults is not None:
             f = self.faults
             f.device.on_update(lambda _: f.show_faults_of_device())
@@ -298,6 +307,10 @@ class ControlPanel:
         self.note.value = ""
         self.show("marker added")
 
+    def _reset_drive_faults(self) -> None:
+        self.sup.reset_drive_faults(self.cid)
+        self.show("drive faults reset: the drives stay off until armed")
+
     def _inject_fault(self) -> None:
         f = self.faults
         assert f is not None
@@ -356,6 +369,8 @@ class ControlPanel:
         self._push("history", self.history, float(self.app.history), force)
         rec = sup.recorder
         self.rec_status.content = (f"Recording **{esc(rec.session_id)}**" if rec.recording else "Not recording")
+        if self.reset_drives is not None:
+            self.reset_drives.disabled = not pilot or sup.armed
         if self.faults is not None:
             self.faults.enable(pilot)
 

@@ -264,9 +264,9 @@ class DeviceRobotIO(RobotIO):
         stopped = self.drives.quick_stop_all()
         return self.drives.disable_all() and stopped
 
-    def fault_reset(self, fin: int) -> bool:
-        """Reset a drive's fault and enable it again."""
-        return self.drives.fault_reset(fin)
+    def reset_drive_faults(self) -> bool:
+        """Reset every EPOS2 in fault; each stays unpowered until the next arming."""
+        return self.drives.reset_faults()
 
     def zero_depth(self, samples: int | None = None) -> float | None:
         """Zero the depth at the surface (the pressure driver's calibration)."""

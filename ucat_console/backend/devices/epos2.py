@@ -526,8 +526,9 @@ class Epos2Driver:
             return True
         return self._goto(cia402.QUICK_STOP, cia402.QUICK_STOP_ACTIVE) is not None
 
-    def fault_reset(self) -> bool:
-        """Rising edge of controlword bit 7, then back to operation enabled."""
+    def fault_reset(self, enable: bool = True) -> bool:
+        """Rising edge of controlword bit 7, then back to operation enabled (``enable``) or
+        left in switch on disabled, its power stage off."""
         self._require_started()
         sw = self._current_statusword()
         if sw is None:
@@ -540,7 +541,7 @@ class Epos2Driver:
                 return False
             if self._goto(cia402.FAULT_RESET, cia402.SWITCH_ON_DISABLED) is None:
                 return False
-        return self.enable()
+        return self.enable() if enable else True
 
     def _require_started(self) -> None:
         if not self._started:
@@ -900,6 +901,10 @@ class FinDrives:
 
     def fault_reset(self, fin: int) -> bool:
         return self.drive(fin).fault_reset()
+
+    def reset_faults(self) -> bool:
+        """Reset every drive in fault and leave it unpowered (True when none is left in fault)."""
+        return all([d.fault_reset(enable=False) for d in self.drivers.values()])
 
     def restart(self, fin: int) -> None:
         """Run one node's start-up again (after a ``bootup`` event); raises like connect."""

@@ -82,6 +82,11 @@ class RobotIO(ABC):
         disarming); False when a drive did not confirm (its events say why)."""
         return True
 
+    def reset_drive_faults(self) -> bool:
+        """Reset the drives that are in fault (after an EMCY), leaving them unpowered; False
+        when one stays in fault (its events say why)."""
+        return True
+
     def truth(self) -> RobotTruth | None:
         """The simulator's true state; None when the robot is real."""
         return None
