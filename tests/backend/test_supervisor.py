@@ -480,8 +480,9 @@ def test_arming_is_refused_when_a_drive_is_in_fault_until_the_fault_is_reset(tmp
         assert drive_states(sup) == {"switch_on_disabled"}  # reset, and off until armed
         sup.arm(PILOT)
         assert sup.armed and drive_states(sup) == {"operation_enabled"}
-        with pytest.raises(CommandRefused, match="disarm first"):
-            sup.reset_drive_faults(PILOT)
+        for armed_refuses in (sup.reset_drive_faults, sup.zero_depth):
+            with pytest.raises(CommandRefused, match="disarm first"):
+                armed_refuses(PILOT)
     finally:
         sup.stop()
 

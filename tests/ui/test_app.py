@@ -14,6 +14,7 @@ from support import wait_for
 from ucat_console.backend.loop.clock import SimulatedClock
 from ucat_console.backend.supervisor import CommandRefused, Supervisor
 from ucat_console.config import AccessConfig, AppConfig, load_config
+from ucat_console.telemetry import channels as ch
 from ucat_console.ui.app import ConsoleApp, is_loopback
 from ucat_console.ui.panels import ControlPanel, esc, param_specs, step_for
 
@@ -133,9 +134,11 @@ def test_page_text_is_escaped() -> None:
 
 def test_rig_fault_inputs_only_where_the_robot_is_the_simulated_rig(app: ConsoleApp) -> None:
     p = page(app, 3, pilot=True)
-    assert p.faults is None and p.reset_drives is None  # the simulator has no drives
+    assert p.faults is None and p.reset_drives is None and p.zero_depth is None  # no devices
     with pytest.raises(CommandRefused, match="no motor drives"):
         app.sup.reset_drive_faults(3)
+    with pytest.raises(CommandRefused, match="no pressure sensor"):
+        app.sup.zero_depth(3)
 
 
 def test_the_pilot_injects_rig_faults_from_the_page_and_bad_entries_are_refused(tmp_path: Path) -> None:
@@ -185,6 +188,18 @@ def test_the_pilot_injects_rig_faults_from_the_page_and_bad_entries_are_refused(
         assert "drive faults reset" in pilot.messages[-1]
         assert sup.rig.nodes[node].state == "switch_on_disabled"
         wait_for(lambda: "motor" not in sup.safety.active(), what="the motor failsafe clearing")
+
+        # depth zeroing: the pressure the robot is at becomes depth 0
+        depths: list = []
+        sup.stream.subscribe(lambda c, m: depths.append(m.depth_m), [ch.DEPTH])
+        wait_for(lambda: depths, what="depth readings")
+        assert depths[-1] > 0.2  # the rig's robot starts below the surface
+        assert viewer.act(viewer._zero_depth) is False
+        assert pilot.act(pilot._zero_depth) is True
+        assert "depth zeroed" in pilot.messages[-1]
+        n = len(depths)
+        wait_for(lambda: len(depths) > n + 5, what="depth readings after the zeroing")
+        assert abs(depths[-1]) < 0.05
     finally:
         a.stop()
         sup.stop()

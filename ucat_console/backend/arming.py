@@ -128,6 +128,9 @@ class ArmingGate(RobotIO):
     def reset_drive_faults(self) -> bool:
         return self.inner.reset_drive_faults()
 
+    def zero_depth(self) -> float:
+        return self.inner.zero_depth()
+
     def next_reading_time(self) -> float:
         return self.inner.next_reading_time()
 

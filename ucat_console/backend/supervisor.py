@@ -905,6 +905,20 @@ class Supervisor:
         if not ok:
             raise CommandRefused("drive fault reset: not every drive left its fault (see its events)")
 
+    def zero_depth(self, who: Actor) -> float:
+        """Take the present pressure as the surface's (disarmed, the robot at the surface);
+        the surface pressure (Pa)."""
+        self.access.require_pilot(who, "depth zeroing")
+        if self.gate.armed:
+            raise CommandRefused("depth zeroing: disarm first, with the robot floating at the surface")
+        try:  # in the caller's thread: it waits for the sensor's next readings, the loop runs on
+            p = self.gate.zero_depth()
+        except ValueError as e:
+            raise CommandRefused(str(e)) from None
+        self._publish_event("operator", "depth_zeroed", f"{actor_name(who)} zeroed the depth at "
+                            f"{p:.1f} Pa", "info", {"who": str(who), "surface_pressure_pa": p})
+        return p
+
     def _require_rig(self, what: str) -> SimRig:
         if self.rig is None:
             raise CommandRefused(

@@ -163,13 +163,16 @@ class ControlPanel:
                 self.rec_stop = gui.add_button("Stop recording")
                 self.note = gui.add_text("Marker note", "")
                 self.marker = gui.add_button("Add marker", hint="or press M")
-        self.reset_drives = None
-        if sup.has_drives:
+        self.reset_drives = self.zero_depth = None
+        if sup.has_drives:  # the robot's devices (or the rig's emulated ones)
             with within(c.get("safety")):
-                with gui.add_folder("Fin drives", order=40.0):
+                with gui.add_folder("Devices", order=40.0):
                     self.reset_drives = gui.add_button(
                         "Reset drive faults", color="orange",
                         hint="after a drive fault (EMCY): reset it; the drive stays off until the next arming")
+                    self.zero_depth = gui.add_button(
+                        "Zero depth at the surface",
+                        hint="with the robot floating at the surface, disarmed: its pressure becomes depth 0")
         self.faults: RigFaultInputs | None = None
         if sup.rig is not None:
             with within(c.get("safety")):
@@ -203,6 +206,7 @@ class ControlPanel:
         self.marker_key.on_trigger(self._guard(self._add_marker))
         if self.reset_drives is not None:
             self.reset_drives.on_click(self._guard(self._reset_drive_faults))
+            self.zero_depth.on_click(self._guard(self._zero_depth))
         if self.faults is not None:
             f = self.faults
             f.device.on_update(lambda _: f.show_faults_of_device())
@@ -311,6 +315,10 @@ class ControlPanel:
         self.sup.reset_drive_faults(self.cid)
         self.show("drive faults reset: the drives stay off until armed")
 
+    def _zero_depth(self) -> None:
+        p = self.sup.zero_depth(self.cid)
+        self.show(f"depth zeroed: surface pressure {p:.1f} Pa")
+
     def _inject_fault(self) -> None:
         f = self.faults
         assert f is not None
@@ -370,7 +378,7 @@ class ControlPanel:
         rec = sup.recorder
         self.rec_status.content = (f"Recording **{esc(rec.session_id)}**" if rec.recording else "Not recording")
         if self.reset_drives is not None:
-            self.reset_drives.disabled = not pilot or sup.armed
+            self.reset_drives.disabled = self.zero_depth.disabled = not pilot or sup.armed
         if self.faults is not None:
             self.faults.enable(pilot)
 

@@ -268,9 +268,13 @@ class DeviceRobotIO(RobotIO):
         """Reset every EPOS2 in fault; each stays unpowered until the next arming."""
         return self.drives.reset_faults()
 
-    def zero_depth(self, samples: int | None = None) -> float | None:
+    def zero_depth(self) -> float:
         """Zero the depth at the surface (the pressure driver's calibration)."""
-        return self.pressure.zero(samples)
+        p = self.pressure.zero()
+        if p is None:
+            raise ValueError("depth zeroing: too few pressure readings (see the pressure "
+                             "sensor's events); the old zero stays")
+        return p
 
     # ------------------------------------------------------------------ events
     def add_event_sink(self, sink: EventSink, replay: bool = True) -> Callable[[], None]:

@@ -87,6 +87,13 @@ class RobotIO(ABC):
         when one stays in fault (its events say why)."""
         return True
 
+    def zero_depth(self) -> float:
+        """Take the present pressure as the surface's (the robot floating at the surface);
+        returns that pressure (Pa). ValueError when there is no pressure sensor to zero, or
+        too few readings came (the sensor's events say why; the old zero stays)."""
+        raise ValueError("depth zeroing: this robot has no pressure sensor to zero "
+                         "(the simulator's depth is exact)")
+
     def truth(self) -> RobotTruth | None:
         """The simulator's true state; None when the robot is real."""
         return None
