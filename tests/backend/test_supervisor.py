@@ -7,6 +7,7 @@ one test runs it in its own thread under a paced clock.
 from __future__ import annotations
 
 import math
+import threading
 import time
 from pathlib import Path
 
@@ -484,6 +485,42 @@ def test_arming_is_refused_when_a_drive_is_in_fault_until_the_fault_is_reset(tmp
             with pytest.raises(CommandRefused, match="disarm first"):
                 armed_refuses(PILOT)
     finally:
+        sup.stop()
+
+
+class StallingRobot(SimRobotIO):
+    """The simulator, until its link stalls at 0.5 s for as long as ``release`` is unset."""
+
+    def __init__(self, *a, **kw) -> None:
+        super().__init__(*a, **kw)
+        self.stalled = threading.Event()
+        self.release = threading.Event()
+
+    def advance_to(self, t: float):
+        if t > 0.5 and not self.release.is_set():
+            self.stalled.set()
+            self.release.wait()
+        return super().advance_to(t)
+
+
+def test_a_command_the_loop_cannot_take_in_time_is_refused_and_never_done(tmp_path: Path, monkeypatch) -> None:
+    from ucat_console.backend import supervisor as supervisor_module
+
+    monkeypatch.setattr(supervisor_module, "_WAIT_LOOP", 0.3)
+    robot = StallingRobot()
+    sup = Supervisor(make_config(), clock=SimulatedClock(), sessions_dir=tmp_path,
+                     robot_factory=lambda c, ev: (robot, lambda: None))
+    sup.start()
+    try:
+        assert robot.stalled.wait(10.0)
+        with pytest.raises(CommandRefused, match="nothing was done"):
+            sup.arm(LOCAL)
+        robot.release.set()
+        t = sup.loop.time
+        wait_for(lambda: sup.loop.time > t + 1.0, what="the loop going on")
+        assert not sup.armed  # the refused arming did not happen later
+    finally:
+        robot.release.set()
         sup.stop()
 
 

@@ -254,6 +254,7 @@ class Supervisor:
             epoch_offset=self.wall0,
         )
         self._pending: queue.SimpleQueue[tuple[Callable[[], Any], dict]] = queue.SimpleQueue()
+        self._pending_lock = threading.Lock()
         self._thread: threading.Thread | None = None
         self._stopping = False
         self._closed = False
@@ -373,7 +374,13 @@ class Supervisor:
         box: dict[str, Any] = {"done": threading.Event()}
         self._pending.put((fn, box))
         if not box["done"].wait(_WAIT_LOOP):
-            raise CommandRefused("the loop did not answer in time")
+            with self._pending_lock:  # a command either runs, and is answered, or never runs
+                started = box.setdefault("started", False)
+                if not started:
+                    box["abandoned"] = True
+            if not started:
+                raise CommandRefused("the loop did not answer in time; nothing was done")
+            box["done"].wait()
         if "error" in box:
             raise box["error"]
         return box.get("result")
@@ -384,6 +391,10 @@ class Supervisor:
                 fn, box = self._pending.get_nowait()
             except queue.Empty:
                 return
+            with self._pending_lock:
+                if box.get("abandoned"):
+                    continue
+                box["started"] = True
             try:
                 box["result"] = fn()
             except BaseException as e:
