@@ -107,9 +107,27 @@ class _Recording:
     def close(self) -> None:
         raise NotImplementedError
 
-    def records(self, channels: Iterable[str] | None = None, start: float | None = None,
-                end: float | None = None, *, start_ns: int | None = None, end_ns: int | None = None,
-                reverse: bool = False) -> Iterator[Record]:
+    def records(
+        self,
+        channels: Iterable[str] | None = None,
+        start: float | None = None,
+        end: float | None = None,
+        *,
+        start_ns: int | None = None,
+        end_ns: int | None = None,
+        reverse: bool = False,
+    ) -> Iterator[Record]:
+        """Decoded messages in time order (``reverse``: latest first) within
+        ``[start, end)`` (stream seconds) or ``[start_ns, end_ns)`` (file nanoseconds)."""
+        lo = start_ns if start is None else self.to_ns(start)
+        hi = end_ns if end is None else self.to_ns(end)
+        yield from self._records_ns(self._topics(channels), lo, hi, reverse)
+
+    def _topics(self, channels: Iterable[str] | None) -> list[str] | None:
+        raise NotImplementedError
+
+    def _records_ns(self, topics: list[str] | None, lo: int | None, hi: int | None,
+                    reverse: bool) -> Iterator[Record]:
         raise NotImplementedError
 
     def state_records_at_ns(self, ns: int, channels: Iterable[str] | None = None) -> dict[str, Record]:
@@ -318,21 +336,9 @@ class SessionReader(_Recording):
             ) from None
         return Record(channel.topic, message.log_time, msg)
 
-    def records(
-        self,
-        channels: Iterable[str] | None = None,
-        start: float | None = None,
-        end: float | None = None,
-        *,
-        start_ns: int | None = None,
-        end_ns: int | None = None,
-        reverse: bool = False,
-    ) -> Iterator[Record]:
-        """Decoded messages in time order (``reverse``: latest first) within
-        ``[start, end)`` (stream seconds) or ``[start_ns, end_ns)`` (file nanoseconds)."""
-        lo = start_ns if start is None else self.to_ns(start)
-        hi = end_ns if end is None else self.to_ns(end)
-        for channel, message in self._iter(self._topics(channels), lo, hi, reverse):
+    def _records_ns(self, topics: list[str] | None, lo: int | None, hi: int | None,
+                    reverse: bool) -> Iterator[Record]:
+        for channel, message in self._iter(topics, lo, hi, reverse):
             yield self._decode(channel, message)
 
     def state_records_at_ns(
@@ -607,21 +613,9 @@ class SessionParts(_Recording):
                 run_end = r.end_ns
         return [[parts[i] for i in sorted(run)] for run in runs]
 
-    def records(
-        self,
-        channels: Iterable[str] | None = None,
-        start: float | None = None,
-        end: float | None = None,
-        *,
-        start_ns: int | None = None,
-        end_ns: int | None = None,
-        reverse: bool = False,
-    ) -> Iterator[Record]:
-        """Decoded messages of every part in time order (``reverse``: latest first) within
-        ``[start, end)`` (stream seconds) or ``[start_ns, end_ns)`` (file nanoseconds)."""
-        topics = self._topics(channels)
-        lo = start_ns if start is None else self.to_ns(start)
-        hi = end_ns if end is None else self.to_ns(end)
+    def _records_ns(self, topics: list[str] | None, lo: int | None, hi: int | None,
+                    reverse: bool) -> Iterator[Record]:
+        """Every part's records, merged in time order."""
         runs = self._runs(lo, hi)
         for run in reversed(runs) if reverse else runs:
             its = [
