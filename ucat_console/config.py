@@ -42,9 +42,8 @@ from ucat_console.control.params import (
     ExecutorConfig,
     MpcConfig,
     PowerConfig,
-    _Config,
 )
-from ucat_console.typedconf import from_dict, param, to_dict
+from ucat_console.typedconf import Config, from_dict, param, to_dict
 
 #: robots the supervisor can drive
 ROBOTS = ("sim", "rig")
@@ -55,7 +54,7 @@ LOOP_BLOCKS = ("mpc", "baseline", "body", "executor", "power")
 
 
 @dataclass(frozen=True)
-class ConsoleConfig(_Config):
+class ConsoleConfig(Config):
     """The console process: web server, live view, supervision (console.md)."""
 
     host: str = param(
@@ -90,7 +89,7 @@ class ConsoleConfig(_Config):
 
 
 @dataclass(frozen=True)
-class AccessConfig(_Config):
+class AccessConfig(Config):
     """One pilot, everyone else read-only (console.md, Safety and access)."""
 
     token: str = param("", doc="pilot token; empty: a new random token at every start")
@@ -106,7 +105,7 @@ class AccessConfig(_Config):
 
 
 @dataclass(frozen=True)
-class FailsafeRule(_Config):
+class FailsafeRule(Config):
     """What one failsafe does, and after how long its cause triggers it."""
 
     action: str = param(
@@ -118,7 +117,7 @@ class FailsafeRule(_Config):
 
 
 @dataclass(frozen=True)
-class FailsafeConfig(_Config):
+class FailsafeConfig(Config):
     """Every failsafe; each is shown, recorded, and latched until its cause clears."""
 
     pilot_gone: FailsafeRule = FailsafeRule("hold", 2.0)
@@ -133,7 +132,7 @@ class FailsafeConfig(_Config):
 
 
 @dataclass(frozen=True)
-class AppConfig(_Config):
+class AppConfig(Config):
     """Everything one run of the console needs (module docstring)."""
 
     robot: str = param("sim", choices=ROBOTS, doc="the robot to drive: the simulator or the device rig")

@@ -18,7 +18,7 @@ import tomllib
 import types
 import typing
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, Self, TypeVar
 
 import tomli_w
 
@@ -239,3 +239,32 @@ def require_below(obj: Any, lo: str, hi: str, why: str = "") -> None:
 def bounded_fields(cls_or_obj: Any) -> list[dataclasses.Field]:
     """Fields that carry range metadata (what a tuning panel shows)."""
     return [f for f in dataclasses.fields(cls_or_obj) if f.metadata]
+
+
+class Config:
+    """The base of every configuration dataclass: validation, TOML in/out, copies.
+
+    Subclasses are ``@dataclass(frozen=True)`` with :func:`param` fields; ``_check`` holds
+    the cross-field checks (run after every field has been checked).
+    """
+
+    def __post_init__(self) -> None:
+        validate(self)
+        self._check()
+
+    def _check(self) -> None:  # cross-field checks
+        pass
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Self:
+        return from_dict(cls, data)
+
+    @classmethod
+    def from_toml(cls, path: str | Path) -> Self:
+        return load_toml(cls, path)
+
+    def to_toml(self) -> str:
+        return dump_toml(self)
+
+    def replace(self, **changes: Any) -> Self:
+        return dataclasses.replace(self, **changes)

@@ -27,8 +27,7 @@ from typing import Sequence
 import numpy as np
 
 from ucat_console.backend.devices.readings import ImuReading
-from ucat_console.control.params import _Config
-from ucat_console.typedconf import param
+from ucat_console.typedconf import Config, param
 
 Quaternion = tuple[float, float, float, float]
 Vector3 = tuple[float, float, float]
@@ -37,7 +36,7 @@ _GRAVITY_DIRECTION_NED = np.array([0.0, 0.0, -1.0])  # specific force at rest, i
 
 
 @dataclass(frozen=True)
-class AttitudeConfig(_Config):
+class AttitudeConfig(Config):
     """Noise model and gates of the attitude EKF."""
 
     gyro_noise: float = param(

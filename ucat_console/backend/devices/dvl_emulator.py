@@ -27,8 +27,7 @@ from typing import Any, Callable
 from ucat_console.backend.devices.emulator_base import DelayedOutput, EmulatorThread, next_tick
 from ucat_console.backend.devices.faults import Fault, FaultSettings
 from ucat_console.backend.devices.lines import LineSplitter, Overlong
-from ucat_console.control.params import _Config
-from ucat_console.typedconf import param
+from ucat_console.typedconf import Config, param
 
 FORMAT = "json_v3.1"
 _BEAM_TILT = math.radians(22.5)  # transducer tilt from the DVL's z axis
@@ -54,7 +53,7 @@ class DvlTruth:
 
 
 @dataclass(frozen=True)
-class DvlEmulatorConfig(_Config):
+class DvlEmulatorConfig(Config):
     """Endpoint and report rates of the emulated A50."""
 
     host: str = param("127.0.0.1", choices=("127.0.0.1", "localhost"), doc="listen address (loopback)")

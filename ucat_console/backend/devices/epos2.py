@@ -49,9 +49,8 @@ from ucat_console.backend.devices.canbus import BITRATES, INTERFACES, CanBusErro
 from ucat_console.backend.devices.readings import FinFeedback
 from ucat_console.backend.devices.reporting import EventReporter
 from ucat_console.backend.devices.units import DriveUnits
-from ucat_console.control.params import _Config
 from ucat_console.telemetry.events import Event, EventSink
-from ucat_console.typedconf import param
+from ucat_console.typedconf import Config, param
 
 logger = logging.getLogger(__name__)
 
@@ -77,7 +76,7 @@ def _failure_code(error: BaseException) -> str:
 
 
 @dataclass(frozen=True)
-class Epos2Config(_Config):
+class Epos2Config(Config):
     """The four EPOS2 fin drives on one CAN bus."""
 
     interface: str = param(

@@ -41,8 +41,7 @@ from ucat_console.backend.devices import cia402
 from ucat_console.backend.devices.canbus import open_bus
 from ucat_console.backend.devices.epos2 import EDS_PATH
 from ucat_console.backend.devices.units import DriveUnits
-from ucat_console.control.params import _Config
-from ucat_console.typedconf import param
+from ucat_console.typedconf import Config, param
 
 logger = logging.getLogger(__name__)
 
@@ -164,7 +163,7 @@ class TrapezoidalServo:
 
 
 @dataclass(frozen=True)
-class Epos2EmulatorConfig(_Config):
+class Epos2EmulatorConfig(Config):
     """Emulated EPOS2 nodes (simulation and tests)."""
 
     units: DriveUnits = DriveUnits()

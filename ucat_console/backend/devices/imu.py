@@ -29,9 +29,8 @@ from ucat_console.backend.devices import mip
 from ucat_console.backend.devices.readings import ImuReading
 from ucat_console.backend.devices.serial_link import BAUD_RATES, SERIAL_ERRORS
 from ucat_console.backend.devices.serial_reader import SerialReader
-from ucat_console.control.params import _Config
 from ucat_console.telemetry.events import EventSink
-from ucat_console.typedconf import param
+from ucat_console.typedconf import Config, param
 
 log = logging.getLogger(__name__)
 
@@ -40,7 +39,7 @@ _ORIENTATION_DESCRIPTORS = {"quaternion": mip.FIELD_QUATERNION, "euler": mip.FIE
 
 
 @dataclass(frozen=True)
-class ImuConfig(_Config):
+class ImuConfig(Config):
     """Serial link and streaming set-up of the 3DM-CX5."""
 
     port: str = param("/dev/ttyACM0", doc="serial device of the IMU")

@@ -36,9 +36,8 @@ from ucat_console.backend.devices.lines import LineSplitter, Overlong
 from ucat_console.backend.devices.readings import DepthReading
 from ucat_console.backend.devices.serial_link import BAUD_RATES
 from ucat_console.backend.devices.serial_reader import SerialReader
-from ucat_console.control.params import _Config
 from ucat_console.telemetry.events import EventSink
-from ucat_console.typedconf import param
+from ucat_console.typedconf import Config, param
 
 
 SOURCE = "pressure"
@@ -52,7 +51,7 @@ _LINE = re.compile(rb"^\s*I=([+-]?(?:\d+(?:\.\d*)?|\.\d+))\s*mA\s*$")
 
 
 @dataclass(frozen=True)
-class PressureConfig(_Config):
+class PressureConfig(Config):
     """Serial ADC link, transducer scaling, water density and fault limits."""
 
     port: str = param("/dev/ttyUSB0", doc="serial device of the ADC")

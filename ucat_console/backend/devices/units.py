@@ -11,8 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ucat_console.control.params import _Config
-from ucat_console.typedconf import param
+from ucat_console.typedconf import Config, param
 
 _TWO_PI = 2.0 * math.pi
 _SECONDS_PER_MINUTE = 60.0
@@ -49,7 +48,7 @@ def rpm_to_rad_s(rpm: float, gear_ratio: float) -> float:
 
 
 @dataclass(frozen=True)
-class DriveUnits(_Config):
+class DriveUnits(Config):
     """Encoder and gearhead of one fin drive (the same on all four fins)."""
 
     encoder_lines: int = param(

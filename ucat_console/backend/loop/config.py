@@ -15,9 +15,8 @@ from ucat_console.control.params import (
     ExecutorConfig,
     MpcConfig,
     PowerConfig,
-    _Config,
 )
-from ucat_console.typedconf import param
+from ucat_console.typedconf import Config, param
 
 #: controller modes: four MPC fins, three MPC problems with the rear pair synchronised,
 #: the inverse-model baseline
@@ -25,7 +24,7 @@ MODES = ("mpc", "mpc_sync", "baseline")
 
 
 @dataclass(frozen=True)
-class LoopConfig(_Config):
+class LoopConfig(Config):
     """The closed loop (control.md sections 7-9)."""
 
     mode: str = param("mpc", choices=MODES, doc="fin controller")

@@ -29,8 +29,7 @@ import math
 from dataclasses import dataclass
 
 from ucat_console.backend.devices.pressure import GRAVITY
-from ucat_console.control.params import _Config
-from ucat_console.typedconf import param, require_below
+from ucat_console.typedconf import Config, param, require_below
 
 #: Standard gravity (m/s2), the project's one value (the pressure driver's): weight,
 #: pressure and the IMU's g unit all use it.
@@ -56,7 +55,7 @@ def _check_vec3(name: str, value: tuple[float, ...]) -> None:
 
 
 @dataclass(frozen=True)
-class VehicleConfig(_Config):
+class VehicleConfig(Config):
     """Rigid body and hull hydrodynamics (Fossen), plant.md 'Vehicle'.
 
     Inertias are about the centre of gravity (the CAD values); the dynamics move them to the
@@ -112,7 +111,7 @@ class VehicleConfig(_Config):
 
 
 @dataclass(frozen=True)
-class FinGeometryConfig(_Config):
+class FinGeometryConfig(Config):
     """Where the fins' forces act (eeUVsim ``finDynamics``): mounting angle and moment arms.
 
     Roll and pitch moments come from each fin's vertical force times the roll/pitch arm,
@@ -132,7 +131,7 @@ class FinGeometryConfig(_Config):
 
 
 @dataclass(frozen=True)
-class FinCoefficients(_Config):
+class FinCoefficients(Config):
     """One quasi-steady coefficient set: v = r_c |w|, D = rho C_D A v^2 / 2, L = rho C_L A v^2 / 2."""
 
     rho: float = param(1000.0, lo=1.0, hi=2000.0, lo_open=True, unit="kg/m3", doc="water density")
@@ -164,7 +163,7 @@ _PRESETS = {
 
 
 @dataclass(frozen=True)
-class FinHydroConfig(_Config):
+class FinHydroConfig(Config):
     """Fin hydrodynamics in the plant (plant.md): coefficient set and wake option.
 
     The wake factor (``strouhal_wake``) is a split Gaussian in the fin's current Strouhal
@@ -193,7 +192,7 @@ class FinHydroConfig(_Config):
 
 
 @dataclass(frozen=True)
-class ServoConfig(_Config):
+class ServoConfig(Config):
     """Fin servos in profile-position mode, as an EPOS2 runs them."""
 
     acceleration: float = param(
@@ -210,7 +209,7 @@ class ServoConfig(_Config):
 
 
 @dataclass(frozen=True)
-class DvlConfig(_Config):
+class DvlConfig(Config):
     """Water Linked DVL A50: bottom-track velocity in the body frame."""
 
     rate: float = param(8.0, lo=2.0, hi=15.0, unit="Hz", doc="velocity report rate")
@@ -227,7 +226,7 @@ class DvlConfig(_Config):
 
 
 @dataclass(frozen=True)
-class PressureConfig(_Config):
+class PressureConfig(Config):
     """Gems 3101P 4-20 mA transducer read by an ADC (gauge pressure, zero at the surface)."""
 
     rate: float = param(20.0, lo=1.0, hi=1000.0, unit="Hz", doc="ADC reading rate")
@@ -239,7 +238,7 @@ class PressureConfig(_Config):
 
 
 @dataclass(frozen=True)
-class ImuConfig(_Config):
+class ImuConfig(Config):
     """Microstrain 3DM-CX5: gyro, accelerometer (in g) and attitude."""
 
     rate: float = param(100.0, lo=1.0, hi=1000.0, unit="Hz", doc="sample rate")
@@ -251,14 +250,14 @@ class ImuConfig(_Config):
 
 
 @dataclass(frozen=True)
-class SensorsConfig(_Config):
+class SensorsConfig(Config):
     dvl: DvlConfig = DvlConfig()
     pressure: PressureConfig = PressureConfig()
     imu: ImuConfig = ImuConfig()
 
 
 @dataclass(frozen=True)
-class PlantConfig(_Config):
+class PlantConfig(Config):
     """The simulated U-CAT."""
 
     vehicle: VehicleConfig = VehicleConfig()
