@@ -236,11 +236,6 @@ def require_below(obj: Any, lo: str, hi: str, why: str = "") -> None:
         raise ValueError(f"{lo}/{hi}: need {lo} < {hi}{reason}, got {a} >= {b}")
 
 
-def bounded_fields(cls_or_obj: Any) -> list[dataclasses.Field]:
-    """Fields that carry range metadata (what a tuning panel shows)."""
-    return [f for f in dataclasses.fields(cls_or_obj) if f.metadata]
-
-
 class Config:
     """The base of every configuration dataclass: validation, TOML in/out, copies.
 

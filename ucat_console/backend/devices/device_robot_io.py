@@ -294,10 +294,6 @@ class DeviceRobotIO(RobotIO):
 
         return remove
 
-    def recent_events(self) -> list[Event]:
-        with self._lock:
-            return list(self._backlog)
-
     def publish_event(self, event: Event) -> None:
         """An event raised beside the drivers (the simulated rig), stamped on the wall clock."""
         self._on_event(event)

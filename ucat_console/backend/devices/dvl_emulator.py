@@ -105,7 +105,6 @@ class DvlEmulator(EmulatorThread):
         self._origin = (0.0, 0.0, 0.0)
         self._last_truth: DvlTruth | None = None
         self._corrupt_count = 0
-        self._drop_requested = False
         self.port: int = config.port
         self.settings: dict[str, Any] = {
             "speed_of_sound": 1475.0,
@@ -140,14 +139,6 @@ class DvlEmulator(EmulatorThread):
     def address(self) -> tuple[str, int]:
         return (self.config.host, self.port)
 
-    @property
-    def client_count(self) -> int:
-        return len(self._clients)
-
-    def drop_clients(self) -> None:
-        """Close every client connection (the server keeps listening)."""
-        self._drop_requested = True
-
     # ------------------------------------------------------------ main loop
 
     def _begin(self, now: float) -> None:
@@ -157,10 +148,6 @@ class DvlEmulator(EmulatorThread):
         self._pos_period = 1.0 / self.config.position_rate_hz
 
     def _step(self) -> None:
-        if self._drop_requested:
-            self._drop_requested = False
-            for c in list(self._clients):
-                self._remove(c)
         now = self._clock()
         due = min(self._next_vel, self._next_pos, self._delayed.next_due())
         timeout = min(0.05, max(0.0, due - now))

@@ -108,6 +108,3 @@ class FaultInjectable:
     def clear(self, fault: Fault | str | None = None) -> None:
         """End one fault, or all of them."""
         self.faults.clear(fault)
-
-    def active_faults(self) -> frozenset[Fault]:
-        return self.faults.snapshot()

@@ -179,11 +179,6 @@ class PressureDriver(SerialReader[DepthReading]):
     def surface_pressure_pa(self) -> float:
         return self._surface
 
-    def set_surface_pressure(self, pressure_pa: float) -> None:
-        if not math.isfinite(pressure_pa):
-            raise ValueError(f"surface pressure: {pressure_pa!r} is not finite")
-        self._surface = float(pressure_pa)
-
     def zero(self, samples: int | None = None, timeout_s: float = 5.0) -> float | None:
         """Zero-offset calibration at the surface: mean pressure of the next readings.
 

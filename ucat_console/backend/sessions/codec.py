@@ -133,10 +133,6 @@ def _encoder(cls: type) -> Callable[[Any], dict[str, Any]]:
     return _make_encoder(cls)
 
 
-def to_json_obj(msg: Any) -> dict[str, Any]:
-    """The JSON object of a message (NaN scalars left out, NaN array elements None)."""
-    return _encoder(type(msg))(msg)
-
 
 def encode(msg: Any) -> bytes:
     """A message dataclass -> compact JSON bytes (ValueError naming a bad field)."""

@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import math
 import types
 import typing
 from dataclasses import dataclass
@@ -169,7 +168,3 @@ def json_schema(cls: type) -> dict[str, Any]:
 def json_schema_bytes(cls: type) -> bytes:
     """The schema as stored in a session file."""
     return _json_schema(cls).encode()
-
-
-def is_nan(x: float) -> bool:
-    return isinstance(x, float) and math.isnan(x)

@@ -319,10 +319,6 @@ class Plant:
     def fin_rates(self) -> tuple[float, ...]:
         return tuple(float(x) for x in self._xf[:, F_OMEGA])
 
-    def fin_forces(self) -> np.ndarray:
-        """(4, 2) fin-frame forces (f_x, f_y) of the last step (N)."""
-        return self._xf[:, F_FX : F_FY + 1].copy()
-
     def fin_strouhal(self) -> tuple[float, ...]:
         return tuple(float(x) for x in self._xf[:, F_ST])
 
