@@ -25,8 +25,9 @@ import math
 import threading
 from typing import Callable
 
-from ucat_console.backend.devices.readings import DepthReading, DvlVelocity, FinFeedback, ImuReading
-from ucat_console.backend.loop.robot_io import Reading, RobotIO, RobotTruth
+from ucat_console.robot.readings import DepthReading, DvlVelocity, FinFeedback, ImuReading
+from ucat_console.robot.interface import RobotIO, RobotTruth
+from ucat_console.robot.readings import Reading
 
 log = logging.getLogger(__name__)
 

@@ -23,7 +23,7 @@ import numpy as np
 
 from ucat_console.backend.loop.closed_loop import ClosedLoop, check_setpoints
 from ucat_console.backend.loop.config import LoopConfig
-from ucat_console.backend.loop.robot_io import SimRobotIO
+from ucat_console.backend.sim.robot_io import SimRobotIO
 from ucat_console.backend.sim.params import FinHydroConfig, PlantConfig, VehicleConfig
 from ucat_console.control.allocation import BodySetpoints
 from ucat_console.control.baseline import BaselinePlanner

@@ -6,7 +6,7 @@ writes them as MCAP channels, the UI and the metrics subscribe to them.
 
 from __future__ import annotations
 
-from ucat_console.backend.devices.readings import DepthReading, DvlVelocity, ImuReading
+from ucat_console.robot.readings import DepthReading, DvlVelocity, ImuReading
 from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.messages import (
     BodyCommand,

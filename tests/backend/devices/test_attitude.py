@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from ucat_console.backend.devices import attitude as att
-from ucat_console.backend.devices.readings import ImuReading
+from ucat_console.robot.readings import ImuReading
 
 ROLL, PITCH = 0.3, -0.2
 

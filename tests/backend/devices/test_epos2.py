@@ -24,8 +24,8 @@ from ucat_console.backend.devices.epos2_emulator import (
     Epos2EmulatorConfig,
     start_emulated_nodes,
 )
-from ucat_console.backend.devices.readings import FinFeedback
-from ucat_console.backend.devices.units import DriveUnits
+from ucat_console.robot.readings import FinFeedback
+from ucat_console.robot.units import DriveUnits
 from ucat_console.telemetry.events import Event
 
 # 500 lines, gear 4: 8000 qc per fin turn = 1273.24 qc/rad; 1 rad/s = 38.197 rpm

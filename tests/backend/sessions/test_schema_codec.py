@@ -9,7 +9,7 @@ import jsonschema
 import pytest
 from session_helpers import example_message, same
 
-from ucat_console.backend.devices.readings import ImuReading
+from ucat_console.robot.readings import ImuReading
 from ucat_console.backend.sessions import codec
 from ucat_console.backend.sessions.schema import DIALECT, json_schema, schema_name
 from ucat_console.telemetry.channels import CHANNELS

@@ -8,7 +8,7 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from ucat_console.backend.devices.readings import DepthReading, DvlVelocity, FinFeedback, ImuReading
+from ucat_console.robot.readings import DepthReading, DvlVelocity, FinFeedback, ImuReading
 from ucat_console.backend.sim.params import (
     DvlConfig,
     ImuConfig,

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 from typing import Any, Callable, Literal
 
 from ucat_console.backend.devices.lines import LineSplitter, Overlong
-from ucat_console.backend.devices.readings import DvlPosition, DvlVelocity
+from ucat_console.robot.readings import DvlPosition, DvlVelocity
 from ucat_console.backend.devices.reporting import EventReporter, SilenceWatch
 from ucat_console.telemetry.events import EventSink
 from ucat_console.typedconf import Config, param

@@ -46,9 +46,9 @@ from canopen.sdo import SdoAbortedError, SdoCommunicationError
 
 from ucat_console.backend.devices import cia402
 from ucat_console.backend.devices.canbus import BITRATES, INTERFACES, CanBusError, open_bus
-from ucat_console.backend.devices.readings import FinFeedback
+from ucat_console.robot.readings import FinFeedback
 from ucat_console.backend.devices.reporting import EventReporter
-from ucat_console.backend.devices.units import DriveUnits
+from ucat_console.robot.units import DriveUnits
 from ucat_console.telemetry.events import Event, EventSink
 from ucat_console.typedconf import Config, param
 

@@ -40,7 +40,7 @@ from canopen.sdo import SdoAbortedError
 from ucat_console.backend.devices import cia402
 from ucat_console.backend.devices.canbus import open_bus
 from ucat_console.backend.devices.epos2 import EDS_PATH
-from ucat_console.backend.devices.units import DriveUnits
+from ucat_console.robot.units import DriveUnits
 from ucat_console.typedconf import Config, param
 
 logger = logging.getLogger(__name__)

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 from ucat_console.backend.devices import mip
-from ucat_console.backend.devices.readings import ImuReading
+from ucat_console.robot.readings import ImuReading
 from ucat_console.backend.devices.serial_link import BAUD_RATES, SERIAL_ERRORS
 from ucat_console.backend.devices.serial_reader import SerialReader
 from ucat_console.telemetry.events import EventSink

@@ -1,8 +1,8 @@
-"""What the drivers deliver: one frozen dataclass per kind of reading.
+"""What the sensors deliver: one frozen dataclass per kind of reading.
 
-The simulated sensors (backend/sim) produce the same types, so the estimator and the
-body-frame layer never know whether a reading came through a real device, an emulator or
-the headless simulator. Units are SI unless the field name says otherwise; ``t`` is the
+The drivers (``backend/devices``) and the simulated sensors (``backend/sim``) produce these
+types, so the estimator and the body-frame layer never know whether a reading came through
+a real device, an emulator or the headless simulator. Units are SI unless the field name says otherwise; ``t`` is the
 receiving clock's time in seconds.
 """
 
@@ -67,3 +67,7 @@ class FinFeedback:
     position_rad: float
     velocity_rad_s: float
     state: str = "operation_enabled"
+
+
+#: any reading a robot delivers
+Reading = ImuReading | DvlVelocity | DepthReading | FinFeedback
