@@ -117,7 +117,7 @@ def _field_types(cls: type) -> dict[str, Any]:
     return typing.get_type_hints(cls)
 
 
-def _coerce(tp: Any, value: Any, key: str) -> Any:
+def coerce(tp: Any, value: Any, key: str) -> Any:
     """Convert a TOML value to the annotated type, refusing silent changes of kind."""
     origin = typing.get_origin(tp)
     args = typing.get_args(tp)
@@ -128,7 +128,7 @@ def _coerce(tp: Any, value: Any, key: str) -> Any:
         last: Exception | None = None
         for a in non_none:
             try:
-                return _coerce(a, value, key)
+                return coerce(a, value, key)
             except ValueError as e:
                 last = e
         raise last or ValueError(f"{key}: cannot read {value!r}")
@@ -140,10 +140,10 @@ def _coerce(tp: Any, value: Any, key: str) -> Any:
         if not isinstance(value, (list, tuple)):
             raise ValueError(f"{key}: expected an array, got {value!r}")
         if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_coerce(args[0], v, f"{key}[{i}]") for i, v in enumerate(value))
+            return tuple(coerce(args[0], v, f"{key}[{i}]") for i, v in enumerate(value))
         if len(args) != len(value):
             raise ValueError(f"{key}: expected {len(args)} values, got {len(value)}")
-        return tuple(_coerce(a, v, f"{key}[{i}]") for i, (a, v) in enumerate(zip(args, value)))
+        return tuple(coerce(a, v, f"{key}[{i}]") for i, (a, v) in enumerate(zip(args, value)))
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ValueError(f"{key}: expected a number, got {value!r}")
@@ -181,7 +181,7 @@ def from_dict(cls: type[T], data: dict[str, Any], prefix: str = "") -> T:
     kwargs = {}
     for name, value in data.items():
         key = prefix + name
-        kwargs[name] = _coerce(hints[name], value, key)
+        kwargs[name] = coerce(hints[name], value, key)
         check_value(fields[name], kwargs[name], prefix)
     try:
         return cls(**kwargs)

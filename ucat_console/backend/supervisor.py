@@ -64,7 +64,7 @@ from ucat_console.telemetry.stream import TelemetryStream
 from ucat_console.typedconf import check_value
 
 if TYPE_CHECKING:
-    from ucat_console.backend.devices.sim_rig import SimRig
+    from ucat_console.backend.sim_rig import SimRig
 
 log = logging.getLogger(__name__)
 

@@ -172,7 +172,7 @@ def run_probe(args: argparse.Namespace) -> int:
 
 def _probe_epos(args: argparse.Namespace, out: _Output, stack: ExitStack) -> int:
     try:
-        from ucat_console.backend.devices.epos2 import probe
+        from ucat_console.backend.devices.epos2_probe import probe
     except ImportError as e:
         print(f"ucat-console: error: the EPOS2 driver is not available: {e}", file=sys.stderr)
         return 2

@@ -21,7 +21,7 @@ import math
 import numba
 import numpy as np
 from llvmlite import ir
-from numba.core import cgutils, types
+from numba.core import types
 from numba.extending import intrinsic
 
 from ucat_console.control.params import MpcConfig

@@ -95,7 +95,7 @@ class ConsoleApp:
         # from behind and to port, the vehicle left of the middle (the controls are on the right)
         server.initial_camera.position = (-1.0, -1.3, z + 0.3)
         server.initial_camera.look_at = (0.35, -0.45, z)
-        self.scene = RobotScene(server.scene, supervisor.cfg.plant, trail_points=cfg.trail_points,
+        self.scene = RobotScene(server.scene, supervisor.cfg.plant.geometry, trail_points=cfg.trail_points,
                                 trail_spacing=cfg.trail_spacing, shadows=cfg.shadows,
                                 environment_map=cfg.environment_map)
         gui = server.gui
@@ -123,7 +123,7 @@ class ConsoleApp:
                                    corridor=self._corridor)
         # review of recorded sessions: the same scene and plot code on the player's stream
         self.playback = PlaybackPanel(
-            gui, server.scene, supervisor.cfg.plant, directory=supervisor.recorder.directory,
+            gui, server.scene, supervisor.cfg.plant.geometry, directory=supervisor.recorder.directory,
             plot_rate=cfg.plot_rate, scene_rate=cfg.scene_rate, max_plot_points=cfg.max_plot_points,
             history=lambda: self.history, max_history=cfg.max_history, corridor=self._corridor,
             trail_points=cfg.trail_points, trail_spacing=cfg.trail_spacing,

@@ -48,7 +48,7 @@ from ucat_console.backend.sessions.replay import (
     parse_weights,
     recorded_seed,
 )
-from ucat_console.backend.sim.params import PlantConfig
+from ucat_console.robot.geometry import Geometry
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.messages import BodyState, FinState
@@ -204,7 +204,7 @@ class PlaybackPanel:
         self,
         gui: Any,
         scene: Any,
-        plant: PlantConfig,
+        geometry: Geometry,
         *,
         directory: str | Path | None = None,
         plot_rate: float = 10.0,
@@ -239,7 +239,7 @@ class PlaybackPanel:
 
         self.root = scene.add_frame(SCENE_ROOT, show_axes=False, position=SCENE_OFFSET, visible=False)
         self._new_scene: Callable[[], RobotScene] = lambda: RobotScene(
-            PrefixedScene(scene, SCENE_ROOT), plant, trail_points=trail_points, trail_spacing=trail_spacing)
+            PrefixedScene(scene, SCENE_ROOT), geometry, trail_points=trail_points, trail_spacing=trail_spacing)
         self.scene = self._new_scene()
         self.feeder = PlotFeeder(int(math.ceil(max_history * plot_rate)) + 2)
         self.sampler = StreamSampler(self.feeder, 1.0 / self.plot_rate)

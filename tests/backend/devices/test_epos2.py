@@ -14,12 +14,9 @@ import pytest
 
 from ucat_console.backend.devices import cia402
 from ucat_console.backend.devices.canbus import open_bus
-from ucat_console.backend.devices.epos2 import (
-    Epos2Config,
-    Epos2Error,
-    FinDrives,
-    probe,
-)
+from ucat_console.backend.devices.epos2 import Epos2Config, Epos2Error
+from ucat_console.backend.devices.epos2_probe import probe
+from ucat_console.backend.devices.fin_drives import FinDrives
 from ucat_console.backend.devices.epos2_emulator import (
     Epos2EmulatorConfig,
     start_emulated_nodes,

@@ -38,7 +38,8 @@ from typing import Callable
 from ucat_console.backend.devices.canbus import CanBusError
 from ucat_console.backend.devices.config import DevicesConfig
 from ucat_console.backend.devices.dvl import DvlClient
-from ucat_console.backend.devices.epos2 import Epos2NoAnswer, FinDrives
+from ucat_console.backend.devices.epos2 import Epos2NoAnswer
+from ucat_console.backend.devices.fin_drives import FinDrives
 from ucat_console.backend.devices.imu import ImuDriver
 from ucat_console.backend.devices.pressure import PressureDriver
 from ucat_console.robot.readings import DvlPosition, DvlVelocity, FinFeedback

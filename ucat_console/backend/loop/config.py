@@ -1,8 +1,9 @@
 """Configuration of the closed loop: controller mode, hand-over latency, rates, envelope.
 
 One :class:`LoopConfig` holds everything the loop needs besides the robot: the controller
-blocks of ``control/params.py`` nested as tables (so one TOML file configures a run) and
-the loop's own values below.
+blocks of ``control/params.py`` and the loop's own values below. It is the only holder of
+the controller blocks: the application's configuration (``config.AppConfig``) keeps them
+here and reads them from here.
 """
 
 from __future__ import annotations

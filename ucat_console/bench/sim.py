@@ -1,4 +1,5 @@
-"""Speed of the closed loop: simulated seconds per wall-clock second, headless.
+"""``ucat-console bench sim``: the closed loop on the simulated robot, simulated seconds per
+wall-clock second, headless.
 
 The loop runs as the experiments run it: the simulated U-CAT at 1 kHz physics with its
 sensors, four fins (three logical fins in sync mode) planning every cycle, and every

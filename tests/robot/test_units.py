@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from ucat_console.backend.devices import units
+from ucat_console.robot import units
 from ucat_console.robot.units import DriveUnits
 
 
