@@ -7,6 +7,19 @@ and builds the console's tuning panels, so a bound is written once.
 
 Nested dataclasses map to TOML tables. Unknown keys, wrong types, non-finite numbers and
 out-of-range values raise :class:`ValueError` naming the dotted key and the allowed range.
+:class:`Config` is the base of every configuration dataclass of the project.
+
+Libraries: TOML is read by ``tomllib`` and written by ``tomli_w``; the validation below is
+written by hand. msgspec (installed with viser) was considered for it and not taken, for
+what msgspec 0.23 does with dataclasses: it checks ``Meta`` constraints only when
+decoding or converting, never when a config is built in Python (``MpcConfig(lam_st=-1)``
+and every tuning change from the page must be refused as well, so the checks here would
+stay); it ignores unknown keys of a dataclass (``forbid_unknown_fields`` is for
+``msgspec.Struct`` only, and a misspelt key must be refused); its errors name a path
+(``$.mpc.lam_st``) but not the unit or an open bound; and the range, unit and doc of each
+field, which the tuning panels are built from, would still need metadata of their own.
+Moving every config class to ``msgspec.Struct`` would change the whole tree for one of
+these (unknown keys).
 """
 
 from __future__ import annotations

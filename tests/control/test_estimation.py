@@ -99,10 +99,10 @@ def test_estimator_object_initialises_from_the_first_reading() -> None:
 
 
 def test_dead_reckoning_rotates_the_body_velocity_into_ned() -> None:
-    # heading east (yaw +90 deg): 0.5 m/s forward for 2 s moves 1 m east
+    # heading east (yaw +90 deg): 0.5 m/s forward and 0.2 m/s to starboard for 0.8 s
     q = rot.quaternion_from_euler(0.0, 0.0, math.pi / 2)
-    x, y = att.dead_reckon((1.0, 2.0), q, (0.5, 0.0, 0.0), 2.0)
-    assert (x, y) == pytest.approx((1.0, 3.0), abs=1e-12)
+    x, y = att.dead_reckon((1.0, 2.0), q, (0.5, 0.2, 0.0), 0.8)
+    assert (x, y) == pytest.approx((1.0 - 0.16, 2.0 + 0.4), abs=1e-12)
     # a gap longer than the longest integrated one counts as that long; none backwards
     x, y = att.dead_reckon((0.0, 0.0), (1.0, 0.0, 0.0, 0.0), (1.0, 0.0, 0.0), 10.0)
     assert x == pytest.approx(att.MAX_DEAD_RECKONING_GAP)

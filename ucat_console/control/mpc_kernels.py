@@ -12,6 +12,12 @@ f_1 = R(theta0) g(d_1, w_1) and f_2 = R(theta0) R(d_1) g(d_2, w_2).
 
 Random numbers come from splitmix64 (one uint64 of state), so a plan is reproducible
 from its seed on every machine.
+
+No clock is read here: a caller timing the two stages calls :func:`sample_kernel` and
+:func:`finish_kernel` (together the same solve as :func:`plan_kernel`) with its own clock
+between them. Over 500 lines because this is one compiled solver whose parts inline into
+one another (cost, gradient, sampler, quasi-Newton step); split, it would be one algorithm
+spread over files.
 """
 
 from __future__ import annotations

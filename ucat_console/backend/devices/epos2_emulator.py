@@ -22,6 +22,10 @@ in-process ``virtual`` interface). It implements what the driver relies on:
 Time advances through :meth:`Epos2Emulator.tick` (the headless simulator and tests call it
 with their own clock) or through a thread that calls it (:meth:`EmulatedNodes.start_thread`).
 Heartbeats are canopen's periodic tasks and run on the wall clock.
+
+Over 500 lines: :class:`Epos2Emulator` is one node's object dictionary hooks, NMT, CiA 402
+state machine, profile position, PDOs and fault injection, all on the node's one state;
+the servo it moves is the plant's model (``robot.servo``).
 """
 
 from __future__ import annotations

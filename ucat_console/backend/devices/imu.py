@@ -4,8 +4,8 @@ Configuration follows the console's start-up sequence: idle, ask the IMU base ra
 the IMU message format of data set 0x80 (scaled accel 0x04, scaled gyro 0x05 and, when
 asked for, quaternion 0x0A or Euler 0x0C) at ``base rate / decimation``, enable the IMU
 stream, resume. The IMU-only CX5 NACKs orientation fields; the driver then reports the
-NACK and falls back to accel + gyro, and attitude comes from
-:mod:`ucat_console.backend.devices.attitude`.
+NACK and falls back to accel + gyro, and attitude comes from the core's estimator
+(:mod:`ucat_console.control.estimation`, run by the closed loop).
 
 A reader thread parses the stream and delivers :class:`ImuReading`. Every fault is an
 :class:`Event` with source ``"imu"``: ``checksum``, ``garbage``, ``malformed``,

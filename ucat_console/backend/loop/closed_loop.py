@@ -36,6 +36,10 @@ old ones are idle. Tuning (MPC weights, PID gains) applies from the next plan / 
 Mutators may be called from any thread: they are validated at once and applied by the
 loop's thread at its next event.
 
+Estimation (the attitude EKF, dead reckoning) is the core's (``control.estimation``); this
+module schedules, hands plans over between modes and publishes. It is over 500 lines
+because those three share the actuators' hand-over state, which one loop thread owns.
+
 Fins: the controller uses the paper's order (0 front-starboard, 1 front-port,
 2 rear-starboard, 3 rear-port); the robot and the telemetry use the robot's order,
 mapped by ``robot.fins.PAPER_TO_ROBOT``.
