@@ -88,8 +88,6 @@ class Scenario:
 
     def check(self) -> None:
         """Refuse setpoints outside the loop's envelope before anything runs."""
-        if self.depth < 0.0:
-            raise ValueError(f"depth: {self.depth!r} m is impossible; a depth setpoint is >= 0 m")
         sp = BodySetpoints(velocity=self.v_ref, depth=self.depth, yaw_rate=self.yaw_rate)
         check_setpoints(self.loop_config(), sp)
         plant_config(self.plant, self.seed, self.current)
