@@ -29,6 +29,7 @@ name the dotted key and the allowed range.
 from __future__ import annotations
 
 import dataclasses
+import typing
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Self
@@ -166,8 +167,8 @@ class AppConfig(Config):
                 if name in loop:
                     raise ValueError(f"loop.{name}: set it in the top-level [{name}] table")
         rest = {k: v for k, v in data.items() if k not in LOOP_BLOCKS}
-        blocks = {name: coerce(type(getattr(LoopConfig(), name)), data[name], name)
-                  for name in LOOP_BLOCKS if name in data}
+        hints = typing.get_type_hints(LoopConfig)
+        blocks = {name: coerce(hints[name], data[name], name) for name in LOOP_BLOCKS if name in data}
         return from_dict(cls, rest).replace(**blocks)
 
     def to_dict(self) -> dict[str, Any]:
