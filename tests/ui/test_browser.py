@@ -205,12 +205,12 @@ def test_closing_the_pilot_page_triggers_the_failsafe(console: Console) -> None:
 def test_a_recorded_session_is_reviewed_in_the_page(console: Console) -> None:
     from ucat_console.backend.access import LOCAL
 
-    a, _ = PAGES["a"]
+    a, a_id = PAGES["a"]
     sup = console.sup
     sup.start_recording(LOCAL, "browser review")
     time.sleep(2.0)
     [path] = sup.stop_recording(LOCAL)
-    panel = console.app.playback
+    panel = console.app.reviews[a_id]  # this page's own review
     panel.refresh_sessions()
     a.get_by_role("tab", name="Review", exact=True).click()
     expect(a.get_by_text("browser review").first).to_be_visible()  # listed, with notes

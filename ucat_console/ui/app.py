@@ -264,7 +264,7 @@ class ConsoleApp:
                 self.panels.pop(cid, None)
             review = self.reviews.pop(cid, None)
         if review is not None:
-            review.stop()
+            review.stop(page_gone=True)
         log.info("page gone: client %s", cid)
 
     def request_refresh(self) -> None:

@@ -44,7 +44,7 @@ REFUSALS = (AccessDenied, CommandRefused, ValueError)
 
 def esc(text: object) -> str:
     """Text made safe for a markdown element (no HTML, no markdown markup)."""
-    s = html.escape(str(text), quote=True)
+    s = html.escape(str(text), quote=False)  # the page decodes &lt; &gt; &amp; but shows &#x27; as is
     for c in "\\`*_{}[]()#+!|~>":
         s = s.replace(c, "\\" + c)
     return s

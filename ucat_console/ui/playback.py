@@ -455,17 +455,27 @@ class PlaybackPanel:
         if player is not None and not quiet:
             self.show("session closed")
 
-    def stop(self) -> None:
-        """Close the session and let go of the stream (the page or the app is going)."""
-        job = self.job
+    def stop(self, page_gone: bool = False) -> None:
+        """Close the session and let go of the stream (the app is stopping, or with
+        ``page_gone`` the page has gone and its elements with it)."""
+        job, self.job = self.job, None
         if job is not None and self.replay_slot.job is job:
             job.cancel()
-        self.close_session(quiet=True)
-        if self.root is not None:
-            try:
-                self.root.remove()
-            except Exception:
-                log.debug("removing the review scene failed", exc_info=True)
+        with self._lock:
+            player, reader = self.player, self.reader
+            self.player = self.reader = None
+        self._stop_ui()
+        if player is not None:
+            player.close()
+        if reader is not None:
+            reader.close()
+        if not page_gone:
+            self._set_enabled()
+            if self.root is not None:
+                try:
+                    self.root.remove()
+                except Exception:
+                    log.debug("removing the review scene failed", exc_info=True)
         for unsub in self._unsubs:
             unsub()
         self._unsubs = []
