@@ -73,6 +73,7 @@ DEFAULT_WEIGHTS = "lam_st=2.0"
 _SLOW_PERIOD = 0.25  # s, timeline, status, label, trail
 #: a page adds at most one review marker this often (s)
 MARKER_INTERVAL = 0.5
+_now = time.monotonic
 _TICK = 1.0 / 30.0  # s, UI thread period
 _GLOBAL_SCENE_CALLS = frozenset({
     "set_up_direction", "configure_default_lights", "configure_environment_map", "add_light_hemisphere",
@@ -543,7 +544,7 @@ class PlaybackPanel:
 
     def add_marker(self, note: object) -> Marker:
         note = check_note(note)
-        now = time.monotonic()
+        now = _now()
         if now - self._last_marker < MARKER_INTERVAL:
             raise ValueError(f"marker: at most one every {MARKER_INTERVAL:g} s from a page")
         self._last_marker = now
