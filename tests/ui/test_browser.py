@@ -115,8 +115,8 @@ def test_the_page_loads_and_shows_the_robot(browser: Browser, console: Console) 
     for name in ("/ned/ucat/fin0/blade/plate", "/ned/ucat/fin3/ghost/plate", "/surface", "/ned/trail"):
         assert page.evaluate(f"() => window.__viserSceneTree.getState()['{name}'] !== undefined"), name
     expect(page.get_by_text("Strouhal number per fin")).to_be_visible()
-    expect(page.get_by_text("Energy per metre (J/m)")).to_be_visible()
-    wait_for(lambda: page.locator(".uplot").count() >= 6, what="six plots")
+    expect(page.get_by_text("Power (W) and energy per metre (J/m)")).to_be_visible()
+    wait_for(lambda: page.locator(".uplot").count() >= 5, what="five plots")
     expect(page.get_by_text("disarmed", exact=False).first).to_be_visible()
     page.wait_for_timeout(2500)  # a few seconds of plot history
     close = page.get_by_role("alert").get_by_role("button")  # the software-WebGL notice
