@@ -100,7 +100,7 @@ def awkward_items() -> list[tuple[str, Any]]:
 
     from ucat_console.backend.devices.readings import ImuReading
     from ucat_console.telemetry import channels as C
-    from ucat_console.telemetry.messages import FinPlan, Power, Status
+    from ucat_console.telemetry.messages import BodyState, FinPlan, FinState, Power, Status
 
     items = [(ch, example_message(cls, k=i, t=0.5 * i)) for i, (ch, cls) in enumerate(C.CHANNELS.items())]
     t = 0.5 * len(items)
@@ -111,5 +111,9 @@ def awkward_items() -> list[tuple[str, Any]]:
         (C.POWER, Power(t + 0.1, (0.1, math.inf, 0.0, -math.inf), 0.5, 0.4, 2.0, 0.0, math.nan)),
         (C.STATUS, Status(t + 0.2, False, "mpc", "", (), 0, "sim")),
         (C.IMU, ImuReading(t + 0.3, (0.0, 0.0, -1.0), (0.0, math.inf, 0.0))),
+        # a finite pose and fin angles, so that every frame of the robot is placed
+        (C.BODY_STATE, BodyState(t + 0.4, (1.0, 2.0, 0.5), (0.9, 0.1, -0.2, 0.3), (0.2, 0.0, 0.0),
+                                 (0.0, 0.0, 0.1), 0.5)),
+        *[(C.fin_state(i), FinState(t + 0.4, i, 0.2 * i - 0.3, 1.0, 0.4, 2.0)) for i in range(4)],
     ]
     return items

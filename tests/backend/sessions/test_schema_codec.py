@@ -32,7 +32,7 @@ BIG_SEED = 17029223188912930816  # > 2^53: a JavaScript number would round it
 def test_setpoints_schema_is_the_hand_written_one():
     s = json_schema(Setpoints)
     assert s["$schema"] == DIALECT
-    assert s["$id"] == "urn:ucat_console:2:Setpoints"
+    assert s["$id"] == "urn:ucat-console:telemetry:2:Setpoints"
     assert s["title"] == "ucat_console.Setpoints"
     assert s["type"] == "object" and s["additionalProperties"] is False
     nonfinite = s["properties"].pop("nonfinite")

@@ -57,9 +57,9 @@ MESSAGE_ENCODING = "json"
 DIALECT = "https://json-schema.org/draft/2020-12/schema"
 #: prefix of our schema names: "ucat_console.<class name>"
 SCHEMA_PREFIX = "ucat_console."
-#: the encoding written now; a schema's ``$id`` names it: ``urn:ucat_console:2:<class>``
+#: the encoding written now; a schema's ``$id`` names it: ``urn:ucat-console:telemetry:2:<class>``
 ENCODING = 2
-ID_PREFIX = f"urn:ucat_console:{ENCODING}:"
+ID_PREFIX = f"urn:ucat-console:telemetry:{ENCODING}:"
 #: the field listing a message's non-finite numbers, and what each was
 NONFINITE = "nonfinite"
 NONFINITE_VALUES = {"nan": float("nan"), "inf": float("inf"), "-inf": float("-inf")}
@@ -253,7 +253,7 @@ def json_schema_bytes(cls: type) -> bytes:
 
 
 def schema_encoding(schema: dict[str, Any]) -> int:
-    """The encoding a stored schema describes: 2 for ``$id`` ``urn:ucat_console:2:...``,
+    """The encoding a stored schema describes: 2 for ``$id`` ``urn:ucat-console:telemetry:2:...``,
     1 for a file written before (no ``$id``); ValueError for another."""
     sid = schema.get("$id")
     if sid is None:
