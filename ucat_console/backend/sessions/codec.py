@@ -138,11 +138,6 @@ def _encoder(cls: type) -> Callable[[Any], dict[str, Any]]:
     return _make_encoder(cls)
 
 
-def to_json_obj(msg: Any) -> dict[str, Any]:
-    """The JSON object of a message, as :func:`encode` writes it."""
-    return _encoder(type(msg))(msg)
-
-
 def encode(msg: Any) -> bytes:
     """A message dataclass -> compact JSON bytes (ValueError naming a bad field)."""
     return json.dumps(_encoder(type(msg))(msg), separators=(",", ":"), allow_nan=False).encode()

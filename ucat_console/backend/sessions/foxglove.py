@@ -176,7 +176,6 @@ DERIVED = (
     (LOG_TOPIC, LOG, LOG_SCHEMA),
 )
 DERIVED_TOPICS = {topic: name for topic, name, _ in DERIVED}
-SCHEMA_NAMES = set(DERIVED_TOPICS.values())
 
 
 def schema_bytes(schema: dict[str, Any]) -> bytes:

@@ -119,9 +119,13 @@ class _Part:
                 )
             self.channel_ids[topic] = w.register_channel(topic, MESSAGE_ENCODING, schema_ids[cls])
         if foxglove_channels:
+            names: dict[str, int] = {}
             for topic, name, schema in foxglove.DERIVED:
-                sid = w.register_schema(name, SCHEMA_ENCODING, foxglove.schema_bytes(schema))
-                self.channel_ids[topic] = w.register_channel(topic, MESSAGE_ENCODING, sid)
+                if name not in names:  # tf and tf_static share foxglove.FrameTransform
+                    names[name] = w.register_schema(
+                        name, SCHEMA_ENCODING, foxglove.schema_bytes(schema)
+                    )
+                self.channel_ids[topic] = w.register_channel(topic, MESSAGE_ENCODING, names[name])
 
     def add(self, topic: str, ns: int, data: bytes) -> None:
         cid = self.channel_ids[topic]
