@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from support import sim_config
 
 ROOT = Path(__file__).resolve().parents[1]
 #: what numba itself loads of scipy when scipy is installed: the package (its version check)
@@ -30,7 +31,7 @@ print(json.dumps({"code": code, "modules": sorted(sys.modules)}))
 @pytest.mark.slow
 def test_a_headless_run_with_the_foxglove_server_loads_no_experiment_library(tmp_path):
     proc = subprocess.run(
-        [sys.executable, "-c", CHILD, "run", "--config", str(ROOT / "config" / "sim-tuned.toml"),
+        [sys.executable, "-c", CHILD, "run", "--config", str(sim_config(tmp_path)),
          "--headless", "--fast", "--duration", "1", "--mode", "mpc", "--foxglove-port", "0"],
         cwd=tmp_path, env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True,
         text=True, timeout=600,

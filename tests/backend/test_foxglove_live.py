@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 from websockets.sync.client import connect
 
-from support import wait_for
+from support import sim_config, wait_for
 from ucat_console.backend.foxglove_live import FoxgloveServer
 from ucat_console.backend.sessions import codec, foxglove
 from ucat_console.backend.sessions.schema import json_schema_bytes
@@ -79,11 +79,11 @@ class Client:
 
 
 @pytest.mark.slow
-def test_run_serves_the_live_robot_to_a_foxglove_client_read_only():
+def test_run_serves_the_live_robot_to_a_foxglove_client_read_only(tmp_path):
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     proc = subprocess.Popen(
         [sys.executable, "-c", "import sys; from ucat_console.cli import main; sys.exit(main())",
-         "run", "--config", str(ROOT / "config" / "sim-tuned.toml"), "--headless",
+         "run", "--config", str(sim_config(tmp_path)), "--headless",
          "--duration", "120", "--mode", "baseline", "--velocity", "0.2", "--depth", "0.5",
          "--foxglove-port", "0"],
         cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
