@@ -36,7 +36,6 @@ from ucat_console.backend.sessions.schema import (
     field_specs,
 )
 
-NAN = float("nan")
 _WIDE = re.compile(WIDE_PATTERN)
 
 
@@ -63,14 +62,14 @@ def _float_out(v: Any) -> float:
     return float(v)
 
 
-def sanitize_json(v: Any) -> Any:
+def _sanitize_json(v: Any) -> Any:
     """Free-form JSON values: non-finite numbers become null."""
     if isinstance(v, float) and not math.isfinite(v):
         return None
     if isinstance(v, dict):
-        return {str(k): sanitize_json(x) for k, x in v.items()}
+        return {str(k): _sanitize_json(x) for k, x in v.items()}
     if isinstance(v, (list, tuple)):
-        return [sanitize_json(x) for x in v]
+        return [_sanitize_json(x) for x in v]
     return v
 
 
@@ -123,7 +122,7 @@ def _make_encoder(cls: type) -> Callable[[Any], dict[str, Any]]:
                 elif kind == SEQ:
                     out[s.name] = list(v)
                 else:  # JSON
-                    out[s.name] = sanitize_json(dict(v))
+                    out[s.name] = _sanitize_json(dict(v))
             except (TypeError, ValueError) as e:
                 raise ValueError(f"{cls.__name__}.{s.name}: {e}") from None
         if bad:

@@ -39,6 +39,14 @@ from typing import Any, Sequence
 from ucat_console.telemetry.channels import BODY_STATE, EVENTS, N_FINS, fin_state
 from ucat_console.telemetry.events import LEVELS, Event
 from ucat_console.telemetry.messages import BodyState, FinState
+from ucat_console.ui.scene import (
+    FIN_COLOUR,
+    FIN_SPAN,
+    FIN_THICKNESS,
+    HULL_COLOUR,
+    NOSE_COLOUR,
+    fin_mount,
+)
 
 FRAME_TRANSFORM = "foxglove.FrameTransform"
 LOG = "foxglove.Log"
@@ -55,11 +63,6 @@ CHILD_FRAME = "body"
 #: world -> ned: half a turn about x (north), (x, y, z, w)
 WORLD_TO_NED = (1.0, 0.0, 0.0, 0.0)
 
-HULL_COLOUR = (0.96, 0.77, 0.0, 1.0)
-NOSE_COLOUR = (0.78, 0.24, 0.16, 1.0)
-FIN_COLOUR = (0.16, 0.16, 0.16, 1.0)
-FIN_SPAN = 0.08  # m, along the fin's axis
-FIN_THICKNESS = 0.006  # m
 NOSE_LENGTH = 0.03  # m
 
 Vec3 = tuple[float, float, float]
@@ -258,12 +261,12 @@ def log_message(event: Event, ns: int) -> dict[str, Any]:
     }
 
 
-def _cube(position: Vec3, size: Vec3, colour: tuple[float, float, float, float]) -> dict[str, Any]:
-    r, g, b, a = colour
+def _cube(position: Vec3, size: Vec3, rgb: tuple[int, int, int]) -> dict[str, Any]:
+    r, g, b = (c / 255 for c in rgb)  # the console's view's colours, 0-255
     return {
         "pose": {"position": _xyz(position), "orientation": _xyzw((1.0, 0.0, 0.0, 0.0))},
         "size": _xyz(size),
-        "color": {"r": r, "g": g, "b": b, "a": a},
+        "color": {"r": r, "g": g, "b": b, "a": 1.0},
     }
 
 
@@ -311,9 +314,8 @@ class RobotGeometry:
 
 def robot_geometry(plant: Any = None) -> RobotGeometry:
     """The geometry of the plant configuration (``PlantConfig``; default: its defaults), as
-    the console's own 3-D view draws it."""
+    the console's own 3-D view draws it (``ui/scene.py``: fin mounts, sizes, colours)."""
     from ucat_console.backend.sim.params import PlantConfig
-    from ucat_console.ui.scene import fin_mount
 
     plant = plant if plant is not None else PlantConfig()
     size = tuple(float(x) for x in plant.vehicle.hull_size)
