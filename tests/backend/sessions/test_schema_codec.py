@@ -12,7 +12,7 @@ import pytest
 from session_helpers import example_message, same
 
 from ucat_console.backend.devices.readings import ImuReading
-from ucat_console.backend.sessions import codec, legacy
+from ucat_console.backend.sessions import codec, foxglove, legacy
 from ucat_console.backend.sessions.schema import (
     DIALECT,
     field_specs,
@@ -85,14 +85,20 @@ def test_every_field_says_what_it_is(cls):
 
 def _foxglove_readable(schema: dict, where: str) -> None:
     """The rules of Foxglove's and Lichtblick's JSON Schema reader (parseJsonSchema): one
-    type name per field, objects with properties, arrays with one item type."""
+    type name per field, objects with properties, arrays with one item type (objects
+    again checked); Foxglove also takes an enumeration of numbers (oneOf of consts)."""
     assert schema["type"] == "object", where
     for name, prop in schema["properties"].items():
+        if "oneOf" in prop:
+            assert all(isinstance(x["const"], int) for x in prop["oneOf"]), f"{where}.{name}"
+            continue
         assert isinstance(prop.get("type"), str), f"{where}.{name}"
         if prop["type"] == "object":
             _foxglove_readable(prop, f"{where}.{name}")
         if prop["type"] == "array":
             assert isinstance(prop["items"]["type"], str), f"{where}.{name}"
+            if prop["items"]["type"] == "object":
+                _foxglove_readable(prop["items"], f"{where}.{name}[]")
 
 
 @pytest.mark.parametrize("cls", TYPES, ids=lambda c: c.__name__)
@@ -101,6 +107,13 @@ def test_schema_is_readable_by_foxglove_and_valid_json_schema(cls):
     jsonschema.Draft202012Validator.check_schema(s)
     _foxglove_readable(s, cls.__name__)
     assert schema_encoding(s) == 2
+
+
+@pytest.mark.parametrize("topic", sorted(foxglove.DERIVED_TOPICS))
+def test_the_foxglove_schemas_are_readable_by_foxglove(topic):
+    [schema] = [s for t, _, s in foxglove.DERIVED if t == topic]
+    jsonschema.Draft202012Validator.check_schema(schema)
+    _foxglove_readable(schema, topic)
 
 
 @pytest.mark.parametrize("cls", TYPES, ids=lambda c: c.__name__)
