@@ -64,3 +64,22 @@ def test_bad_values_are_refused_naming_the_key(tmp_path: Path, text: str, key: s
     with pytest.raises(ValueError, match=key.replace(".", r"\.")) as e:
         load_config(path)
     assert str(path) in str(e.value)
+
+
+def test_a_binary_file_is_refused_naming_the_file(tmp_path: Path) -> None:
+    p = tmp_path / "pool.toml"
+    p.write_bytes(b"\x89PNG\r\n\x1a\n\xff\xfe\x00binary")
+    with pytest.raises(ValueError, match=r"pool\.toml: not a text file"):
+        load_config(p)
+    with pytest.raises(ValueError, match=r"is a directory"):
+        load_config(tmp_path)
+
+
+def test_secret_fields_are_left_out_of_a_redacted_config_and_its_repr() -> None:
+    from ucat_console.config import AccessConfig
+
+    cfg = AppConfig(access=AccessConfig(token="s3cret-pilot-token"))
+    assert "s3cret-pilot-token" in cfg.to_toml()  # the file the operator writes keeps it
+    assert "s3cret-pilot-token" not in cfg.to_toml(redact=True)
+    assert "s3cret-pilot-token" not in repr(cfg)
+    assert AppConfig.from_dict(cfg.to_dict(redact=True)).access.token == ""

@@ -62,6 +62,17 @@ class ConsoleConfig(_Config):
         "127.0.0.1", doc="address the web server binds; anything but loopback is warned about"
     )
     port: int = param(8080, lo=0, hi=65535, doc="web server port (0: any free port)")
+    allowed_origins: tuple[str, ...] = param(
+        (), doc="web origins besides the console's own whose pages may connect, e.g. "
+        "'https://console.example.org' for a reverse proxy (each scheme://host[:port])",
+    )
+    heartbeat_period: float = param(
+        0.25, lo=0.05, hi=5.0, unit="s", doc="how often every page is asked to prove it is alive",
+    )
+    page_timeout: float = param(
+        10.0, lo=1.0, hi=3600.0, unit="s",
+        doc="a viewer's page that has not answered for this long is closed (the pilot's: failsafe.pilot_gone.timeout)",
+    )
     scene_rate: float = param(40.0, lo=1.0, hi=60.0, unit="Hz", doc="3-D view update rate")
     plot_rate: float = param(10.0, lo=1.0, hi=30.0, unit="Hz", doc="plot refresh rate")
     history: float = param(30.0, lo=5.0, hi=600.0, unit="s", doc="initial plot history window")
@@ -93,9 +104,15 @@ class ConsoleConfig(_Config):
 class AccessConfig(_Config):
     """One pilot, everyone else read-only (console.md, Safety and access)."""
 
-    token: str = param("", doc="pilot token; empty: a new random token at every start")
-    max_failures: int = param(5, lo=1, hi=1000, doc="wrong tokens before token entry is locked")
-    lockout: float = param(30.0, lo=0.0, hi=3600.0, unit="s", doc="how long token entry stays locked")
+    token: str = param("", secret=True,
+                       doc="pilot token; empty: a new random token at every start (never recorded or logged)")
+    max_failures: int = param(5, lo=1, hi=1000, doc="wrong tokens from one page before its token entry is locked")
+    address_max_failures: int = param(
+        20, lo=1, hi=100_000,
+        doc="wrong tokens from one remote address before its pages that sent one are locked out too",
+    )
+    lockout: float = param(30.0, lo=0.0, hi=3600.0, unit="s",
+                           doc="window for counting wrong tokens, and how long a lock lasts")
     confirm_timeout: float = param(
         20.0, lo=1.0, hi=600.0, unit="s", doc="an arm request must be confirmed within this time"
     )
@@ -165,14 +182,15 @@ class AppConfig(_Config):
                     raise ValueError(f"loop.{name}: set it in the top-level [{name}] table")
         return from_dict(cls, data)
 
-    def to_dict(self) -> dict[str, Any]:
-        d = to_dict(self)
+    def to_dict(self, redact: bool = False) -> dict[str, Any]:
+        """The configuration as TOML tables; ``redact`` leaves the secret fields out."""
+        d = to_dict(self, redact)
         for name in LOOP_BLOCKS:
             d["loop"].pop(name, None)
         return d
 
-    def to_toml(self) -> str:
-        return tomli_w.dumps(self.to_dict())
+    def to_toml(self, redact: bool = False) -> str:
+        return tomli_w.dumps(self.to_dict(redact))
 
 
 def load_config(path: str | Path | None) -> AppConfig:

@@ -37,9 +37,14 @@ def param(
     choices: tuple[Any, ...] | None = None,
     unit: str = "",
     doc: str = "",
+    secret: bool = False,
     default_factory: Any = _MISSING,
 ) -> Any:
-    """A dataclass field with bounds: ``lo <= value <= hi`` (open ends with ``*_open``)."""
+    """A dataclass field with bounds: ``lo <= value <= hi`` (open ends with ``*_open``).
+
+    ``secret``: the value is never written where others read it: :func:`to_dict` with
+    ``redact=True`` (what recordings store) leaves it out, and the dataclass's repr (what
+    a log line shows) does not show it."""
     meta = {
         "lo": lo,
         "hi": hi,
@@ -48,10 +53,11 @@ def param(
         "choices": choices,
         "unit": unit,
         "doc": doc,
+        "secret": secret,
     }
     if default_factory is not _MISSING:
-        return dataclasses.field(default_factory=default_factory, metadata=meta)
-    return dataclasses.field(default=default, metadata=meta)
+        return dataclasses.field(default_factory=default_factory, metadata=meta, repr=not secret)
+    return dataclasses.field(default=default, metadata=meta, repr=not secret)
 
 
 def describe_range(f: dataclasses.Field) -> str:
@@ -190,19 +196,34 @@ def from_dict(cls: type[T], data: dict[str, Any], prefix: str = "") -> T:
         raise ValueError(msg if not prefix or msg.startswith(prefix) else prefix + msg) from None
 
 
-def to_dict(obj: Any) -> dict[str, Any]:
-    """A TOML-ready dict of a config dataclass (None values are left out)."""
+def to_dict(obj: Any, redact: bool = False) -> dict[str, Any]:
+    """A TOML-ready dict of a config dataclass (None values are left out; with ``redact``,
+    the fields declared ``secret`` too)."""
     out: dict[str, Any] = {}
     for f in dataclasses.fields(obj):
+        if redact and f.metadata.get("secret"):
+            continue
         v = getattr(obj, f.name)
         if v is None:
             continue
         if dataclasses.is_dataclass(v):
-            out[f.name] = to_dict(v)
+            out[f.name] = to_dict(v, redact)
         elif isinstance(v, tuple):
-            out[f.name] = [to_dict(x) if dataclasses.is_dataclass(x) else x for x in v]
+            out[f.name] = [to_dict(x, redact) if dataclasses.is_dataclass(x) else x for x in v]
         else:
             out[f.name] = v
+    return out
+
+
+def secret_values(obj: Any) -> list[str]:
+    """The non-empty values of every ``secret`` field in a config tree (to keep out of logs)."""
+    out: list[str] = []
+    for f in dataclasses.fields(obj):
+        v = getattr(obj, f.name)
+        if f.metadata.get("secret") and isinstance(v, str) and v:
+            out.append(v)
+        elif dataclasses.is_dataclass(v):
+            out += secret_values(v)
     return out
 
 
@@ -215,6 +236,10 @@ def load_toml(cls: type[T], path: str | Path) -> T:
             data = tomllib.load(fh)
     except FileNotFoundError:
         raise ValueError(f"{p}: configuration file not found") from None
+    except IsADirectoryError:
+        raise ValueError(f"{p}: is a directory, not a configuration file") from None
+    except UnicodeDecodeError as e:
+        raise ValueError(f"{p}: not a text file (byte {e.start} is not UTF-8); expected TOML") from None
     except tomllib.TOMLDecodeError as e:
         raise ValueError(f"{p}: not valid TOML: {e}") from None
     build = getattr(cls, "from_dict", None) or (lambda d: from_dict(cls, d))

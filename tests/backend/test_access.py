@@ -1,4 +1,5 @@
-"""Access: one pilot, the token, explicit hand-over, lockout after wrong tokens."""
+"""Access: one pilot, the token, explicit hand-over, wrong-token limits per page and per
+address (never for everyone), a gone pilot's waiting successor."""
 
 from __future__ import annotations
 
@@ -96,14 +97,63 @@ def test_release_only_by_the_pilot(access: AccessControl) -> None:
     assert access.pilot is None
 
 
-def test_wrong_tokens_lock_token_entry_for_everyone(access: AccessControl, clock: FakeClock) -> None:
+def test_wrong_tokens_lock_only_the_page_that_sent_them(access: AccessControl, clock: FakeClock) -> None:
     for _ in range(3):
         with pytest.raises(AccessDenied, match="wrong"):
             access.request_control(2, "guess")
     with pytest.raises(AccessDenied, match="locked"):
-        access.request_control(3, TOKEN)  # even the right token, from another page
+        access.request_control(2, TOKEN)  # this page: locked, even with the right token
+    assert access.request_control(3, TOKEN) is True  # another page gets in at once
     clock.t += 31.0
-    assert access.request_control(3, TOKEN) is True
+    access.release(3)
+    assert access.request_control(2, TOKEN) is True  # the lock ends
+
+
+def test_a_page_spamming_wrong_tokens_never_locks_out_the_pilot_on_the_same_address(clock: FakeClock) -> None:
+    a = AccessControl(AccessConfig(token=TOKEN, max_failures=3, address_max_failures=5, lockout=30.0),
+                      clock=clock)
+    spam = iter(range(100, 10_000))
+    for _ in range(40):  # reload after reload from one machine, a wrong token each time
+        page = next(spam)
+        a.connect(page, "127.0.0.1")
+        for _ in range(3):
+            with pytest.raises(AccessDenied, match="wrong|locked"):
+                a.request_control(page, "guess")
+        a.disconnect(page)
+        clock.t += 0.1
+    a.connect(7, "127.0.0.1")  # the pilot's page, freshly loaded on the same machine
+    assert a.request_control(7, TOKEN) is True
+
+
+def test_an_address_over_its_limit_locks_its_pages_that_failed(clock: FakeClock) -> None:
+    a = AccessControl(AccessConfig(token=TOKEN, max_failures=10, address_max_failures=4, lockout=30.0),
+                      clock=clock)
+    for c in (1, 2, 3):
+        a.connect(c, "10.0.0.9")
+    a.connect(4, "10.0.0.8")
+    for c in (1, 2):
+        for _ in range(2):
+            with pytest.raises(AccessDenied, match="wrong"):
+                a.request_control(c, "guess")
+    with pytest.raises(AccessDenied, match="10.0.0.9"):
+        a.request_control(1, TOKEN)  # failed before, its address is over its limit
+    with pytest.raises(AccessDenied, match="wrong"):
+        a.request_control(3, "guess")  # a page that had not failed gets its attempt ...
+    with pytest.raises(AccessDenied, match="locked"):
+        a.request_control(3, TOKEN)  # ... one
+    assert a.request_control(4, TOKEN) is True  # other addresses are not touched
+
+
+def test_the_page_waiting_for_a_gone_pilot_takes_control(access: AccessControl) -> None:
+    assert access.request_control(1, TOKEN) is True
+    assert access.request_control(2, TOKEN) is False  # waits for 1's hand-over
+    assert access.disconnect(1) is True
+    assert access.pilot == 2 and access.pending is None
+
+
+def test_an_oversized_token_is_a_wrong_token(access: AccessControl) -> None:
+    with pytest.raises(AccessDenied, match="wrong"):
+        access.request_control(1, TOKEN + "x" * 5000)
 
 
 def test_failures_spread_beyond_the_window_do_not_lock(access: AccessControl, clock: FakeClock) -> None:

@@ -600,3 +600,23 @@ def test_the_pilot_rehearses_a_silent_pressure_sensor_on_the_simulated_rig(tmp_p
         wait_for(lambda: "fault_cleared" in ev.codes("rig"), what="the clearing on the events channel")
     finally:
         sup.stop()
+
+
+def test_a_fixed_token_is_in_neither_the_recording_nor_the_log(tmp_path: Path, caplog) -> None:
+    import logging
+
+    secret = "fixed-pilot-token-1234"
+    sup = Supervisor(AppConfig(access=AccessConfig(token=secret)), clock=SimulatedClock(), sessions_dir=tmp_path)
+    try:
+        sup.start_recording(LOCAL, "secret check")
+        sup.step(0.5)
+        with caplog.at_level(logging.INFO):
+            logging.getLogger("ucat_console.test").info("a line that quotes the token: %s", secret)
+        paths = sup.stop_recording(LOCAL)
+    finally:
+        sup.stop()
+    assert paths and all(secret.encode() not in p.read_bytes() for p in paths)
+    with SessionReader(paths[0], tmp_path) as r:
+        assert "[access]" in r.config_toml and "token" not in r.config_toml.split("[access]", 1)[1].split("[", 1)[0]
+    line = next(r.getMessage() for r in caplog.records if "quotes the token" in r.getMessage())
+    assert secret not in line and "<redacted>" in line

@@ -130,6 +130,7 @@ def test_tuning_inputs_come_from_the_field_metadata() -> None:
 def test_page_text_is_escaped() -> None:
     assert "<" not in esc("<script>alert(1)</script>")
     assert esc("**bold**") == "\\*\\*bold\\*\\*"
+    assert esc("it's 'quoted'") == "it's 'quoted'"  # quotes stay quotes (the page shows &#x27; as is)
 
 
 def test_rig_fault_inputs_only_where_the_robot_is_the_simulated_rig(app: ConsoleApp) -> None:

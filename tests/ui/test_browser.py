@@ -115,8 +115,8 @@ def test_the_page_loads_and_shows_the_robot(browser: Browser, console: Console) 
     for name in ("/ned/ucat/fin0/blade/plate", "/ned/ucat/fin3/ghost/plate", "/surface", "/ned/trail"):
         assert page.evaluate(f"() => window.__viserSceneTree.getState()['{name}'] !== undefined"), name
     expect(page.get_by_text("Strouhal number per fin")).to_be_visible()
-    expect(page.get_by_text("Energy per metre (J/m)")).to_be_visible()
-    wait_for(lambda: page.locator(".uplot").count() >= 6, what="six plots")
+    expect(page.get_by_text("Power (W) and energy per metre (J/m)")).to_be_visible()
+    wait_for(lambda: page.locator(".uplot").count() >= 5, what="five plots")
     expect(page.get_by_text("disarmed", exact=False).first).to_be_visible()
     page.wait_for_timeout(2500)  # a few seconds of plot history
     close = page.get_by_role("alert").get_by_role("button")  # the software-WebGL notice
@@ -205,12 +205,12 @@ def test_closing_the_pilot_page_triggers_the_failsafe(console: Console) -> None:
 def test_a_recorded_session_is_reviewed_in_the_page(console: Console) -> None:
     from ucat_console.backend.access import LOCAL
 
-    a, _ = PAGES["a"]
+    a, a_id = PAGES["a"]
     sup = console.sup
     sup.start_recording(LOCAL, "browser review")
     time.sleep(2.0)
     [path] = sup.stop_recording(LOCAL)
-    panel = console.app.playback
+    panel = console.app.reviews[a_id]  # this page's own review
     panel.refresh_sessions()
     a.get_by_role("tab", name="Review", exact=True).click()
     expect(a.get_by_text("browser review").first).to_be_visible()  # listed, with notes

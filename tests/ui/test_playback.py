@@ -213,7 +213,7 @@ def test_counterfactual_with_the_recorded_weights_reproduces_the_recorded_st(
     text = ",".join(f"{k}={v!r}" for k, v in run.weights.items())
     panel.weights.value = text
     assert panel.act(lambda: panel.run_counterfactual(panel.weights.value))
-    res = panel.last_replay
+    res = panel.wait_replay()  # it runs in a child process
     assert res is not None and res.skipped == 0
     assert len(res.rows) == len(run.plans)
     for row, plan in zip(sorted(res.rows, key=lambda r: (r.t, r.fin)), sorted(run.plans, key=lambda m: (m.t, m.fin))):
@@ -237,7 +237,50 @@ def test_counterfactual_bad_weights_are_refused(panel: PlaybackPanel, run: Run) 
     assert panel.act(lambda: panel.run_counterfactual("lam_x=2")) is False
     assert "lam_x" in panel.messages[-1]
     assert panel.act(lambda: panel.run_counterfactual("lam_st=nan")) is False
-    assert panel.last_replay is None
+    assert panel.act(lambda: panel.run_counterfactual("lam_st=-1")) is False  # out of range: at once
+    assert "lam_st" in panel.messages[-1]
+    assert panel.job is None and panel.last_replay is None
+
+
+def test_a_counterfactual_replay_shows_progress_runs_one_at_a_time_and_cancels(
+        panel: PlaybackPanel, run: Run) -> None:
+    panel.open(run.path.name)
+    job = panel.run_counterfactual("lam_st=2.0")
+    assert panel.replay_progress.visible and panel.cancel_button.visible
+    server2 = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)  # another page
+    other = PlaybackPanel(server2.gui, server2.scene, AppConfig().plant, directory=run.directory,
+                          replay_slot=panel.replay_slot)
+    try:
+        other.open(run.path.name)
+        assert other.act(lambda: other.run_counterfactual("lam_st=3.0")) is False  # one at a time
+        assert "running" in other.messages[-1]
+    finally:
+        other.stop()
+        server2.stop()
+    assert panel.act(panel.cancel_counterfactual)
+    assert job.done and job.cancelled and job.result is None
+    assert not panel.replay_progress.visible and "cancelled" in panel.replay_table.content
+    # the slot is free again, and a replay runs to its end
+    panel.run_counterfactual("lam_st=2.0")
+    res = panel.wait_replay()
+    assert res is not None and len(res.rows) == len(run.plans)
+    assert not panel.replay_progress.visible and "| all |" in panel.replay_table.content
+
+
+def test_a_page_may_not_start_a_replay_when_the_console_says_no(run: Run) -> None:
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+
+    def refuse() -> None:
+        raise ValueError("counterfactual replay: while the robot is armed only the pilot may start one")
+
+    p = PlaybackPanel(server.gui, server.scene, AppConfig().plant, directory=run.directory, may_replay=refuse)
+    try:
+        p.open(run.path.name)
+        assert p.act(lambda: p.run_counterfactual("lam_st=2.0")) is False
+        assert "only the pilot" in p.messages[-1] and p.job is None
+    finally:
+        p.stop()
+        server.stop()
 
 
 def test_a_truncated_file_is_listed_and_repaired_from_the_panel(
@@ -266,12 +309,14 @@ def test_the_console_mounts_the_review_tab(run: Run, tmp_path: Path) -> None:
 
     sup = Supervisor(AppConfig(), clock=SimulatedClock(), sessions_dir=run.directory)
     app = ConsoleApp(sup, port=0)
+    review = app.build_review(app.server.gui, app.server.scene)  # what each page gets
     try:
-        assert app.playback.directory == run.directory.resolve()
-        assert run.session_id in app.playback.choice.options
-        assert app.playback.act(lambda: app.playback.open(run.path.name))
-        assert not math.isnan(app.playback.feeder.latest[0])
+        assert review.directory == run.directory.resolve()
+        assert run.session_id in review.choice.options
+        assert review.act(lambda: review.open(run.path.name))
+        assert not math.isnan(review.feeder.latest[0])
     finally:
+        review.stop()
         app.stop()
         sup.stop()
 
@@ -433,7 +478,9 @@ def test_seek_step_events_plots_and_replay_across_parts(split_panel: PlaybackPan
     # counterfactual replay: every fin plan of every part
     plans = [m for c, m, _ in split_run.records([ch.fin_plan(i) for i in range(ch.N_FINS)])]
     assert plans
-    res = panel.run_counterfactual("lam_st=2.0")
+    panel.run_counterfactual("lam_st=2.0")
+    res = panel.wait_replay()
+    assert res is not None
     assert len(res.rows) + res.skipped == len(plans)
     assert sorted(r.t for r in res.rows) == sorted(m.t for m in plans)
 
@@ -464,3 +511,20 @@ def test_a_truncated_part_is_repaired_from_the_session_chooser(
                 assert digest(d / path.name) == digest(path)
     finally:
         p.stop()
+
+
+def test_review_markers_are_limited_in_size_and_rate(panel: PlaybackPanel, run: Run, monkeypatch) -> None:
+    import ucat_console.ui.playback as playback
+
+    t = [1000.0]
+    monkeypatch.setattr(playback, "_now", lambda: t[0])
+    panel.open(run.path.name)
+    assert panel.act(lambda: panel.add_marker("x" * 2049)) is False
+    assert "2048 bytes" in panel.messages[-1]
+    assert panel.act(lambda: panel.add_marker("first"))
+    assert panel.act(lambda: panel.add_marker("too soon")) is False
+    assert "at most one every" in panel.messages[-1]
+    t[0] += playback.MARKER_INTERVAL
+    assert panel.act(lambda: panel.add_marker("second"))
+    notes = [m.note for m in panel.player.markers.markers]
+    assert "first" in notes and "second" in notes and "too soon" not in notes

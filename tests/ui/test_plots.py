@@ -70,3 +70,26 @@ def test_feeder_rows_hold_the_latest_values() -> None:
 )
 def test_filled_replaces_nan_by_the_last_value(a: list, expected: list) -> None:
     np.testing.assert_array_equal(filled(np.array(a)), expected)
+
+
+def test_st_is_hidden_while_disarmed_or_still_and_clipped_above_one() -> None:
+    from ucat_console.ui.plots import ST_HIDDEN, st_shown
+
+    st = np.array([0.3, 0.3, 6.0, 0.3, np.nan, 2.7])
+    armed = np.array([1.0, 1.0, 1.0, 0.0, 1.0, 1.0])
+    speed = np.array([0.2, 0.01, 0.2, 0.2, 0.2, -0.2])
+    shown, above = st_shown(st, armed, speed)
+    np.testing.assert_array_equal(shown, [0.3, ST_HIDDEN, 1.0, ST_HIDDEN, ST_HIDDEN, 1.0])
+    np.testing.assert_array_equal(above, [ST_HIDDEN, ST_HIDDEN, 1.0, ST_HIDDEN, ST_HIDDEN, 1.0])
+    assert ST_HIDDEN < 0.0  # below the fixed 0-1 axis
+
+
+def test_span_pins_keep_a_minimum_axis_span_around_the_data() -> None:
+    from ucat_console.ui.plots import span_pins
+
+    depth = np.array([1.000, 1.002, 0.999])
+    target = np.array([1.0, 1.0, 1.0])
+    lo, hi = span_pins(depth, target, span=0.2)
+    assert np.allclose(hi - lo, 0.2) and lo[0] < 0.999 and hi[0] > 1.002
+    lo, hi = span_pins(np.array([np.nan, np.nan]), np.array([np.nan, np.nan]), span=0.1)
+    assert np.allclose(hi - lo, 0.1)

@@ -3,9 +3,20 @@
 Every page that connects is a *client* (an integer id). At most one client is the pilot.
 Taking control needs the pilot token (random, printed at start-up, compared in constant
 time); when nobody flies, the right token makes its holder the pilot at once, otherwise
-the request waits for the present pilot to hand over explicitly (or to decline). Wrong
-tokens are counted: after ``max_failures`` of them within ``lockout`` seconds, token
-entry is refused for everyone for ``lockout`` seconds.
+the request waits for the present pilot to hand over explicitly (or to decline). A pilot
+whose page is gone (closed, or silent: :meth:`AccessControl.disconnect`) flies no more:
+the page that was waiting for its hand-over takes control at once, and any page with the
+right token may.
+
+Wrong tokens are counted per page and per remote address, never for everyone, so no page
+can lock the pilot out:
+
+* a page that sent ``max_failures`` wrong tokens within ``lockout`` seconds may not try
+  again for ``lockout`` seconds (reloading gives a new page, hence the next rule);
+* once ``address_max_failures`` wrong tokens came from one address within ``lockout``
+  seconds, every page of that address that has sent a wrong token is locked out too;
+  a page of that address that has not yet failed still gets its attempt, so the pilot's
+  freshly loaded page is never refused for what another page on the same machine did.
 
 :data:`LOCAL` is the console process itself (command line, Ctrl-C, headless runs): it
 is always allowed. :class:`AccessControl` holds no other state than who is connected and
@@ -45,7 +56,28 @@ class AccessState:
     pilot: int | None
     clients: tuple[int, ...]
     pending: int | None  # client asking the pilot for control
-    locked_until: float  # monotonic time until which token entry is locked (0: not locked)
+
+
+class _Failures:
+    """Wrong-token times of one page or address, and until when it is locked."""
+
+    __slots__ = ("times", "locked_until")
+
+    def __init__(self) -> None:
+        self.times: list[float] = []
+        self.locked_until = 0.0
+
+    def add(self, now: float, window: float, limit: int) -> bool:
+        """Count a failure at ``now``; True when this locks it."""
+        self.times = [t for t in self.times if now - t < window] + [now]
+        if len(self.times) >= limit:
+            self.locked_until = now + window
+            self.times = []
+            return True
+        return False
+
+    def recent(self, now: float, window: float) -> bool:
+        return any(now - t < window for t in self.times) or now < self.locked_until
 
 
 class AccessControl:
@@ -55,10 +87,11 @@ class AccessControl:
         self._clock = clock
         self._lock = threading.RLock()
         self._clients: list[int] = []
+        self._address: dict[int, str] = {}
         self._pilot: int | None = None
         self._pending: int | None = None
-        self._failures: list[float] = []
-        self._locked_until = 0.0
+        self._page_failures: dict[int, _Failures] = {}
+        self._address_failures: dict[str, _Failures] = {}
         self._listeners: list[Callable[[AccessState], None]] = []
 
     # ------------------------------------------------------------------ state
@@ -81,7 +114,12 @@ class AccessControl:
 
     def state(self) -> AccessState:
         with self._lock:
-            return AccessState(self._pilot, tuple(self._clients), self._pending, self._locked_until)
+            return AccessState(self._pilot, tuple(self._clients), self._pending)
+
+    def address(self, client: int) -> str:
+        """The remote address client ``client`` connected from ("" when not known)."""
+        with self._lock:
+            return self._address.get(client, "")
 
     def add_listener(self, fn: Callable[[AccessState], None]) -> None:
         """``fn(state)`` after every change (connect, disconnect, pilot, request)."""
@@ -99,22 +137,33 @@ class AccessControl:
             )
 
     # ------------------------------------------------------------------ clients
-    def connect(self, client: int) -> None:
+    def connect(self, client: int, address: str = "") -> None:
+        """A page connected (from remote ``address``, when known)."""
         with self._lock:
             if client not in self._clients:
                 self._clients.append(client)
+            if address:
+                self._address[client] = address
         self._changed()
 
     def disconnect(self, client: int) -> bool:
-        """Forget ``client``; True when it was the pilot."""
+        """Forget ``client`` (its page closed or went silent); True when it was the pilot.
+
+        The page that asked the gone pilot for control (with the right token) takes
+        control at once."""
         with self._lock:
             if client in self._clients:
                 self._clients.remove(client)
+            self._address.pop(client, None)
+            self._page_failures.pop(client, None)
             was_pilot = self._pilot == client
             if was_pilot:
                 self._pilot = None
                 log.warning("pilot (client %s) left", client)
-            if self._pending == client:
+                if self._pending is not None and self._pending in self._clients:
+                    self._pilot = self._pending
+                    log.info("client %s, which asked for control, is the pilot", self._pilot)
+            if self._pending in (client, self._pilot):
                 self._pending = None
         self._changed()
         return was_pilot
@@ -132,20 +181,34 @@ class AccessControl:
             if self._pilot == client:
                 return True
             now = self._clock()
-            if now < self._locked_until:
+            window = self.cfg.lockout
+            page = self._page_failures.setdefault(client, _Failures())
+            address = self._address.get(client, "")
+            by_address = self._address_failures.setdefault(address, _Failures()) if address else None
+            if now < page.locked_until:
                 raise AccessDenied(
-                    f"take control: too many wrong tokens; token entry is locked for another "
-                    f"{self._locked_until - now:.0f} s"
+                    f"take control: too many wrong tokens from this page; its token entry is locked "
+                    f"for another {page.locked_until - now:.0f} s"
                 )
-            if not isinstance(token, str) or not secrets.compare_digest(
+            if by_address is not None and now < by_address.locked_until and page.recent(now, window):
+                raise AccessDenied(
+                    f"take control: too many wrong tokens from {address}; token entry is locked for "
+                    f"this page for another {by_address.locked_until - now:.0f} s"
+                )
+            if not isinstance(token, str) or len(token) > 1024 or not secrets.compare_digest(
                 token.strip().encode(), self._token.encode()
             ):
-                self._failures = [t for t in self._failures if now - t < self.cfg.lockout] + [now]
-                if len(self._failures) >= self.cfg.max_failures:
-                    self._locked_until = now + self.cfg.lockout
-                    self._failures = []
-                    log.warning("token entry locked for %.0f s after wrong tokens", self.cfg.lockout)
+                if page.add(now, window, self.cfg.max_failures):
+                    log.warning("token entry locked for %.0f s for client %s after wrong tokens", window, client)
+                if by_address is not None:
+                    if now < by_address.locked_until:
+                        page.locked_until = max(page.locked_until, by_address.locked_until)
+                    elif by_address.add(now, window, self.cfg.address_max_failures):
+                        log.warning("token entry locked for %.0f s for the pages of %s that sent wrong "
+                                    "tokens", window, address)
+                self._prune(now, window)
                 raise AccessDenied("take control: wrong pilot token")
+            page.times = []
             if self._pilot is None:
                 self._pilot = client
                 self._pending = None
@@ -157,6 +220,11 @@ class AccessControl:
                 log.info("client %s asks client %s for control", client, self._pilot)
         self._changed()
         return granted
+
+    def _prune(self, now: float, window: float) -> None:
+        """Forget addresses whose failures have all expired (the table stays small)."""
+        for key in [k for k, f in self._address_failures.items() if not f.recent(now, window)]:
+            del self._address_failures[key]
 
     def hand_over(self, pilot: Actor, to: int) -> None:
         """The pilot gives control to the client that asked for it."""

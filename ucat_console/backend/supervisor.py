@@ -44,6 +44,7 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Mapping
 
+from ucat_console.backend import redaction
 from ucat_console.backend.access import LOCAL, AccessControl, AccessDenied, AccessState, Actor, actor_name
 from ucat_console.backend.arming import ArmingGate
 from ucat_console.backend.loop.clock import Clock, PacedClock
@@ -61,7 +62,7 @@ from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event, EventSink
 from ucat_console.telemetry.messages import BodyState, FinState, Status
 from ucat_console.telemetry.stream import TelemetryStream
-from ucat_console.typedconf import check_value
+from ucat_console.typedconf import check_value, secret_values
 
 if TYPE_CHECKING:
     from ucat_console.backend.devices.sim_rig import SimRig
@@ -216,6 +217,8 @@ class Supervisor:
         self._lock = threading.RLock()
         self._listeners: list[Callable[[], None]] = []
         self.access = AccessControl(cfg.access)
+        self._secrets = [self.access.token, *secret_values(cfg)]
+        redaction.keep_out_of_logs(self._secrets)
         self.safety = SafetyMonitor(cfg.failsafe)
         # the compiled solver first: a compile holds the interpreter for a minute or more,
         # which the drivers' heartbeat supervision would read as silent drives
@@ -316,6 +319,7 @@ class Supervisor:
                 self.loop.close()
             finally:
                 self._close_robot()
+                redaction.release(self._secrets)
         log.info("supervisor stopped")
 
     def __enter__(self) -> Supervisor:
@@ -533,16 +537,29 @@ class Supervisor:
         return e
 
     # ================================================================== access
-    def client_connected(self, client: int) -> None:
-        self.access.connect(client)
+    def client_connected(self, client: int, address: str = "") -> None:
+        """A page connected (from remote ``address``)."""
+        self.access.connect(client, address)
 
-    def client_disconnected(self, client: int) -> None:
-        if self.access.disconnect(client):
-            self.safety.pilot_left()
-            self._publish_event("access", "pilot_left", f"the pilot's page (client {client}) is gone",
-                                "warning", {"client": client})
+    def client_disconnected(self, client: int, silent_for: float = 0.0) -> None:
+        """A page is gone: its socket closed, or it has not answered for ``silent_for`` s.
+
+        When it was the pilot's, the pilot-gone failsafe counts from the page's last sign of
+        life (``silent_for`` s ago), unless the page that was waiting for a hand-over has
+        taken control."""
         if self._arm_request is not None and self._arm_request.who == client:
             self._arm_request = None
+        if not self.access.disconnect(client):
+            return
+        successor = self.access.pilot
+        how = (f"has not answered for {silent_for:.1f} s" if silent_for > 0 else "is gone")
+        self._publish_event("access", "pilot_left", f"the pilot's page (client {client}) {how}",
+                            "warning", {"client": client, "silent_for": silent_for})
+        if successor is None:
+            self.safety.pilot_left(now=max(self.loop.time - silent_for, 0.0))
+        else:
+            self._publish_event("access", "pilot", f"client {successor} took control (it had asked for it)",
+                                "info", {"client": successor})
 
     def take_control(self, client: int, token: object) -> bool:
         """True: ``client`` is the pilot now; False: waiting for the pilot's hand-over."""
@@ -831,7 +848,7 @@ class Supervisor:
     def _start_recording(self, label: str = "", notes: str = "") -> str:
         t = self.tuning()["mpc"]
         return self.recorder.start(
-            label=label, notes=notes, config_toml=self.current_config().to_toml(),
+            label=label, notes=notes, config_toml=self.current_config().to_toml(redact=True),
             weights={"lam_f": t.lam_f, "lam_st": t.lam_st, "lam_a": t.lam_a, "lam_d": t.lam_d},
         )
 

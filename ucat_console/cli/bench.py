@@ -34,11 +34,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     q.add_argument("--json", type=Path, default=None, help="write the results as JSON")
     q.set_defaults(func=run_sim)
 
+    from ucat_console.bench import safety as bench_safety
     from ucat_console.bench import sessions as bench_sessions
     from ucat_console.bench import ui as bench_ui
 
     bench_sessions.register(kinds)
     bench_ui.register_bench(kinds)
+    bench_safety.register_bench(kinds)
 
 
 def run_mpc(args: argparse.Namespace) -> int:

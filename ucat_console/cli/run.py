@@ -115,10 +115,13 @@ def run(args: argparse.Namespace) -> int:
             app.start()
             if args.playback is not None:
                 name = Path(args.playback).name
-                if Path(args.playback).resolve().parent != app.playback.directory.resolve():
+                directory = app.sessions_dir
+                if Path(args.playback).resolve().parent != directory.resolve():
                     raise ValueError(f"--playback: {args.playback} is not in the sessions "
-                                     f"directory {app.playback.directory}")
-                app.playback.open(name)
+                                     f"directory {directory}")
+                if not (directory / name).is_file():
+                    raise ValueError(f"--playback: {args.playback}: no such session file")
+                app.initial_session = name  # every page opens it in its Review tab
         if args.foxglove_port is not None:
             fox = _foxglove_server(args.foxglove_port, cfg, sup)
         sup.start()

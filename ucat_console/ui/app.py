@@ -10,10 +10,20 @@ directly) and runs one UI thread that pushes, at fixed rates whatever the teleme
   page's controls when the supervisor's state changed.
 
 Shared elements (3-D view, plots, status, introspection) are server-wide; each page's
-controls are its own (:class:`~ucat_console.ui.panels.ControlPanel`), built when it
-connects. The server binds to ``console.host`` (127.0.0.1 by default) and warns when that
-is not a loopback address: viser has no authentication of its own, and the pilot token
-guards only the controls, not what the page shows.
+controls are its own (:class:`~ucat_console.ui.panels.ControlPanel`), and so is its review
+of recorded sessions (:class:`~ucat_console.ui.playback.PlaybackPanel`: every page reviews
+on its own, with its own player, position and review plots, so no page can move what
+another is reviewing). A page's panels are built when it connects, one page at a time
+(viser runs connect callbacks concurrently, and the shared tabs they fill are not safe to
+enter from two threads at once).
+
+Every page passes through a :class:`~ucat_console.ui.guard.PageGuard`: its handshake's
+Origin, every message it sends (only the values of its own inputs, pilot-only inputs only
+while it is the pilot's) and its heartbeat; a page that stops answering is gone, and when
+it was the pilot's the pilot-gone failsafe acts. The server binds to ``console.host``
+(127.0.0.1 by default) and warns when that is not a loopback address: viser has no
+authentication of its own, and the pilot token guards only the controls, not what the
+page shows.
 
 With ``probe=True`` a tiny HTML element carries, with every pose update and in the same
 batch, the wall-clock time at which the shown BodyState was published; the UI benchmark
@@ -28,17 +38,19 @@ import logging
 import math
 import threading
 import time
-from typing import Any
+from typing import Any, Callable
 
 import viser
 
+from ucat_console.backend.sessions.replay_job import ReplaySlot
 from ucat_console.backend.supervisor import CommandRefused, Supervisor
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.messages import BodyState, FinPlan, FinState
 from ucat_console.ui import panels
-from ucat_console.ui.plots import CHANNELS as PLOT_CHANNELS
+from ucat_console.ui.guard import PageGuard
 from ucat_console.ui.playback import PlaybackPanel
+from ucat_console.ui.plots import CHANNELS as PLOT_CHANNELS
 from ucat_console.ui.plots import LivePlots, PlotFeeder
 from ucat_console.ui.scene import RobotScene
 
@@ -82,12 +94,27 @@ class ConsoleApp:
         self._events: collections.deque[Event] = collections.deque(maxlen=_EVENTS_SHOWN)
         self._dirty = threading.Event()
         self.panels: dict[int, panels.ControlPanel] = {}
+        self.reviews: dict[int, PlaybackPanel] = {}
+        self._build_lock = threading.Lock()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.tick_errors = 0
+        #: a session every new page opens in its Review tab (``run --playback``)
+        self.initial_session: str | None = None
+        self.sessions_dir = supervisor.recorder.directory
+        self.replay_slot = ReplaySlot()
 
-        server = viser.ViserServer(host=self.host, port=cfg.port if port is None else port, verbose=False,
-                                   label="U-CAT console")
+        self.guard = PageGuard(
+            is_pilot=supervisor.access.is_pilot,
+            pilot_timeout=lambda: supervisor.cfg.failsafe.pilot_gone.timeout,
+            page_timeout=cfg.page_timeout, heartbeat_period=cfg.heartbeat_period,
+            allowed_origins=cfg.allowed_origins,
+            on_connect=supervisor.client_connected,
+            on_disconnect=supervisor.client_disconnected,
+            on_gone=lambda cid, silent: supervisor.client_disconnected(cid, silent_for=silent),
+        )
+        server = self.guard.serve(host=self.host, port=cfg.port if port is None else port, verbose=False,
+                                  label="U-CAT console")
         self.server = server
         server.gui.configure_theme(control_width="large", show_share_button=False, dark_mode=False)
         server.request_share_url = _no_share_url  # type: ignore[method-assign]
@@ -121,14 +148,8 @@ class ConsoleApp:
         with self.plot_panel.add_tab("Plots"):
             self.plots = LivePlots(gui, self.feeder, rate=cfg.plot_rate, max_points=cfg.max_plot_points,
                                    corridor=self._corridor)
-        # review of recorded sessions: the same scene and plot code on the player's stream
-        self.playback = PlaybackPanel(
-            gui, server.scene, supervisor.cfg.plant, directory=supervisor.recorder.directory,
-            plot_rate=cfg.plot_rate, scene_rate=cfg.scene_rate, max_plot_points=cfg.max_plot_points,
-            history=lambda: self.history, max_history=cfg.max_history, corridor=self._corridor,
-            trail_points=cfg.trail_points, trail_spacing=cfg.trail_spacing,
-            container=self.tab_review, plot_container=self.plot_panel.add_tab("Review plots"),
-        )
+        # each page's review of recorded sessions goes here (its plots in this tab)
+        self.review_plot_tab = self.plot_panel.add_tab("Review plots")
         self.plot_panel.dock_left()
         self.plot_panel.set_width(460)
 
@@ -142,6 +163,7 @@ class ConsoleApp:
         supervisor.add_listener(self.request_refresh)
         server.on_client_connect(self._on_connect)
         server.on_client_disconnect(self._on_disconnect)
+        self._unsubs.append(lambda: self.replay_slot.cancel())
 
     # ------------------------------------------------------------------ lifecycle
     @property
@@ -167,7 +189,11 @@ class ConsoleApp:
             self._thread.join(timeout=5.0)
         for unsub in self._unsubs:
             unsub()
-        self.playback.stop()
+        self.guard.stop()
+        with self._build_lock:
+            reviews, self.reviews = list(self.reviews.values()), {}
+        for r in reviews:
+            r.stop()
         self.server.stop()
 
     # ------------------------------------------------------------------ stream side
@@ -191,19 +217,54 @@ class ConsoleApp:
 
     # ------------------------------------------------------------------ pages
     def _on_connect(self, client: viser.ClientHandle) -> None:
+        """A page has shown (its first camera report): build its controls and its review."""
         cid = client.client_id
-        self.sup.client_connected(cid)
         containers = {"tuning": self.tab_tuning, "session": self.tab_session, "safety": self.tab_safety}
-        panel = panels.ControlPanel(self, cid, client.gui, client, containers)
-        with self._lock:
-            self.panels[cid] = panel
-        log.info("page connected: client %s", cid)
+        with self._build_lock:
+            if cid not in self.guard.clients:
+                return  # gone while waiting
+            panel = panels.ControlPanel(self, cid, client.gui, client, containers, allow=self._allow(cid))
+            review = self.build_review(client.gui, client.scene, cid)
+            with self._lock:
+                self.panels[cid] = panel
+            self.reviews[cid] = review
+        log.info("page connected: client %s (%s)", cid, self.guard.address(cid) or "?")
+        if self.initial_session is not None:
+            review.act(lambda: review.open(self.initial_session))
+
+    def _allow(self, cid: int) -> Callable[..., None]:
+        def allow(handle: Any, pilot_only: bool, max_len: int = 200) -> None:
+            if handle is not None:
+                self.guard.allow(handle, cid, pilot_only=pilot_only, max_len=max_len)
+        return allow
+
+    def build_review(self, gui: Any, scene: Any, cid: int | None = None) -> PlaybackPanel:
+        """One page's review of recorded sessions, in the Review tab and the review plots."""
+        cfg = self.cfg
+        return PlaybackPanel(
+            gui, scene, self.sup.cfg.plant, directory=self.sessions_dir,
+            plot_rate=cfg.plot_rate, scene_rate=cfg.scene_rate, max_plot_points=cfg.max_plot_points,
+            history=lambda: self.history, max_history=cfg.max_history, corridor=self._corridor,
+            trail_points=cfg.trail_points, trail_spacing=cfg.trail_spacing,
+            container=self.tab_review, plot_container=self.review_plot_tab,
+            allow=self._allow(cid) if cid is not None else None,
+            replay_slot=self.replay_slot, may_replay=lambda: self._may_replay(cid),
+        )
+
+    def _may_replay(self, cid: int | None) -> None:
+        """CommandRefused unless page ``cid`` may start a counterfactual replay now: any page
+        while the robot is disarmed; only the pilot while it is armed (the replay takes CPU)."""
+        if self.sup.armed and (cid is None or not self.sup.access.is_pilot(cid)):
+            raise CommandRefused("counterfactual replay: while the robot is armed only the pilot may start one")
 
     def _on_disconnect(self, client: viser.ClientHandle) -> None:
         cid = client.client_id
-        with self._lock:
-            self.panels.pop(cid, None)
-        self.sup.client_disconnected(cid)
+        with self._build_lock:
+            with self._lock:
+                self.panels.pop(cid, None)
+            review = self.reviews.pop(cid, None)
+        if review is not None:
+            review.stop(page_gone=True)
         log.info("page gone: client %s", cid)
 
     def request_refresh(self) -> None:
@@ -281,7 +342,10 @@ class ConsoleApp:
         _set(self.events, panels.events_markdown(list(self._events)))
 
     def _refresh_panels(self) -> None:
+        live = set(self.guard.clients)
         with self._lock:
+            for cid in [c for c in self.panels if c not in live]:
+                del self.panels[cid]  # a page that went while its panel was being built
             ps = list(self.panels.values())
         for p in ps:
             try:

@@ -44,7 +44,7 @@ REFUSALS = (AccessDenied, CommandRefused, ValueError)
 
 def esc(text: object) -> str:
     """Text made safe for a markdown element (no HTML, no markdown markup)."""
-    s = html.escape(str(text), quote=True)
+    s = html.escape(str(text), quote=False)  # the page decodes &lt; &gt; &amp; but shows &#x27; as is
     for c in "\\`*_{}[]()#+!|~>":
         s = s.replace(c, "\\" + c)
     return s
@@ -102,8 +102,12 @@ class ControlPanel:
     """One page's controls; ``gui`` is that page's ``client.gui``."""
 
     def __init__(self, app: ConsoleApp, client_id: int, gui: Any, client: Any = None,
-                 containers: dict[str, Any] | None = None) -> None:
+                 containers: dict[str, Any] | None = None,
+                 allow: Callable[..., None] | None = None) -> None:
+        """``allow(handle, pilot_only, max_len)`` tells the page guard which inputs this page
+        may set (the page's own, pilot-only ones only while it is the pilot's)."""
         self.app = app
+        self._allow = allow or (lambda handle, pilot_only, max_len=200: None)
         self.sup = app.sup
         self.cid = client_id
         self.gui = gui
@@ -183,7 +187,26 @@ class ControlPanel:
                                           hotkey="M")
 
         self._wire()
+        self._register_inputs()
         self.refresh(force=True)
+
+    def _register_inputs(self) -> None:
+        allow = self._allow
+        for h in (self.token, self.take):
+            allow(h, False)
+        pilot = [self.release, self.handover, self.decline, self.arm, self.disarm, self.mode,
+                 *self.sp_inputs.values(), self.apply_sp, self.apply_tuning, self.revert, self.save,
+                 *self.params.values(), self.history, self.rec_start, self.rec_stop, self.marker,
+                 self.reset_drives, self.zero_depth]
+        if self.faults is not None:
+            f = self.faults
+            pilot += [f.device, f.fault, f.fin, f.code, f.duration, f.inject, f.clear]
+        for h in pilot:
+            allow(h, True)
+        allow(self.note, True, 500)
+        guard = getattr(self.app, "guard", None)
+        if guard is not None and self.client is not None:
+            guard.allow_command(self.marker_key, self.cid, pilot_only=True, name="Add marker (M)")
 
     # ------------------------------------------------------------------ callbacks
     def _wire(self) -> None:
@@ -268,6 +291,8 @@ class ControlPanel:
             gui.add_markdown("The fins will move. Check that the water around the robot is clear.")
             confirm = gui.add_button("Confirm arm", color="green")
             cancel = gui.add_button("Cancel")
+        self._allow(confirm, True)
+        self._allow(cancel, True)
 
         def on_confirm(event: Any) -> None:
             modal.close()

@@ -22,10 +22,20 @@ seeking, frame steps, event jumps and counterfactual replay run across the part
 boundaries; the browser's table lists every part, and a truncated part is repaired from
 here (the session then opens).
 
-Playback controls do not move the robot, so every page may use them; the review is shared
-by every page (like the live view). The player's own thread plays; a small UI thread here
-pushes the review scene (on each new body state, at most ``scene_rate``), the plots (at
-``plot_rate``) and the timeline and status (4 Hz) while a session is open.
+Every page reviews on its own: the console builds one panel per page on that page's
+``client.gui`` and ``client.scene``, so each page has its own player, position, speed and
+review plots, and no page can change what another is reviewing. Playback controls do not
+move the robot, so every page may use them, and any page may add review markers (they go
+to the session's sidecar, shared by every page reviewing that session). The player's own
+thread plays; a small UI thread here pushes the review scene (on each new body state, at
+most ``scene_rate``), the plots (at ``plot_rate``) and the timeline and status (4 Hz)
+while a session is open.
+
+A counterfactual replay runs in a child process at a lower CPU priority
+(:class:`~ucat_console.backend.sessions.replay_job.ReplayJob`), one at a time per console
+(the console's :class:`~ucat_console.backend.sessions.replay_job.ReplaySlot`), with its
+progress shown in the panel and a Cancel; ``may_replay()`` raises when this page may not
+start one now.
 """
 
 from __future__ import annotations
@@ -38,16 +48,11 @@ from pathlib import Path
 from typing import Any, Callable
 
 from ucat_console.backend.sessions import files, index, repair
-from ucat_console.backend.sessions.markers import Marker
+from ucat_console.backend.sessions.markers import MAX_NOTE_BYTES, Marker, check_note
 from ucat_console.backend.sessions.player import MAX_SPEED, MIN_SPEED, Player, check_speed
 from ucat_console.backend.sessions.reader import SessionParts, part_paths
-from ucat_console.backend.sessions.replay import (
-    ReplayResult,
-    SeedRule,
-    counterfactual,
-    parse_weights,
-    recorded_seed,
-)
+from ucat_console.backend.sessions.replay import ReplayResult, parse_weights, recorded_config, replay_config
+from ucat_console.backend.sessions.replay_job import ReplayJob, ReplaySlot
 from ucat_console.backend.sim.params import PlantConfig
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event
@@ -66,6 +71,9 @@ SCENE_ROOT = "/review"
 SCENE_OFFSET = (0.0, 1.2, 0.0)
 DEFAULT_WEIGHTS = "lam_st=2.0"
 _SLOW_PERIOD = 0.25  # s, timeline, status, label, trail
+#: a page adds at most one review marker this often (s)
+MARKER_INTERVAL = 0.5
+_now = time.monotonic
 _TICK = 1.0 / 30.0  # s, UI thread period
 _GLOBAL_SCENE_CALLS = frozenset({
     "set_up_direction", "configure_default_lights", "configure_environment_map", "add_light_hemisphere",
@@ -217,9 +225,17 @@ class PlaybackPanel:
         trail_spacing: float = 0.02,
         container: Any = None,
         plot_container: Any = None,
+        allow: Callable[..., None] | None = None,
+        replay_slot: ReplaySlot | None = None,
+        may_replay: Callable[[], None] = lambda: None,
     ) -> None:
         self.directory = files.sessions_dir(directory)
         self.gui = gui
+        self.replay_slot = replay_slot if replay_slot is not None else ReplaySlot()
+        self.may_replay = may_replay
+        self.job: ReplayJob | None = None
+        self._job_weights: dict[str, float] = {}
+        self._last_marker = -math.inf
         self.plot_rate = float(plot_rate)
         self.scene_rate = float(scene_rate)
         self.history = history
@@ -237,10 +253,11 @@ class PlaybackPanel:
         self._thread: threading.Thread | None = None
         self.tick_errors = 0
 
-        self.root = scene.add_frame(SCENE_ROOT, show_axes=False, position=SCENE_OFFSET, visible=False)
+        self._scene_api = scene
+        self.root: Any = None
         self._new_scene: Callable[[], RobotScene] = lambda: RobotScene(
             PrefixedScene(scene, SCENE_ROOT), plant, trail_points=trail_points, trail_spacing=trail_spacing)
-        self.scene = self._new_scene()
+        self.scene: RobotScene | None = None  # built when a session is opened
         self.feeder = PlotFeeder(int(math.ceil(max_history * plot_rate)) + 2)
         self.sampler = StreamSampler(self.feeder, 1.0 / self.plot_rate)
         with within(plot_container):
@@ -274,15 +291,28 @@ class PlaybackPanel:
                 self.step_fwd = gui.add_button("Frame forward")
                 self.prev_button = gui.add_button("Previous event")
                 self.next_button = gui.add_button("Next event")
-                self.note = gui.add_text("Marker note", "")
-                self.marker_button = gui.add_button("Add marker", hint="saved beside the session; the file is untouched")
+                self.note = gui.add_text("Review note", "", hint=f"the note of a review marker, at most {MAX_NOTE_BYTES} bytes")
+                self.marker_button = gui.add_button("Add review marker",
+                                                    hint="saved beside the session (any page reviewing may add one); "
+                                                         "the recording itself is untouched")
                 self.message = gui.add_markdown("")
             with gui.add_folder("Counterfactual replay", order=3.0, expand_by_default=False):
                 self.weights = gui.add_text("Weights", DEFAULT_WEIGHTS,
                                             hint="e.g. lam_st=2.0,lam_f=1.5 (lam_f, lam_st, lam_a, lam_d)")
-                self.replay_button = gui.add_button("Replay with these weights")
+                self.replay_button = gui.add_button("Replay with these weights",
+                                                    hint="runs in the background at a lower priority, one at a time")
+                self.replay_progress = gui.add_progress_bar(0.0, visible=False)
+                self.cancel_button = gui.add_button("Cancel replay", visible=False)
                 self.replay_table = gui.add_markdown("")
         self._wire()
+        if allow is not None:
+            for h in (self.choice, self.refresh_list, self.open_button, self.repair_button, self.close_button,
+                      self.timeline, self.play_button, self.pause_button, self.speed, self.loop, self.step_back,
+                      self.step_fwd, self.prev_button, self.next_button, self.marker_button, self.replay_button,
+                      self.cancel_button):
+                allow(h, False)
+            allow(self.note, False, MAX_NOTE_BYTES)
+            allow(self.weights, False, 500)
         self.refresh_sessions()
         self._set_enabled()
 
@@ -303,6 +333,7 @@ class PlaybackPanel:
         self.next_button.on_click(self._page(self.next_event))
         self.marker_button.on_click(self._page(lambda: self.add_marker(self.note.value)))
         self.replay_button.on_click(self._page(lambda: self.run_counterfactual(self.weights.value)))
+        self.cancel_button.on_click(self._page(self.cancel_counterfactual))
 
     def _page(self, fn: Callable[[], Any]) -> Callable[[Any], None]:
         """A viser callback: page events only (values set from code are ignored)."""
@@ -393,6 +424,8 @@ class PlaybackPanel:
         with self._lock:
             self.reader, self.player = reader, player
             self._body, self._fins = None, [None] * N_FINS
+            if self.root is None:
+                self.root = self._scene_api.add_frame(SCENE_ROOT, show_axes=False, position=SCENE_OFFSET)
             self.scene = self._new_scene()  # the same node names: a fresh trail
         self.timeline.min = 0.0
         self.timeline.max = max(player.end - player.start, 0.01)
@@ -411,18 +444,39 @@ class PlaybackPanel:
             player, reader = self.player, self.reader
             self.player = self.reader = None
         self._stop_ui()
+        if self.job is not None:
+            self._start_ui()  # the replay's progress still shows
         if player is not None:
             player.close()
         if reader is not None:
             reader.close()
-        self.root.visible = False
+        if self.root is not None:
+            self.root.visible = False
         self._set_enabled()
         if player is not None and not quiet:
             self.show("session closed")
 
-    def stop(self) -> None:
-        """Close the session and let go of the stream (the app is stopping)."""
-        self.close_session(quiet=True)
+    def stop(self, page_gone: bool = False) -> None:
+        """Close the session and let go of the stream (the app is stopping, or with
+        ``page_gone`` the page has gone and its elements with it)."""
+        job, self.job = self.job, None
+        if job is not None and self.replay_slot.job is job:
+            job.cancel()
+        with self._lock:
+            player, reader = self.player, self.reader
+            self.player = self.reader = None
+        self._stop_ui()
+        if player is not None:
+            player.close()
+        if reader is not None:
+            reader.close()
+        if not page_gone:
+            self._set_enabled()
+            if self.root is not None:
+                try:
+                    self.root.remove()
+                except Exception:
+                    log.debug("removing the review scene failed", exc_info=True)
         for unsub in self._unsubs:
             unsub()
         self._unsubs = []
@@ -489,8 +543,11 @@ class PlaybackPanel:
         return what
 
     def add_marker(self, note: object) -> Marker:
-        if not isinstance(note, str):
-            raise ValueError(f"marker note: expected text, got {note!r}")
+        note = check_note(note)
+        now = _now()
+        if now - self._last_marker < MARKER_INTERVAL:
+            raise ValueError(f"marker: at most one every {MARKER_INTERVAL:g} s from a page")
+        self._last_marker = now
         m = self._need().add_marker(note)
         self.note.value = ""
         self.show(f"marker at {m.t - self._need().start:.2f} s saved to {self._need().markers.path.name}")
@@ -526,15 +583,67 @@ class PlaybackPanel:
         self.sampler.flush()
 
     # ------------------------------------------------------------------ counterfactual
-    def run_counterfactual(self, text: object, seed: SeedRule = recorded_seed) -> ReplayResult:
-        if self.reader is None:
+    def run_counterfactual(self, text: object) -> ReplayJob:
+        """Start replaying the open session's plans with other weights (in the background)."""
+        r = self.reader
+        if r is None:
             raise ValueError("no session open: choose one and press Open")
         weights = parse_weights(text)  # type: ignore[arg-type]
-        result = counterfactual(self.reader, weights, seed=seed)
-        self.last_replay = result
-        self.replay_table.content = replay_markdown(result, weights)
-        self.show(f"counterfactual replay: {len(result.rows)} plans")
-        return result
+        replay_config(recorded_config(r), weights)  # a weight out of range: refused here, at once
+        self.may_replay()
+        job = self.replay_slot.start(r.session_id, self.directory, weights, owner=self)
+        self.job, self._job_weights = job, weights
+        self.replay_progress.value = 0.0
+        self.replay_progress.visible = self.cancel_button.visible = True
+        self.replay_table.content = "Counterfactual replay running ..."
+        self.show("counterfactual replay started")
+        self._start_ui()
+        return job
+
+    def cancel_counterfactual(self) -> None:
+        job = self.job
+        if job is None or job.done:
+            raise ValueError("no counterfactual replay of this page is running")
+        job.cancel()
+        self._job_finished()
+
+    def wait_replay(self, timeout: float = 300.0) -> ReplayResult | None:
+        """Wait for this page's replay to end and show it (the panel's UI thread does the same)."""
+        job = self.job
+        if job is not None:
+            job.wait(timeout)
+            self._job_finished()
+        return self.last_replay
+
+    def _job_finished(self) -> None:
+        """Show the end of this page's replay (once)."""
+        with self._lock:
+            job, self.job = self.job, None
+        if job is None:
+            return
+        self.replay_progress.visible = self.cancel_button.visible = False
+        if job.result is not None:
+            self.last_replay = job.result
+            self.replay_table.content = replay_markdown(job.result, self._job_weights)
+            self.show(f"counterfactual replay: {len(job.result.rows)} plans")
+        elif job.cancelled:
+            self.replay_table.content = "Counterfactual replay cancelled."
+            self.show("counterfactual replay cancelled")
+        else:
+            self.replay_table.content = ""
+            self.show(f"counterfactual replay failed: {job.error}", error=True)
+
+    def _tick_job(self) -> None:
+        job = self.job
+        if job is None:
+            return
+        if job.done:
+            self._job_finished()
+            return
+        pr = job.progress
+        self.replay_progress.value = round(100.0 * pr.fraction, 1)
+        self.replay_table.content = (f"Counterfactual replay running: {pr.done} of {pr.total} plans"
+                                     if pr.total else "Counterfactual replay starting ...")
 
     # ------------------------------------------------------------------ stream side and UI thread
     def _on_message(self, channel: str, msg: Any) -> None:
@@ -582,12 +691,15 @@ class PlaybackPanel:
             self._stop.wait(_TICK)
 
     def tick_scene(self) -> None:
-        self.scene.update_pose(self._body, list(self._fins))
+        if self.scene is not None:
+            self.scene.update_pose(self._body, list(self._fins))
 
     def tick_slow(self) -> None:
-        self.scene.update_label(self._body)
-        self.scene.update_trail()
+        if self.scene is not None:
+            self.scene.update_label(self._body)
+            self.scene.update_trail()
         self._sync_inputs()
+        self._tick_job()
 
     def _sync_inputs(self) -> None:
         """Timeline, speed, loop and status show the player's state (set from code)."""

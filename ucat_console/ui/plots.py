@@ -8,12 +8,17 @@ rate). :class:`LivePlots` then sends the rows of the chosen history window, deci
 at most ``max_plot_points`` per series: the size of a plot update is bounded by the
 configuration, never by the length of the session.
 
-Charts (one shared time axis, seconds of stream time, with synchronised cursors):
+Charts (one shared time axis labelled in seconds of stream time, synchronised cursors):
 
-* Strouhal number of each fin's last plan, the optimal corridor shaded (a uPlot band);
-* depth and its target; forward velocity and its target; yaw rate and its target;
-* power per fin and in total, with the running mean of the total;
-* energy per metre travelled.
+* Strouhal number of each fin's last plan on a fixed 0-1 axis with the optimal corridor
+  filled; a value above 1 is drawn at 1 and marked with a point; no St is drawn while
+  the robot is disarmed or slower than :data:`ST_MIN_SPEED` (St = f A / U means nothing
+  there): those values are put below the axis;
+* depth and its target; forward velocity and its target; yaw rate and its target; each
+  axis spans at least :data:`MIN_SPAN` (an invisible pair of points keeps it from
+  zooming 2 mm of depth noise up to the whole chart);
+* power per fin and in total, with the running mean of the total, and the energy per
+  metre travelled on the right-hand axis of the same chart.
 """
 
 from __future__ import annotations
@@ -25,9 +30,15 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from ucat_console.telemetry import channels as ch
-from ucat_console.telemetry.messages import BodyState, FinPlan, Power, Setpoints
+from ucat_console.telemetry.messages import BodyState, FinPlan, Power, Setpoints, Status
 
 N_FINS = ch.N_FINS
+#: below this forward speed (m/s) no Strouhal number is shown
+ST_MIN_SPEED = 0.02
+#: where a hidden St is put (below the fixed 0-1 axis: not drawn)
+ST_HIDDEN = -1.0
+#: the smallest span of each tracking chart's value axis
+MIN_SPAN = {"depth": 0.2, "velocity": 0.1, "yaw_rate": 0.1}
 
 #: the columns of a row
 COLUMNS: tuple[str, ...] = (
@@ -39,10 +50,11 @@ COLUMNS: tuple[str, ...] = (
     *(f"p{i}" for i in range(N_FINS)),
     "p_total", "p_mean",
     "energy_per_metre",
+    "armed",
 )
 COL = {name: i for i, name in enumerate(COLUMNS)}
 #: the channels the feeder reads
-CHANNELS = (ch.BODY_STATE, ch.SETPOINTS, ch.POWER, *(ch.fin_plan(i) for i in range(N_FINS)))
+CHANNELS = (ch.BODY_STATE, ch.SETPOINTS, ch.POWER, ch.STATUS, *(ch.fin_plan(i) for i in range(N_FINS)))
 
 FIN_COLOURS = ("#d62728", "#1f77b4", "#2ca02c", "#ff7f0e")
 _PLANS = {ch.fin_plan(i): i for i in range(N_FINS)}
@@ -123,6 +135,9 @@ class PlotFeeder:
             row[COL["p_total"]] = p.total
             row[COL["p_mean"]] = p.mean_total
             row[COL["energy_per_metre"]] = p.energy_per_metre
+        elif channel == ch.STATUS:
+            st: Status = msg
+            row[COL["armed"]] = 1.0 if st.armed else 0.0
         if msg.t > row[0] or row[0] != row[0]:
             row[0] = msg.t
 
@@ -167,8 +182,28 @@ def _series(label: str, stroke: str, width: float = 1.5, dash: tuple[float, ...]
 
 
 _X = {"label": "t (s)"}
+_X_AXIS = {"label": "t (s)", "size": 36}
 _SCALES = {"x": {"time": False}}
 _CURSOR = {"sync": {"key": "ucat"}}
+_PIN = {"label": "axis span", "stroke": "rgba(0,0,0,0)", "width": 0.5, "points": {"show": False}}
+
+
+def st_shown(st: np.ndarray, armed: np.ndarray, speed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(St drawn on the 0-1 axis, markers at 1 where St is above 1): hidden values, while
+    disarmed, slower than ST_MIN_SPEED or unknown, go below the axis."""
+    hide = ~(armed > 0.5) | ~(np.abs(speed) >= ST_MIN_SPEED) | ~np.isfinite(st)
+    shown = np.where(hide, ST_HIDDEN, np.minimum(st, 1.0))
+    above = np.where(~hide & (st > 1.0), 1.0, ST_HIDDEN)
+    return shown, above
+
+
+def span_pins(*series: np.ndarray, span: float) -> tuple[np.ndarray, np.ndarray]:
+    """Two constant series around the middle of ``series`` at least ``span`` apart (the
+    value axis then spans at least that)."""
+    vals = np.concatenate([s[np.isfinite(s)] for s in series]) if series else np.zeros(0)
+    mid = 0.5 * (vals.min() + vals.max()) if vals.size else 0.0
+    n = len(series[0]) if series else 0
+    return np.full(n, mid - span / 2), np.full(n, mid + span / 2)
 
 
 class LivePlots:
@@ -184,36 +219,40 @@ class LivePlots:
         empty = np.zeros(0)
         fins = range(N_FINS)
         common = dict(scales=_SCALES, cursor=_CURSOR, height=height)
+        st_scales = {"x": {"time": False}, "y": {"range": [0.0, 1.0], "auto": False}}
+        above = {"label": "St > 1 (at 1)", "stroke": "rgba(0,0,0,0)", "width": 0.5,
+                 "points": {"show": True, "size": 7, "stroke": "#d62728", "fill": "#d62728"}}
         self.st = gui.add_uplot(
-            (empty,) * (2 + N_FINS + 1),
-            (_X, _series("St high", "#2ca02c", 1.0, (4, 4)), _series("St low", "#2ca02c", 1.0, (4, 4)),
-             *(_series(f"St fin {i}", FIN_COLOURS[i]) for i in fins)),
-            bands=({"series": (1, 2), "fill": "rgba(44, 160, 44, 0.15)"},),
-            title="Strouhal number per fin (corridor shaded)",
-            axes=({}, {"label": "St"}), **common,
+            (empty,) * (2 + N_FINS + 2),
+            (_X, _series("St high", "#2ca02c", 1.0), _series("St low", "#2ca02c", 1.0),
+             *(_series(f"St fin {i}", FIN_COLOURS[i]) for i in fins), above),
+            bands=({"series": (1, 2), "fill": "rgba(44, 160, 44, 0.28)"},),
+            title="Strouhal number per fin (corridor filled; none while disarmed or still)",
+            axes=(_X_AXIS, {"label": "St"}), cursor=_CURSOR, height=height, scales=st_scales,
         )
         self.depth = gui.add_uplot(
-            (empty,) * 3, (_X, _series("depth", "#1f77b4"), _series("target", "#555", 1.0, (6, 3))),
-            title="Depth (m)", axes=({}, {"label": "m"}), **common,
+            (empty,) * 5, (_X, _series("depth", "#1f77b4"), _series("target", "#555", 1.0, (6, 3)), _PIN, _PIN),
+            title="Depth (m)", axes=(_X_AXIS, {"label": "m"}), **common,
         )
         self.velocity = gui.add_uplot(
-            (empty,) * 3, (_X, _series("u", "#d62728"), _series("target", "#555", 1.0, (6, 3))),
-            title="Forward velocity (m/s)", axes=({}, {"label": "m/s"}), **common,
+            (empty,) * 5, (_X, _series("u", "#d62728"), _series("target", "#555", 1.0, (6, 3)), _PIN, _PIN),
+            title="Forward velocity (m/s)", axes=(_X_AXIS, {"label": "m/s"}), **common,
         )
         self.yaw_rate = gui.add_uplot(
-            (empty,) * 3, (_X, _series("r", "#9467bd"), _series("target", "#555", 1.0, (6, 3))),
-            title="Yaw rate (rad/s)", axes=({}, {"label": "rad/s"}), **common,
+            (empty,) * 5, (_X, _series("r", "#9467bd"), _series("target", "#555", 1.0, (6, 3)), _PIN, _PIN),
+            title="Yaw rate (rad/s)", axes=(_X_AXIS, {"label": "rad/s"}), **common,
         )
+        epm = _series("energy per metre (J/m, right)", "#17becf", 2.0)
+        epm["scale"] = "epm"
         self.power = gui.add_uplot(
-            (empty,) * (1 + N_FINS + 2),
+            (empty,) * (1 + N_FINS + 3),
             (_X, *(_series(f"fin {i}", FIN_COLOURS[i], 1.0) for i in fins),
-             _series("total", "#000", 2.0), _series("running mean", "#8c564b", 1.5, (6, 3))),
-            title="Power (W)", axes=({}, {"label": "W"}), **common,
+             _series("total", "#888", 2.0), _series("running mean", "#8c564b", 1.5, (6, 3)), epm),
+            title="Power (W) and energy per metre (J/m)",
+            axes=(_X_AXIS, {"label": "W"}, {"scale": "epm", "side": 1, "label": "J/m", "grid": {"show": False}}),
+            scales={"x": {"time": False}, "epm": {"auto": True}}, cursor=_CURSOR, height=height,
         )
-        self.energy = gui.add_uplot(
-            (empty,) * 2, (_X, _series("energy per metre", "#17becf")),
-            title="Energy per metre (J/m)", axes=({}, {"label": "J/m"}), **common,
-        )
+        self.energy = self.power  # one chart: power and energy per metre
 
     def rows(self, window: float) -> np.ndarray:
         """The rows of the last ``window`` seconds, decimated to ``max_points``."""
@@ -227,11 +266,13 @@ class LivePlots:
         t = r[:, 0]
         lo, hi = self.corridor()
         c = COL
-        self.st.data = (t, np.full_like(t, hi), np.full_like(t, lo),
-                        *(r[:, c[f"st{i}"]] for i in range(N_FINS)))
-        self.depth.data = (t, r[:, c["depth"]], r[:, c["depth_sp"]])
-        self.velocity.data = (t, r[:, c["velocity"]], r[:, c["velocity_sp"]])
-        self.yaw_rate.data = (t, r[:, c["yaw_rate"]], r[:, c["yaw_rate_sp"]])
-        self.power.data = (t, *(r[:, c[f"p{i}"]] for i in range(N_FINS)), r[:, c["p_total"]], r[:, c["p_mean"]])
-        self.energy.data = (t, r[:, c["energy_per_metre"]])
+        armed, speed = r[:, c["armed"]], r[:, c["velocity"]]
+        shown = [st_shown(r[:, c[f"st{i}"]], armed, speed) for i in range(N_FINS)]
+        above = np.max([a for _, a in shown], axis=0) if len(t) else np.zeros(0)
+        self.st.data = (t, np.full_like(t, hi), np.full_like(t, lo), *(v for v, _ in shown), above)
+        for chart, name in ((self.depth, "depth"), (self.velocity, "velocity"), (self.yaw_rate, "yaw_rate")):
+            value, target = r[:, c[name]], r[:, c[f"{name}_sp"]]
+            chart.data = (t, value, target, *span_pins(value, target, span=MIN_SPAN[name]))
+        self.power.data = (t, *(r[:, c[f"p{i}"]] for i in range(N_FINS)), r[:, c["p_total"]], r[:, c["p_mean"]],
+                           r[:, c["energy_per_metre"]])
         self.updates += 1

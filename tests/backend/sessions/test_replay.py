@@ -119,3 +119,45 @@ def test_weights_parse_and_refusals():
         parse_weights("lam_f")
     with pytest.raises(ValueError, match="lam_st"):
         replay_config(MpcConfig(), {"lam_st": 500.0})  # above the parameter's range
+
+
+def test_a_long_session_with_wound_up_fin_angles_replays_without_refusals(sessions):
+    """The fins wind up over whole turns in a long session; the live planner plans from the
+    wrapped angle, and so does the replay: nothing is refused, every plan is reproduced."""
+    from ucat_console.backend.loop.planners import MpcFinPlanner, PlanInputs
+
+    live = {f: MpcFinPlanner(CFG, seed=f) for f in range(2)}
+    items = []
+    for k, theta0 in enumerate((-245.3, -120.0, 88.8, 40.1 * math.pi, -13.0)):
+        for fin in range(2):
+            x = PlanInputs(t=0.1 * k, fins=(fin,), target=(-0.3, 0.05), v_body=0.2, theta0=theta0,
+                           u_prev=(0.5, -0.5, 2.0, 2.0))
+            o = live[fin](x)
+            items.append((C.fin_plan(fin), FinPlan(
+                t=x.t, fin=fin, mode="mpc", target=x.target, v_body=x.v_body, theta0=theta0, u_prev=x.u_prev,
+                u=o.u, commands=o.commands, cost_total=o.cost_total, cost_force=o.cost_force,
+                cost_strouhal=o.cost_strouhal, cost_amplitude=o.cost_amplitude,
+                cost_smoothness=o.cost_smoothness, st=o.st, mean_force=o.mean_force,
+                solve_time=o.solve_time, late=False, seed=o.seed,
+            )))
+    assert any(abs(m.theta0) > 4 * math.pi for _, m in items)  # FinMpc alone refuses these
+    [path] = record(sessions, items, config_toml="[mpc]\n" + CFG.to_toml(),
+                    weights=dict(zip(("lam_f", "lam_st", "lam_a", "lam_d"), CFG.weights)))
+    with SessionReader(path, sessions) as r:
+        res = counterfactual(r, {})
+    assert res.skipped == 0 and len(res.rows) == len(items)
+    assert [row.u for row in res.rows] == [m.u for _, m in items]
+
+
+def test_refused_plans_are_summarised_in_one_log_line(sessions, caplog):
+    bad = [(C.fin_plan(0), FinPlan(
+        t=0.1 * i, fin=0, mode="mpc", target=(-0.3, 0.0), v_body=float("nan") if i % 2 else 0.2, theta0=0.0,
+        u_prev=(0.5, -0.5, 2.0, 2.0), u=(0.5, -0.5, 2.0, 2.0), commands=(0.5, 0.5, 0.0, 2.0), cost_total=1.0,
+        cost_force=0.1, cost_strouhal=0.1, cost_amplitude=0.1, cost_smoothness=0.0, st=0.3,
+        mean_force=(0.0, 0.0), solve_time=1e-4, late=False)) for i in range(10)]
+    [path] = record(sessions, bad)
+    with SessionReader(path, sessions) as r, caplog.at_level("WARNING"):
+        res = counterfactual(r, {})
+    assert res.skipped == 5 and len(res.rows) == 5
+    lines = [rec for rec in caplog.records if "not replayed" in rec.getMessage()]
+    assert len(lines) == 1 and "5 of 10" in lines[0].getMessage()

@@ -6,7 +6,10 @@ sidecar ``<session id>.markers.json`` in the same directory::
     {"session": "<id>", "markers": [{"t": 12.5, "note": "fin 2 stalls", "created": 1.7e9}]}
 
 ``t`` is on the recorded stream's clock (seconds, like the messages' ``t``), ``created``
-the wall-clock time (UNIX seconds) the marker was added. The file is replaced atomically.
+the wall-clock time (UNIX seconds) the marker was added. The file is written to a
+temporary file beside it and renamed over it, so it is always whole. A note holds at most
+:data:`MAX_NOTE_BYTES` bytes (UTF-8) and a session at most :data:`MAX_MARKERS` markers, so
+the sidecar stays below about 21 MB whoever adds to it.
 """
 
 from __future__ import annotations
@@ -16,10 +19,16 @@ import math
 import os
 import threading
 import time
+import weakref
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from ucat_console.backend.sessions import files
+
+#: the longest note of a review marker (bytes, UTF-8)
+MAX_NOTE_BYTES = 2048
+#: the most markers a session keeps
+MAX_MARKERS = 10_000
 
 
 @dataclass(frozen=True)
@@ -41,8 +50,36 @@ def _marker(obj: object, where: str) -> Marker:
     return Marker(float(t), note, float(created))
 
 
+def check_note(note: object) -> str:
+    """``note`` when it is text within :data:`MAX_NOTE_BYTES`, else ValueError saying why."""
+    if not isinstance(note, str):
+        raise ValueError(f"marker note: expected text, got {type(note).__name__}")
+    n = len(note.encode("utf-8", "surrogatepass"))
+    if n > MAX_NOTE_BYTES:
+        raise ValueError(f"marker note: {n} bytes, over the limit of {MAX_NOTE_BYTES} bytes")
+    return note
+
+
+_SHARED: weakref.WeakValueDictionary[Path, MarkerStore] = weakref.WeakValueDictionary()
+_SHARED_LOCK = threading.Lock()
+
+
 class MarkerStore:
-    """The markers of one session, loaded from and saved to its sidecar file."""
+    """The markers of one session, loaded from and saved to its sidecar file.
+
+    Everyone in one process reviewing a session should use the same store
+    (:meth:`shared`), so that markers added from several pages all reach the file."""
+
+    @classmethod
+    def shared(cls, directory: str | Path, session_id: str) -> MarkerStore:
+        """The one store of ``session_id`` in this process (made when first asked for)."""
+        key = files.markers_path(Path(directory), session_id).resolve()
+        with _SHARED_LOCK:
+            store = _SHARED.get(key)
+            if store is None:
+                store = cls(directory, session_id)
+                _SHARED[key] = store
+            return store
 
     def __init__(self, directory: str | Path, session_id: str) -> None:
         self.session_id = session_id
@@ -63,6 +100,8 @@ class MarkerStore:
             raise ValueError(
                 f"{self.path}: markers of session {doc.get('session')!r}, not {self.session_id!r}"
             )
+        if len(doc["markers"]) > MAX_MARKERS:
+            raise ValueError(f"{self.path}: {len(doc['markers'])} markers, more than the limit of {MAX_MARKERS}")
         out = [_marker(m, f"{self.path}: markers[{i}]") for i, m in enumerate(doc["markers"])]
         return sorted(out, key=lambda m: m.t)
 
@@ -73,23 +112,34 @@ class MarkerStore:
     def add(self, t: float, note: str = "") -> Marker:
         if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t):
             raise ValueError(f"t: expected a finite time, got {t!r}")
-        if not isinstance(note, str):
-            raise ValueError(f"note: expected text, got {note!r}")
+        note = check_note(note)
         m = Marker(float(t), note, time.time())
         with self._lock:
-            self._markers = sorted(self._markers + [m], key=lambda x: x.t)
-            self._save()
+            if len(self._markers) >= MAX_MARKERS:
+                raise ValueError(f"markers: session {self.session_id} has the most markers a session "
+                                 f"keeps ({MAX_MARKERS}); remove some first")
+            new = sorted(self._markers + [m], key=lambda x: x.t)
+            self._save(new)  # first: a failed write leaves the markers as they were
+            self._markers = new
         return m
 
     def remove(self, marker: Marker) -> None:
         with self._lock:
             if marker not in self._markers:
                 raise ValueError(f"no such marker: {marker!r}")
-            self._markers = [m for m in self._markers if m != marker]
-            self._save()
+            new = [m for m in self._markers if m != marker]
+            self._save(new)
+            self._markers = new
 
-    def _save(self) -> None:
-        doc = {"session": self.session_id, "markers": [asdict(m) for m in self._markers]}
+    def _save(self, markers: list[Marker]) -> None:
+        doc = {"session": self.session_id, "markers": [asdict(m) for m in markers]}
         tmp = self.path.with_name(self.path.name + ".tmp")
-        tmp.write_text(json.dumps(doc, indent=1))
-        os.replace(tmp, self.path)
+        try:
+            with open(tmp, "w", encoding="utf-8") as fh:
+                json.dump(doc, fh, indent=1)
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.replace(tmp, self.path)
+        except BaseException:
+            tmp.unlink(missing_ok=True)
+            raise

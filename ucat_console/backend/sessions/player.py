@@ -83,7 +83,7 @@ class Player:
         self._events: list[tuple[int, Event]] = [
             (r.log_time_ns, r.message) for r in reader.records([EVENTS])
         ]
-        self.markers = MarkerStore(reader.path.parent, reader.session_id)
+        self.markers = MarkerStore.shared(reader.path.parent, reader.session_id)
 
     # ------------------------------------------------------------------ state
     @property

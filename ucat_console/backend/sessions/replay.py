@@ -5,7 +5,10 @@ Each recorded :class:`~ucat_console.telemetry.messages.FinPlan` holds every inpu
 planner (target force, measured forward speed, start angle, previous plan). For each one,
 ``FinMpc(config).plan(target, v_body, theta0, u_prev, seed=seed)`` is run with the
 session's MPC configuration (the ``[mpc]`` table of its recorded configuration, then its
-recorded weights) changed by the requested weights.
+recorded weights) changed by the requested weights. The recorded start angle is the fin's
+measured angle, which winds up over whole turns in a long session; like the live planner
+(:class:`~ucat_console.backend.loop.planners.MpcFinPlanner`), the replay plans from it
+wrapped to (-pi, pi], so a plan is made from the same inputs as it was live.
 
 Predicted mechanical power of a plan ``u = [d_1, d_2, w_1, w_2]``: each stroke k turns the
 fin through ``|d_k|`` at the mean rate ``w_k`` for ``dt_k = |d_k| / w_k``; its drag power at
@@ -29,6 +32,7 @@ import numpy as np
 
 from ucat_console.backend.sessions.reader import SessionSource
 from ucat_console.control import FinMpc, MpcConfig
+from ucat_console.control.baseline import wrap_angle
 from ucat_console.control.power import drag_power
 from ucat_console.telemetry.channels import N_FINS, fin_plan
 from ucat_console.telemetry.messages import FinPlan
@@ -169,6 +173,7 @@ def counterfactual(
     fins: Iterable[int] | None = None,
     start: float | None = None,
     end: float | None = None,
+    progress: Callable[[int], None] | None = None,
 ) -> ReplayResult:
     """Re-plan every recorded FinPlan with ``weights`` changed (of every part, in time
     order, when ``reader`` is a whole split session).
@@ -176,7 +181,9 @@ def counterfactual(
     ``seed``: one seed for every plan, None (each fin's planner continues its random
     stream), or a function ``(plan, index) -> seed``; by default each plan's recorded seed,
     so the recorded weights reproduce the recorded plans exactly. ``base``: the configuration before
-    the change (default: the recorded one).
+    the change (default: the recorded one). ``progress(n)`` is called after every 50th plan
+    (``n`` plans done). Plans the planner refuses are counted in ``skipped`` and summarised
+    in one log line.
     """
     record_cfg = base if base is not None else recorded_config(reader)
     cfg = replay_config(record_cfg, weights)
@@ -188,13 +195,16 @@ def counterfactual(
     channels = [fin_plan(f) for f in sorted(fin_set)]
     rows: list[ReplayRow] = []
     skipped = 0
+    first_refusal = ""
     for i, (_, msg) in enumerate(reader.messages(channels, start, end)):
+        if progress is not None and i and i % 50 == 0:
+            progress(i)
         s = seed(msg, i) if callable(seed) else seed
         try:
-            plan = planners[msg.fin].plan(msg.target, msg.v_body, msg.theta0, msg.u_prev, seed=s)
+            plan = planners[msg.fin].plan(msg.target, msg.v_body, wrap_angle(msg.theta0), msg.u_prev, seed=s)
         except (ValueError, FloatingPointError) as e:
             skipped += 1
-            log.warning("fin %d plan at t=%.3f not replayed: %s", msg.fin, msg.t, e)
+            first_refusal = first_refusal or f"fin {msg.fin} at t={msg.t:.3f}: {e}"
             continue
         rec_power = predicted_power(msg.u, record_cfg)
         rows.append(ReplayRow(
@@ -204,4 +214,7 @@ def counterfactual(
             u=plan.u, st=plan.cost.st, force_error=plan.cost.force, cost=plan.cost.total,
             power=predicted_power(plan.u, cfg),
         ))
+    if skipped:
+        log.warning("%d of %d recorded plans not replayed (the planner refused their inputs); the first: %s",
+                    skipped, skipped + len(rows), first_refusal)
     return ReplayResult(cfg, tuple(rows), skipped)

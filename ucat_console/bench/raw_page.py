@@ -1,0 +1,155 @@
+"""A console page without a browser: viser's websocket protocol spoken directly.
+
+:class:`RawPage` connects to the console's websocket as the page's script does (the
+``viser-v<version>`` subprotocol, msgpack messages out, zstd-compressed msgpack batches
+in), keeps the GUI elements the server creates for it (uuid -> type and properties), and
+can click buttons, set values, and send anything at all: what a hostile page or a broken
+network would do. By default it answers the console's heartbeats as the real page does;
+``answer_heartbeats=False`` makes it a frozen page, :meth:`RawPage.stop_reading` one that
+stops reading its socket without closing it.
+
+The safety benchmark and the tests use it; it is not part of the console.
+"""
+
+from __future__ import annotations
+
+import socket
+import threading
+import time
+from typing import Any
+
+import msgspec.msgpack
+import viser
+import websockets.sync.client
+import zstandard
+
+CAMERA = {
+    "type": "ViewerCameraMessage", "wxyz": (1.0, 0.0, 0.0, 0.0), "position": (0.0, 0.0, 3.0),
+    "fov": 1.0, "near": 0.01, "far": 1000.0, "image_height": 600, "image_width": 800,
+    "look_at": (0.0, 0.0, 0.0), "up_direction": (0.0, 0.0, 1.0),
+}
+
+
+def decode_batch(frame: bytes) -> list[dict[str, Any]]:
+    """The messages of one server frame (binary arrays left as placeholders)."""
+    n = int.from_bytes(frame[0:8], "little")
+    c = int.from_bytes(frame[8:16], "little")
+    inner = zstandard.ZstdDecompressor().decompress(frame[16:16 + c], max_output_size=n)
+    return list(msgspec.msgpack.decode(inner)["messages"])
+
+
+class RawPage:
+    """One page on ``url`` (``http://host:port``); ``origin``: the Origin header to send
+    (None: none); ``local_host``: the loopback address to connect from."""
+
+    def __init__(self, url: str, *, origin: str | None = None, local_host: str | None = None,
+                 answer_heartbeats: bool = True, open_timeout: float = 20.0) -> None:
+        ws_url = url.replace("http://", "ws://", 1)
+        host, port = ws_url.split("//", 1)[1].split("/", 1)[0].rsplit(":", 1)
+        sock = socket.create_connection((host, int(port)), timeout=open_timeout,
+                                        source_address=(local_host, 0) if local_host else None)
+        headers = {"Origin": origin} if origin is not None else None
+        self.ws = websockets.sync.client.connect(
+            ws_url, sock=sock, subprotocols=[f"viser-v{viser.__version__}"], additional_headers=headers,
+            max_size=None, open_timeout=open_timeout, compression=None,
+        )
+        self.answer_heartbeats = answer_heartbeats
+        self._lock = threading.Lock()
+        self.elements: dict[str, dict[str, Any]] = {}  # uuid -> {"type", **props}
+        self.notifications: list[str] = []
+        self.heartbeats = 0
+        self.closed = False
+        self._reading = threading.Event()
+        self._reading.set()
+        self._thread = threading.Thread(target=self._read, name="raw-page", daemon=True)
+        self._thread.start()
+        self.send(CAMERA)  # the page shows: the console builds its controls
+
+    # ------------------------------------------------------------------ wire
+    def send(self, message: dict[str, Any]) -> None:
+        self.ws.send(msgspec.msgpack.encode(message))
+
+    def send_raw(self, data: bytes | str) -> None:
+        self.ws.send(data)
+
+    def _read(self) -> None:
+        try:
+            while True:
+                self._reading.wait()
+                frame = self.ws.recv()
+                if isinstance(frame, bytes):
+                    for m in decode_batch(frame):
+                        self._apply(m)
+        except Exception:
+            self.closed = True
+
+    def _apply(self, m: dict[str, Any]) -> None:
+        tp = m.get("type", "")
+        if tp == "LocalStorageGetItemRequestMessage":
+            self.heartbeats += 1
+            if self.answer_heartbeats:
+                try:
+                    self.send({"type": "LocalStorageGetItemResponseMessage", "value": None, "error": None,
+                               "request_uuid": m["request_uuid"]})
+                except Exception:
+                    pass
+            return
+        with self._lock:
+            if tp == "GuiUpdateMessage":
+                el = self.elements.get(m["uuid"])
+                if el is not None:
+                    el.update(m["updates"])
+            elif tp == "GuiRemoveMessage":
+                self.elements.pop(m["uuid"], None)
+            elif tp == "NotificationShowMessage":
+                self.notifications.append(str(m.get("props", {}).get("body", "")))
+            elif tp.startswith("Gui") and "uuid" in m and isinstance(m.get("props"), dict):
+                self.elements[m["uuid"]] = {"type": tp, **m["props"],
+                                            **({"value": m["value"]} if "value" in m else {})}
+
+    def stop_reading(self) -> None:
+        """Stop reading the socket without closing it (the server's sends back up)."""
+        self._reading.clear()
+
+    def close(self) -> None:
+        self._reading.set()
+        try:
+            self.ws.close()
+        except Exception:
+            pass
+
+    # ------------------------------------------------------------------ the page's controls
+    def find(self, label: str, type_: str | None = None) -> str | None:
+        """The uuid of an element whose label starts with ``label`` (None when there is none)."""
+        with self._lock:
+            for uuid, el in self.elements.items():
+                if str(el.get("label", "")).startswith(label) and (type_ is None or el["type"] == type_):
+                    return uuid
+        return None
+
+    def wait_for(self, label: str, type_: str | None = None, timeout: float = 30.0) -> str:
+        deadline = time.monotonic() + timeout
+        while True:
+            uuid = self.find(label, type_)
+            if uuid is not None:
+                return uuid
+            if time.monotonic() > deadline or self.closed:
+                raise TimeoutError(f"the page never got an element labelled {label!r}")
+            time.sleep(0.02)
+
+    def element(self, uuid: str) -> dict[str, Any]:
+        with self._lock:
+            return dict(self.elements.get(uuid, {}))
+
+    def update(self, uuid: str, **updates: Any) -> None:
+        self.send({"type": "GuiUpdateMessage", "uuid": uuid, "updates": updates})
+
+    def click(self, label: str) -> None:
+        self.update(self.wait_for(label, "GuiButtonMessage"), value=True)
+
+    def set_value(self, label: str, value: Any) -> None:
+        self.update(self.wait_for(label), value=value)
+
+    def take_control(self, token: str) -> None:
+        self.set_value("Pilot token", token)
+        self.click("Take control")

@@ -1,0 +1,534 @@
+"""What the console checks of every page before viser acts on it.
+
+viser trusts its pages: it accepts any websocket (any Origin), applies whatever property an
+update message names to whatever handle it names, and counts a page as present for as long
+as its TCP connection is open. :class:`PageGuard` stands between the websocket and viser:
+
+* **Handshake.** A websocket upgrade whose ``Origin`` is not the console's own is refused
+  with HTTP 403 and one log line (:func:`origin_allowed`): a browser page from elsewhere
+  cannot drive the console through the operator's browser. A request without ``Origin``
+  (a non-browser client, which could send any header anyway) is let through; the pilot
+  token still guards control. Frames over :data:`MAX_FRAME` bytes close the socket.
+* **Incoming messages.** Every message a page sends is decoded and admitted or refused
+  here, once, before viser sees it (:meth:`PageGuard.admit`): a GUI update may change only
+  the ``value`` of an input the console registered for that page (:meth:`PageGuard.allow`),
+  with a value of the input's kind and within its size; a pilot-only input only while the
+  page is the pilot's; the other message types only where the console uses them (camera,
+  commands, heartbeat answers). Everything else, and anything over the page's message
+  rate, is refused with one log line (no traceback) and changes nothing.
+* **Liveness.** Every ``heartbeat_period`` each page is asked for a value (viser's
+  localStorage request, which only the page's running script answers). A page that has
+  not answered for its allowed silence (:meth:`PageGuard.silence_limit`: the pilot's
+  ``failsafe.pilot_gone.timeout``, everyone else ``console.page_timeout``) is declared
+  gone (``on_gone(client, silent_for)``) and its socket is closed at once: a frozen
+  browser, a page that stops reading, or a cut Wi-Fi link is noticed in seconds, not at
+  the TCP retransmission timeout. A page that wakes up reconnects as a new page.
+
+viser does not offer hooks for these, so :func:`install` wraps two names in viser's
+websocket module (the ``websockets`` serve call and the per-connection message consumer);
+servers created without :func:`serve` are left as viser makes them.
+"""
+
+from __future__ import annotations
+
+import collections
+import ipaddress
+import logging
+import math
+import threading
+import time
+import types
+from dataclasses import dataclass
+from typing import Any, Callable, Iterable
+from urllib.parse import urlsplit
+
+import viser
+import viser._messages as vm
+import viser.infra._infra as vinfra
+
+log = logging.getLogger(__name__)
+
+#: the largest websocket frame a page may send (bytes); larger ones close its socket
+MAX_FRAME = 256 * 1024
+#: the longest text a page may put in any input (characters)
+MAX_TEXT = 4096
+#: messages a page may send per second (a token bucket; bursts up to twice this)
+MESSAGE_RATE = 120.0
+HEARTBEAT_KEY = "ucat-console-heartbeat"
+_HB_PREFIX = "ucat-hb-"
+_LOG_EVERY = 10.0  # s between log lines for repeated refusals of one page
+
+
+# ---------------------------------------------------------------------- handshake
+def _is_ip_or_localhost(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        ipaddress.ip_address(host.strip("[]"))
+        return True
+    except ValueError:
+        return False
+
+
+def origin_allowed(origin: str | None, host_header: str | None, allowed: Iterable[str] = ()) -> bool:
+    """Whether a websocket handshake with this ``Origin`` may connect.
+
+    Allowed: no Origin (not a browser); an Origin in ``allowed`` (e.g. the address of a
+    reverse proxy, ``https://console.example.org``); or the page's own origin, i.e. the
+    Origin's host and port are the request's ``Host`` and the host is an IP address or
+    ``localhost`` (a host name could be rebound by a hostile DNS server to this machine,
+    so names must be listed in ``allowed``).
+    """
+    if origin is None:
+        return True
+    origin = origin.strip()
+    if origin in {a.rstrip("/") for a in allowed}:
+        return True
+    try:
+        parts = urlsplit(origin)
+    except ValueError:
+        return False
+    if parts.scheme not in ("http", "https") or not parts.netloc or host_header is None:
+        return False
+    return parts.netloc.lower() == host_header.strip().lower() and _is_ip_or_localhost(
+        (parts.hostname or "").lower())
+
+
+# ---------------------------------------------------------------------- inputs
+@dataclass(frozen=True)
+class InputRule:
+    """Who may set one input's value, and what a value must be."""
+
+    client: int  # the page the input belongs to
+    pilot_only: bool
+    check: Callable[[Any], str | None]  # None when the value is acceptable, else why not
+    name: str
+
+
+def value_check(handle: Any, max_len: int) -> Callable[[Any], str | None]:
+    """The check of a value for ``handle`` by its kind (number, text, choice, switch, button)."""
+    if isinstance(handle, viser.GuiButtonHandle):
+        return lambda v: None if v is True else f"a button's value must be true, got {v!r}"
+    if isinstance(handle, viser.GuiCheckboxHandle):
+        return lambda v: None if isinstance(v, bool) else f"expected true or false, got {type(v).__name__}"
+    if isinstance(handle, viser.GuiDropdownHandle):
+        def choice(v: Any) -> str | None:
+            if not isinstance(v, str) or len(v) > max_len:
+                return "expected one of the options"
+            return None if v in handle.options else "not one of the options"
+        return choice
+    if isinstance(handle, viser.GuiTextHandle):
+        def text(v: Any) -> str | None:
+            if not isinstance(v, str):
+                return f"expected text, got {type(v).__name__}"
+            return None if len(v) <= max_len else f"text of {len(v)} characters, over the limit of {max_len}"
+        return text
+    if isinstance(handle, (viser.GuiNumberHandle, viser.GuiSliderHandle)):
+        slider = isinstance(handle, viser.GuiSliderHandle)
+
+        def number(v: Any) -> str | None:
+            if isinstance(v, bool) or not isinstance(v, (int, float)):
+                return f"expected a number, got {type(v).__name__}"
+            if not math.isfinite(v):
+                return "not a finite number"
+            if slider and not handle.min <= v <= handle.max:
+                return f"outside the slider's range [{handle.min:g}, {handle.max:g}]"
+            return None
+        return number
+    raise TypeError(f"no value check for a {type(handle).__name__}")
+
+
+# ---------------------------------------------------------------------- pages
+class _Page:
+    """One websocket: its connection, address and liveness."""
+
+    def __init__(self, client: int, conn: Any, ws_conn: Any, address: str, now: float) -> None:
+        self.client = client
+        self.conn = conn  # viser's WebsockClientConnection (queue_message)
+        self.ws = ws_conn  # the websockets ServerConnection (transport)
+        self.address = address
+        self.connected = now
+        self.last_answer = now
+        self.answers = 0
+        self.seq = 0
+        self.gone = False
+        self.tokens = 2 * MESSAGE_RATE
+        self.refill = now
+        self.refused = 0
+        self.last_log = -math.inf
+        self.unlogged = 0
+
+
+class PageGuard:
+    """The checks of one console's pages (module docstring).
+
+    ``is_pilot(client)``: whether a page is the pilot's now; ``pilot_timeout()``: the
+    pilot's allowed silence (s); ``on_connect(client, address)`` / ``on_gone(client,
+    silent_for)``: called when a websocket opens and when a silent page is declared gone.
+    """
+
+    def __init__(
+        self,
+        *,
+        is_pilot: Callable[[int], bool],
+        pilot_timeout: Callable[[], float],
+        page_timeout: float,
+        heartbeat_period: float,
+        allowed_origins: Iterable[str] = (),
+        on_connect: Callable[[int, str], None] = lambda c, a: None,
+        on_disconnect: Callable[[int], None] = lambda c: None,
+        on_gone: Callable[[int, float], None] = lambda c, s: None,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.is_pilot = is_pilot
+        self.pilot_timeout = pilot_timeout
+        self.page_timeout = float(page_timeout)
+        self.heartbeat_period = float(heartbeat_period)
+        self.allowed_origins = tuple(allowed_origins)
+        self.on_connect = on_connect
+        self.on_disconnect = on_disconnect
+        self.on_gone = on_gone
+        self.clock = clock
+        self._lock = threading.Lock()
+        self._pages: dict[int, _Page] = {}
+        self._by_ws: dict[Any, int] = {}
+        self._inputs: dict[str, InputRule] = {}
+        self._commands: dict[str, InputRule] = {}
+        self._origin_logged: dict[str, float] = {}
+        self.refusals: collections.deque[tuple[int | None, str]] = collections.deque(maxlen=1000)
+        self.server: viser.ViserServer | None = None
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    # ------------------------------------------------------------------ server
+    def serve(self, **kwargs: Any) -> viser.ViserServer:
+        """A ViserServer (``kwargs`` as for viser) whose pages pass through this guard."""
+        install()
+        with _PENDING_LOCK:  # the serve call happens inside the constructor, in viser's thread
+            _PENDING.append(self)
+            try:
+                server = viser.ViserServer(**kwargs)
+            finally:
+                if self in _PENDING:
+                    _PENDING.remove(self)
+        self.server = server
+        ws = server._websock_server
+        ws.on_client_connect(self._opened)
+        ws.on_client_disconnect(self._closed)
+        self._thread = threading.Thread(target=self._run, name="page-guard", daemon=True)
+        self._thread.start()
+        return server
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+
+    def handshake_refusal(self, connection: Any, request: Any) -> Any:
+        """None to go on with a websocket upgrade, else the HTTP response that refuses it."""
+        origin = request.headers.get("Origin")
+        if origin_allowed(origin, request.headers.get("Host"), self.allowed_origins):
+            return None
+        now = self.clock()
+        if now - self._origin_logged.get(origin, -math.inf) >= 60.0:
+            self._origin_logged[origin] = now
+            log.warning("refused a websocket from Origin %r (remote %s): not the console's own origin; "
+                        "add it to console.allowed_origins if it is a reverse proxy in front of the console",
+                        origin, _address(connection))
+        self.refusals.append((None, f"origin {origin}"))
+        return connection.respond(403, "Forbidden: this page's origin may not connect to the console\n")
+
+    # ------------------------------------------------------------------ connections (event loop)
+    def _opened(self, conn: Any) -> None:
+        cid = int(conn.client_id)
+        ws_conn = self.server._websock_server._live_connections.get(cid) if self.server else None
+        page = _Page(cid, conn, ws_conn, _address(ws_conn), self.clock())
+        with self._lock:
+            self._pages[cid] = page
+            if ws_conn is not None:
+                self._by_ws[ws_conn] = cid
+        try:
+            self.on_connect(cid, page.address)
+        except Exception:
+            log.exception("page %s: connect handling failed", cid)
+
+    def _closed(self, conn: Any) -> None:
+        cid = int(conn.client_id)
+        with self._lock:
+            page = self._pages.pop(cid, None)
+            if page is not None and page.ws is not None:
+                self._by_ws.pop(page.ws, None)
+            for table in (self._inputs, self._commands):
+                for key in [k for k, r in table.items() if r.client == cid]:
+                    del table[key]
+        try:
+            self.on_disconnect(cid)
+        except Exception:
+            log.exception("page %s: disconnect handling failed", cid)
+
+    def client_of(self, ws_conn: Any) -> int | None:
+        with self._lock:
+            return self._by_ws.get(ws_conn)
+
+    @property
+    def clients(self) -> tuple[int, ...]:
+        """Every open websocket's client id (whether or not its page has shown yet)."""
+        with self._lock:
+            return tuple(self._pages)
+
+    def address(self, client: int) -> str:
+        with self._lock:
+            p = self._pages.get(client)
+            return p.address if p is not None else ""
+
+    def silence(self, client: int) -> float | None:
+        """Seconds since the page last answered (None: no such page)."""
+        with self._lock:
+            p = self._pages.get(client)
+            return None if p is None else self.clock() - p.last_answer
+
+    # ------------------------------------------------------------------ inputs
+    def allow(self, handle: Any, client: int, *, pilot_only: bool, max_len: int = 200, name: str = "") -> None:
+        """Let page ``client`` set ``handle``'s value (only while it is the pilot's if
+        ``pilot_only``); text up to ``max_len`` characters."""
+        max_len = min(int(max_len), MAX_TEXT)
+        rule = InputRule(client, pilot_only, value_check(handle, max_len),
+                         name or getattr(handle, "label", "") or type(handle).__name__)
+        with self._lock:
+            self._inputs[handle._impl.uuid] = rule
+
+    def allow_command(self, handle: Any, client: int, *, pilot_only: bool, name: str = "") -> None:
+        rule = InputRule(client, pilot_only, lambda v: None, name or getattr(handle, "name", "command"))
+        with self._lock:
+            self._commands[handle._impl.uuid] = rule
+
+    def forget(self, handle: Any) -> None:
+        with self._lock:
+            self._inputs.pop(handle._impl.uuid, None)
+            self._commands.pop(handle._impl.uuid, None)
+
+    # ------------------------------------------------------------------ incoming (event loop)
+    def admit(self, client: int | None, message: Any) -> bool:
+        """Whether viser may act on ``message`` from page ``client`` (module docstring)."""
+        with self._lock:
+            page = self._pages.get(client) if client is not None else None
+            if page is None:
+                why = "a message from a socket that is not a page of the console"
+            else:
+                why = self._why_refused(page, message)
+        if why is None:
+            return True
+        self._refuse(client, why)
+        return False
+
+    def _why_refused(self, page: _Page, message: Any) -> str | None:
+        now = self.clock()
+        page.tokens = min(2 * MESSAGE_RATE, page.tokens + (now - page.refill) * MESSAGE_RATE)
+        page.refill = now
+        if page.tokens < 1.0:
+            return f"over the message rate of {MESSAGE_RATE:g}/s"
+        page.tokens -= 1.0
+        tp = type(message)
+        if tp is vm.ViewerCameraMessage:
+            return None
+        if tp is vm.LocalStorageGetItemResponseMessage:
+            uid = message.request_uuid
+            if isinstance(uid, str) and uid.startswith(_HB_PREFIX):
+                page.last_answer = now
+                page.answers += 1
+                return "heartbeat"  # taken here; viser has nothing to do with it
+            value = message.value
+            return None if value is None or (isinstance(value, str) and len(value) <= MAX_TEXT) else \
+                "a stored value over the size limit"
+        if tp is vm.GuiUpdateMessage:
+            rule = self._inputs.get(message.uuid) if isinstance(message.uuid, str) else None
+            if rule is None:
+                return f"an update of {_short(message.uuid)}, which is not an input of this page"
+            updates = message.updates
+            if not isinstance(updates, dict) or set(updates) != {"value"}:
+                props = ", ".join(sorted(map(str, updates))) if isinstance(updates, dict) else repr(updates)
+                return f"{rule.name}: only its value may change, not {_short(props)}"
+            if rule.client != page.client:
+                return f"{rule.name}: an input of another page"
+            if rule.pilot_only and not self.is_pilot(page.client):
+                return f"{rule.name}: only the pilot's page may use it"
+            bad = rule.check(updates["value"])
+            return None if bad is None else f"{rule.name}: {bad}"
+        if tp is vm.CommandTriggerMessage:
+            rule = self._commands.get(message.uuid) if isinstance(message.uuid, str) else None
+            if rule is None or rule.client != page.client:
+                return "a command that is not this page's"
+            if rule.pilot_only and not self.is_pilot(page.client):
+                return f"{rule.name}: only the pilot's page may use it"
+            return None
+        return f"a {tp.__name__}, which the console does not take"
+
+    def _refuse(self, client: int | None, why: str) -> None:
+        if why == "heartbeat":
+            return
+        self.refusals.append((client, why))
+        with self._lock:
+            page = self._pages.get(client) if client is not None else None
+            if page is None:
+                first = True
+            else:
+                page.refused += 1
+                now = self.clock()
+                first = now - page.last_log >= _LOG_EVERY
+                if first:
+                    more, page.unlogged, page.last_log = page.unlogged, 0, now
+                else:
+                    page.unlogged += 1
+        if first:
+            extra = f" ({more} more refused since the last line)" if page is not None and more else ""
+            log.warning("refused from page %s: %s%s", client, why, extra)
+
+    # ------------------------------------------------------------------ liveness (own thread)
+    def silence_limit(self, client: int) -> float:
+        """How long page ``client`` may go without answering before it is gone."""
+        floor = 3.0 * self.heartbeat_period
+        if self.is_pilot(client):
+            return max(float(self.pilot_timeout()), floor)
+        return max(self.page_timeout, floor)
+
+    def _run(self) -> None:
+        while not self._stop.wait(self.heartbeat_period):
+            try:
+                self.tick()
+            except Exception:
+                log.exception("page heartbeat failed")
+
+    def tick(self) -> None:
+        """Ask every page for a heartbeat; declare the ones silent too long gone."""
+        now = self.clock()
+        with self._lock:
+            pages = [p for p in self._pages.values() if not p.gone]
+        for p in pages:
+            silent = now - p.last_answer
+            if silent >= self.silence_limit(p.client):
+                self.declare_gone(p.client, silent)
+                continue
+            p.seq += 1
+            try:
+                p.conn.queue_message(vm.LocalStorageGetItemRequestMessage(
+                    key=HEARTBEAT_KEY, request_uuid=f"{_HB_PREFIX}{p.seq}"))
+                if self.server is not None:
+                    self.server._websock_server.flush_client(p.client)
+            except Exception:
+                log.debug("heartbeat to page %s not sent", p.client, exc_info=True)
+
+    def declare_gone(self, client: int, silent_for: float) -> None:
+        """Page ``client`` stopped answering: tell the console, then close its socket."""
+        with self._lock:
+            page = self._pages.get(client)
+            if page is None or page.gone:
+                return
+            page.gone = True
+        log.warning("page %s (%s) has not answered for %.1f s: treated as gone, its socket is closed",
+                    client, page.address or "?", silent_for)
+        try:
+            self.on_gone(client, silent_for)
+        finally:
+            self.close(client)
+
+    def close(self, client: int) -> None:
+        """Drop page ``client``'s TCP connection at once (no closing handshake to wait for)."""
+        with self._lock:
+            page = self._pages.get(client)
+        if page is None or page.ws is None or self.server is None:
+            return
+        loop = self.server._websock_server._background_event_loop
+        try:
+            loop.call_soon_threadsafe(page.ws.transport.abort)
+        except RuntimeError:
+            pass  # the server's loop has stopped
+
+
+def _short(text: object, n: int = 60) -> str:
+    s = str(text)
+    return s if len(s) <= n else s[:n] + "..."
+
+
+def _address(ws_conn: Any) -> str:
+    try:
+        addr = ws_conn.remote_address
+    except Exception:
+        return ""
+    if isinstance(addr, tuple) and addr:
+        return str(addr[0])
+    return str(addr or "")
+
+
+# ---------------------------------------------------------------------- hooks into viser
+_PENDING: list[PageGuard] = []
+_PENDING_LOCK = threading.Lock()
+_GUARDS: dict[Any, PageGuard] = {}  # websockets Server -> its guard
+_INSTALLED = False
+
+
+def install() -> None:
+    """Wrap viser's serve call and message consumer once (idempotent)."""
+    global _INSTALLED
+    if _INSTALLED:
+        return
+    real_ws = vinfra.websockets
+    real_serve = real_ws.asyncio.server.serve
+    real_consumer = vinfra._message_consumer
+
+    def guarded_serve(handler: Any, host: Any, port: Any, **kwargs: Any) -> Any:
+        guard = _PENDING.pop() if _PENDING else None
+        if guard is None:
+            return real_serve(handler, host, port, **kwargs)
+        http = kwargs.get("process_request")
+
+        def process_request(connection: Any, request: Any) -> Any:
+            if request.headers.get("Upgrade", "").lower() == "websocket":
+                refusal = guard.handshake_refusal(connection, request)
+                if refusal is not None:
+                    return refusal
+            return http(connection, request) if http is not None else None
+
+        kwargs["process_request"] = process_request
+        kwargs["max_size"] = MAX_FRAME
+        serving = real_serve(handler, host, port, **kwargs)
+        _GUARDS[serving.server] = guard
+        return serving
+
+    async def guarded_consumer(websocket: Any, handle_message: Any, message_class: Any) -> None:
+        guard = _GUARDS.get(getattr(websocket, "server", None))
+        if guard is None:
+            return await real_consumer(websocket, handle_message, message_class)
+        while True:
+            raw = await websocket.recv()
+            client = guard.client_of(websocket)
+            if not isinstance(raw, bytes):
+                guard._refuse(client, "a text frame (the console speaks binary messages only)")
+                continue
+            try:
+                message = message_class.deserialize(raw)
+            except Exception as e:  # not a viser message
+                guard._refuse(client, f"an undecodable message ({type(e).__name__})")
+                continue
+            if guard.admit(client, message):
+                handle_message(message)
+
+    server_ns = types.SimpleNamespace(**{k: getattr(real_ws.asyncio.server, k)
+                                         for k in dir(real_ws.asyncio.server) if not k.startswith("__")})
+    server_ns.serve = guarded_serve
+    asyncio_ns = types.SimpleNamespace(server=server_ns)
+    vinfra.websockets = _ModuleView(real_ws, asyncio=asyncio_ns)
+    vinfra._message_consumer = guarded_consumer
+    _INSTALLED = True
+
+
+class _ModuleView:
+    """A module with some attributes replaced (the rest read from the module itself)."""
+
+    def __init__(self, module: Any, **replaced: Any) -> None:
+        self._module = module
+        self._replaced = replaced
+
+    def __getattr__(self, name: str) -> Any:
+        if name in self._replaced:
+            return self._replaced[name]
+        return getattr(self._module, name)

@@ -1,0 +1,184 @@
+"""The console's own script in the page: the fixed status bar, DISARM, the link-loss banner,
+the theme switch and the gamepad.
+
+viser draws its panels; what must stay on screen whatever the operator scrolls to, and
+what must still work when the server is gone, is drawn here in plain DOM (no innerHTML:
+every text the server sends is set as text). The server installs the script once per page
+(:data:`INSTALL`, run by viser's RunJavascript message; installing again is a no-op) and
+then sends the bar's state a few times a second (:func:`update_source`). Two things the
+page does on its own:
+
+* **Link loss**: when no state has arrived for :data:`LINK_LOST_AFTER` s, a full-width
+  banner says the link is lost and what the robot does meanwhile (the configured
+  pilot-gone failsafe, as last told by the server); it goes with the next state.
+* **DISARM** (the bar's button, and the Esc key through the console's command) and the
+  gamepad send their messages through the page's own viser connection
+  (``window.__viserMutable.sendMessage``, viser's client, checked with viser 1.1.1 by the
+  browser tests) to inputs of this page that the server registered; the page guard
+  checks them like any other message.
+
+The gamepad (where the browser exposes one, polled 10 times a second while this page is
+the pilot's): left stick forward/back is the velocity, left stick left/right the yaw rate,
+right stick up/down the depth rate, each with a dead zone; button 1 (B / circle) disarms.
+Losing the gamepad or the page's focus sends zeros once (no runaway stick).
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+#: seconds without a state from the server before the link-loss banner shows
+LINK_LOST_AFTER = 1.5
+#: the gamepad's dead zone (fraction of full stick)
+DEAD_ZONE = 0.15
+#: the theme key in the browser's storage
+THEME_KEY = "ucat-theme"
+
+INSTALL = r"""
+(() => {
+  if (window.__ucat) return;
+  const LOST_MS = %(lost_ms)d, DEAD = %(dead)f;
+  const u = window.__ucat = {state: null, last: 0, lost: false, pad: {sent: null, at: 0, active: false}};
+  const css = document.createElement("style");
+  css.textContent = `
+    #ucat-bar { position: fixed; top: 0; left: 0; right: 0; height: 46px; z-index: 2147483000;
+      display: flex; align-items: center; gap: 10px; padding: 0 10px; box-sizing: border-box;
+      font: 14px/1.2 system-ui, sans-serif; background: #1f2328; color: #e6e6e6;
+      border-bottom: 1px solid #444; overflow: hidden; white-space: nowrap; }
+    #ucat-bar.light { background: #f3f4f6; color: #111; border-bottom-color: #bbb; }
+    #ucat-bar .armed { font-weight: 800; font-size: 18px; padding: 4px 12px; border-radius: 4px;
+      letter-spacing: 0.04em; }
+    #ucat-bar .armed.on { background: #d7263d; color: #fff; }
+    #ucat-bar .armed.off { background: #2f6f3e; color: #fff; }
+    #ucat-bar .item { opacity: 0.95; }
+    #ucat-bar .rec { color: #ff5c5c; font-weight: 700; }
+    #ucat-bar .fs { color: #fff; background: #b45309; padding: 2px 8px; border-radius: 3px; font-weight: 700; }
+    #ucat-bar .light-dot { display: inline-flex; align-items: center; gap: 4px; margin-right: 6px; cursor: help; }
+    #ucat-bar .dot { width: 11px; height: 11px; border-radius: 50%%; display: inline-block; }
+    #ucat-bar .dot.ok { background: #22c55e; } #ucat-bar .dot.warn { background: #f59e0b; }
+    #ucat-bar .dot.bad { background: #ef4444; } #ucat-bar .dot.off { background: #6b7280; }
+    #ucat-bar .grow { flex: 1 1 auto; }
+    #ucat-disarm { font: 800 18px system-ui, sans-serif; color: #fff; background: #d7263d; border: 0;
+      border-radius: 5px; padding: 6px 22px; cursor: pointer; letter-spacing: 0.05em; }
+    #ucat-disarm:disabled { background: #6b7280; cursor: not-allowed; opacity: 0.7; }
+    #ucat-theme { font: 14px system-ui, sans-serif; background: transparent; color: inherit;
+      border: 1px solid #777; border-radius: 4px; padding: 4px 8px; cursor: pointer; }
+    #ucat-banner { position: fixed; top: 46px; left: 0; right: 0; z-index: 2147483001; display: none;
+      padding: 14px 18px; font: 700 20px/1.3 system-ui, sans-serif; color: #fff; background: #b91c1c;
+      text-align: center; box-shadow: 0 4px 12px rgba(0,0,0,.4); }
+    #ucat-banner small { display: block; font-weight: 500; font-size: 15px; margin-top: 4px; }
+    body.ucat-has-bar #root { position: fixed !important; top: 46px !important; left: 0; right: 0;
+      bottom: 0; height: auto !important; }
+  `;
+  document.head.appendChild(css);
+  const el = (tag, cls, text) => { const e = document.createElement(tag); if (cls) e.className = cls;
+    if (text !== undefined) e.textContent = text; return e; };
+  const bar = el("div"); bar.id = "ucat-bar";
+  const armed = el("span", "armed off", "DISARMED"); armed.id = "ucat-armed";
+  const info = el("span", "item"); info.id = "ucat-info";
+  const rec = el("span", "rec"); rec.id = "ucat-rec";
+  const fs = el("span", "fs"); fs.id = "ucat-failsafes"; fs.style.display = "none";
+  const lights = el("span", "item"); lights.id = "ucat-lights";
+  const battery = el("span", "item"); battery.id = "ucat-battery";
+  const grow = el("span", "grow");
+  const theme = el("button", "", "theme"); theme.id = "ucat-theme"; theme.title = "dark / light (this browser)";
+  const disarm = el("button", "", "DISARM"); disarm.id = "ucat-disarm"; disarm.disabled = true;
+  disarm.title = "motors off now (key: Esc)";
+  bar.append(armed, info, rec, fs, lights, battery, grow, theme, disarm);
+  const banner = el("div"); banner.id = "ucat-banner";
+  const install = () => { if (!document.body) return setTimeout(install, 50);
+    document.body.append(bar, banner); document.body.classList.add("ucat-has-bar"); };
+  install();
+  const send = (uuid, value) => {
+    const m = window.__viserMutable;
+    if (!uuid || !m || !m.sendMessage) return false;
+    m.sendMessage({type: "GuiUpdateMessage", uuid: uuid, updates: {value: value}});
+    return true;
+  };
+  u.send = send;
+  disarm.addEventListener("click", () => { const s = u.state; if (s && !disarm.disabled) send(s.disarm_uuid, true); });
+  theme.addEventListener("click", () => { const s = u.state; if (s) send(s.theme_uuid, true); });
+  const showBanner = (on) => {
+    if (on === u.lost) return;
+    u.lost = on;
+    banner.style.display = on ? "block" : "none";
+    if (on) {
+      banner.textContent = "";
+      banner.append(document.createTextNode("LINK LOST: this page no longer reaches the console"));
+      const s = u.state;
+      banner.append(el("small", "", s ? s.link_policy : "the robot's failsafes act on their own"));
+    }
+  };
+  u.render = (s) => {
+    u.state = s; u.last = Date.now(); showBanner(false);
+    armed.textContent = s.armed ? "ARMED" : "DISARMED";
+    armed.className = "armed " + (s.armed ? "on" : "off");
+    info.textContent = `mode ${s.mode}  ·  pilot: ${s.pilot}  ·  link ok`;
+    rec.textContent = s.recording ? `● REC ${s.recording}` : "";
+    fs.style.display = s.failsafes.length ? "inline" : "none";
+    fs.textContent = s.failsafes.length ? "FAILSAFE " + s.failsafes.join(", ") : "";
+    lights.textContent = "";
+    for (const l of s.lights) {
+      const w = el("span", "light-dot"); w.title = l.why; w.dataset.name = l.name; w.dataset.state = l.state;
+      w.append(el("span", "dot " + l.state), document.createTextNode(l.name));
+      lights.append(w);
+    }
+    battery.textContent = s.battery;
+    disarm.disabled = !(s.armed && s.you_pilot);
+    bar.classList.toggle("light", !s.dark);
+    theme.textContent = s.dark ? "☀ light" : "☾ dark";
+  };
+  setInterval(() => { if (u.state && Date.now() - u.last > LOST_MS) showBanner(true); }, 250);
+  // ------------------------------------------------------------ gamepad
+  const axis = (v) => (Math.abs(v) < DEAD ? 0 : (v - Math.sign(v) * DEAD) / (1 - DEAD));
+  const padSend = (cmd) => {
+    const s = u.state; if (!s) return;
+    const key = JSON.stringify(cmd);
+    const now = Date.now();
+    const moving = cmd.v !== 0 || cmd.r !== 0 || cmd.dz !== 0;
+    if (key === u.pad.sent && !(moving && now - u.pad.at > 500)) return;
+    if (send(s.drive_uuid, key)) { u.pad.sent = key; u.pad.at = now; }
+  };
+  const stopPad = () => { if (u.pad.active) { padSend({v: 0, r: 0, dz: 0, stop: 1}); u.pad.active = false; } };
+  window.addEventListener("blur", stopPad);
+  window.addEventListener("gamepaddisconnected", stopPad);
+  setInterval(() => {
+    const s = u.state;
+    if (!s || !s.you_pilot || !navigator.getGamepads || !document.hasFocus()) { stopPad(); return; }
+    const pad = Array.from(navigator.getGamepads()).find((p) => p && p.connected);
+    if (!pad) { stopPad(); return; }
+    if (pad.buttons[1] && pad.buttons[1].pressed && s.armed) { send(s.disarm_uuid, true); }
+    const cmd = {v: -axis(pad.axes[1] || 0), r: axis(pad.axes[0] || 0), dz: axis(pad.axes[3] || 0)};
+    cmd.v = Math.round(cmd.v * 100) / 100; cmd.r = Math.round(cmd.r * 100) / 100;
+    cmd.dz = Math.round(cmd.dz * 100) / 100;
+    if (cmd.v !== 0 || cmd.r !== 0 || cmd.dz !== 0) u.pad.active = true;
+    if (u.pad.active) padSend(cmd);
+  }, 100);
+})();
+""" % {"lost_ms": int(LINK_LOST_AFTER * 1000), "dead": DEAD_ZONE}
+
+
+def update_source(state: dict[str, Any]) -> str:
+    """The script that shows ``state`` in the bar (JSON is a JavaScript literal)."""
+    return f"window.__ucat && window.__ucat.render({json.dumps(state, allow_nan=False)});"
+
+
+def parse_drive(text: object) -> tuple[float, float, float, bool]:
+    """``(velocity, yaw_rate, depth_rate, stop)`` fractions in [-1, 1] from the gamepad's
+    message, or ValueError naming what is wrong."""
+    if not isinstance(text, str) or len(text) > 200:
+        raise ValueError("gamepad: expected a short JSON object")
+    try:
+        d = json.loads(text)
+    except ValueError:
+        raise ValueError("gamepad: not JSON") from None
+    if not isinstance(d, dict) or not {"v", "r", "dz"} <= set(d) or set(d) - {"v", "r", "dz", "stop"}:
+        raise ValueError("gamepad: expected the keys v, r, dz")
+    out = []
+    for k in ("v", "r", "dz"):
+        x = d[k]
+        if isinstance(x, bool) or not isinstance(x, (int, float)) or not -1.0 <= x <= 1.0:
+            raise ValueError(f"gamepad: {k} must be a number in [-1, 1], got {x!r}")
+        out.append(float(x))
+    return out[0], out[1], out[2], bool(d.get("stop"))
