@@ -174,7 +174,7 @@ class FinMpc:
         )
 
     def _plan_scipy(self, f, v, th, up, seed, refine) -> Plan:
-        import scipy.optimize  # the reference solver only: the console never loads scipy
+        import scipy.optimize  # here only: nothing else of the console imports scipy.optimize
 
         cfg = self.config
         rng = np.random.default_rng(seed) if seed is not None else self._np_rng
