@@ -21,7 +21,6 @@ from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
-import scipy.optimize
 
 from ucat_console.control import mpc_kernels as K
 from ucat_console.control.cost import H, CostBreakdown, breakdown_from_terms, cost_terms
@@ -175,6 +174,8 @@ class FinMpc:
         )
 
     def _plan_scipy(self, f, v, th, up, seed, refine) -> Plan:
+        import scipy.optimize  # here only: nothing else of the console imports scipy.optimize
+
         cfg = self.config
         rng = np.random.default_rng(seed) if seed is not None else self._np_rng
         t0 = time.perf_counter()
