@@ -1,5 +1,6 @@
 # Shared by scripts/run.sh and scripts/test.sh: make a virtual environment in .venv
-# and install the project into it (with extras given as $1, e.g. "test").
+# and install the project into it (with extras given as $1, e.g. "test"), every package at
+# the version constraints.txt pins, so that every install is the same.
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
@@ -17,8 +18,8 @@ if [ ! -x .venv/bin/python ]; then
 fi
 extras="${1:-}"
 stamp=".venv/.installed${extras:+-$extras}"
-if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
+if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] || [ constraints.txt -nt "$stamp" ]; then
   .venv/bin/python -m pip install -q --upgrade pip
-  if [ -n "$extras" ]; then .venv/bin/python -m pip install -q -e ".[$extras]"; else .venv/bin/python -m pip install -q -e .; fi
+  .venv/bin/python -m pip install -q -c constraints.txt -e ".${extras:+[$extras]}"
   touch "$stamp"
 fi

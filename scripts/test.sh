@@ -1,8 +1,12 @@
 #!/usr/bin/env bash
-# Install the project with its test dependencies (and Debian's chromium for the
-# browser tests), then run the whole test suite. Extra arguments go to pytest.
+# Install the project with its test dependencies (every extra; Debian's chromium for the
+# browser tests, node and npm for the independent session reader), then run the whole test
+# suite. Extra arguments go to pytest.
 source "$(dirname "$0")/_env.sh" "test"
 if [ ! -x /usr/bin/chromium ]; then
   as_root apt-get update -qq && as_root apt-get install -y -qq chromium
+fi
+if ! command -v npm >/dev/null; then
+  as_root apt-get update -qq && as_root apt-get install -y -qq nodejs npm
 fi
 exec .venv/bin/python -m pytest "$@"

@@ -3,8 +3,10 @@ stream messages."""
 
 from __future__ import annotations
 
+import json
 import threading
 import time
+from pathlib import Path
 from typing import Any, Callable
 
 import pytest
@@ -73,3 +75,13 @@ def wait_for(predicate: Callable[[], Any], timeout: float = 10.0, what: str = "c
         if time.monotonic() > deadline:
             pytest.fail(f"gave up waiting for {what}")
         time.sleep(0.01)
+
+
+def sim_config(directory: Path) -> Path:
+    """config/sim-tuned.toml recording into ``directory`` (a headless run records from
+    arming), for runs of the command in a child process."""
+    root = Path(__file__).resolve().parents[1]
+    cfg = directory / "sim.toml"
+    cfg.write_text((root / "config" / "sim-tuned.toml").read_text()
+                   + f"\n[console]\nsessions_dir = {json.dumps(str(directory))}\n")
+    return cfg

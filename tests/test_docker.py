@@ -74,7 +74,12 @@ def test_the_container_reaches_every_device_the_robot_configuration_names() -> N
 
 def test_the_image_installs_the_project_and_keeps_sessions_outside() -> None:
     assert dockerfile_instruction("FROM").startswith("python:3.11")
-    assert "pip install -e ." in (DOCKER / "Dockerfile").read_text()
+    text = (DOCKER / "Dockerfile").read_text()
+    assert 'pip install -c constraints.txt -e ".[foxglove]"' in text  # pinned, reproducible
+    assert (ROOT / "constraints.txt").is_file()
+    patterns = [x for x in (DOCKER / "Dockerfile.dockerignore").read_text().splitlines()
+                if x and not x.startswith("#")]
+    assert not check_rootfs.ignored("constraints.txt", patterns)  # in the build context
     workdir = dockerfile_instruction("WORKDIR")
     volume = json.loads(dockerfile_instruction("VOLUME"))
     assert volume == [f"{workdir}/sessions"]

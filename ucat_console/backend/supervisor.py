@@ -55,6 +55,7 @@ from ucat_console.backend.sim.robot_io import SimRobotIO
 from ucat_console.robot.interface import RobotIO
 from ucat_console.backend.safety import CHANNELS as SAFETY_CHANNELS
 from ucat_console.backend.safety import SafetyMonitor, Transition
+from ucat_console.backend.sessions.foxglove import robot_geometry
 from ucat_console.backend.sessions.recorder import Recorder
 from ucat_console.config import AppConfig
 from ucat_console.control.allocation import BodySetpoints
@@ -255,7 +256,7 @@ class Supervisor:
         self.recorder = Recorder(
             self.stream, cfg.recorder,
             directory=sessions_dir if sessions_dir is not None else (cfg.console.sessions_dir or None),
-            epoch_offset=self.wall0,
+            epoch_offset=self.wall0, geometry=robot_geometry(cfg.plant),
         )
         self._pending: queue.SimpleQueue[tuple[Callable[[], Any], dict]] = queue.SimpleQueue()
         self._pending_lock = threading.Lock()

@@ -161,7 +161,7 @@ def measure_ui(duration: float = 20.0, pages: int = 2, warmup: float = 5.0, velo
                                            timeout=60_000)
                     opened.append(page)
                 for page in opened:
-                    page.wait_for_function("() => document.querySelectorAll('.uplot').length >= 6",
+                    page.wait_for_function("() => document.querySelectorAll('.uplot').length >= 5",
                                            timeout=60_000)
                 time.sleep(warmup)
                 for page in opened:

@@ -44,6 +44,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run_mpc(args: argparse.Namespace) -> int:
+    from ucat_console.experiments import require_extra
+
+    require_extra("tqdm")
     from tqdm import tqdm
 
     from ucat_console.bench import mpc as B

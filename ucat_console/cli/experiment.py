@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from ucat_console.experiments.runner import EXPERIMENTS
+from ucat_console.experiments import EXPERIMENTS, require_extra
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -28,6 +28,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    require_extra()
     from ucat_console.experiments.runner import run_experiments
 
     command = "ucat-console experiment " + " ".join(sys.argv[2:] if len(sys.argv) > 2 else args.names)

@@ -3,6 +3,7 @@
     ucat-console run                         # simulated robot, page on http://127.0.0.1:8080
     ucat-console run --config pool.toml --port 0
     ucat-console run --headless --duration 60 --mode mpc_sync --velocity 0.2 --depth 1 --record
+    ucat-console run --foxglove-port 8765     # and the live robot in Foxglove / Lichtblick
 
 With the page, the motors stay disarmed until the pilot (the page that entered the token
 printed below) arms them. ``--headless`` runs without a page and arms at once with the
@@ -38,6 +39,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--record", action="store_true", help="record the whole run")
     p.add_argument("--playback", default=None, metavar="FILE",
                    help="open this session file (in the sessions directory) in the Review tab")
+    p.add_argument("--foxglove-port", type=int, default=None, metavar="P",
+                   help="also serve the live telemetry to Foxglove / Lichtblick (read-only "
+                        "WebSocket on --host, port P; 0: any free port)")
     p.set_defaults(func=run)
 
 
@@ -52,6 +56,23 @@ def _config(args: argparse.Namespace) -> Any:
         console = console.replace(port=args.port)
     loop = cfg.loop if args.mode is None else cfg.loop.replace(mode=args.mode)
     return cfg.replace(console=console, loop=loop)
+
+
+def _foxglove_server(port: int, cfg: Any, sup: Any) -> Any:
+    """The read-only Foxglove server on the console's address (its URL printed)."""
+    from ucat_console.backend.foxglove_live import FoxgloveServer
+    from ucat_console.backend.sessions.foxglove import robot_geometry
+    from ucat_console.ui.app import is_loopback
+
+    host = cfg.console.host
+    if not is_loopback(host):
+        print(f"WARNING: the Foxglove server binds {host}: the telemetry is readable from "
+              "other machines", file=sys.stderr)
+    fox = FoxgloveServer(sup.stream, host=host, port=port, epoch_offset=sup.wall0,
+                         geometry=robot_geometry(cfg.plant))
+    print(f"Foxglove server on {fox.url}  (port {fox.port}; open it in Foxglove or Lichtblick: "
+          f"Open connection, Foxglove WebSocket; read-only)", flush=True)
+    return fox
 
 
 def run(args: argparse.Namespace) -> int:
@@ -82,6 +103,7 @@ def run(args: argparse.Namespace) -> int:
           flush=True)
     sup = Supervisor(cfg, clock=SimulatedClock() if args.fast else None)
     app = None
+    fox = None
     last_power: list[Any] = [None]
     sup.stream.subscribe(lambda c, m: last_power.__setitem__(0, m), [ch.POWER])
     try:
@@ -100,6 +122,8 @@ def run(args: argparse.Namespace) -> int:
                 if not (directory / name).is_file():
                     raise ValueError(f"--playback: {args.playback}: no such session file")
                 app.initial_session = name  # every page opens it in its Review tab
+        if args.foxglove_port is not None:
+            fox = _foxglove_server(args.foxglove_port, cfg, sup)
         sup.start()
         if args.record:
             print(f"recording session {sup.start_recording(LOCAL)}")
@@ -126,6 +150,8 @@ def run(args: argparse.Namespace) -> int:
         paths = sup.recorder.paths
         h = sup.health()
         sup.stop()
+        if fox is not None:
+            fox.stop()
         if app is not None:
             app.stop()
         signal.signal(signal.SIGTERM, previous)

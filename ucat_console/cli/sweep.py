@@ -26,6 +26,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ucat_console.experiments import require_extra
+
+    require_extra()
     from ucat_console.experiments.runner import run_sweep_command
 
     if args.seed < 0:

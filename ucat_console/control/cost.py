@@ -28,6 +28,12 @@ def strouhal(u: ArrayLike, v_body: float, cfg: MpcConfig) -> NDArray:
     return 2.0 * freq * amp / max(float(v_body), cfg.v_floor)
 
 
+def stroke_strouhal(w: float, v_body: float, cfg: MpcConfig) -> float:
+    """St of one stroke at mean rate ``w``: :func:`strouhal` of a cycle of two such strokes,
+    ``w L_f / (2 max(V_B, v_floor))`` (the stroke angle cancels)."""
+    return abs(float(w)) * cfg.fin_length / (2.0 * max(float(v_body), cfg.v_floor))
+
+
 def eta_hat(st: ArrayLike, cfg: MpcConfig) -> NDArray:
     """Efficiency surrogate eta_max (St/St_opt) exp(1 - St/St_opt) (eq 11)."""
     x = np.asarray(st, dtype=float) / cfg.st_opt

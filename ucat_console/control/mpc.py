@@ -27,7 +27,6 @@ from dataclasses import dataclass
 from typing import Callable, Sequence
 
 import numpy as np
-import scipy.optimize
 
 from ucat_console.control import mpc_kernels as K
 from ucat_console.control.cost import H, CostBreakdown, breakdown_from_terms, cost_terms
@@ -197,6 +196,8 @@ class FinMpc:
         )
 
     def _plan_scipy(self, f, v, th, up, seed, refine) -> Plan:
+        import scipy.optimize  # here only: nothing else of the console imports scipy.optimize
+
         cfg = self.config
         rng = np.random.default_rng(seed) if seed is not None else self._np_rng
         clock = self._clock or (lambda: math.nan)

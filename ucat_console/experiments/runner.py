@@ -19,14 +19,13 @@ from contextlib import ExitStack
 from pathlib import Path
 from typing import Any
 
+from ucat_console.experiments import EXPERIMENTS, figures, open_loop
 from ucat_console.experiments import closed_loop_runs as closed
-from ucat_console.experiments import figures, open_loop
 from ucat_console.experiments.distributed import task_client
 from ucat_console.experiments.report import render
 
 log = logging.getLogger(__name__)
 
-EXPERIMENTS = ("E1", "E2", "E3", "E4", "E5")
 _CLOSED = ("E4", "E5")
 
 

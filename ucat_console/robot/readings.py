@@ -2,37 +2,46 @@
 
 The drivers (``backend/devices``) and the simulated sensors (``backend/sim``) produce these
 types, so the estimator and the body-frame layer never know whether a reading came through
-a real device, an emulator or the headless simulator. Units are SI unless the field name says otherwise; ``t`` is the
-receiving clock's time in seconds.
+a real device, an emulator or the headless simulator. Units are SI unless the field name
+says otherwise; ``t`` is the receiving clock's time in seconds. Each field's meaning, unit
+and frame is its :class:`~ucat_console.robot.fields.Doc`.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Annotated
+
+from ucat_console.robot.fields import RPY, WXYZ, XYZ, Doc
+
+Time = Annotated[float, Doc("time on the receiving clock", unit="s")]
 
 
 @dataclass(frozen=True)
 class ImuReading:
     """MIP sensor data set 0x80: accel in g, gyro in rad/s, orientation when streamed."""
 
-    t: float
-    accel_g: tuple[float, float, float]
-    gyro: tuple[float, float, float]
-    quaternion: tuple[float, float, float, float] | None = None  # (w, x, y, z)
-    euler: tuple[float, float, float] | None = None  # roll, pitch, yaw (rad)
+    t: Time
+    accel_g: Annotated[tuple[float, float, float], Doc("acceleration", "g", "IMU", XYZ)]
+    gyro: Annotated[tuple[float, float, float], Doc("angular rate", "rad/s", "IMU", XYZ)]
+    quaternion: Annotated[tuple[float, float, float, float] | None,
+                          Doc("orientation when streamed (held w first)", "1", "IMU to NED",
+                              WXYZ)] = None
+    euler: Annotated[tuple[float, float, float] | None,
+                     Doc("orientation when streamed", "rad", "IMU to NED", RPY)] = None
 
 
 @dataclass(frozen=True)
 class DvlVelocity:
     """DVL A50 ``velocity`` report in the DVL's frame; ``valid`` False means missing data."""
 
-    t: float
-    vx: float
-    vy: float
-    vz: float
-    valid: bool
-    altitude: float
-    fom: float
+    t: Time
+    vx: Annotated[float, Doc("velocity along the DVL's x", "m/s", "DVL")]
+    vy: Annotated[float, Doc("velocity along the DVL's y", "m/s", "DVL")]
+    vz: Annotated[float, Doc("velocity along the DVL's z", "m/s", "DVL")]
+    valid: Annotated[bool, Doc("the DVL has bottom lock (False: the velocity is missing)")]
+    altitude: Annotated[float, Doc("distance to the bottom", "m")]
+    fom: Annotated[float, Doc("figure of merit (velocity uncertainty)", "m/s")]
 
 
 @dataclass(frozen=True)
@@ -53,9 +62,9 @@ class DvlPosition:
 class DepthReading:
     """Pressure transducer reading converted to depth below the zeroed surface."""
 
-    t: float
-    depth_m: float
-    pressure_pa: float
+    t: Time
+    depth_m: Annotated[float, Doc("depth below the zeroed surface", "m")]
+    pressure_pa: Annotated[float, Doc("absolute pressure", "Pa")]
 
 
 @dataclass(frozen=True)

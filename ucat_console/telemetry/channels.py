@@ -14,6 +14,7 @@ from ucat_console.telemetry.messages import (
     BodyState,
     FinPlan,
     FinState,
+    FinStrouhal,
     Power,
     Setpoints,
     Status,
@@ -39,6 +40,10 @@ def fin_plan(fin: int) -> str:
     return f"fin/{fin}/plan"
 
 
+def fin_strouhal(fin: int) -> str:
+    return f"fin/{fin}/strouhal"
+
+
 #: every channel and its message type
 CHANNELS: dict[str, type] = {
     BODY_STATE: BodyState,
@@ -52,6 +57,7 @@ CHANNELS: dict[str, type] = {
     DEPTH: DepthReading,
     **{fin_state(i): FinState for i in range(N_FINS)},
     **{fin_plan(i): FinPlan for i in range(N_FINS)},
+    **{fin_strouhal(i): FinStrouhal for i in range(N_FINS)},
 }
 
 

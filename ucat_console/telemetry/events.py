@@ -7,7 +7,9 @@ message type, so the UI, the recorder and the failsafes read faults the same way
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Annotated, Any, Callable
+
+from ucat_console.robot.fields import Doc
 
 #: severities, lowest first
 LEVELS = ("debug", "info", "warning", "error", "fatal")
@@ -25,12 +27,12 @@ class Event:
     ``data`` holds the details (JSON-compatible values only).
     """
 
-    t: float
-    source: str
-    code: str
-    message: str
-    level: str = "warning"
-    data: dict[str, Any] = field(default_factory=dict)
+    t: Annotated[float, Doc("time on the clock of whoever raised it", "s")]
+    source: Annotated[str, Doc("the device or component")]
+    code: Annotated[str, Doc("machine-readable code")]
+    message: Annotated[str, Doc("for people")]
+    level: Annotated[str, Doc("debug, info, warning, error or fatal")] = "warning"
+    data: Annotated[dict[str, Any], Doc("details (JSON values)")] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.level not in LEVELS:

@@ -4,108 +4,145 @@ Every message is a frozen dataclass with a time ``t`` in seconds on the stream's
 (the wall clock, UNIX epoch, for live and real-time runs; simulated time from 0 for
 headless runs, which the recorder offsets to an epoch). Values are SI; angles in
 radians. Fin indices are the plant's (0 front-right, 1 back-right, 2 back-left,
-3 front-left).
+3 front-left). Each field's meaning, unit and frame is its :class:`Doc` annotation (the
+session schemas carry it as the field's description).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Annotated
+
+from ucat_console.robot.fields import WXYZ, XY, XYZ, Doc
 
 Vec3 = tuple[float, float, float]
 Quat = tuple[float, float, float, float]  # (w, x, y, z)
 Vec4 = tuple[float, float, float, float]
+
+Time = Annotated[float, Doc("time on the stream's clock", unit="s")]
+Fin = Annotated[int, Doc("fin index (0 front-right, 1 back-right, 2 back-left, 3 front-left)")]
+#: a plan u = [d_1, d_2, w_1, w_2] and the stroke commands [theta_1, w_1, theta_2, w_2]
+PLAN_NAMES = ("d_1", "d_2", "w_1", "w_2")
+COMMAND_NAMES = ("theta_1", "w_1", "theta_2", "w_2")
 
 
 @dataclass(frozen=True)
 class BodyState:
     """The estimator's vehicle state (and the simulator's truth, when simulated)."""
 
-    t: float
-    position: Vec3  # NED, m (x north, y east, z down = depth)
-    orientation: Quat  # body to NED
-    velocity: Vec3  # body frame u, v, w, m/s
-    rates: Vec3  # body frame p, q, r, rad/s
-    depth: float  # m, positive down
+    t: Time
+    position: Annotated[Vec3, Doc("position (x north, y east, z down = depth)", "m", "NED", XYZ)]
+    orientation: Annotated[Quat, Doc("attitude, rotating body vectors into NED (held w first)",
+                                     "1", "body to NED", WXYZ)]
+    velocity: Annotated[Vec3, Doc("velocity u, v, w", "m/s", "body FRD", XYZ)]
+    rates: Annotated[Vec3, Doc("angular rates p, q, r", "rad/s", "body FRD", XYZ)]
+    depth: Annotated[float, Doc("depth, positive down", "m")]
 
 
 @dataclass(frozen=True)
 class Setpoints:
-    t: float
-    velocity: float  # forward, m/s
-    depth: float  # m
-    yaw_rate: float  # rad/s, positive clockwise seen from above (NED z down)
+    t: Time
+    velocity: Annotated[float, Doc("forward velocity setpoint", "m/s")]
+    depth: Annotated[float, Doc("depth setpoint", "m")]
+    yaw_rate: Annotated[float, Doc("yaw rate setpoint, positive clockwise seen from above",
+                                   "rad/s", "NED")]
 
 
 @dataclass(frozen=True)
 class BodyCommand:
     """Outputs of the body-frame PIDs before allocation."""
 
-    t: float
-    force_x: float  # F_x*, fin-model convention (forward thrust < 0), N
-    force_y: float  # F_y*, N
-    yaw: float  # yaw thrust differential, N
+    t: Time
+    force_x: Annotated[float, Doc("F_x*, fin-model convention (forward thrust < 0)", "N")]
+    force_y: Annotated[float, Doc("F_y* (> 0 lifts)", "N")]
+    yaw: Annotated[float, Doc("yaw thrust differential", "N")]
 
 
 @dataclass(frozen=True)
 class FinState:
     """One fin's measured and commanded motion."""
 
-    t: float
-    fin: int
-    angle: float  # measured, rad
-    rate: float  # measured, rad/s
-    angle_cmd: float  # target of the stroke being executed, rad
-    rate_cmd: float  # its profile velocity, rad/s
+    t: Time
+    fin: Fin
+    angle: Annotated[float, Doc("measured fin angle (0 neutral, > 0 tip up)", "rad")]
+    rate: Annotated[float, Doc("measured fin rate", "rad/s")]
+    angle_cmd: Annotated[float, Doc("target angle of the stroke being executed", "rad")]
+    rate_cmd: Annotated[float, Doc("profile velocity of that stroke", "rad/s")]
+
+
+@dataclass(frozen=True)
+class FinStrouhal:
+    """The Strouhal number of each stroke as it starts, with the corridor it should keep to.
+
+    ``st = w L_f / (2 max(V_B, v_floor))``: a stroke at mean rate ``w`` is half a cycle
+    of frequency ``w / (2 |d|)`` and amplitude ``|d| L_f / 2`` (control.md section 2)."""
+
+    t: Time
+    fin: Fin
+    st: Annotated[float, Doc("Strouhal number of the stroke at the measured speed", "1")]
+    st_low: Annotated[float, Doc("lower edge of the efficient corridor", "1")]
+    st_high: Annotated[float, Doc("upper edge of the efficient corridor", "1")]
+    st_opt: Annotated[float, Doc("the optimal Strouhal number the MPC aims at", "1")]
+    v_body: Annotated[float, Doc("measured forward speed used", "m/s")]
+    stroke: Annotated[float, Doc("stroke angle d (target minus start)", "rad")]
+    rate: Annotated[float, Doc("stroke rate w (profile velocity)", "rad/s")]
 
 
 @dataclass(frozen=True)
 class FinPlan:
     """One planned cycle of one fin, with every input needed to replay it."""
 
-    t: float
-    fin: int
-    mode: str  # "mpc", "mpc_sync", "baseline"
-    target: tuple[float, float]  # (f_x*, f_y*), N
-    v_body: float  # measured forward speed used, m/s
-    theta0: float  # fin angle the plan starts from, rad
-    u_prev: Vec4
-    u: Vec4  # [d_1, d_2, w_1, w_2]
-    commands: Vec4  # [theta_1, w_1, theta_2, w_2]
-    cost_total: float
-    cost_force: float
-    cost_strouhal: float
-    cost_amplitude: float
-    cost_smoothness: float
-    st: float
-    mean_force: tuple[float, float]
-    solve_time: float  # s
-    late: bool  # the plan arrived after its fin went idle
-    amplitude: float = 0.0  # baseline only: theta_max, rad
-    centre: float = 0.0  # baseline only: oscillation centre, rad
-    seed: int = -1  # the planner's seed for this plan (-1: none), so a replay is exact
+    t: Time
+    fin: Fin
+    mode: Annotated[str, Doc('fin controller: "mpc", "mpc_sync" or "baseline"')]
+    target: Annotated[tuple[float, float], Doc("force target (f_x*, f_y*)", "N", "fin model", XY)]
+    v_body: Annotated[float, Doc("measured forward speed used", "m/s")]
+    theta0: Annotated[float, Doc("fin angle the plan starts from", "rad")]
+    u_prev: Annotated[Vec4, Doc("previous plan [d_1, d_2, w_1, w_2]", "rad, rad/s", "",
+                                PLAN_NAMES)]
+    u: Annotated[Vec4, Doc("plan [d_1, d_2, w_1, w_2]: strokes and mean rates", "rad, rad/s", "",
+                           PLAN_NAMES)]
+    commands: Annotated[Vec4, Doc("stroke commands [theta_1, w_1, theta_2, w_2]", "rad, rad/s",
+                                  "", COMMAND_NAMES)]
+    cost_total: Annotated[float, Doc("cost J", "1")]
+    cost_force: Annotated[float, Doc("force term c_force (1-norm)", "N")]
+    cost_strouhal: Annotated[float, Doc("Strouhal penalty c_St", "1")]
+    cost_amplitude: Annotated[float, Doc("amplitude term c_amp", "m")]
+    cost_smoothness: Annotated[float, Doc("smoothness term c_diff", "1")]
+    st: Annotated[float, Doc("Strouhal number of the planned cycle", "1")]
+    mean_force: Annotated[tuple[float, float], Doc("cycle-mean force (f_bar_x, f_bar_y)", "N",
+                                                   "body", XY)]
+    solve_time: Annotated[float, Doc("planner time", "s")]
+    late: Annotated[bool, Doc("the plan arrived after its fin went idle")]
+    amplitude: Annotated[float, Doc("baseline only: theta_max", "rad")] = 0.0
+    centre: Annotated[float, Doc("baseline only: oscillation centre", "rad")] = 0.0
+    seed: Annotated[int, Doc("the planner's seed for this plan (-1: none), so a replay is exact",
+                             wide=True)] = -1
 
 
 @dataclass(frozen=True)
 class Power:
     """Mechanical power from encoder positions (control.md section 9)."""
 
-    t: float
-    per_fin: Vec4  # W
-    total: float  # W
-    mean_total: float  # running mean over the time the fins were driven (armed), W
-    energy: float  # J spent while armed
-    distance: float  # m travelled while armed
-    energy_per_metre: float  # J/m (NaN until the vehicle has moved)
+    t: Time
+    per_fin: Annotated[Vec4, Doc("power per fin, by fin index", "W")]
+    total: Annotated[float, Doc("total power", "W")]
+    mean_total: Annotated[float, Doc("running mean over the time the fins were driven (armed)",
+                                     "W")]
+    energy: Annotated[float, Doc("energy spent while armed", "J")]
+    distance: Annotated[float, Doc("distance travelled while armed", "m")]
+    energy_per_metre: Annotated[float, Doc("energy per metre (NaN until the vehicle has moved)",
+                                           "J/m")]
 
 
 @dataclass(frozen=True)
 class Status:
     """The supervisor's state, published at a low rate and on every change."""
 
-    t: float
-    armed: bool
-    mode: str
-    pilot: str  # client id of the pilot, "" when none
-    failsafes: tuple[str, ...]  # active failsafe names
-    late_plans: int
-    source: str  # "sim", "robot", "playback"
+    t: Time
+    armed: Annotated[bool, Doc("motors armed")]
+    mode: Annotated[str, Doc("fin controller")]
+    pilot: Annotated[str, Doc('client id of the pilot, "" when none')]
+    failsafes: Annotated[tuple[str, ...], Doc("active failsafe names")]
+    late_plans: Annotated[int, Doc("plans that arrived after their fin went idle")]
+    source: Annotated[str, Doc('"sim", "robot" or "playback"')]

@@ -27,6 +27,7 @@ from ucat_console.robot.rotations import quaternion_from_matrix
 from ucat_console.telemetry.messages import BodyState, FinState
 
 HULL_COLOUR = (245, 196, 0)
+NOSE_COLOUR = (200, 60, 40)
 FIN_COLOUR = (40, 40, 40)
 GHOST_COLOUR = (30, 144, 255)
 WATER_COLOUR = (64, 140, 200)
@@ -98,7 +99,7 @@ class RobotScene:
         self.ned = scene.add_frame("/ned", show_axes=False, wxyz=NED_WXYZ)
         self.body = scene.add_frame("/ned/ucat", show_axes=False)
         self.hull = scene.add_box("/ned/ucat/hull", color=HULL_COLOUR, dimensions=tuple(size))
-        scene.add_box("/ned/ucat/nose", color=(200, 60, 40), dimensions=(0.03, size[1] * 0.6, size[2] * 0.6),
+        scene.add_box("/ned/ucat/nose", color=NOSE_COLOUR, dimensions=(0.03, size[1] * 0.6, size[2] * 0.6),
                       position=(size[0] / 2 + 0.015, 0.0, 0.0))
         self.blades = []
         self.ghosts = []

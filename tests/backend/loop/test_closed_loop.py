@@ -207,6 +207,27 @@ def test_telemetry_rates_and_replayable_baseline_plans() -> None:
     assert math.isfinite(log.get(ch.POWER)[-1].energy) and log.get(ch.POWER)[-1].energy > 0.0
 
 
+def test_every_stroke_publishes_its_strouhal_number_with_the_corridor() -> None:
+    mpc = MpcConfig(st_low=0.2, st_high=0.4)
+    loop, _, log = make_loop("baseline", mpc=mpc)
+    loop.run_until(4.0)
+    for fin in range(4):
+        strokes = log.get(ch.fin_strouhal(fin))
+        plans = [p for p in log.plans() if p.fin == fin]
+        # two strokes per planned cycle: the plans started so far, each with its first
+        # stroke sent and all but the last with both
+        assert 2 * len(plans) - 1 <= len(strokes) <= 2 * len(plans)
+        for s in strokes:
+            assert (s.fin, s.st_low, s.st_high, s.st_opt) == (fin, 0.2, 0.4, mpc.st_opt)
+            # St = 2 f A / V of a stroke: half a cycle of |d| / w seconds, amplitude |d| L_f / 2
+            f = 1.0 / (2.0 * abs(s.stroke) / s.rate)
+            a = abs(s.stroke) * mpc.fin_length / 2.0
+            assert s.st == pytest.approx(2.0 * f * a / max(s.v_body, mpc.v_floor), rel=1e-9)
+        # the strokes' rates are the plan's: w_1, w_2 of each cycle
+        rates = [p.commands[i] for p in plans for i in (1, 3)]
+        assert [s.rate for s in strokes] == rates[:len(strokes)]
+
+
 class LateDvlRobot(SimRobotIO):
     """The simulator whose DVL reports only from ``dvl_from`` s on, without bottom lock
     when ``lock`` is False (as a DVL still connecting, or too close to the surface)."""

@@ -87,3 +87,33 @@ def record(
     stats = rec.stats()
     assert stats.dropped == 0 and stats.rejected == 0 and not stats.error
     return paths
+
+
+BIG_SEED = 17029223188912930816  # > 2^53 and > 2^63: JavaScript and int64 would change it
+
+
+def awkward_items() -> list[tuple[str, Any]]:
+    """Every channel once (example messages, NaN in some floats), plus the values that
+    tools lose most easily: infinities, a seed beyond 2^63, an empty pilot name and an empty
+    failsafe list, an IMU reading without orientation."""
+    import dataclasses
+
+    from ucat_console.robot.readings import ImuReading
+    from ucat_console.telemetry import channels as C
+    from ucat_console.telemetry.messages import BodyState, FinPlan, FinState, Power, Status
+
+    items = [(ch, example_message(cls, k=i, t=0.5 * i)) for i, (ch, cls) in enumerate(C.CHANNELS.items())]
+    t = 0.5 * len(items)
+    plan = dataclasses.replace(example_message(FinPlan, k=3, t=t, nan=False), fin=1,
+                               seed=BIG_SEED, cost_total=math.inf)
+    items += [
+        (C.fin_plan(1), plan),
+        (C.POWER, Power(t + 0.1, (0.1, math.inf, 0.0, -math.inf), 0.5, 0.4, 2.0, 0.0, math.nan)),
+        (C.STATUS, Status(t + 0.2, False, "mpc", "", (), 0, "sim")),
+        (C.IMU, ImuReading(t + 0.3, (0.0, 0.0, -1.0), (0.0, math.inf, 0.0))),
+        # a finite pose and fin angles, so that every frame of the robot is placed
+        (C.BODY_STATE, BodyState(t + 0.4, (1.0, 2.0, 0.5), (0.9, 0.1, -0.2, 0.3), (0.2, 0.0, 0.0),
+                                 (0.0, 0.0, 0.1), 0.5)),
+        *[(C.fin_state(i), FinState(t + 0.4, i, 0.2 * i - 0.3, 1.0, 0.4, 2.0)) for i in range(4)],
+    ]
+    return items

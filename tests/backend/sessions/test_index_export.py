@@ -7,28 +7,30 @@ import json
 import math
 
 import pytest
-from session_helpers import example_message, record
+from session_helpers import BIG_SEED, awkward_items, example_message, record, same
 
 from ucat_console.backend.sessions.export import columns, csv_name, export_csv
 from ucat_console.backend.sessions.index import list_sessions, session_parts
 from ucat_console.backend.sessions.reader import SessionReader
+from ucat_console.backend.sessions.schema import field_specs
 from ucat_console.backend.sessions.recorder import RecorderConfig
 from ucat_console.telemetry import channels as C
 from ucat_console.telemetry.events import Event
-from ucat_console.telemetry.messages import BodyState, Setpoints, Status
+from ucat_console.telemetry.messages import BodyState, Power, Setpoints, Status
 
 OFFSET = 1_700_000_000.0
 
 
-def test_csv_columns_are_flattened_from_the_type():
+def test_csv_columns_are_mcap_paths_flattened_from_the_type():
     assert columns(BodyState) == [
         "log_time_ns", "t",
-        "position.0", "position.1", "position.2",
-        "orientation.0", "orientation.1", "orientation.2", "orientation.3",
-        "velocity.0", "velocity.1", "velocity.2",
-        "rates.0", "rates.1", "rates.2",
+        "position.x", "position.y", "position.z",
+        "orientation.w", "orientation.x", "orientation.y", "orientation.z",
+        "velocity.x", "velocity.y", "velocity.z",
+        "rates.x", "rates.y", "rates.z",
         "depth",
     ]
+    assert columns(Power)[2:6] == ["per_fin[0]", "per_fin[1]", "per_fin[2]", "per_fin[3]"]
     assert columns(Status) == ["log_time_ns", "t", "armed", "mode", "pilot", "failsafes",
                                "late_plans", "source"]
     assert csv_name("fin/0/state") == "fin_0_state.csv"
@@ -54,19 +56,75 @@ def test_csv_export_matches_the_recorded_values(sessions, tmp_path):
     for b, row in zip(bodies, rows, strict=True):
         assert int(row["log_time_ns"]) == round((b.t + OFFSET) * 1e9)
         assert float(row["t"]) == b.t
-        for i in range(3):
-            x = float(row[f"position.{i}"])
+        for i, name in enumerate("xyz"):
+            x = float(row[f"position.{name}"])
             assert (math.isnan(x) and math.isnan(b.position[i])) or x == b.position[i]
         d = float(row["depth"])
         assert (math.isnan(d) and math.isnan(b.depth)) or d == b.depth
     with open(out / "status.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
     assert [r["armed"] for r in rows] == ["true", "false", "true"]
-    assert [r["failsafes"] for r in rows] == ["", "dvl_silent;late", "dvl_silent;late"]
+    assert [json.loads(r["failsafes"]) for r in rows] == [[], ["dvl_silent", "late"]] + \
+        [["dvl_silent", "late"]]
     with open(out / "events.csv", newline="") as fh:
         [row] = list(csv.DictReader(fh))
     assert row["message"] == 'a, "quoted" note' and json.loads(row["data"]) == {"x": 1}
     assert (out / "power.csv").read_text().strip() == ",".join(columns(C.CHANNELS[C.POWER]))
+    side = json.loads((out / "body_state.columns.json").read_text())
+    by = {c["name"]: c for c in side["columns"]}
+    assert [c["name"] for c in side["columns"]] == columns(BodyState)
+    assert by["position.z"]["unit"] == "m" and "NED" in by["position.z"]["description"]
+    assert by["rates.z"]["unit"] == "rad/s" and by["depth"]["dtype"] == "float64"
+
+
+def _parse(cell: str, column: dict):
+    """A CSV cell read back by its sidecar column alone (independently of the exporter)."""
+    if cell == "":
+        assert column["nullable"] or column["dtype"] == "string", column["name"]
+        return None if column["nullable"] else ""
+    return {
+        "float64": float, "int64": int, "decimal": int, "string": str,
+        "bool": {"true": True, "false": False}.__getitem__, "json": json.loads,
+    }[column["dtype"]](cell)
+
+
+def test_csv_keeps_infinities_large_seeds_empty_text_and_missing_values(sessions, tmp_path):
+    items = awkward_items()
+    [path] = record(sessions, items, epoch_offset=OFFSET)
+    with SessionReader(path, sessions) as r:
+        export_csv(r, list(C.CHANNELS), tmp_path)
+    for channel, cls in C.CHANNELS.items():
+        side = json.loads((tmp_path / csv_name(channel).replace(".csv", ".columns.json")).read_text())
+        cols = side["columns"]
+        with open(tmp_path / csv_name(channel), newline="") as fh:
+            rows = list(csv.reader(fh))
+        assert rows[0] == [c["name"] for c in cols]
+        want = [m for c, m in items if c == channel]
+        assert len(rows) - 1 == len(want)
+        for msg, cells in zip(want, rows[1:]):
+            values = dict(zip(rows[0], (_parse(x, c) for x, c in zip(cells, cols))))
+            for spec in field_specs(cls):
+                v = getattr(msg, spec.name)
+                got = [values[p] for p in spec.paths()]
+                if spec.kind == "floats":
+                    assert same(None if all(g is None for g in got) else tuple(got), v), spec.name
+                elif spec.kind == "seq":
+                    assert tuple(got[0]) == v, spec.name
+                else:
+                    assert same(got[0], v), (channel, spec.name)
+    dtypes = {}  # one dtype per column, the same in every file of a message type
+    for channel, cls in C.CHANNELS.items():
+        side = tmp_path / csv_name(channel).replace(".csv", ".columns.json")
+        for c in json.loads(side.read_text())["columns"]:
+            dtypes.setdefault((cls.__name__, c["name"]), set()).add(c["dtype"])
+    assert all(len(d) == 1 for d in dtypes.values())
+    plan = json.loads((tmp_path / "fin_1_plan.columns.json").read_text())["columns"]
+    assert {c["name"]: c["dtype"] for c in plan}["seed"] == "decimal"
+    with open(tmp_path / "fin_1_plan.csv", newline="") as fh:
+        assert [r["seed"] for r in csv.DictReader(fh)][-1] == str(BIG_SEED)
+    with open(tmp_path / "status.csv", newline="") as fh:
+        last = list(csv.DictReader(fh))[-1]
+    assert last["pilot"] == "" and last["failsafes"] == "[]"
 
 
 def test_export_refuses_unknown_channels(sessions, tmp_path):

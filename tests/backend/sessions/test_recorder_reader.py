@@ -70,7 +70,8 @@ def test_file_checked_with_plain_mcap_reader_and_jsonschema(sessions):
         summary = reader.get_summary()
         assert summary is not None and summary.statistics is not None
         topics = {ch.topic: ch for ch in summary.channels.values()}
-        assert set(topics) == set(C.CHANNELS) | {"foxglove/tf", "foxglove/log"}
+        assert set(topics) == set(C.CHANNELS) | {"foxglove/tf", "foxglove/tf_static",
+                                                 "foxglove/scene", "foxglove/log"}
         for ch in topics.values():  # every channel has a JSON schema
             schema = summary.schemas[ch.schema_id]
             assert schema.encoding == "jsonschema" and ch.message_encoding == "json"
@@ -82,16 +83,19 @@ def test_file_checked_with_plain_mcap_reader_and_jsonschema(sessions):
         assert meta["weights"] == {"lam_st": "5.0", "lam_f": "1.5"}
         assert meta["version"]["ucat_console"] == ucat_console.__version__
         assert meta["session"]["epoch_offset"] == repr(OFFSET)
-        tf, logs = [], []
+        tf, logs, scenes = [], [], []
         for schema, channel, message in reader.iter_messages():
             obj = json.loads(message.data)
-            expected_ns = round(obj["timestamp"]["sec"] * 10**9 + obj["timestamp"]["nsec"]) \
-                if channel.topic.startswith("foxglove/") else None
-            if channel.topic == "foxglove/tf":
+            stamp = obj.get("timestamp") if channel.topic.startswith("foxglove/") else None
+            expected_ns = None if stamp is None else stamp["sec"] * 10**9 + stamp["nsec"]
+            if channel.topic in ("foxglove/tf", "foxglove/tf_static"):
                 jsonschema.validate(obj, fox_tf)
                 assert set(obj) <= set(fox_tf["properties"])
                 assert message.log_time == expected_ns
                 tf.append(obj)
+            elif channel.topic == "foxglove/scene":
+                jsonschema.validate(obj, json.loads(schema.data))
+                scenes.append(obj)
             elif channel.topic == "foxglove/log":
                 jsonschema.validate(obj, fox_log)
                 assert set(obj) <= set(fox_log["properties"])
@@ -103,11 +107,21 @@ def test_file_checked_with_plain_mcap_reader_and_jsonschema(sessions):
                 # nanoseconds since the UNIX epoch: (t + offset) * 1e9, both times
                 t = obj["t"]
                 assert message.log_time == message.publish_time == round((t + OFFSET) * 1e9)
-    # one transform per finite body pose (the example pose has a NaN: no transform)
-    assert len(tf) == 1
-    assert tf[0]["translation"] == {"x": 1.5, "y": 2.0, "z": 3.0}
-    assert tf[0]["rotation"] == {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}
-    assert tf[0]["timestamp"] == {"sec": 1_700_000_020, "nsec": 0}
+    # the static world -> ned first, then one transform per finite body pose (the example
+    # pose has a NaN: no transform) and one per fin state with a finite angle
+    assert (tf[0]["parent_frame_id"], tf[0]["child_frame_id"]) == ("world", "ned")
+    poses = [x for x in tf if x["child_frame_id"] == "body"]
+    assert len(poses) == 1
+    assert poses[0]["parent_frame_id"] == "ned"
+    assert poses[0]["translation"] == {"x": 1.5, "y": 2.0, "z": 3.0}
+    assert poses[0]["rotation"] == {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}
+    assert poses[0]["timestamp"] == {"sec": 1_700_000_020, "nsec": 0}
+    fins = {x["child_frame_id"] for x in tf if x["parent_frame_id"] == "body"}
+    assert fins == {f"fin{m.fin}" for c, m in items
+                    if c.endswith("/state") and c.startswith("fin/") and math.isfinite(m.angle)}
+    assert len(fins) >= 2
+    [scene] = scenes  # the hull in the body frame, a blade in each fin's frame
+    assert [e["frame_id"] for e in scene["entities"]] == ["body"] + [f"fin{i}" for i in range(4)]
     assert [x["level"] for x in logs] == [
         ("debug", "info", "warning", "error", "fatal").index(e.level) + 1 for e in events
     ]
@@ -285,3 +299,34 @@ def test_truncated_and_corrupted_files_are_refused_with_clear_messages(sessions)
     with SessionReader(broken, sessions) as r:
         with pytest.raises(ValueError, match="corrupted data"):
             list(r.messages())
+
+
+# ------------------------------------------------------------------ files of encoding 1
+def test_a_session_written_by_encoding_1_reads_back_the_same_messages(sessions):
+    """A file the recorder wrote before encoding 2 (fixtures/legacy_v1.py says how it was
+    made): arrays for vectors, 1e999 for infinities, numeric seeds."""
+    import importlib.util
+    import shutil
+
+    spec = importlib.util.spec_from_file_location("legacy_v1", FIXTURES / "legacy_v1.py")
+    legacy_v1 = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(legacy_v1)
+    src = FIXTURES / "20231114-221320-legacy-v1_001.mcap"
+    shutil.copy(src, sessions / src.name)
+    with open(src, "rb") as fh:  # it is what encoding 1 wrote
+        summary = make_reader(fh).get_summary()
+        docs = [json.loads(s.data) for s in summary.schemas.values()
+                if s.name.startswith("ucat_console.")]
+        assert docs and not any("$id" in d for d in docs)
+    with open(src, "rb") as fh:
+        raw = b"".join(m.data for _, c, m in make_reader(fh).iter_messages(topics=[C.BODY_STATE]))
+        assert b"1e999" in raw and b'"position":[' in raw
+    expected = sorted(legacy_v1.messages(), key=lambda item: item[1].t)  # file order
+    with SessionReader(sessions / src.name, sessions) as r:
+        back = list(r.messages())
+        assert r.notes == "written by encoding 1"
+        assert r.state_at(10.0)[C.fin_plan(0)].seed == 17029223188912930816
+    assert len(back) == len(expected)
+    for (ch, msg), (ch2, msg2) in zip(expected, back):
+        assert ch == ch2
+        assert same(msg, msg2), ch

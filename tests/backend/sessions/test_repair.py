@@ -91,7 +91,9 @@ def test_sigkill_loses_at_most_about_a_second_and_repair_recovers_the_rest(sessi
     with SessionReader(path, sessions) as r:
         values = [m.velocity for _, m in r.messages()]
         assert r.notes == "recorded until SIGKILL"
-    assert report.messages == len(values) > 0
+    with open(path, "rb") as fh:  # every message of the file, the derived Foxglove ones too
+        assert report.messages == sum(1 for _ in make_reader(fh).iter_messages())
+    assert len(values) > 0
     assert values == [float(k) for k in range(len(values))]  # a prefix: only the tail lost
     # the child published at least ``published`` and at most one burst more
     lost_at_most = published + BATCH - len(values)
@@ -106,22 +108,26 @@ def test_repair_of_a_cut_file_recovers_every_complete_chunk(sessions):
     [path] = record(sessions, items, RecorderConfig(chunk_size=4096))
     with SessionReader(path, sessions) as r:
         chunks = sorted(r._summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+        setpoints_id = r._topic_ids[C.SETPOINTS]
     cut = chunks[len(chunks) // 2].chunk_start_offset + 7  # inside a chunk record
-    # independently: the messages of the chunks that end before the cut
-    expected = 0
+    # independently: the messages of the chunks that end before the cut (all of them, and
+    # the setpoints among them; the others are the derived Foxglove scene and transform)
+    expected = setpoints = 0
     with open(path, "rb") as fh:
         for ci in chunks:
             if ci.chunk_start_offset + ci.chunk_length <= cut:
                 fh.seek(ci.chunk_start_offset + 9)  # past opcode and length
                 chunk = Chunk.read(ReadDataStream(fh))
-                expected += sum(isinstance(x, Message) for x in breakup_chunk(chunk))
+                messages = [x for x in breakup_chunk(chunk) if isinstance(x, Message)]
+                expected += len(messages)
+                setpoints += sum(x.channel_id == setpoints_id for x in messages)
     path.write_bytes(path.read_bytes()[:cut])
     report = repair(path, sessions, keep_original=False)
     assert report.messages == expected > 0
     assert report.original is None and not path.with_name(path.name + ".orig").exists()
     assert report.stop_reason  # it says where reading broke off
     with SessionReader(path, sessions) as r:
-        assert [m.velocity for _, m in r.messages()] == [float(k) for k in range(expected)]
+        assert [m.velocity for _, m in r.messages()] == [float(k) for k in range(setpoints)]
         assert set(r.channels) == set(C.CHANNELS)  # schemas and channels came along
 
 

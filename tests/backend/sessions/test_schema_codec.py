@@ -1,7 +1,9 @@
-"""JSON Schemas derived from the message dataclasses, and the JSON codec."""
+"""JSON Schemas derived from the message dataclasses, and the JSON codec (encoding 2, and
+encoding 1 as files written before it hold it)."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -10,58 +12,108 @@ import pytest
 from session_helpers import example_message, same
 
 from ucat_console.robot.readings import ImuReading
-from ucat_console.backend.sessions import codec
-from ucat_console.backend.sessions.schema import DIALECT, json_schema, schema_name
+from ucat_console.backend.sessions import codec, foxglove, legacy
+from ucat_console.backend.sessions.schema import (
+    DIALECT,
+    field_specs,
+    json_schema,
+    schema_encoding,
+    schema_name,
+)
 from ucat_console.telemetry.channels import CHANNELS
 from ucat_console.telemetry.events import Event
-from ucat_console.telemetry.messages import BodyState, FinState, Setpoints, Status
+from ucat_console.robot.fields import field_docs
+from ucat_console.telemetry.messages import BodyState, FinPlan, FinState, Power, Setpoints, Status
 
 TYPES = sorted(set(CHANNELS.values()), key=lambda c: c.__name__)
+BIG_SEED = 17029223188912930816  # > 2^53: a JavaScript number would round it
 
 
 def test_setpoints_schema_is_the_hand_written_one():
     s = json_schema(Setpoints)
     assert s["$schema"] == DIALECT
+    assert s["$id"] == "urn:ucat-console:telemetry:2:Setpoints"
     assert s["title"] == "ucat_console.Setpoints"
     assert s["type"] == "object" and s["additionalProperties"] is False
+    nonfinite = s["properties"].pop("nonfinite")
     assert s["properties"] == {
-        "t": {"type": "number"},
-        "velocity": {"type": "number"},
-        "depth": {"type": "number"},
-        "yaw_rate": {"type": "number"},
+        "t": {"type": "number", "description": "time on the stream's clock (unit s)"},
+        "velocity": {"type": "number", "description": "forward velocity setpoint (unit m/s)"},
+        "depth": {"type": "number", "description": "depth setpoint (unit m)"},
+        "yaw_rate": {"type": "number", "description": "yaw rate setpoint, positive clockwise "
+                                                      "seen from above (unit rad/s; frame NED)"},
     }
-    assert s["required"] == []  # a NaN float is left out, so no float is required
+    assert nonfinite["type"] == "object" and nonfinite["properties"] == {}
+    assert nonfinite["additionalProperties"] == {"type": "string", "enum": ["nan", "inf", "-inf"]}
+    assert s["required"] == []  # a non-finite float is left out, so no float is required
 
 
-def test_tuples_are_fixed_length_arrays_and_other_kinds_map_one_to_one():
+def test_vectors_are_named_quaternions_x_y_z_w_per_fin_values_stay_arrays():
     body = json_schema(BodyState)["properties"]
-    assert body["position"]["minItems"] == body["position"]["maxItems"] == 3
-    assert body["orientation"]["prefixItems"] == [{"type": ["number", "null"]}] * 4
-    assert body["orientation"]["items"] == {"type": "number"}
+    assert body["position"]["properties"] == {n: {"type": "number"} for n in "xyz"}
+    assert body["position"]["title"] == "foxglove.Vector3"
+    assert "NED" in body["position"]["description"] and "unit m" in body["position"]["description"]
+    assert list(body["orientation"]["properties"]) == ["x", "y", "z", "w"]
+    assert body["orientation"]["title"] == "foxglove.Quaternion"
+    per_fin = json_schema(Power)["properties"]["per_fin"]
+    assert per_fin["type"] == "array" and per_fin["minItems"] == per_fin["maxItems"] == 4
+    assert per_fin["prefixItems"] == [{"type": ["number", "null"]}] * 4
+    assert per_fin["items"] == {"type": "number"}
+    plan = json_schema(FinPlan)["properties"]
+    assert list(plan["u"]["properties"]) == ["d_1", "d_2", "w_1", "w_2"]
+    assert plan["seed"]["type"] == "string" and plan["seed"]["pattern"] == "^-?[0-9]+$"
+    assert "2^53" in plan["seed"]["description"]
     fin = json_schema(FinState)
-    assert fin["properties"]["fin"] == {"type": "integer"}
+    assert fin["properties"]["fin"]["type"] == "integer"
     assert fin["required"] == ["fin"]
     status = json_schema(Status)["properties"]
-    assert status["armed"] == {"type": "boolean"}
-    assert status["mode"] == {"type": "string"}
-    assert status["failsafes"] == {"type": "array", "items": {"type": "string"}}
+    assert status["armed"]["type"] == "boolean"
+    assert status["failsafes"]["items"] == {"type": "string"}
     imu = json_schema(ImuReading)
     assert "quaternion" not in imu["required"]  # optional: left out when None
+    assert list(imu["properties"]["euler"]["properties"]) == ["roll", "pitch", "yaw"]
     assert json_schema(Event)["properties"]["data"]["type"] == "object"
 
 
 @pytest.mark.parametrize("cls", TYPES, ids=lambda c: c.__name__)
+def test_every_field_says_what_it_is(cls):
+    docs = field_docs(cls)
+    assert set(docs) == {f.name for f in dataclasses.fields(cls)}
+    for name, prop in json_schema(cls)["properties"].items():
+        assert prop.get("description"), name
+
+
+def _foxglove_readable(schema: dict, where: str) -> None:
+    """The rules of Foxglove's and Lichtblick's JSON Schema reader (parseJsonSchema): one
+    type name per field, objects with properties, arrays with one item type (objects
+    again checked); Foxglove also takes an enumeration of numbers (oneOf of consts)."""
+    assert schema["type"] == "object", where
+    for name, prop in schema["properties"].items():
+        if "oneOf" in prop:
+            assert all(isinstance(x["const"], int) for x in prop["oneOf"]), f"{where}.{name}"
+            continue
+        assert isinstance(prop.get("type"), str), f"{where}.{name}"
+        if prop["type"] == "object":
+            _foxglove_readable(prop, f"{where}.{name}")
+        if prop["type"] == "array":
+            assert isinstance(prop["items"]["type"], str), f"{where}.{name}"
+            if prop["items"]["type"] == "object":
+                _foxglove_readable(prop["items"], f"{where}.{name}[]")
+
+
+@pytest.mark.parametrize("cls", TYPES, ids=lambda c: c.__name__)
 def test_schema_is_readable_by_foxglove_and_valid_json_schema(cls):
-    """Foxglove/Lichtblick's JSON Schema reader takes one type name per field and a single
-    item type per array; anything else makes it reject the channel."""
     s = json_schema(cls)
     jsonschema.Draft202012Validator.check_schema(s)
-    for name, prop in s["properties"].items():
-        assert isinstance(prop["type"], str), name
-        if prop["type"] == "array":
-            assert isinstance(prop["items"]["type"], str), name
-        if prop["type"] == "object":
-            assert isinstance(prop["properties"], dict), name
+    _foxglove_readable(s, cls.__name__)
+    assert schema_encoding(s) == 2
+
+
+@pytest.mark.parametrize("topic", sorted(foxglove.DERIVED_TOPICS))
+def test_the_foxglove_schemas_are_readable_by_foxglove(topic):
+    [schema] = [s for t, _, s in foxglove.DERIVED if t == topic]
+    jsonschema.Draft202012Validator.check_schema(schema)
+    _foxglove_readable(schema, topic)
 
 
 @pytest.mark.parametrize("cls", TYPES, ids=lambda c: c.__name__)
@@ -74,18 +126,43 @@ def test_every_message_type_round_trips_with_nan(cls):
     assert same(back, msg)
 
 
-def test_nan_encoding_scalar_left_out_array_element_null_inf_as_1e999():
+def test_non_finite_numbers_are_left_out_and_listed_by_path():
     msg = BodyState(1.5, (1.0, math.nan, math.inf), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
                     (0.0, 0.0, -math.inf), math.nan)
     text = codec.encode(msg).decode()
+    assert "1e999" not in text and "NaN" not in text and "Infinity" not in text
     obj = json.loads(text)
     assert "depth" not in obj
-    assert obj["position"][1] is None
-    assert '"position":[1.0,null,1e999]' in text
-    assert '"rates":[0.0,0.0,-1e999]' in text
+    assert obj["position"] == {"x": 1.0}
+    assert obj["orientation"] == {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}
+    assert obj["nonfinite"] == {"position.y": "nan", "position.z": "inf", "rates.z": "-inf",
+                                "depth": "nan"}
     back = codec.decode(BodyState, text.encode())
     assert math.isnan(back.depth) and math.isnan(back.position[1])
     assert back.position[2] == math.inf and back.rates[2] == -math.inf
+    assert back.orientation == (1.0, 0.0, 0.0, 0.0)  # w first again
+    power = Power(2.0, (0.1, math.inf, 0.3, 0.4), 1.0, 0.5, 3.0, 0.0, math.nan)
+    obj = json.loads(codec.encode(power))
+    assert obj["per_fin"] == [0.1, None, 0.3, 0.4]
+    assert obj["nonfinite"] == {"per_fin[1]": "inf", "energy_per_metre": "nan"}
+    assert same(codec.decode(Power, codec.encode(power)), power)
+
+
+def test_a_seed_beyond_2_53_is_a_string_and_comes_back_exact():
+    plan = example_message(FinPlan, k=2, nan=False)
+    plan = dataclasses.replace(plan, seed=BIG_SEED)
+    obj = json.loads(codec.encode(plan))
+    assert obj["seed"] == "17029223188912930816"
+    assert codec.decode(FinPlan, codec.encode(plan)).seed == BIG_SEED
+    none = dataclasses.replace(plan, seed=-1)
+    assert codec.decode(FinPlan, codec.encode(none)).seed == -1
+
+
+def test_empty_text_and_empty_lists_stay_empty():
+    status = Status(1.0, False, "mpc", "", (), 0, "sim")
+    obj = json.loads(codec.encode(status))
+    assert obj["pilot"] == "" and obj["failsafes"] == []
+    assert codec.decode(Status, codec.encode(status)) == status
 
 
 def test_optional_tuple_none_is_left_out_and_read_back_as_none():
@@ -108,8 +185,15 @@ def test_event_data_non_finite_becomes_null():
         (b"[1, 2]", "expected a JSON object"),
         (b'{"t": 1.0, "fin": "two"}', "FinState.fin: expected an integer"),
         (b'{"t": 1.0, "fin": 1, "angle": "x"}', "FinState.angle: expected a number"),
+        (b'{"t": 1.0, "fin": 1, "angle": null}', "FinState.angle: expected a number"),
         (b'{"t": 1.0, "fin": 1, "spin": 3}', "FinState.spin: unknown field"),
         (b'{"t": 1.0}', "FinState.fin: missing"),
+        (b'{"t": 1.0, "fin": 1, "rate": 0, "angle_cmd": 0, "rate_cmd": 0}',
+         "FinState.angle: missing"),  # a number left out must be listed as non-finite
+        (b'{"t": 1.0, "fin": 1, "angle": 0, "rate": 0, "angle_cmd": 0, "rate_cmd": 0,'
+         b' "nonfinite": {"angle": "nan"}}', "'angle' names no missing value"),
+        (b'{"t": 1.0, "fin": 1, "rate": 0, "angle_cmd": 0, "rate_cmd": 0,'
+         b' "nonfinite": {"angle": "huge"}}', "expected an object of nan / inf / -inf"),
     ],
 )
 def test_decode_names_the_bad_field(data, needle):
@@ -117,10 +201,15 @@ def test_decode_names_the_bad_field(data, needle):
         codec.decode(FinState, data)
 
 
-def test_decode_checks_fixed_lengths_and_event_level():
-    with pytest.raises(ValueError, match=r"BodyState.position: expected an array of 3"):
-        codec.decode(BodyState, b'{"t":0,"position":[1,2],"orientation":[1,0,0,0],'
-                                b'"velocity":[0,0,0],"rates":[0,0,0]}')
+def test_decode_checks_vectors_wide_integers_and_event_level():
+    good = json.loads(codec.encode(example_message(BodyState, nan=False)))
+    with pytest.raises(ValueError, match=r"BodyState.position.q: unknown field"):
+        codec.decode(BodyState, json.dumps({**good, "position": {"x": 1, "q": 2}}).encode())
+    with pytest.raises(ValueError, match=r"BodyState.position: expected an object of x, y, z"):
+        codec.decode(BodyState, json.dumps({**good, "position": [1, 2, 3]}).encode())
+    plan = json.loads(codec.encode(example_message(FinPlan, nan=False)))
+    with pytest.raises(ValueError, match="FinPlan.seed: expected an integer as a decimal string"):
+        codec.decode(FinPlan, json.dumps({**plan, "seed": 3}).encode())
     with pytest.raises(ValueError, match="level"):
         codec.decode(Event, b'{"t":0,"source":"a","code":"b","message":"c","level":"loud",'
                             b'"data":{}}')
@@ -132,8 +221,27 @@ def test_encode_refuses_a_wrong_kind_naming_the_field():
         codec.encode(bad)
 
 
+def test_encoding_1_objects_decode_to_the_same_messages():
+    """What files written before encoding 2 hold: arrays, 1e999, a missing NaN scalar, a
+    null NaN element, a numeric seed (written here by hand as that codec wrote them)."""
+    body = (b'{"t":1.5,"position":[1.0,null,1e999],"orientation":[1.0,0.0,0.0,0.0],'
+            b'"velocity":[0.0,0.0,0.0],"rates":[0.0,0.0,-1e999]}')
+    back = legacy.decode(BodyState, body)
+    assert same(back, BodyState(1.5, (1.0, math.nan, math.inf), (1.0, 0.0, 0.0, 0.0),
+                                (0.0, 0.0, 0.0), (0.0, 0.0, -math.inf), math.nan))
+    plan = json.loads(codec.encode(example_message(FinPlan, nan=False)))
+    old = {**plan, "seed": 12345, "target": [plan["target"]["x"], plan["target"]["y"]]}
+    for name in ("u_prev", "u", "commands", "mean_force"):
+        old[name] = list(plan[name].values())
+    assert legacy.decode(FinPlan, json.dumps(old).encode()).seed == 12345
+    with pytest.raises(ValueError, match="BodyState.position: expected an array of 3"):
+        legacy.decode(BodyState, b'{"t":0,"position":[1,2],"orientation":[1,0,0,0],'
+                                  b'"velocity":[0,0,0],"rates":[0,0,0]}')
+
+
 def test_time_conversion_is_exact_for_simulated_times_under_an_epoch_offset():
     assert codec.to_ns(0.125, 1_700_000_000.0) == 1_700_000_000_125_000_000
     assert codec.to_ns(1_700_000_000.5) == 1_700_000_000_500_000_000
     assert codec.from_ns(1_700_000_000_125_000_000, 1_700_000_000.0) == 0.125
     assert schema_name(BodyState) == "ucat_console.BodyState"
+    assert [s.paths() for s in field_specs(Power)][1] == [f"per_fin[{i}]" for i in range(4)]

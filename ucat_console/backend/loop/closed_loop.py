@@ -82,6 +82,7 @@ from ucat_console.control.executor import (
     SendToServo,
     StrokeTimeout,
 )
+from ucat_console.control.cost import stroke_strouhal
 from ucat_console.control.params import BaselineConfig, MpcConfig, PidGains
 from ucat_console.control.power import PowerEstimator
 from ucat_console.telemetry import channels as ch
@@ -91,6 +92,7 @@ from ucat_console.telemetry.messages import (
     BodyState,
     FinPlan,
     FinState,
+    FinStrouhal,
     Power,
     Setpoints,
     Status,
@@ -503,6 +505,7 @@ class ClosedLoop:
             if tp is SendToServo:
                 pf = PAPER_TO_ROBOT[a.fin]
                 self.io.command_fin(pf, a.theta_ref, a.w_ref)
+                self._publish_stroke(t, pf, a.theta_ref - self._cmd_angle[pf], a.w_ref)
                 self._cmd_angle[pf] = a.theta_ref
                 self._cmd_rate[pf] = a.w_ref
             elif tp is PlanRequest:
@@ -657,6 +660,13 @@ class ClosedLoop:
         for pf in range(N_FINS):
             a = ang[pf]
             publish(ch.fin_state(pf), FinState(t, pf, 0.0 if a != a else a, rate[pf], ca[pf], cr[pf]))
+
+    def _publish_stroke(self, t: float, fin: int, stroke: float, rate: float) -> None:
+        m = self._mpc_cfg
+        self.stream.publish(ch.fin_strouhal(fin), FinStrouhal(
+            t, fin, stroke_strouhal(rate, self._v_body, m), m.st_low, m.st_high, m.st_opt,
+            self._v_body, stroke, rate,
+        ))
 
     def _publish_power(self, t: float) -> None:
         per = []

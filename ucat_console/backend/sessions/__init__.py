@@ -3,9 +3,12 @@
 The recorder and the player are the two ends of the one telemetry stream: the recorder
 writes what is published, the player publishes what was written.
 
-    schema     JSON Schemas derived from the message dataclasses (and the NaN encoding)
+    schema     JSON Schemas derived from the message dataclasses (encoding 2: named vectors,
+               wide integers as text, non-finite numbers listed in ``nonfinite``)
     codec      message <-> JSON bytes; stream seconds <-> file nanoseconds
-    foxglove   foxglove.FrameTransform / foxglove.Log written beside our channels
+    legacy     reading files of encoding 1 (written before encoding 2)
+    foxglove   the robot for Foxglove's 3-D panel (transforms, scene) and foxglove.Log,
+               written beside our channels (and served live by backend.foxglove_live)
     files      the sessions directory, file names, metadata record names
     recorder   Recorder: stream -> crash-safe MCAP parts
     reader     SessionReader (one part file) and SessionParts (every part of a session as one

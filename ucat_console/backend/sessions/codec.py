@@ -1,8 +1,10 @@
 """Message dataclass <-> JSON bytes, and stream time <-> MCAP nanoseconds.
 
 The encoding is the one documented in :mod:`ucat_console.backend.sessions.schema`
-(NaN scalars left out, NaN array elements null, +/-inf as +/-1e999). Decoding checks every
-field's kind and names the field in its ValueError: a file is input like any other.
+(encoding 2: named vectors, wide integers as strings, non-finite numbers left out and
+listed in ``nonfinite``). Decoding checks every field's kind and names the field in its
+ValueError: a file is input like any other. Files of encoding 1 are decoded by
+:mod:`ucat_console.backend.sessions.legacy`.
 
 Time: a message's ``t`` is seconds on the stream's clock; a session file stores
 ``log_time = publish_time = round(t * 1e9) + round(epoch_offset * 1e9)``, nanoseconds
@@ -16,6 +18,7 @@ from __future__ import annotations
 import functools
 import json
 import math
+import re
 from typing import Any, Callable
 
 from ucat_console.backend.sessions.schema import (
@@ -24,18 +27,16 @@ from ucat_console.backend.sessions.schema import (
     FLOATS,
     INT,
     JSON,
+    NONFINITE,
+    NONFINITE_VALUES,
     SEQ,
     STR,
+    WIDE_PATTERN,
     FieldSpec,
     field_specs,
 )
 
-NAN = float("nan")
-_INF_TOKEN = "\x00ucat-inf\x00"  # placeholder while dumping; replaced by a bare 1e999
-_PLACEHOLDERS = {
-    json.dumps(_INF_TOKEN): "1e999",
-    json.dumps("-" + _INF_TOKEN): "-1e999",
-}
+_WIDE = re.compile(WIDE_PATTERN)
 
 
 def to_ns(t: float, epoch_offset: float = 0.0) -> int:
@@ -47,6 +48,11 @@ def to_ns(t: float, epoch_offset: float = 0.0) -> int:
 def from_ns(ns: int, epoch_offset: float = 0.0) -> float:
     """Nanoseconds since the UNIX epoch -> stream seconds."""
     return (ns - round(epoch_offset * 1e9)) * 1e-9
+
+
+def nonfinite_name(x: float) -> str:
+    """"nan", "inf" or "-inf"."""
+    return "nan" if x != x else ("inf" if x > 0 else "-inf")
 
 
 # ---------------------------------------------------------------------- encoding
@@ -67,32 +73,12 @@ def _sanitize_json(v: Any) -> Any:
     return v
 
 
-def _inf_tokens(obj: dict[str, Any]) -> dict[str, Any]:
-    def tok(x: Any) -> Any:
-        if isinstance(x, float) and math.isinf(x):
-            return _INF_TOKEN if x > 0 else "-" + _INF_TOKEN
-        if isinstance(x, list):
-            return [tok(y) for y in x]
-        return x
-
-    return {k: (v if isinstance(v, dict) else tok(v)) for k, v in obj.items()}
-
-
-def _dumps(obj: dict[str, Any]) -> bytes:
-    try:
-        return json.dumps(obj, separators=(",", ":"), allow_nan=False).encode()
-    except ValueError:  # an infinity somewhere
-        text = json.dumps(_inf_tokens(obj), separators=(",", ":"), allow_nan=False)
-        for token, number in _PLACEHOLDERS.items():
-            text = text.replace(token, number)
-        return text.encode()
-
-
 def _make_encoder(cls: type) -> Callable[[Any], dict[str, Any]]:
     specs = field_specs(cls)
 
     def to_obj(msg: Any) -> dict[str, Any]:
         out: dict[str, Any] = {}
+        bad: dict[str, str] = {}
         for s in specs:
             v = getattr(msg, s.name)
             if v is None and s.optional:
@@ -100,17 +86,33 @@ def _make_encoder(cls: type) -> Callable[[Any], dict[str, Any]]:
             try:
                 kind = s.kind
                 if kind == FLOAT:
-                    if v != v:  # NaN: left out
-                        continue
-                    out[s.name] = _float_out(v)
+                    x = _float_out(v)
+                    if math.isfinite(x):
+                        out[s.name] = x
+                    else:
+                        bad[s.name] = nonfinite_name(x)
                 elif kind == FLOATS:
                     if len(v) != s.length:
                         raise ValueError(f"expected {s.length} values, got {len(v)}")
-                    out[s.name] = [None if x != x else _float_out(x) for x in v]
+                    xs = [_float_out(x) for x in v]
+                    if s.names:
+                        obj = {}
+                        for n, x in zip(s.names, xs):
+                            if math.isfinite(x):
+                                obj[n] = x
+                            else:
+                                bad[f"{s.name}.{n}"] = nonfinite_name(x)
+                        out[s.name] = obj
+                    else:
+                        for i, x in enumerate(xs):
+                            if not math.isfinite(x):
+                                bad[f"{s.name}[{i}]"] = nonfinite_name(x)
+                                xs[i] = None  # type: ignore[call-overload]
+                        out[s.name] = xs
                 elif kind == INT:
                     if isinstance(v, bool) or not isinstance(v, int):
                         raise ValueError(f"expected an integer, got {v!r}")
-                    out[s.name] = v
+                    out[s.name] = str(v) if s.wide else v
                 elif kind == BOOL:
                     out[s.name] = bool(v)
                 elif kind == STR:
@@ -123,6 +125,8 @@ def _make_encoder(cls: type) -> Callable[[Any], dict[str, Any]]:
                     out[s.name] = _sanitize_json(dict(v))
             except (TypeError, ValueError) as e:
                 raise ValueError(f"{cls.__name__}.{s.name}: {e}") from None
+        if bad:
+            out[NONFINITE] = bad
         return out
 
     return to_obj
@@ -133,16 +137,13 @@ def _encoder(cls: type) -> Callable[[Any], dict[str, Any]]:
     return _make_encoder(cls)
 
 
-
 def encode(msg: Any) -> bytes:
     """A message dataclass -> compact JSON bytes (ValueError naming a bad field)."""
-    return _dumps(_encoder(type(msg))(msg))
+    return json.dumps(_encoder(type(msg))(msg), separators=(",", ":"), allow_nan=False).encode()
 
 
 # ---------------------------------------------------------------------- decoding
-def _float_in(v: Any, where: str) -> float:
-    if v is None:
-        return NAN
+def _number(v: Any, where: str) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise ValueError(f"{where}: expected a number, got {v!r}")
     return float(v)
@@ -155,15 +156,58 @@ _ITEM_CHECK = {
 }
 
 
-def _field_in(s: FieldSpec, v: Any, where: str) -> Any:
+class _NonFinite:
+    """The message's ``nonfinite`` listing; each entry must be taken by a missing value."""
+
+    def __init__(self, listing: Any, where: str) -> None:
+        if listing is None:
+            listing = {}
+        if not isinstance(listing, dict) or not all(
+            isinstance(v, str) and v in NONFINITE_VALUES for v in listing.values()
+        ):
+            raise ValueError(f"{where}.{NONFINITE}: expected an object of nan / inf / -inf, "
+                             f"got {listing!r}")
+        self.left = dict(listing)
+        self.where = where
+
+    def take(self, path: str) -> float:
+        try:
+            return NONFINITE_VALUES[self.left.pop(path)]
+        except KeyError:
+            raise ValueError(f"{self.where}.{path}: missing") from None
+
+    def check_used(self) -> None:
+        if self.left:
+            path = next(iter(self.left))
+            raise ValueError(f"{self.where}.{NONFINITE}: {path!r} names no missing value")
+
+
+def _field_in(s: FieldSpec, v: Any, where: str, nonfinite: _NonFinite) -> Any:
     kind = s.kind
     if kind == FLOAT:
-        return _float_in(v, where)
+        return _number(v, where)
     if kind == FLOATS:
+        if s.names:
+            if not isinstance(v, dict):
+                raise ValueError(f"{where}: expected an object of {', '.join(s.names)}, got {v!r}")
+            unknown = [k for k in v if k not in s.names]
+            if unknown:
+                raise ValueError(f"{where}.{unknown[0]}: unknown field")
+            return tuple(
+                _number(v[n], f"{where}.{n}") if n in v else nonfinite.take(f"{s.name}.{n}")
+                for n in s.names
+            )
         if not isinstance(v, list) or len(v) != s.length:
             raise ValueError(f"{where}: expected an array of {s.length} numbers, got {v!r}")
-        return tuple(_float_in(x, f"{where}[{i}]") for i, x in enumerate(v))
+        return tuple(
+            nonfinite.take(f"{s.name}[{i}]") if x is None else _number(x, f"{where}[{i}]")
+            for i, x in enumerate(v)
+        )
     if kind == INT:
+        if s.wide:
+            if not isinstance(v, str) or not _WIDE.match(v):
+                raise ValueError(f"{where}: expected an integer as a decimal string, got {v!r}")
+            return int(v)
         if isinstance(v, bool) or not isinstance(v, int):
             raise ValueError(f"{where}: expected an integer, got {v!r}")
         return v
@@ -194,31 +238,37 @@ def from_json_obj(cls: type, obj: Any) -> Any:
         raise ValueError(f"{name}: expected a JSON object, got {type(obj).__name__}")
     specs = field_specs(cls)
     known = {s.name for s in specs}
-    unknown = [k for k in obj if k not in known]
+    unknown = [k for k in obj if k not in known and k != NONFINITE]
     if unknown:
         raise ValueError(f"{name}.{unknown[0]}: unknown field")
+    nonfinite = _NonFinite(obj.get(NONFINITE), name)
     kwargs: dict[str, Any] = {}
     for s in specs:
         where = f"{name}.{s.name}"
-        if s.name not in obj or (obj[s.name] is None and s.optional):
+        if s.name not in obj:
             if s.optional:
                 kwargs[s.name] = None
             elif s.kind == FLOAT:
-                kwargs[s.name] = NAN
+                kwargs[s.name] = nonfinite.take(s.name)
             else:
                 raise ValueError(f"{where}: missing")
             continue
-        kwargs[s.name] = _field_in(s, obj[s.name], where)
+        kwargs[s.name] = _field_in(s, obj[s.name], where, nonfinite)
+    nonfinite.check_used()
     try:
         return cls(**kwargs)
     except (TypeError, ValueError) as e:
         raise ValueError(f"{name}: {e}") from None
 
 
-def decode(cls: type, data: bytes) -> Any:
-    """JSON bytes -> a ``cls`` message (ValueError naming what is wrong)."""
+def loads(cls: type, data: bytes) -> Any:
+    """The JSON object of a message's bytes (ValueError when they are not JSON)."""
     try:
-        obj = json.loads(data)
+        return json.loads(data)
     except (ValueError, UnicodeDecodeError) as e:
         raise ValueError(f"{cls.__name__}: message is not valid JSON ({e})") from None
-    return from_json_obj(cls, obj)
+
+
+def decode(cls: type, data: bytes) -> Any:
+    """JSON bytes -> a ``cls`` message (ValueError naming what is wrong)."""
+    return from_json_obj(cls, loads(cls, data))

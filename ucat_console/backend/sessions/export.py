@@ -1,17 +1,33 @@
-"""CSV export: one file per channel, columns flattened from the message dataclass.
+"""CSV export: one file per channel, columns flattened from the message dataclass, and a
+sidecar describing every column.
 
 File names: the channel name with ``/`` replaced by ``_`` (``fin/0/state`` ->
-``fin_0_state.csv``). Columns, in field order, after ``log_time_ns`` (the file's UNIX
-nanoseconds; ``t`` is the message's own time field):
+``fin_0_state.csv``), and beside it ``fin_0_state.columns.json``. Columns, in field order,
+after ``log_time_ns`` (the file's UNIX nanoseconds; ``t`` is the message's own time field),
+named by their MCAP message paths (as Foxglove and PlotJuggler name them):
 
-    scalar field            its name                          ``depth``
-    fixed-length tuple      ``name.i`` for each element i     ``position.0``, ``position.1``
-    variable-length tuple   its name, elements joined by ";"  ``failsafes``
-    dict (Event.data)       its name, as compact JSON         ``data``
+    scalar field                 its name                       ``depth``
+    named vector                 ``name.part`` for each part    ``position.x``, ``orientation.w``
+    per-fin array                ``name[i]`` for each element   ``per_fin[0]`` ... ``per_fin[3]``
+    variable-length tuple        its name, as a JSON array      ``failsafes``: ``[]``, ``["dvl"]``
+    dict (Event.data)            its name, as compact JSON      ``data``
 
-Floats are written with ``repr`` (they read back exactly; NaN as ``nan``, infinities as
-``inf``/``-inf``), booleans as ``true``/``false``, a field that is None as empty cells.
-The columns depend only on the message type, never on the data.
+One dtype per column, whatever the data (the sidecar names it): ``float64`` (``repr``, so
+values read back exactly; ``nan``, ``inf``, ``-inf`` for non-finite ones), ``int64``,
+``bool`` (``true``/``false``), ``string``, ``json`` (JSON text), and ``decimal`` for
+integers that may exceed 2^63 (planner seeds, -1 for none): written as decimal text, to be
+read as text (``pandas.read_csv(..., dtype={"seed": str})``) and converted with ``int``,
+since a float64 or an int64 column would change them.
+
+Missing and empty stay apart: a value is *missing* only where a field is optional and
+absent (an IMU reading without orientation): its cells are empty, and only columns the
+sidecar marks ``"nullable": true`` can have them. Text is never missing, so an empty
+cell in a ``string`` column is the empty string (read text columns with
+``keep_default_na=False`` in pandas, which otherwise reads an empty cell as NaN), and an
+empty list is ``[]``.
+
+The sidecar (``*.columns.json``) lists each column's ``name``, ``dtype``, ``unit``,
+``nullable`` and ``description``, the field's schema description with its unit and frame.
 """
 
 from __future__ import annotations
@@ -22,34 +38,69 @@ from pathlib import Path
 from typing import Any, Iterable, Sequence
 
 from ucat_console.backend.sessions.reader import SessionParts, SessionReader, SessionSource
-from ucat_console.backend.sessions.schema import BOOL, FLOAT, FLOATS, JSON, SEQ, field_specs
+from ucat_console.backend.sessions.schema import (
+    BOOL,
+    FLOAT,
+    FLOATS,
+    INT,
+    JSON,
+    SEQ,
+    STR,
+    FieldSpec,
+    field_specs,
+)
 from ucat_console.telemetry.channels import message_type
 
 TIME_COLUMN = "log_time_ns"
+SIDECAR_SUFFIX = ".columns.json"
+_DTYPES = {FLOAT: "float64", FLOATS: "float64", INT: "int64", BOOL: "bool", STR: "string",
+           SEQ: "json", JSON: "json"}
 
 
 def csv_name(channel: str) -> str:
     return channel.replace("/", "_") + ".csv"
 
 
-def columns(cls: type) -> list[str]:
-    """The CSV header of message type ``cls``."""
-    out = [TIME_COLUMN]
+def sidecar_name(channel: str) -> str:
+    return channel.replace("/", "_") + SIDECAR_SUFFIX
+
+
+def _dtype(s: FieldSpec) -> str:
+    return "decimal" if s.kind == INT and s.wide else _DTYPES[s.kind]
+
+
+def column_specs(cls: type) -> list[dict[str, Any]]:
+    """The sidecar's description of each column of message type ``cls``."""
+    out: list[dict[str, Any]] = [{
+        "name": TIME_COLUMN, "dtype": "int64", "unit": "ns", "nullable": False,
+        "description": "the message's file time, nanoseconds since the UNIX epoch",
+    }]
     for s in field_specs(cls):
-        if s.kind == FLOATS:
-            out += [f"{s.name}.{i}" for i in range(s.length)]
-        else:
-            out.append(s.name)
+        doc = s.doc
+        for path in s.paths():
+            out.append({
+                "name": path,
+                "dtype": _dtype(s),
+                "unit": doc.unit if doc is not None else "",
+                "nullable": s.optional,
+                "description": doc.describe() if doc is not None else "",
+            })
     return out
 
 
-def _cell(kind: str, v: Any) -> str:
+def columns(cls: type) -> list[str]:
+    """The CSV header of message type ``cls``."""
+    return [c["name"] for c in column_specs(cls)]
+
+
+def _cell(s: FieldSpec, v: Any) -> str:
+    kind = s.kind
     if kind == FLOAT:
         return repr(float(v))
     if kind == BOOL:
         return "true" if v else "false"
     if kind == SEQ:
-        return ";".join("true" if x is True else "false" if x is False else str(x) for x in v)
+        return json.dumps(list(v), separators=(",", ":"))
     if kind == JSON:
         return json.dumps(v, separators=(",", ":"), sort_keys=True)
     return str(v)
@@ -65,7 +116,7 @@ def row(msg: Any, log_time_ns: int) -> list[str]:
         elif v is None:
             out.append("")
         else:
-            out.append(_cell(s.kind, v))
+            out.append(_cell(s, v))
     return out
 
 
@@ -76,8 +127,9 @@ def export_csv(
     start: float | None = None,
     end: float | None = None,
 ) -> dict[str, tuple[Path, int]]:
-    """Write one CSV per channel into ``out_dir``: the messages of ``readers`` (a part, a
-    whole session as :class:`SessionParts`, or several of them, in the order given).
+    """Write one CSV per channel, with its sidecar, into ``out_dir``: the messages of
+    ``readers`` (a part, a whole session as :class:`SessionParts`, or several of them, in
+    the order given).
 
     Returns channel -> (file, rows). Unknown channel names raise ValueError; a channel
     with no messages gets a file with its header only.
@@ -95,10 +147,13 @@ def export_csv(
     result: dict[str, tuple[Path, int]] = {}
     for c in chans:
         path = out / csv_name(c)
+        specs = column_specs(types[c])
+        (out / sidecar_name(c)).write_text(json.dumps(
+            {"channel": c, "file": path.name, "columns": specs}, indent=1) + "\n")
         n = 0
         with open(path, "w", newline="") as fh:
             w = csv.writer(fh)
-            w.writerow(columns(types[c]))
+            w.writerow([s["name"] for s in specs])
             for r in readers:
                 for rec in r.records([c], start, end):
                     w.writerow(row(rec.message, rec.log_time_ns))

@@ -31,13 +31,18 @@ from mcap.reader import SeekingReader
 from mcap.records import Channel, ChunkIndex, Message, Schema
 from mcap.summary import Summary
 
-from ucat_console.backend.sessions import codec, files, foxglove
+from ucat_console.backend.sessions import codec, files, foxglove, legacy
 from ucat_console.backend.sessions.schema import (
     MESSAGE_ENCODING,
+    NONFINITE,
     SCHEMA_ENCODING,
     field_specs,
+    schema_encoding,
     schema_name,
 )
+
+#: the message decoder of each schema encoding (schema.schema_encoding)
+_DECODERS = {1: legacy.decode, 2: codec.decode}
 from ucat_console.telemetry.channels import CHANNELS, EVENTS
 from ucat_console.telemetry.events import Event
 
@@ -59,8 +64,9 @@ class Record:
     message: Any
 
 
-def _check_schema(topic: str, schema: Schema | None, channel: Channel, path: Path) -> None:
-    """ValueError unless ``channel`` is one of ours with our schema."""
+def _check_schema(topic: str, schema: Schema | None, channel: Channel, path: Path) -> int:
+    """The encoding of ``channel`` (0 for a derived Foxglove channel); ValueError unless it
+    is one of ours with our schema."""
     if topic in CHANNELS:
         cls = CHANNELS[topic]
         want = schema_name(cls)
@@ -78,16 +84,20 @@ def _check_schema(topic: str, schema: Schema | None, channel: Channel, path: Pat
             raise ValueError(
                 f"{path}: channel {topic!r}: schema is not a JSON Schema object"
             ) from None
-        fields = {s.name for s in field_specs(cls)}
+        try:
+            encoding = schema_encoding(doc)
+        except ValueError as e:
+            raise ValueError(f"{path}: channel {topic!r}: {e}") from None
+        fields = {s.name for s in field_specs(cls)} | {NONFINITE}
         if not props <= fields:
             raise ValueError(f"{path}: channel {topic!r}: schema fields "
                              f"{sorted(props - fields)} are not fields of {cls.__name__}")
-        return
-    for ftopic, name, _ in foxglove.DERIVED:
+        return encoding
+    for ftopic, name in foxglove.DERIVED_TOPICS.items():
         if topic == ftopic:
             if schema is None or schema.name != name:
                 raise ValueError(f"{path}: not a session file: channel {topic!r} is not {name}")
-            return
+            return 0
     raise ValueError(f"{path}: not a session file: foreign channel {topic!r}"
                      + (f" (schema {schema.name!r})" if schema is not None else ""))
 
@@ -246,10 +256,13 @@ class SessionReader(_Recording):
         if not channels:
             raise ValueError(f"{p}: not a session file: it has no channels")
         self._topic_ids: dict[str, int] = {}
+        self._decoders: dict[str, Any] = {}
         for cid, ch in channels.items():
             schema = summary.schemas.get(ch.schema_id) if ch.schema_id else None
-            _check_schema(ch.topic, schema, ch, p)
+            encoding = _check_schema(ch.topic, schema, ch, p)
             self._topic_ids[ch.topic] = cid
+            if encoding:
+                self._decoders[ch.topic] = _DECODERS[encoding]
         if not any(t in CHANNELS for t in self._topic_ids):
             raise ValueError(
                 f"{p}: not a session file: none of its channels is a telemetry channel"
@@ -329,7 +342,7 @@ class SessionReader(_Recording):
     def _decode(self, channel: Channel, message: Message) -> Record:
         cls = CHANNELS[channel.topic]
         try:
-            msg = codec.decode(cls, message.data)
+            msg = self._decoders[channel.topic](cls, message.data)
         except ValueError as e:
             raise ValueError(
                 f"{self.path}: channel {channel.topic!r}, message at {message.log_time} ns: {e}"

@@ -38,7 +38,7 @@ from ucat_console.backend.sessions.schema import (
     json_schema_bytes,
     schema_name,
 )
-from ucat_console.telemetry.channels import BODY_STATE, CHANNELS, EVENTS
+from ucat_console.telemetry.channels import CHANNELS, EVENTS
 from ucat_console.telemetry.events import Event, EventSink
 from ucat_console.telemetry.stream import TelemetryStream
 from ucat_console.typedconf import Config, param
@@ -73,7 +73,9 @@ class RecorderConfig(Config):
         3600.0, lo=1.0, hi=7 * 86400.0, unit="s", doc="start a new part after this recorded time"
     )
     compression: str = param("zstd", choices=("zstd", "lz4", "none"), doc="chunk compression")
-    foxglove: bool = param(True, doc="also write foxglove.FrameTransform and foxglove.Log")
+    foxglove: bool = param(
+        True, doc="also write the robot for Foxglove's 3-D panel (transforms, scene) and foxglove.Log"
+    )
 
 
 @dataclass(frozen=True)
@@ -116,9 +118,13 @@ class _Part:
                 )
             self.channel_ids[topic] = w.register_channel(topic, MESSAGE_ENCODING, schema_ids[cls])
         if foxglove_channels:
+            names: dict[str, int] = {}
             for topic, name, schema in foxglove.DERIVED:
-                sid = w.register_schema(name, SCHEMA_ENCODING, foxglove.schema_bytes(schema))
-                self.channel_ids[topic] = w.register_channel(topic, MESSAGE_ENCODING, sid)
+                if name not in names:  # tf and tf_static share foxglove.FrameTransform
+                    names[name] = w.register_schema(
+                        name, SCHEMA_ENCODING, foxglove.schema_bytes(schema)
+                    )
+                self.channel_ids[topic] = w.register_channel(topic, MESSAGE_ENCODING, names[name])
 
     def add(self, topic: str, ns: int, data: bytes) -> None:
         cid = self.channel_ids[topic]
@@ -150,6 +156,7 @@ class Recorder:
     ``epoch_offset`` (s) is added to the messages' ``t`` to make UNIX time: 0 for a
     wall-clock stream, the run's start time for a headless run in simulated seconds.
     ``event_sink`` also receives the recorder's own events (overflow, write failure).
+    ``geometry`` is the robot drawn in Foxglove's 3-D panel (default: the default plant's).
     """
 
     def __init__(
@@ -160,6 +167,7 @@ class Recorder:
         epoch_offset: float = 0.0,
         event_sink: EventSink | None = None,
         clock: Callable[[], float] = time.monotonic,
+        geometry: foxglove.RobotGeometry | None = None,
     ) -> None:
         if not math.isfinite(epoch_offset):
             raise ValueError(f"epoch_offset: {epoch_offset!r} is not finite")
@@ -169,6 +177,8 @@ class Recorder:
         self.epoch_offset = float(epoch_offset)
         self._event_sink = event_sink
         self._clock = clock
+        self._derived = foxglove.Derived(geometry or foxglove.robot_geometry()) \
+            if self.config.foxglove else None
         self._lock = threading.Lock()
         self._thread: threading.Thread | None = None
         self._unsubscribe: Callable[[], None] | None = None
@@ -406,15 +416,15 @@ class Recorder:
         if channel not in part.channel_ids:
             self._rejected += 1
             return None
+        derived = self._derived
+        if derived is not None and part.first_ns is None:
+            for topic, extra in derived.opening(ns):
+                part.add(topic, ns, extra)
         part.add(channel, ns, data)
         self._written += 1
-        if self.config.foxglove:
-            if channel == BODY_STATE:
-                tf = foxglove.frame_transform(msg, ns)
-                if tf is not None:
-                    part.add(foxglove.TF_TOPIC, ns, foxglove.encode(tf))
-            elif channel == EVENTS:
-                part.add(foxglove.LOG_TOPIC, ns, foxglove.encode(foxglove.log_message(msg, ns)))
+        if derived is not None:
+            for topic, extra in derived.derive(channel, msg, ns):
+                part.add(topic, ns, extra)
         return ns
 
     def _write_notes(self, notes: str) -> None:
