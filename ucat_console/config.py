@@ -18,14 +18,18 @@ One TOML file configures a run; every table is optional::
     action = "surface"
     timeout = 3.0
 
-The controller blocks are top-level tables only: ``[loop]`` holds the loop's own values,
-and the :class:`LoopConfig` handed to the closed loop (``app.loop``) always carries the
-top-level ``mpc``, ``body``, ``baseline``, ``executor`` and ``power``. Errors name the
-dotted key and the allowed range.
+One tree, each value held once: the controller blocks (``mpc``, ``body``, ``baseline``,
+``executor``, ``power``) live in the closed loop's :class:`LoopConfig` (``app.loop``, what
+the loop is handed), and ``app.mpc`` and the others read them there. In a TOML file they
+are top-level tables only (``[loop]`` holds the loop's own values; ``[loop.mpc]`` is
+refused, naming the key); :meth:`AppConfig.replace` takes them by name as well. Errors
+name the dotted key and the allowed range.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import typing
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Self
@@ -36,26 +40,18 @@ from ucat_console.backend.devices.config import DevicesConfig
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.backend.sessions.recorder import RecorderConfig
 from ucat_console.backend.sim.params import PlantConfig
-from ucat_console.control.params import (
-    BaselineConfig,
-    BodyConfig,
-    ExecutorConfig,
-    MpcConfig,
-    PowerConfig,
-    _Config,
-)
-from ucat_console.typedconf import from_dict, param, to_dict
+from ucat_console.typedconf import Config, coerce, from_dict, param, to_dict
 
 #: robots the supervisor can drive
 ROBOTS = ("sim", "rig")
 #: what a failsafe does when it triggers
 FAILSAFE_ACTIONS = ("hold", "surface", "disarm", "warn")
-#: the controller blocks shared by the app (top level) and the loop (nested)
+#: the controller blocks: held by the loop's configuration, top-level tables in a file
 LOOP_BLOCKS = ("mpc", "baseline", "body", "executor", "power")
 
 
 @dataclass(frozen=True)
-class ConsoleConfig(_Config):
+class ConsoleConfig(Config):
     """The console process: web server, live view, supervision (console.md)."""
 
     host: str = param(
@@ -101,7 +97,7 @@ class ConsoleConfig(_Config):
 
 
 @dataclass(frozen=True)
-class AccessConfig(_Config):
+class AccessConfig(Config):
     """One pilot, everyone else read-only (console.md, Safety and access)."""
 
     token: str = param("", secret=True,
@@ -123,7 +119,7 @@ class AccessConfig(_Config):
 
 
 @dataclass(frozen=True)
-class FailsafeRule(_Config):
+class FailsafeRule(Config):
     """What one failsafe does, and after how long its cause triggers it."""
 
     action: str = param(
@@ -135,7 +131,7 @@ class FailsafeRule(_Config):
 
 
 @dataclass(frozen=True)
-class FailsafeConfig(_Config):
+class FailsafeConfig(Config):
     """Every failsafe; each is shown, recorded, and latched until its cause clears."""
 
     pilot_gone: FailsafeRule = FailsafeRule("hold", 2.0)
@@ -150,15 +146,10 @@ class FailsafeConfig(_Config):
 
 
 @dataclass(frozen=True)
-class AppConfig(_Config):
+class AppConfig(Config):
     """Everything one run of the console needs (module docstring)."""
 
     robot: str = param("sim", choices=ROBOTS, doc="the robot to drive: the simulator or the device rig")
-    mpc: MpcConfig = MpcConfig()
-    baseline: BaselineConfig = BaselineConfig()
-    body: BodyConfig = BodyConfig()
-    executor: ExecutorConfig = ExecutorConfig()
-    power: PowerConfig = PowerConfig()
     loop: LoopConfig = LoopConfig()
     plant: PlantConfig = PlantConfig()
     recorder: RecorderConfig = RecorderConfig()
@@ -167,26 +158,41 @@ class AppConfig(_Config):
     failsafe: FailsafeConfig = FailsafeConfig()
     devices: DevicesConfig = DevicesConfig()
 
-    def _check(self) -> None:
-        # the loop always runs the app's controller blocks
-        nested = {name: getattr(self, name) for name in LOOP_BLOCKS}
-        if any(getattr(self.loop, k) != v for k, v in nested.items()):
-            object.__setattr__(self, "loop", self.loop.replace(**nested))
+    # the controller blocks, read where they are held (the loop's configuration)
+    mpc = property(lambda self: self.loop.mpc, doc="the fin MPC (``loop.mpc``)")
+    baseline = property(lambda self: self.loop.baseline, doc="the baseline (``loop.baseline``)")
+    body = property(lambda self: self.loop.body, doc="the body-frame layer (``loop.body``)")
+    executor = property(lambda self: self.loop.executor, doc="the executors (``loop.executor``)")
+    power = property(lambda self: self.loop.power, doc="the power estimate (``loop.power``)")
+
+    def replace(self, **changes: Any) -> Self:
+        """A copy with ``changes``; a controller block given by name (``mpc=...``) goes into
+        the loop's configuration (after a ``loop`` given in the same call)."""
+        blocks = {name: changes.pop(name) for name in LOOP_BLOCKS if name in changes}
+        loop = changes.pop("loop", self.loop)
+        if blocks:
+            loop = loop.replace(**blocks)
+        return dataclasses.replace(self, loop=loop, **changes)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Self:
-        loop = data.get("loop") if isinstance(data, dict) else None
+        if not isinstance(data, dict):
+            return from_dict(cls, data)
+        loop = data.get("loop")
         if isinstance(loop, dict):
             for name in LOOP_BLOCKS:
                 if name in loop:
                     raise ValueError(f"loop.{name}: set it in the top-level [{name}] table")
-        return from_dict(cls, data)
+        rest = {k: v for k, v in data.items() if k not in LOOP_BLOCKS}
+        hints = typing.get_type_hints(LoopConfig)
+        blocks = {name: coerce(hints[name], data[name], name) for name in LOOP_BLOCKS if name in data}
+        return from_dict(cls, rest).replace(**blocks)
 
     def to_dict(self, redact: bool = False) -> dict[str, Any]:
         """The configuration as TOML tables; ``redact`` leaves the secret fields out."""
         d = to_dict(self, redact)
         for name in LOOP_BLOCKS:
-            d["loop"].pop(name, None)
+            d[name] = d["loop"].pop(name)
         return d
 
     def to_toml(self, redact: bool = False) -> str:

@@ -7,6 +7,19 @@ and builds the console's tuning panels, so a bound is written once.
 
 Nested dataclasses map to TOML tables. Unknown keys, wrong types, non-finite numbers and
 out-of-range values raise :class:`ValueError` naming the dotted key and the allowed range.
+:class:`Config` is the base of every configuration dataclass of the project.
+
+Libraries: TOML is read by ``tomllib`` and written by ``tomli_w``; the validation below is
+written by hand. msgspec (installed with viser) was considered for it and not taken, for
+what msgspec 0.23 does with dataclasses: it checks ``Meta`` constraints only when
+decoding or converting, never when a config is built in Python (``MpcConfig(lam_st=-1)``
+and every tuning change from the page must be refused as well, so the checks here would
+stay); it ignores unknown keys of a dataclass (``forbid_unknown_fields`` is for
+``msgspec.Struct`` only, and a misspelt key must be refused); its errors name a path
+(``$.mpc.lam_st``) but not the unit or an open bound; and the range, unit and doc of each
+field, which the tuning panels are built from, would still need metadata of their own.
+Moving every config class to ``msgspec.Struct`` would change the whole tree for one of
+these (unknown keys).
 """
 
 from __future__ import annotations
@@ -18,7 +31,7 @@ import tomllib
 import types
 import typing
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, Self, TypeVar
 
 import tomli_w
 
@@ -123,7 +136,7 @@ def _field_types(cls: type) -> dict[str, Any]:
     return typing.get_type_hints(cls)
 
 
-def _coerce(tp: Any, value: Any, key: str) -> Any:
+def coerce(tp: Any, value: Any, key: str) -> Any:
     """Convert a TOML value to the annotated type, refusing silent changes of kind."""
     origin = typing.get_origin(tp)
     args = typing.get_args(tp)
@@ -134,7 +147,7 @@ def _coerce(tp: Any, value: Any, key: str) -> Any:
         last: Exception | None = None
         for a in non_none:
             try:
-                return _coerce(a, value, key)
+                return coerce(a, value, key)
             except ValueError as e:
                 last = e
         raise last or ValueError(f"{key}: cannot read {value!r}")
@@ -146,10 +159,10 @@ def _coerce(tp: Any, value: Any, key: str) -> Any:
         if not isinstance(value, (list, tuple)):
             raise ValueError(f"{key}: expected an array, got {value!r}")
         if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_coerce(args[0], v, f"{key}[{i}]") for i, v in enumerate(value))
+            return tuple(coerce(args[0], v, f"{key}[{i}]") for i, v in enumerate(value))
         if len(args) != len(value):
             raise ValueError(f"{key}: expected {len(args)} values, got {len(value)}")
-        return tuple(_coerce(a, v, f"{key}[{i}]") for i, (a, v) in enumerate(zip(args, value)))
+        return tuple(coerce(a, v, f"{key}[{i}]") for i, (a, v) in enumerate(zip(args, value)))
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ValueError(f"{key}: expected a number, got {value!r}")
@@ -187,7 +200,7 @@ def from_dict(cls: type[T], data: dict[str, Any], prefix: str = "") -> T:
     kwargs = {}
     for name, value in data.items():
         key = prefix + name
-        kwargs[name] = _coerce(hints[name], value, key)
+        kwargs[name] = coerce(hints[name], value, key)
         check_value(fields[name], kwargs[name], prefix)
     try:
         return cls(**kwargs)
@@ -261,6 +274,30 @@ def require_below(obj: Any, lo: str, hi: str, why: str = "") -> None:
         raise ValueError(f"{lo}/{hi}: need {lo} < {hi}{reason}, got {a} >= {b}")
 
 
-def bounded_fields(cls_or_obj: Any) -> list[dataclasses.Field]:
-    """Fields that carry range metadata (what a tuning panel shows)."""
-    return [f for f in dataclasses.fields(cls_or_obj) if f.metadata]
+class Config:
+    """The base of every configuration dataclass: validation, TOML in/out, copies.
+
+    Subclasses are ``@dataclass(frozen=True)`` with :func:`param` fields; ``_check`` holds
+    the cross-field checks (run after every field has been checked).
+    """
+
+    def __post_init__(self) -> None:
+        validate(self)
+        self._check()
+
+    def _check(self) -> None:  # cross-field checks
+        pass
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Self:
+        return from_dict(cls, data)
+
+    @classmethod
+    def from_toml(cls, path: str | Path) -> Self:
+        return load_toml(cls, path)
+
+    def to_toml(self) -> str:
+        return dump_toml(self)
+
+    def replace(self, **changes: Any) -> Self:
+        return dataclasses.replace(self, **changes)

@@ -25,12 +25,12 @@ from ucat_console.backend.devices.imu import ImuConfig
 from ucat_console.backend.devices.imu_emulator import ImuEmulator
 from ucat_console.backend.devices.pressure import PressureConfig
 from ucat_console.backend.devices.pressure_emulator import PressureEmulator
-from ucat_console.backend.devices.readings import DepthReading, DvlVelocity, FinFeedback, ImuReading
-from ucat_console.backend.devices.units import DriveUnits
+from ucat_console.robot.readings import DepthReading, DvlVelocity, FinFeedback, ImuReading
+from ucat_console.robot.units import DriveUnits
 from ucat_console.backend.loop.clock import PacedClock
 from ucat_console.backend.loop.closed_loop import ClosedLoop
 from ucat_console.backend.loop.config import LoopConfig
-from ucat_console.backend.loop.robot_io import SimRobotIO
+from ucat_console.backend.sim.robot_io import SimRobotIO
 from ucat_console.backend.rig import build_robot_io, connect_events, rig_of
 from ucat_console.cli.devices import synthetic_depth, synthetic_dvl, synthetic_imu
 from ucat_console.control.allocation import BodySetpoints

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from ucat_console.backend.devices.readings import DepthReading, DvlVelocity, ImuReading
+from ucat_console.robot.readings import DepthReading, DvlVelocity, ImuReading
 from ucat_console.backend.safety import SafetyMonitor
 from ucat_console.config import FailsafeConfig, FailsafeRule
 from ucat_console.telemetry import channels as ch

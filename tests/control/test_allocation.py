@@ -6,14 +6,10 @@ import math
 
 import pytest
 
-from ucat_console.backend.devices.readings import DepthReading, DvlVelocity, ImuReading
-from ucat_console.control.allocation import (
-    FIN_SIDES,
-    BodyController,
-    BodySetpoints,
-    allocate,
-)
+from ucat_console.control.allocation import BodyController, BodySetpoints, allocate
 from ucat_console.control.params import BodyConfig, PidGains
+from ucat_console.robot.fins import PAPER_SIDES as FIN_SIDES
+from ucat_console.robot.readings import DepthReading, DvlVelocity, ImuReading
 
 B = 0.2981  # lateral fin distance used to turn differentials into moments (m)
 

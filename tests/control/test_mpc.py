@@ -1,6 +1,7 @@
 """The two-stage planner: both solvers, bounds, signs, determinism, bad input."""
 
 import math
+import time
 
 import numpy as np
 import pytest
@@ -37,7 +38,7 @@ def test_plan_is_admissible_keeps_warm_start_signs_and_never_worse(solver):
 
 
 def test_reported_cost_and_commands_belong_to_the_plan():
-    mpc = FinMpc(CFG, seed=1)
+    mpc = FinMpc(CFG, seed=1, clock=time.perf_counter)
     f, v, th = (-0.5, 0.5), 0.3, 0.7
     plan = mpc.plan(f, v, th, U_PREV)
     again = mpc.cost(plan.u, f, v, th, U_PREV)

@@ -90,7 +90,7 @@ def server():
 
 @pytest.fixture
 def panel(server: viser.ViserServer, run: Run):
-    p = PlaybackPanel(server.gui, server.scene, AppConfig().plant, directory=run.directory,
+    p = PlaybackPanel(server.gui, server.scene, AppConfig().plant.geometry, directory=run.directory,
                       plot_rate=PLOT_RATE, max_history=60.0, history=lambda: 60.0)
     yield p
     p.stop()
@@ -248,7 +248,7 @@ def test_a_counterfactual_replay_shows_progress_runs_one_at_a_time_and_cancels(
     job = panel.run_counterfactual("lam_st=2.0")
     assert panel.replay_progress.visible and panel.cancel_button.visible
     server2 = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)  # another page
-    other = PlaybackPanel(server2.gui, server2.scene, AppConfig().plant, directory=run.directory,
+    other = PlaybackPanel(server2.gui, server2.scene, AppConfig().plant.geometry, directory=run.directory,
                           replay_slot=panel.replay_slot)
     try:
         other.open(run.path.name)
@@ -273,7 +273,7 @@ def test_a_page_may_not_start_a_replay_when_the_console_says_no(run: Run) -> Non
     def refuse() -> None:
         raise ValueError("counterfactual replay: while the robot is armed only the pilot may start one")
 
-    p = PlaybackPanel(server.gui, server.scene, AppConfig().plant, directory=run.directory, may_replay=refuse)
+    p = PlaybackPanel(server.gui, server.scene, AppConfig().plant.geometry, directory=run.directory, may_replay=refuse)
     try:
         p.open(run.path.name)
         assert p.act(lambda: p.run_counterfactual("lam_st=2.0")) is False
@@ -291,7 +291,7 @@ def test_a_truncated_file_is_listed_and_repaired_from_the_panel(
     data = run.path.read_bytes()
     cut = d / run.path.name
     cut.write_bytes(data[: len(data) * 2 // 3])  # a killed recorder: no summary
-    p = PlaybackPanel(server.gui, server.scene, AppConfig().plant, directory=d, plot_rate=PLOT_RATE)
+    p = PlaybackPanel(server.gui, server.scene, AppConfig().plant.geometry, directory=d, plot_rate=PLOT_RATE)
     try:
         assert "truncated" in p.browser.content and not p.repair_button.disabled
         assert p.act(lambda: p.open(cut.name)) is False  # it does not open before the repair
@@ -368,7 +368,7 @@ def split_run(tmp_path_factory: pytest.TempPathFactory) -> SplitRun:
 
 @pytest.fixture
 def split_panel(server: viser.ViserServer, split_run: SplitRun):
-    p = PlaybackPanel(server.gui, server.scene, AppConfig().plant, directory=split_run.directory,
+    p = PlaybackPanel(server.gui, server.scene, AppConfig().plant.geometry, directory=split_run.directory,
                       plot_rate=PLOT_RATE, max_history=60.0, history=lambda: 60.0)
     yield p
     p.stop()
@@ -495,7 +495,7 @@ def test_a_truncated_part_is_repaired_from_the_session_chooser(
     cut = d / split_run.paths[1].name
     data = cut.read_bytes()
     cut.write_bytes(data[: len(data) // 2])
-    p = PlaybackPanel(server.gui, server.scene, AppConfig().plant, directory=d, plot_rate=PLOT_RATE)
+    p = PlaybackPanel(server.gui, server.scene, AppConfig().plant.geometry, directory=d, plot_rate=PLOT_RATE)
     try:
         assert not p.repair_button.disabled and "truncated" in p.browser.content
         assert p.act(lambda: p.open(p.choice.value)) is False

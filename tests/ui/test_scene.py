@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from ucat_console.backend.sim.params import PlantConfig, fin_plane_axes
+from ucat_console.backend.sim.params import PlantConfig
+from ucat_console.robot.geometry import fin_plane_axes
 from ucat_console.ui.scene import fin_mount, turn_about_z
 
 
@@ -24,7 +25,7 @@ def rotate(q: tuple[float, float, float, float], v: np.ndarray) -> np.ndarray:
 @pytest.mark.parametrize("fin", range(4))
 def test_a_fins_chord_at_angle_theta_follows_the_fin_plane(fin: int) -> None:
     cfg = PlantConfig()
-    pos, q = fin_mount(cfg, fin, cfg.vehicle.hull_size[1])
+    pos, q = fin_mount(cfg.geometry, fin, cfg.vehicle.hull_size[1])
     xm, ym = (np.array(v) for v in fin_plane_axes(cfg.fins, fin))
     for theta in (0.0, 0.7, -1.2):
         # chord = mount rotation applied to the blade's x axis turned by theta

@@ -25,12 +25,13 @@ import math
 import threading
 from typing import Callable
 
-from ucat_console.backend.devices.readings import DepthReading, DvlVelocity, FinFeedback, ImuReading
-from ucat_console.backend.loop.robot_io import Reading, RobotIO, RobotTruth
+from ucat_console.robot.readings import DepthReading, DvlVelocity, FinFeedback, ImuReading
+from ucat_console.robot.fins import N_FINS
+from ucat_console.robot.interface import RobotIO, RobotTruth
+from ucat_console.robot.readings import Reading
 
 log = logging.getLogger(__name__)
 
-N_FINS = 4
 #: profile velocity of the stop set-point sent on disarming (rad/s)
 STOP_RATE = 2.0
 

@@ -1,6 +1,6 @@
 """The robot behind the closed loop, built from configuration: :func:`build_robot_io`.
 
-Three robots share one interface (``loop.robot_io.RobotIO``), picked by
+Three robots share one interface (``robot.interface.RobotIO``), picked by
 ``DevicesConfig.robot``::
 
     sim          SimRobotIO ------------------------------------> Plant (in process)
@@ -19,8 +19,9 @@ from typing import Any, Callable
 
 from ucat_console.backend.devices.config import DevicesConfig
 from ucat_console.backend.devices.device_robot_io import DeviceRobotIO
-from ucat_console.backend.devices.sim_rig import SimRig
-from ucat_console.backend.loop.robot_io import RobotIO, SimRobotIO
+from ucat_console.backend.sim_rig import SimRig
+from ucat_console.backend.sim.robot_io import SimRobotIO
+from ucat_console.robot.interface import RobotIO
 from ucat_console.backend.sim.params import PlantConfig
 from ucat_console.telemetry.events import EventSink
 

@@ -35,7 +35,7 @@ import threading
 from dataclasses import dataclass
 from typing import Any
 
-from ucat_console.backend.devices.readings import DepthReading, DvlVelocity, ImuReading
+from ucat_console.robot.readings import DepthReading, DvlVelocity, ImuReading
 from ucat_console.config import FailsafeConfig, FailsafeRule
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event

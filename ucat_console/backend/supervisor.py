@@ -51,7 +51,8 @@ from ucat_console.backend.loop.clock import Clock, PacedClock
 from ucat_console.backend.loop.closed_loop import PID_LOOPS, ClosedLoop
 from ucat_console.backend.loop.config import MODES
 from ucat_console.backend.loop.planners import MpcFinPlanner, warm_up
-from ucat_console.backend.loop.robot_io import RobotIO, SimRobotIO
+from ucat_console.backend.sim.robot_io import SimRobotIO
+from ucat_console.robot.interface import RobotIO
 from ucat_console.backend.safety import CHANNELS as SAFETY_CHANNELS
 from ucat_console.backend.safety import SafetyMonitor, Transition
 from ucat_console.backend.sessions.foxglove import robot_geometry
@@ -65,7 +66,7 @@ from ucat_console.telemetry.stream import TelemetryStream
 from ucat_console.typedconf import check_value, secret_values
 
 if TYPE_CHECKING:
-    from ucat_console.backend.devices.sim_rig import SimRig
+    from ucat_console.backend.sim_rig import SimRig
 
 log = logging.getLogger(__name__)
 

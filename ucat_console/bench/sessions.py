@@ -22,7 +22,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
-from ucat_console.backend.devices.readings import DepthReading, DvlVelocity, ImuReading
+from ucat_console.robot.readings import DepthReading, DvlVelocity, ImuReading
 from ucat_console.backend.sessions.reader import SessionReader
 from ucat_console.backend.sessions.recorder import Recorder, RecorderConfig
 from ucat_console.telemetry import channels as C

@@ -110,7 +110,7 @@ def run_mpc(args: argparse.Namespace) -> int:
 
 
 def run_sim(args: argparse.Namespace) -> int:
-    from ucat_console.backend.loop.bench import measure_realtime_factor
+    from ucat_console.bench.sim import measure_realtime_factor
     from ucat_console.bench.machine import machine_info, pin_to_one_core
 
     if not 0.0 < args.seconds <= 3600.0:

@@ -172,7 +172,7 @@ def run_probe(args: argparse.Namespace) -> int:
 
 def _probe_epos(args: argparse.Namespace, out: _Output, stack: ExitStack) -> int:
     try:
-        from ucat_console.backend.devices.epos2 import probe
+        from ucat_console.backend.devices.epos2_probe import probe
     except ImportError as e:
         print(f"ucat-console: error: the EPOS2 driver is not available: {e}", file=sys.stderr)
         return 2
@@ -194,7 +194,7 @@ def _probe_epos(args: argparse.Namespace, out: _Output, stack: ExitStack) -> int
 
 def _probe_imu(args: argparse.Namespace, out: _Output, stack: ExitStack) -> int:
     from ucat_console.backend.devices.imu import ImuConfig, ImuDriver
-    from ucat_console.backend.devices.readings import ImuReading
+    from ucat_console.robot.readings import ImuReading
 
     port = args.port
     if args.emulate:
@@ -215,7 +215,7 @@ def _probe_imu(args: argparse.Namespace, out: _Output, stack: ExitStack) -> int:
 
 def _probe_dvl(args: argparse.Namespace, out: _Output, stack: ExitStack) -> int:
     from ucat_console.backend.devices.dvl import DvlClient, DvlConfig
-    from ucat_console.backend.devices.readings import DvlPosition, DvlVelocity
+    from ucat_console.robot.readings import DvlPosition, DvlVelocity
 
     host, port = args.host, args.port
     if args.emulate:
@@ -245,7 +245,7 @@ def _probe_dvl(args: argparse.Namespace, out: _Output, stack: ExitStack) -> int:
 
 def _probe_pressure(args: argparse.Namespace, out: _Output, stack: ExitStack) -> int:
     from ucat_console.backend.devices.pressure import PressureConfig, PressureDriver
-    from ucat_console.backend.devices.readings import DepthReading
+    from ucat_console.robot.readings import DepthReading
 
     port = args.port
     if args.emulate:
@@ -280,13 +280,13 @@ def _listen(driver: Any, args: argparse.Namespace, stack: ExitStack) -> int:
 
 def synthetic_imu(t: float) -> Any:
     """Level, at rest, turning at 0.1 rad/s about the vertical."""
-    from ucat_console.backend.devices.attitude import quaternion_from_euler
-    from ucat_console.backend.devices.readings import ImuReading
+    from ucat_console.robot.readings import ImuReading
+    from ucat_console.robot.rotations import quaternion_from_euler, quaternion_normalize
 
     yaw = math.remainder(0.1 * t, 2.0 * math.pi)
     return ImuReading(
         t=t, accel_g=(0.0, 0.0, -1.0), gyro=(0.0, 0.0, 0.1),
-        quaternion=quaternion_from_euler(0.0, 0.0, yaw), euler=(0.0, 0.0, yaw),
+        quaternion=quaternion_normalize(quaternion_from_euler(0.0, 0.0, yaw)), euler=(0.0, 0.0, yaw),
     )
 
 

@@ -3,8 +3,8 @@
 Control.md section 7, paper section IV.B/IV.D.
 
 Fin indexing is the paper's: fins 0 and 1 are the front pair, 2 and 3 the rear pair;
-0 and 2 are on the starboard side, 1 and 3 on the port side (:data:`FIN_SIDES`). The plant
-and the drivers map these to their own order.
+0 and 2 are on the starboard side, 1 and 3 on the port side (``robot.fins.PAPER_SIDES``). The plant
+and the drivers use the robot's order (``robot.fins``, which holds the one map between them).
 
 Sign conventions. Forces are those of the fin model (control.md section 1): forward thrust
 is ``f_x < 0``; ``f_y`` is the force in the fin's working plane perpendicular to x (vertical
@@ -32,16 +32,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ucat_console.backend.devices.readings import DepthReading, DvlVelocity, ImuReading
 from ucat_console.control.argcheck import finite, in_range
 from ucat_console.control.filters import MedianFilter
 from ucat_console.control.params import BodyConfig
 from ucat_console.control.pid import Pid
+from ucat_console.robot.readings import DepthReading, DvlVelocity, ImuReading
+from ucat_console.robot.fins import N_FINS
 
 FRONT_STARBOARD, FRONT_PORT, REAR_STARBOARD, REAR_PORT = 0, 1, 2, 3
-#: side of each fin (paper index): +1 starboard, -1 port
-FIN_SIDES = (1, -1, 1, -1)
-N_FINS = 4
 
 #: logical -> physical fins
 INDEPENDENT_FINS: tuple[tuple[int, ...], ...] = ((0,), (1,), (2,), (3,))
@@ -90,23 +88,37 @@ def allocate(fx_body: float, fy_body: float, yaw: float, *, sync: bool = False) 
     return Allocation(targets=(front_s, front_p, rear, rear), fins=INDEPENDENT_FINS)
 
 
+#: the widest envelope: no configuration allows setpoints beyond these (m/s, m, rad/s)
+MAX_VELOCITY, MAX_DEPTH, MAX_YAW_RATE = 5.0, 1000.0, 10.0
+
+
 @dataclass(frozen=True)
 class BodySetpoints:
-    """Setpoints: forward velocity (m/s), depth (m, positive down), yaw rate (rad/s)."""
+    """Setpoints: forward velocity (m/s), depth (m, positive down), yaw rate (rad/s).
+
+    Always inside the widest envelope; :meth:`within` checks a configured one (the one
+    setpoint range check: the loop, the supervisor and the experiments all call it).
+    """
 
     velocity: float = 0.0
     depth: float = 0.0
     yaw_rate: float = 0.0
 
     def __post_init__(self) -> None:
-        in_range("velocity", self.velocity, -5.0, 5.0, unit="m/s")
-        in_range("depth", self.depth, 0.0, 1000.0, unit="m")
-        in_range("yaw_rate", self.yaw_rate, -10.0, 10.0, unit="rad/s")
+        self.within(MAX_VELOCITY, MAX_DEPTH, MAX_YAW_RATE)
+
+    def within(self, max_velocity: float, max_depth: float, max_yaw_rate: float) -> BodySetpoints:
+        """``self`` if |velocity| <= max_velocity, 0 <= depth <= max_depth and
+        |yaw_rate| <= max_yaw_rate, else ValueError naming the value and the range."""
+        in_range("velocity", self.velocity, -max_velocity, max_velocity, unit="m/s")
+        in_range("depth", self.depth, 0.0, max_depth, unit="m")
+        in_range("yaw_rate", self.yaw_rate, -max_yaw_rate, max_yaw_rate, unit="rad/s")
+        return self
 
 
 @dataclass(frozen=True)
-class BodyCommand:
-    """Output of one body-frame step.
+class BodyStep:
+    """Output of one body-frame step (published as ``telemetry.messages.BodyCommand``).
 
     ``fx``, ``fy``, ``yaw`` are F_x*, F_y* and the yaw differential (N); ``velocity``,
     ``depth`` are the median-filtered measurements and ``yaw_rate`` the last gyro rate (None
@@ -183,7 +195,7 @@ class BodyController:
         self.last_imu_t = finite("imu.t", reading.t)
         self._new_r = True
 
-    def update(self, t: float, setpoints: BodySetpoints, *, sync: bool = False) -> BodyCommand:
+    def update(self, t: float, setpoints: BodySetpoints, *, sync: bool = False) -> BodyStep:
         """One control step at time ``t`` (s): run the loops that have new data, allocate."""
         t = finite("t", t)
         v = self.velocity_filter.value
@@ -197,7 +209,7 @@ class BodyController:
         if new_r and r is not None:
             self._yaw = self.yaw_pid.update((setpoints.yaw_rate, r), t)
         self._new_v = self._new_z = self._new_r = False
-        return BodyCommand(
+        return BodyStep(
             t=t,
             fx=self._fx,
             fy=self._fy,

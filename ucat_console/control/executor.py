@@ -42,7 +42,6 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from ucat_console.backend.devices.readings import FinFeedback
 from ucat_console.control.argcheck import finite, in_range
 from ucat_console.control.params import ExecutorConfig
 
@@ -309,12 +308,6 @@ class FinExecutor:
             raise ValueError(f"t_now: {t_now!r} is earlier than the feedback time t_fb={t_fb!r}")
         self._watch[fin].feed(t_fb, w_fb, theta_fb)
         return self._advance(t_now, predict=True)
-
-    def on_fin_feedback(self, fb: FinFeedback, t_now: float) -> list[Action]:
-        """:meth:`on_feedback` for a driver's :class:`FinFeedback`."""
-        return self.on_feedback(
-            fb.t, fb.velocity_rad_s, t_now, fin=fb.fin, theta_fb=fb.position_rad
-        )
 
     def tick(self, t_now: float) -> list[Action]:
         """Check stroke timeouts at ``t_now`` without new feedback (no extrapolation)."""

@@ -12,17 +12,22 @@ f_1 = R(theta0) g(d_1, w_1) and f_2 = R(theta0) R(d_1) g(d_2, w_2).
 
 Random numbers come from splitmix64 (one uint64 of state), so a plan is reproducible
 from its seed on every machine.
+
+No clock is read here: a caller timing the two stages calls :func:`sample_kernel` and
+:func:`finish_kernel` (together the same solve as :func:`plan_kernel`) with its own clock
+between them. Over 500 lines because this is one compiled solver whose parts inline into
+one another (cost, gradient, sampler, quasi-Newton step); split, it would be one algorithm
+spread over files.
 """
 
 from __future__ import annotations
 
 import math
-import sys
 
 import numba
 import numpy as np
 from llvmlite import ir
-from numba.core import cgutils, types
+from numba.core import types
 from numba.extending import intrinsic
 
 from ucat_console.control.params import MpcConfig
@@ -72,31 +77,6 @@ def pack_problem(f_target, v_body: float, theta0: float, u_prev) -> tuple:
         math.cos(theta0), math.sin(theta0),
         float(u_prev[0]), float(u_prev[1]), float(u_prev[2]), float(u_prev[3]),
     )
-
-
-if not sys.platform.startswith("linux"):  # pragma: no cover
-    raise ImportError("the compiled MPC kernels read CLOCK_MONOTONIC through Linux's clock_gettime")
-
-
-@intrinsic
-def monotonic_ns(typingctx):
-    """CLOCK_MONOTONIC in nanoseconds (the clock of time.perf_counter_ns on Linux),
-    read inside compiled code without leaving nopython mode."""
-
-    def codegen(context, builder, signature, args):
-        i32 = ir.IntType(32)
-        i64 = ir.IntType(64)
-        timespec = ir.LiteralStructType([i64, i64])
-        fnty = ir.FunctionType(i32, [i32, timespec.as_pointer()])
-        fn = cgutils.get_or_insert_function(builder.module, fnty, "clock_gettime")
-        ts = cgutils.alloca_once(builder, timespec)
-        builder.call(fn, [ir.Constant(i32, 1), ts])  # CLOCK_MONOTONIC
-        zero = ir.Constant(i32, 0)
-        sec = builder.load(builder.gep(ts, [zero, zero]))
-        nsec = builder.load(builder.gep(ts, [zero, ir.Constant(i32, 1)]))
-        return builder.add(builder.mul(sec, ir.Constant(i64, 1_000_000_000)), nsec)
-
-    return types.int64(), codegen
 
 
 _FAST = {"contract", "arcp", "nsz", "afn", "reassoc"}  # no "nnan"/"ninf": inf is a sentinel
@@ -554,16 +534,16 @@ def refine(p, q, gx_tab, gy_tab, x, max_iter, work, hinv, table):
 
 
 @_inline
-def _plan(p, q, gx_tab, gy_tab, n, max_iter, rng, best_u, best_j, block, work, hinv, u_out, terms, table):
-    """One solve: sampling, refinement of the best len(best_j) samples, final terms.
-
-    Returns the durations of the two stages in nanoseconds.
-    """
-    t0 = monotonic_ns()
+def _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, table):
+    """Stage 1: draw n samples, keep the best len(best_j); u_out = the best."""
     sample_stage(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, table)
-    t_mid = monotonic_ns()
     for c in range(4):
         u_out[c] = best_u[0, c]
+
+
+@_inline
+def _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, table):
+    """Stage 2: refine the kept samples (none when max_iter is 0), then the final terms."""
     j_best = best_j[0]
     if max_iter > 0:
         x = work[7]
@@ -578,15 +558,36 @@ def _plan(p, q, gx_tab, gy_tab, n, max_iter, rng, best_u, best_j, block, work, h
                 for c in range(4):
                     u_out[c] = x[c]
     cost_terms_at(p, q, gx_tab, gy_tab, u_out, terms, table)
-    return t_mid - t0, monotonic_ns() - t_mid
 
 
 @_jit
 def plan_kernel(p, q, gx_tab, gy_tab, n, max_iter, rng, best_u, best_j, block, work, hinv, u_out, terms):
-    """One solve (see :func:`_plan`), compiled once per force model."""
+    """One solve: sampling, refinement of the best len(best_j) samples, final terms
+    (compiled once per force model: ``table`` is a constant in each branch)."""
     if p[P_MODE] == MODE_TABLE:
-        return _plan(p, q, gx_tab, gy_tab, n, max_iter, rng, best_u, best_j, block, work, hinv, u_out, terms, True)
-    return _plan(p, q, gx_tab, gy_tab, n, max_iter, rng, best_u, best_j, block, work, hinv, u_out, terms, False)
+        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, True)
+        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, True)
+    else:
+        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, False)
+        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, False)
+
+
+@_jit
+def sample_kernel(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out):
+    """The first half of :func:`plan_kernel` (for a caller timing the two stages)."""
+    if p[P_MODE] == MODE_TABLE:
+        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, True)
+    else:
+        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, False)
+
+
+@_jit
+def finish_kernel(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms):
+    """The second half of :func:`plan_kernel` (for a caller timing the two stages)."""
+    if p[P_MODE] == MODE_TABLE:
+        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, True)
+    else:
+        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, False)
 
 
 @_jit

@@ -6,47 +6,13 @@ the paper's symbols (``lam_st`` is lambda_St, ``w`` is omega).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
-from pathlib import Path
-from typing import Any, Self
+from dataclasses import dataclass
 
-from ucat_console.typedconf import (
-    dump_toml,
-    from_dict,
-    load_toml,
-    param,
-    require_below,
-    validate,
-)
-
-
-class _Config:
-    """Shared behaviour of config dataclasses: validation, TOML in/out, copies."""
-
-    def __post_init__(self) -> None:
-        validate(self)
-        self._check()
-
-    def _check(self) -> None:  # cross-field checks
-        pass
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> Self:
-        return from_dict(cls, data)
-
-    @classmethod
-    def from_toml(cls, path: str | Path) -> Self:
-        return load_toml(cls, path)
-
-    def to_toml(self) -> str:
-        return dump_toml(self)
-
-    def replace(self, **changes: Any) -> Self:
-        return replace(self, **changes)
+from ucat_console.typedconf import Config, param, require_below
 
 
 @dataclass(frozen=True)
-class MpcConfig(_Config):
+class MpcConfig(Config):
     """The fin MPC (control.md sections 1-5, paper Table I)."""
 
     # cost weights (eq 17)
@@ -97,14 +63,14 @@ class MpcConfig(_Config):
 
 
 @dataclass(frozen=True)
-class BaselineConfig(_Config):
+class BaselineConfig(Config):
     """The fixed-frequency inverse model of Remmas et al. (control.md section 6)."""
 
     frequency: float = param(2.0, lo=0.05, hi=10.0, unit="Hz", doc="fixed fin-beat frequency")
 
 
 @dataclass(frozen=True)
-class PidGains(_Config):
+class PidGains(Config):
     kp: float = param(0.0, lo=0.0, hi=1000.0, doc="proportional gain")
     ki: float = param(0.0, lo=0.0, hi=1000.0, doc="integral gain")
     kd: float = param(0.0, lo=0.0, hi=1000.0, doc="derivative gain")
@@ -112,7 +78,7 @@ class PidGains(_Config):
 
 
 @dataclass(frozen=True)
-class BodyConfig(_Config):
+class BodyConfig(Config):
     """Body-frame layer (control.md section 7, paper Table I)."""
 
     velocity: PidGains = PidGains(kp=40.0, ki=1.0, kd=0.1, limit=2.5)
@@ -126,7 +92,7 @@ class BodyConfig(_Config):
 
 
 @dataclass(frozen=True)
-class ExecutorConfig(_Config):
+class ExecutorConfig(Config):
     """Execution module (control.md section 8, Algorithm 2)."""
 
     w_threshold: float = param(
@@ -144,7 +110,7 @@ class ExecutorConfig(_Config):
 
 
 @dataclass(frozen=True)
-class PowerConfig(_Config):
+class PowerConfig(Config):
     """Power estimate from encoder positions (control.md section 9)."""
 
     fin_inertia: float = param(2.8e-5, lo=0.0, hi=1.0, unit="kg m2", doc="fin inertia I")

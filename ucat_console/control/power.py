@@ -39,16 +39,6 @@ def drag_power(w: ArrayLike, cfg: MpcConfig) -> NDArray[np.float64]:
     return drag_coefficient(cfg) * np.abs(np.asarray(w, dtype=float)) ** 3
 
 
-def fin_power(
-    w: ArrayLike, alpha: ArrayLike, pcfg: PowerConfig, mcfg: MpcConfig
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """(P_inert, P_drag, P_fin) for rates ``w`` and accelerations ``alpha``."""
-    w = np.asarray(w, dtype=float)
-    p_inert = pcfg.fin_inertia * np.asarray(alpha, dtype=float) * w
-    p_drag = drag_power(w, mcfg)
-    return p_inert, p_drag, np.maximum(0.0, p_inert) + p_drag
-
-
 def time_mean(t: ArrayLike, x: ArrayLike) -> float:
     """Time average of samples ``x`` at times ``t`` (trapezoidal rule), for 1-D arrays."""
     t = finite_array("t", t, ndim=1)

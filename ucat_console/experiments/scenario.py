@@ -23,7 +23,7 @@ import numpy as np
 
 from ucat_console.backend.loop.closed_loop import ClosedLoop, check_setpoints
 from ucat_console.backend.loop.config import LoopConfig
-from ucat_console.backend.loop.robot_io import SimRobotIO
+from ucat_console.backend.sim.robot_io import SimRobotIO
 from ucat_console.backend.sim.params import FinHydroConfig, PlantConfig, VehicleConfig
 from ucat_console.control.allocation import BodySetpoints
 from ucat_console.control.baseline import BaselinePlanner
@@ -88,8 +88,6 @@ class Scenario:
 
     def check(self) -> None:
         """Refuse setpoints outside the loop's envelope before anything runs."""
-        if self.depth < 0.0:
-            raise ValueError(f"depth: {self.depth!r} m is impossible; a depth setpoint is >= 0 m")
         sp = BodySetpoints(velocity=self.v_ref, depth=self.depth, yaw_rate=self.yaw_rate)
         check_setpoints(self.loop_config(), sp)
         plant_config(self.plant, self.seed, self.current)

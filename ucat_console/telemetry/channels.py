@@ -6,7 +6,8 @@ writes them as MCAP channels, the UI and the metrics subscribe to them.
 
 from __future__ import annotations
 
-from ucat_console.backend.devices.readings import DepthReading, DvlVelocity, ImuReading
+from ucat_console.robot.fins import N_FINS  # ch.N_FINS: how many fin channels
+from ucat_console.robot.readings import DepthReading, DvlVelocity, ImuReading
 from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.messages import (
     BodyCommand,
@@ -19,7 +20,6 @@ from ucat_console.telemetry.messages import (
     Status,
 )
 
-N_FINS = 4
 
 BODY_STATE = "body/state"
 SETPOINTS = "body/setpoints"

@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Annotated, Any, Callable
 
-from ucat_console.telemetry.fields import Doc
+from ucat_console.robot.fields import Doc
 
 #: severities, lowest first
 LEVELS = ("debug", "info", "warning", "error", "fatal")

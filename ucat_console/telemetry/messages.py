@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Annotated
 
-from ucat_console.telemetry.fields import WXYZ, XY, XYZ, Doc
+from ucat_console.robot.fields import WXYZ, XY, XYZ, Doc
 
 Vec3 = tuple[float, float, float]
 Quat = tuple[float, float, float, float]  # (w, x, y, z)

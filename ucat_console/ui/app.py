@@ -122,7 +122,7 @@ class ConsoleApp:
         # from behind and to port, the vehicle left of the middle (the controls are on the right)
         server.initial_camera.position = (-1.0, -1.3, z + 0.3)
         server.initial_camera.look_at = (0.35, -0.45, z)
-        self.scene = RobotScene(server.scene, supervisor.cfg.plant, trail_points=cfg.trail_points,
+        self.scene = RobotScene(server.scene, supervisor.cfg.plant.geometry, trail_points=cfg.trail_points,
                                 trail_spacing=cfg.trail_spacing, shadows=cfg.shadows,
                                 environment_map=cfg.environment_map)
         gui = server.gui
@@ -242,7 +242,7 @@ class ConsoleApp:
         """One page's review of recorded sessions, in the Review tab and the review plots."""
         cfg = self.cfg
         return PlaybackPanel(
-            gui, scene, self.sup.cfg.plant, directory=self.sessions_dir,
+            gui, scene, self.sup.cfg.plant.geometry, directory=self.sessions_dir,
             plot_rate=cfg.plot_rate, scene_rate=cfg.scene_rate, max_plot_points=cfg.max_plot_points,
             history=lambda: self.history, max_history=cfg.max_history, corridor=self._corridor,
             trail_points=cfg.trail_points, trail_spacing=cfg.trail_spacing,

@@ -414,7 +414,7 @@ class RigFaultInputs:
     invalid or slow. Only built when the robot is the simulated rig; only the pilot injects."""
 
     def __init__(self, gui: Any) -> None:
-        from ucat_console.backend.devices.sim_rig import DEFAULT_EMCY, EMULATOR_FAULTS
+        from ucat_console.backend.sim_rig import DEFAULT_EMCY, EMULATOR_FAULTS
 
         self.faults_of = EMULATOR_FAULTS
         device = next(iter(EMULATOR_FAULTS))

@@ -53,7 +53,7 @@ from ucat_console.backend.sessions.player import MAX_SPEED, MIN_SPEED, Player, c
 from ucat_console.backend.sessions.reader import SessionParts, part_paths
 from ucat_console.backend.sessions.replay import ReplayResult, parse_weights, recorded_config, replay_config
 from ucat_console.backend.sessions.replay_job import ReplayJob, ReplaySlot
-from ucat_console.backend.sim.params import PlantConfig
+from ucat_console.robot.geometry import Geometry
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.messages import BodyState, FinState
@@ -212,7 +212,7 @@ class PlaybackPanel:
         self,
         gui: Any,
         scene: Any,
-        plant: PlantConfig,
+        geometry: Geometry,
         *,
         directory: str | Path | None = None,
         plot_rate: float = 10.0,
@@ -256,7 +256,7 @@ class PlaybackPanel:
         self._scene_api = scene
         self.root: Any = None
         self._new_scene: Callable[[], RobotScene] = lambda: RobotScene(
-            PrefixedScene(scene, SCENE_ROOT), plant, trail_points=trail_points, trail_spacing=trail_spacing)
+            PrefixedScene(scene, SCENE_ROOT), geometry, trail_points=trail_points, trail_spacing=trail_spacing)
         self.scene: RobotScene | None = None  # built when a session is opened
         self.feeder = PlotFeeder(int(math.ceil(max_history * plot_rate)) + 2)
         self.sampler = StreamSampler(self.feeder, 1.0 / self.plot_rate)

@@ -7,7 +7,7 @@ node below it takes telemetry values unchanged. The view follows the vehicle
 horizontally (``/ned`` is shifted so the vehicle stays above the origin) and the water
 surface stays at world z = 0, so depth reads directly.
 
-Fins. Each fin works in its own plane (``backend.sim.params.fin_plane_axes``): the fin's
+Fins. Each fin works in its own plane (``robot.geometry.fin_plane_axes``): the fin's
 chord points along ``cos(theta) x_m + sin(theta) y_m``, turning about the plane's normal.
 Node ``fin<i>`` is the fin's mount with axes (x_m, y_m, normal); its children ``blade``
 (measured angle) and ``ghost`` (commanded angle, translucent) turn about the mount's z axis.
@@ -21,10 +21,11 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ucat_console.backend.sim.params import PlantConfig, fin_plane_axes, fin_signs
+from ucat_console.robot.fins import N_FINS, fin_signs
+from ucat_console.robot.geometry import Geometry, fin_plane_axes
+from ucat_console.robot.rotations import quaternion_from_matrix
 from ucat_console.telemetry.messages import BodyState, FinState
 
-N_FINS = 4
 HULL_COLOUR = (245, 196, 0)
 NOSE_COLOUR = (200, 60, 40)
 FIN_COLOUR = (40, 40, 40)
@@ -39,31 +40,12 @@ FIN_SPAN = 0.08  # m, along the fin's axis (for the view)
 FIN_THICKNESS = 0.006  # m
 
 
-def _quat_from_matrix(m: np.ndarray) -> tuple[float, float, float, float]:
-    """(w, x, y, z) of a rotation matrix."""
-    tr = m[0, 0] + m[1, 1] + m[2, 2]
-    if tr > 0:
-        s = math.sqrt(tr + 1.0) * 2
-        w, x, y, z = 0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s
-    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
-        s = math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2]) * 2
-        w, x, y, z = (m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s
-    elif m[1, 1] > m[2, 2]:
-        s = math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2]) * 2
-        w, x, y, z = (m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s
-    else:
-        s = math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1]) * 2
-        w, x, y, z = (m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s
-    return (w, x, y, z)
-
-
 Vec3 = tuple[float, float, float]
 Quat = tuple[float, float, float, float]
 
 
-def fin_mount(cfg: PlantConfig, fin: int, hull_width: float) -> tuple[Vec3, Quat]:
+def fin_mount(g: Geometry, fin: int, hull_width: float) -> tuple[Vec3, Quat]:
     """Body-frame position and orientation (wxyz) of a fin's mount frame (x_m, y_m, normal)."""
-    g = cfg.fins
     s_lat, s_long, _ = fin_signs(fin)
     xm, ym = fin_plane_axes(g, fin)
     xm_a, ym_a = np.array(xm), np.array(ym)
@@ -73,7 +55,7 @@ def fin_mount(cfg: PlantConfig, fin: int, hull_width: float) -> tuple[Vec3, Quat
     base = np.array([s_long * g.arm_pitch, s_lat * max(g.arm_roll, hull_width / 2), 0.0])
     pos = base + outward * n * (FIN_SPAN / 2 + 0.01)
     p = (float(pos[0]), float(pos[1]), float(pos[2]))
-    return p, _quat_from_matrix(np.column_stack([xm_a, ym_a, n]))
+    return p, quaternion_from_matrix(np.column_stack([xm_a, ym_a, n]))
 
 
 def surface_lines(size: float, step: float) -> np.ndarray:
@@ -91,11 +73,11 @@ def turn_about_z(theta: float) -> tuple[float, float, float, float]:
 class RobotScene:
     """The scene nodes and their updates (server-wide)."""
 
-    def __init__(self, scene: Any, plant: PlantConfig, *, trail_points: int, trail_spacing: float,
+    def __init__(self, scene: Any, geometry: Geometry, *, trail_points: int, trail_spacing: float,
                  shadows: bool = False, environment_map: bool = False) -> None:
         self.scene = scene
-        size = plant.vehicle.hull_size
-        self.fin_length = 1.5 * plant.hydro.resolved().fin_length
+        size = geometry.hull_size
+        self.fin_length = 1.5 * geometry.fin_length
         self.trail_spacing = float(trail_spacing)
         self._trail = np.zeros((int(trail_points), 3))
         self._trail_n = 0
@@ -123,7 +105,7 @@ class RobotScene:
         self.ghosts = []
         L = self.fin_length
         for i in range(N_FINS):
-            pos, q = fin_mount(plant, i, size[1])
+            pos, q = fin_mount(geometry, i, size[1])
             scene.add_frame(f"/ned/ucat/fin{i}", show_axes=False, position=pos, wxyz=q)
             blade = scene.add_frame(f"/ned/ucat/fin{i}/blade", show_axes=False)
             scene.add_box(f"/ned/ucat/fin{i}/blade/plate", color=FIN_COLOUR,

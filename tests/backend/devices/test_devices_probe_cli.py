@@ -90,9 +90,9 @@ def test_probe_epos_calls_the_epos2_probe(run, tmp_path, monkeypatch) -> None:
         emit({"kind": "epos2", "t": 1.0, "position_rad": 0.5, "velocity_rad_s": 0.0, "state": "operation_enabled"})
         return 0
 
-    fake = types.ModuleType("ucat_console.backend.devices.epos2")
+    fake = types.ModuleType("ucat_console.backend.devices.epos2_probe")
     fake.probe = probe
-    monkeypatch.setitem(sys.modules, "ucat_console.backend.devices.epos2", fake)
+    monkeypatch.setitem(sys.modules, "ucat_console.backend.devices.epos2_probe", fake)
     out = tmp_path / "epos.jsonl"
     args = ("epos", "--interface", "virtual", "--channel", "probe-test", "--node", "3", "--duration", "0.1")
     assert run(*args, "--json", str(out), "--quiet") == 0

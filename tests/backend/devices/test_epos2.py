@@ -14,18 +14,15 @@ import pytest
 
 from ucat_console.backend.devices import cia402
 from ucat_console.backend.devices.canbus import open_bus
-from ucat_console.backend.devices.epos2 import (
-    Epos2Config,
-    Epos2Error,
-    FinDrives,
-    probe,
-)
+from ucat_console.backend.devices.epos2 import Epos2Config, Epos2Error
+from ucat_console.backend.devices.epos2_probe import probe
+from ucat_console.backend.devices.fin_drives import FinDrives
 from ucat_console.backend.devices.epos2_emulator import (
     Epos2EmulatorConfig,
     start_emulated_nodes,
 )
-from ucat_console.backend.devices.readings import FinFeedback
-from ucat_console.backend.devices.units import DriveUnits
+from ucat_console.robot.readings import FinFeedback
+from ucat_console.robot.units import DriveUnits
 from ucat_console.telemetry.events import Event
 
 # 500 lines, gear 4: 8000 qc per fin turn = 1273.24 qc/rad; 1 rad/s = 38.197 rpm

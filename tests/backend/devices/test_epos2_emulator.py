@@ -22,7 +22,7 @@ from ucat_console.backend.devices.epos2_emulator import (
     TrapezoidalServo,
     start_emulated_nodes,
 )
-from ucat_console.backend.devices.units import DriveUnits
+from ucat_console.robot.units import DriveUnits
 
 NODE = 5
 UNITS = DriveUnits(encoder_lines=512, gear_ratio=1.0)  # 2048 qc per turn

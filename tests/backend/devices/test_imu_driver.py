@@ -9,7 +9,7 @@ from ucat_console.backend.devices import mip
 from ucat_console.backend.devices.faults import FaultSettings
 from ucat_console.backend.devices.imu import ImuConfig, ImuDriver
 from ucat_console.backend.devices.imu_emulator import ImuEmulator, ImuEmulatorConfig
-from ucat_console.backend.devices.readings import ImuReading
+from ucat_console.robot.readings import ImuReading
 
 # values exactly representable in float32, so they survive the wire unchanged
 TRUTH = ImuReading(

@@ -11,14 +11,11 @@ from ucat_console.backend.devices.pressure import (
     AdcLineParser,
     PressureConfig,
     PressureDriver,
-    current_to_pressure,
-    depth_to_pressure,
     format_adc_line,
     parse_adc_line,
-    pressure_to_current,
-    pressure_to_depth,
 )
 from ucat_console.backend.devices.pressure_emulator import PressureEmulator, PressureEmulatorConfig
+from ucat_console.robot.units import current_to_pressure, depth_to_pressure, pressure_to_current, pressure_to_depth
 
 
 def test_current_to_depth_by_hand() -> None:

@@ -8,13 +8,14 @@ import math
 import numpy as np
 import pytest
 
-from ucat_console.backend.devices.readings import DvlVelocity
+from ucat_console.robot.readings import DvlVelocity
 from ucat_console.backend.loop.clock import PacedClock
-from ucat_console.backend.loop.closed_loop import PLANT_TO_PAPER, ClosedLoop
+from ucat_console.backend.loop.closed_loop import ClosedLoop
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.backend.loop.planners import BaselineFinPlanner, PlanInputs
-from ucat_console.backend.loop.robot_io import SimRobotIO
-from ucat_console.backend.sim.params import PAPER_TO_PLANT_FIN
+from ucat_console.backend.sim.robot_io import SimRobotIO
+from ucat_console.robot.fins import PAPER_TO_ROBOT as PAPER_TO_PLANT_FIN
+from ucat_console.robot.fins import ROBOT_TO_PAPER as PLANT_TO_PAPER
 from ucat_console.control.allocation import BodySetpoints
 from ucat_console.control.params import BaselineConfig, BodyConfig, MpcConfig, PidGains
 from ucat_console.experiments.scenario import START_FIN_ANGLE

@@ -98,7 +98,7 @@ def awkward_items() -> list[tuple[str, Any]]:
     failsafe list, an IMU reading without orientation."""
     import dataclasses
 
-    from ucat_console.backend.devices.readings import ImuReading
+    from ucat_console.robot.readings import ImuReading
     from ucat_console.telemetry import channels as C
     from ucat_console.telemetry.messages import BodyState, FinPlan, FinState, Power, Status
 

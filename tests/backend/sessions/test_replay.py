@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import time
 
 import pytest
 from session_helpers import record
@@ -26,7 +27,7 @@ CFG = MpcConfig(n_samples=64, max_iter=10, lam_st=3.0, lam_f=2.0)
 def recorded_plans() -> list[tuple[str, FinPlan]]:
     """Plans made by actually running the planner, as the supervisor records them."""
     items = []
-    planners = {f: FinMpc(CFG) for f in range(4)}
+    planners = {f: FinMpc(CFG, clock=time.perf_counter) for f in range(4)}
     u_prev = {f: (0.5, -0.5, 2.0, 2.0) for f in range(4)}
     theta = {f: 0.0 for f in range(4)}
     t = 0.0

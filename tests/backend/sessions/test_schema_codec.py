@@ -11,7 +11,7 @@ import jsonschema
 import pytest
 from session_helpers import example_message, same
 
-from ucat_console.backend.devices.readings import ImuReading
+from ucat_console.robot.readings import ImuReading
 from ucat_console.backend.sessions import codec, foxglove, legacy
 from ucat_console.backend.sessions.schema import (
     DIALECT,
@@ -22,7 +22,7 @@ from ucat_console.backend.sessions.schema import (
 )
 from ucat_console.telemetry.channels import CHANNELS
 from ucat_console.telemetry.events import Event
-from ucat_console.telemetry.fields import field_docs
+from ucat_console.robot.fields import field_docs
 from ucat_console.telemetry.messages import BodyState, FinPlan, FinState, Power, Setpoints, Status
 
 TYPES = sorted(set(CHANNELS.values()), key=lambda c: c.__name__)

@@ -16,7 +16,7 @@ from ucat_console.backend.sim.fin_hydro import (
     wake_factor,
 )
 from ucat_console.backend.sim.params import FinGeometryConfig, FinHydroConfig
-from ucat_console.backend.sim.servo import servo_step
+from ucat_console.robot.servo import servo_step
 
 GEOM = FinGeometryConfig()
 PAPER_QS = hydro_params(FinHydroConfig(coefficients="paper", wake="quasi_steady"), GEOM)

@@ -11,16 +11,15 @@ import pytest
 import ucat_console.backend.sim as sim_pkg
 from ucat_console.backend.sim.params import (
     EEUVSIM_COEFFICIENTS,
-    FIN_NAMES,
     PAPER_COEFFICIENTS,
-    PAPER_TO_PLANT_FIN,
     FinGeometryConfig,
     FinHydroConfig,
     PlantConfig,
     VehicleConfig,
-    fin_plane_axes,
-    fin_signs,
 )
+from ucat_console.robot.fins import FIN_NAMES, fin_signs
+from ucat_console.robot.fins import PAPER_TO_ROBOT as PAPER_TO_PLANT_FIN
+from ucat_console.robot.geometry import fin_plane_axes
 
 
 def test_defaults_follow_the_spec_table() -> None:

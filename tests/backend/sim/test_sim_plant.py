@@ -10,8 +10,9 @@ from numba.core.registry import CPUDispatcher
 
 import ucat_console.backend.sim.fin_hydro as fin_hydro_mod
 import ucat_console.backend.sim.plant as plant_mod
-import ucat_console.backend.sim.servo as servo_mod
 import ucat_console.backend.sim.vehicle as vehicle_mod
+import ucat_console.robot.rotations as rotations_mod
+import ucat_console.robot.servo as servo_mod
 from ucat_console.backend.sim.params import FinHydroConfig, PlantConfig, VehicleConfig
 from ucat_console.backend.sim.plant import F_ENERGY, F_OMEGA, F_THETA, Plant, measure_realtime_factor
 
@@ -40,7 +41,7 @@ def test_compiled_core_equals_the_python_reference(monkeypatch: pytest.MonkeyPat
     xv_c, xf_c = np.empty_like(xv0), np.empty_like(xf0)
     assert plant_mod.advance_steps(*_core_args(p, xv0, xf0, 5, xv_c, xf_c))
     reference = plant_mod.advance_steps.py_func
-    for mod in (plant_mod, vehicle_mod, fin_hydro_mod, servo_mod):
+    for mod in (plant_mod, vehicle_mod, fin_hydro_mod, servo_mod, rotations_mod):
         for name, obj in list(vars(mod).items()):
             if isinstance(obj, CPUDispatcher):
                 monkeypatch.setattr(mod, name, obj.py_func)

@@ -8,12 +8,11 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from ucat_console.backend.devices.readings import DepthReading, DvlVelocity, FinFeedback, ImuReading
 from ucat_console.backend.sim.params import (
-    DvlConfig,
-    ImuConfig,
+    DvlModelConfig,
+    ImuModelConfig,
     PlantConfig,
-    PressureConfig,
+    PressureModelConfig,
     SensorsConfig,
     ServoConfig,
 )
@@ -23,7 +22,9 @@ from ucat_console.backend.sim.sensors import (
     adc_quantise,
     current_from_pressure,
 )
-from ucat_console.backend.sim.vehicle import euler_to_quat, initial_state
+from ucat_console.backend.sim.vehicle import initial_state
+from ucat_console.robot.readings import DepthReading, DvlVelocity, FinFeedback, ImuReading
+from ucat_console.robot.rotations import quaternion_from_euler
 
 G0 = 9.80665
 ZERO4 = np.zeros(4)
@@ -53,7 +54,7 @@ def test_rates_over_two_seconds() -> None:
 
 
 def test_next_sensor_time_lands_on_samples() -> None:
-    cfg = PlantConfig(sensors=SensorsConfig(dvl=DvlConfig(rate=15.0)))
+    cfg = PlantConfig(sensors=SensorsConfig(dvl=DvlModelConfig(rate=15.0)))
     p = Plant(cfg)
     dvl_t = []
     while p.time < 1.0:
@@ -66,9 +67,9 @@ def test_next_sensor_time_lands_on_samples() -> None:
 
 def test_noise_statistics_at_rest() -> None:
     cfg = SensorsConfig(
-        imu=ImuConfig(gyro_noise_std=0.01, accel_noise_std=0.02, attitude_noise_std=0.005),
-        dvl=DvlConfig(rate=15.0, noise_std=0.01, dropout_probability=0.0),
-        pressure=PressureConfig(rate=100.0, noise_std_pa=50.0),
+        imu=ImuModelConfig(gyro_noise_std=0.01, accel_noise_std=0.02, attitude_noise_std=0.005),
+        dvl=DvlModelConfig(rate=15.0, noise_std=0.01, dropout_probability=0.0),
+        pressure=PressureModelConfig(rate=100.0, noise_std_pa=50.0),
     )
     suite = SensorSuite(cfg, ServoConfig(), seed=3)
     xv = initial_state((0.0, 0.0, 2.0))
@@ -97,10 +98,10 @@ def test_noise_statistics_at_rest() -> None:
 
 
 def test_accelerometer_sees_gravity_through_the_attitude() -> None:
-    cfg = SensorsConfig(imu=ImuConfig(gyro_noise_std=0, gyro_bias_std=0, accel_noise_std=0, accel_bias_std=0, attitude_noise_std=0))
+    cfg = SensorsConfig(imu=ImuModelConfig(gyro_noise_std=0, gyro_bias_std=0, accel_noise_std=0, accel_bias_std=0, attitude_noise_std=0))
     suite = SensorSuite(cfg, ServoConfig(), seed=0)
     pitch, roll = 0.3, -0.2
-    xv = initial_state((0.0, 0.0, 1.0), euler_to_quat(roll, pitch, 0.0), (0.0, 0.0, 0.0, 0.0, 0.0, 0.2))
+    xv = initial_state((0.0, 0.0, 1.0), quaternion_from_euler(roll, pitch, 0.0), (0.0, 0.0, 0.0, 0.0, 0.0, 0.2))
     imu = [r for r in suite.sample(0.0, xv, ZERO4, ZERO4) if isinstance(r, ImuReading)][0]
     # specific force -g in body axes: (sin p, -cos p sin r, -cos p cos r)
     expected = (math.sin(pitch), -math.cos(pitch) * math.sin(roll), -math.cos(pitch) * math.cos(roll))
@@ -110,7 +111,7 @@ def test_accelerometer_sees_gravity_through_the_attitude() -> None:
 
 
 def test_dvl_out_of_range_is_invalid_not_zero() -> None:
-    cfg = SensorsConfig(dvl=DvlConfig(bottom_depth=1.0, dropout_probability=0.0))
+    cfg = SensorsConfig(dvl=DvlModelConfig(bottom_depth=1.0, dropout_probability=0.0))
     suite = SensorSuite(cfg, ServoConfig(), seed=0)
     xv = initial_state((0.0, 0.0, 2.0), body_velocity=(0.3, 0, 0, 0, 0, 0))  # below the bottom
     dvl = [r for r in _collect(suite, xv, 1.0) if isinstance(r, DvlVelocity)]
@@ -122,7 +123,7 @@ def test_dvl_out_of_range_is_invalid_not_zero() -> None:
 
 
 def test_dvl_random_dropouts() -> None:
-    cfg = SensorsConfig(dvl=DvlConfig(rate=15.0, dropout_probability=0.3))
+    cfg = SensorsConfig(dvl=DvlModelConfig(rate=15.0, dropout_probability=0.3))
     suite = SensorSuite(cfg, ServoConfig(), seed=11)
     xv = initial_state((0.0, 0.0, 1.0), body_velocity=(0.3, 0, 0, 0, 0, 0))
     dvl = [r for r in _collect(suite, xv, 100.0, step=1 / 15) if isinstance(r, DvlVelocity)]
@@ -136,7 +137,7 @@ def test_dvl_random_dropouts() -> None:
 
 
 def test_pressure_chain_current_saturation_and_adc() -> None:
-    cfg = PressureConfig()  # span 250 kPa over 4-20 mA
+    cfg = PressureModelConfig()  # span 250 kPa over 4-20 mA
     assert current_from_pressure(0.0, cfg) == pytest.approx(4.0)
     assert current_from_pressure(125_000.0, cfg) == pytest.approx(12.0)
     assert current_from_pressure(-1e5, cfg) == 3.8  # NE 43 saturation
@@ -144,7 +145,7 @@ def test_pressure_chain_current_saturation_and_adc() -> None:
     step = 25.0 / (2**16 - 1)
     assert abs(adc_quantise(12.34567, cfg) - 12.34567) <= step / 2
     # noiseless chain: depth back to within one ADC step (in metres) of the truth
-    quiet = SensorsConfig(pressure=PressureConfig(noise_std_pa=0.0))
+    quiet = SensorsConfig(pressure=PressureModelConfig(noise_std_pa=0.0))
     suite = SensorSuite(quiet, ServoConfig(), seed=0)
     dep = [r for r in suite.sample(0.0, initial_state((0.0, 0.0, 1.5)), ZERO4, ZERO4) if isinstance(r, DepthReading)][0]
     step_m = step / 16.0 * 250_000.0 / (997.0 * G0)

@@ -9,7 +9,8 @@ import pytest
 
 from ucat_console.backend.sim.params import PlantConfig, VehicleConfig
 from ucat_console.backend.sim.plant import Plant
-from ucat_console.backend.sim.vehicle import euler_to_quat, quat_to_euler, vehicle_matrices
+from ucat_console.backend.sim.vehicle import vehicle_matrices
+from ucat_console.robot.rotations import euler_from_quaternion, quaternion_from_euler
 
 G0 = 9.80665
 
@@ -26,7 +27,7 @@ def test_at_rest_stays_at_rest_for_20_s() -> None:
     pos, q = p.pose()
     assert p.time == pytest.approx(20.0)
     assert np.allclose(pos, (1.0, -2.0, 1.5), atol=1e-9)
-    assert np.allclose(quat_to_euler(q), (0.0, 0.0, 0.7), atol=1e-9)
+    assert np.allclose(euler_from_quaternion(q), (0.0, 0.0, 0.7), atol=1e-9)
     assert np.allclose(p.body_velocity(), 0.0, atol=1e-12)
 
 
@@ -120,4 +121,4 @@ def test_disturbance_force_is_resolved_from_ned() -> None:
 
 def test_euler_quaternion_round_trip() -> None:
     for e in [(0.1, -0.2, 0.3), (-1.0, 0.5, -2.5), (0.0, 0.0, math.pi - 1e-3)]:
-        assert quat_to_euler(euler_to_quat(*e)) == pytest.approx(e, abs=1e-12)
+        assert euler_from_quaternion(quaternion_from_euler(*e)) == pytest.approx(e, abs=1e-12)

@@ -2,9 +2,18 @@
 
 Controlword commands, statusword bits and state masks, object indices, NMT command codes
 and the EMCY error-code table. Both sides of the bus read them from here.
+
+The state masks and the standard controlword commands are canopen's
+(``canopen.profiles.p402.State402``), renamed to this project's state names; what the
+profile table does not hold is the EPOS2's own use of the controlword (quick stop with the
+enable bits kept, new set-point "change immediately", halt) and the bits of profile
+position mode (set-point acknowledge, target reached). Why the driver does not run on
+canopen's ``BaseNode402`` is in ``epos2.py``'s docstring.
 """
 
 from __future__ import annotations
+
+from canopen.profiles.p402 import State402
 
 # --- object dictionary indices -------------------------------------------------------------
 DEVICE_TYPE = 0x1000
@@ -46,12 +55,12 @@ CW_RELATIVE = 1 << 6
 CW_FAULT_RESET = 1 << 7
 CW_HALT = 1 << 8
 
-DISABLE_VOLTAGE = 0x0000
-SHUTDOWN = 0x0006
-SWITCH_ON = 0x0007
-ENABLE_OPERATION = 0x000F
-QUICK_STOP = 0x000B
-FAULT_RESET = 0x0080
+DISABLE_VOLTAGE = State402.CW_DISABLE_VOLTAGE
+SHUTDOWN = State402.CW_SHUTDOWN
+SWITCH_ON = State402.CW_SWITCH_ON
+ENABLE_OPERATION = State402.CW_OPERATION_ENABLED
+QUICK_STOP = 0x000B  # quick stop (bit 2 low) with voltage and operation still enabled
+FAULT_RESET = State402.CW_SWITCH_ON_DISABLED  # bit 7: fault reset (transition 15)
 NEW_SETPOINT_IMMEDIATE = 0x003F
 HALT = 0x010F
 
@@ -80,15 +89,10 @@ FAULT = "fault"
 UNKNOWN = "unknown"
 
 #: (state, mask, value): the state is current when ``statusword & mask == value``
-STATE_MASKS: tuple[tuple[str, int, int], ...] = (
-    (NOT_READY, 0x4F, 0x00),
-    (SWITCH_ON_DISABLED, 0x4F, 0x40),
-    (READY_TO_SWITCH_ON, 0x6F, 0x21),
-    (SWITCHED_ON, 0x6F, 0x23),
-    (OPERATION_ENABLED, 0x6F, 0x27),
-    (QUICK_STOP_ACTIVE, 0x6F, 0x07),
-    (FAULT_REACTION_ACTIVE, 0x4F, 0x0F),
-    (FAULT, 0x4F, 0x08),
+#: (canopen's table, State402.SW_MASK)
+STATE_MASKS: tuple[tuple[str, int, int], ...] = tuple(
+    (name.lower().replace(" ", "_"), mask, value)
+    for name, (mask, value) in State402.SW_MASK.items()
 )
 _MASK_OF = {name: (mask, value) for name, mask, value in STATE_MASKS}
 

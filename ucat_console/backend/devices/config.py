@@ -2,7 +2,7 @@
 
 ``robot`` picks one of three robots behind the same closed loop:
 
-* ``"sim"``: the in-process simulated U-CAT (``loop.robot_io.SimRobotIO``), no devices;
+* ``"sim"``: the in-process simulated U-CAT (``backend.sim.robot_io.SimRobotIO``), no devices;
 * ``"sim-devices"``: the simulated U-CAT behind protocol-exact emulators (EPOS2 nodes on a
   python-can ``virtual`` bus, the IMU and the pressure ADC on ptys, the DVL on 127.0.0.1),
   reached through the same drivers as the real robot. The emulators' endpoints replace
@@ -27,15 +27,14 @@ from ucat_console.backend.devices.imu import ImuConfig
 from ucat_console.backend.devices.imu_emulator import ImuEmulatorConfig
 from ucat_console.backend.devices.pressure import PressureConfig
 from ucat_console.backend.devices.pressure_emulator import PressureEmulatorConfig
-from ucat_console.control.params import _Config
-from ucat_console.typedconf import param
+from ucat_console.typedconf import Config, param
 
 #: the robots the console can drive
 ROBOTS = ("sim", "sim-devices", "hardware")
 
 
 @dataclass(frozen=True)
-class SimStartConfig(_Config):
+class SimStartConfig(Config):
     """Where the simulated U-CAT starts (robot ``sim`` and ``sim-devices``)."""
 
     depth: float = param(1.0, lo=0.0, hi=1000.0, unit="m", doc="start depth (positive down)")
@@ -47,7 +46,7 @@ class SimStartConfig(_Config):
 
 
 @dataclass(frozen=True)
-class SimRigConfig(_Config):
+class SimRigConfig(Config):
     """The emulators the simulated U-CAT speaks through (robot ``sim-devices``)."""
 
     pace: float = param(
@@ -74,7 +73,7 @@ class SimRigConfig(_Config):
 
 
 @dataclass(frozen=True)
-class DevicesConfig(_Config):
+class DevicesConfig(Config):
     """The robot behind the closed loop and its devices."""
 
     robot: str = param(

@@ -1,6 +1,6 @@
 """The closed loop's robot reached through the device drivers: :class:`DeviceRobotIO`.
 
-It implements ``loop.robot_io.RobotIO`` with the drivers only: :class:`FinDrives` for the
+It implements ``robot.interface.RobotIO`` with the drivers only: :class:`FinDrives` for the
 four EPOS2 nodes, :class:`ImuDriver`, :class:`DvlClient` and :class:`PressureDriver`. It
 does not know whether the other ends are the robot's devices or the emulators of the
 simulated rig; the configuration's endpoints decide.
@@ -38,13 +38,15 @@ from typing import Callable
 from ucat_console.backend.devices.canbus import CanBusError
 from ucat_console.backend.devices.config import DevicesConfig
 from ucat_console.backend.devices.dvl import DvlClient
-from ucat_console.backend.devices.epos2 import Epos2NoAnswer, FinDrives
+from ucat_console.backend.devices.epos2 import Epos2NoAnswer
+from ucat_console.backend.devices.fin_drives import FinDrives
 from ucat_console.backend.devices.imu import ImuDriver
 from ucat_console.backend.devices.pressure import PressureDriver
-from ucat_console.backend.devices.readings import DvlPosition, DvlVelocity, FinFeedback
+from ucat_console.robot.readings import DvlPosition, DvlVelocity, FinFeedback
 from ucat_console.backend.devices.reporting import EventReporter
 from ucat_console.backend.devices.serial_link import SERIAL_ERRORS, open_serial
-from ucat_console.backend.loop.robot_io import Reading, RobotIO, RobotTruth
+from ucat_console.robot.interface import RobotIO, RobotTruth
+from ucat_console.robot.readings import Reading
 from ucat_console.telemetry.events import Event, EventSink
 
 log = logging.getLogger(__name__)
@@ -293,10 +295,6 @@ class DeviceRobotIO(RobotIO):
                 self._sinks = tuple(s for s in self._sinks if s is not sink)
 
         return remove
-
-    def recent_events(self) -> list[Event]:
-        with self._lock:
-            return list(self._backlog)
 
     def publish_event(self, event: Event) -> None:
         """An event raised beside the drivers (the simulated rig), stamped on the wall clock."""

@@ -36,11 +36,10 @@ from dataclasses import dataclass
 from typing import Any, Callable, Literal
 
 from ucat_console.backend.devices.lines import LineSplitter, Overlong
-from ucat_console.backend.devices.readings import DvlPosition, DvlVelocity
+from ucat_console.robot.readings import DvlPosition, DvlVelocity
 from ucat_console.backend.devices.reporting import EventReporter, SilenceWatch
-from ucat_console.control.params import _Config
 from ucat_console.telemetry.events import EventSink
-from ucat_console.typedconf import param
+from ucat_console.typedconf import Config, param
 
 log = logging.getLogger(__name__)
 
@@ -50,7 +49,7 @@ COMMANDS = ("reset_dead_reckoning", "calibrate_gyro", "get_config", "set_config"
 
 
 @dataclass(frozen=True)
-class DvlConfig(_Config):
+class DvlConfig(Config):
     """Network endpoint and timing of the DVL client."""
 
     host: str = param("192.168.194.95", doc="DVL address (the A50's factory fallback address)")

@@ -27,8 +27,7 @@ from typing import Any, Callable
 from ucat_console.backend.devices.emulator_base import DelayedOutput, EmulatorThread, next_tick
 from ucat_console.backend.devices.faults import Fault, FaultSettings
 from ucat_console.backend.devices.lines import LineSplitter, Overlong
-from ucat_console.control.params import _Config
-from ucat_console.typedconf import param
+from ucat_console.typedconf import Config, param
 
 FORMAT = "json_v3.1"
 _BEAM_TILT = math.radians(22.5)  # transducer tilt from the DVL's z axis
@@ -54,7 +53,7 @@ class DvlTruth:
 
 
 @dataclass(frozen=True)
-class DvlEmulatorConfig(_Config):
+class DvlEmulatorConfig(Config):
     """Endpoint and report rates of the emulated A50."""
 
     host: str = param("127.0.0.1", choices=("127.0.0.1", "localhost"), doc="listen address (loopback)")
@@ -106,7 +105,6 @@ class DvlEmulator(EmulatorThread):
         self._origin = (0.0, 0.0, 0.0)
         self._last_truth: DvlTruth | None = None
         self._corrupt_count = 0
-        self._drop_requested = False
         self.port: int = config.port
         self.settings: dict[str, Any] = {
             "speed_of_sound": 1475.0,
@@ -141,14 +139,6 @@ class DvlEmulator(EmulatorThread):
     def address(self) -> tuple[str, int]:
         return (self.config.host, self.port)
 
-    @property
-    def client_count(self) -> int:
-        return len(self._clients)
-
-    def drop_clients(self) -> None:
-        """Close every client connection (the server keeps listening)."""
-        self._drop_requested = True
-
     # ------------------------------------------------------------ main loop
 
     def _begin(self, now: float) -> None:
@@ -158,10 +148,6 @@ class DvlEmulator(EmulatorThread):
         self._pos_period = 1.0 / self.config.position_rate_hz
 
     def _step(self) -> None:
-        if self._drop_requested:
-            self._drop_requested = False
-            for c in list(self._clients):
-                self._remove(c)
         now = self._clock()
         due = min(self._next_vel, self._next_pos, self._delayed.next_due())
         timeout = min(0.05, max(0.0, due - now))

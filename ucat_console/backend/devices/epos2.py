@@ -1,8 +1,9 @@
-"""Maxon EPOS2 fin drives over CANopen (CiA 402), on python-can through ``canopen``.
+"""Maxon EPOS2 fin drives over CANopen (CiA 402), on python-can through ``canopen``: the
+configuration and the driver of one node.
 
-One :class:`Epos2Driver` per node, four of them in a :class:`FinDrives` that owns the one
-``canopen.Network`` (and with it the one ``can.Notifier``; everything subscribes through
-the network). The bus is whatever :func:`canbus.open_bus` opens from the configuration:
+One :class:`Epos2Driver` per node, four of them in a ``fin_drives.FinDrives`` that owns the
+one ``canopen.Network`` (and with it the one ``can.Notifier``; everything subscribes through
+the network); ``epos2_probe`` brings one node up from the command line. The bus is whatever :func:`canbus.open_bus` opens from the configuration:
 ``socketcan`` on the robot, ``virtual`` against the emulator; nothing here depends on which.
 
 Start-up per node (:meth:`Epos2Driver.start`): NMT reset communication, wait for the
@@ -25,16 +26,41 @@ periods, checked five times per period, so within three periods), EMCY frames ar
 and a node entering the fault state puts the other nodes in quick stop. Every fault reaches
 ``on_event`` as an :class:`Event` with ``source = "epos2.<node>"``; nothing raises out of a
 bus callback.
+
+canopen's CiA 402 profile. The statusword decoding and the standard controlword commands
+come from ``canopen.profiles.p402.State402`` (through ``cia402``). The driver is not a
+``canopen.profiles.p402.BaseNode402``, because that class does not fit the EPOS2 as it is
+driven here:
+
+* its state changes block the caller: the ``state`` setter writes a controlword and polls
+  the statusword (``check_statusword`` -> ``wait_for_reception``) until fixed class
+  timeouts (0.4 s per transition, 0.8 s in all) and raises ``RuntimeError`` on timeout,
+  where the four drives are brought up, stopped and supervised from one thread with
+  configured timeouts, and every failure must become an ``Event`` (never an exception
+  out of a bus callback);
+* ``setup_402_state_machine`` uploads the node's PDO configuration by SDO
+  (``pdo.read()``) and only warns when the controlword or statusword is not mapped,
+  where this driver writes its own mapping (RPDO2 target + profile velocity, TPDO2
+  position + velocity on an event timer) and falls back to SDO set-points when a node
+  refuses it;
+* it has no profile-position set-point handshake (new set-point bit 4, set-point
+  acknowledge bit 12, target reached bit 10), which is what every stroke runs on, and its
+  ``reset_from_fault`` always runs into its own timeout (a FIXME in canopen 2.4);
+* the emulator is a ``canopen.LocalNode``; the profile offers nothing for the drive side,
+  so the emulator's state machine is written here anyway, against the same tables.
+
+The module holds one node's driver (start-up, PDO set-up, the set-point handshake,
+heartbeat and EMCY supervision, the safe-state commands), over 500 lines because these
+share one node's state and lock; the group of four drives is ``fin_drives.py``.
 """
 
 from __future__ import annotations
 
 import logging
 import math
-import queue
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -45,13 +71,12 @@ from canopen.emcy import EmcyError
 from canopen.sdo import SdoAbortedError, SdoCommunicationError
 
 from ucat_console.backend.devices import cia402
-from ucat_console.backend.devices.canbus import BITRATES, INTERFACES, CanBusError, open_bus
-from ucat_console.backend.devices.readings import FinFeedback
+from ucat_console.backend.devices.canbus import BITRATES, INTERFACES
+from ucat_console.robot.readings import FinFeedback
 from ucat_console.backend.devices.reporting import EventReporter
-from ucat_console.backend.devices.units import DriveUnits
-from ucat_console.control.params import _Config
-from ucat_console.telemetry.events import Event, EventSink
-from ucat_console.typedconf import param
+from ucat_console.robot.units import DriveUnits
+from ucat_console.telemetry.events import EventSink
+from ucat_console.typedconf import Config, param
 
 logger = logging.getLogger(__name__)
 
@@ -77,7 +102,7 @@ def _failure_code(error: BaseException) -> str:
 
 
 @dataclass(frozen=True)
-class Epos2Config(_Config):
+class Epos2Config(Config):
     """The four EPOS2 fin drives on one CAN bus."""
 
     interface: str = param(
@@ -166,7 +191,7 @@ class Epos2NoAnswer(Epos2Error):
     """The node never answered (no boot-up after reset communication)."""
 
 
-def _check_node_id(node: Any, key: str) -> int:
+def check_node_id(node: Any, key: str) -> int:
     if isinstance(node, bool) or not isinstance(node, int) or not 1 <= node <= 127:
         raise ValueError(f"{key}: {node!r} is out of range; allowed: [1, 127]")
     return node
@@ -188,7 +213,7 @@ class Epos2Driver:
         on_fault: Callable[[Epos2Driver], None] | None = None,
     ) -> None:
         self.fin = fin
-        self.node_id = _check_node_id(node_id, "node_id")
+        self.node_id = check_node_id(node_id, "node_id")
         self.config = config
         self.units = config.units
         self.source = f"epos2.{node_id}"
@@ -767,272 +792,3 @@ class Epos2Driver:
             self._emit("setpoint_timeout",
                        f"no set-point acknowledge within {self.config.setpoint_ack_timeout} s",
                        level="warning", waited_s=late)
-
-
-class FinDrives:
-    """The fin drives on one CAN bus: one network, one notifier, one driver per node.
-
-    ``fins`` maps fin index to node id (default: ``config.node_ids`` for fins 0..3). A
-    supervision thread checks heartbeats and runs the safe-state reaction: when a node
-    faults, every other node in operation enabled gets a quick stop.
-    """
-
-    NOTIFIER_CYCLE = 0.1  # s; bounds how long closing the network takes
-
-    def __init__(
-        self,
-        config: Epos2Config,
-        on_feedback: FeedbackSink,
-        on_event: EventSink,
-        *,
-        fins: Mapping[int, int] | None = None,
-        clock: Callable[[], float] = time.monotonic,
-        supervise: bool = True,
-    ) -> None:
-        self.config = config
-        if fins is None:
-            fins = dict(enumerate(config.node_ids))
-        seen: set[int] = set()
-        for fin, node in fins.items():
-            _check_node_id(node, f"fins[{fin}]")
-            if node in seen:
-                raise ValueError(f"fins[{fin}]: node {node} is used twice")
-            seen.add(node)
-        self.fins: dict[int, int] = dict(fins)
-        self._on_feedback = on_feedback
-        self._on_event = on_event
-        self._clock = clock
-        self._supervise = supervise
-        self.network: canopen.Network | None = None
-        self.drivers: dict[int, Epos2Driver] = {}
-        self._master_heartbeat: Any = None
-        self._actions: queue.Queue[Callable[[], None] | None] = queue.Queue()
-        self._thread: threading.Thread | None = None
-        self._stop = threading.Event()
-
-    # ----------------------------------------------------------------------------- lifecycle
-    def connect(self) -> None:
-        """Open the bus and start every node; raise Epos2NoAnswer / Epos2Error on failure."""
-        cfg = self.config
-        bus = open_bus(cfg.interface, cfg.channel, cfg.bitrate)
-        network = canopen.Network(bus)
-        network.NOTIFIER_CYCLE = self.NOTIFIER_CYCLE
-        network.connect()
-        self.network = network
-        for fin, node in self.fins.items():
-            self.drivers[fin] = Epos2Driver(
-                network, fin, node, cfg, self._on_feedback, self._on_event,
-                clock=self._clock, on_fault=self._on_node_fault,
-            )
-        if cfg.master_heartbeat_id:
-            self._master_heartbeat = network.send_periodic(
-                0x700 + cfg.master_heartbeat_id, bytes([cia402.NMT_OPERATIONAL]),
-                cfg.heartbeat_ms / 1000.0,
-            )
-        failures: list[tuple[Epos2Driver, Epos2Error]] = []
-        for driver in self.drivers.values():
-            try:
-                driver.start()
-            except Epos2Error as e:
-                failures.append((driver, e))
-                driver._emit("no_answer" if isinstance(e, Epos2NoAnswer) else "start_failed",
-                             str(e))
-        if failures:
-            self.close(disable=False)
-            message = "; ".join(str(e) for _, e in failures)
-            if all(isinstance(e, Epos2NoAnswer) for _, e in failures):
-                raise Epos2NoAnswer(message)
-            raise Epos2Error(message)
-        if self._supervise:
-            self._stop.clear()
-            self._thread = threading.Thread(target=self._run, name="epos2-supervision",
-                                            daemon=True)
-            self._thread.start()
-
-    def close(self, disable: bool = True) -> None:
-        """Stop supervision, optionally send shutdown to enabled nodes, leave the bus."""
-        if self._thread is not None:
-            self._stop.set()
-            self._actions.put(None)
-            self._thread.join(timeout=2.0)
-            self._thread = None
-        if disable:
-            for driver in self.drivers.values():
-                if driver.started and driver.state in (cia402.OPERATION_ENABLED,
-                                                       cia402.QUICK_STOP_ACTIVE):
-                    try:
-                        driver.disable()
-                    except Exception:
-                        logger.exception("%s: disable on close failed", driver.source)
-        if self._master_heartbeat is not None:
-            self._master_heartbeat.stop()
-            self._master_heartbeat = None
-        if self.network is not None:
-            try:
-                self.network.disconnect()
-            except Exception:
-                logger.exception("closing the CAN network failed")
-            self.network = None
-
-    def __enter__(self) -> FinDrives:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-    # ----------------------------------------------------------------------------- commands
-    def drive(self, fin: int) -> Epos2Driver:
-        try:
-            return self.drivers[fin]
-        except KeyError:
-            raise KeyError(f"fin {fin}: no drive (fins: {sorted(self.drivers)})") from None
-
-    def command(self, fin: int, target_rad: float, profile_velocity_rad_s: float) -> bool:
-        return self.drive(fin).command(target_rad, profile_velocity_rad_s)
-
-    def enable_all(self) -> bool:
-        return all([d.enable() for d in self.drivers.values()])
-
-    def disable_all(self) -> bool:
-        return all([d.disable() for d in self.drivers.values()])
-
-    def quick_stop_all(self) -> bool:
-        return all([d.quick_stop() for d in self.drivers.values()])
-
-    def fault_reset(self, fin: int) -> bool:
-        return self.drive(fin).fault_reset()
-
-    def reset_faults(self) -> bool:
-        """Reset every drive in fault and leave it unpowered (True when none is left in fault)."""
-        return all([d.fault_reset(enable=False) for d in self.drivers.values()])
-
-    def restart(self, fin: int) -> None:
-        """Run one node's start-up again (after a ``bootup`` event); raises like connect."""
-        driver = self.drive(fin)
-        try:
-            driver.start()
-        except Epos2Error as e:
-            driver._emit("no_answer" if isinstance(e, Epos2NoAnswer) else "start_failed", str(e))
-            raise
-
-    # ----------------------------------------------------------------------------- supervision
-    def check(self, now: float) -> None:
-        for driver in self.drivers.values():
-            driver.check(now)
-
-    def _on_node_fault(self, faulted: Epos2Driver) -> None:
-        """Safe state: quick stop on every other enabled node (run on the supervision thread)."""
-
-        def react() -> None:
-            for driver in self.drivers.values():
-                if driver is faulted or driver.state != cia402.OPERATION_ENABLED:
-                    continue
-                ok = driver.quick_stop()
-                driver._emit("quick_stop", f"safe state: {faulted.source} faulted",
-                             level="warning" if ok else "error", reason=faulted.source,
-                             done=ok)
-
-        if self._thread is not None:
-            self._actions.put(react)
-        else:
-            logger.warning("no supervision thread: safe-state reaction for %s not run",
-                           faulted.source)
-
-    def _run(self) -> None:
-        interval = self.config.heartbeat_ms / 5000.0
-        next_check = time.monotonic()
-        while not self._stop.is_set():
-            try:
-                action = self._actions.get(timeout=max(0.0, next_check - time.monotonic()))
-            except queue.Empty:
-                action = None
-            if self._stop.is_set():
-                break
-            try:
-                if action is not None:
-                    action()
-                if time.monotonic() >= next_check:
-                    next_check = time.monotonic() + interval
-                    self.check(self._clock())
-            except Exception:
-                logger.exception("EPOS2 supervision step failed")
-
-
-def probe(
-    interface: str,
-    channel: str,
-    node: int,
-    bitrate: int | None,
-    duration: float,
-    emit: Callable[[dict], None],
-) -> int:
-    """Bring one node to operation enabled (profile position) and stream it for ``duration`` s.
-
-    Emits ``{"kind": "feedback", "t", "position_rad", "velocity_rad_s", "state"}`` per
-    feedback TPDO and ``{"kind": "fault", "t", "reason"}`` per warning or error event
-    (``t`` in seconds since the probe started), then disables the node. Returns 0 on
-    success, 1 when the node never answered, 2 when it answered but could not be brought
-    to operation enabled (or the bus could not be opened). With ``interface="virtual"``
-    start emulated nodes on the same channel first (``epos2_emulator.start_emulated_nodes``).
-    """
-    _check_node_id(node, "node")
-    if not duration >= 0.0:
-        raise ValueError(f"duration: must be >= 0, got {duration!r}")
-    settings: dict[str, Any] = {"interface": interface, "channel": channel}
-    if bitrate is not None:
-        settings["bitrate"] = bitrate
-    config = Epos2Config(**settings)
-    items: queue.Queue[tuple[str, Any]] = queue.Queue()
-    t0 = time.monotonic()
-
-    def on_event(event: Event) -> None:
-        if event.level in ("warning", "error", "fatal"):
-            items.put(("fault", event))
-
-    def flush() -> None:
-        while True:
-            try:
-                kind, item = items.get_nowait()
-            except queue.Empty:
-                return
-            _emit_probe_item(kind, item, t0, emit)
-
-    drives = FinDrives(config, lambda fb: items.put(("feedback", fb)), on_event,
-                       fins={0: node}, clock=time.monotonic)
-    try:
-        drives.connect()
-    except Epos2NoAnswer as e:
-        flush()
-        emit({"kind": "fault", "t": time.monotonic() - t0, "reason": f"no_answer: {e}"})
-        return 1
-    except (Epos2Error, CanBusError) as e:
-        flush()
-        emit({"kind": "fault", "t": time.monotonic() - t0, "reason": f"start_failed: {e}"})
-        return 2
-    result = 0
-    try:
-        if not drives.enable_all():
-            result = 2
-        deadline = time.monotonic() + duration
-        while True:
-            remaining = deadline - time.monotonic()
-            if remaining <= 0.0:
-                break
-            try:
-                kind, item = items.get(timeout=remaining)
-            except queue.Empty:
-                break
-            _emit_probe_item(kind, item, t0, emit)
-        drives.disable_all()
-    finally:
-        drives.close()
-        flush()
-    return result
-
-
-def _emit_probe_item(kind: str, item: Any, t0: float, emit: Callable[[dict], None]) -> None:
-    if kind == "feedback":
-        emit({"kind": "feedback", "t": item.t - t0, "position_rad": item.position_rad,
-              "velocity_rad_s": item.velocity_rad_s, "state": item.state})
-    else:
-        emit({"kind": "fault", "t": item.t - t0, "reason": f"{item.code}: {item.message}"})

@@ -22,6 +22,10 @@ in-process ``virtual`` interface). It implements what the driver relies on:
 Time advances through :meth:`Epos2Emulator.tick` (the headless simulator and tests call it
 with their own clock) or through a thread that calls it (:meth:`EmulatedNodes.start_thread`).
 Heartbeats are canopen's periodic tasks and run on the wall clock.
+
+Over 500 lines: :class:`Epos2Emulator` is one node's object dictionary hooks, NMT, CiA 402
+state machine, profile position, PDOs and fault injection, all on the node's one state;
+the servo it moves is the plant's model (``robot.servo``).
 """
 
 from __future__ import annotations
@@ -40,9 +44,9 @@ from canopen.sdo import SdoAbortedError
 from ucat_console.backend.devices import cia402
 from ucat_console.backend.devices.canbus import open_bus
 from ucat_console.backend.devices.epos2 import EDS_PATH
-from ucat_console.backend.devices.units import DriveUnits
-from ucat_console.control.params import _Config
-from ucat_console.typedconf import param
+from ucat_console.robot.servo import servo_step
+from ucat_console.robot.units import DriveUnits
+from ucat_console.typedconf import Config, param
 
 logger = logging.getLogger(__name__)
 
@@ -79,7 +83,8 @@ class Servo(Protocol):
 
 
 class TrapezoidalServo:
-    """Trapezoidal velocity profile towards the target, as the EPOS2 runs profile position.
+    """Trapezoidal velocity profile towards the target, as the EPOS2 runs profile position:
+    the plant's servo model (``robot.servo.servo_step``), stepped here.
 
     Accelerates at ``acceleration`` up to the commanded profile velocity (capped at
     ``max_rate``) and brakes at ``deceleration`` so as to stop on the target. Position is
@@ -138,33 +143,12 @@ class TrapezoidalServo:
             remaining -= h
 
     def _substep(self, h: float) -> None:
-        d = self._target - self._x
-        v = self._v
-        if abs(d) <= 1e-12 and v == 0.0:
-            self._x = self._target
-            return
-        sign = 1.0 if d > 0.0 or (d == 0.0 and v < 0.0) else -1.0
-        dist = abs(d)
-        u = v * sign  # speed towards the target (negative: moving away)
-        if u > 0.0 and u * u >= 2.0 * self.deceleration * dist:
-            # braking phase: the constant deceleration that stops exactly on the target
-            a_stop = u * u / (2.0 * dist) if dist > 0.0 else math.inf
-            if u <= a_stop * h:
-                self._x, self._v = self._target, 0.0
-                return
-            u_new = u - a_stop * h
-        elif u > self._vmax:
-            u_new = max(self._vmax, u - self.deceleration * h)
-        elif u < 0.0:
-            u_new = min(0.0, u + self.deceleration * h)
-        else:
-            u_new = min(self._vmax, u + self.acceleration * h)
-        self._x += sign * 0.5 * (u + u_new) * h
-        self._v = sign * u_new
+        self._x, self._v, _ = servo_step(self._x, self._v, self._target, self._vmax,
+                                         self.acceleration, self.max_rate, h, self.deceleration)
 
 
 @dataclass(frozen=True)
-class Epos2EmulatorConfig(_Config):
+class Epos2EmulatorConfig(Config):
     """Emulated EPOS2 nodes (simulation and tests)."""
 
     units: DriveUnits = DriveUnits()

@@ -24,8 +24,7 @@ from dataclasses import dataclass
 from enum import Enum
 from typing import Callable
 
-from ucat_console.control.params import _Config
-from ucat_console.typedconf import param
+from ucat_console.typedconf import Config, param
 
 
 class Fault(str, Enum):
@@ -49,7 +48,7 @@ def as_fault(fault: Fault | str) -> Fault:
 
 
 @dataclass(frozen=True)
-class FaultSettings(_Config):
+class FaultSettings(Config):
     """How strongly an injected fault acts."""
 
     slow_delay_s: float = param(
@@ -109,6 +108,3 @@ class FaultInjectable:
     def clear(self, fault: Fault | str | None = None) -> None:
         """End one fault, or all of them."""
         self.faults.clear(fault)
-
-    def active_faults(self) -> frozenset[Fault]:
-        return self.faults.snapshot()

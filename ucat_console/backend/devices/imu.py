@@ -4,8 +4,8 @@ Configuration follows the console's start-up sequence: idle, ask the IMU base ra
 the IMU message format of data set 0x80 (scaled accel 0x04, scaled gyro 0x05 and, when
 asked for, quaternion 0x0A or Euler 0x0C) at ``base rate / decimation``, enable the IMU
 stream, resume. The IMU-only CX5 NACKs orientation fields; the driver then reports the
-NACK and falls back to accel + gyro, and attitude comes from
-:mod:`ucat_console.backend.devices.attitude`.
+NACK and falls back to accel + gyro, and attitude comes from the core's estimator
+(:mod:`ucat_console.control.estimation`, run by the closed loop).
 
 A reader thread parses the stream and delivers :class:`ImuReading`. Every fault is an
 :class:`Event` with source ``"imu"``: ``checksum``, ``garbage``, ``malformed``,
@@ -26,12 +26,11 @@ from dataclasses import dataclass
 from typing import Callable
 
 from ucat_console.backend.devices import mip
-from ucat_console.backend.devices.readings import ImuReading
+from ucat_console.robot.readings import ImuReading
 from ucat_console.backend.devices.serial_link import BAUD_RATES, SERIAL_ERRORS
 from ucat_console.backend.devices.serial_reader import SerialReader
-from ucat_console.control.params import _Config
 from ucat_console.telemetry.events import EventSink
-from ucat_console.typedconf import param
+from ucat_console.typedconf import Config, param
 
 log = logging.getLogger(__name__)
 
@@ -40,7 +39,7 @@ _ORIENTATION_DESCRIPTORS = {"quaternion": mip.FIELD_QUATERNION, "euler": mip.FIE
 
 
 @dataclass(frozen=True)
-class ImuConfig(_Config):
+class ImuConfig(Config):
     """Serial link and streaming set-up of the 3DM-CX5."""
 
     port: str = param("/dev/ttyACM0", doc="serial device of the IMU")

@@ -34,14 +34,13 @@ from ucat_console.backend.devices import mip
 from ucat_console.backend.devices.emulator_base import DelayedOutput, EmulatorThread
 from ucat_console.backend.devices.faults import Fault, FaultSettings
 from ucat_console.backend.devices.pty_port import PtyPort
-from ucat_console.control.params import _Config
-from ucat_console.typedconf import param
+from ucat_console.typedconf import Config, param
 
 _GARBAGE = b"\x00\x75\xff\x13\x65"  # includes a lone sync byte, to exercise resynchronisation
 
 
 @dataclass(frozen=True)
-class ImuEmulatorConfig(_Config):
+class ImuEmulatorConfig(Config):
     """Behaviour of the emulated 3DM-CX5."""
 
     base_rate_hz: int = param(1000, lo=1, hi=4000, unit="Hz", doc="IMU data base rate")

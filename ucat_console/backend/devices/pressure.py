@@ -7,11 +7,10 @@ ADC line format (one reading per line, ASCII)::
 ``<current>`` is the loop current in mA as a decimal number; ``\\n`` alone also ends a
 line. Anything else on a line is a malformed line.
 
-Conversions (one definition each, with their inverses for the emulator):
-
-* gauge pressure ``p = p_min + (I - 4 mA) / 16 mA * span``;
-* depth ``d = (p - p_surface) / (rho g)`` with ``g = 9.80665 m/s^2`` and ``rho``
-  configured (997 kg/m^3 fresh water, 1029 salt water).
+Conversions are the robot's (``robot/units.py``, one definition each, with their inverses
+for the emulator and the simulated transducer): gauge pressure
+``p = p_min + (I - 4 mA) / 16 mA * span``; depth ``d = (p - p_surface) / (rho g)`` with
+standard gravity and ``rho`` configured (997 kg/m^3 fresh water, 1029 salt water).
 
 ``p_surface`` starts at ``surface_pressure_pa`` and is set by :meth:`PressureDriver.zero`
 (zero-offset calibration at the surface: the mean pressure of the next readings).
@@ -33,26 +32,21 @@ from dataclasses import dataclass
 from typing import Callable, Literal
 
 from ucat_console.backend.devices.lines import LineSplitter, Overlong
-from ucat_console.backend.devices.readings import DepthReading
+from ucat_console.robot.readings import DepthReading
+from ucat_console.robot.units import LOOP_MAX_MA, LOOP_MIN_MA, RHO_FRESH, current_to_pressure, pressure_to_depth
 from ucat_console.backend.devices.serial_link import BAUD_RATES
 from ucat_console.backend.devices.serial_reader import SerialReader
-from ucat_console.control.params import _Config
 from ucat_console.telemetry.events import EventSink
-from ucat_console.typedconf import param
+from ucat_console.typedconf import Config, param
 
 
 SOURCE = "pressure"
-GRAVITY = 9.80665  # m/s^2, standard gravity
-LOOP_ZERO_MA = 4.0
-LOOP_SPAN_MA = 16.0
-RHO_FRESH = 997.0
-RHO_SALT = 1029.0
 
 _LINE = re.compile(rb"^\s*I=([+-]?(?:\d+(?:\.\d*)?|\.\d+))\s*mA\s*$")
 
 
 @dataclass(frozen=True)
-class PressureConfig(_Config):
+class PressureConfig(Config):
     """Serial ADC link, transducer scaling, water density and fault limits."""
 
     port: str = param("/dev/ttyUSB0", doc="serial device of the ADC")
@@ -67,8 +61,8 @@ class PressureConfig(_Config):
     surface_pressure_pa: float = param(
         0.0, lo=-1.0e5, hi=1.0e7, unit="Pa", doc="gauge pressure at the surface until zeroed"
     )
-    loop_min_ma: float = param(3.8, lo=0.0, hi=4.0, unit="mA", doc="lower current: broken loop")
-    loop_max_ma: float = param(20.5, lo=20.0, hi=30.0, unit="mA", doc="higher current: shorted loop")
+    loop_min_ma: float = param(LOOP_MIN_MA, lo=0.0, hi=4.0, unit="mA", doc="lower current: broken loop")
+    loop_max_ma: float = param(LOOP_MAX_MA, lo=20.0, hi=30.0, unit="mA", doc="higher current: shorted loop")
     zero_samples: int = param(20, lo=1, hi=10000, doc="readings averaged by the surface zeroing")
     silence_timeout_s: float = param(
         1.0, lo=0.01, hi=60.0, unit="s", doc="report silence after this long without a reading"
@@ -77,29 +71,6 @@ class PressureConfig(_Config):
         1.0, lo=0.05, hi=60.0, unit="s", doc="retry opening a failed port this often"
     )
     read_timeout_s: float = param(0.05, lo=0.001, hi=1.0, unit="s", doc="serial read timeout")
-
-
-# ---------------------------------------------------------------- conversions
-
-
-def current_to_pressure(current_ma: float, p_min_pa: float, span_pa: float) -> float:
-    """Gauge pressure (Pa) from loop current (mA)."""
-    return p_min_pa + (current_ma - LOOP_ZERO_MA) / LOOP_SPAN_MA * span_pa
-
-
-def pressure_to_current(pressure_pa: float, p_min_pa: float, span_pa: float) -> float:
-    """Loop current (mA) for a gauge pressure (Pa); inverse of :func:`current_to_pressure`."""
-    return LOOP_ZERO_MA + (pressure_pa - p_min_pa) / span_pa * LOOP_SPAN_MA
-
-
-def pressure_to_depth(pressure_pa: float, surface_pressure_pa: float, rho: float) -> float:
-    """Depth (m, positive down) below the zeroed surface."""
-    return (pressure_pa - surface_pressure_pa) / (rho * GRAVITY)
-
-
-def depth_to_pressure(depth_m: float, surface_pressure_pa: float, rho: float) -> float:
-    """Gauge pressure (Pa) at a depth; inverse of :func:`pressure_to_depth`."""
-    return surface_pressure_pa + depth_m * rho * GRAVITY
 
 
 class AdcLineError(ValueError):
@@ -179,11 +150,6 @@ class PressureDriver(SerialReader[DepthReading]):
     @property
     def surface_pressure_pa(self) -> float:
         return self._surface
-
-    def set_surface_pressure(self, pressure_pa: float) -> None:
-        if not math.isfinite(pressure_pa):
-            raise ValueError(f"surface pressure: {pressure_pa!r} is not finite")
-        self._surface = float(pressure_pa)
 
     def zero(self, samples: int | None = None, timeout_s: float = 5.0) -> float | None:
         """Zero-offset calibration at the surface: mean pressure of the next readings.

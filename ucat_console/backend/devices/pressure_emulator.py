@@ -17,21 +17,16 @@ from typing import Callable
 
 from ucat_console.backend.devices.emulator_base import DelayedOutput, EmulatorThread, next_tick
 from ucat_console.backend.devices.faults import Fault, FaultSettings
-from ucat_console.backend.devices.pressure import (
-    PressureConfig,
-    depth_to_pressure,
-    format_adc_line,
-    pressure_to_current,
-)
+from ucat_console.backend.devices.pressure import PressureConfig, format_adc_line
 from ucat_console.backend.devices.pty_port import PtyPort
-from ucat_console.control.params import _Config
-from ucat_console.typedconf import param
+from ucat_console.robot.units import depth_to_pressure, pressure_to_current
+from ucat_console.typedconf import Config, param
 
 BROKEN_LOOP_MA = 0.0
 
 
 @dataclass(frozen=True)
-class PressureEmulatorConfig(_Config):
+class PressureEmulatorConfig(Config):
     """Line rate and sensor offset of the emulated ADC."""
 
     rate_hz: float = param(20.0, lo=0.5, hi=500.0, unit="Hz", doc="ADC lines per second")

@@ -36,9 +36,13 @@ old ones are idle. Tuning (MPC weights, PID gains) applies from the next plan / 
 Mutators may be called from any thread: they are validated at once and applied by the
 loop's thread at its next event.
 
+Estimation (the attitude EKF, dead reckoning) is the core's (``control.estimation``); this
+module schedules, hands plans over between modes and publishes. It is over 500 lines
+because those three share the actuators' hand-over state, which one loop thread owns.
+
 Fins: the controller uses the paper's order (0 front-starboard, 1 front-port,
 2 rear-starboard, 3 rear-port); the robot and the telemetry use the robot's order,
-mapped by ``PAPER_TO_PLANT_FIN``.
+mapped by ``robot.fins.PAPER_TO_ROBOT``.
 """
 
 from __future__ import annotations
@@ -46,13 +50,11 @@ from __future__ import annotations
 import logging
 import math
 import queue
-from dataclasses import fields
+from dataclasses import fields, replace
 from typing import Any, Callable
 
 import numpy as np
 
-from ucat_console.backend.devices.attitude import AttitudeEstimator
-from ucat_console.backend.devices.readings import DepthReading, DvlVelocity, FinFeedback, ImuReading
 from ucat_console.backend.loop.clock import Clock, SimulatedClock
 from ucat_console.backend.loop.config import MODES, LoopConfig
 from ucat_console.backend.loop.planners import (
@@ -61,12 +63,9 @@ from ucat_console.backend.loop.planners import (
     PlanInputs,
     PlanJob,
     PlanningService,
-    PlanOutcome,
     Planner,
     ThreadedPlanning,
 )
-from ucat_console.backend.loop.robot_io import RobotIO, RobotTruth
-from ucat_console.backend.sim.params import PAPER_TO_PLANT_FIN
 from ucat_console.control.allocation import (
     INDEPENDENT_FINS,
     SYNC_FINS,
@@ -74,6 +73,7 @@ from ucat_console.control.allocation import (
     BodySetpoints,
     allocate,
 )
+from ucat_console.control.estimation import MAX_DEAD_RECKONING_GAP, AttitudeEstimator, dead_reckon
 from ucat_console.control.executor import (
     CycleComplete,
     FinExecutor,
@@ -97,13 +97,13 @@ from ucat_console.telemetry.messages import (
     Setpoints,
     Status,
 )
+from ucat_console.robot.fins import N_FINS, PAPER_TO_ROBOT, ROBOT_TO_PAPER
+from ucat_console.robot.interface import RobotIO, RobotTruth
+from ucat_console.robot.readings import DepthReading, DvlVelocity, FinFeedback, ImuReading
 from ucat_console.telemetry.stream import TelemetryStream
 
 log = logging.getLogger(__name__)
 
-N_FINS = 4
-#: robot (plant) fin index -> paper fin index
-PLANT_TO_PAPER: tuple[int, ...] = tuple(PAPER_TO_PLANT_FIN.index(i) for i in range(N_FINS))
 #: events closer than this (s) are simultaneous
 _EPS = 1e-7
 PID_LOOPS = ("velocity", "depth", "yaw_rate")
@@ -111,19 +111,7 @@ PID_LOOPS = ("velocity", "depth", "yaw_rate")
 
 def check_setpoints(cfg: LoopConfig, sp: BodySetpoints) -> BodySetpoints:
     """``sp`` if it lies inside the envelope of ``cfg``, else ValueError naming the value."""
-    if abs(sp.velocity) > cfg.max_velocity:
-        raise ValueError(
-            f"velocity: {sp.velocity!r} m/s is outside the envelope; allowed: "
-            f"[-{cfg.max_velocity}, {cfg.max_velocity}] m/s"
-        )
-    if not 0.0 <= sp.depth <= cfg.max_depth:
-        raise ValueError(f"depth: {sp.depth!r} m is outside the envelope; allowed: [0, {cfg.max_depth}] m")
-    if abs(sp.yaw_rate) > cfg.max_yaw_rate:
-        raise ValueError(
-            f"yaw_rate: {sp.yaw_rate!r} rad/s is outside the envelope; allowed: "
-            f"[-{cfg.max_yaw_rate}, {cfg.max_yaw_rate}] rad/s"
-        )
-    return sp
+    return sp.within(cfg.max_velocity, cfg.max_depth, cfg.max_yaw_rate)
 
 
 class _Actuator:
@@ -149,7 +137,7 @@ class _Actuator:
         self.pending_end: float | None = None  # last target of the loaded, waiting plan
         self.active = True
         self.predecessors: list[_Actuator] = []
-        self.ready: tuple[PlanInputs, PlanOutcome] | None = None
+        self.ready: tuple[PlanInputs, FinPlan] | None = None
         self.requested = False
         self.retiring = False
 
@@ -403,7 +391,7 @@ class ClosedLoop:
             tp = type(r)
             if tp is FinFeedback:
                 pf = r.fin
-                p = PLANT_TO_PAPER[pf]
+                p = ROBOT_TO_PAPER[pf]
                 self._fb_angle[pf] = r.position_rad
                 self._fb_rate[pf] = r.velocity_rad_s
                 self._power[pf].update(r.t, r.position_rad, accumulate=driving)
@@ -435,14 +423,10 @@ class ClosedLoop:
 
     def _dead_reckon(self, r: DvlVelocity, driving: bool) -> None:
         if self._dvl_t is not None:
-            dt = min(max(r.t - self._dvl_t, 0.0), 1.0)
-            w, x, y, z = self._q
-            vx, vy, vz = r.vx, r.vy, r.vz
-            # body -> NED, rows x and y of R(q)
-            self._xy[0] += dt * ((1 - 2 * (y * y + z * z)) * vx + 2 * (x * y - w * z) * vy + 2 * (x * z + w * y) * vz)
-            self._xy[1] += dt * (2 * (x * y + w * z) * vx + (1 - 2 * (x * x + z * z)) * vy + 2 * (y * z - w * x) * vz)
+            dt = min(max(r.t - self._dvl_t, 0.0), MAX_DEAD_RECKONING_GAP)
+            self._xy[0], self._xy[1] = dead_reckon((self._xy[0], self._xy[1]), self._q, (r.vx, r.vy, r.vz), dt)
             if driving:
-                self.distance += dt * math.hypot(vx, vy)
+                self.distance += dt * math.hypot(r.vx, r.vy)
         self._dvl_t = r.t
         self._dvl_v = (r.vx, r.vy, r.vz)
 
@@ -460,7 +444,7 @@ class ClosedLoop:
             return  # the first plans wait for the first DVL and depth reports: no stroke from a guess
         for act in self._actuators:
             if not act.requested and act.active:
-                angle = self._fb_angle[PAPER_TO_PLANT_FIN[act.fins[0]]]
+                angle = self._fb_angle[PAPER_TO_ROBOT[act.fins[0]]]
                 if not math.isnan(angle):
                     self._request(act, t, angle)
 
@@ -497,7 +481,7 @@ class ClosedLoop:
             return
         self._load(act, job.inputs, outcome, t)
 
-    def _load(self, act: _Actuator, inputs: PlanInputs, outcome: PlanOutcome, t: float) -> None:
+    def _load(self, act: _Actuator, inputs: PlanInputs, outcome: FinPlan, t: float) -> None:
         was_running = act.executor.running
         actions = act.executor.load(outcome.commands, t, theta_start=inputs.theta0)
         if was_running:
@@ -511,23 +495,15 @@ class ClosedLoop:
                 late = True
         publish = self.stream.publish
         for p in act.fins:
-            pf = PAPER_TO_PLANT_FIN[p]
-            publish(ch.fin_plan(pf), FinPlan(
-                t=t, fin=pf, mode=act.mode, target=inputs.target, v_body=inputs.v_body,
-                theta0=inputs.theta0, u_prev=inputs.u_prev, u=outcome.u, commands=outcome.commands,
-                cost_total=outcome.cost_total, cost_force=outcome.cost_force,
-                cost_strouhal=outcome.cost_strouhal, cost_amplitude=outcome.cost_amplitude,
-                cost_smoothness=outcome.cost_smoothness, st=outcome.st, mean_force=outcome.mean_force,
-                solve_time=outcome.solve_time, late=late, amplitude=outcome.amplitude,
-                centre=outcome.centre, seed=outcome.seed,
-            ))
+            pf = PAPER_TO_ROBOT[p]
+            publish(ch.fin_plan(pf), replace(outcome, t=t, fin=pf, mode=act.mode, late=late))
         self._handle(act, actions, t)
 
     def _handle(self, act: _Actuator, actions: list, t: float) -> None:
         for a in actions:
             tp = type(a)
             if tp is SendToServo:
-                pf = PAPER_TO_PLANT_FIN[a.fin]
+                pf = PAPER_TO_ROBOT[a.fin]
                 self.io.command_fin(pf, a.theta_ref, a.w_ref)
                 self._publish_stroke(t, pf, a.theta_ref - self._cmd_angle[pf], a.w_ref)
                 self._cmd_angle[pf] = a.theta_ref
@@ -607,7 +583,7 @@ class ClosedLoop:
             ref = self._owner[n.fins[0]]
             theta0 = ref.end_angle()
             if theta0 is None:
-                a = self._fb_angle[PAPER_TO_PLANT_FIN[n.fins[0]]]
+                a = self._fb_angle[PAPER_TO_ROBOT[n.fins[0]]]
                 theta0 = 0.0 if math.isnan(a) else a
             n.u_prev = ref.u_prev
             self._request(n, t, theta0)

@@ -1,8 +1,9 @@
 """Configuration of the closed loop: controller mode, hand-over latency, rates, envelope.
 
 One :class:`LoopConfig` holds everything the loop needs besides the robot: the controller
-blocks of ``control/params.py`` nested as tables (so one TOML file configures a run) and
-the loop's own values below.
+blocks of ``control/params.py`` and the loop's own values below. It is the only holder of
+the controller blocks: the application's configuration (``config.AppConfig``) keeps them
+here and reads them from here.
 """
 
 from __future__ import annotations
@@ -15,9 +16,8 @@ from ucat_console.control.params import (
     ExecutorConfig,
     MpcConfig,
     PowerConfig,
-    _Config,
 )
-from ucat_console.typedconf import param
+from ucat_console.typedconf import Config, param
 
 #: controller modes: four MPC fins, three MPC problems with the rear pair synchronised,
 #: the inverse-model baseline
@@ -25,7 +25,7 @@ MODES = ("mpc", "mpc_sync", "baseline")
 
 
 @dataclass(frozen=True)
-class LoopConfig(_Config):
+class LoopConfig(Config):
     """The closed loop (control.md sections 7-9)."""
 
     mode: str = param("mpc", choices=MODES, doc="fin controller")

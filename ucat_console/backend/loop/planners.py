@@ -1,7 +1,10 @@
 """Fin planners behind one interface, and the services that run them.
 
 A planner turns :class:`PlanInputs` (everything a plan depends on, which is also what a
-``FinPlan`` message carries so a recording can be replayed) into a :class:`PlanOutcome`:
+``FinPlan`` message carries so a recording can be replayed) into a ``FinPlan``: the plan, its
+cost terms, its inputs and its solve time (measured here, around the solver; the core reads
+no clock). The loop publishes it with the hand-over time, the robot fin, the mode and
+whether it came late filled in (:func:`dataclasses.replace`):
 
 * :class:`MpcFinPlanner`: the Strouhal-aware MPC (``control.mpc.FinMpc``), for the modes
   "mpc" and "mpc_sync";
@@ -30,6 +33,7 @@ from ucat_console.control.baseline import BaselinePlanner, wrap_angle
 from ucat_console.control.cost import cost_terms
 from ucat_console.control.mpc import FinMpc
 from ucat_console.control.params import BaselineConfig, MpcConfig
+from ucat_console.telemetry.messages import FinPlan
 
 Vec4 = tuple[float, float, float, float]
 
@@ -46,23 +50,10 @@ class PlanInputs:
     u_prev: Vec4  # the fin's previous plan
 
 
-@dataclass(frozen=True)
-class PlanOutcome:
-    """A plan in the MPC's format with its cost terms (the baseline's scored alike)."""
-
-    u: Vec4
-    commands: Vec4
-    cost_total: float
-    cost_force: float
-    cost_strouhal: float
-    cost_amplitude: float
-    cost_smoothness: float
-    st: float
-    mean_force: tuple[float, float]
-    solve_time: float  # s, wall clock
-    amplitude: float = 0.0  # baseline only
-    centre: float = 0.0  # baseline only
-    seed: int = -1  # the MPC's seed for this plan (-1: not seeded)
+def _plan(x: PlanInputs, **result: object) -> FinPlan:
+    """A FinPlan of ``x``; ``t``, ``fin``, ``mode`` and ``late`` are the loop's to fill in."""
+    return FinPlan(t=x.t, fin=-1, mode="", target=x.target, v_body=x.v_body, theta0=x.theta0,
+                   u_prev=x.u_prev, late=False, **result)  # type: ignore[arg-type]
 
 
 def _wrapped(theta0: float) -> tuple[float, float]:
@@ -90,7 +81,7 @@ class MpcFinPlanner:
         self._seed_base = seed << 32
         self._count = 0
 
-    def __call__(self, x: PlanInputs) -> PlanOutcome:
+    def __call__(self, x: PlanInputs) -> FinPlan:
         t0 = time.perf_counter()
         theta, offset = _wrapped(x.theta0)
         # every plan gets its own seed (recorded in FinPlan), so a recording replays exactly
@@ -98,8 +89,8 @@ class MpcFinPlanner:
         self._count += 1
         p = self._mpc.plan(x.target, x.v_body, theta, x.u_prev, seed=seed)
         c = p.cost
-        return PlanOutcome(
-            u=p.u, commands=_shift(p.commands, offset), cost_total=c.total, cost_force=c.force,
+        return _plan(
+            x, u=p.u, commands=_shift(p.commands, offset), cost_total=c.total, cost_force=c.force,
             cost_strouhal=c.strouhal_penalty, cost_amplitude=c.amplitude,
             cost_smoothness=c.smoothness, st=c.st, mean_force=c.mean_force,
             solve_time=time.perf_counter() - t0, seed=seed,
@@ -113,7 +104,7 @@ class BaselineFinPlanner:
         self.cfg = cfg
         self._planner = BaselinePlanner(cfg, bcfg)
 
-    def __call__(self, x: PlanInputs) -> PlanOutcome:
+    def __call__(self, x: PlanInputs) -> FinPlan:
         t0 = time.perf_counter()
         theta, offset = _wrapped(x.theta0)
         b = self._planner.plan(x.target[0], x.target[1], theta)
@@ -129,17 +120,19 @@ class BaselineFinPlanner:
             force = float(terms["force"])
         solve = time.perf_counter() - t0
         if terms is None:
-            return PlanOutcome(u, commands, self.cfg.lam_f * force, force, 0.0, 0.0, 0.0, st,
-                               (fbx, fby), solve, b.amplitude, b.centre)
-        return PlanOutcome(
-            u=u, commands=commands, cost_total=float(terms["total"]), cost_force=force,
+            return _plan(x, u=u, commands=commands, cost_total=self.cfg.lam_f * force,
+                         cost_force=force, cost_strouhal=0.0, cost_amplitude=0.0,
+                         cost_smoothness=0.0, st=st, mean_force=(fbx, fby), solve_time=solve,
+                         amplitude=b.amplitude, centre=b.centre)
+        return _plan(
+            x, u=u, commands=commands, cost_total=float(terms["total"]), cost_force=force,
             cost_strouhal=float(terms["strouhal_penalty"]), cost_amplitude=float(terms["amplitude"]),
             cost_smoothness=float(terms["smoothness"]), st=st, mean_force=(fbx, fby),
             solve_time=solve, amplitude=b.amplitude, centre=b.centre,
         )
 
 
-Planner = Callable[[PlanInputs], PlanOutcome]
+Planner = Callable[[PlanInputs], FinPlan]
 
 
 def warm_up(cfg: LoopConfig | None = None) -> float:
@@ -161,7 +154,7 @@ class PlanJob:
 
     def __init__(self, inputs: PlanInputs) -> None:
         self.inputs = inputs
-        self.outcome: PlanOutcome | None = None
+        self.outcome: FinPlan | None = None
         self.error: BaseException | None = None
         self.done_wall = math.inf
         self._future: Future | None = None
@@ -173,7 +166,7 @@ class PlanJob:
             self.error = e
         self.done_wall = time.perf_counter()
 
-    def wait(self) -> PlanOutcome:
+    def wait(self) -> FinPlan:
         """The outcome (blocking until the planner is done); a planner error is raised here."""
         if self._future is not None:
             self._future.result()

@@ -317,10 +317,10 @@ def robot_geometry(plant: Any = None) -> RobotGeometry:
     the console's own 3-D view draws it (``ui/scene.py``: fin mounts, sizes, colours)."""
     from ucat_console.backend.sim.params import PlantConfig
 
-    plant = plant if plant is not None else PlantConfig()
-    size = tuple(float(x) for x in plant.vehicle.hull_size)
-    mounts = tuple(fin_mount(plant, i, size[1]) for i in range(N_FINS))
-    return RobotGeometry(size, mounts, 1.5 * plant.hydro.resolved().fin_length)  # type: ignore[arg-type]
+    g = (plant if plant is not None else PlantConfig()).geometry
+    size = tuple(float(x) for x in g.hull_size)
+    mounts = tuple(fin_mount(g, i, size[1]) for i in range(N_FINS))
+    return RobotGeometry(size, mounts, 1.5 * g.fin_length)  # type: ignore[arg-type]
 
 
 class Derived:

@@ -38,11 +38,10 @@ from ucat_console.backend.sessions.schema import (
     json_schema_bytes,
     schema_name,
 )
-from ucat_console.control.params import _Config
 from ucat_console.telemetry.channels import CHANNELS, EVENTS
 from ucat_console.telemetry.events import Event, EventSink
 from ucat_console.telemetry.stream import TelemetryStream
-from ucat_console.typedconf import param
+from ucat_console.typedconf import Config, param
 
 log = logging.getLogger(__name__)
 
@@ -54,7 +53,7 @@ _SIZE_CHECK_EVERY = 256  # messages between part-size checks
 
 
 @dataclass(frozen=True)
-class RecorderConfig(_Config):
+class RecorderConfig(Config):
     """Session recording (console.md, Sessions)."""
 
     chunk_size: int = param(

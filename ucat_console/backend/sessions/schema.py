@@ -3,7 +3,7 @@
 Every channel of a session file carries JSON messages (MCAP message encoding ``json``)
 described by a JSON Schema (schema encoding ``jsonschema``, dialect 2020-12), so that
 Foxglove/Lichtblick and PlotJuggler show every channel. Each field's ``description`` is
-its :class:`~ucat_console.telemetry.fields.Doc` (meaning, unit, frame).
+its :class:`~ucat_console.robot.fields.Doc` (meaning, unit, frame).
 
 Type mapping (the only kinds a message field may have), encoding 2:
 
@@ -48,7 +48,7 @@ import typing
 from dataclasses import dataclass
 from typing import Any
 
-from ucat_console.telemetry.fields import WXYZ, XYZ, Doc, field_docs
+from ucat_console.robot.fields import WXYZ, XYZ, Doc, field_docs
 
 #: MCAP encodings of our channels
 SCHEMA_ENCODING = "jsonschema"

@@ -63,12 +63,8 @@ import math
 import numpy as np
 from numba import njit
 
-from ucat_console.backend.sim.params import (
-    N_FINS,
-    FinGeometryConfig,
-    FinHydroConfig,
-    fin_signs,
-)
+from ucat_console.backend.sim.params import FinGeometryConfig, FinHydroConfig
+from ucat_console.robot.fins import N_FINS, fin_signs
 
 # hydro parameter vector layout
 H_RHO = 0
@@ -121,7 +117,7 @@ def hydro_params(hydro: FinHydroConfig, geometry: FinGeometryConfig) -> np.ndarr
 
 
 def fin_sign_table() -> np.ndarray:
-    """(4, 3) array of (s_lat, s_long, s_y) per plant fin (see ``params.fin_signs``)."""
+    """(4, 3) array of (s_lat, s_long, s_y) per plant fin (see ``robot.fins.fin_signs``)."""
     return np.array([fin_signs(i) for i in range(N_FINS)], dtype=float)
 
 

@@ -3,24 +3,12 @@
 One frozen dataclass per block, nested under :class:`PlantConfig`. Defaults come from the
 TalTech eeUVsim U-CAT model (plant.md table) unless a field's doc says otherwise.
 
-Frames and conventions (kept by every module of ``backend/sim``):
-
-* World frame NED (x north, y east, z down). Body frame FRD (x forward, y starboard,
-  z down), Fossen's convention. Attitude is the unit quaternion (w, x, y, z) rotating body
-  vectors into NED.
-* The plant's fins are numbered front-right 0, back-right 1, back-left 2, front-left 3
-  (:data:`FIN_NAMES`). The paper's allocation numbers its fins so that 0 and 1 are the front
-  pair; :data:`PAPER_TO_PLANT_FIN` maps them: paper 0 -> FR 0, paper 1 -> FL 3,
-  paper 2 -> BR 1, paper 3 -> BL 2.
-* Each fin works in its own 2-D plane (the controller's fin model, control.md section 1):
-  ``x_m`` is horizontal, pointing to the body's rear at the mounting angle alpha from the
-  body's -x axis (towards the inside for the front fins, the outside for the rear fins, as
-  in eeUVsim's surge/sway maps); ``y_m`` is vertical, pointing up (towards the surface).
-  Forward propulsion is ``f_x < 0``; ``f_y > 0`` is an upward force. A model force
-  (f_x, f_y) acts on the body as (-f_x cos(alpha), s_y f_x sin(alpha), -f_y) with s_y from
-  :func:`fin_signs`; alpha = 0 gives exactly (-f_x, 0, -f_y).
-* Fin angle theta = 0 is the fin's neutral (horizontal) position; theta > 0 turns the fin
-  from ``x_m`` towards ``y_m`` (tip up).
+Frames, fin order and fin planes are the robot's (``ucat_console.robot``: ``fins`` for the
+order and signs, ``geometry`` for the fin planes, ``rotations`` for the attitude
+quaternion): world NED, body FRD (Fossen), attitude the unit quaternion (w, x, y, z)
+rotating body vectors into NED, fins in the robot's order. The sensor models' blocks are
+named ``*ModelConfig``: the drivers' configuration of the same devices is another thing
+(``backend/devices``).
 """
 
 from __future__ import annotations
@@ -28,20 +16,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ucat_console.backend.devices.pressure import GRAVITY
-from ucat_console.control.params import _Config
-from ucat_console.typedconf import param, require_below
-
-#: Standard gravity (m/s2), the project's one value (the pressure driver's): weight,
-#: pressure and the IMU's g unit all use it.
-STANDARD_GRAVITY = GRAVITY
-
-#: Plant fin order.
-FIN_NAMES: tuple[str, str, str, str] = ("front_right", "back_right", "back_left", "front_left")
-N_FINS = 4
-
-#: Plant fin index for each of the paper's allocation indices 0..3 (paper 0, 1 = front pair).
-PAPER_TO_PLANT_FIN: tuple[int, int, int, int] = (0, 3, 1, 2)
+from ucat_console.robot import geometry as G
+from ucat_console.robot.geometry import Geometry
+from ucat_console.robot.units import RHO_FRESH, DriveUnits
+from ucat_console.typedconf import Config, param, require_below
 
 #: Names of the fin coefficient sets (see :class:`FinHydroConfig`).
 COEFFICIENT_SETS = ("paper", "eeuvsim", "soft_fin", "custom")
@@ -56,7 +34,7 @@ def _check_vec3(name: str, value: tuple[float, ...]) -> None:
 
 
 @dataclass(frozen=True)
-class VehicleConfig(_Config):
+class VehicleConfig(Config):
     """Rigid body and hull hydrodynamics (Fossen), plant.md 'Vehicle'.
 
     Inertias are about the centre of gravity (the CAD values); the dynamics move them to the
@@ -101,7 +79,7 @@ class VehicleConfig(_Config):
         (0.0, 0.0, 0.0), unit="N", doc="constant disturbance force at the body origin, world NED"
     )
     hull_size: tuple[float, float, float] = param(
-        (0.57, 0.30, 0.25), unit="m", doc="hull box length, width, height (3-D view only)"
+        G.HULL_SIZE, unit="m", doc="hull box length, width, height (3-D view only)"
     )
 
     def _check(self) -> None:
@@ -112,7 +90,7 @@ class VehicleConfig(_Config):
 
 
 @dataclass(frozen=True)
-class FinGeometryConfig(_Config):
+class FinGeometryConfig(Config):
     """Where the fins' forces act (eeUVsim ``finDynamics``): mounting angle and moment arms.
 
     Roll and pitch moments come from each fin's vertical force times the roll/pitch arm,
@@ -121,18 +99,18 @@ class FinGeometryConfig(_Config):
     """
 
     mounting_angle_deg: float = param(
-        30.0, lo=0.0, hi=89.0, unit="deg", doc="fin plane's horizontal axis from the body x axis"
+        G.MOUNTING_ANGLE_DEG, lo=0.0, hi=89.0, unit="deg", doc="fin plane's horizontal axis from the body x axis"
     )
-    arm_roll: float = param(0.1502, lo=0.0, hi=2.0, unit="m", doc="roll moment arm of the vertical force")
-    arm_pitch: float = param(0.25753, lo=0.0, hi=2.0, unit="m", doc="pitch moment arm of the vertical force")
-    arm_yaw: float = param(0.2981, lo=0.0, hi=2.0, unit="m", doc="yaw moment arm of the horizontal force")
+    arm_roll: float = param(G.ARM_ROLL, lo=0.0, hi=2.0, unit="m", doc="roll moment arm of the vertical force")
+    arm_pitch: float = param(G.ARM_PITCH, lo=0.0, hi=2.0, unit="m", doc="pitch moment arm of the vertical force")
+    arm_yaw: float = param(G.ARM_YAW, lo=0.0, hi=2.0, unit="m", doc="yaw moment arm of the horizontal force")
     fin_inertia: float = param(
         2.8e-5, lo=0.0, hi=1.0, unit="kg m2", doc="fin inertia about its axis (true shaft power)"
     )
 
 
 @dataclass(frozen=True)
-class FinCoefficients(_Config):
+class FinCoefficients(Config):
     """One quasi-steady coefficient set: v = r_c |w|, D = rho C_D A v^2 / 2, L = rho C_L A v^2 / 2."""
 
     rho: float = param(1000.0, lo=1.0, hi=2000.0, lo_open=True, unit="kg/m3", doc="water density")
@@ -140,7 +118,7 @@ class FinCoefficients(_Config):
     c_l: float = param(0.25, lo=0.0, hi=20.0, doc="lift coefficient C_L")
     area: float = param(0.020, lo=0.0, hi=1.0, lo_open=True, unit="m2", doc="fin planform area A_f")
     r_c: float = param(0.10, lo=0.0, hi=2.0, lo_open=True, unit="m", doc="radius of gyration r_c")
-    fin_length: float = param(0.10, lo=0.0, hi=2.0, lo_open=True, unit="m", doc="fin length L_f (Strouhal)")
+    fin_length: float = param(G.FIN_LENGTH, lo=0.0, hi=2.0, lo_open=True, unit="m", doc="fin length L_f (Strouhal)")
     thrust_gain: float = param(
         1.0, lo=0.0, hi=100.0, lo_open=True, doc="thrust multiplier over the quasi-steady model"
     )
@@ -164,7 +142,7 @@ _PRESETS = {
 
 
 @dataclass(frozen=True)
-class FinHydroConfig(_Config):
+class FinHydroConfig(Config):
     """Fin hydrodynamics in the plant (plant.md): coefficient set and wake option.
 
     The wake factor (``strouhal_wake``) is a split Gaussian in the fin's current Strouhal
@@ -193,24 +171,19 @@ class FinHydroConfig(_Config):
 
 
 @dataclass(frozen=True)
-class ServoConfig(_Config):
+class ServoConfig(Config):
     """Fin servos in profile-position mode, as an EPOS2 runs them."""
 
     acceleration: float = param(
         64.0, lo=0.0, hi=10000.0, lo_open=True, unit="rad/s2", doc="profile acceleration = deceleration"
     )
     max_rate: float = param(10.0, lo=0.0, hi=200.0, lo_open=True, unit="rad/s", doc="maximum fin rate")
-    encoder_lines: int = param(
-        512, lo=1, hi=1_000_000, unit="lines/turn", doc="encoder lines per motor turn (quadcounts = 4 x lines)"
-    )
-    gear_ratio: float = param(
-        35.0, lo=1.0, hi=10000.0, doc="motor turns per fin turn (assumed; not in the sources)"
-    )
+    units: DriveUnits = DriveUnits()  # encoder and gearhead (robot.units: the one default)
     feedback_rate: float = param(100.0, lo=1.0, hi=1000.0, unit="Hz", doc="encoder feedback (PDO) rate")
 
 
 @dataclass(frozen=True)
-class DvlConfig(_Config):
+class DvlModelConfig(Config):
     """Water Linked DVL A50: bottom-track velocity in the body frame."""
 
     rate: float = param(8.0, lo=2.0, hi=15.0, unit="Hz", doc="velocity report rate")
@@ -227,11 +200,11 @@ class DvlConfig(_Config):
 
 
 @dataclass(frozen=True)
-class PressureConfig(_Config):
+class PressureModelConfig(Config):
     """Gems 3101P 4-20 mA transducer read by an ADC (gauge pressure, zero at the surface)."""
 
     rate: float = param(20.0, lo=1.0, hi=1000.0, unit="Hz", doc="ADC reading rate")
-    water_density: float = param(997.0, lo=900.0, hi=1100.0, unit="kg/m3", doc="true water density")
+    water_density: float = param(RHO_FRESH, lo=900.0, hi=1100.0, unit="kg/m3", doc="true water density")
     span_pa: float = param(250_000.0, lo=1000.0, hi=1e8, unit="Pa", doc="gauge pressure at 20 mA")
     noise_std_pa: float = param(20.0, lo=0.0, hi=1e5, unit="Pa", doc="transducer noise")
     adc_bits: int = param(16, lo=4, hi=32, doc="ADC resolution")
@@ -239,7 +212,7 @@ class PressureConfig(_Config):
 
 
 @dataclass(frozen=True)
-class ImuConfig(_Config):
+class ImuModelConfig(Config):
     """Microstrain 3DM-CX5: gyro, accelerometer (in g) and attitude."""
 
     rate: float = param(100.0, lo=1.0, hi=1000.0, unit="Hz", doc="sample rate")
@@ -251,14 +224,14 @@ class ImuConfig(_Config):
 
 
 @dataclass(frozen=True)
-class SensorsConfig(_Config):
-    dvl: DvlConfig = DvlConfig()
-    pressure: PressureConfig = PressureConfig()
-    imu: ImuConfig = ImuConfig()
+class SensorsConfig(Config):
+    dvl: DvlModelConfig = DvlModelConfig()
+    pressure: PressureModelConfig = PressureModelConfig()
+    imu: ImuModelConfig = ImuModelConfig()
 
 
 @dataclass(frozen=True)
-class PlantConfig(_Config):
+class PlantConfig(Config):
     """The simulated U-CAT."""
 
     vehicle: VehicleConfig = VehicleConfig()
@@ -269,25 +242,13 @@ class PlantConfig(_Config):
     dt: float = param(0.001, lo=1e-5, hi=0.001, unit="s", doc="physics time step (1 kHz or finer)")
     seed: int = param(0, lo=0, hi=2**63 - 1, doc="seed of the sensor noise")
 
+    @property
+    def geometry(self) -> Geometry:
+        """The robot geometry this plant simulates (what the 3-D view draws)."""
+        f = self.fins
+        return Geometry(
+            hull_size=self.vehicle.hull_size, fin_length=self.hydro.resolved().fin_length,
+            mounting_angle_deg=f.mounting_angle_deg, arm_roll=f.arm_roll, arm_pitch=f.arm_pitch,
+            arm_yaw=f.arm_yaw,
+        )
 
-def fin_signs(fin: int) -> tuple[float, float, float]:
-    """(s_lat, s_long, s_y) of a plant fin: +1 starboard / +1 front / lateral sign of x_m.
-
-    x_m = (-cos(alpha), s_y sin(alpha), 0) in the body frame; s_y = -s_lat * s_long, so the
-    front fins' x_m points inwards and the rear fins' outwards.
-    """
-    if fin not in range(N_FINS):
-        raise ValueError(f"fin: {fin!r} is not a plant fin index 0..3")
-    s_lat = (1.0, 1.0, -1.0, -1.0)[fin]
-    s_long = (1.0, -1.0, -1.0, 1.0)[fin]
-    return s_lat, s_long, -s_lat * s_long
-
-
-def fin_plane_axes(geometry: FinGeometryConfig, fin: int) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
-    """Body-frame unit vectors (x_m, y_m) of a fin's working plane (for the 3-D view).
-
-    The fin's chord direction at angle theta is cos(theta) x_m + sin(theta) y_m.
-    """
-    _, _, s_y = fin_signs(fin)
-    a = math.radians(geometry.mounting_angle_deg)
-    return (-math.cos(a), s_y * math.sin(a), 0.0), (0.0, 0.0, -1.0)

@@ -33,9 +33,8 @@ from ucat_console.backend.sim.fin_hydro import (
     fin_strouhal,
     hydro_params,
 )
-from ucat_console.backend.sim.params import N_FINS, PlantConfig
-from ucat_console.backend.sim.sensors import Reading, SensorSuite
-from ucat_console.backend.sim.servo import encoder_reading, servo_step
+from ucat_console.backend.sim.params import PlantConfig
+from ucat_console.backend.sim.sensors import SensorSuite
 from ucat_console.backend.sim.vehicle import (
     NU,
     NWORK,
@@ -43,14 +42,15 @@ from ucat_console.backend.sim.vehicle import (
     POS,
     QUAT,
     body_current,
-    euler_to_quat,
     initial_state,
-    quat_to_euler,
-    quat_to_rot,
     vehicle_matrices,
     vehicle_params,
     vehicle_step,
 )
+from ucat_console.robot.fins import N_FINS
+from ucat_console.robot.readings import Reading
+from ucat_console.robot.rotations import euler_from_quaternion, quat_to_rot, quaternion_from_euler
+from ucat_console.robot.servo import encoder_reading, servo_step
 
 log = logging.getLogger(__name__)
 
@@ -212,7 +212,7 @@ class Plant:
             raise ValueError(f"seed: expected a non-negative integer, got {seed!r}")
         if quaternion is None:
             r, p, y = _finite("euler", euler, 3)
-            quaternion = euler_to_quat(r, p, y)
+            quaternion = quaternion_from_euler(r, p, y)
         self._xv[:] = initial_state(position_ned, quaternion, body_velocity)
         angles = _finite("fin_angles", fin_angles, N_FINS)
         self._xf[:, :] = 0.0
@@ -292,7 +292,7 @@ class Plant:
         """Fin ``i``'s encoder angle and rate, quantised as the EPOS2 reports them."""
         if not 0 <= i < N_FINS:
             raise ValueError(f"fin: {i!r} is not a plant fin index 0..3")
-        return encoder_reading(float(self._xf[i, F_THETA]), float(self._xf[i, F_OMEGA]), self._cfg.servo)
+        return encoder_reading(float(self._xf[i, F_THETA]), float(self._xf[i, F_OMEGA]), self._cfg.servo.units)
 
     # -------------------------------------------------------------- true state
     def pose(self) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
@@ -303,7 +303,7 @@ class Plant:
 
     def euler(self) -> tuple[float, float, float]:
         """Roll, pitch, yaw (rad, ZYX)."""
-        return quat_to_euler(self._xv[QUAT : QUAT + 4])
+        return euler_from_quaternion(self._xv[QUAT : QUAT + 4])
 
     def body_velocity(self) -> tuple[float, float, float, float, float, float]:
         """(u, v, w, p, q, r) over ground, body frame."""
@@ -318,10 +318,6 @@ class Plant:
 
     def fin_rates(self) -> tuple[float, ...]:
         return tuple(float(x) for x in self._xf[:, F_OMEGA])
-
-    def fin_forces(self) -> np.ndarray:
-        """(4, 2) fin-frame forces (f_x, f_y) of the last step (N)."""
-        return self._xf[:, F_FX : F_FY + 1].copy()
 
     def fin_strouhal(self) -> tuple[float, ...]:
         return tuple(float(x) for x in self._xf[:, F_ST])

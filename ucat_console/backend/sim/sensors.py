@@ -1,7 +1,7 @@
 """Sensor models of the simulated U-CAT: DVL, pressure transducer, IMU and fin encoders.
 
 Each sensor samples the plant's true state at its own rate and returns the reading types the
-drivers deliver (``backend/devices/readings.py``). Noise comes from numpy Generators seeded
+robot delivers (``robot/readings.py``). Noise comes from numpy Generators seeded
 from one seed (one independent stream per sensor), so a run is repeatable and a change in
 one sensor's sampling does not shift another's noise.
 
@@ -11,11 +11,12 @@ one sensor's sampling does not shift another's noise.
   never zeros).
 * Pressure (Gems 3101P behind an ADC): gauge pressure rho g z plus noise, turned into the
   4-20 mA loop current (saturating at 3.8 and 20.5 mA, NAMUR NE 43), quantised by the ADC,
-  and converted back to pressure and depth (the conversions are the pressure driver's).
+  and converted back to pressure and depth (the conversions of ``robot/units.py``, which the
+  pressure driver uses too).
 * IMU (3DM-CX5): gyro = body rate + constant bias + noise; accel in g = specific force
   (a - g) / g0 in the body frame (level and at rest: (0, 0, -1)) + bias + noise; attitude
   = the true quaternion turned by a small random rotation, with its ZYX Euler angles.
-* Encoders: fin angle and rate quantised as the EPOS2 reports them (``servo``), at the
+* Encoders: fin angle and rate quantised as the EPOS2 reports them (``robot.servo``), at the
   feedback (PDO) rate.
 """
 
@@ -27,37 +28,30 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ucat_console.backend.devices.pressure import (
+from ucat_console.backend.sim.params import PressureModelConfig, SensorsConfig, ServoConfig
+from ucat_console.backend.sim.vehicle import NU, NU_DOT, POS, QUAT
+from ucat_console.robot.fins import N_FINS
+from ucat_console.robot.readings import DepthReading, DvlVelocity, FinFeedback, ImuReading, Reading
+from ucat_console.robot.rotations import quat_mul, quat_to_euler
+from ucat_console.robot.servo import quantise
+from ucat_console.robot.units import (
+    GRAVITY,
+    LOOP_MAX_MA,
+    LOOP_MIN_MA,
     current_to_pressure,
     depth_to_pressure,
     pressure_to_current,
     pressure_to_depth,
 )
-from ucat_console.backend.devices.readings import DepthReading, DvlVelocity, FinFeedback, ImuReading
-from ucat_console.backend.sim.params import (
-    N_FINS,
-    STANDARD_GRAVITY,
-    PressureConfig,
-    SensorsConfig,
-    ServoConfig,
-)
-from ucat_console.backend.sim.servo import counts_per_fin_radian, quantise, rate_quantum
-from ucat_console.backend.sim.vehicle import NU, NU_DOT, POS, QUAT
-
-Reading = ImuReading | DvlVelocity | DepthReading | FinFeedback
-
-#: 4-20 mA loop current limits of a saturating transmitter (NAMUR NE 43)
-LOOP_MIN_MA = 3.8
-LOOP_MAX_MA = 20.5
 
 
-def current_from_pressure(gauge_pa: float, cfg: PressureConfig) -> float:
+def current_from_pressure(gauge_pa: float, cfg: PressureModelConfig) -> float:
     """Loop current (mA) of the transducer at a gauge pressure, saturating at the NE 43 limits."""
     i = pressure_to_current(gauge_pa, 0.0, cfg.span_pa)
     return min(max(i, LOOP_MIN_MA), LOOP_MAX_MA)
 
 
-def adc_quantise(current_ma: float, cfg: PressureConfig) -> float:
+def adc_quantise(current_ma: float, cfg: PressureModelConfig) -> float:
     """The current the ADC reports: a whole code of ``adc_bits`` over 0..full scale."""
     full = (1 << cfg.adc_bits) - 1
     code = min(max(round(current_ma / cfg.adc_full_scale_ma * full), 0), full)
@@ -82,9 +76,9 @@ def imu_kernel(
     ax = xv[NU_DOT] + (q * ww - r * v)
     ay = xv[NU_DOT + 1] + (r * u - p * ww)
     az = xv[NU_DOT + 2] + (p * v - q * u)
-    out[0] = ax / STANDARD_GRAVITY - g0x + accel_bias[0] + noise[0]
-    out[1] = ay / STANDARD_GRAVITY - g0y + accel_bias[1] + noise[1]
-    out[2] = az / STANDARD_GRAVITY - g0z + accel_bias[2] + noise[2]
+    out[0] = ax / GRAVITY - g0x + accel_bias[0] + noise[0]
+    out[1] = ay / GRAVITY - g0y + accel_bias[1] + noise[1]
+    out[2] = az / GRAVITY - g0z + accel_bias[2] + noise[2]
     out[3] = p + gyro_bias[0] + noise[3]
     out[4] = q + gyro_bias[1] + noise[4]
     out[5] = r + gyro_bias[2] + noise[5]
@@ -98,20 +92,14 @@ def imu_kernel(
         c = 1.0
         s = 0.5
     dw, dx, dy, dz = c, s * nx, s * ny, s * nz
-    qw = w * dw - x * dx - y * dy - z * dz
-    qx = w * dx + x * dw + y * dz - z * dy
-    qy = w * dy - x * dz + y * dw + z * dx
-    qz = w * dz + x * dy - y * dx + z * dw
+    qw, qx, qy, qz = quat_mul(w, x, y, z, dw, dx, dy, dz)
     norm = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
     qw, qx, qy, qz = qw / norm, qx / norm, qy / norm, qz / norm
     out[6] = qw
     out[7] = qx
     out[8] = qy
     out[9] = qz
-    out[10] = math.atan2(2.0 * (qw * qx + qy * qz), 1.0 - 2.0 * (qx * qx + qy * qy))
-    sp = 2.0 * (qw * qy - qz * qx)
-    out[11] = math.asin(max(-1.0, min(1.0, sp)))
-    out[12] = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+    out[10], out[11], out[12] = quat_to_euler(qw, qx, qy, qz)
 
 
 class _Noise:
@@ -169,8 +157,8 @@ class SensorSuite:
     def __init__(self, cfg: SensorsConfig, servo: ServoConfig, seed: int) -> None:
         self._cfg = cfg
         self._servo = servo
-        self._counts_per_rad = counts_per_fin_radian(servo)
-        self._rate_quantum = rate_quantum(servo)
+        self._counts_per_rad = servo.units.quadcounts_per_rad
+        self._rate_quantum = servo.units.rate_quantum
         self.reset(seed)
 
     def reset(self, seed: int, t0: float = 0.0) -> None:

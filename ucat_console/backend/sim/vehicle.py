@@ -30,7 +30,9 @@ import math
 import numpy as np
 from numba import njit
 
-from ucat_console.backend.sim.params import STANDARD_GRAVITY, VehicleConfig
+from ucat_console.backend.sim.params import VehicleConfig
+from ucat_console.robot.rotations import quat_mul, quat_to_rot, skew
+from ucat_console.robot.units import GRAVITY
 
 # state layout
 POS = 0
@@ -55,15 +57,11 @@ NPV = 32
 NWORK = 24
 
 
-def _skew(v: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-
-
 def vehicle_matrices(cfg: VehicleConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(M_RB, M_A, (M_RB + M_A)^-1) as 6x6 arrays."""
     m = cfg.mass
     rg = np.asarray(cfg.cg, dtype=float)
-    s = _skew(rg)
+    s = skew(rg)
     i_g = np.diag([cfg.ixx, cfg.iyy, cfg.izz])
     i_o = i_g - m * s @ s
     mrb = np.zeros((6, 6))
@@ -83,7 +81,7 @@ def vehicle_params(
 ) -> np.ndarray:
     """The vehicle parameter vector read by the compiled step (layout ``P_*``)."""
     pv = np.zeros(NPV)
-    w = cfg.mass * STANDARD_GRAVITY
+    w = cfg.mass * GRAVITY
     pv[P_W] = w
     pv[P_B] = w * cfg.buoyancy_ratio
     pv[P_RG : P_RG + 3] = cfg.cg
@@ -115,43 +113,6 @@ def initial_state(
     xv[QUAT : QUAT + 4] = q / n
     xv[NU : NU + 6] = body_velocity
     return xv
-
-
-def euler_to_quat(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
-    """ZYX Euler angles (rad) to the body->NED quaternion (w, x, y, z)."""
-    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
-    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
-    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    return (
-        cr * cp * cy + sr * sp * sy,
-        sr * cp * cy - cr * sp * sy,
-        cr * sp * cy + sr * cp * sy,
-        cr * cp * sy - sr * sp * cy,
-    )
-
-
-def quat_to_euler(q: tuple[float, ...] | np.ndarray) -> tuple[float, float, float]:
-    """Body->NED quaternion (w, x, y, z) to ZYX Euler angles roll, pitch, yaw (rad)."""
-    w, x, y, z = (float(v) for v in q)
-    roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
-    pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x))))
-    yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
-    return roll, pitch, yaw
-
-
-@njit(cache=True)
-def quat_to_rot(q: np.ndarray, r: np.ndarray) -> None:
-    """Fill ``r`` (3x3) with the body->NED rotation of the unit quaternion q = (w, x, y, z)."""
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    r[0, 0] = 1.0 - 2.0 * (y * y + z * z)
-    r[0, 1] = 2.0 * (x * y - w * z)
-    r[0, 2] = 2.0 * (x * z + w * y)
-    r[1, 0] = 2.0 * (x * y + w * z)
-    r[1, 1] = 1.0 - 2.0 * (x * x + z * z)
-    r[1, 2] = 2.0 * (y * z - w * x)
-    r[2, 0] = 2.0 * (x * z - w * y)
-    r[2, 1] = 2.0 * (y * z + w * x)
-    r[2, 2] = 1.0 - 2.0 * (x * x + y * y)
 
 
 @njit(cache=True)
@@ -276,10 +237,7 @@ def vehicle_step(
         s = 0.5 * dt
     dw, dx, dy, dz = c, s * wx, s * wy, s * wz
     qw, qx, qy, qz = xv[QUAT], xv[QUAT + 1], xv[QUAT + 2], xv[QUAT + 3]
-    nw = qw * dw - qx * dx - qy * dy - qz * dz
-    nx = qw * dx + qx * dw + qy * dz - qz * dy
-    ny = qw * dy - qx * dz + qy * dw + qz * dx
-    nz = qw * dz + qx * dy - qy * dx + qz * dw
+    nw, nx, ny, nz = quat_mul(qw, qx, qy, qz, dw, dx, dy, dz)
     norm = math.sqrt(nw * nw + nx * nx + ny * ny + nz * nz)
     xv[QUAT] = nw / norm
     xv[QUAT + 1] = nx / norm

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from ucat_console.backend.sim.params import ServoConfig
-from ucat_console.backend.sim.servo import encoder_reading, servo_step
+from ucat_console.robot.servo import encoder_reading, servo_step
+from ucat_console.robot.units import DriveUnits
 
 DT = 0.001
 ACC = 64.0
@@ -68,7 +68,7 @@ def test_holds_at_target() -> None:
 
 
 def test_encoder_quantisation() -> None:
-    cfg = ServoConfig(encoder_lines=500, gear_ratio=35.0)  # 2000 quadcounts per motor turn
+    cfg = DriveUnits(encoder_lines=500, gear_ratio=35.0)  # 2000 quadcounts per motor turn
     count = 2 * math.pi / (2000 * 35.0)
     rpm_step = 2 * math.pi / 60.0 / 35.0
     for theta, omega in [(0.123456, 1.234567), (-0.7, -3.3), (1e-6, 1e-4)]:

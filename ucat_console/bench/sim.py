@@ -1,4 +1,5 @@
-"""Speed of the closed loop: simulated seconds per wall-clock second, headless.
+"""``ucat-console bench sim``: the closed loop on the simulated robot, simulated seconds per
+wall-clock second, headless.
 
 The loop runs as the experiments run it: the simulated U-CAT at 1 kHz physics with its
 sensors, four fins (three logical fins in sync mode) planning every cycle, and every
@@ -11,7 +12,7 @@ import time
 
 from ucat_console.backend.loop.closed_loop import ClosedLoop
 from ucat_console.backend.loop.config import MODES, LoopConfig
-from ucat_console.backend.loop.robot_io import SimRobotIO
+from ucat_console.backend.sim.robot_io import SimRobotIO
 from ucat_console.control.allocation import BodySetpoints
 from ucat_console.telemetry.stream import TelemetryStream
 

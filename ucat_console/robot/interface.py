@@ -1,14 +1,16 @@
 """The closed loop's view of the robot: fin commands out, sensor readings in.
 
 :class:`RobotIO` is deliberately small, like python-can's ``BusABC``: the loop never knows
-whether the readings come from the in-process simulator (:class:`SimRobotIO`), from the
-device drivers talking to emulators, or from the real robot.
+whether the readings come from the in-process simulator (``backend.sim.robot_io.SimRobotIO``),
+from the device drivers talking to emulators (``backend.devices.device_robot_io``), or from
+the real robot. It lives here, in the robot's description, so that the loop, the plant and
+the drivers meet on it without importing each other.
 
 Contract:
 
 * Fins are numbered in the robot's order (the plant's and the drivers': 0 front-right,
   1 back-right, 2 back-left, 3 front-left), as in the telemetry. The loop maps the
-  controller's (paper) order with ``PAPER_TO_PLANT_FIN``.
+  controller's (paper) order with ``robot.fins.PAPER_TO_ROBOT``.
 * :meth:`RobotIO.command_fin` is a profile-position set-point that acts at once (the
   EPOS2's "change set immediately"): target angle (rad) and profile velocity (rad/s).
 * :meth:`RobotIO.advance_to` lets the robot reach time ``t`` (the simulator steps its
@@ -24,15 +26,10 @@ Contract:
 
 from __future__ import annotations
 
-import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
-from ucat_console.backend.devices.readings import DepthReading, DvlVelocity, FinFeedback, ImuReading
-from ucat_console.backend.sim.params import PlantConfig
-from ucat_console.backend.sim.plant import Plant
-
-Reading = ImuReading | DvlVelocity | DepthReading | FinFeedback
+from ucat_console.robot.readings import Reading
 
 
 @dataclass(frozen=True)
@@ -100,51 +97,3 @@ class RobotIO(ABC):
 
     def close(self) -> None:
         """Release devices (nothing to do for the simulator)."""
-
-
-class SimRobotIO(RobotIO):
-    """The in-process simulated U-CAT (``backend.sim.Plant``), headless or paced.
-
-    The plant starts level at ``depth`` (m) with heading ``yaw`` (rad), surging at
-    ``velocity`` (m/s, body x; 0: at rest), all fins at rest at angle 0; ``seed`` restarts
-    the sensor noise (default: the plant configuration's seed).
-    """
-
-    def __init__(
-        self, cfg: PlantConfig | None = None, *, depth: float = 0.0, yaw: float = 0.0,
-        velocity: float = 0.0, seed: int | None = None,
-    ) -> None:
-        if not math.isfinite(depth) or depth < 0.0:
-            raise ValueError(f"depth: the start depth must be finite and >= 0 m, got {depth!r}")
-        if not math.isfinite(velocity) or abs(velocity) > 5.0:
-            raise ValueError(f"velocity: the start surge must be finite and within 5 m/s, got {velocity!r}")
-        self.plant = Plant(cfg)
-        self.plant.reset(
-            position_ned=(0.0, 0.0, float(depth)), euler=(0.0, 0.0, float(yaw)),
-            body_velocity=(float(velocity), 0.0, 0.0, 0.0, 0.0, 0.0), seed=seed,
-        )
-
-    def command_fin(self, fin: int, target_rad: float, profile_velocity_rad_s: float) -> None:
-        self.plant.command_fin(fin, target_rad, profile_velocity_rad_s)
-
-    def next_reading_time(self) -> float:
-        return self.plant.next_sensor_time()
-
-    def advance_to(self, t: float) -> list[Reading]:
-        self.plant.advance_to(t)
-        return self.plant.sample_sensors()
-
-    def truth(self) -> RobotTruth:
-        p = self.plant
-        pos, q = p.pose()
-        return RobotTruth(
-            t=p.time,
-            position=pos,
-            orientation=q,
-            euler=p.euler(),
-            velocity=p.body_velocity(),
-            fin_angles=p.fin_angles(),
-            fin_rates=p.fin_rates(),
-            fin_strouhal=p.fin_strouhal(),
-            fin_energy=p.fin_energy(),
-        )

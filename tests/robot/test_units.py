@@ -8,8 +8,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from ucat_console.backend.devices import units
-from ucat_console.backend.devices.units import DriveUnits
+from ucat_console.robot import units
+from ucat_console.robot.units import DriveUnits
 
 
 def test_quadcounts_are_four_per_line():

@@ -1,5 +1,10 @@
 """The simulated U-CAT behind its device emulators: :class:`SimRig`.
 
+It joins the plant (``backend/sim``) to the emulators (``backend/devices``), so it sits
+above both, beside ``backend/rig.py``, which builds the robots: the plant and the drivers
+never import each other. The page reads the rig's fault tables (:data:`EMULATOR_FAULTS`,
+:data:`DEFAULT_EMCY`) from here.
+
 The rig is the robot's side of the wire in simulation. A thread steps the plant
 (``backend.sim``) in real time, or ``pace`` times faster, and its sensor models feed the
 emulators, which speak the devices' protocols to whatever drivers connect:
@@ -39,8 +44,9 @@ from ucat_console.backend.devices.epos2_emulator import (
 from ucat_console.backend.devices.faults import Fault, as_fault
 from ucat_console.backend.devices.imu_emulator import ImuEmulator
 from ucat_console.backend.devices.pressure_emulator import PressureEmulator
-from ucat_console.backend.devices.readings import DepthReading, DvlVelocity, ImuReading
-from ucat_console.backend.loop.robot_io import RobotTruth, SimRobotIO
+from ucat_console.robot.readings import DepthReading, DvlVelocity, ImuReading
+from ucat_console.backend.sim.robot_io import SimRobotIO
+from ucat_console.robot.interface import RobotTruth
 from ucat_console.backend.sim.params import PlantConfig
 from ucat_console.telemetry.events import Event, EventSink, ignore_events
 

@@ -1,9 +1,10 @@
-"""What the drivers deliver: one frozen dataclass per kind of reading.
+"""What the sensors deliver: one frozen dataclass per kind of reading.
 
-The simulated sensors (backend/sim) produce the same types, so the estimator and the
-body-frame layer never know whether a reading came through a real device, an emulator or
-the headless simulator. Units are SI unless the field name says otherwise; ``t`` is the
-receiving clock's time in seconds.
+The drivers (``backend/devices``) and the simulated sensors (``backend/sim``) produce these
+types, so the estimator and the body-frame layer never know whether a reading came through
+a real device, an emulator or the headless simulator. Units are SI unless the field name
+says otherwise; ``t`` is the receiving clock's time in seconds. Each field's meaning, unit
+and frame is its :class:`~ucat_console.robot.fields.Doc`.
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Annotated
 
-from ucat_console.telemetry.fields import RPY, WXYZ, XYZ, Doc
+from ucat_console.robot.fields import RPY, WXYZ, XYZ, Doc
 
 Time = Annotated[float, Doc("time on the receiving clock", unit="s")]
 
@@ -75,3 +76,7 @@ class FinFeedback:
     position_rad: float
     velocity_rad_s: float
     state: str = "operation_enabled"
+
+
+#: any reading a robot delivers
+Reading = ImuReading | DvlVelocity | DepthReading | FinFeedback

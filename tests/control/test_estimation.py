@@ -1,14 +1,15 @@
-"""Attitude EKF: static tilt from gravity, yaw from a constant rate, gyro bias."""
+"""State estimation: the attitude EKF (static tilt from gravity, yaw from a constant rate, gyro
+bias) and dead reckoning."""
 
 from __future__ import annotations
 
 import math
 
-import numpy as np
 import pytest
 
-from ucat_console.backend.devices import attitude as att
-from ucat_console.backend.devices.readings import ImuReading
+from ucat_console.control import estimation as att
+from ucat_console.robot import rotations as rot
+from ucat_console.robot.readings import ImuReading
 
 ROLL, PITCH = 0.3, -0.2
 
@@ -19,18 +20,6 @@ def specific_force(roll: float, pitch: float) -> tuple[float, float, float]:
     The third row of Rz(yaw) Ry(pitch) Rx(roll) is (-sin p, sin r cos p, cos r cos p).
     """
     return (math.sin(pitch), -math.sin(roll) * math.cos(pitch), -math.cos(roll) * math.cos(pitch))
-
-
-def test_euler_quaternion_round_trip() -> None:
-    for rpy in [(0.1, -0.2, 0.3), (-1.0, 0.5, -2.5), (0.0, 0.0, math.pi - 1e-6)]:
-        back = att.euler_from_quaternion(att.quaternion_from_euler(*rpy))
-        assert back == pytest.approx(rpy, abs=1e-9)
-
-
-def test_rotation_matrix_of_a_yaw_quarter_turn() -> None:
-    R = att.rotation_matrix(att.quaternion_from_euler(0.0, 0.0, math.pi / 2))
-    # sensor x (forward) points east after a +90 deg yaw in NED
-    assert R @ np.array([1.0, 0.0, 0.0]) == pytest.approx([0.0, 1.0, 0.0], abs=1e-12)
 
 
 def test_tilt_from_accel_inverts_the_gravity_model() -> None:
@@ -106,3 +95,14 @@ def test_estimator_object_initialises_from_the_first_reading() -> None:
     assert first.euler[:2] == pytest.approx((ROLL, PITCH), abs=1e-9)
     second = est.update(ImuReading(t=0.01, accel_g=f, gyro=(0.0, 0.0, 0.0)))
     assert second.t == 0.01
+
+
+def test_dead_reckoning_rotates_the_body_velocity_into_ned() -> None:
+    # heading east (yaw +90 deg): 0.5 m/s forward and 0.2 m/s to starboard for 0.8 s
+    q = rot.quaternion_from_euler(0.0, 0.0, math.pi / 2)
+    x, y = att.dead_reckon((1.0, 2.0), q, (0.5, 0.2, 0.0), 0.8)
+    assert (x, y) == pytest.approx((1.0 - 0.16, 2.0 + 0.4), abs=1e-12)
+    # a gap longer than the longest integrated one counts as that long; none backwards
+    x, y = att.dead_reckon((0.0, 0.0), (1.0, 0.0, 0.0, 0.0), (1.0, 0.0, 0.0), 10.0)
+    assert x == pytest.approx(att.MAX_DEAD_RECKONING_GAP)
+    assert att.dead_reckon((0.0, 0.0), (1.0, 0.0, 0.0, 0.0), (1.0, 0.0, 0.0), -1.0) == (0.0, 0.0)

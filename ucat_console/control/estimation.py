@@ -1,8 +1,12 @@
-"""Attitude from gyro and accelerometer: a small multiplicative quaternion EKF.
+"""State estimation: attitude from gyro and accelerometer, position by dead reckoning.
 
-Used when the IMU (the IMU-only 3DM-CX5) does not stream its own orientation. Pure
-functions on a frozen :class:`AttitudeState`; time is an argument, nothing here keeps a
-clock or a thread.
+Pure functions of the core (no clock, no thread, no I/O: time is an argument); the closed
+loop calls them on the readings it receives, whichever robot delivers them. Median and
+low-pass filters are in :mod:`ucat_console.control.filters`.
+
+Attitude: a small multiplicative quaternion EKF, used when the IMU (the IMU-only 3DM-CX5)
+does not stream its own orientation. Pure functions on a frozen :class:`AttitudeState`;
+:class:`AttitudeEstimator` only holds the state between samples.
 
 Conventions (those of the 3DM-CX5): sensor frame x forward, y right, z down; world frame
 NED; ``q = (w, x, y, z)`` rotates sensor vectors into the world (``v_w = R(q) v_b``);
@@ -16,6 +20,9 @@ over the step; the correction compares the measured specific-force direction wit
 of the specific force differs from 1 g by more than ``accel_gate``). Yaw is not
 observable from gravity: it follows the gyro alone, as in the paper's EKF without a
 magnetometer.
+
+Dead reckoning: :func:`dead_reckon` integrates a DVL's body-frame velocity, rotated into
+NED by the attitude, over the time since the previous report.
 """
 
 from __future__ import annotations
@@ -26,18 +33,25 @@ from typing import Sequence
 
 import numpy as np
 
-from ucat_console.backend.devices.readings import ImuReading
-from ucat_console.control.params import _Config
-from ucat_console.typedconf import param
-
-Quaternion = tuple[float, float, float, float]
-Vector3 = tuple[float, float, float]
+from ucat_console.robot.readings import ImuReading
+from ucat_console.robot.rotations import (
+    Quaternion,
+    Vector3,
+    euler_from_quaternion,
+    quaternion_from_euler,
+    quaternion_from_rotation_vector,
+    quaternion_multiply,
+    quaternion_normalize,
+    rotation_matrix,
+    skew,
+)
+from ucat_console.typedconf import Config, param
 
 _GRAVITY_DIRECTION_NED = np.array([0.0, 0.0, -1.0])  # specific force at rest, in g
 
 
 @dataclass(frozen=True)
-class AttitudeConfig(_Config):
+class AttitudeConfig(Config):
     """Noise model and gates of the attitude EKF."""
 
     gyro_noise: float = param(
@@ -84,74 +98,7 @@ class AttitudeState:
         return (float(d[0]), float(d[1]), float(d[2]))
 
 
-# ---------------------------------------------------------------- quaternion helpers
-
-
-def quaternion_multiply(a: Sequence[float], b: Sequence[float]) -> Quaternion:
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return (
-        aw * bw - ax * bx - ay * by - az * bz,
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-    )
-
-
-def quaternion_normalize(q: Sequence[float]) -> Quaternion:
-    n = math.sqrt(sum(v * v for v in q))
-    if not n > 0.0 or not math.isfinite(n):
-        raise ValueError(f"quaternion {tuple(q)!r} cannot be normalised")
-    w, x, y, z = (v / n for v in q)
-    if w < 0.0:  # one sign for one rotation
-        w, x, y, z = -w, -x, -y, -z
-    return (w, x, y, z)
-
-
-def quaternion_from_rotation_vector(phi: Sequence[float]) -> Quaternion:
-    """``exp`` of a rotation vector (axis times angle, rad)."""
-    px, py, pz = (float(v) for v in phi)
-    angle = math.sqrt(px * px + py * py + pz * pz)
-    if angle < 1e-12:
-        return quaternion_normalize((1.0, 0.5 * px, 0.5 * py, 0.5 * pz))
-    s = math.sin(0.5 * angle) / angle
-    return (math.cos(0.5 * angle), s * px, s * py, s * pz)
-
-
-def rotation_matrix(q: Sequence[float]) -> np.ndarray:
-    """R(q): sensor to world."""
-    w, x, y, z = q
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
-def quaternion_from_euler(roll: float, pitch: float, yaw: float) -> Quaternion:
-    """ZYX Euler angles (rad) to a quaternion."""
-    cr, sr = math.cos(0.5 * roll), math.sin(0.5 * roll)
-    cp, sp = math.cos(0.5 * pitch), math.sin(0.5 * pitch)
-    cy, sy = math.cos(0.5 * yaw), math.sin(0.5 * yaw)
-    return quaternion_normalize(
-        (
-            cr * cp * cy + sr * sp * sy,
-            sr * cp * cy - cr * sp * sy,
-            cr * sp * cy + sr * cp * sy,
-            cr * cp * sy - sr * sp * cy,
-        )
-    )
-
-
-def euler_from_quaternion(q: Sequence[float]) -> Vector3:
-    """ZYX Euler angles (roll, pitch, yaw) in rad; yaw in (-pi, pi]."""
-    w, x, y, z = q
-    roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
-    pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x))))
-    yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
-    return (roll, pitch, yaw)
+# ---------------------------------------------------------------- attitude
 
 
 def tilt_from_accel(accel_g: Sequence[float]) -> tuple[float, float]:
@@ -162,17 +109,11 @@ def tilt_from_accel(accel_g: Sequence[float]) -> tuple[float, float]:
     return roll, pitch
 
 
-def _skew(v: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-
-
 def _frozen(a: np.ndarray) -> np.ndarray:
     a = np.array(a, dtype=float)
     a.setflags(write=False)
     return a
 
-
-# ---------------------------------------------------------------- filter
 
 
 def initial_state(
@@ -188,7 +129,8 @@ def initial_state(
     cov = np.diag(
         [config.initial_attitude_std**2] * 3 + [config.initial_bias_std**2] * 3
     )
-    return AttitudeState(float(t), quaternion_from_euler(roll, pitch, yaw), (0.0, 0.0, 0.0), _frozen(cov))
+    q = quaternion_normalize(quaternion_from_euler(roll, pitch, yaw))
+    return AttitudeState(float(t), q, (0.0, 0.0, 0.0), _frozen(cov))
 
 
 def predict(
@@ -237,7 +179,7 @@ def correct(
     R = rotation_matrix(state.q)
     h = R.T @ _GRAVITY_DIRECTION_NED
     H = np.zeros((3, 6))
-    H[:, :3] = _skew(h)
+    H[:, :3] = skew(h)
     P = np.array(state.cov)
     Rn = np.eye(3) * config.accel_noise**2
     S = H @ P @ H.T + Rn
@@ -281,3 +223,23 @@ class AttitudeEstimator:
     def reset(self, initial_yaw: float = 0.0) -> None:
         self._yaw0 = initial_yaw
         self.state = None
+
+
+# ---------------------------------------------------------------- dead reckoning
+
+#: longest gap between DVL reports that is integrated (s); a longer one counts as this long
+MAX_DEAD_RECKONING_GAP = 1.0
+
+
+def dead_reckon(
+    xy: tuple[float, float], q: Sequence[float], velocity: Sequence[float], dt: float
+) -> tuple[float, float]:
+    """North and east position after moving at the body-frame ``velocity`` (m/s) for ``dt``
+    seconds (clipped to 0 .. :data:`MAX_DEAD_RECKONING_GAP`) with attitude ``q``."""
+    dt = min(max(dt, 0.0), MAX_DEAD_RECKONING_GAP)
+    vx, vy, vz = velocity
+    r = rotation_matrix(q)
+    return (
+        xy[0] + dt * (float(r[0, 0]) * vx + float(r[0, 1]) * vy + float(r[0, 2]) * vz),
+        xy[1] + dt * (float(r[1, 0]) * vx + float(r[1, 1]) * vy + float(r[1, 2]) * vz),
+    )

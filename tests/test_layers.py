@@ -1,0 +1,41 @@
+"""The layers hold: ``lint-imports`` passes on the project's contracts (pyproject.toml), and a
+contract broken on purpose makes it fail."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+LINT_IMPORTS = Path(sys.executable).with_name("lint-imports")
+
+
+def lint_imports(cwd: Path) -> subprocess.CompletedProcess:
+    """``lint-imports`` with the pyproject.toml in ``cwd``, on the package found there."""
+    return subprocess.run([str(LINT_IMPORTS), "--no-cache"], cwd=cwd, capture_output=True,
+                          text=True, timeout=300)
+
+
+def test_the_contracts_hold() -> None:
+    run = lint_imports(ROOT)
+    assert run.returncode == 0, run.stdout + run.stderr
+    assert "0 broken" in run.stdout
+
+
+def test_a_broken_contract_fails(tmp_path: Path) -> None:
+    shutil.copy(ROOT / "pyproject.toml", tmp_path / "pyproject.toml")
+    shutil.copytree(ROOT / "ucat_console", tmp_path / "ucat_console",
+                    ignore=shutil.ignore_patterns("__pycache__", "*.npz", "*.eds"))
+    # the robot's description reaching into the core, and the page into a driver
+    (tmp_path / "ucat_console" / "robot" / "leak.py").write_text(
+        "from ucat_console.control.params import MpcConfig\n")
+    (tmp_path / "ucat_console" / "ui" / "leak.py").write_text(
+        "import ucat_console.backend.devices.pressure\n")
+    run = lint_imports(tmp_path)
+    assert run.returncode != 0
+    assert "robot imports nothing of the package BROKEN" in run.stdout
+    assert "ucat_console.robot.leak -> ucat_console.control.params" in run.stdout
+    assert "ucat_console.ui.leak -> ucat_console.backend.devices.pressure" in run.stdout
+    assert "2 broken" in run.stdout

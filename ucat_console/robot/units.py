@@ -1,0 +1,153 @@
+"""Physical constants and unit conversions, each defined once.
+
+* Gravity and water density: :data:`GRAVITY` (standard gravity, used for weight, pressure
+  and the IMU's g unit alike), :data:`RHO_FRESH`, :data:`RHO_SALT`.
+* Pressure transducer (Gems 3101P, 4-20 mA): gauge pressure
+  ``p = p_min + (I - 4 mA) / 16 mA * span``; depth ``d = (p - p_surface) / (rho g)``; a
+  saturating transmitter's loop current stays within :data:`LOOP_MIN_MA` ..
+  :data:`LOOP_MAX_MA` (NAMUR NE 43).
+* Fin drives (EPOS2): position in quadcounts of the motor encoder (four per encoder line
+  and motor turn), speed in rpm of the motor shaft; the controller thinks in radians and
+  rad/s at the fin, which turns ``gear_ratio`` times slower than the motor.
+  :class:`DriveUnits` is the encoder and gearhead of the fin drives; the driver, the EPOS2
+  emulator and the plant's encoder model all convert through it.
+
+``DriveUnits`` defaults to the U-CAT's drives as this project models them: a 512-line
+encoder and a 35:1 gearhead. The gear ratio is not in the sources (plant.md assumes it);
+it is the default because the plant has always modelled it, both shipped configuration
+files set it, and a direct drive (1:1, the drivers' former default) is not what the U-CAT
+has. A rig whose drives differ sets ``[devices.epos2.units]``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+#: standard gravity (m/s2)
+GRAVITY = 9.80665
+#: fresh and salt water density (kg/m3)
+RHO_FRESH = 997.0
+RHO_SALT = 1029.0
+
+#: 4-20 mA loop: current at zero gauge pressure and from 4 to 20 mA
+LOOP_ZERO_MA = 4.0
+LOOP_SPAN_MA = 16.0
+#: loop current limits of a saturating transmitter (NAMUR NE 43): below, a broken loop;
+#: above, a shorted one
+LOOP_MIN_MA = 3.8
+LOOP_MAX_MA = 20.5
+
+#: the U-CAT fin drives' encoder lines per motor turn and motor turns per fin turn
+ENCODER_LINES = 512
+GEAR_RATIO = 35.0
+
+_TWO_PI = 2.0 * math.pi
+_SECONDS_PER_MINUTE = 60.0
+
+
+# ---------------------------------------------------------------- pressure and depth
+
+
+def current_to_pressure(current_ma: float, p_min_pa: float, span_pa: float) -> float:
+    """Gauge pressure (Pa) from loop current (mA)."""
+    return p_min_pa + (current_ma - LOOP_ZERO_MA) / LOOP_SPAN_MA * span_pa
+
+
+def pressure_to_current(pressure_pa: float, p_min_pa: float, span_pa: float) -> float:
+    """Loop current (mA) for a gauge pressure (Pa); inverse of :func:`current_to_pressure`."""
+    return LOOP_ZERO_MA + (pressure_pa - p_min_pa) / span_pa * LOOP_SPAN_MA
+
+
+def pressure_to_depth(pressure_pa: float, surface_pressure_pa: float, rho: float) -> float:
+    """Depth (m, positive down) below the zeroed surface."""
+    return (pressure_pa - surface_pressure_pa) / (rho * GRAVITY)
+
+
+def depth_to_pressure(depth_m: float, surface_pressure_pa: float, rho: float) -> float:
+    """Gauge pressure (Pa) at a depth; inverse of :func:`pressure_to_depth`."""
+    return surface_pressure_pa + depth_m * rho * GRAVITY
+
+
+# ---------------------------------------------------------------- fin drives
+
+
+def quadcounts_per_turn(encoder_lines: int) -> int:
+    """Quadcounts per motor turn: four edges per encoder line."""
+    return 4 * encoder_lines
+
+
+def quadcounts_per_rad(encoder_lines: int, gear_ratio: float) -> float:
+    """Quadcounts per radian at the fin."""
+    return quadcounts_per_turn(encoder_lines) * gear_ratio / _TWO_PI
+
+
+def rad_to_quadcounts(angle_rad: float, encoder_lines: int, gear_ratio: float) -> float:
+    """Fin angle (rad) to motor position (quadcounts, not rounded)."""
+    return angle_rad * quadcounts_per_rad(encoder_lines, gear_ratio)
+
+
+def quadcounts_to_rad(quadcounts: float, encoder_lines: int, gear_ratio: float) -> float:
+    """Motor position (quadcounts) to fin angle (rad)."""
+    return quadcounts / quadcounts_per_rad(encoder_lines, gear_ratio)
+
+
+def rad_s_to_rpm(rate_rad_s: float, gear_ratio: float) -> float:
+    """Fin rate (rad/s) to motor speed (rpm, not rounded); also rad/s2 -> rpm/s."""
+    return rate_rad_s * gear_ratio * _SECONDS_PER_MINUTE / _TWO_PI
+
+
+def rpm_to_rad_s(rpm: float, gear_ratio: float) -> float:
+    """Motor speed (rpm) to fin rate (rad/s); also rpm/s -> rad/s2."""
+    return rpm * _TWO_PI / (gear_ratio * _SECONDS_PER_MINUTE)
+
+
+@dataclass(frozen=True)
+class DriveUnits:
+    """Encoder and gearhead of one fin drive (the same on all four fins).
+
+    A configuration block (``[devices.epos2.units]``, ``[plant.servo.units]``): the
+    configuration loader reads it like any other block; its two checks are here because
+    this package imports nothing of the configuration machinery.
+    """
+
+    #: encoder lines per motor turn (quadcounts = 4 x lines); set to the installed encoder
+    encoder_lines: int = ENCODER_LINES
+    #: motor turns per fin turn; set to the installed gearhead
+    gear_ratio: float = GEAR_RATIO
+
+    def __post_init__(self) -> None:
+        n = self.encoder_lines
+        if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= 1_000_000:
+            raise ValueError(f"encoder_lines: {n!r} is not allowed; allowed: an integer in [1, 1000000] lines/turn")
+        g = self.gear_ratio
+        if isinstance(g, bool) or not isinstance(g, (int, float)) or not (0.0 < g <= 10_000.0):
+            raise ValueError(f"gear_ratio: {g!r} is out of range; allowed: (0.0, 10000.0]")
+        object.__setattr__(self, "gear_ratio", float(g))
+
+    @property
+    def quadcounts_per_rad(self) -> float:
+        return quadcounts_per_rad(self.encoder_lines, self.gear_ratio)
+
+    @property
+    def resolution_rad(self) -> float:
+        """One quadcount as a fin angle (the encoder quantisation step)."""
+        return 1.0 / self.quadcounts_per_rad
+
+    @property
+    def rate_quantum(self) -> float:
+        """Fin rate (rad/s) of one motor rpm, the resolution of the reported velocity."""
+        return rpm_to_rad_s(1.0, self.gear_ratio)
+
+    def to_quadcounts(self, angle_rad: float) -> int:
+        """Fin angle to the nearest whole quadcount (what 0x607A takes)."""
+        return int(round(rad_to_quadcounts(angle_rad, self.encoder_lines, self.gear_ratio)))
+
+    def to_rad(self, quadcounts: float) -> float:
+        return quadcounts_to_rad(quadcounts, self.encoder_lines, self.gear_ratio)
+
+    def to_rpm(self, rate_rad_s: float) -> float:
+        return rad_s_to_rpm(rate_rad_s, self.gear_ratio)
+
+    def to_rad_s(self, rpm: float) -> float:
+        return rpm_to_rad_s(rpm, self.gear_ratio)
