@@ -405,7 +405,7 @@ def test_arming_after_a_wait_swims_as_arming_at_once_and_power_counts_only_armed
 def test_the_planners_are_compiled_before_the_robot_starts(tmp_path: Path, monkeypatch) -> None:
     """A compile holds the interpreter for minutes: the drives' heartbeats must not be
     supervised yet (their loss would be reported as a fault)."""
-    from ucat_console.backend import supervisor as supervisor_module
+    from ucat_console.backend.supervisor import supervisor as supervisor_module
 
     order: list[str] = []
     warm_up = supervisor_module.warm_up
@@ -504,12 +504,10 @@ class StallingRobot(SimRobotIO):
 
 
 def test_a_command_the_loop_cannot_take_in_time_is_refused_and_never_done(tmp_path: Path, monkeypatch) -> None:
-    from ucat_console.backend import supervisor as supervisor_module
-
-    monkeypatch.setattr(supervisor_module, "_WAIT_LOOP", 0.3)
     robot = StallingRobot()
     sup = Supervisor(make_config(), clock=SimulatedClock(), sessions_dir=tmp_path,
                      robot_factory=lambda c, ev: (robot, lambda: None))
+    sup.commands.wait = 0.3  # how long a command waits for the loop's thread
     sup.start()
     try:
         assert robot.stalled.wait(10.0)

@@ -118,7 +118,9 @@ def test_plot_history_is_the_pilots_and_bounded(app: ConsoleApp) -> None:
 
 
 def test_tuning_inputs_come_from_the_field_metadata() -> None:
-    specs = param_specs(Supervisor._tuning_from(AppConfig()))
+    from ucat_console.backend.supervisor.tuning import tuning_blocks
+
+    specs = param_specs(tuning_blocks(AppConfig()))
     lam_st = next(s for s in specs["mpc"] if s.key == "mpc.lam_st")
     assert "[0.0, 100.0]" in lam_st.label and "Strouhal" in lam_st.hint
     n = next(s for s in specs["mpc"] if s.key == "mpc.n_samples")

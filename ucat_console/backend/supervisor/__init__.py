@@ -1,0 +1,20 @@
+"""The supervisor and its parts (one module each): the robot's factory and clock
+(``robots``), the loop's command queue and refusals (``commands``), live tuning and its
+journal (``tuning``), the two-step arming (``arm_requests``), recording (``recording``),
+the device commands (``rig_control``), the health line (``health``), and the
+:class:`Supervisor` that holds them together (``supervisor``)."""
+
+from ucat_console.backend.supervisor.commands import CommandRefused
+from ucat_console.backend.supervisor.health import Health
+from ucat_console.backend.supervisor.robots import (
+    ROBOT_FACTORIES,
+    RobotFactory,
+    SteadyPacedClock,
+    rig_robot,
+    sim_robot,
+)
+from ucat_console.backend.supervisor.supervisor import SETPOINTS, Supervisor
+from ucat_console.backend.supervisor.tuning import TUNABLE, JournalEntry
+
+__all__ = ["CommandRefused", "Health", "ROBOT_FACTORIES", "RobotFactory", "SETPOINTS", "SteadyPacedClock",
+           "Supervisor", "TUNABLE", "JournalEntry", "rig_robot", "sim_robot"]

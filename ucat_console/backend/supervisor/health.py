@@ -1,0 +1,34 @@
+"""What the terminal's health line shows."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Health:
+    t: float
+    mode: str
+    armed: bool
+    lag: float  # s the loop is behind the wall clock now
+    lag_max: float
+    late_plans: int
+    plan_overruns: int
+    failsafes: tuple[str, ...]
+    clients: int
+    pilot: str
+    recording: str
+    fault: str
+
+    def line(self) -> str:
+        fs = ",".join(self.failsafes) or "none"
+        parts = [
+            f"t={self.t:7.1f}s", f"mode={self.mode}", "ARMED" if self.armed else "disarmed",
+            f"lag={self.lag * 1e3:.0f}ms(max {self.lag_max * 1e3:.0f})",
+            f"late_plans={self.late_plans}", f"overruns={self.plan_overruns}",
+            f"failsafes={fs}", f"clients={self.clients}", f"pilot={self.pilot or 'none'}",
+            f"rec={self.recording or 'off'}",
+        ]
+        if self.fault:
+            parts.append(f"FAULT={self.fault}")
+        return " ".join(parts)

@@ -1,0 +1,88 @@
+"""Recording sessions: on demand, and automatically from arming until a tail after
+disarming. :class:`SessionRecording` owns whether the present recording was started by
+arming (and so stops by itself) or by the operator."""
+
+from __future__ import annotations
+
+import logging
+import threading
+from pathlib import Path
+from typing import Callable
+
+from ucat_console.backend.sessions.recorder import Recorder
+from ucat_console.backend.supervisor.commands import CommandRefused
+
+log = logging.getLogger(__name__)
+
+#: the longest notes of a recording (characters)
+MAX_NOTES = 2000
+
+
+class SessionRecording:
+    """``config_toml()`` and ``weights()`` give what a new recording stores; ``tail`` is how
+    long an automatic recording runs on after disarming; ``on_arm``: record on arming."""
+
+    def __init__(self, recorder: Recorder, *, config_toml: Callable[[], str], weights: Callable[[], dict],
+                 on_arm: bool, tail: float, notify: Callable[[], None]) -> None:
+        self.recorder = recorder
+        self._config_toml = config_toml
+        self._weights = weights
+        self.on_arm = on_arm
+        self.tail = tail
+        self._notify = notify
+        self._auto = False
+        self._disarmed_at: float | None = None
+
+    @property
+    def recording(self) -> bool:
+        return self.recorder.recording
+
+    @property
+    def session_id(self) -> str:
+        return self.recorder.session_id if self.recorder.recording else ""
+
+    def _start(self, label: str = "", notes: str = "") -> str:
+        return self.recorder.start(label=label, notes=notes, config_toml=self._config_toml(),
+                                   weights=self._weights())
+
+    def start(self, notes: object = "") -> str:
+        """The operator's recording; CommandRefused when one runs or the notes are bad."""
+        if not isinstance(notes, str) or len(notes) > MAX_NOTES:
+            raise CommandRefused(f"notes: expected text of at most {MAX_NOTES} characters")
+        if self.recorder.recording:
+            raise CommandRefused(f"record: already recording session {self.recorder.session_id}")
+        sid = self._start(notes=notes)
+        self._auto = False
+        return sid
+
+    def stop(self) -> list[Path]:
+        if not self.recorder.recording:
+            raise CommandRefused("record: not recording")
+        paths = self.recorder.stop()
+        self._auto = False
+        return paths
+
+    def armed(self) -> None:
+        """Arming: start recording (first, so the file holds the moment of arming). Raises
+        what the recorder raised; the caller decides that arming goes on."""
+        self._disarmed_at = None
+        if self.on_arm and not self.recorder.recording:
+            self._start(label="armed", notes="started on arming")
+            self._auto = True
+
+    def disarmed(self, now: float) -> None:
+        self._disarmed_at = now
+
+    def check(self, now: float, armed: bool) -> None:
+        """Stop an automatic recording ``tail`` s after disarming (between loop chunks)."""
+        if (self._auto and not armed and self._disarmed_at is not None
+                and now - self._disarmed_at >= self.tail and self.recorder.recording):
+            self._auto = False
+            threading.Thread(target=self._stop_quietly, name="recorder-stop", daemon=True).start()
+
+    def _stop_quietly(self) -> None:
+        try:
+            self.recorder.stop()
+        except Exception:
+            log.exception("stopping the recording failed")
+        self._notify()

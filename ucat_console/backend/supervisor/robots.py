@@ -1,0 +1,60 @@
+"""Where the supervisor's robot comes from, and the clock it runs on in real time.
+
+A robot factory is ``(app_config, event_sink) -> (robot_io, close)``: :func:`sim_robot`
+(the default for ``robot = "sim"``) or :func:`rig_robot` (the device rig,
+``ucat_console.backend.rig.build_robot_io``).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Callable
+
+from ucat_console.backend.loop.clock import PacedClock
+from ucat_console.backend.sim.robot_io import SimRobotIO
+from ucat_console.config import AppConfig
+from ucat_console.robot.interface import RobotIO
+from ucat_console.telemetry.events import EventSink
+
+if TYPE_CHECKING:
+    from ucat_console.backend.sim_rig import SimRig
+
+RobotFactory = Callable[[AppConfig, EventSink], tuple[RobotIO, Callable[[], None]]]
+
+
+def sim_robot(cfg: AppConfig, events: EventSink) -> tuple[RobotIO, Callable[[], None]]:
+    """The in-process simulated U-CAT, level at ``console.sim_depth``."""
+    return SimRobotIO(cfg.plant, depth=cfg.console.sim_depth), lambda: None
+
+
+def rig_robot(cfg: AppConfig, events: EventSink) -> tuple[RobotIO, Callable[[], None]]:
+    """The device rig (drivers on emulators or the robot), from ``backend.rig``."""
+    from ucat_console.backend import rig
+
+    return rig.build_robot_io(cfg, event_sink=events)
+
+
+ROBOT_FACTORIES: dict[str, RobotFactory] = {"sim": sim_robot, "rig": rig_robot}
+
+
+def simulated_rig(robot_io: RobotIO) -> SimRig | None:
+    """The simulated rig behind ``robot_io`` (fault injection), None for any other robot."""
+    if getattr(robot_io, "rig", None) is None:
+        return None  # no device stack to import for the in-process simulator
+    from ucat_console.backend.rig import rig_of
+
+    return rig_of(robot_io)
+
+
+class SteadyPacedClock(PacedClock):
+    """A :class:`PacedClock` anchored once: the loop runs in chunks without drifting."""
+
+    def __init__(self, pace: float = 1.0) -> None:
+        super().__init__(pace)
+        self._anchored = False
+
+    def start(self, t0: float) -> None:
+        if not self._anchored:
+            super().start(t0)
+            self._anchored = True
+        else:
+            self._wake.clear()

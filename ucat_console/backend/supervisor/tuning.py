@@ -1,0 +1,177 @@
+"""Live tuning and its journal: what the operator may tune, the tuning in force, the saved
+tuning to revert to, and who changed what when.
+
+:class:`Tuning` owns the commanded tuning (block -> frozen config: ``mpc``, ``baseline``,
+``pid.<loop>``). A change is checked whole before anything changes
+(:meth:`Tuning.check`: every key tunable, every value of its field's kind and range, and an
+MPC configuration the planner accepts), then handed to the closed loop, which applies it
+from its next plan or PID step, and journalled (:class:`Journal`).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass, fields
+from typing import Any, Callable, Mapping
+
+from ucat_console.backend.loop.closed_loop import PID_LOOPS, ClosedLoop
+from ucat_console.backend.loop.planners import MpcFinPlanner
+from ucat_console.backend.supervisor.commands import CommandRefused, number
+from ucat_console.config import AppConfig
+from ucat_console.typedconf import check_value
+
+#: what the operator may tune live: block -> fields (PID blocks are "pid.<loop>")
+TUNABLE: dict[str, tuple[str, ...]] = {
+    "mpc": ("lam_f", "lam_st", "lam_a", "lam_d", "st_opt", "st_low", "st_high", "n_samples"),
+    **{f"pid.{loop}": ("kp", "ki", "kd", "limit") for loop in PID_LOOPS},
+    "baseline": ("frequency",),
+}
+_JOURNAL_KEEP = 500
+
+
+def fmt(v: Any) -> str:
+    return f"{v:g}" if isinstance(v, float) else str(v)
+
+
+@dataclass(frozen=True)
+class JournalEntry:
+    """One operator or failsafe change: who, when (wall clock and stream time), old -> new."""
+
+    wall: float
+    t: float
+    who: str
+    key: str
+    old: Any
+    new: Any
+
+    def text(self) -> str:
+        stamp = time.strftime("%H:%M:%S", time.localtime(self.wall))
+        return f"{stamp} {self.who}: {self.key} {fmt(self.old)} -> {fmt(self.new)}"
+
+
+class Journal:
+    """The last changes (any thread)."""
+
+    def __init__(self, clock: Callable[[], float]) -> None:
+        self._clock = clock  # stream time
+        self._lock = threading.Lock()
+        self._entries: list[JournalEntry] = []
+
+    def add(self, who: str, key: str, old: Any, new: Any) -> JournalEntry:
+        e = JournalEntry(time.time(), self._clock(), who, key, old, new)
+        with self._lock:
+            self._entries.append(e)
+            if len(self._entries) > _JOURNAL_KEEP:
+                del self._entries[: len(self._entries) - _JOURNAL_KEEP]
+        return e
+
+    def last(self, n: int | None = None) -> list[JournalEntry]:
+        with self._lock:
+            return list(self._entries if n is None else self._entries[-n:])
+
+
+def split_key(key: object) -> tuple[str, str]:
+    """``"pid.depth.kp"`` -> ``("pid.depth", "kp")``, or CommandRefused."""
+    if not isinstance(key, str) or "." not in key:
+        raise CommandRefused(f"parameter: {key!r} is not a tunable parameter")
+    block, _, name = key.rpartition(".")
+    if name not in TUNABLE.get(block, ()):
+        raise CommandRefused(f"{key}: not a tunable parameter")
+    return block, name
+
+
+def tuning_blocks(cfg: AppConfig) -> dict[str, Any]:
+    """The tunable blocks of a configuration: block -> frozen config."""
+    blocks: dict[str, Any] = {"mpc": cfg.mpc, "baseline": cfg.baseline}
+    for name in PID_LOOPS:
+        blocks[f"pid.{name}"] = getattr(cfg.body, name)
+    return blocks
+
+
+class Tuning:
+    """The commanded tuning of one closed loop (module docstring)."""
+
+    def __init__(self, cfg: AppConfig, loop: ClosedLoop, journal: Journal) -> None:
+        self.loop = loop
+        self.journal = journal
+        self._lock = threading.Lock()
+        self._blocks = tuning_blocks(cfg)
+        self._saved = dict(self._blocks)
+
+    def blocks(self) -> dict[str, Any]:
+        with self._lock:
+            return dict(self._blocks)
+
+    def saved(self) -> dict[str, Any]:
+        with self._lock:
+            return dict(self._saved)
+
+    def value(self, key: str) -> Any:
+        block, name = split_key(key)
+        return getattr(self.blocks()[block], name)
+
+    def check(self, changes: Mapping[str, object]) -> dict[str, Any]:
+        """The tuning blocks ``changes`` would give, or CommandRefused; changes nothing."""
+        if not isinstance(changes, Mapping) or not changes:
+            raise CommandRefused("tuning: no changes given")
+        current = self.blocks()
+        per_block: dict[str, dict[str, Any]] = {}
+        for key, value in changes.items():
+            block, name = split_key(key)
+            cfg = current[block]
+            f = next(f for f in fields(cfg) if f.name == name)
+            if f.metadata.get("choices") is not None:
+                if not isinstance(value, str):
+                    raise CommandRefused(f"{key}: expected one of {', '.join(map(str, f.metadata['choices']))}, "
+                                         f"got {value!r}")
+                v: Any = value
+            else:
+                v = number(key, value, isinstance(getattr(cfg, name), int))
+            try:
+                check_value(f, v, prefix=f"{block}.")
+            except ValueError as e:
+                raise CommandRefused(str(e)) from None
+            per_block.setdefault(block, {})[name] = v
+        out: dict[str, Any] = {}
+        for block, vals in per_block.items():
+            try:
+                new = current[block].replace(**vals)
+            except ValueError as e:
+                raise CommandRefused(f"{block}.{e}" if not str(e).startswith(block) else str(e)) from None
+            if block == "mpc":
+                try:
+                    MpcFinPlanner(new, 0)
+                except ValueError as e:
+                    raise CommandRefused(f"mpc: {e}") from None
+            out[block] = new
+        return out
+
+    def apply(self, new_blocks: Mapping[str, Any], who: str) -> dict[str, list[Any]]:
+        """Hand checked blocks to the loop and journal them; the changed fields (key -> [old, new])."""
+        diffs: dict[str, list[Any]] = {}
+        with self._lock:
+            for block, new in new_blocks.items():
+                old = self._blocks[block]
+                if new == old:
+                    continue
+                if block == "mpc":
+                    self.loop.set_mpc_config(new)
+                elif block == "baseline":
+                    self.loop.set_baseline_config(new)
+                else:
+                    self.loop.set_pid_gains(block.split(".", 1)[1], new)
+                self._blocks[block] = new
+                for f in fields(new):
+                    a, b = getattr(old, f.name), getattr(new, f.name)
+                    if a != b:
+                        diffs[f"{block}.{f.name}"] = [a, b]
+        for key, (a, b) in diffs.items():
+            self.journal.add(who, key, a, b)
+        return diffs
+
+    def save(self, who: str) -> None:
+        """The present tuning becomes the one to revert to."""
+        with self._lock:
+            self._saved = dict(self._blocks)
+        self.journal.add(who, "tuning", "saved", "baseline")
