@@ -618,3 +618,29 @@ def test_a_fixed_token_is_in_neither_the_recording_nor_the_log(tmp_path: Path, c
         assert "[access]" in r.config_toml and "token" not in r.config_toml.split("[access]", 1)[1].split("[", 1)[0]
     line = next(r.getMessage() for r in caplog.records if "quotes the token" in r.getMessage())
     assert secret not in line and "<redacted>" in line
+
+
+def test_a_burst_of_plan_overruns_is_one_event_with_its_count(sup: Supervisor) -> None:
+    ev = Events(sup)
+    t = sup.loop.time
+    for k in range(20):  # the loop's events, as it publishes them
+        sup._loop_stream.publish(ch.EVENTS, Event(
+            t=t + 0.01 * k, source="loop", code="plan_overrun", message=f"plan {k} late", level="warning",
+            data={"fins": [k % 4], "late": 0.001 * k, "solve_time": 0.0005, "plan_latency": 0.02}))
+    assert "plan_overrun" not in ev.codes("loop")  # held while the burst goes on
+    sup.step(2.0)
+    overruns = [e for e in ev.events if e.code == "plan_overrun"]
+    assert len(overruns) == 1
+    o = overruns[0]
+    assert o.data["count"] == 20 and o.data["fins"] == [0, 1, 2, 3]
+    assert "20 x plan ready after its hand-over deadline" in o.message and "19.0 ms late" in o.message
+
+
+def test_a_single_overrun_keeps_its_own_message(sup: Supervisor) -> None:
+    ev = Events(sup)
+    sup._loop_stream.publish(ch.EVENTS, Event(t=sup.loop.time, source="loop", code="plan_overrun",
+                                              message="plan for fins [2] ready 3.0 ms after its deadline",
+                                              level="warning", data={"fins": [2], "late": 0.003}))
+    sup.step(2.0)
+    [o] = [e for e in ev.events if e.code == "plan_overrun"]
+    assert o.message == "plan for fins [2] ready 3.0 ms after its deadline" and o.data["count"] == 1

@@ -62,3 +62,37 @@ def fin_plane_axes(geometry: HasMountingAngle, fin: int) -> tuple[Vec3, Vec3]:
     _, _, s_y = fin_signs(fin)
     a = math.radians(geometry.mounting_angle_deg)
     return (-math.cos(a), s_y * math.sin(a), 0.0), (0.0, 0.0, -1.0)
+
+
+# ---------------------------------------------------------------------- as drawn
+#: how long a fin blade is drawn, as a multiple of the effective fin length L_f (the
+#: model's length is a hydrodynamic effective length; the blade itself is longer)
+BLADE_LENGTH_FACTOR = 1.5
+#: span of a fin blade along its shaft (m) and its thickness (m), as drawn
+BLADE_SPAN = 0.08
+BLADE_THICKNESS = 0.006
+
+Quat = tuple[float, float, float, float]
+
+
+def _cross(a: Vec3, b: Vec3) -> Vec3:
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+def fin_mount(geometry: Geometry, fin: int) -> tuple[Vec3, Quat]:
+    """Body-frame position and orientation (w, x, y, z) of a fin's mount frame, whose axes
+    are the fin plane's (x_m, y_m) and its normal; the blade turns about the normal and
+    spans along it, just outside the hull."""
+    import numpy as np
+
+    from ucat_console.robot.rotations import quaternion_from_matrix
+
+    s_lat, s_long, _ = fin_signs(fin)
+    xm, ym = fin_plane_axes(geometry, fin)
+    n = _cross(xm, ym)
+    outward = 1.0 if n[1] * s_lat > 0 else -1.0
+    base = (s_long * geometry.arm_pitch, s_lat * max(geometry.arm_roll, geometry.hull_size[1] / 2), 0.0)
+    off = outward * (BLADE_SPAN / 2 + 0.01)
+    pos = (base[0] + off * n[0], base[1] + off * n[1], base[2] + off * n[2])
+    matrix = ((xm[0], ym[0], n[0]), (xm[1], ym[1], n[1]), (xm[2], ym[2], n[2]))
+    return pos, tuple(float(v) for v in quaternion_from_matrix(np.array(matrix)))  # type: ignore[return-value]

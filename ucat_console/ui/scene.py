@@ -1,17 +1,25 @@
-"""The 3-D view: the U-CAT hull, its four fins (measured, and the commanded angle ghosted),
-the body pose from the estimator, a trail of the path, the water surface and a depth label.
+"""The 3-D view: the U-CAT's ellipsoidal hull with a heading arrow, its four fins as fin-shaped
+plates at their measured angles (the commanded angle ghosted), the body pose from the
+estimator, a trail of the path and a depth label; and, once per view, the pool around it:
+a faint water surface at depth 0 and a floor grid.
 
-Frames. The telemetry is in NED (x north, y east, z down) and the body frame is FRD; the
-scene node ``/ned`` turns NED into viser's z-up world (half a turn about x), so every
-node below it takes telemetry values unchanged. The view follows the vehicle
-horizontally (``/ned`` is shifted so the vehicle stays above the origin) and the water
-surface stays at world z = 0, so depth reads directly.
+Frames. The telemetry is in NED (x north, y east, z down) and the body frame is FRD; a
+robot's root node (``/ned`` for the live robot, ``/review`` for a page's reviewed one)
+turns NED into viser's z-up world (half a turn about x), so every node below it takes
+telemetry values unchanged; the water surface is world z = 0, so depth reads directly. A
+page that reviews a session hides the live robot for itself (a page-scoped, invisible
+``/ned`` shadows the shared one) and sees the reviewed robot in its place.
 
 Fins. Each fin works in its own plane (``robot.geometry.fin_plane_axes``): the fin's
 chord points along ``cos(theta) x_m + sin(theta) y_m``, turning about the plane's normal.
-Node ``fin<i>`` is the fin's mount with axes (x_m, y_m, normal); its children ``blade``
-(measured angle) and ``ghost`` (commanded angle, translucent) turn about the mount's z axis.
-Fins are numbered in the robot's order, as in the telemetry.
+Node ``fin<i>`` is the fin's mount (``robot.geometry.fin_mount``) with axes (x_m, y_m,
+normal); its children ``blade`` (measured angle) and ``ghost`` (commanded angle,
+translucent) turn about the mount's z axis. Fins are numbered in the robot's order, as in
+the telemetry.
+
+The hull is an icosphere scaled to the hull's half-sizes (viser scales nodes per axis); the
+fin plate is a small extruded outline built here (:func:`fin_plate_mesh`: a dozen points
+do not need a mesh library).
 """
 
 from __future__ import annotations
@@ -21,114 +29,127 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ucat_console.robot.fins import N_FINS, fin_signs
-from ucat_console.robot.geometry import Geometry, fin_plane_axes
-from ucat_console.robot.rotations import quaternion_from_matrix
+from ucat_console.robot.fins import N_FINS
+from ucat_console.robot.geometry import BLADE_LENGTH_FACTOR, BLADE_SPAN, BLADE_THICKNESS, Geometry, fin_mount
+from ucat_console.robot.look import FIN_COLOUR, GHOST_COLOUR, HULL_COLOUR, NOSE_COLOUR
 from ucat_console.telemetry.messages import BodyState, FinState
 
-HULL_COLOUR = (245, 196, 0)
-NOSE_COLOUR = (200, 60, 40)
-FIN_COLOUR = (40, 40, 40)
-GHOST_COLOUR = (30, 144, 255)
 WATER_COLOUR = (64, 140, 200)
+FLOOR_COLOUR = (120, 130, 140)
 TRAIL_COLOUR = (220, 60, 60)
+HEADING_COLOUR = (220, 60, 40)
 #: NED -> viser world (z up): half a turn about x
 NED_WXYZ = (0.0, 1.0, 0.0, 0.0)
-SURFACE_SIZE = 10.0  # m, side of the square of surface lines around the vehicle
-SURFACE_STEP = 0.5  # m between surface lines
-FIN_SPAN = 0.08  # m, along the fin's axis (for the view)
-FIN_THICKNESS = 0.006  # m
-
-
-Vec3 = tuple[float, float, float]
-Quat = tuple[float, float, float, float]
-
-
-def fin_mount(g: Geometry, fin: int, hull_width: float) -> tuple[Vec3, Quat]:
-    """Body-frame position and orientation (wxyz) of a fin's mount frame (x_m, y_m, normal)."""
-    s_lat, s_long, _ = fin_signs(fin)
-    xm, ym = fin_plane_axes(g, fin)
-    xm_a, ym_a = np.array(xm), np.array(ym)
-    n = np.cross(xm_a, ym_a)
-    outward = 1.0 if n[1] * s_lat > 0 else -1.0
-    # the blade spans along the axis, outside the hull
-    base = np.array([s_long * g.arm_pitch, s_lat * max(g.arm_roll, hull_width / 2), 0.0])
-    pos = base + outward * n * (FIN_SPAN / 2 + 0.01)
-    p = (float(pos[0]), float(pos[1]), float(pos[2]))
-    return p, quaternion_from_matrix(np.column_stack([xm_a, ym_a, n]))
-
-
-def surface_lines(size: float, step: float) -> np.ndarray:
-    """Segments (N, 2, 3) of a square grid of side ``size`` at z = 0, centred on the origin."""
-    h = size / 2
-    ticks = np.arange(-h, h + 1e-9, step)
-    segs = [((x, -h, 0.0), (x, h, 0.0)) for x in ticks] + [((-h, y, 0.0), (h, y, 0.0)) for y in ticks]
-    return np.array(segs, dtype=float)
+LIVE_ROOT = "/ned"
+REVIEW_ROOT = "/review"
 
 
 def turn_about_z(theta: float) -> tuple[float, float, float, float]:
     return (math.cos(theta / 2), 0.0, 0.0, math.sin(theta / 2))
 
 
+def fin_plate_mesh(length: float, span: float, thickness: float) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices, faces) of a fin blade: a rounded, tapering outline in the x-z plane (chord
+    along +x from the shaft at x = 0, span along z), ``thickness`` thick along y."""
+    # half-spans along the chord: full at the shaft, tapering, rounded at the tip
+    xs = np.array([0.0, 0.35, 0.7, 0.88, 0.97, 1.0]) * length
+    hs = np.array([0.5, 0.48, 0.4, 0.3, 0.18, 0.0]) * span
+    outline = [(x, h) for x, h in zip(xs, hs)] + [(x, -h) for x, h in zip(xs[::-1][1:], hs[::-1][1:])]
+    n = len(outline)
+    y = thickness / 2
+    verts = [(x, y, z) for x, z in outline] + [(x, -y, z) for x, z in outline]
+    cx = float(np.mean([p[0] for p in outline]))
+    verts += [(cx, y, 0.0), (cx, -y, 0.0)]
+    top_c, bot_c = 2 * n, 2 * n + 1
+    faces = []
+    for i in range(n):
+        j = (i + 1) % n
+        faces.append((top_c, i, j))  # top
+        faces.append((bot_c, n + j, n + i))  # bottom
+        faces.append((i, n + i, n + j))  # side
+        faces.append((i, n + j, j))
+    return np.array(verts, dtype=np.float32), np.array(faces, dtype=np.uint32)
+
+
+def add_pool(scene: Any, *, floor_depth: float, shadows: bool = False, environment_map: bool = False) -> None:
+    """The pool around every robot (once per view): lights, a faint water surface at depth
+    0 (a translucent grid that fades with distance, so it never hides the robot) and a
+    floor grid at ``floor_depth``."""
+    scene.set_up_direction("+z")
+    scene.configure_default_lights(cast_shadow=shadows)
+    if not environment_map:
+        scene.configure_environment_map(None)
+        # daylight from above, water-blue from below
+        scene.add_light_hemisphere("/light", sky_color=(255, 255, 255), ground_color=(90, 130, 170),
+                                   intensity=1.6)
+    scene.add_grid("/surface", width=40.0, height=40.0, plane="xy", cell_size=1.0, section_size=5.0,
+                   cell_color=WATER_COLOUR, section_color=WATER_COLOUR, cell_thickness=0.6,
+                   section_thickness=0.8, plane_color=WATER_COLOUR, plane_opacity=0.06,
+                   infinite_grid=True, fade_distance=18.0, shadow_opacity=0.0)
+    scene.add_grid("/floor", width=40.0, height=40.0, plane="xy", cell_size=0.5, section_size=2.0,
+                   cell_color=FLOOR_COLOUR, section_color=(90, 95, 100), position=(0.0, 0.0, -float(floor_depth)),
+                   infinite_grid=True, fade_distance=25.0, shadow_opacity=0.2)
+
+
 class RobotScene:
-    """The scene nodes and their updates (server-wide)."""
+    """One robot's nodes under ``root`` (``/ned`` live, ``/review`` reviewed) and their updates."""
 
     def __init__(self, scene: Any, geometry: Geometry, *, trail_points: int, trail_spacing: float,
-                 shadows: bool = False, environment_map: bool = False) -> None:
+                 root: str = LIVE_ROOT) -> None:
         self.scene = scene
+        self.root = root.rstrip("/")
         size = geometry.hull_size
-        self.fin_length = 1.5 * geometry.fin_length
+        self.fin_length = BLADE_LENGTH_FACTOR * geometry.fin_length
         self.trail_spacing = float(trail_spacing)
         self._trail = np.zeros((int(trail_points), 3))
         self._trail_n = 0
         self._trail_next = 0
         self._trail_dirty = False
         self.updates = 0
+        self.position: tuple[float, float, float] | None = None  # the robot's last NED position
 
-        scene.set_up_direction("+z")
-        scene.configure_default_lights(cast_shadow=shadows)
-        if not environment_map:
-            scene.configure_environment_map(None)
-            # daylight from above, water-blue from below
-            scene.add_light_hemisphere("/light", sky_color=(255, 255, 255), ground_color=(90, 130, 170),
-                                       intensity=1.6)
-        # the surface as lines: a filled translucent plane over the whole view costs too much
-        # where the browser renders in software
-        self.surface = scene.add_line_segments("/surface", surface_lines(SURFACE_SIZE, SURFACE_STEP),
-                                               WATER_COLOUR, thickness=1.5, thickness_units="screen")
-        self.ned = scene.add_frame("/ned", show_axes=False, wxyz=NED_WXYZ)
-        self.body = scene.add_frame("/ned/ucat", show_axes=False)
-        self.hull = scene.add_box("/ned/ucat/hull", color=HULL_COLOUR, dimensions=tuple(size))
-        scene.add_box("/ned/ucat/nose", color=NOSE_COLOUR, dimensions=(0.03, size[1] * 0.6, size[2] * 0.6),
-                      position=(size[0] / 2 + 0.015, 0.0, 0.0))
+        r = self.root
+        self.ned = scene.add_frame(r, show_axes=False, wxyz=NED_WXYZ)
+        self.body = scene.add_frame(f"{r}/ucat", show_axes=False)
+        half = tuple(0.5 * s for s in size)
+        self.hull = scene.add_icosphere(f"{r}/ucat/hull", radius=1.0, color=HULL_COLOUR, subdivisions=3,
+                                        scale=half)
+        # the heading: a red nose cap and an arrow ahead of it, along the body's x axis
+        scene.add_icosphere(f"{r}/ucat/nose", radius=1.0, color=NOSE_COLOUR, subdivisions=2,
+                            scale=(0.035, half[1] * 0.35, half[2] * 0.35), position=(half[0] - 0.01, 0.0, 0.0))
+        scene.add_arrows(f"{r}/ucat/heading", np.array([[[half[0] + 0.02, 0.0, 0.0], [half[0] + 0.25, 0.0, 0.0]]]),
+                         HEADING_COLOUR, shaft_radius=0.008, head_radius=0.022, head_length=0.05)
+        verts, faces = fin_plate_mesh(self.fin_length, BLADE_SPAN, BLADE_THICKNESS)
         self.blades = []
         self.ghosts = []
-        L = self.fin_length
         for i in range(N_FINS):
-            pos, q = fin_mount(geometry, i, size[1])
-            scene.add_frame(f"/ned/ucat/fin{i}", show_axes=False, position=pos, wxyz=q)
-            blade = scene.add_frame(f"/ned/ucat/fin{i}/blade", show_axes=False)
-            scene.add_box(f"/ned/ucat/fin{i}/blade/plate", color=FIN_COLOUR,
-                          dimensions=(L, FIN_THICKNESS, FIN_SPAN), position=(L / 2, 0.0, 0.0))
-            ghost = scene.add_frame(f"/ned/ucat/fin{i}/ghost", show_axes=False)
-            scene.add_box(f"/ned/ucat/fin{i}/ghost/plate", color=GHOST_COLOUR,
-                          dimensions=(L, FIN_THICKNESS, FIN_SPAN), position=(L / 2, 0.0, 0.0), opacity=0.35,
-                          cast_shadow=False)
+            pos, q = fin_mount(geometry, i)
+            scene.add_frame(f"{r}/ucat/fin{i}", show_axes=False, position=pos, wxyz=q)
+            blade = scene.add_frame(f"{r}/ucat/fin{i}/blade", show_axes=False)
+            scene.add_mesh_simple(f"{r}/ucat/fin{i}/blade/plate", verts, faces, color=FIN_COLOUR,
+                                  side="double")
+            ghost = scene.add_frame(f"{r}/ucat/fin{i}/ghost", show_axes=False)
+            scene.add_mesh_simple(f"{r}/ucat/fin{i}/ghost/plate", verts, faces, color=GHOST_COLOUR,
+                                  opacity=0.35, side="double", cast_shadow=False)
             self.blades.append(blade)
             self.ghosts.append(ghost)
-        self.label = scene.add_label("/ned/ucat/depth", "depth -", position=(0.0, 0.0, -0.35),
+        self.label = scene.add_label(f"{r}/ucat/depth", "depth -", position=(0.0, 0.0, -0.35),
                                      anchor="bottom-center")
-        self.trail = scene.add_line_segments("/ned/trail", np.zeros((1, 2, 3)), TRAIL_COLOUR,
+        self.trail = scene.add_line_segments(f"{r}/trail", np.zeros((1, 2, 3)), TRAIL_COLOUR,
                                              thickness=2.0, thickness_units="screen")
+
+    def world_position(self) -> tuple[float, float, float] | None:
+        """The robot's position in viser's world (z up), for a camera to follow."""
+        p = self.position
+        return None if p is None else (p[0], -p[1], -p[2])
 
     # ------------------------------------------------------------------ updates
     def update_pose(self, body: BodyState | None, fins: Sequence[FinState | None]) -> None:
-        """Pose, fins and view offset (call inside ``server.atomic()``)."""
+        """Pose and fins (call inside ``atomic()``)."""
         if body is not None:
-            x, y, _ = body.position
-            self.ned.position = (-x, y, 0.0)
             self.body.position = body.position
             self.body.wxyz = body.orientation
+            self.position = body.position
             self._add_trail_point(body.position)
         for i, f in enumerate(fins):
             if f is None:
@@ -164,3 +185,7 @@ class RobotScene:
         pts = self.trail_points()
         self.trail.points = np.stack([pts[:-1], pts[1:]], axis=1)
         self._trail_dirty = False
+
+    def remove(self) -> None:
+        """Take this robot's nodes out of the scene."""
+        self.ned.remove()

@@ -464,18 +464,19 @@ class ClosedLoop:
         act.job = None
         act.t_deliver = math.inf
         outcome = job.wait()
-        if self._planning.threaded:
-            overrun = job.done_wall > self.clock.wall_deadline(deadline)
-        else:
-            overrun = outcome.solve_time > self.cfg.plan_latency
+        if self._planning.threaded:  # done after the wall-clock hand-over deadline
+            late = job.done_wall - self.clock.wall_deadline(deadline)
+        else:  # the solve took longer than the hand-over allows
+            late = outcome.solve_time - self.cfg.plan_latency
         act.u_prev = outcome.u
         self.plans_made += 1
-        if overrun:
+        if late > 0.0:
             self.plan_overruns += 1
-            self._event(t, "plan_overrun", f"plan for fins {list(act.fins)} took "
-                        f"{outcome.solve_time * 1e3:.2f} ms, over the {self.cfg.plan_latency * 1e3:.1f} ms hand-over",
+            self._event(t, "plan_overrun", f"plan for fins {list(act.fins)} ready {late * 1e3:.1f} ms after its "
+                        f"hand-over deadline ({self.cfg.plan_latency * 1e3:.1f} ms after the request; "
+                        f"solve {outcome.solve_time * 1e3:.2f} ms)",
                         "warning", {"fins": list(act.fins), "solve_time": outcome.solve_time,
-                                    "plan_latency": self.cfg.plan_latency})
+                                    "plan_latency": self.cfg.plan_latency, "late": late})
         if not act.active:
             act.ready = (job.inputs, outcome)
             return

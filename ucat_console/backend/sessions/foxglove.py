@@ -39,14 +39,8 @@ from typing import Any, Sequence
 from ucat_console.telemetry.channels import BODY_STATE, EVENTS, N_FINS, fin_state
 from ucat_console.telemetry.events import LEVELS, Event
 from ucat_console.telemetry.messages import BodyState, FinState
-from ucat_console.ui.scene import (
-    FIN_COLOUR,
-    FIN_SPAN,
-    FIN_THICKNESS,
-    HULL_COLOUR,
-    NOSE_COLOUR,
-    fin_mount,
-)
+from ucat_console.robot.geometry import BLADE_LENGTH_FACTOR, BLADE_SPAN, BLADE_THICKNESS, fin_mount
+from ucat_console.robot.look import FIN_COLOUR, HULL_COLOUR, NOSE_COLOUR
 
 FRAME_TRANSFORM = "foxglove.FrameTransform"
 LOG = "foxglove.Log"
@@ -298,7 +292,7 @@ def scene_update(hull_size: Vec3, fin_mounts: Sequence[tuple[Vec3, Quat]], fin_l
     ])]
     for i in range(len(fin_mounts)):
         entities.append(_entity(ns, fin_frame(i), f"fin{i}", [
-            _cube((fin_length / 2, 0.0, 0.0), (fin_length, FIN_THICKNESS, FIN_SPAN), FIN_COLOUR),
+            _cube((fin_length / 2, 0.0, 0.0), (fin_length, BLADE_THICKNESS, BLADE_SPAN), FIN_COLOUR),
         ]))
     return {"deletions": [], "entities": entities}
 
@@ -319,8 +313,8 @@ def robot_geometry(plant: Any = None) -> RobotGeometry:
 
     g = (plant if plant is not None else PlantConfig()).geometry
     size = tuple(float(x) for x in g.hull_size)
-    mounts = tuple(fin_mount(g, i, size[1]) for i in range(N_FINS))
-    return RobotGeometry(size, mounts, 1.5 * g.fin_length)  # type: ignore[arg-type]
+    mounts = tuple(fin_mount(g, i) for i in range(N_FINS))
+    return RobotGeometry(size, mounts, BLADE_LENGTH_FACTOR * g.fin_length)  # type: ignore[arg-type]
 
 
 class Derived:

@@ -56,6 +56,7 @@ from ucat_console.backend.safety import SafetyMonitor, Transition
 from ucat_console.backend.sessions.foxglove import robot_geometry
 from ucat_console.backend.sessions.recorder import Recorder
 from ucat_console.backend.supervisor.arm_requests import ArmRequests
+from ucat_console.backend.supervisor.bursts import BurstFolder
 from ucat_console.backend.supervisor.commands import CommandRefused, LoopCommands, number
 from ucat_console.backend.supervisor.health import Health
 from ucat_console.backend.supervisor.recording import SessionRecording
@@ -143,6 +144,8 @@ class Supervisor:
             notify=self._notify,
         )
         self.rig_control = RigControl(self)
+        #: plan overruns, one event per burst
+        self.bursts = BurstFolder(lambda ev: self.stream.publish(ch.EVENTS, ev))
         self._thread: threading.Thread | None = None
         self._stopping = False
         self._closed = False
@@ -186,6 +189,7 @@ class Supervisor:
             return
         self._closed = True
         self._disarm(LOCAL, "shutdown")
+        self.bursts.check(self.loop.time, flush=True)
         self._stopping = True
         self.loop.stop()
         if self._thread is not None:
@@ -250,6 +254,7 @@ class Supervisor:
         self.commands.run_pending()
         for tr in self.safety.check(now):
             self._on_failsafe(tr)
+        self.bursts.check(now)
         self.recording.check(now, self.gate.armed)
 
     # ================================================================== telemetry
@@ -263,6 +268,8 @@ class Supervisor:
                 msg = FinState(msg.t, msg.fin, msg.angle, msg.rate, a, r)
             elif tp is Event and msg.code == "stroke_timeout" and msg.source == "loop":
                 return
+        if channel == ch.EVENTS and type(msg) is Event and self.bursts.take(msg):
+            return
         self.stream.publish(channel, msg)
 
     def _on_body(self, channel: str, msg: BodyState) -> None:
