@@ -1,4 +1,5 @@
-"""3-D view geometry: the fins' mount frames match the plant's fin planes."""
+"""3-D view geometry: the fins' mount frames match the plant's fin planes; the fin plate is a
+closed mesh."""
 
 from __future__ import annotations
 
@@ -8,8 +9,8 @@ import numpy as np
 import pytest
 
 from ucat_console.backend.sim.params import PlantConfig
-from ucat_console.robot.geometry import fin_plane_axes
-from ucat_console.ui.scene import fin_mount, turn_about_z
+from ucat_console.robot.geometry import fin_mount, fin_plane_axes
+from ucat_console.ui.scene import fin_plate_mesh, turn_about_z
 
 
 def rotate(q: tuple[float, float, float, float], v: np.ndarray) -> np.ndarray:
@@ -25,7 +26,7 @@ def rotate(q: tuple[float, float, float, float], v: np.ndarray) -> np.ndarray:
 @pytest.mark.parametrize("fin", range(4))
 def test_a_fins_chord_at_angle_theta_follows_the_fin_plane(fin: int) -> None:
     cfg = PlantConfig()
-    pos, q = fin_mount(cfg.geometry, fin, cfg.vehicle.hull_size[1])
+    pos, q = fin_mount(cfg.geometry, fin)
     xm, ym = (np.array(v) for v in fin_plane_axes(cfg.fins, fin))
     for theta in (0.0, 0.7, -1.2):
         # chord = mount rotation applied to the blade's x axis turned by theta
@@ -36,3 +37,16 @@ def test_a_fins_chord_at_angle_theta_follows_the_fin_plane(fin: int) -> None:
     assert abs(pos[1]) > half_width
     assert math.copysign(1.0, pos[1]) == (1.0 if fin in (0, 1) else -1.0)  # 0, 1: starboard
     assert math.copysign(1.0, pos[0]) == (1.0 if fin in (0, 3) else -1.0)  # 0, 3: front
+
+
+def test_the_fin_plate_is_a_closed_mesh_of_the_blade_size() -> None:
+    verts, faces = fin_plate_mesh(0.15, 0.08, 0.006)
+    assert verts[:, 0].min() == 0.0 and verts[:, 0].max() == pytest.approx(0.15)
+    assert np.ptp(verts[:, 2]) == pytest.approx(0.08) and np.ptp(verts[:, 1]) == pytest.approx(0.006)
+    # closed: every edge is shared by exactly two faces
+    edges: dict[tuple[int, int], int] = {}
+    for f in faces:
+        for a, b in ((f[0], f[1]), (f[1], f[2]), (f[2], f[0])):
+            key = (min(a, b), max(a, b))
+            edges[key] = edges.get(key, 0) + 1
+    assert set(edges.values()) == {2}
