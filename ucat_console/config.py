@@ -72,6 +72,7 @@ class ConsoleConfig(Config):
     scene_rate: float = param(40.0, lo=1.0, hi=60.0, unit="Hz", doc="3-D view update rate")
     plot_rate: float = param(10.0, lo=1.0, hi=30.0, unit="Hz", doc="plot refresh rate")
     history: float = param(30.0, lo=5.0, hi=600.0, unit="s", doc="initial plot history window")
+    dark: bool = param(True, doc="dark theme for a page that has not chosen (each browser remembers its choice)")
     shadows: bool = param(False, doc="shadows in the 3-D view (costly where the browser renders in software)")
     environment_map: bool = param(
         False, doc="image-based lighting in the 3-D view (costly where the browser renders in software)"
@@ -94,6 +95,12 @@ class ConsoleConfig(Config):
     )
     sessions_dir: str = param("", doc="where recordings go; empty: sessions/ at the project root")
     sim_depth: float = param(0.5, lo=0.0, hi=100.0, unit="m", doc="depth the simulated robot starts at")
+    floor_depth: float = param(3.0, lo=0.1, hi=1000.0, unit="m", doc="depth of the floor grid in the 3-D view")
+    drive_velocity_step: float = param(0.05, lo=0.001, hi=1.0, unit="m/s", doc="W/S key: forward velocity step")
+    drive_yaw_step: float = param(0.05, lo=0.001, hi=2.0, unit="rad/s", doc="Q/E key: yaw rate step")
+    drive_depth_step: float = param(0.1, lo=0.01, hi=5.0, unit="m", doc="R/F key: depth step")
+    drive_depth_rate: float = param(0.2, lo=0.01, hi=2.0, unit="m/s",
+                                    doc="gamepad: depth change at full stick")
 
 
 @dataclass(frozen=True)

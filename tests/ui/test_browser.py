@@ -112,9 +112,10 @@ def test_the_page_loads_and_shows_the_robot(browser: Browser, console: Console) 
         "() => { const t = window.__viserSceneTree; return t && t.getState()['/ned/ucat/hull'] !== undefined; }",
         timeout=15_000,
     )
-    for name in ("/ned/ucat/fin0/blade/plate", "/ned/ucat/fin3/ghost/plate", "/surface", "/ned/trail"):
+    for name in ("/ned/ucat/fin0/blade/plate", "/ned/ucat/fin3/ghost/plate", "/ned/ucat/heading", "/surface",
+                 "/floor", "/ned/trail"):
         assert page.evaluate(f"() => window.__viserSceneTree.getState()['{name}'] !== undefined"), name
-    expect(page.get_by_text("Strouhal number per fin")).to_be_visible()
+    expect(page.get_by_text("St per fin 0-3")).to_be_visible()
     expect(page.get_by_text("Power (W) and energy per metre (J/m)")).to_be_visible()
     wait_for(lambda: page.locator(".uplot").count() >= 5, what="five plots")
     expect(page.get_by_text("disarmed", exact=False).first).to_be_visible()
@@ -198,7 +199,7 @@ def test_closing_the_pilot_page_triggers_the_failsafe(console: Console) -> None:
     assert fired.t - left.t >= PILOT_GONE_TIMEOUT - sup.cfg.console.supervise_period
     assert fired.data["action"] == "hold"
     assert sup.setpoints.velocity == 0.0 and sup.setpoints.yaw_rate == 0.0
-    expect(a.get_by_text("FAILSAFE: pilot_gone")).to_be_visible()
+    expect(a.locator("#ucat-failsafes")).to_contain_text("FAILSAFE pilot_gone")  # in the fixed status bar
     a.screenshot(path=str(ARTIFACTS / "console-failsafe.png"))
 
 
@@ -221,7 +222,7 @@ def test_a_recorded_session_is_reviewed_in_the_page(console: Console) -> None:
     wait_for(lambda: panel.player is not None, what="the session opening")
     expect(a.get_by_text(f"opened {session_id}").first).to_be_visible()
     a.wait_for_function(  # the review vehicle is drawn by the live scene code
-        "() => window.__viserSceneTree.getState()['/review/ned/ucat/hull'] !== undefined", timeout=15_000
+        "() => window.__viserSceneTree.getState()['/review/ucat/hull'] !== undefined", timeout=15_000
     )
     start = panel.player.position
     a.get_by_role("button", name="Play").click()

@@ -41,6 +41,8 @@ log = logging.getLogger(__name__)
 LOCAL = "local"
 
 Actor = int | str  # a client id, or LOCAL
+#: the longest name a page may give itself
+MAX_NAME = 40
 
 
 class AccessDenied(PermissionError):
@@ -88,6 +90,7 @@ class AccessControl:
         self._lock = threading.RLock()
         self._clients: list[int] = []
         self._address: dict[int, str] = {}
+        self._names: dict[int, str] = {}
         self._pilot: int | None = None
         self._pending: int | None = None
         self._page_failures: dict[int, _Failures] = {}
@@ -115,6 +118,28 @@ class AccessControl:
     def state(self) -> AccessState:
         with self._lock:
             return AccessState(self._pilot, tuple(self._clients), self._pending)
+
+    def name(self, client: int) -> str:
+        """The name page ``client`` chose ("" when none)."""
+        with self._lock:
+            return self._names.get(client, "")
+
+    def set_name(self, client: int, name: object) -> None:
+        """Page ``client``'s own name, shown to the others when it flies (at most
+        :data:`MAX_NAME` printable characters; "" clears it)."""
+        if not isinstance(name, str):
+            raise ValueError(f"name: expected text, got {type(name).__name__}")
+        name = " ".join(name.split())
+        if len(name) > MAX_NAME or not name.isprintable():
+            raise ValueError(f"name: at most {MAX_NAME} printable characters")
+        with self._lock:
+            if client not in self._clients:
+                raise AccessDenied(f"name: client {client} is not connected")
+            if name:
+                self._names[client] = name
+            else:
+                self._names.pop(client, None)
+        self._changed()
 
     def address(self, client: int) -> str:
         """The remote address client ``client`` connected from ("" when not known)."""
@@ -155,6 +180,7 @@ class AccessControl:
             if client in self._clients:
                 self._clients.remove(client)
             self._address.pop(client, None)
+            self._names.pop(client, None)
             self._page_failures.pop(client, None)
             was_pilot = self._pilot == client
             if was_pilot:

@@ -239,6 +239,23 @@ class SafetyMonitor:
         return causes
 
     # ------------------------------------------------------------------ reading
+    def sensor_silence(self, sensor: str, now: float) -> tuple[float, int]:
+        """(seconds since ``sensor``'s last valid reading at ``now``, invalid readings since)."""
+        if sensor not in SENSORS:
+            raise ValueError(f"sensor: {sensor!r} is not one of {', '.join(SENSORS)}")
+        with self._lock:
+            return max(0.0, now - self._last_valid[sensor]), self._invalid[sensor]
+
+    def recent_late_plans(self) -> int:
+        """Late plans within the planner_late window (at the last check)."""
+        with self._lock:
+            return len(self._late)
+
+    def motor_faults(self) -> list[str]:
+        """The motor controller faults reported and not cleared ("source code")."""
+        with self._lock:
+            return [f"{src} {code}" for src, codes in sorted(self._motor.items()) for code in sorted(codes)]
+
     def active(self) -> tuple[str, ...]:
         with self._lock:
             return tuple(n for n in FAILSAFES if n in self._active)

@@ -1,21 +1,26 @@
 """The console's web page: a viser server showing the supervisor's telemetry stream.
 
+Layout: a fixed status bar at the top of every page (armed state, mode, pilot, link,
+recording, failsafes, a light per sensor, the drives and the planner, DISARM: the page's
+own script, :mod:`ucat_console.ui.page_script`); the plots docked on the left; the controls
+docked on the right, the pilot's section (token, arming, mode, setpoints, key map) first
+and the tabs (Tuning, MPC, Safety, Session, Review) below; the 3-D view in the middle.
+
 :class:`ConsoleApp` subscribes to the supervisor's stream (it never reads the loop
-directly) and runs one UI thread that pushes, at fixed rates whatever the telemetry rate:
+directly). The live view is a :class:`~ucat_console.ui.view.StreamView` (the same class
+each page's review uses) pushing the 3-D robot at up to ``console.scene_rate`` and the
+plots at ``console.plot_rate``; at 4 Hz the app also sends every page its status bar, and
+updates MPC introspection, failsafes, journal, events, the follow cameras, and every page's
+controls when the supervisor's state changed.
 
-* the 3-D view at ``console.scene_rate`` (pose, fins, commanded fins; grouped in one
-  ``server.atomic()`` batch), the trail and the depth label at 4 Hz;
-* the plots at ``console.plot_rate`` (a row into the ring buffers, then the chosen window);
-* the status line, MPC introspection, failsafes, journal and events at 4 Hz, and every
-  page's controls when the supervisor's state changed.
-
-Shared elements (3-D view, plots, status, introspection) are server-wide; each page's
-controls are its own (:class:`~ucat_console.ui.panels.ControlPanel`), and so is its review
-of recorded sessions (:class:`~ucat_console.ui.playback.PlaybackPanel`: every page reviews
-on its own, with its own player, position and review plots, so no page can move what
-another is reviewing). A page's panels are built when it connects, one page at a time
-(viser runs connect callbacks concurrently, and the shared tabs they fill are not safe to
-enter from two threads at once).
+Shared elements (3-D view, plots, introspection) are server-wide; each page's controls are
+its own (:class:`~ucat_console.ui.panels.ControlPanel`), and so is its review of recorded
+sessions (:class:`~ucat_console.ui.playback.PlaybackPanel`: every page reviews on its own,
+with its own player, position and review plots, so no page can move what another is
+reviewing; while it reviews, its 3-D view shows the reviewed robot in place of the live
+one). A page's panels are built when it connects, one page at a time (viser runs connect
+callbacks concurrently, and the shared tabs they fill are not safe to enter from two
+threads at once). Each page chooses its theme (dark by default), remembered by its browser.
 
 Every page passes through a :class:`~ucat_console.ui.guard.PageGuard`: its handshake's
 Origin, every message it sends (only the values of its own inputs, pilot-only inputs only
@@ -41,25 +46,31 @@ import time
 from typing import Any, Callable
 
 import viser
+import viser._messages as vm
 
 from ucat_console.backend.sessions.replay_job import ReplaySlot
 from ucat_console.backend.supervisor import CommandRefused, Supervisor
+from ucat_console.robot.fins import N_FINS
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event
-from ucat_console.telemetry.messages import BodyState, FinPlan, FinState
-from ucat_console.ui import panels
+from ucat_console.telemetry.messages import FinPlan
+from ucat_console.ui import page_script, panels
 from ucat_console.ui.guard import PageGuard
 from ucat_console.ui.playback import PlaybackPanel
-from ucat_console.ui.plots import CHANNELS as PLOT_CHANNELS
-from ucat_console.ui.plots import LivePlots, PlotFeeder
-from ucat_console.ui.scene import RobotScene
+from ucat_console.ui.scene import add_pool
+from ucat_console.ui.status_bar import bar_state
+from ucat_console.ui.view import StreamView
 
 log = logging.getLogger(__name__)
 
-N_FINS = ch.N_FINS
-_SLOW_PERIOD = 0.25  # s, status / introspection / label / trail
-_EVENTS_SHOWN = 12
+_EVENTS_KEPT = 200
 _QUIET_EVENTS = frozenset({"stroke_timeout"})
+#: the docked panels' widths (px): plots on the left, controls on the right
+PLOTS_WIDTH = 400
+CONTROLS_WIDTH = 360
+#: plot height (px): the five live plots fit a 1280x800 window below the status bar
+PLOT_HEIGHT = 108
+FOLLOW_PERIOD = 0.1  # s between follow-camera moves
 
 
 def is_loopback(host: str) -> bool:
@@ -69,6 +80,15 @@ def is_loopback(host: str) -> bool:
         return ipaddress.ip_address(host).is_loopback
     except ValueError:
         return False
+
+
+class _Page:
+    """What the app keeps of one page besides its panels: theme and camera following."""
+
+    def __init__(self, client: Any, dark: bool) -> None:
+        self.client = client
+        self.dark = dark
+        self.followed: tuple[float, float, float] | None = None
 
 
 class ConsoleApp:
@@ -86,23 +106,20 @@ class ConsoleApp:
                         self.host)
         self.history = cfg.history
         self._lock = threading.Lock()
-        self._body: BodyState | None = None
-        self._body_wall = 0.0
-        self._body_seq = 0
-        self._fins: list[FinState | None] = [None] * N_FINS
         self._plans: list[FinPlan | None] = [None] * N_FINS
-        self._events: collections.deque[Event] = collections.deque(maxlen=_EVENTS_SHOWN)
+        self._events: collections.deque[Event] = collections.deque(maxlen=_EVENTS_KEPT)
         self._dirty = threading.Event()
         self.panels: dict[int, panels.ControlPanel] = {}
         self.reviews: dict[int, PlaybackPanel] = {}
+        self.pages: dict[int, _Page] = {}
         self._build_lock = threading.Lock()
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-        self.tick_errors = 0
+        self._next_follow = 0.0
         #: a session every new page opens in its Review tab (``run --playback``)
         self.initial_session: str | None = None
         self.sessions_dir = supervisor.recorder.directory
         self.replay_slot = ReplaySlot()
+        #: what the planner light says while the planners load ("" when ready)
+        self.loading = ""
 
         self.guard = PageGuard(
             is_pilot=supervisor.access.is_pilot,
@@ -116,17 +133,12 @@ class ConsoleApp:
         server = self.guard.serve(host=self.host, port=cfg.port if port is None else port, verbose=False,
                                   label="U-CAT console")
         self.server = server
-        server.gui.configure_theme(control_width="large", show_share_button=False, dark_mode=False)
+        self._theme(server.gui, cfg.dark)
         server.request_share_url = _no_share_url  # type: ignore[method-assign]
-        z = -max(cfg.sim_depth, 0.3)
-        # from behind and to port, the vehicle left of the middle (the controls are on the right)
-        server.initial_camera.position = (-1.0, -1.3, z + 0.3)
-        server.initial_camera.look_at = (0.35, -0.45, z)
-        self.scene = RobotScene(server.scene, supervisor.cfg.plant.geometry, trail_points=cfg.trail_points,
-                                trail_spacing=cfg.trail_spacing, shadows=cfg.shadows,
-                                environment_map=cfg.environment_map)
+        add_pool(server.scene, floor_depth=cfg.floor_depth, shadows=cfg.shadows, environment_map=cfg.environment_map)
         gui = server.gui
-        self.status = gui.add_markdown("Starting ...", order=0.0)
+        gui.main_panel.dock_right()
+        gui.main_panel.set_width(CONTROLS_WIDTH)
         self.probe = gui.add_html("", order=0.5) if probe else None
         self.tabs = gui.add_tab_group(order=5.0)
         self.tab_tuning = self.tabs.add_tab("Tuning")
@@ -140,25 +152,26 @@ class ConsoleApp:
             self.introspection = gui.add_markdown("No plans yet.")
         with self.tab_safety:
             self.failsafes = gui.add_markdown("")
-        with self.tab_session:
-            self.events = gui.add_markdown("No events yet.", order=100.0)
 
         self.plot_panel = gui.add_panel(order=50.0)
-        self.feeder = PlotFeeder(int(math.ceil(cfg.max_history * cfg.plot_rate)) + 2)
-        with self.plot_panel.add_tab("Plots"):
-            self.plots = LivePlots(gui, self.feeder, rate=cfg.plot_rate, max_points=cfg.max_plot_points,
-                                   corridor=self._corridor)
+        with self.plot_panel.add_tab("Live plots"):
+            self.view = StreamView(
+                server.scene, gui, supervisor.cfg.plant.geometry, plot_rate=cfg.plot_rate,
+                scene_rate=cfg.scene_rate, max_plot_points=cfg.max_plot_points, history=lambda: self.history,
+                max_history=cfg.max_history, corridor=self._corridor, trail_points=cfg.trail_points,
+                trail_spacing=cfg.trail_spacing, atomic=server.atomic, on_slow=self._tick_slow,
+                on_tick=self._tick, on_pose=self._probe if probe else None, plot_height=PLOT_HEIGHT, name="live",
+            )
         # each page's review of recorded sessions goes here (its plots in this tab)
         self.review_plot_tab = self.plot_panel.add_tab("Review plots")
         self.plot_panel.dock_left()
-        self.plot_panel.set_width(460)
+        self.plot_panel.set_width(PLOTS_WIDTH)
+        self.scene = self.view.show()
+        self.plots = self.view.plots
 
         self._unsubs = [
-            supervisor.stream.subscribe(self.feeder.on_message, PLOT_CHANNELS),
-            supervisor.stream.subscribe(self._on_message, [
-                ch.BODY_STATE, ch.EVENTS, *(ch.fin_state(i) for i in range(N_FINS)),
-                *(ch.fin_plan(i) for i in range(N_FINS)),
-            ]),
+            *self.view.subscribe(supervisor.stream),
+            supervisor.stream.subscribe(self._on_message, [ch.EVENTS, *(ch.fin_plan(i) for i in range(N_FINS))]),
         ]
         supervisor.add_listener(self.request_refresh)
         server.on_client_connect(self._on_connect)
@@ -177,16 +190,17 @@ class ConsoleApp:
             host = f"[{host}]"
         return f"http://{host}:{self.port}"
 
+    @property
+    def tick_errors(self) -> int:
+        return self.view.tick_errors
+
     def start(self) -> None:
-        if self._thread is not None:
+        if self.view.running:
             raise RuntimeError("the console app is already running")
-        self._thread = threading.Thread(target=self._run, name="console-ui", daemon=True)
-        self._thread.start()
+        self.view.start()
 
     def stop(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=5.0)
+        self.view.stop()
         for unsub in self._unsubs:
             unsub()
         self.guard.stop()
@@ -199,17 +213,13 @@ class ConsoleApp:
     # ------------------------------------------------------------------ stream side
     def _on_message(self, channel: str, msg: Any) -> None:
         tp = type(msg)
-        if tp is BodyState:
-            self._body = msg
-            self._body_wall = time.time()
-            self._body_seq += 1
-        elif tp is FinState:
-            self._fins[msg.fin] = msg
-        elif tp is FinPlan:
+        if tp is FinPlan:
             self._plans[msg.fin] = msg
-        elif tp is Event:
-            if msg.code not in _QUIET_EVENTS:
-                self._events.append(msg)
+        elif tp is Event and msg.code not in _QUIET_EVENTS:
+            self._events.append(msg)
+
+    def recent_events(self) -> list[Event]:
+        return list(self._events)
 
     def _corridor(self) -> tuple[float, float]:
         m = self.sup.tuning()["mpc"]
@@ -217,9 +227,10 @@ class ConsoleApp:
 
     # ------------------------------------------------------------------ pages
     def _on_connect(self, client: viser.ClientHandle) -> None:
-        """A page has shown (its first camera report): build its controls and its review."""
+        """A page has shown (its first camera report): its script, theme, controls and review."""
         cid = client.client_id
         containers = {"tuning": self.tab_tuning, "session": self.tab_session, "safety": self.tab_safety}
+        client._websock_connection.queue_message(vm.RunJavascriptMessage(source=page_script.INSTALL))
         with self._build_lock:
             if cid not in self.guard.clients:
                 return  # gone while waiting
@@ -227,10 +238,24 @@ class ConsoleApp:
             review = self.build_review(client.gui, client.scene, cid)
             with self._lock:
                 self.panels[cid] = panel
+                self.pages[cid] = _Page(client, self.cfg.dark)
             self.reviews[cid] = review
         log.info("page connected: client %s (%s)", cid, self.guard.address(cid) or "?")
+        self._place_camera(client)
+        threading.Thread(target=self._remembered_theme, args=(cid,), name="page-theme", daemon=True).start()
         if self.initial_session is not None:
             review.act(lambda: review.open(self.initial_session))
+
+    def _place_camera(self, client: Any) -> None:
+        """A new page looks at the robot from behind, to port and a little above it."""
+        p = self.view.scene.world_position() if self.view.scene is not None else None
+        x, y, z = p if p is not None else (0.0, 0.0, -max(self.cfg.sim_depth, 0.3))
+        try:
+            with client.atomic():
+                client.camera.look_at = (x, y, z)
+                client.camera.position = (x - 1.0, y + 0.8, z + 0.35)
+        except Exception:
+            log.debug("placing the camera of client %s failed", client.client_id, exc_info=True)
 
     def _allow(self, cid: int) -> Callable[..., None]:
         def allow(handle: Any, pilot_only: bool, max_len: int = 200) -> None:
@@ -248,7 +273,7 @@ class ConsoleApp:
             trail_points=cfg.trail_points, trail_spacing=cfg.trail_spacing,
             container=self.tab_review, plot_container=self.review_plot_tab,
             allow=self._allow(cid) if cid is not None else None,
-            replay_slot=self.replay_slot, may_replay=lambda: self._may_replay(cid),
+            replay_slot=self.replay_slot, may_replay=lambda: self._may_replay(cid), plot_height=PLOT_HEIGHT,
         )
 
     def _may_replay(self, cid: int | None) -> None:
@@ -262,6 +287,7 @@ class ConsoleApp:
         with self._build_lock:
             with self._lock:
                 self.panels.pop(cid, None)
+                self.pages.pop(cid, None)
             review = self.reviews.pop(cid, None)
         if review is not None:
             review.stop(page_gone=True)
@@ -281,65 +307,98 @@ class ConsoleApp:
         self.history = float(seconds)
         self.request_refresh()
 
-    # ------------------------------------------------------------------ UI thread
-    def _run(self) -> None:
-        cfg = self.cfg
-        period = 1.0 / cfg.scene_rate
-        plot_period = 1.0 / cfg.plot_rate
-        next_tick = time.perf_counter()
-        next_plot = next_slow = next_tick
-        last_seq = -1
-        while not self._stop.is_set():
-            now = time.perf_counter()
-            try:
-                seq = self._body_seq
-                if seq != last_seq:
-                    last_seq = seq
-                    self._tick_scene()
-                if now >= next_plot:
-                    next_plot += plot_period
-                    if self.feeder.sample():
-                        self.plots.refresh(self.history)
-                if now >= next_slow:
-                    next_slow = now + _SLOW_PERIOD
-                    self._tick_slow()
-                if self._dirty.is_set():
-                    self._dirty.clear()
-                    self._refresh_panels()
-            except Exception:
-                self.tick_errors += 1
-                log.exception("UI update failed")
-            next_tick += period
-            delay = next_tick - time.perf_counter()
-            if delay < -1.0:  # far behind (machine suspended): do not try to catch up
-                next_tick = time.perf_counter()
-                next_plot = next_slow = next_tick
-            self._stop.wait(max(delay, 0.0))
+    # ------------------------------------------------------------------ theme
+    @staticmethod
+    def _theme(gui: Any, dark: bool) -> None:
+        gui.configure_theme(control_width="medium", show_share_button=False, dark_mode=dark)
 
-    def _tick_scene(self) -> None:
-        body = self._body
-        with self.server.atomic():
-            self.scene.update_pose(body, list(self._fins))
-            if self.probe is not None and body is not None:
-                self.probe.content = (f'<span id="ucat-probe" data-seq="{self._body_seq}" '
-                                      f'data-wall="{self._body_wall * 1e3:.1f}" data-t="{body.t:.3f}"></span>')
+    def _remembered_theme(self, cid: int) -> None:
+        """The theme this page's browser chose before (it asks the page; no answer: the default)."""
+        page = self.pages.get(cid)
+        if page is None:
+            return
+        try:
+            stored = page.client.local_storage.get_item(page_script.THEME_KEY, timeout=5.0)
+        except Exception:
+            stored = None
+        if stored in ("dark", "light"):
+            page.dark = stored == "dark"
+        self._theme(page.client.gui, page.dark)
+
+    def toggle_theme(self, cid: int) -> None:
+        """Dark <-> light for one page, remembered by its browser."""
+        page = self.pages.get(cid)
+        if page is None:
+            return
+        page.dark = not page.dark
+        page.client.local_storage.set_item(page_script.THEME_KEY, "dark" if page.dark else "light")
+        self._theme(page.client.gui, page.dark)
+
+    # ------------------------------------------------------------------ UI thread (the live view's)
+    def _probe(self) -> None:
+        body, probe = self.view.body, self.probe
+        if probe is not None and body is not None:
+            probe.content = (f'<span id="ucat-probe" data-seq="{self.view.body_seq}" '
+                             f'data-wall="{self.view.body_wall * 1e3:.1f}" data-t="{body.t:.3f}"></span>')
+
+    def _tick(self) -> None:
+        if self._dirty.is_set():
+            self._dirty.clear()
+            self._refresh_panels()
+        now = time.monotonic()
+        if now >= self._next_follow:
+            self._next_follow = now + FOLLOW_PERIOD
+            self._follow()
 
     def _tick_slow(self) -> None:
         sup = self.sup
-        body = self._body
-        self.scene.update_label(body)
-        self.scene.update_trail()
         h = sup.health()
-        _set(self.status, panels.status_markdown(
-            armed=h.armed, mode=h.mode, pilot=sup.access.pilot, t=h.t,
-            depth=body.depth if body else None, velocity=body.velocity[0] if body else None,
-            failsafes=h.failsafes, recording=h.recording, fault=h.fault,
-        ))
         _set(self.introspection, panels.introspection_markdown(list(self._plans), h.late_plans,
                                                               h.plan_overruns, h.mode))
         _set(self.failsafes, panels.failsafe_markdown(sup.safety.states(), h.t))
         _set(self.journal, panels.journal_markdown(sup.journal(12)))
-        _set(self.events, panels.events_markdown(list(self._events)))
+        with self._lock:
+            pages = list(self.pages.items())
+            ps = dict(self.panels)
+        for cid, page in pages:
+            panel = ps.get(cid)
+            if panel is None:
+                continue
+            try:
+                panel.show_events()
+                uuids = {"disarm_uuid": panel.disarm._impl.uuid, "drive_uuid": panel.drive_input._impl.uuid,
+                         "theme_uuid": panel.theme_button._impl.uuid}
+                state = bar_state(sup, cid, dark=page.dark, uuids=uuids, loading=self.loading)
+                page.client._websock_connection.queue_message(
+                    vm.RunJavascriptMessage(source=page_script.update_source(state)))
+            except Exception:
+                log.debug("the status bar of client %s was not sent", cid, exc_info=True)
+
+    def _follow(self) -> None:
+        """Move each following page's camera with the robot it shows (live or reviewed)."""
+        with self._lock:
+            pages = list(self.pages.items())
+            ps = dict(self.panels)
+        live = set(self.guard.clients)
+        for cid, page in pages:
+            panel, review = ps.get(cid), self.reviews.get(cid)
+            if panel is None or not panel.follow.value or cid not in live:
+                page.followed = None
+                continue
+            scene = review.view.scene if review is not None and review.player is not None else self.view.scene
+            p = scene.world_position() if scene is not None else None
+            if p is None:
+                continue
+            if page.followed is not None and math.dist(p, page.followed) > 1e-4:
+                cam = page.client.camera  # keep the camera's offset from the robot, look at it
+                offset = tuple(float(a - b) for a, b in zip(cam.position, page.followed))
+                try:
+                    with page.client.atomic():
+                        cam.look_at = p
+                        cam.position = tuple(a + b for a, b in zip(p, offset))
+                except Exception:
+                    log.debug("moving the camera of client %s failed", cid, exc_info=True)
+            page.followed = p
 
     def _refresh_panels(self) -> None:
         live = set(self.guard.clients)

@@ -103,6 +103,7 @@ class InputRule:
     pilot_only: bool
     check: Callable[[Any], str | None]  # None when the value is acceptable, else why not
     name: str
+    handle: Any = None  # the input, to show its value again after a refused one
 
 
 def value_check(handle: Any, max_len: int) -> Callable[[Any], str | None]:
@@ -293,7 +294,7 @@ class PageGuard:
         ``pilot_only``); text up to ``max_len`` characters."""
         max_len = min(int(max_len), MAX_TEXT)
         rule = InputRule(client, pilot_only, value_check(handle, max_len),
-                         name or getattr(handle, "label", "") or type(handle).__name__)
+                         name or getattr(handle, "label", "") or type(handle).__name__, handle)
         with self._lock:
             self._inputs[handle._impl.uuid] = rule
 
@@ -353,7 +354,14 @@ class PageGuard:
             if rule.pilot_only and not self.is_pilot(page.client):
                 return f"{rule.name}: only the pilot's page may use it"
             bad = rule.check(updates["value"])
-            return None if bad is None else f"{rule.name}: {bad}"
+            if bad is None:
+                return None
+            if rule.handle is not None:  # the page shows what it typed: show the value in force
+                try:
+                    rule.handle._queue_update("value", rule.handle.value)
+                except Exception:
+                    log.debug("restoring %s failed", rule.name, exc_info=True)
+            return f"{rule.name}: {bad}"
         if tp is vm.CommandTriggerMessage:
             rule = self._commands.get(message.uuid) if isinstance(message.uuid, str) else None
             if rule is None or rule.client != page.client:

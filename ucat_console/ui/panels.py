@@ -25,13 +25,14 @@ import time
 from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING, Any, Callable
 
-from ucat_console.backend.access import AccessDenied, actor_name
+from ucat_console.backend.access import MAX_NAME, AccessDenied, actor_name
 from ucat_console.backend.loop.config import MODES
 from ucat_console.backend.safety import FailsafeState
 from ucat_console.backend.supervisor import SETPOINTS, TUNABLE, CommandRefused, JournalEntry
 from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.messages import FinPlan
 from ucat_console.typedconf import describe_range
+from ucat_console.ui.driving import KEY_MAP, KEYS, Driving
 
 if TYPE_CHECKING:
     from ucat_console.ui.app import ConsoleApp
@@ -40,6 +41,12 @@ log = logging.getLogger(__name__)
 
 MODE_LABELS = {"mpc": "MPC", "mpc_sync": "MPC, rear fins synchronised", "baseline": "baseline inverse model"}
 REFUSALS = (AccessDenied, CommandRefused, ValueError)
+#: the events list's filters: name -> the levels shown
+SEVERITY_FILTERS = {
+    "all": frozenset({"debug", "info", "warning", "error", "fatal"}),
+    "warnings and errors": frozenset({"warning", "error", "fatal"}),
+    "errors": frozenset({"error", "fatal"}),
+}
 
 
 def esc(text: object) -> str:
@@ -128,7 +135,8 @@ class ControlPanel:
                 self.handover = gui.add_button("Hand over", color="orange", visible=False)
                 self.decline = gui.add_button("Decline", visible=False)
                 self.arm = gui.add_button("Arm motors", color="green")
-                self.disarm = gui.add_button("DISARM", color="red")
+                # the status bar's DISARM button (and Esc) press this one; it is not drawn here
+                self.disarm = gui.add_button("DISARM", color="red", visible=False)
                 self.mode = gui.add_dropdown("Mode", MODES, initial_value=sup.mode,
                                              hint=", ".join(f"{k}: {v}" for k, v in MODE_LABELS.items()))
                 sp = sup.setpoints
@@ -142,6 +150,12 @@ class ControlPanel:
                 }
                 self.apply_sp = gui.add_button("Apply setpoints")
                 self.message = gui.add_markdown("")
+                self.key_map = gui.add_markdown(KEY_MAP)
+                self.name = gui.add_text("Your name", "", hint="shown to the other pages when you fly "
+                                         f"(at most {MAX_NAME} characters)")
+                # the page's script sends the gamepad's sticks and the theme switch here
+                self.drive_input = gui.add_text("gamepad", "", visible=False)
+                self.theme_button = gui.add_button("theme", visible=False)
 
         self.params: dict[str, Any] = {}
         with within(c.get("tuning")):
@@ -167,6 +181,11 @@ class ControlPanel:
                 self.rec_stop = gui.add_button("Stop recording")
                 self.note = gui.add_text("Marker note", "")
                 self.marker = gui.add_button("Add marker", hint="or press M")
+                self.follow = gui.add_checkbox("Follow the robot", True, hint="the 3-D view keeps the robot in view")
+            with gui.add_folder("Events", order=30.0):
+                self.severity = gui.add_dropdown("Show", tuple(SEVERITY_FILTERS), initial_value="warnings and errors",
+                                                 hint="which events the list shows")
+                self.events = gui.add_markdown("No events yet.")
         self.reset_drives = self.zero_depth = None
         if sup.has_drives:  # the robot's devices (or the rig's emulated ones)
             with within(c.get("safety")):
@@ -185,6 +204,13 @@ class ControlPanel:
         # the one-key marker (the note typed above goes with it)
         self.marker_key = gui.add_command("Add marker", description="a marker with the note typed in 'Marker note'",
                                           hotkey="M")
+        # manual driving and DISARM from the keyboard
+        self.driving = Driving(sup, self.cid, lambda fn: self.act(fn))
+        self.key_commands = {key: gui.add_command(f"Drive: {label}", description=f"key {key}", hotkey=key)
+                             for key, (_, _, label) in KEYS.items()}
+        self.stop_key = gui.add_command("Drive: stop", description="velocity and yaw rate to 0", hotkey="space")
+        self.disarm_key = gui.add_command("DISARM", description="motors off now", hotkey="escape")
+        self._events_shown = ""
 
         self._wire()
         self._register_inputs()
@@ -204,9 +230,13 @@ class ControlPanel:
         for h in pilot:
             allow(h, True)
         allow(self.note, True, 500)
+        allow(self.drive_input, True, 200)
+        for h in (self.name, self.follow, self.severity, self.theme_button):
+            allow(h, False, MAX_NAME if h is self.name else 200)
         guard = getattr(self.app, "guard", None)
         if guard is not None and self.client is not None:
-            guard.allow_command(self.marker_key, self.cid, pilot_only=True, name="Add marker (M)")
+            for cmd in (self.marker_key, self.stop_key, self.disarm_key, *self.key_commands.values()):
+                guard.allow_command(cmd, self.cid, pilot_only=True)
 
     # ------------------------------------------------------------------ callbacks
     def _wire(self) -> None:
@@ -227,6 +257,14 @@ class ControlPanel:
         self.rec_stop.on_click(self._guard(lambda: sup.stop_recording(cid)))
         self.marker.on_click(self._guard(self._add_marker))
         self.marker_key.on_trigger(self._guard(self._add_marker))
+        for key, cmd in self.key_commands.items():
+            cmd.on_trigger(self._guard(lambda k=key: self.driving.step(k)))
+        self.stop_key.on_trigger(self._guard(self.driving.stop))
+        self.disarm_key.on_trigger(self._guard(lambda: sup.disarm(cid, "operator")))
+        self.drive_input.on_update(self._guard(lambda: self.driving.gamepad(self.drive_input.value)))
+        self.name.on_update(self._guard(lambda: sup.access.set_name(cid, self.name.value)))
+        self.severity.on_update(lambda _: self.show_events(force=True))
+        self.theme_button.on_click(self._guard(self._toggle_theme))
         if self.reset_drives is not None:
             self.reset_drives.on_click(self._guard(self._reset_drive_faults))
             self.zero_depth.on_click(self._guard(self._zero_depth))
@@ -286,13 +324,24 @@ class ControlPanel:
     def _request_arm(self) -> None:
         nonce = self.sup.request_arm(self.cid)
         gui = self.gui
+        sp = self.sup.setpoints
         modal = gui.add_modal("Arm the motors?")
         with modal:
-            gui.add_markdown("The fins will move. Check that the water around the robot is clear.")
+            gui.add_markdown("The fins will move. Check that the water around the robot is clear.\n\n"
+                             f"The robot goes at once to **velocity {sp.velocity:g} m/s, depth {sp.depth:g} m, "
+                             f"yaw rate {sp.yaw_rate:g} rad/s**.")
             confirm = gui.add_button("Confirm arm", color="green")
+            zero = gui.add_button("Zero velocity and yaw rate, then arm",
+                                  visible=bool(sp.velocity or sp.yaw_rate))
             cancel = gui.add_button("Cancel")
-        self._allow(confirm, True)
-        self._allow(cancel, True)
+        for h in (confirm, zero, cancel):
+            self._allow(h, True)
+
+        def on_zero(event: Any) -> None:
+            if self.act(lambda: self.sup.set_setpoints(self.cid, velocity=0.0, yaw_rate=0.0)):
+                on_confirm(event)
+
+        zero.on_click(on_zero)
 
         def on_confirm(event: Any) -> None:
             modal.close()
@@ -373,39 +422,63 @@ class ControlPanel:
             if pending is not None:
                 role += f" Client {pending} asks for control."
         else:
-            role = f"Read-only (client {cid}). Pilot: {'client ' + str(p) if p is not None else 'none'}."
+            who = "none" if p is None else (f"{esc(sup.access.name(p))} (client {p})" if sup.access.name(p)
+                                            else f"client {p}")
+            role = f"Read-only (client {cid}). Pilot: {who}."
             if pending == cid:
                 role += " Waiting for the pilot's hand-over."
-        self.role.content = role
-        for h in (self.token, self.take):
-            h.disabled = pilot
-        self.release.disabled = not pilot
-        self.handover.visible = pilot and pending is not None
-        self.decline.visible = pilot and pending is not None
+        _set(self.role, role)
+        self._set_prop(self.token, "visible", not pilot)
+        self._set_prop(self.take, "visible", not pilot)
+        self._set_prop(self.release, "visible", pilot)
+        self._set_prop(self.handover, "visible", pilot and pending is not None)
+        self._set_prop(self.decline, "visible", pilot and pending is not None)
         if pending is not None:
-            self.handover.label = f"Hand over to client {pending}"
-        self.arm.disabled = not pilot or sup.armed
-        self.disarm.disabled = not pilot
-        self.mode.disabled = not pilot
+            self._set_prop(self.handover, "label", f"Hand over to client {pending}")
+        armed, recording = sup.armed, sup.recorder.recording
+        self._set_prop(self.arm, "disabled", not pilot or armed)
+        self._set_prop(self.disarm, "disabled", not pilot or not armed)
+        self._set_prop(self.mode, "disabled", not pilot)
         self._push("mode", self.mode, sup.mode, force)
         sp = sup.setpoints
         for k in SETPOINTS:
-            self.sp_inputs[k].disabled = not pilot
-            self._push(f"sp.{k}", self.sp_inputs[k], float(getattr(sp, k)), force)
-        self.apply_sp.disabled = not pilot
+            self._set_prop(self.sp_inputs[k], "disabled", not pilot)
+            self._push(f"sp.{k}", self.sp_inputs[k], round(float(getattr(sp, k)), 4), force)
         for key, handle in self.params.items():
-            handle.disabled = not pilot
+            self._set_prop(handle, "disabled", not pilot)
             self._push(key, handle, float(sup.param_value(key)), force)
-        for h in (self.apply_tuning, self.revert, self.save, self.history, self.rec_start,
-                  self.rec_stop, self.note, self.marker, self.marker_key):
-            h.disabled = not pilot
+        for h in (self.apply_sp, self.apply_tuning, self.revert, self.save, self.history, self.note, self.marker,
+                  self.marker_key, self.stop_key, self.disarm_key, *self.key_commands.values()):
+            self._set_prop(h, "disabled", not pilot)
+        self._set_prop(self.rec_start, "disabled", not pilot or recording)
+        self._set_prop(self.rec_stop, "disabled", not pilot or not recording)
         self._push("history", self.history, float(self.app.history), force)
-        rec = sup.recorder
-        self.rec_status.content = (f"Recording **{esc(rec.session_id)}**" if rec.recording else "Not recording")
+        _set(self.rec_status, f"Recording **{esc(sup.recorder.session_id)}**" if recording else "Not recording")
         if self.reset_drives is not None:
-            self.reset_drives.disabled = self.zero_depth.disabled = not pilot or sup.armed
+            self._set_prop(self.reset_drives, "disabled", not pilot or armed)
+            self._set_prop(self.zero_depth, "disabled", not pilot or armed)
         if self.faults is not None:
             self.faults.enable(pilot)
+
+    @staticmethod
+    def _set_prop(handle: Any, name: str, value: Any) -> None:
+        """Set a property only when it changes (a refresh sends nothing for what stayed)."""
+        if getattr(handle, name) != value:
+            setattr(handle, name, value)
+
+    def show_events(self, force: bool = False) -> None:
+        """The events list, filtered by this page's choice of severity."""
+        levels = SEVERITY_FILTERS.get(self.severity.value, SEVERITY_FILTERS["all"])
+        text = events_markdown([e for e in self.app.recent_events() if e.level in levels][-_EVENTS_SHOWN:])
+        if force or text != self._events_shown:
+            self._events_shown = text
+            self.events.content = text
+
+    def _toggle_theme(self) -> None:
+        self.app.toggle_theme(self.cid)
+
+
+_EVENTS_SHOWN = 12
 
 
 class RigFaultInputs:
@@ -461,6 +534,11 @@ class RigFaultInputs:
 
 
 _UNSET = object()
+
+
+def _set(handle: Any, content: str) -> None:
+    if handle.content != content:
+        handle.content = content
 
 
 def within(container: Any) -> Any:

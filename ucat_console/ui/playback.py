@@ -4,10 +4,10 @@ other MPC weights.
 Playback is the other end of the telemetry stream: a
 :class:`~ucat_console.backend.sessions.player.Player` publishes a session onto a
 :class:`~ucat_console.telemetry.TelemetryStream` of its own, and the review view is the
-live view's code on that stream -- a :class:`~ucat_console.ui.scene.RobotScene` (its nodes
-under ``/review``, beside the live vehicle) and :class:`~ucat_console.ui.plots.LivePlots`
-with their :class:`~ucat_console.ui.plots.PlotFeeder` (in a "Review" tab of the plot
-panel). The live view keeps its own stream, scene and plots and never stops.
+live view's code on that stream, a :class:`~ucat_console.ui.view.StreamView` (the robot
+under ``/review``, drawn in place of the live one: while a page reviews, the live robot is
+hidden for that page; its plots in the "Review plots" tab of the plot panel). The live
+view keeps its own stream, scene and plots and never stops.
 
 Rows of the review plots are taken on the recording's clock (one row per
 ``1 / plot_rate`` s of stream time, holding every message up to that time,
@@ -47,6 +47,8 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
+from viser._messages import GuiSliderMark
+
 from ucat_console.backend.sessions import files, index, repair
 from ucat_console.backend.sessions.markers import MAX_NOTE_BYTES, Marker, check_note
 from ucat_console.backend.sessions.player import MAX_SPEED, MIN_SPEED, Player, check_speed
@@ -54,96 +56,24 @@ from ucat_console.backend.sessions.reader import SessionParts, part_paths
 from ucat_console.backend.sessions.replay import ReplayResult, parse_weights, recorded_config, replay_config
 from ucat_console.backend.sessions.replay_job import ReplayJob, ReplaySlot
 from ucat_console.robot.geometry import Geometry
-from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event
-from ucat_console.telemetry.messages import BodyState, FinState
 from ucat_console.telemetry.stream import TelemetryStream
 from ucat_console.ui.panels import esc, within
 from ucat_console.ui.plots import CHANNELS as PLOT_CHANNELS
-from ucat_console.ui.plots import LivePlots, PlotFeeder
-from ucat_console.ui.scene import RobotScene
+from ucat_console.ui.scene import LIVE_ROOT, REVIEW_ROOT
+from ucat_console.ui.view import StreamSampler, StreamView, from_page
+
+__all__ = ["PlaybackPanel", "StreamSampler"]
 
 log = logging.getLogger(__name__)
 
-N_FINS = ch.N_FINS
-SCENE_ROOT = "/review"
-#: where the reviewed vehicle is drawn (viser world, m): beside the live one
-SCENE_OFFSET = (0.0, 1.2, 0.0)
 DEFAULT_WEIGHTS = "lam_st=2.0"
 _SLOW_PERIOD = 0.25  # s, timeline, status, label, trail
 #: a page adds at most one review marker this often (s)
 MARKER_INTERVAL = 0.5
+#: the most event ticks the timeline shows
+MAX_TIMELINE_MARKS = 200
 _now = time.monotonic
-_TICK = 1.0 / 30.0  # s, UI thread period
-_GLOBAL_SCENE_CALLS = frozenset({
-    "set_up_direction", "configure_default_lights", "configure_environment_map", "add_light_hemisphere",
-})
-
-
-class PrefixedScene:
-    """A viser scene API whose ``add_*`` node names are put under ``root``; the calls that set
-    up the whole scene (up direction, lights, environment) are left to the live view."""
-
-    def __init__(self, scene: Any, root: str) -> None:
-        self._scene = scene
-        self.root = root.rstrip("/")
-
-    def __getattr__(self, name: str) -> Any:
-        if name in _GLOBAL_SCENE_CALLS:
-            return lambda *args, **kwargs: None
-        attr = getattr(self._scene, name)
-        if not name.startswith("add_"):
-            return attr
-
-        def add(node: str, *args: Any, **kwargs: Any) -> Any:
-            return attr(self.root + "/" + node.lstrip("/"), *args, **kwargs)
-
-        return add
-
-
-class StreamSampler:
-    """A stream subscriber feeding a :class:`PlotFeeder` with rows on the stream's clock.
-
-    When a message newer than every message seen arrives and at least ``period`` s of stream
-    time have passed since the last row, the feeder's latest values (every message up to
-    then) become a row, before the new message is applied. The rows depend on the messages
-    and their times only, not on when or how fast they are published.
-    """
-
-    def __init__(self, feeder: PlotFeeder, period: float) -> None:
-        if not period > 0.0:
-            raise ValueError(f"period: {period!r} must be a positive number of seconds")
-        self.feeder = feeder
-        self.period = float(period)
-        self._lock = threading.Lock()
-        self._t_max = -math.inf
-        self._t_row = -math.inf
-        self.rows = 0
-
-    def on_message(self, channel: str, msg: Any) -> None:
-        with self._lock:
-            t = msg.t
-            if t > self._t_max:
-                if math.isfinite(self._t_max) and self._t_max >= self._t_row + self.period:
-                    if self.feeder.sample():
-                        self._t_row = self._t_max
-                        self.rows += 1
-                self._t_max = t
-            self.feeder.on_message(channel, msg)
-
-    def flush(self) -> bool:
-        """A row of everything seen so far (the position reached); False when nothing new."""
-        with self._lock:
-            if self.feeder.sample():
-                self._t_row = self._t_max
-                self.rows += 1
-                return True
-            return False
-
-    def reset(self) -> None:
-        with self._lock:
-            self.feeder.reset()
-            self._t_max = self._t_row = -math.inf
 
 
 def _size(n: int) -> str:
@@ -228,6 +158,7 @@ class PlaybackPanel:
         allow: Callable[..., None] | None = None,
         replay_slot: ReplaySlot | None = None,
         may_replay: Callable[[], None] = lambda: None,
+        plot_height: int = 170,
     ) -> None:
         self.directory = files.sessions_dir(directory)
         self.gui = gui
@@ -245,28 +176,19 @@ class PlaybackPanel:
         self.player: Player | None = None
         self.last_replay: ReplayResult | None = None
         self._lock = threading.RLock()
-        self._body: BodyState | None = None
-        self._body_seq = 0
-        self._fins: list[FinState | None] = [None] * N_FINS
         self._speed = 1.0  # the last speed accepted
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-        self.tick_errors = 0
-
-        self._scene_api = scene
-        self.root: Any = None
-        self._new_scene: Callable[[], RobotScene] = lambda: RobotScene(
-            PrefixedScene(scene, SCENE_ROOT), geometry, trail_points=trail_points, trail_spacing=trail_spacing)
-        self.scene: RobotScene | None = None  # built when a session is opened
-        self.feeder = PlotFeeder(int(math.ceil(max_history * plot_rate)) + 2)
-        self.sampler = StreamSampler(self.feeder, 1.0 / self.plot_rate)
+        self._hide_live: Any = None  # this page's invisible shadow of the live robot
         with within(plot_container):
-            self.plots = LivePlots(gui, self.feeder, rate=plot_rate, max_points=max_plot_points,
-                                   corridor=corridor)
-        self._unsubs = [
-            self.stream.subscribe(self.sampler.on_message, PLOT_CHANNELS),
-            self.stream.subscribe(self._on_message, [ch.BODY_STATE, *(ch.fin_state(i) for i in range(N_FINS))]),
-        ]
+            self.view = StreamView(
+                scene, gui, geometry, plot_rate=plot_rate, scene_rate=scene_rate, max_plot_points=max_plot_points,
+                history=history, max_history=max_history, corridor=corridor, trail_points=trail_points,
+                trail_spacing=trail_spacing, root=REVIEW_ROOT, sample_rows=False, on_slow=self._tick_slow,
+                plot_height=plot_height, name="review",
+            )
+        self.sampler = self.view.sampler
+        self.feeder = self.view.feeder
+        self.plots = self.view.plots
+        self._unsubs = self.view.subscribe(self.stream)
 
         with within(container):
             with gui.add_folder("Sessions", order=1.0):
@@ -336,14 +258,7 @@ class PlaybackPanel:
         self.cancel_button.on_click(self._page(self.cancel_counterfactual))
 
     def _page(self, fn: Callable[[], Any]) -> Callable[[Any], None]:
-        """A viser callback: page events only (values set from code are ignored)."""
-
-        def cb(event: Any) -> None:
-            if getattr(event, "client_id", None) is None and getattr(event, "client", None) is None:
-                return
-            self.act(fn)
-
-        return cb
+        return from_page(fn, self.act)
 
     def act(self, fn: Callable[[], Any]) -> bool:
         """Run one command; a refusal (ValueError) is shown and the inputs show the state."""
@@ -423,16 +338,16 @@ class PlaybackPanel:
         self.close_session(quiet=True)
         with self._lock:
             self.reader, self.player = reader, player
-            self._body, self._fins = None, [None] * N_FINS
-            if self.root is None:
-                self.root = self._scene_api.add_frame(SCENE_ROOT, show_axes=False, position=SCENE_OFFSET)
-            self.scene = self._new_scene()  # the same node names: a fresh trail
+            self.view.reset()
+            self.view.show()  # a fresh robot and trail
+            if self._hide_live is None:  # the reviewed robot in place of the live one
+                self._hide_live = self.view.scene_api.add_frame(LIVE_ROOT, show_axes=False, visible=False)
         self.timeline.min = 0.0
         self.timeline.max = max(player.end - player.start, 0.01)
-        self.root.visible = True
+        self._mark_events(reader)
         self._jumped(player.seek(player.start))
         self._set_enabled()
-        self._start_ui()
+        self.view.start()
         n = len(reader.parts)
         what = "" if name == reader.session_id else f" (session {reader.session_id})"
         self.show(f"opened {name}{what}: {n} part{'s' if n > 1 else ''}, {reader.duration:.1f} s, "
@@ -443,15 +358,15 @@ class PlaybackPanel:
         with self._lock:
             player, reader = self.player, self.reader
             self.player = self.reader = None
-        self._stop_ui()
-        if self.job is not None:
-            self._start_ui()  # the replay's progress still shows
+        self.view.stop()
         if player is not None:
             player.close()
         if reader is not None:
             reader.close()
-        if self.root is not None:
-            self.root.visible = False
+        self._show_live()
+        self.view.hide()
+        if self.job is not None:
+            self.view.start()  # the replay's progress still shows
         self._set_enabled()
         if player is not None and not quiet:
             self.show("session closed")
@@ -465,18 +380,15 @@ class PlaybackPanel:
         with self._lock:
             player, reader = self.player, self.reader
             self.player = self.reader = None
-        self._stop_ui()
+        self.view.stop()
         if player is not None:
             player.close()
         if reader is not None:
             reader.close()
         if not page_gone:
             self._set_enabled()
-            if self.root is not None:
-                try:
-                    self.root.remove()
-                except Exception:
-                    log.debug("removing the review scene failed", exc_info=True)
+            self._show_live()
+            self.view.hide()
         for unsub in self._unsubs:
             unsub()
         self._unsubs = []
@@ -597,7 +509,7 @@ class PlaybackPanel:
         self.replay_progress.visible = self.cancel_button.visible = True
         self.replay_table.content = "Counterfactual replay running ..."
         self.show("counterfactual replay started")
-        self._start_ui()
+        self.view.start()
         return job
 
     def cancel_counterfactual(self) -> None:
@@ -645,61 +557,35 @@ class PlaybackPanel:
         self.replay_table.content = (f"Counterfactual replay running: {pr.done} of {pr.total} plans"
                                      if pr.total else "Counterfactual replay starting ...")
 
-    # ------------------------------------------------------------------ stream side and UI thread
-    def _on_message(self, channel: str, msg: Any) -> None:
-        if type(msg) is BodyState:
-            self._body = msg
-            self._body_seq += 1
-        elif type(msg) is FinState:
-            self._fins[msg.fin] = msg
-
-    def _start_ui(self) -> None:
-        if self._thread is not None:
-            return
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._run, name="playback-ui", daemon=True)
-        self._thread.start()
-
-    def _stop_ui(self) -> None:
-        self._stop.set()
-        t, self._thread = self._thread, None
-        if t is not None and t is not threading.current_thread():
-            t.join(timeout=5.0)
-
-    def _run(self) -> None:
-        next_plot = next_slow = next_scene = time.perf_counter()
-        last_seq = -1
-        last_rows = -1
-        while not self._stop.is_set():
-            now = time.perf_counter()
+    # ------------------------------------------------------------------ the view's slow work
+    def _show_live(self) -> None:
+        """This page sees the live robot again."""
+        h, self._hide_live = self._hide_live, None
+        if h is not None:
             try:
-                if self._body_seq != last_seq and now >= next_scene:
-                    last_seq = self._body_seq
-                    next_scene = now + 1.0 / self.scene_rate
-                    self.tick_scene()
-                if now >= next_plot:
-                    next_plot = now + 1.0 / self.plot_rate
-                    if self.sampler.rows != last_rows:
-                        last_rows = self.sampler.rows
-                        self.plots.refresh(float(self.history()))
-                if now >= next_slow:
-                    next_slow = now + _SLOW_PERIOD
-                    self.tick_slow()
+                h.remove()
             except Exception:
-                self.tick_errors += 1
-                log.exception("review update failed")
-            self._stop.wait(_TICK)
+                log.debug("showing the live robot again failed", exc_info=True)
 
-    def tick_scene(self) -> None:
-        if self.scene is not None:
-            self.scene.update_pose(self._body, list(self._fins))
+    def _mark_events(self, reader: Any) -> None:
+        """Ticks on the timeline at the session's warnings and errors (and markers)."""
+        start = reader.start
+        times = sorted({round(e.t - start, 2) for e in reader.events() if e.level in ("warning", "error", "fatal")})
+        if len(times) > MAX_TIMELINE_MARKS:  # keep the slider readable
+            step = len(times) / MAX_TIMELINE_MARKS
+            times = [times[int(i * step)] for i in range(MAX_TIMELINE_MARKS)]
+        try:  # viser's slider takes marks at creation; its props accept new ones
+            self.timeline._marks = tuple(GuiSliderMark(value=float(t), label=None) for t in times) or None
+        except Exception:
+            log.debug("timeline marks not shown", exc_info=True)
 
-    def tick_slow(self) -> None:
-        if self.scene is not None:
-            self.scene.update_label(self._body)
-            self.scene.update_trail()
+    def _tick_slow(self) -> None:
         self._sync_inputs()
         self._tick_job()
+
+    @property
+    def tick_errors(self) -> int:
+        return self.view.tick_errors
 
     def _sync_inputs(self) -> None:
         """Timeline, speed, loop and status show the player's state (set from code)."""

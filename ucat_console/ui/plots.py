@@ -182,7 +182,8 @@ def _series(label: str, stroke: str, width: float = 1.5, dash: tuple[float, ...]
 
 
 _X = {"label": "t (s)"}
-_X_AXIS = {"label": "t (s)", "size": 36}
+_X_AXIS = {"label": "t (s)", "size": 30, "labelSize": 14, "labelGap": 0}
+_NO_LEGEND = {"show": False}
 _SCALES = {"x": {"time": False}}
 _CURSOR = {"sync": {"key": "ucat"}}
 _PIN = {"label": "axis span", "stroke": "rgba(0,0,0,0)", "width": 0.5, "points": {"show": False}}
@@ -227,20 +228,24 @@ class LivePlots:
             (_X, _series("St high", "#2ca02c", 1.0), _series("St low", "#2ca02c", 1.0),
              *(_series(f"St fin {i}", FIN_COLOURS[i]) for i in fins), above),
             bands=({"series": (1, 2), "fill": "rgba(44, 160, 44, 0.28)"},),
-            title="Strouhal number per fin (corridor filled; none while disarmed or still)",
-            axes=(_X_AXIS, {"label": "St"}), cursor=_CURSOR, height=height, scales=st_scales,
+            title="St per fin 0-3 (red, blue, green, orange); corridor green; none while disarmed or still",
+            axes=(_X_AXIS, {"label": "St", "size": 40}), cursor=_CURSOR, height=height, scales=st_scales,
+            legend=_NO_LEGEND,
         )
         self.depth = gui.add_uplot(
             (empty,) * 5, (_X, _series("depth", "#1f77b4"), _series("target", "#555", 1.0, (6, 3)), _PIN, _PIN),
-            title="Depth (m)", axes=(_X_AXIS, {"label": "m"}), **common,
+            title="Depth (m): measured, target dashed", axes=(_X_AXIS, {"label": "m", "size": 40}),
+            legend=_NO_LEGEND, **common,
         )
         self.velocity = gui.add_uplot(
             (empty,) * 5, (_X, _series("u", "#d62728"), _series("target", "#555", 1.0, (6, 3)), _PIN, _PIN),
-            title="Forward velocity (m/s)", axes=(_X_AXIS, {"label": "m/s"}), **common,
+            title="Forward velocity (m/s): measured, target dashed", axes=(_X_AXIS, {"label": "m/s", "size": 40}),
+            legend=_NO_LEGEND, **common,
         )
         self.yaw_rate = gui.add_uplot(
             (empty,) * 5, (_X, _series("r", "#9467bd"), _series("target", "#555", 1.0, (6, 3)), _PIN, _PIN),
-            title="Yaw rate (rad/s)", axes=(_X_AXIS, {"label": "rad/s"}), **common,
+            title="Yaw rate (rad/s): measured, target dashed", axes=(_X_AXIS, {"label": "rad/s", "size": 40}),
+            legend=_NO_LEGEND, **common,
         )
         epm = _series("energy per metre (J/m, right)", "#17becf", 2.0)
         epm["scale"] = "epm"
@@ -249,8 +254,10 @@ class LivePlots:
             (_X, *(_series(f"fin {i}", FIN_COLOURS[i], 1.0) for i in fins),
              _series("total", "#888", 2.0), _series("running mean", "#8c564b", 1.5, (6, 3)), epm),
             title="Power (W) and energy per metre (J/m)",
-            axes=(_X_AXIS, {"label": "W"}, {"scale": "epm", "side": 1, "label": "J/m", "grid": {"show": False}}),
+            axes=(_X_AXIS, {"label": "W", "size": 40},
+                  {"scale": "epm", "side": 1, "label": "J/m", "grid": {"show": False}, "size": 40}),
             scales={"x": {"time": False}, "epm": {"auto": True}}, cursor=_CURSOR, height=height,
+            legend={"show": True, "live": False},
         )
         self.energy = self.power  # one chart: power and energy per metre
 

@@ -82,10 +82,10 @@ def add_pool(scene: Any, *, floor_depth: float, shadows: bool = False, environme
         # daylight from above, water-blue from below
         scene.add_light_hemisphere("/light", sky_color=(255, 255, 255), ground_color=(90, 130, 170),
                                    intensity=1.6)
-    scene.add_grid("/surface", width=40.0, height=40.0, plane="xy", cell_size=1.0, section_size=5.0,
-                   cell_color=WATER_COLOUR, section_color=WATER_COLOUR, cell_thickness=0.6,
-                   section_thickness=0.8, plane_color=WATER_COLOUR, plane_opacity=0.06,
-                   infinite_grid=True, fade_distance=18.0, shadow_opacity=0.0)
+    scene.add_grid("/surface", width=40.0, height=40.0, plane="xy", cell_size=2.0, section_size=10.0,
+                   cell_color=WATER_COLOUR, section_color=WATER_COLOUR, cell_thickness=0.4,
+                   section_thickness=0.6, plane_color=WATER_COLOUR, plane_opacity=0.05,
+                   infinite_grid=True, fade_distance=10.0, shadow_opacity=0.0)
     scene.add_grid("/floor", width=40.0, height=40.0, plane="xy", cell_size=0.5, section_size=2.0,
                    cell_color=FLOOR_COLOUR, section_color=(90, 95, 100), position=(0.0, 0.0, -float(floor_depth)),
                    infinite_grid=True, fade_distance=25.0, shadow_opacity=0.2)

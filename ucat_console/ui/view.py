@@ -113,7 +113,7 @@ class StreamView:
                  corridor: Callable[[], tuple[float, float]], trail_points: int, trail_spacing: float,
                  root: str = LIVE_ROOT, sample_rows: bool = True, atomic: Callable[[], Any] | None = None,
                  on_slow: Callable[[], None] | None = None, on_tick: Callable[[], None] | None = None,
-                 name: str = "view") -> None:
+                 on_pose: Callable[[], None] | None = None, plot_height: int = 170, name: str = "view") -> None:
         self.scene_api = scene
         self.geometry = geometry
         self.plot_rate = float(plot_rate)
@@ -124,6 +124,7 @@ class StreamView:
         self._atomic = atomic or contextlib.nullcontext
         self.on_slow = on_slow
         self.on_tick = on_tick
+        self.on_pose = on_pose
         self.name = name
         self.sample_rows = sample_rows
         self.scene: RobotScene | None = None
@@ -133,7 +134,8 @@ class StreamView:
         self.fins: list[FinState | None] = [None] * N_FINS
         self.feeder = PlotFeeder(int(math.ceil(max_history * plot_rate)) + 2)
         self.sampler = StreamSampler(self.feeder, 1.0 / self.plot_rate)
-        self.plots = LivePlots(gui, self.feeder, rate=plot_rate, max_points=max_plot_points, corridor=corridor)
+        self.plots = LivePlots(gui, self.feeder, rate=plot_rate, max_points=max_plot_points, corridor=corridor,
+                               height=plot_height)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.tick_errors = 0
@@ -181,6 +183,8 @@ class StreamView:
         if s is not None:
             with self._atomic():
                 s.update_pose(self.body, list(self.fins))
+                if self.on_pose is not None:
+                    self.on_pose()
 
     def refresh_plots(self) -> None:
         self.plots.refresh(float(self.history()))

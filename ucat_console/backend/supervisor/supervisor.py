@@ -504,7 +504,7 @@ class Supervisor:
                 if rule.action == "hold":
                     body = self._last_body
                     depth = body.depth if body is not None and math.isfinite(body.depth) else self._setpoints.depth
-                    depth = min(max(depth, 0.0), self.cfg.loop.max_depth)
+                    depth = round(min(max(depth, 0.0), self.cfg.loop.max_depth), 3)  # to the mm
                 else:
                     depth = 0.0
                 self._apply_setpoints(BodySetpoints(0.0, depth, 0.0), f"failsafe {tr.name}")
@@ -534,8 +534,10 @@ class Supervisor:
         self._notify()
 
     def set_setpoints(self, who: Actor, velocity: object = None, depth: object = None,
-                      yaw_rate: object = None) -> None:
-        """New setpoints (unchanged where None), inside the loop's envelope."""
+                      yaw_rate: object = None, quiet: bool = False) -> None:
+        """New setpoints (unchanged where None), inside the loop's envelope; ``quiet``: not
+        journalled or announced one by one (a gamepad sends several a second; the loop
+        still records every setpoint on its Setpoints channel)."""
         self.access.require_pilot(who, "setpoints")
         given = {"velocity": velocity, "depth": depth, "yaw_rate": yaw_rate}
         values = {k: number(k, v, False) for k, v in given.items() if v is not None}
@@ -552,9 +554,9 @@ class Supervisor:
             ))
         except ValueError as e:
             raise CommandRefused(str(e)) from None
-        self._apply_setpoints(sp, actor_name(who))
+        self._apply_setpoints(sp, actor_name(who), quiet)
 
-    def _apply_setpoints(self, sp: BodySetpoints, who: str) -> None:
+    def _apply_setpoints(self, sp: BodySetpoints, who: str, quiet: bool = False) -> None:
         with self._lock:
             old = self._setpoints
             self.loop.set_setpoints(velocity=sp.velocity, depth=sp.depth, yaw_rate=sp.yaw_rate)
@@ -564,8 +566,9 @@ class Supervisor:
             a, b = getattr(old, k), getattr(sp, k)
             if a != b:
                 changes[k] = [a, b]
-                self.journal_log.add(who, f"setpoint.{k}", a, b)
-        if changes:
+                if not quiet:
+                    self.journal_log.add(who, f"setpoint.{k}", a, b)
+        if changes and not quiet:
             self._publish_event("operator", "setpoints", f"{who}: " + ", ".join(
                 f"{k} {fmt(v[0])} -> {fmt(v[1])}" for k, v in changes.items()), "info",
                 {"who": who, "changes": changes})

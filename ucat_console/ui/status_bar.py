@@ -1,0 +1,107 @@
+"""What the fixed status bar shows: armed state, mode, pilot, recording, failsafes, a light for
+each sensor, the drives and the planner, and the battery.
+
+:func:`bar_state` builds it from the supervisor for one page (the pilot reads "you"); the
+page's script (:mod:`ucat_console.ui.page_script`) draws it. Lights are ``ok`` (green),
+``warn`` (amber), ``bad`` (red) or ``off`` (grey: not on this robot), each with the reason
+shown on hover.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from ucat_console.backend.safety import SENSORS
+
+#: the lights, in the bar's order: sensor or part -> label
+LIGHTS = {"imu": "IMU", "dvl": "DVL", "depth": "Depth", "drives": "Drives", "planner": "Planner"}
+MODE_LABELS = {"mpc": "MPC", "mpc_sync": "MPC sync", "baseline": "baseline"}
+ACTIONS = {"hold": "stops and holds its depth", "surface": "stops and rises to the surface",
+           "disarm": "turns its motors off", "warn": "goes on (warn only)"}
+
+
+@dataclass(frozen=True)
+class Light:
+    name: str
+    state: str  # ok, warn, bad, off
+    why: str
+
+    def as_dict(self) -> dict[str, str]:
+        return {"name": self.name, "state": self.state, "why": self.why}
+
+
+def lights(sup: Any, loading: str = "") -> list[Light]:
+    """Each light's state and reason from the supervisor's failsafes and readings."""
+    safety = sup.safety
+    now = sup.loop.time
+    active = {s.name: s for s in safety.states() if s.active}
+    out: list[Light] = []
+    for sensor in SENSORS:
+        rule = safety.rule(sensor)
+        quiet, invalid = safety.sensor_silence(sensor, now)
+        if sensor in active:
+            out.append(Light(LIGHTS[sensor], "bad", f"failsafe {sensor}: {active[sensor].cause}"))
+        elif quiet > 0.5 * rule.timeout or invalid:
+            what = f"{invalid} invalid readings" if invalid else "no reading"
+            out.append(Light(LIGHTS[sensor], "warn", f"{what} for {quiet:.1f} s (failsafe after {rule.timeout:g} s)"))
+        else:
+            out.append(Light(LIGHTS[sensor], "ok", f"valid reading {quiet:.2f} s ago"))
+    if not sup.has_drives:
+        out.append(Light(LIGHTS["drives"], "off", "simulated fins: no motor drives"))
+    elif "motor" in active:
+        out.append(Light(LIGHTS["drives"], "bad", active["motor"].cause))
+    else:
+        faults = safety.motor_faults()
+        out.append(Light(LIGHTS["drives"], "warn" if faults else "ok",
+                         ("reported: " + ", ".join(faults)) if faults else
+                         ("powered" if sup.armed else "off until armed")))
+    late = safety.recent_late_plans()
+    if loading:
+        out.append(Light(LIGHTS["planner"], "warn", loading))
+    elif "planner_late" in active:
+        out.append(Light(LIGHTS["planner"], "bad", active["planner_late"].cause))
+    elif late:
+        out.append(Light(LIGHTS["planner"], "warn",
+                         f"{late} late plans in the last {safety.rule('planner_late').timeout:g} s"))
+    else:
+        overruns = sup.loop.plan_overruns
+        out.append(Light(LIGHTS["planner"], "ok", "plans in time" + (
+            f" ({overruns} plans since the start were ready after their hand-over deadline; "
+            "a fin then starts its stroke a little later)" if overruns else "")))
+    return out
+
+
+def link_policy(sup: Any) -> str:
+    """What the robot does when the pilot's page is lost, as the banner says it."""
+    rule = sup.cfg.failsafe.pilot_gone
+    return (f"If this page was the pilot's, the robot {ACTIONS.get(rule.action, rule.action)} "
+            f"{rule.timeout:g} s after the page's last answer (failsafe pilot_gone: {rule.action}). "
+            "Reload the page when the link is back; the token is needed again.")
+
+
+def pilot_label(sup: Any, client: int | None) -> str:
+    p = sup.access.pilot
+    if p is None:
+        return "none"
+    if client is not None and p == client:
+        return "you"
+    name = sup.access.name(p)
+    return f"{name} (client {p})" if name else f"client {p}"
+
+
+def bar_state(sup: Any, client: int | None, *, dark: bool, uuids: dict[str, str], loading: str = "") -> dict[str, Any]:
+    """The bar's state for page ``client`` (JSON-ready)."""
+    return {
+        "armed": bool(sup.armed),
+        "mode": MODE_LABELS.get(sup.mode, sup.mode),
+        "pilot": pilot_label(sup, client),
+        "you_pilot": client is not None and sup.access.is_pilot(client),
+        "recording": sup.recording.session_id,
+        "failsafes": list(sup.safety.active()) + ([f"loop stopped: {sup.fault}"] if sup.fault else []),
+        "lights": [x.as_dict() for x in lights(sup, loading)],
+        "battery": "no battery sensor",
+        "link_policy": link_policy(sup),
+        "dark": bool(dark),
+        **uuids,
+    }
