@@ -75,6 +75,40 @@ def _foxglove_server(port: int, cfg: Any, sup: Any) -> Any:
     return fox
 
 
+#: how often the page's address and the pilot token are printed again (s)
+TOKEN_REPEAT = 60.0
+
+
+def _prepare_with_page(cfg: Any) -> Any:
+    """Serve the loading page at once and compile in a child process; the configuration with
+    the port the page got (the console takes it over)."""
+    from ucat_console.backend import prepare
+    from ucat_console.ui.loading import LoadingPage
+
+    page = LoadingPage(cfg, cfg.console.host, cfg.console.port)
+    url_host = cfg.console.host if cfg.console.host not in ("0.0.0.0", "::") else "127.0.0.1"
+    print(f"U-CAT console on http://{url_host}:{page.port}  (starting: the page shows the progress)", flush=True)
+    t0 = time.monotonic()
+
+    def progress(p: Any) -> None:
+        page.set_progress(p)
+        print(f"  {p.text()} ({time.monotonic() - t0:.0f} s)", flush=True)
+
+    prep = prepare.start(cfg, progress)
+    try:
+        prep.wait()
+    except BaseException:
+        prep.cancel()
+        page.stop()
+        raise
+    port = page.port
+    page.stop()
+    if prep.error:
+        raise RuntimeError(f"preparing the compiled code failed: {prep.error}")
+    print(f"ready in {time.monotonic() - t0:.1f} s", flush=True)
+    return cfg.replace(console=cfg.console.replace(port=port))
+
+
 def run(args: argparse.Namespace) -> int:
     from ucat_console.backend.access import LOCAL
     from ucat_console.backend.loop.clock import SimulatedClock
@@ -99,8 +133,16 @@ def run(args: argparse.Namespace) -> int:
         raise KeyboardInterrupt
 
     previous = signal.signal(signal.SIGTERM, on_term)
-    print("loading the planners (the first start on a machine compiles them, about a minute)",
-          flush=True)
+    if args.headless:
+        print("loading the planners (the first start on a machine compiles them, about a minute)",
+              flush=True)
+    else:
+        try:
+            cfg = _prepare_with_page(cfg)
+        except KeyboardInterrupt:
+            print("\nstopped while starting", file=sys.stderr)
+            signal.signal(signal.SIGTERM, previous)
+            return 1
     sup = Supervisor(cfg, clock=SimulatedClock() if args.fast else None)
     app = None
     fox = None
@@ -135,21 +177,26 @@ def run(args: argparse.Namespace) -> int:
             print(f"headless run: mode {sup.mode}, setpoints {sup.setpoints}, motors armed")
         period = cfg.console.health_period
         next_health = time.monotonic() + period
+        next_token = time.monotonic() + TOKEN_REPEAT
         while sup.running:
             if args.duration is not None and sup.loop.time >= args.duration:
                 break
             time.sleep(0.1 if not args.fast else 0.02)
-            if time.monotonic() >= next_health:
+            now = time.monotonic()
+            if now >= next_health:
                 next_health += period
                 print(sup.health().line(), flush=True)
+            if app is not None and now >= next_token:  # the token stays findable on the terminal
+                next_token += TOKEN_REPEAT
+                print(f"U-CAT console on {app.url}  pilot token: {sup.access.token}", flush=True)
         if sup.fault:
             print(f"the closed loop stopped: {sup.fault}", file=sys.stderr)
     except KeyboardInterrupt:
         print("\nstopping: disarming and closing files", file=sys.stderr)
     finally:
         paths = sup.recorder.paths
-        h = sup.health()
         sup.stop()
+        h = sup.health()  # after stopping: disarmed
         if fox is not None:
             fox.stop()
         if app is not None:

@@ -217,7 +217,9 @@ class LivePlots:
         self.max_points = int(max_points)
         self.corridor = corridor
         self.updates = 0
-        empty = np.zeros(0)
+        # never an empty chart: viser's page derives the x range from the data, and an empty
+        # x array gives it a NaN range that it then keeps for good (no lines, no ticks)
+        empty = np.array([0.0, 1.0])
         fins = range(N_FINS)
         common = dict(scales=_SCALES, cursor=_CURSOR, height=height)
         st_scales = {"x": {"time": False}, "y": {"range": [0.0, 1.0], "auto": False}}
@@ -266,8 +268,11 @@ class LivePlots:
         return self.feeder.buffer.last(int(math.ceil(window * self.rate)) + 1, self.max_points)
 
     def refresh(self, window: float) -> None:
-        """Send the last ``window`` seconds to every page."""
+        """Send the last ``window`` seconds to every page (nothing until there are two rows:
+        a chart needs an x range)."""
         r = self.rows(window)
+        if r.shape[0] < 2 or not r[-1, 0] > r[0, 0]:
+            return
         for j in range(1, r.shape[1]):
             r[:, j] = filled(r[:, j])
         t = r[:, 0]

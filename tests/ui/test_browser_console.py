@@ -1,0 +1,206 @@
+"""The operator's page at the pool side, in headless Chromium: the fixed status bar and DISARM
+on every tab at 1280x800 and 1920x1080, the link-loss banner, keyboard driving (and a
+viewer's keys doing nothing), the theme remembered across reloads, review plots drawn
+whichever plot tab was chosen first. Screenshots go to ``test-artifacts/``."""
+
+from __future__ import annotations
+
+import re
+import time
+from pathlib import Path
+from typing import Iterator
+
+import pytest
+from support import wait_for
+
+pytest.importorskip("playwright.sync_api")
+from playwright.sync_api import Browser, Page, expect, sync_playwright  # noqa: E402
+
+from ucat_console.backend.access import LOCAL  # noqa: E402
+from ucat_console.backend.supervisor import Supervisor  # noqa: E402
+from ucat_console.bench.ui import CHROMIUM, CHROMIUM_ARGS  # noqa: E402
+from ucat_console.config import AccessConfig, AppConfig, ConsoleConfig  # noqa: E402
+from ucat_console.ui.app import ConsoleApp  # noqa: E402
+
+pytestmark = [pytest.mark.browser, pytest.mark.slow]
+TOKEN = "pool-side-browser-token"
+ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
+TABS = ("Tuning", "MPC", "Safety", "Session", "Review")
+expect.set_options(timeout=15_000)
+
+
+class Console:
+    def __init__(self, tmp: Path, port: int = 0) -> None:
+        cfg = AppConfig(access=AccessConfig(token=TOKEN),
+                        console=ConsoleConfig(port=port, record_on_arm=False, scene_rate=15.0, plot_rate=5.0))
+        self.sup = Supervisor(cfg, sessions_dir=tmp)
+        self.app = ConsoleApp(self.sup)
+        self.app.start()
+        self.sup.start()
+
+    def stop(self) -> None:
+        self.sup.stop()
+        self.app.stop()
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[Browser]:
+    if not Path(CHROMIUM).exists():
+        pytest.skip(f"no Chromium at {CHROMIUM}")
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        yield b
+        b.close()
+
+
+@pytest.fixture
+def console(tmp_path: Path) -> Iterator[Console]:
+    c = Console(tmp_path)
+    yield c
+    c.stop()
+
+
+def open_page(browser: Browser, console: Console, width: int = 1280, height: int = 800, context=None) -> Page:
+    page = context.new_page() if context is not None else browser.new_page(viewport={"width": width, "height": height})
+    page.goto(console.app.url)
+    page.wait_for_function("() => !document.body.innerText.includes('Connecting...')", timeout=30_000)
+    expect(page.locator("#ucat-armed")).to_be_visible()
+    return page
+
+
+def gui_input(page: Page, label: str):
+    label_el = page.locator("label", has_text=re.compile("^" + re.escape(label))).first
+    return label_el.locator("xpath=ancestor::div[contains(@class, 'Flex-root')][1]").locator(
+        "input:not([type='hidden'])").first
+
+
+def take_control(page: Page) -> None:
+    gui_input(page, "Pilot token").fill(TOKEN)
+    page.get_by_role("button", name="Take control").click()
+    expect(page.get_by_text("You are the pilot")).to_be_visible()
+
+
+def inside_viewport(page: Page, selector: str) -> bool:
+    box = page.locator(selector).bounding_box()
+    vp = page.viewport_size
+    return (box is not None and box["width"] > 0 and box["x"] >= 0 and box["y"] >= 0
+            and box["x"] + box["width"] <= vp["width"] and box["y"] + box["height"] <= vp["height"])
+
+
+@pytest.mark.parametrize("size", [(1280, 800), (1920, 1080)])
+def test_status_bar_armed_state_and_disarm_are_on_screen_on_every_tab(browser: Browser, console: Console,
+                                                                      size: tuple[int, int]) -> None:
+    page = open_page(browser, console, *size)
+    take_control(page)
+    console.sup.arm(LOCAL)
+    expect(page.locator("#ucat-armed")).to_have_text("ARMED")
+    expect(page.locator("#ucat-disarm")).to_be_enabled()
+    close = page.get_by_role("alert").get_by_role("button")  # the software-WebGL notice
+    if close.count():
+        close.first.click()
+    ARTIFACTS.mkdir(exist_ok=True)
+    for tab in TABS:
+        page.get_by_role("tab", name=tab, exact=True).click()
+        page.wait_for_timeout(300)
+        for sel in ("#ucat-bar", "#ucat-armed", "#ucat-disarm"):
+            assert inside_viewport(page, sel), (tab, sel)
+        # mode and setpoints without scrolling
+        for label in ("Mode", "Velocity m/s", "Depth m", "Yaw rate"):
+            box = gui_input(page, label).bounding_box()
+            assert box is not None and box["y"] + box["height"] <= size[1], (tab, label)
+        page.screenshot(path=str(ARTIFACTS / f"console-{size[0]}x{size[1]}-{tab.lower()}.png"))
+    lights = page.locator("#ucat-lights .light-dot")
+    assert {lights.nth(i).get_attribute("data-name") for i in range(lights.count())} == \
+        {"IMU", "DVL", "Depth", "Drives", "Planner"}
+    page.locator("#ucat-disarm").click()  # one click
+    wait_for(lambda: not console.sup.armed, what="the bar's DISARM")
+    expect(page.locator("#ucat-disarm")).to_be_disabled()
+    page.close()
+
+
+def test_keys_drive_the_pilot_and_do_nothing_for_a_viewer(browser: Browser, console: Console) -> None:
+    sup = console.sup
+    pilot = open_page(browser, console)
+    viewer = open_page(browser, console)
+    take_control(pilot)
+    pilot.locator("#ucat-bar").click()  # focus on the page, not in a text box
+    for _ in range(3):
+        pilot.keyboard.press("w")
+    wait_for(lambda: sup.setpoints.velocity == pytest.approx(0.15), what="three velocity steps")
+    pilot.keyboard.press("e")
+    wait_for(lambda: sup.setpoints.yaw_rate == pytest.approx(0.05), what="a yaw-rate step")
+    viewer.locator("#ucat-bar").click()
+    viewer.keyboard.press("w")
+    viewer.keyboard.press(" ")
+    pilot.keyboard.press("r")  # something the pilot does after the viewer's keys
+    wait_for(lambda: sup.setpoints.depth == pytest.approx(0.4), what="a depth step")
+    assert sup.setpoints.velocity == pytest.approx(0.15)  # the viewer's keys did nothing
+    pilot.keyboard.press(" ")  # stop
+    wait_for(lambda: sup.setpoints.velocity == 0.0 and sup.setpoints.yaw_rate == 0.0, what="the stop key")
+    sup.arm(LOCAL)
+    expect(pilot.locator("#ucat-armed")).to_have_text("ARMED")
+    pilot.keyboard.press("Escape")
+    wait_for(lambda: not sup.armed, what="Esc disarming")
+
+
+def test_the_theme_switch_is_remembered_across_reloads(browser: Browser, console: Console) -> None:
+    ctx = browser.new_context(viewport={"width": 1280, "height": 800})
+    page = open_page(browser, console, context=ctx)
+    expect(page.locator("#ucat-bar")).not_to_have_class(re.compile("light"))  # dark by default
+    page.locator("#ucat-theme").click()
+    expect(page.locator("#ucat-bar")).to_have_class(re.compile("light"))
+    page.reload()
+    page.wait_for_function("() => !document.body.innerText.includes('Connecting...')", timeout=30_000)
+    expect(page.locator("#ucat-bar")).to_have_class(re.compile("light"))
+    page.screenshot(path=str(ARTIFACTS / "console-light.png"))
+    ctx.close()
+
+
+def test_the_link_loss_banner_shows_when_the_console_stops_and_goes_when_it_returns(
+        browser: Browser, tmp_path: Path) -> None:
+    c = Console(tmp_path)
+    page = open_page(browser, c)
+    port = c.app.port
+    banner = page.locator("#ucat-banner")
+    expect(banner).to_be_hidden()
+    c.stop()
+    expect(banner).to_be_visible()
+    expect(banner).to_contain_text("LINK LOST")
+    expect(banner).to_contain_text("pilot_gone")  # what the robot does meanwhile
+    page.screenshot(path=str(ARTIFACTS / "console-link-lost.png"))
+    back = Console(tmp_path, port=port)
+    try:
+        expect(banner).to_be_hidden(timeout=30_000)
+    finally:
+        back.stop()
+
+
+@pytest.mark.parametrize("first", ["Live plots", "Review plots"])
+def test_review_plots_draw_whichever_plot_tab_was_chosen_first(browser: Browser, console: Console,
+                                                               first: str) -> None:
+    sup = console.sup
+    sup.arm(LOCAL)
+    sup.set_setpoints(LOCAL, velocity=0.2)  # the velocity line leaves its dashed target
+    sup.start_recording(LOCAL, "plots")
+    time.sleep(4.0)
+    [path] = sup.stop_recording(LOCAL)
+    sup.disarm(LOCAL)
+    page = open_page(browser, console)
+    page.get_by_role("tab", name=first).click()
+    review = next(iter(console.app.reviews.values()))
+    review.refresh_sessions()
+    review.open(path.name.rsplit("_", 1)[0])
+    page.get_by_role("tab", name="Review plots").click()
+    review.play()
+    # uPlot draws on canvases: the review depth chart's canvas gets coloured pixels
+    drawn = """() => [...document.querySelectorAll('.uplot')].filter(u => u.getBoundingClientRect().width > 0)
+      .some(u => { const c = u.querySelector('canvas'); if (!c || !c.width) return false;
+        const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+        for (let i = 0; i < d.length; i += 4)
+          if (d[i] > 110 && d[i] > 2.2 * d[i + 1] && d[i] > 2.2 * d[i + 2]) return true;
+        return false; })"""
+    try:
+        page.wait_for_function(drawn, timeout=20_000)  # a red (velocity) line in a shown chart
+    finally:
+        page.screenshot(path=str(ARTIFACTS / f"console-review-plots-{first.split()[0].lower()}.png"))
+    page.close()

@@ -1,0 +1,82 @@
+"""The page served while the console prepares its compiled code (the first start on a machine).
+
+``ucat-console run`` serves this page on the console's address at once, with a progress
+bar and the same status bar as the console (disarmed, nothing to arm), while
+:mod:`ucat_console.backend.prepare` compiles in a child process. When the code is ready the
+page's server stops and the console starts on the same port; open pages reconnect by
+themselves (viser's page retries every second) and get the console. The page passes
+through the same :class:`~ucat_console.ui.guard.PageGuard` as the console's, with no
+inputs at all: nothing a page sends changes anything.
+"""
+
+from __future__ import annotations
+
+import threading
+from typing import Any
+
+import viser._messages as vm
+
+from ucat_console.backend.prepare import Progress
+from ucat_console.config import AppConfig
+from ucat_console.ui import page_script
+from ucat_console.ui.guard import PageGuard
+
+
+class LoadingPage:
+    def __init__(self, cfg: AppConfig, host: str, port: int) -> None:
+        c = cfg.console
+        self.guard = PageGuard(is_pilot=lambda cid: False, pilot_timeout=lambda: cfg.failsafe.pilot_gone.timeout,
+                               page_timeout=c.page_timeout, heartbeat_period=c.heartbeat_period,
+                               allowed_origins=c.allowed_origins)
+        self.server = self.guard.serve(host=host, port=port, verbose=False, label="U-CAT console")
+        self.server.gui.configure_theme(control_width="medium", show_share_button=False, dark_mode=c.dark)
+        self.server.request_share_url = lambda *a, **k: None  # type: ignore[method-assign]
+        gui = self.server.gui
+        self.text = gui.add_markdown("**Starting the console.** Preparing the compiled planners ...")
+        self.bar = gui.add_progress_bar(0.0, animated=True)
+        gui.add_markdown("The first start on a machine compiles the planners (about a minute); later "
+                         "starts take seconds. This page turns into the console when it is ready; "
+                         "arming is possible from then on.")
+        self._progress = Progress(0, 1, "the planners")
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self.server.on_client_connect(self._on_connect)
+        self._thread = threading.Thread(target=self._run, name="loading-page", daemon=True)
+        self._thread.start()
+
+    @property
+    def port(self) -> int:
+        return self.server.get_port()
+
+    def _on_connect(self, client: Any) -> None:
+        client._websock_connection.queue_message(vm.RunJavascriptMessage(source=page_script.INSTALL))
+
+    def set_progress(self, p: Progress) -> None:
+        with self._lock:
+            self._progress = p
+        self.text.content = f"**Starting the console.** {p.text().capitalize()} ..."
+        self.bar.value = 100.0 * p.done / max(p.total, 1)
+
+    def _state(self) -> dict[str, Any]:
+        p = self._progress
+        why = p.text()
+        return {"armed": False, "mode": "-", "pilot": "none (the console is starting)", "you_pilot": False,
+                "recording": "", "failsafes": [], "battery": "",
+                "lights": [{"name": "Planner", "state": "warn", "why": why}],
+                "link_policy": "The console is starting; this page reconnects by itself.",
+                "dark": True, "disarm_uuid": "", "drive_uuid": "", "theme_uuid": ""}
+
+    def _run(self) -> None:
+        while not self._stop.wait(0.25):
+            src = page_script.update_source(self._state())
+            for client in self.server.get_clients().values():
+                try:
+                    client._websock_connection.queue_message(vm.RunJavascriptMessage(source=src))
+                except Exception:
+                    pass
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=2.0)
+        self.guard.stop()
+        self.server.stop()
