@@ -595,20 +595,3 @@ def events_markdown(events: list[Event]) -> str:
         mark = "**" if e.level in ("error", "fatal") else ""
         out.append(f"- {e.t:7.1f} s {mark}{esc(e.source)} {esc(e.code)}{mark}: {esc(e.message)}")
     return "\n".join(out)
-
-
-def status_markdown(*, armed: bool, mode: str, pilot: int | None, t: float, depth: float | None,
-                    velocity: float | None, failsafes: tuple[str, ...], recording: str, fault: str) -> str:
-    parts = ["**ARMED**" if armed else "disarmed", f"mode **{esc(mode)}**",
-             f"pilot: {'client ' + str(pilot) if pilot is not None else 'none'}", f"t {t:.1f} s"]
-    if depth is not None and math.isfinite(depth):
-        parts.append(f"depth {depth:.2f} m")
-    if velocity is not None and math.isfinite(velocity):
-        parts.append(f"u {velocity:+.2f} m/s")
-    parts.append(f"recording {esc(recording)}" if recording else "not recording")
-    text = " · ".join(parts)
-    if failsafes:
-        text += "\n\n**FAILSAFE: " + ", ".join(esc(f) for f in failsafes) + "**"
-    if fault:
-        text += f"\n\n**LOOP STOPPED: {esc(fault)}**"
-    return text
