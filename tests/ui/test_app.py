@@ -206,3 +206,74 @@ def test_the_pilot_injects_rig_faults_from_the_page_and_bad_entries_are_refused(
     finally:
         a.stop()
         sup.stop()
+
+
+def test_the_arm_dialog_shows_the_setpoints_and_offers_to_zero_them(app: ConsoleApp) -> None:
+    pilot = page(app, 3, pilot=True)
+    app.sup.set_setpoints(3, velocity=0.2, yaw_rate=0.1)
+    made = []
+    real_button = pilot.gui.add_button
+    pilot.gui.add_button = lambda label, **kw: made.append((label, real_button(label, **kw))) or made[-1][1]
+    real_md = pilot.gui.add_markdown
+    texts = []
+    pilot.gui.add_markdown = lambda text, **kw: texts.append(text) or real_md(text, **kw)
+    assert pilot.act(pilot._request_arm)
+    assert any("velocity 0.2 m/s" in t and "yaw rate 0.1 rad/s" in t for t in texts)
+    zero = dict(made)["Zero velocity and yaw rate, then arm"]
+    assert zero.visible
+    app.sup.set_setpoints(3, velocity=0.0, yaw_rate=0.0)
+    assert pilot.act(pilot._request_arm)  # nothing to zero: the offer is not shown
+    assert not [b for label, b in made if label.startswith("Zero")][-1].visible
+
+
+def test_the_gamepad_drives_within_the_envelope_and_stops(app: ConsoleApp) -> None:
+    from ucat_console.ui.driving import Driving
+
+    sup = app.sup
+    page(app, 3, pilot=True)
+    d = Driving(sup, 3, lambda fn: fn())
+    lc = sup.cfg.loop
+    d.gamepad('{"v": 1.0, "r": -0.5, "dz": 0}')
+    assert sup.setpoints.velocity == pytest.approx(lc.max_velocity)
+    assert sup.setpoints.yaw_rate == pytest.approx(-0.5 * lc.max_yaw_rate)
+    assert sup.journal()[-1].key == "gamepad"  # driving started (the setpoints are not journalled one by one)
+    d.gamepad('{"v": 0, "r": 0, "dz": 0, "stop": 1}')
+    assert sup.setpoints.velocity == 0.0 and sup.setpoints.yaw_rate == 0.0
+    for bad in ('{"v": 2, "r": 0, "dz": 0}', '{"v": "x", "r": 0, "dz": 0}', "not json", '{"v": 0}'):
+        with pytest.raises(ValueError, match="gamepad"):
+            d.gamepad(bad)
+    viewer = Driving(sup, 4, lambda fn: fn())
+    sup.client_connected(4)
+    with pytest.raises(Exception, match="read-only"):
+        viewer.gamepad('{"v": 1, "r": 0, "dz": 0}')
+    assert sup.setpoints.velocity == 0.0
+
+
+def test_keys_step_the_setpoints_and_clamp_to_the_envelope(app: ConsoleApp) -> None:
+    from ucat_console.ui.driving import Driving
+
+    sup = app.sup
+    page(app, 3, pilot=True)
+    d = Driving(sup, 3, lambda fn: fn())
+    for _ in range(100):
+        d.step("W")
+    assert sup.setpoints.velocity == pytest.approx(sup.cfg.loop.max_velocity)
+    depth = sup.setpoints.depth
+    d.step("F")
+    assert sup.setpoints.depth == pytest.approx(depth + sup.cfg.console.drive_depth_step)
+    d.stop()
+    assert sup.setpoints.velocity == 0.0 and sup.setpoints.yaw_rate == 0.0
+
+
+def test_the_events_list_shows_the_chosen_severities(app: ConsoleApp) -> None:
+    from ucat_console.telemetry.events import Event
+
+    pilot = page(app, 3, pilot=True)
+    for level in ("info", "warning", "error"):
+        app._on_message(ch.EVENTS, Event(1.0, "test", f"{level}_code", f"a {level}", level))
+    pilot.severity.value = "errors"
+    pilot.show_events(force=True)
+    assert "error\\_code" in pilot.events.content and "warning\\_code" not in pilot.events.content
+    pilot.severity.value = "all"
+    pilot.show_events(force=True)
+    assert "info\\_code" in pilot.events.content

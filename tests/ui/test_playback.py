@@ -528,3 +528,11 @@ def test_review_markers_are_limited_in_size_and_rate(panel: PlaybackPanel, run: 
     assert panel.act(lambda: panel.add_marker("second"))
     notes = [m.note for m in panel.player.markers.markers]
     assert "first" in notes and "second" in notes and "too soon" not in notes
+
+
+def test_the_timeline_has_a_tick_at_each_warning_and_error(panel: PlaybackPanel, run: Run) -> None:
+    panel.open(run.path.name)
+    with SessionReader(run.path, run.directory) as r:
+        serious = sorted({round(e.t - r.start, 2) for e in r.events() if e.level in ("warning", "error", "fatal")})
+    assert serious  # arming is a warning
+    assert [m.value for m in panel.timeline._marks] == pytest.approx(serious)

@@ -71,6 +71,12 @@ DEFAULT_WEIGHTS = "lam_st=2.0"
 _SLOW_PERIOD = 0.25  # s, timeline, status, label, trail
 #: a page adds at most one review marker this often (s)
 MARKER_INTERVAL = 0.5
+#: what Previous / Next event stop at: name -> event levels (None: every event)
+JUMP_LEVELS: dict[str, frozenset[str] | None] = {
+    "all events": None,
+    "warnings and errors": frozenset({"warning", "error", "fatal"}),
+    "errors": frozenset({"error", "fatal"}),
+}
 #: the most event ticks the timeline shows
 MAX_TIMELINE_MARKS = 200
 _now = time.monotonic
@@ -211,6 +217,8 @@ class PlaybackPanel:
                 self.loop = gui.add_checkbox("Loop", False)
                 self.step_back = gui.add_button("Frame back")
                 self.step_fwd = gui.add_button("Frame forward")
+                self.jump_levels = gui.add_dropdown("Jump to", tuple(JUMP_LEVELS), initial_value="all events",
+                                                    hint="which events Previous / Next event stop at (markers always)")
                 self.prev_button = gui.add_button("Previous event")
                 self.next_button = gui.add_button("Next event")
                 self.note = gui.add_text("Review note", "", hint=f"the note of a review marker, at most {MAX_NOTE_BYTES} bytes")
@@ -230,7 +238,8 @@ class PlaybackPanel:
         if allow is not None:
             for h in (self.choice, self.refresh_list, self.open_button, self.repair_button, self.close_button,
                       self.timeline, self.play_button, self.pause_button, self.speed, self.loop, self.step_back,
-                      self.step_fwd, self.prev_button, self.next_button, self.marker_button, self.replay_button,
+                      self.step_fwd, self.jump_levels, self.prev_button, self.next_button, self.marker_button,
+                      self.replay_button,
                       self.cancel_button):
                 allow(h, False)
             allow(self.note, False, MAX_NOTE_BYTES)
@@ -442,15 +451,18 @@ class PlaybackPanel:
             self.show("no frame " + ("after" if n > 0 else "before") + " this one")
         return ok
 
+    def _levels(self) -> frozenset[str] | None:
+        return JUMP_LEVELS.get(self.jump_levels.value)
+
     def next_event(self) -> Event | Marker | None:
         p = self._need()
-        what = self._moved(p.next_event)
+        what = self._moved(lambda: p.next_event(self._levels()))
         self.show(_describe(what) if what is not None else "no event after this one")
         return what
 
     def prev_event(self) -> Event | Marker | None:
         p = self._need()
-        what = self._moved(p.prev_event)
+        what = self._moved(lambda: p.prev_event(self._levels()))
         self.show(_describe(what) if what is not None else "no event before this one")
         return what
 

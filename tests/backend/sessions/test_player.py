@@ -195,3 +195,14 @@ def test_playing_thread_publishes_everything_in_order_then_stops(player):
     p.play()  # at the end: starts again from the beginning
     p.pause()
     assert not p.playing
+
+
+def test_event_jumps_can_stop_only_at_warnings_and_errors(player):
+    p, sink, items = player
+    p.seek(0.0)
+    serious = frozenset({"warning", "error", "fatal"})
+    assert p.next_event(serious).message == "second"  # the info event at 2.05 s is passed over
+    assert p.position == pytest.approx(6.05)
+    assert p.next_event(serious) is None
+    assert p.prev_event(serious) is None  # nothing serious before 6.05
+    assert p.prev_event().message == "first"  # every event

@@ -26,7 +26,7 @@ import bisect
 import logging
 import threading
 import time
-from typing import Any, Callable, Iterator
+from typing import Any, Callable, Collection, Iterator
 
 from ucat_console.backend.sessions.markers import Marker, MarkerStore
 from ucat_console.backend.sessions.reader import Record, SessionSource
@@ -266,15 +266,17 @@ class Player:
             return True
 
     # ------------------------------------------------------------------ events and markers
-    def _jump_targets(self) -> list[tuple[int, Event | Marker]]:
-        targets: list[tuple[int, Event | Marker]] = list(self._events)
+    def _jump_targets(self, levels: Collection[str] | None = None) -> list[tuple[int, Event | Marker]]:
+        targets: list[tuple[int, Event | Marker]] = [
+            (ns, e) for ns, e in self._events if levels is None or e.level in levels]
         targets += [(self.reader.to_ns(m.t), m) for m in self.markers.markers]
         return sorted(targets, key=lambda x: x[0])
 
-    def next_event(self) -> Event | Marker | None:
-        """Seek to the next recorded event or marker after the position (None: none)."""
+    def next_event(self, levels: Collection[str] | None = None) -> Event | Marker | None:
+        """Seek to the next recorded event (of one of ``levels``; default any) or marker
+        after the position (None: none)."""
         with self._lock:
-            targets = self._jump_targets()
+            targets = self._jump_targets(levels)
             i = bisect.bisect_right([ns for ns, _ in targets], self._pos_ns)
             if i >= len(targets):
                 return None
@@ -283,10 +285,10 @@ class Player:
         self._wake.set()
         return what
 
-    def prev_event(self) -> Event | Marker | None:
-        """Seek to the latest recorded event or marker before the position (None: none)."""
+    def prev_event(self, levels: Collection[str] | None = None) -> Event | Marker | None:
+        """Seek to the latest recorded event (of one of ``levels``) or marker before the position."""
         with self._lock:
-            targets = self._jump_targets()
+            targets = self._jump_targets(levels)
             i = bisect.bisect_left([ns for ns, _ in targets], self._pos_ns) - 1
             if i < 0:
                 return None
