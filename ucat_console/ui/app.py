@@ -207,7 +207,7 @@ class ConsoleApp:
         with self._build_lock:
             reviews, self.reviews = list(self.reviews.values()), {}
         for r in reviews:
-            r.stop()
+            r.stop(page_gone=True)  # the server goes, and every page's elements with it
         self.server.stop()
 
     # ------------------------------------------------------------------ stream side
