@@ -5,12 +5,11 @@ from __future__ import annotations
 
 import math
 import threading
-import time
 import tomllib
 import uuid
 from pathlib import Path
 from types import SimpleNamespace
-from typing import Any, Callable
+from typing import Any
 
 import pytest
 from support import Collector, wait_for

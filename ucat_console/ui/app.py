@@ -54,7 +54,7 @@ from ucat_console.robot.fins import N_FINS
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.messages import FinPlan
-from ucat_console.ui import page_script, panels
+from ucat_console.ui import markdown, page_script, panels
 from ucat_console.ui.guard import PageGuard
 from ucat_console.ui.playback import PlaybackPanel
 from ucat_console.ui.scene import add_pool
@@ -353,10 +353,10 @@ class ConsoleApp:
     def _tick_slow(self) -> None:
         sup = self.sup
         h = sup.health()
-        _set(self.introspection, panels.introspection_markdown(list(self._plans), h.late_plans,
+        _set(self.introspection, markdown.introspection_markdown(list(self._plans), h.late_plans,
                                                               h.plan_overruns, h.mode))
-        _set(self.failsafes, panels.failsafe_markdown(sup.safety.states(), h.t))
-        _set(self.journal, panels.journal_markdown(sup.journal(12)))
+        _set(self.failsafes, markdown.failsafe_markdown(sup.safety.states(), h.t))
+        _set(self.journal, markdown.journal_markdown(sup.journal(12)))
         with self._lock:
             pages = list(self.pages.items())
             ps = dict(self.panels)

@@ -24,9 +24,9 @@ as its TCP connection is open. :class:`PageGuard` stands between the websocket a
   browser, a page that stops reading, or a cut Wi-Fi link is noticed in seconds, not at
   the TCP retransmission timeout. A page that wakes up reconnects as a new page.
 
-viser does not offer hooks for these, so :func:`install` wraps two names in viser's
-websocket module (the ``websockets`` serve call and the per-connection message consumer);
-servers created without :func:`serve` are left as viser makes them.
+viser does not offer hooks for these, so :mod:`ucat_console.ui.viser_hooks` wraps two names
+in viser's websocket module (the ``websockets`` serve call and the per-connection message
+consumer); servers created without :meth:`PageGuard.serve` are left as viser makes them.
 """
 
 from __future__ import annotations
@@ -37,14 +37,14 @@ import logging
 import math
 import threading
 import time
-import types
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable
 from urllib.parse import urlsplit
 
 import viser
 import viser._messages as vm
-import viser.infra._infra as vinfra
+
+from ucat_console.ui import viser_hooks
 
 log = logging.getLogger(__name__)
 
@@ -163,10 +163,14 @@ class _Page:
 class PageGuard:
     """The checks of one console's pages (module docstring).
 
+    ``max_frame``: the largest websocket frame a page may send (bytes).
+
     ``is_pilot(client)``: whether a page is the pilot's now; ``pilot_timeout()``: the
     pilot's allowed silence (s); ``on_connect(client, address)`` / ``on_gone(client,
     silent_for)``: called when a websocket opens and when a silent page is declared gone.
     """
+
+    max_frame = MAX_FRAME
 
     def __init__(
         self,
@@ -204,14 +208,7 @@ class PageGuard:
     # ------------------------------------------------------------------ server
     def serve(self, **kwargs: Any) -> viser.ViserServer:
         """A ViserServer (``kwargs`` as for viser) whose pages pass through this guard."""
-        install()
-        with _PENDING_LOCK:  # the serve call happens inside the constructor, in viser's thread
-            _PENDING.append(self)
-            try:
-                server = viser.ViserServer(**kwargs)
-            finally:
-                if self in _PENDING:
-                    _PENDING.remove(self)
+        server = viser_hooks.guarded_server(self, **kwargs)
         self.server = server
         ws = server._websock_server
         ws.on_client_connect(self._opened)
@@ -319,7 +316,7 @@ class PageGuard:
                 why = self._why_refused(page, message)
         if why is None:
             return True
-        self._refuse(client, why)
+        self.refuse(client, why)
         return False
 
     def _why_refused(self, page: _Page, message: Any) -> str | None:
@@ -371,7 +368,8 @@ class PageGuard:
             return None
         return f"a {tp.__name__}, which the console does not take"
 
-    def _refuse(self, client: int | None, why: str) -> None:
+    def refuse(self, client: int | None, why: str) -> None:
+        """Count and log (at most once per page every few seconds) a refused message."""
         if why == "heartbeat":
             return
         self.refusals.append((client, why))
@@ -465,78 +463,3 @@ def _address(ws_conn: Any) -> str:
     if isinstance(addr, tuple) and addr:
         return str(addr[0])
     return str(addr or "")
-
-
-# ---------------------------------------------------------------------- hooks into viser
-_PENDING: list[PageGuard] = []
-_PENDING_LOCK = threading.Lock()
-_GUARDS: dict[Any, PageGuard] = {}  # websockets Server -> its guard
-_INSTALLED = False
-
-
-def install() -> None:
-    """Wrap viser's serve call and message consumer once (idempotent)."""
-    global _INSTALLED
-    if _INSTALLED:
-        return
-    real_ws = vinfra.websockets
-    real_serve = real_ws.asyncio.server.serve
-    real_consumer = vinfra._message_consumer
-
-    def guarded_serve(handler: Any, host: Any, port: Any, **kwargs: Any) -> Any:
-        guard = _PENDING.pop() if _PENDING else None
-        if guard is None:
-            return real_serve(handler, host, port, **kwargs)
-        http = kwargs.get("process_request")
-
-        def process_request(connection: Any, request: Any) -> Any:
-            if request.headers.get("Upgrade", "").lower() == "websocket":
-                refusal = guard.handshake_refusal(connection, request)
-                if refusal is not None:
-                    return refusal
-            return http(connection, request) if http is not None else None
-
-        kwargs["process_request"] = process_request
-        kwargs["max_size"] = MAX_FRAME
-        serving = real_serve(handler, host, port, **kwargs)
-        _GUARDS[serving.server] = guard
-        return serving
-
-    async def guarded_consumer(websocket: Any, handle_message: Any, message_class: Any) -> None:
-        guard = _GUARDS.get(getattr(websocket, "server", None))
-        if guard is None:
-            return await real_consumer(websocket, handle_message, message_class)
-        while True:
-            raw = await websocket.recv()
-            client = guard.client_of(websocket)
-            if not isinstance(raw, bytes):
-                guard._refuse(client, "a text frame (the console speaks binary messages only)")
-                continue
-            try:
-                message = message_class.deserialize(raw)
-            except Exception as e:  # not a viser message
-                guard._refuse(client, f"an undecodable message ({type(e).__name__})")
-                continue
-            if guard.admit(client, message):
-                handle_message(message)
-
-    server_ns = types.SimpleNamespace(**{k: getattr(real_ws.asyncio.server, k)
-                                         for k in dir(real_ws.asyncio.server) if not k.startswith("__")})
-    server_ns.serve = guarded_serve
-    asyncio_ns = types.SimpleNamespace(server=server_ns)
-    vinfra.websockets = _ModuleView(real_ws, asyncio=asyncio_ns)
-    vinfra._message_consumer = guarded_consumer
-    _INSTALLED = True
-
-
-class _ModuleView:
-    """A module with some attributes replaced (the rest read from the module itself)."""
-
-    def __init__(self, module: Any, **replaced: Any) -> None:
-        self._module = module
-        self._replaced = replaced
-
-    def __getattr__(self, name: str) -> Any:
-        if name in self._replaced:
-            return self._replaced[name]
-        return getattr(self._module, name)

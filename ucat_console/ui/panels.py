@@ -16,9 +16,7 @@ and each field's ``param`` metadata gives the label's range, the unit, the hint 
 
 from __future__ import annotations
 
-import contextlib
 
-import html
 import logging
 import math
 import time
@@ -27,12 +25,11 @@ from typing import TYPE_CHECKING, Any, Callable
 
 from ucat_console.backend.access import MAX_NAME, AccessDenied, actor_name
 from ucat_console.backend.loop.config import MODES
-from ucat_console.backend.safety import FailsafeState
-from ucat_console.backend.supervisor import SETPOINTS, TUNABLE, CommandRefused, JournalEntry
-from ucat_console.telemetry.events import Event
-from ucat_console.telemetry.messages import FinPlan
+from ucat_console.backend.supervisor import SETPOINTS, TUNABLE, CommandRefused
 from ucat_console.typedconf import describe_range
 from ucat_console.ui.driving import KEY_MAP, KEYS, Driving
+from ucat_console.ui.markdown import _set, esc, events_markdown, within
+from ucat_console.ui.rig_faults import RigFaultInputs
 
 if TYPE_CHECKING:
     from ucat_console.ui.app import ConsoleApp
@@ -47,14 +44,6 @@ SEVERITY_FILTERS = {
     "warnings and errors": frozenset({"warning", "error", "fatal"}),
     "errors": frozenset({"error", "fatal"}),
 }
-
-
-def esc(text: object) -> str:
-    """Text made safe for a markdown element (no HTML, no markdown markup)."""
-    s = html.escape(str(text), quote=False)  # the page decodes &lt; &gt; &amp; but shows &#x27; as is
-    for c in "\\`*_{}[]()#+!|~>":
-        s = s.replace(c, "\\" + c)
-    return s
 
 
 def step_for(value: float, is_int: bool) -> float:
@@ -481,117 +470,4 @@ class ControlPanel:
 _EVENTS_SHOWN = 12
 
 
-class RigFaultInputs:
-    """Fault injection on the simulated rig's device emulators (Safety tab): rehearsing what
-    the console and the failsafes do when a drive faults or a sensor goes silent, garbled,
-    invalid or slow. Only built when the robot is the simulated rig; only the pilot injects."""
-
-    def __init__(self, gui: Any) -> None:
-        from ucat_console.backend.sim_rig import DEFAULT_EMCY, EMULATOR_FAULTS
-
-        self.faults_of = EMULATOR_FAULTS
-        device = next(iter(EMULATOR_FAULTS))
-        with gui.add_folder("Rig faults (simulated devices)", order=50.0):
-            self.device = gui.add_dropdown("Device", tuple(EMULATOR_FAULTS), initial_value=device)
-            self.fault = gui.add_dropdown("Fault", EMULATOR_FAULTS[device])
-            self.fin = gui.add_number("Fin [0, 3]", 0, min=0, max=3, step=1, hint="EPOS2 faults: the fin's drive")
-            self.code = gui.add_text("EMCY code", f"0x{DEFAULT_EMCY:04X}",
-                                     hint="EPOS2 emcy: the error code the drive reports (0x2310: overcurrent)")
-            self.duration = gui.add_number("Duration s (0: until cleared)", 0.0, min=0.0, max=3600.0, step=1.0,
-                                           hint="the fault ends by itself after this long (not for emcy: "
-                                                "a drive fault stays until reset)")
-            self.inject = gui.add_button("Inject fault", color="orange")
-            self.clear = gui.add_button("Clear the device's faults")
-
-    def show_faults_of_device(self) -> None:
-        faults = self.faults_of.get(self.device.value, ())
-        self.fault.options = faults
-        if faults and self.fault.value not in faults:
-            self.fault.value = faults[0]
-
-    def arguments(self) -> dict[str, Any]:
-        """The typed arguments of the chosen fault; CommandRefused naming a bad entry."""
-        kw: dict[str, Any] = {}
-        epos2, emcy = self.device.value == "epos2", self.fault.value == "emcy"
-        if epos2:
-            fin = self.fin.value
-            if not (isinstance(fin, (int, float)) and math.isfinite(fin) and fin == int(fin)):
-                raise CommandRefused(f"fin: expected a fin index 0..3, got {fin!r}")
-            kw["fin"] = int(fin)
-        if epos2 and emcy:
-            text = str(self.code.value).strip()
-            try:
-                kw["code"] = int(text, 0)
-            except ValueError:
-                raise CommandRefused(f"EMCY code: {text!r} is not a number; write it as e.g. 0x2310") from None
-        elif self.duration.value:
-            kw["duration"] = float(self.duration.value)
-        return kw
-
-    def enable(self, pilot: bool) -> None:
-        for h in (self.device, self.fault, self.fin, self.code, self.duration, self.inject, self.clear):
-            h.disabled = not pilot
-
-
 _UNSET = object()
-
-
-def _set(handle: Any, content: str) -> None:
-    if handle.content != content:
-        handle.content = content
-
-
-def within(container: Any) -> Any:
-    """``with within(container):`` enters the container when one is given."""
-    return contextlib.nullcontext() if container is None else container
-
-
-# ---------------------------------------------------------------------- shared panels
-def introspection_markdown(plans: list[FinPlan | None], late_plans: int, overruns: int, mode: str) -> str:
-    """Each fin's last plan: strokes and rates, cost split, solve time, late flag."""
-    lines = [
-        f"Mode **{esc(mode)}** · late plans **{late_plans}** · hand-over overruns **{overruns}**",
-        "",
-        "| fin | St | d1, d2 (rad) | w1, w2 (rad/s) | cost F / St / A / D = total | solve ms | late |",
-        "|---|---|---|---|---|---|---|",
-    ]
-    baseline = []
-    for i, p in enumerate(plans):
-        if p is None:
-            lines.append(f"| {i} | - | - | - | - | - | - |")
-            continue
-        d1, d2, w1, w2 = p.u
-        lines.append(
-            f"| {i} | {p.st:.3f} | {d1:+.2f}, {d2:+.2f} | {w1:.2f}, {w2:.2f} | "
-            f"{p.cost_force:.3g} / {p.cost_strouhal:.3g} / {p.cost_amplitude:.3g} / {p.cost_smoothness:.3g}"
-            f" = {p.cost_total:.3g} | {p.solve_time * 1e3:.1f} | {'yes' if p.late else 'no'} |"
-        )
-        if p.mode == "baseline":
-            baseline.append(f"fin {i}: amplitude {p.amplitude:.2f} rad, centre {p.centre:+.2f} rad")
-    if baseline:
-        lines += ["", "Baseline: " + "; ".join(baseline)]
-    return "\n".join(lines)
-
-
-def failsafe_markdown(states: list[FailsafeState], now: float) -> str:
-    lines = ["| failsafe | action | after | state | cause |", "|---|---|---|---|---|"]
-    for s in states:
-        state = f"**ACTIVE** {now - s.since:.0f} s" if s.active and s.since is not None else "ok"
-        lines.append(f"| {s.name} | {s.action} | {s.timeout:g} s | {state} | {esc(s.cause) if s.active else ''} |")
-    return "\n".join(lines)
-
-
-def journal_markdown(entries: list[JournalEntry]) -> str:
-    if not entries:
-        return "Journal: no changes yet."
-    return "Journal (newest first):\n\n" + "\n".join(f"- {esc(e.text())}" for e in reversed(entries))
-
-
-def events_markdown(events: list[Event]) -> str:
-    if not events:
-        return "No events yet."
-    out = []
-    for e in reversed(events):
-        mark = "**" if e.level in ("error", "fatal") else ""
-        out.append(f"- {e.t:7.1f} s {mark}{esc(e.source)} {esc(e.code)}{mark}: {esc(e.message)}")
-    return "\n".join(out)

@@ -36,6 +36,10 @@ A counterfactual replay runs in a child process at a lower CPU priority
 (the console's :class:`~ucat_console.backend.sessions.replay_job.ReplaySlot`), with its
 progress shown in the panel and a Cancel; ``may_replay()`` raises when this page may not
 start one now.
+
+The module is over 500 lines: it is the one Review tab, whose browser, playback, markers and
+replay all act on the same open session and inputs; the pieces that stand alone (the view,
+the sampler, the markdown, the replay job, the player) are in their own modules.
 """
 
 from __future__ import annotations
@@ -58,7 +62,7 @@ from ucat_console.backend.sessions.replay_job import ReplayJob, ReplaySlot
 from ucat_console.robot.geometry import Geometry
 from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.stream import TelemetryStream
-from ucat_console.ui.panels import esc, within
+from ucat_console.ui.markdown import _describe, esc, replay_markdown, sessions_markdown, within
 from ucat_console.ui.plots import CHANNELS as PLOT_CHANNELS
 from ucat_console.ui.scene import LIVE_ROOT, REVIEW_ROOT
 from ucat_console.ui.view import StreamSampler, StreamView, from_page
@@ -80,59 +84,6 @@ JUMP_LEVELS: dict[str, frozenset[str] | None] = {
 #: the most event ticks the timeline shows
 MAX_TIMELINE_MARKS = 200
 _now = time.monotonic
-
-
-def _size(n: int) -> str:
-    for unit in ("B", "KiB", "MiB", "GiB"):
-        if n < 1024 or unit == "GiB":
-            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
-        n /= 1024  # type: ignore[assignment]
-    return f"{n} B"
-
-
-def _opt(v: float | int | None, fmt: str) -> str:
-    return "?" if v is None else format(v, fmt)
-
-
-def sessions_markdown(sessions: list[index.SessionInfo]) -> str:
-    """The session browser's table."""
-    if not sessions:
-        return "No recorded sessions."
-    lines = ["| session | part | duration | size | events | notes |", "|---|---|---|---|---|---|"]
-    for s in sessions:
-        for p in s.parts:
-            dur = "truncated (repair)" if p.truncated else (f"{p.duration:.1f} s" if p.duration is not None else "?")
-            if p.error:
-                dur = "unreadable: " + p.error
-            lines.append(f"| {esc(s.session_id)} | {p.part} | {esc(dur)} | {_size(p.size)} | "
-                         f"{_opt(p.events, 'd')} | {esc(p.notes)} |")
-    return "\n".join(lines)
-
-
-def replay_markdown(result: ReplayResult, weights: dict[str, float]) -> str:
-    """Recorded and counterfactual St, force error and predicted power, per fin and overall."""
-    changed = ", ".join(f"{k} = {v:g}" for k, v in weights.items()) or "the recorded weights"
-    head = f"Counterfactual with {esc(changed)}: {len(result.rows)} plans"
-    if result.skipped:
-        head += f", {result.skipped} not replayed (see the log)"
-    if not result.rows:
-        return head + "; no fin plans in this session."
-    lines = [head, "",
-             "| fin | plans | St rec | St new | force err rec (N) | force err new (N) | P rec (W) | P new (W) |",
-             "|---|---|---|---|---|---|---|---|"]
-    for r in result.summary():
-        lines.append(
-            f"| {r['fin']} | {r['plans']} | {r['recorded_st']:.3f} | {r['st']:.3f} | "
-            f"{r['recorded_force_error']:.4f} | {r['force_error']:.4f} | "
-            f"{r['recorded_power']:.3f} | {r['power']:.3f} |"
-        )
-    return "\n".join(lines)
-
-
-def _describe(what: Event | Marker) -> str:
-    if isinstance(what, Marker):
-        return f"marker at {what.t:.2f} s: {what.note or '(no note)'}"
-    return f"event at {what.t:.2f} s: {what.source}/{what.code} {what.message}"
 
 
 class PlaybackPanel:

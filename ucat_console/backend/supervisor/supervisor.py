@@ -33,6 +33,10 @@ of the gate; :class:`~.tuning.Tuning` the commanded tuning and its journal;
 :class:`~.recording.SessionRecording` the recording; :class:`~.rig_control.RigControl` the
 drive and fault commands; the closed loop owns what it has applied. The parts live in the
 modules of this package.
+
+The module is over 500 lines because :class:`Supervisor` is the one entry point for
+operator commands: each is a short method that checks who asks and what, then acts through
+its part; the state and logic of the parts are in their own modules.
 """
 
 from __future__ import annotations
