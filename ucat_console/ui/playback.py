@@ -314,7 +314,8 @@ class PlaybackPanel:
                   f"notes: {reader.notes or '-'}")
         return player
 
-    def close_session(self, quiet: bool = False) -> None:
+    def _let_go(self) -> bool:
+        """Stop the view and close the player and the reader; whether a session was open."""
         with self._lock:
             player, reader = self.player, self.reader
             self.player = self.reader = None
@@ -323,12 +324,16 @@ class PlaybackPanel:
             player.close()
         if reader is not None:
             reader.close()
+        return player is not None
+
+    def close_session(self, quiet: bool = False) -> None:
+        was_open = self._let_go()
         self._show_live()
         self.view.hide()
         if self.job is not None:
             self.view.start()  # the replay's progress still shows
         self._set_enabled()
-        if player is not None and not quiet:
+        if was_open and not quiet:
             self.show("session closed")
 
     def stop(self, page_gone: bool = False) -> None:
@@ -337,14 +342,7 @@ class PlaybackPanel:
         job, self.job = self.job, None
         if job is not None and self.replay_slot.job is job:
             job.cancel()
-        with self._lock:
-            player, reader = self.player, self.reader
-            self.player = self.reader = None
-        self.view.stop()
-        if player is not None:
-            player.close()
-        if reader is not None:
-            reader.close()
+        self._let_go()
         if not page_gone:
             self._set_enabled()
             self._show_live()
