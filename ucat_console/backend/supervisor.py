@@ -74,7 +74,8 @@ RobotFactory = Callable[[AppConfig, EventSink], tuple[RobotIO, Callable[[], None
 
 #: what the operator may tune live: block -> fields (PID blocks are "pid.<loop>")
 TUNABLE: dict[str, tuple[str, ...]] = {
-    "mpc": ("lam_f", "lam_st", "lam_a", "lam_d", "st_opt", "st_low", "st_high", "n_samples"),
+    "mpc": ("formulation", "lam_f", "lam_st", "lam_a", "lam_d", "lam_c", "lam_e", "st_opt", "st_low",
+            "st_high", "n_samples"),
     **{f"pid.{loop}": ("kp", "ki", "kd", "limit") for loop in PID_LOOPS},
     "baseline": ("frequency",),
 }
@@ -777,7 +778,12 @@ class Supervisor:
             block, name = self._split_key(key)
             cfg = current[block]
             f = next(f for f in fields(cfg) if f.name == name)
-            v = _number(key, value, isinstance(getattr(cfg, name), int))
+            if isinstance(getattr(cfg, name), str):  # a choice field: its value is a name
+                if not isinstance(value, str):
+                    raise CommandRefused(f"{key}: expected a name, got {value!r}")
+                v: Any = value
+            else:
+                v = _number(key, value, isinstance(getattr(cfg, name), int))
             try:
                 check_value(f, v, prefix=f"{block}.")
             except ValueError as e:

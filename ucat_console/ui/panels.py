@@ -79,6 +79,9 @@ def param_specs(tuning: dict[str, Any]) -> dict[str, list[ParamSpec]]:
         for name in names:
             f = by_name[name]
             value = getattr(cfg, name)
+            if f.metadata.get("choices") is not None:
+                continue  # a choice (mpc.formulation), not a number input
+
             is_int = isinstance(value, int)
             prefix = block.split(".", 1)[1] + " " if block.startswith("pid.") else ""
             label = f"{prefix}{name} {describe_range(f)}"
