@@ -15,6 +15,7 @@ TITLES = {
     "E2": "E2: Strouhal corridor, baseline vs MPC (paper Fig. 6)",
     "E3": "E3: cost-term ablation (paper Table III)",
     "E4": "E4: closed loop, power and tracking (paper Table V, Fig. 7)",
+    "E4R": "E4R: E4 from rest, the paper's settings and config/sim-tuned.toml",
     "E5": "E5: field-style circle at 3 m with a current (paper Fig. 8)",
     "sweep": "Weight sweep over the E4 protocol",
 }
@@ -31,6 +32,13 @@ def num(x: Any, digits: int) -> str:
 
 def yes_no(x: bool) -> str:
     return "yes" if x else "no"
+
+
+def saving(r: dict[str, Any], key: str) -> str:
+    """A saving cell: the number where both runs track, else "not comparable"."""
+    if r.get("comparable") is False:
+        return "not comparable"
+    return num(r[key], 1)
 
 
 def table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
@@ -138,7 +146,8 @@ def _e4(res: dict[str, Any]) -> str:
            f"each run starts cruising at its reference, settles {p['settle_s']:g} s and is measured over "
            f"{p['window_s']:g} s. Power is the encoder-based estimate of control.md section 9 (the paper's "
            f"method); true power is the plant's shaft power. Savings are against the baseline at the same "
-           f"reference, where the baseline reached it (>= {p['reached_share']:g} of the reference).\n\n"
+           f"reference, where both track (velocity MAE <= {p.get('tracking_mae', 0.03):g} m/s; else not "
+           f"comparable); reached: mean speed >= {p['reached_share']:g} of the reference.\n\n"
            "Plant assumptions:\n\n", _plants(res["plants"]), "\n"]
     for plant in res["plants"]:
         out.append(f"\nPlant `{plant}`:\n\n")
@@ -146,7 +155,7 @@ def _e4(res: dict[str, Any]) -> str:
         for r in (r for r in res["rows"] if r["plant"] == plant):
             rows.append([num(r["v_ref"], 1), r["mode"], num(r["paper_power"], 3), num(r["power_est"], 4),
                          num(r["power_est_sd"], 4), num(r["power_true"], 4), num(r["paper_saving"], 1),
-                         num(r["saving_est"], 1), num(r["saving_true"], 1), num(r["paper_velocity_mae"], 4),
+                         saving(r, "saving_est"), saving(r, "saving_true"), num(r["paper_velocity_mae"], 4),
                          num(r["velocity_mae"], 4), num(r["velocity_mean"], 3), yes_no(r["reached"]),
                          num(r["paper_st_mae"], 4), num(r["st_mae"], 4), num(r["st_plant_mae"], 4),
                          num(r["depth_mae"], 4), num(r["late_plans"], 1)])
@@ -155,6 +164,34 @@ def _e4(res: dict[str, Any]) -> str:
                           "paper vel MAE", "ours vel MAE", "mean speed", "reached", "paper St MAE",
                           "ours St MAE (plans)", "ours St MAE (plant)", "depth MAE (m)", "late plans"], rows))
         out.append("\n" + _claims(res["claims"][plant]))
+    return "".join(out)
+
+
+def _e4r(res: dict[str, Any]) -> str:
+    p = res["protocol"]
+    t = p["sim_tuned"]
+    out = [f"Protocol: from rest (hull still, fins at the forward-thrust centre), depth {p['depth']} m, "
+           f"references {', '.join(str(v) for v in p['speeds'])} m/s, controllers "
+           f"{', '.join(p['controllers'])} (mpc_closed: the closed-stroke formulation with the same "
+           f"model and weights), seeds {', '.join(str(s) for s in p['seeds'])}; settle {p['settle_s']:g} s, "
+           f"measured over {p['window_s']:g} s. Settings: `paper` (the defaults: Table I) and `sim_tuned` "
+           f"(config/sim-tuned.toml: lam_f {t['lam_f']:g}, lam_st {t['lam_st']:g}, lam_d {t['lam_d']:g}, "
+           f"velocity PID kp {t['velocity_kp']:g} ki {t['velocity_ki']:g} limit {t['velocity_limit']:g} N). "
+           f"Power is the estimate (control.md section 9), true power the plant's shaft power, J/m the true "
+           f"energy per metre; savings where both track (velocity MAE <= {p['tracking_mae']:g} m/s).\n\n"]
+    for setting in p["settings"]:
+        for plant in res["plants"]:
+            rows = [r for r in res["rows"] if r["settings"] == setting and r["plant"] == plant]
+            if not rows:
+                continue
+            out.append(f"\nSettings `{setting}`, plant `{plant}`:\n\n")
+            out.append(table(
+                ["v_ref (m/s)", "controller", "mean v", "vel MAE", "power (W)", "true power (W)",
+                 "true J/m", "saving %", "true J/m saving %", "St MAE (plans)", "St MAE (plant)"],
+                [[num(r["v_ref"], 1), r["controller"], num(r["velocity_mean"], 3), num(r["velocity_mae"], 3),
+                  num(r["power_est"], 3), num(r["power_true"], 3), num(r["energy_per_metre_true"], 3),
+                  saving(r, "saving_est"), saving(r, "saving_epm_true"), num(r["st_mae"], 3),
+                  num(r["st_plant_mae"], 3)] for r in rows]))
     return "".join(out)
 
 
@@ -187,13 +224,14 @@ def _sweep(res: dict[str, Any]) -> str:
 
 def sweep_table(res: dict[str, Any]) -> str:
     rows = [[num(r["v_ref"], 1), r["mode"], num(r["lam_st"], 2), num(r["lam_d"], 2), num(r["power_est"], 4),
-             num(r["saving_est"], 1), num(r["velocity_mae"], 4), num(r["st_mae"], 4), num(r["depth_mae"], 4)]
+             num(r["energy_per_metre"], 3), saving(r, "saving_est"), saving(r, "saving_epm"),
+             num(r["velocity_mae"], 4), num(r["st_mae"], 4), num(r["depth_mae"], 4)]
             for r in sorted(res["rows"], key=lambda r: (r["v_ref"], r["mode"], r["lam_st"] or 0.0, r["lam_d"] or 0.0))]
-    return table(["v_ref (m/s)", "controller", "lam_st", "lam_d", "power (W)", "saving %", "vel MAE (m/s)",
-                  "St MAE", "depth MAE (m)"], rows)
+    return table(["v_ref (m/s)", "controller", "lam_st", "lam_d", "power (W)", "energy per metre (J/m)",
+                  "saving %", "J/m saving %", "vel MAE (m/s)", "St MAE", "depth MAE (m)"], rows)
 
 
-_SECTIONS = {"E1": _e1, "E2": _e2, "E3": _e3, "E4": _e4, "E5": _e5, "sweep": _sweep}
+_SECTIONS = {"E1": _e1, "E2": _e2, "E3": _e3, "E4": _e4, "E4R": _e4r, "E5": _e5, "sweep": _sweep}
 
 
 def render(doc: dict[str, Any]) -> str:

@@ -26,7 +26,7 @@ from ucat_console.experiments.report import render
 
 log = logging.getLogger(__name__)
 
-_CLOSED = ("E4", "E5")
+_CLOSED = ("E4", "E4R", "E5")
 
 
 def parse_names(names: Sequence[str]) -> list[str]:
@@ -107,6 +107,8 @@ def run_experiments(
     # setpoints are checked before anything runs
     if "E4" in ids:
         closed.e4_scenarios(quick, seed, speeds, closed.E4_DEPTH if depth is None else depth)
+    if "E4R" in ids:
+        closed.e4r_scenarios(quick, seed, speeds, closed.E4_DEPTH if depth is None else depth)
     if "E5" in ids:
         closed.e5_scenarios(quick, seed, 3.0 if depth is None else depth)
     tmp = prepare_output(out)
@@ -165,6 +167,12 @@ def _run_one(name: str, tmp: Path, quick: bool, seed: int, client: Any,
         res["findings"] = _e4_findings(res)
         _write_csv(tmp / "e4_runs.csv", res["rows"])
         return res
+    if name == "E4R":
+        res = closed.run_e4r(client, quick, seed, speeds, closed.E4_DEPTH if depth is None else depth, progress)
+        res["figures"] = [figures.e4r_figure(res, tmp)]
+        res["findings"] = _e4r_findings(res)
+        _write_csv(tmp / "e4r_runs.csv", res["rows"])
+        return res
     if name == "E5":
         res, traces = closed.run_e5(client, quick, seed, 3.0 if depth is None else depth, progress)
         res["figures"] = [figures.e5_figure(traces, res, tmp)]
@@ -198,6 +206,18 @@ def _e4_findings(res: dict[str, Any]) -> list[str]:
                "speed its Strouhal penalty pins w near 6 V_B, where the model's thrust is a few hundredths of "
                "a newton, so the force term (lam_f 1.5) cannot win against lam_St 5 and the L1 smoothness "
                "term (lam_d 1) holds the plan near u_prev; the PIDs saturate and cannot steer it.")
+    return out
+
+
+def _e4r_findings(res: dict[str, Any]) -> list[str]:
+    out = []
+    for setting in res["protocol"]["settings"]:
+        for plant in res["plants"]:
+            rows = [r for r in res["rows"] if r["settings"] == setting and r["plant"] == plant]
+            lost = [f"{r['controller']} at {r['v_ref']:g}" for r in rows if not r["tracks"]]
+            if lost:
+                out.append(f"`{setting}`, `{plant}`: not tracking (vel MAE > "
+                           f"{res['protocol']['tracking_mae']:g} m/s): " + ", ".join(lost) + ".")
     return out
 
 
