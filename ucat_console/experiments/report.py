@@ -113,7 +113,22 @@ def _e2(res: dict[str, Any]) -> str:
     out.append(table(["V (m/s)", "controller", "St mean", "St max", "St in band %", "St slope per N",
                       "St-force correlation", "force error per fin (N)", "max per fin (N)",
                       "body force error (N)"], rows))
+    out.append(_sensitivity(res, ["v"], ["st_in_range_pct", "force_error_fin"],
+                            ["V (m/s)"], ["MPC St in band %", "force error per fin (N)"]))
     return "".join(out)
+
+
+def _sensitivity(res: dict[str, Any], keys: Sequence[str], metrics: Sequence[str],
+                 key_titles: Sequence[str], titles: Sequence[str]) -> str:
+    """The rates from each initial previous plan (the first row: the protocol's)."""
+    rows = [[" ".join(f"{x:g}" for x in r["u_prev0"]), *[str(r[k]) for k in keys],
+             *[num(r[m], 3 if "error" in m or m == "stability" else 1) for m in metrics], num(r["frozen_pct"], 1)]
+            for r in res.get("u_prev_sensitivity", [])]
+    if not rows:
+        return ""
+    return ("\nThe same from other initial previous plans u_prev (d_1 d_2 w_1 w_2); frozen: plans "
+            "exactly the initial u_prev:\n\n"
+            + table(["initial u_prev", *key_titles, *titles, "frozen %"], rows))
 
 
 def _e3(res: dict[str, Any]) -> str:
@@ -127,6 +142,22 @@ def _e3(res: dict[str, Any]) -> str:
     out.append(table(["configuration", "paper force error (N)", "ours force error (N)", "paper St deviation",
                       "ours St deviation", "paper in range %", "ours in range %", "paper stability",
                       "ours stability"], rows))
+    out.append(_sensitivity(res, ["config"], ["force_error", "in_range_pct", "stability"],
+                            ["configuration"], ["force error (N)", "in range %", "stability"]))
+    if "corridor_bounds" in res:
+        b = res["table_iv_bound"]
+        out.append(f"\nWhat the paper's numbers allow. Table IV's mean two-stage cost {b['mean_cost']:g} at N = 500 "
+                   f"with lam_f = {b['lam_f']:g} bounds its mean force error: every other term is >= 0, so "
+                   f"c_force <= J / lam_f = {num(b['force_error_at_most'], 3)} N. Inside the corridor a stroke "
+                   "pair with equal rates has w <= 2 V St_high / L_f, where the model's largest mean force is "
+                   "F_max; over the grid no such plan can have a mean force error below "
+                   "mean(max(0, |f*| - F_max)):\n\n")
+        out.append(table(["V (m/s)", "w at St 0.35 (rad/s)", "F_max, d_2 = -d_1 (N)", "F_max, any pair (N)",
+                          "grid mean |f*| (N)", "least mean force error in the corridor (N)"],
+                         [[num(r["v"], 1), num(r["w_max_in_corridor"], 2), num(r["f_max_symmetric"], 3),
+                           num(r["f_max"], 3),
+                           num(r["mean_demand"], 3), num(r["least_mean_force_error"], 3)]
+                          for r in res["corridor_bounds"]]))
     return "".join(out)
 
 
