@@ -142,3 +142,45 @@ class PowerConfig(Config):
     filter_tau: float = param(
         0.02, lo=0.0, hi=1.0, unit="s", doc="first-order low-pass on rate and acceleration"
     )
+
+
+def _check_steps(steps: tuple[tuple[float, float, float], ...]) -> None:
+    if not steps:
+        raise ValueError("steps: the manoeuvre needs at least one step")
+    for i, step in enumerate(steps):
+        if len(step) != 3:
+            raise ValueError(f"steps[{i}]: expected (centre offset rad, stroke rad, rate rad/s), got {step!r}")
+        offset, stroke, rate = step
+        if not -1.6 <= offset <= 1.6:
+            raise ValueError(f"steps[{i}]: centre offset {offset!r} rad is out of range; allowed: [-1.6, 1.6]")
+        if not 0.05 <= stroke <= 3.14159:
+            raise ValueError(f"steps[{i}]: stroke {stroke!r} rad is out of range; allowed: [0.05, 3.14159]")
+        if not 0.1 <= rate <= 50.0:
+            raise ValueError(f"steps[{i}]: rate {rate!r} rad/s is out of range; allowed: [0.1, 50.0]")
+
+
+@dataclass(frozen=True)
+class ManoeuvreConfig(Config):
+    """The identification manoeuvre (mode "identify"): fixed strokes, step after step.
+
+    Each step holds a symmetric stroke pair of ``stroke`` rad at the mean rate ``rate`` about
+    the forward-thrust centre of the controller's model turned by ``centre offset``, for
+    ``step_s`` seconds; several centres are needed to tell C_L from C_D (the mean thrust of
+    one centre is one combination of the two), several rates and strokes to span the
+    speeds. After the last step the fins hold still.
+    """
+
+    steps: tuple[tuple[float, float, float], ...] = param(
+        ((0.0, 0.6, 2.0), (0.0, 1.2, 2.0), (0.0, 0.6, 4.0), (0.0, 1.2, 4.0),
+         (-0.5, 0.8, 3.0), (0.5, 0.8, 3.0)),
+        doc="(centre offset rad, stroke rad, mean rate rad/s) of each step",
+    )
+    step_s: float = param(20.0, lo=2.0, hi=600.0, unit="s", doc="how long each step is held")
+
+    def _check(self) -> None:
+        _check_steps(self.steps)
+
+    @property
+    def duration(self) -> float:
+        """The whole manoeuvre (s)."""
+        return self.step_s * len(self.steps)
