@@ -23,7 +23,15 @@ import numpy as np
 from ucat_console.control.params import BodyConfig, MpcConfig
 from ucat_console.experiments import paper
 from ucat_console.experiments.distributed import run_all
-from ucat_console.experiments.scenario import PLANT_VARIANTS, Scenario, plant_assumptions, run_scenario
+from ucat_console.experiments.scenario import (
+    PLANT_VARIANTS,
+    Scenario,
+    family_name,
+    hydro_of,
+    plant_assumptions,
+    plant_config,
+    run_scenario,
+)
 
 CONTROLLERS = ("baseline", "mpc", "mpc_sync")
 E4_SPEEDS = (0.1, 0.2, 0.3, 0.4)
@@ -251,6 +259,121 @@ def run_e4r(client: Any, quick: bool, seed: int, speeds: Sequence[float] | None 
         "plants": {v: plant_assumptions(v) for v in PLANT_VARIANTS},
         "rows": sorted(rows, key=lambda r: (order.index(r["settings"]), list(PLANT_VARIANTS).index(r["plant"]),
                                             r["v_ref"], E4R_CONTROLLERS.index(r["controller"]))),
+    }
+
+
+# ---------------------------------------------------------------------------- E6
+#: E6's plant family (declared before it was run: docs/experiments/e6-declaration.md)
+E6_GAINS = (1.0, 2.3, 4.6, 9.2)
+E6_WAKES = ("strouhal_wake", "quasi_steady")
+E6_SPEEDS = (0.1, 0.2, 0.3)
+#: baseline (eq 19 with the paper's C_D); the same with the identified C_D; the shipped MPC
+#: (paper formulation, the paper's model); the same with the identified model; the
+#: closed-stroke formulation with the identified model. Savings are against "baseline".
+E6_CONTROLLERS = ("baseline", "baseline_id", "mpc", "mpc_id", "mpc_closed_id")
+#: the target: at least this saving of true energy per metre where the baseline leaves the corridor
+E6_TARGET_PCT = 10.0
+#: the baseline "leaves the corridor" where fewer than this share of its plans have St in it
+E6_CORRIDOR_SHARE = 0.5
+
+
+def e6_plants(quick: bool) -> list[str]:
+    gains = (1.0, 4.6) if quick else E6_GAINS
+    return [family_name(g, w) for g in gains for w in E6_WAKES]
+
+
+def identify_plant(plant: str, seed: int, quick: bool) -> dict[str, Any]:
+    """Run and record the identification manoeuvre on ``plant`` (headless, in a temporary
+    sessions directory) and fit the fin coefficients to it (``ucat-console identify``'s path)."""
+    import tempfile
+
+    from ucat_console.backend.access import LOCAL
+    from ucat_console.backend.identification import ManoeuvreRun, identify_sessions
+    from ucat_console.backend.loop.clock import SimulatedClock
+    from ucat_console.backend.supervisor import Supervisor
+    from ucat_console.config import AccessConfig, AppConfig, ConsoleConfig
+    from ucat_console.control.params import ManoeuvreConfig
+
+    app = AppConfig(plant=plant_config(plant, seed), console=ConsoleConfig(sim_depth=3.0, record_on_arm=False),
+                    access=AccessConfig(token="e6-identify"))
+    if quick:
+        app = app.replace(loop=app.loop.replace(manoeuvre=ManoeuvreConfig(step_s=12.0)))
+    with tempfile.TemporaryDirectory() as tmp:
+        sup = Supervisor(app, clock=SimulatedClock(), sessions_dir=tmp)
+        try:
+            sup.arm(LOCAL)
+            sup.step(1.0)
+            run = ManoeuvreRun(sup, LOCAL)
+            run.start()
+            sup.step(run.duration + 0.2)
+            run.poll()
+        finally:
+            sup.stop()
+        r = identify_sessions([run.paths[0].name], tmp).result
+    return {"plant": plant, "c_d": r.c_d, "c_l": r.c_l, "c_d_ci": r.c_d_ci, "c_l_ci": r.c_l_ci,
+            "windows": len(r.windows), "steady_windows": r.steady_windows, "rms_residual": r.rms_residual}
+
+
+def e6_scenarios(quick: bool, seed: int, identified: dict[str, dict[str, Any]]) -> list[Scenario]:
+    mpc, body = e4r_settings()["sim_tuned"]
+    seeds = (seed,) if quick else (seed, seed + 1, seed + 2)
+    speeds = (0.2,) if quick else E6_SPEEDS
+    settle, window = e4_timing(quick)
+    out = []
+    for plant in e6_plants(quick):
+        ident = identified[plant]
+        model = mpc.replace(c_d=ident["c_d"], c_l=ident["c_l"])
+        configs = {"baseline": ("baseline", mpc), "baseline_id": ("baseline", model),
+                   "mpc": ("mpc", mpc), "mpc_id": ("mpc", model),
+                   "mpc_closed_id": ("mpc", model.replace(formulation="closed_stroke"))}
+        for v in speeds:
+            for ctrl in E6_CONTROLLERS:
+                mode, m = configs[ctrl]
+                for s in seeds:
+                    out.append(Scenario(mode=mode, v_ref=v, seed=s, plant=plant, settle_s=settle,
+                                        window_s=window, start_velocity=0.0, mpc=m, body=body,
+                                        tag=f"E6:{ctrl}"))
+    for sc in out:
+        sc.check()
+    return out
+
+
+def run_e6(client: Any, quick: bool, seed: int, progress: bool = True) -> dict[str, Any]:
+    """Where St-awareness pays: the family of plants, each with its identified model."""
+    plants = e6_plants(quick)
+    idents = run_all(client, identify_plant, [(p, seed, quick) for p in plants], "E6 identification",
+                     progress, star=True)
+    identified = {d["plant"]: d for d in idents}
+    scenarios = e6_scenarios(quick, seed, identified)
+    runs = run_all(client, run_scenario, scenarios, "E6 runs", progress)
+    _label(runs, ("experiment", "controller"))
+    rows = aggregate(runs, ("plant", "v_ref", "controller"))
+    for r in rows:
+        r["mode"] = r["controller"]
+    _add_savings(rows, ("plant", "v_ref"))
+    base = {(r["plant"], r["v_ref"]): r for r in rows if r["controller"] == "baseline"}
+    for r in rows:
+        b = base[(r["plant"], r["v_ref"])]
+        r["baseline_out_of_corridor"] = bool(b["st_in_range"] < E6_CORRIDOR_SHARE)
+    for p in plants:
+        h = hydro_of(p)
+        identified[p]["thrust_gain"] = h.custom.thrust_gain
+        identified[p]["wake"] = h.wake
+    target_rows = [r for r in rows if r["controller"] == "mpc_closed_id" and r["baseline_out_of_corridor"]]
+    met = [r for r in target_rows if r["comparable"] and r["saving_epm_true"] >= E6_TARGET_PCT]
+    settle, window = e4_timing(quick)
+    return {
+        "protocol": {"plants": plants, "speeds": sorted({s.v_ref for s in scenarios}),
+                     "controllers": list(E6_CONTROLLERS), "seeds": sorted({s.seed for s in scenarios}),
+                     "settle_s": settle, "window_s": window, "tracking_mae": TRACKING_MAE,
+                     "target_pct": E6_TARGET_PCT, "corridor_share": E6_CORRIDOR_SHARE,
+                     "settings": _settings_summary(*e4r_settings()["sim_tuned"]),
+                     "closed_stroke": {"lam_c": MpcConfig().lam_c, "lam_e": MpcConfig().lam_e}},
+        "identified": [identified[p] for p in plants],
+        "rows": sorted(rows, key=lambda r: (plants.index(r["plant"]), r["v_ref"],
+                                            E6_CONTROLLERS.index(r["controller"]))),
+        "target": {"cases": len(target_rows), "comparable": sum(r["comparable"] for r in target_rows),
+                   "met": len(met)},
     }
 
 

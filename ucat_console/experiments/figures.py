@@ -147,6 +147,32 @@ def e4r_figure(res: dict[str, Any], out: Path) -> str:
     return _save(fig, out / "e4r_energy_per_metre.png")
 
 
+def e6_figure(res: dict[str, Any], out: Path) -> str:
+    """True energy-per-metre saving against the thrust gain (E6), comparable cases only."""
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
+    gains = {d["plant"]: d["thrust_gain"] for d in res["identified"]}
+    wakes = {d["plant"]: d["wake"] for d in res["identified"]}
+    for ax, wake in zip(axes, ("strouhal_wake", "quasi_steady")):
+        for ctrl in ("mpc", "mpc_id", "mpc_closed_id"):
+            for v in res["protocol"]["speeds"]:
+                rows = [r for r in res["rows"] if r["controller"] == ctrl and r["v_ref"] == v
+                        and wakes[r["plant"]] == wake]
+                g = [gains[r["plant"]] for r in rows if r["comparable"]]
+                s = [r["saving_epm_true"] for r in rows if r["comparable"]]
+                style = {"mpc": "s--", "mpc_id": "^:", "mpc_closed_id": "o-"}[ctrl]
+                ax.plot(g, s, style, label=f"{ctrl} {v:g} m/s", ms=5)
+        ax.axhline(res["protocol"]["target_pct"], color="tab:red", lw=0.8, ls="--")
+        ax.axhline(0.0, color="k", lw=0.6)
+        ax.set_xscale("log")
+        ax.set_xlim(0.8 * min(gains.values()), 1.25 * max(gains.values()))
+        ax.set_xticks(sorted(set(gains.values())), [f"{g:g}" for g in sorted(set(gains.values()))])
+        ax.set_xlabel("soft-fin thrust gain G")
+        ax.set_title(wake, fontsize=9)
+    axes[0].set_ylabel("true energy per metre saved vs baseline (%)")
+    axes[1].legend(fontsize=6, ncol=2)
+    return _save(fig, out / "e6_saving_vs_gain.png")
+
+
 def sweep_figure(res: dict[str, Any], out: Path) -> str:
     fig, ax = plt.subplots(figsize=(6, 4.5))
     for r in res["rows"]:

@@ -26,7 +26,7 @@ from ucat_console.experiments.report import render
 
 log = logging.getLogger(__name__)
 
-_CLOSED = ("E4", "E4R", "E5")
+_CLOSED = ("E4", "E4R", "E5", "E6")
 
 
 def parse_names(names: Sequence[str]) -> list[str]:
@@ -173,6 +173,12 @@ def _run_one(name: str, tmp: Path, quick: bool, seed: int, client: Any,
         res["findings"] = _e4r_findings(res)
         _write_csv(tmp / "e4r_runs.csv", res["rows"])
         return res
+    if name == "E6":
+        res = closed.run_e6(client, quick, seed, progress)
+        res["figures"] = [figures.e6_figure(res, tmp)]
+        res["findings"] = _e6_findings(res)
+        _write_csv(tmp / "e6_runs.csv", res["rows"])
+        return res
     if name == "E5":
         res, traces = closed.run_e5(client, quick, seed, 3.0 if depth is None else depth, progress)
         res["figures"] = [figures.e5_figure(traces, res, tmp)]
@@ -218,6 +224,24 @@ def _e4r_findings(res: dict[str, Any]) -> list[str]:
             if lost:
                 out.append(f"`{setting}`, `{plant}`: not tracking (vel MAE > "
                            f"{res['protocol']['tracking_mae']:g} m/s): " + ", ".join(lost) + ".")
+    return out
+
+
+def _e6_findings(res: dict[str, Any]) -> list[str]:
+    t, p = res["target"], res["protocol"]
+    rows = [r for r in res["rows"] if r["controller"] == "mpc_closed_id"]
+    comparable = [r for r in rows if r["comparable"]]
+    out = [f"Target ({p['target_pct']:g} % less true energy per metre than the baseline at matched tracking "
+           f"where the baseline leaves the corridor): {t['cases']} plant-speed cases where the baseline leaves "
+           f"it, {t['comparable']} of them comparable (both track), met in {t['met']}."]
+    if comparable:
+        s = [r["saving_epm_true"] for r in comparable]
+        out.append(f"Closed-stroke MPC with the identified model, wherever both track ({len(comparable)} of "
+                   f"{len(rows)} cases): true energy-per-metre saving {min(s):.1f} to {max(s):.1f} % "
+                   f"(mean {sum(s) / len(s):.1f} %).")
+    lost = [f"{r['plant']} at {r['v_ref']:g}" for r in rows if not r["tracks"]]
+    if lost:
+        out.append("Closed-stroke MPC not tracking: " + ", ".join(lost) + ".")
     return out
 
 
