@@ -436,7 +436,8 @@ def run_e5(client: Any, quick: bool, seed: int, depth: float = 3.0,
 
 # ---------------------------------------------------------------------------- sweep
 def sweep_scenarios(lam_st: Sequence[float], lam_d: Sequence[float], speeds: Sequence[float],
-                    seeds: Sequence[int], quick: bool, plant: str = "strouhal_wake") -> list[Scenario]:
+                    seeds: Sequence[int], quick: bool, plant: str = "strouhal_wake",
+                    formulation: str = "paper") -> list[Scenario]:
     settle, window = e4_timing(quick)
     out = []
     for v in speeds:
@@ -446,7 +447,8 @@ def sweep_scenarios(lam_st: Sequence[float], lam_d: Sequence[float], speeds: Seq
             for a in lam_st:
                 for d in lam_d:
                     out.append(Scenario(mode="mpc", v_ref=v, seed=s, plant=plant, settle_s=settle,
-                                        window_s=window, mpc=MpcConfig(lam_st=a, lam_d=d), tag="sweep"))
+                                        window_s=window, mpc=MpcConfig(lam_st=a, lam_d=d, formulation=formulation),
+                                        tag="sweep"))
     for sc in out:
         sc.check()
     return out
@@ -454,8 +456,8 @@ def sweep_scenarios(lam_st: Sequence[float], lam_d: Sequence[float], speeds: Seq
 
 def run_sweep(client: Any, lam_st: Sequence[float], lam_d: Sequence[float], speeds: Sequence[float],
               seeds: Sequence[int], quick: bool, plant: str = "strouhal_wake",
-              progress: bool = True) -> dict[str, Any]:
-    scenarios = sweep_scenarios(lam_st, lam_d, speeds, seeds, quick, plant)
+              progress: bool = True, formulation: str = "paper") -> dict[str, Any]:
+    scenarios = sweep_scenarios(lam_st, lam_d, speeds, seeds, quick, plant, formulation)
     runs = run_all(client, run_scenario, scenarios, "sweep runs", progress)
     for r in runs:
         base = r["scenario"]["mode"] == "baseline"
@@ -464,7 +466,7 @@ def run_sweep(client: Any, lam_st: Sequence[float], lam_d: Sequence[float], spee
     rows = aggregate(runs, ("plant", "v_ref", "mode", "lam_st", "lam_d"))
     _add_savings(rows, ("plant", "v_ref"))
     settle, window = e4_timing(quick)
-    return {"protocol": {"plant": plant, "speeds": list(speeds), "seeds": list(seeds),
+    return {"protocol": {"plant": plant, "formulation": formulation, "speeds": list(speeds), "seeds": list(seeds),
                          "lam_st": list(lam_st), "lam_d": list(lam_d), "settle_s": settle,
                          "window_s": window, "depth": E4_DEPTH},
             "rows": rows}

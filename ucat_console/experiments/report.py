@@ -280,7 +280,7 @@ def _e5(res: dict[str, Any]) -> str:
 
 def _sweep(res: dict[str, Any]) -> str:
     p = res["protocol"]
-    out = [f"Protocol: the E4 protocol on plant `{p['plant']}`, references "
+    out = [f"Protocol: the E4 protocol on plant `{p['plant']}`, formulation {p.get('formulation', 'paper')}, references "
            f"{', '.join(str(v) for v in p['speeds'])} m/s, seeds {', '.join(str(s) for s in p['seeds'])}, "
            f"lam_st in {p['lam_st']}, lam_d in {p['lam_d']}, settle {p['settle_s']:g} s, window {p['window_s']:g} s.\n\n"]
     out.append(sweep_table(res))

@@ -256,7 +256,7 @@ def _write_csv(path: Path, rows: Sequence[dict[str, Any]]) -> None:
 def run_sweep_command(
     out: Path, *, lam_st: Sequence[float], lam_d: Sequence[float], speeds: Sequence[float],
     seeds: int, quick: bool, seed: int, plant: str, scheduler: str | None, progress: bool = True,
-    command: str = "",
+    command: str = "", formulation: str = "paper",
 ) -> dict[str, Any]:
     """The weight sweep: DIR/sweep.csv, sweep.md (table), the plot, results.json, report.md."""
     if seeds < 1:
@@ -266,12 +266,12 @@ def run_sweep_command(
             if not 0.0 <= v <= 100.0:
                 raise ValueError(f"{name}: {v!r} is out of range; allowed: [0.0, 100.0]")
     seed_list = [seed + k for k in range(seeds)]
-    closed.sweep_scenarios(lam_st, lam_d, speeds, seed_list, quick, plant)  # validates setpoints
+    closed.sweep_scenarios(lam_st, lam_d, speeds, seed_list, quick, plant, formulation)  # validates setpoints
     tmp = prepare_output(out)
     try:
         t0 = time.perf_counter()
         with task_client(scheduler) as client:
-            res = closed.run_sweep(client, lam_st, lam_d, speeds, seed_list, quick, plant, progress)
+            res = closed.run_sweep(client, lam_st, lam_d, speeds, seed_list, quick, plant, progress, formulation)
         res["runtime_s"] = time.perf_counter() - t0
         res["figures"] = [figures.sweep_figure(res, tmp)]
         doc = {"meta": {"title": "Weight sweep", "command": command or "ucat-console sweep", "quick": quick,
