@@ -200,6 +200,45 @@ def stroke_force(p, gx_tab, gy_tab, d, w, cd, sd, table):
     return gx, gy, dgx_dd, dgy_dd, dgx_dw, dgy_dw
 
 
+@_jit
+def closed_terms(p, kst, d1, d2, w1, w2, inv_t, want_grad):
+    """The closed-stroke formulation's own terms: (c_St per stroke, c_close, c_energy, and
+    their weighted gradient dJ/dd1, dJ/dd2, dJ/dw1, dJ/dw2; zero unless ``want_grad``).
+
+    Compiled on its own rather than inlined: inlined, its code would be compiled into
+    every one of the paper's kernels as well (numba prunes the dead ``closed`` branch only
+    after typing), which made their first compile several times slower."""
+    # per stroke: St_k = kst w_k, c_St = (c(St_1) + c(St_2)) / 2
+    x1 = kst * w1 / p[P_ST_OPT]
+    x2 = kst * w2 / p[P_ST_OPT]
+    ex1 = exp_neg(1.0 - x1)
+    ex2 = exp_neg(1.0 - x2)
+    c1 = p[P_ETA_MAX] - p[P_ETA_MAX] * x1 * ex1
+    c2 = p[P_ETA_MAX] - p[P_ETA_MAX] * x2 * ex2
+    c_st = 0.5 * (max(c1, 0.0) + max(c2, 0.0))
+    # the opening of the cycle, and the model's mean mechanical power (drag, inertia)
+    opening = d1 + d2
+    a1 = abs(d1)
+    a2 = abs(d2)
+    kd = p[P_KD]
+    half_i = 0.5 * p[P_INERTIA]
+    c_energy = (kd * (a1 * w1 * w1 + a2 * w2 * w2) + half_i * (w1 * w1 + w2 * w2)) * inv_t
+    if not want_grad:
+        return c_st, abs(opening), c_energy, 0.0, 0.0, 0.0, 0.0
+    # dc(St_k)/dw_k = -eta_max e^{1-x_k} (1 - x_k) kst / St_opt, halved
+    kk = -0.5 * p[P_LAM_ST] * p[P_ETA_MAX] * kst / p[P_ST_OPT]
+    g_w1 = kk * ex1 * (1.0 - x1) if c1 > 0.0 else 0.0
+    g_w2 = kk * ex2 * (1.0 - x2) if c2 > 0.0 else 0.0
+    lc = p[P_LAM_C] * _sgn(opening)
+    # P = E / T: dP = (dE - P dT) / T, with dT/dd_k = sgn(d_k) / w_k, dT/dw_k = -|d_k| / w_k^2
+    le = p[P_LAM_E] * inv_t
+    g_d1 = lc + le * (kd * _sgn(d1) * w1 * w1 - c_energy * _sgn(d1) / w1)
+    g_d2 = lc + le * (kd * _sgn(d2) * w2 * w2 - c_energy * _sgn(d2) / w2)
+    g_w1 += le * (2.0 * kd * a1 * w1 + 2.0 * half_i * w1 + c_energy * a1 / (w1 * w1))
+    g_w2 += le * (2.0 * kd * a2 * w2 + 2.0 * half_i * w2 + c_energy * a2 / (w2 * w2))
+    return c_st, abs(opening), c_energy, g_d1, g_d2, g_w1, g_w2
+
+
 @_inline
 def cost_eval(p, q, gx_tab, gy_tab, d1, d2, w1, w2, want_grad, table, closed):
     """J at u = (d1, d2, w1, w2) as a tuple of scalars: (J, c_force, c_St, c_amp,
@@ -240,23 +279,12 @@ def cost_eval(p, q, gx_tab, gy_tab, d1, d2, w1, w2, want_grad, table, closed):
     ssum = a1 + a2
     st = kst * ssum * inv_t
     if closed:
-        # per stroke: St_k = kst w_k, c_St = (c(St_1) + c(St_2)) / 2
-        x1 = kst * w1 / p[P_ST_OPT]
-        x2 = kst * w2 / p[P_ST_OPT]
-        ex1 = exp_neg(1.0 - x1)
-        ex2 = exp_neg(1.0 - x2)
-        c1_st = p[P_ETA_MAX] - p[P_ETA_MAX] * x1 * ex1
-        c2_st = p[P_ETA_MAX] - p[P_ETA_MAX] * x2 * ex2
-        st1_active = c1_st > 0.0
-        st2_active = c2_st > 0.0
-        if not st1_active:
-            c1_st = 0.0
-        if not st2_active:
-            c2_st = 0.0
-        c_st = 0.5 * (c1_st + c2_st)
+        c_st, c_close, c_energy, k_d1, k_d2, k_w1, k_w2 = closed_terms(
+            p, kst, d1, d2, w1, w2, inv_t, want_grad)
         st_active = False
-        x = 0.0
+        x = ex1 = 0.0
     else:
+        c_close = c_energy = k_d1 = k_d2 = k_w1 = k_w2 = 0.0
         x = st / p[P_ST_OPT]
         ex1 = exp_neg(1.0 - x)
         eta = p[P_ETA_MAX] * x * ex1
@@ -282,16 +310,7 @@ def cost_eval(p, q, gx_tab, gy_tab, d1, d2, w1, w2, want_grad, table, closed):
     lam_a = p[P_LAM_A]
     lam_d = p[P_LAM_D]
     total = lam_f * c_force + lam_st * c_st + lam_a * c_amp + lam_d * c_diff
-    c_close = 0.0
-    c_energy = 0.0
     if closed:
-        # opening of the cycle, and the model's mean mechanical power (drag, inertia)
-        opening = d1 + d2
-        c_close = abs(opening)
-        kd = p[P_KD]
-        half_i = 0.5 * p[P_INERTIA]
-        e_cyc = kd * (a1 * w1 * w1 + a2 * w2 * w2) + half_i * (w1 * w1 + w2 * w2)
-        c_energy = e_cyc * inv_t
         total += p[P_LAM_C] * c_close + p[P_LAM_E] * c_energy
     if not want_grad:
         return total, c_force, c_st, c_amp, c_diff, st, fbx, fby, c_close, c_energy, 0.0, 0.0, 0.0, 0.0
@@ -341,21 +360,10 @@ def cost_eval(p, q, gx_tab, gy_tab, d1, d2, w1, w2, want_grad, table, closed):
         g_w1 += k * (-ssum * inv_t * dt1_w)
         g_w2 += k * (-ssum * inv_t * dt2_w)
     if closed:
-        # dc(St_k)/dw_k = -eta_max e^{1-x_k} (1 - x_k) kst / St_opt, halved
-        kk = -0.5 * lam_st * p[P_ETA_MAX] * kst / p[P_ST_OPT]
-        if st1_active:
-            g_w1 += kk * ex1 * (1.0 - x1)
-        if st2_active:
-            g_w2 += kk * ex2 * (1.0 - x2)
-        lc = p[P_LAM_C] * _sgn(opening)
-        g_d1 += lc
-        g_d2 += lc
-        # P = E / T: dP = (dE - P dT) / T
-        le = p[P_LAM_E] * inv_t
-        g_d1 += le * (kd * s1 * w1 * w1 - c_energy * dt1_d)
-        g_d2 += le * (kd * s2 * w2 * w2 - c_energy * dt2_d)
-        g_w1 += le * (2.0 * kd * a1 * w1 + 2.0 * half_i * w1 - c_energy * dt1_w)
-        g_w2 += le * (2.0 * kd * a2 * w2 + 2.0 * half_i * w2 - c_energy * dt2_w)
+        g_d1 += k_d1
+        g_d2 += k_d2
+        g_w1 += k_w1
+        g_w2 += k_w2
     if m1 > 0.0:
         g_d1 -= lam_a * half_l * s1
     if m2 > 0.0:
@@ -485,7 +493,7 @@ def _box(p, x0, lo, hi):
         hi[2 + k] = p[P_WMAX]
 
 
-@_inline
+@_jit
 def _tie(v):
     """Project a gradient onto the closed subspace d_2 = -d_1."""
     a = 0.5 * (v[0] - v[1])
@@ -626,78 +634,69 @@ def _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, table, c
 
 @_inline
 def _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, table, closed):
-    """Stage 2: refine the kept samples (none when max_iter is 0), then the final terms."""
+    """Stage 2: refine the kept samples (none when max_iter is 0), then the final terms.
+
+    In the closed-stroke formulation one more start follows: a best plan that opens by at
+    most CLOSE_SNAP is refined again from its projection on the closed subspace (the L1
+    closure term's minimum lies there, which a free refinement only approaches) and taken
+    if it is as good within the stopping tolerance. One refine call site for all starts, so
+    the solver is inlined once per kernel."""
     j_best = best_j[0]
     if max_iter > 0:
         x = work[7]
-        for s in range(best_j.shape[0]):
-            if not best_j[s] < np.inf:
-                break
-            for c in range(4):
-                x[c] = best_u[s, c]
-            j = refine(p, q, gx_tab, gy_tab, x, max_iter, work, hinv, table, closed)
-            if j < j_best:
-                j_best = j
+        k = best_j.shape[0]
+        for s in range(k + 1):
+            if s < k:
+                if not best_j[s] < np.inf:
+                    continue
                 for c in range(4):
-                    u_out[c] = x[c]
-        opening = u_out[0] + u_out[1]
-        if closed and opening != 0.0 and abs(opening) <= CLOSE_SNAP:
-            # an open plan next to a closed one: the L1 closure term's minimum is on the
-            # closed subspace, which a free refinement only approaches; refine there
-            x[0] = 0.5 * (u_out[0] - u_out[1])
-            x[1] = -x[0]
-            x[2] = u_out[2]
-            x[3] = u_out[3]
+                    x[c] = best_u[s, c]
+            else:
+                opening = u_out[0] + u_out[1]
+                if not (closed and opening != 0.0 and abs(opening) <= CLOSE_SNAP):
+                    break
+                x[0] = 0.5 * (u_out[0] - u_out[1])
+                x[1] = -x[0]
+                x[2] = u_out[2]
+                x[3] = u_out[3]
             j = refine(p, q, gx_tab, gy_tab, x, max_iter, work, hinv, table, closed)
-            if j <= j_best + FTOL * max(abs(j_best), 1.0):
+            if j < j_best or (s == k and j <= j_best + FTOL * max(abs(j_best), 1.0)):
+                j_best = min(j, j_best)
                 for c in range(4):
                     u_out[c] = x[c]
     cost_terms_at(p, q, gx_tab, gy_tab, u_out, terms, table, closed)
 
 
-@_inline
-def _plan(p, q, gx_tab, gy_tab, n, max_iter, rng, best_u, best_j, block, work, hinv, u_out, terms, closed):
-    if p[P_MODE] == MODE_TABLE:
-        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, True, closed)
-        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, True, closed)
-    else:
-        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, False, closed)
-        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, False, closed)
-
-
-@_inline
-def _sample_only(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, closed):
-    if p[P_MODE] == MODE_TABLE:
-        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, True, closed)
-    else:
-        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, False, closed)
-
-
-@_inline
-def _finish(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, closed):
-    if p[P_MODE] == MODE_TABLE:
-        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, True, closed)
-    else:
-        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, False, closed)
-
-
+# The entry points branch on the force model themselves, with the flags as literals: one
+# more inlined layer between them and the solver would multiply numba's inlining time.
 @_jit
 def plan_kernel(p, q, gx_tab, gy_tab, n, max_iter, rng, best_u, best_j, block, work, hinv, u_out, terms):
     """One solve: sampling, refinement of the best len(best_j) samples, final terms
     (compiled once per force model: ``table`` is a constant in each branch)."""
-    _plan(p, q, gx_tab, gy_tab, n, max_iter, rng, best_u, best_j, block, work, hinv, u_out, terms, False)
+    if p[P_MODE] == MODE_TABLE:
+        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, True, False)
+        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, True, False)
+    else:
+        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, False, False)
+        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, False, False)
 
 
 @_jit
 def sample_kernel(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out):
     """The first half of :func:`plan_kernel` (for a caller timing the two stages)."""
-    _sample_only(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, False)
+    if p[P_MODE] == MODE_TABLE:
+        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, True, False)
+    else:
+        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, False, False)
 
 
 @_jit
 def finish_kernel(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms):
     """The second half of :func:`plan_kernel` (for a caller timing the two stages)."""
-    _finish(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, False)
+    if p[P_MODE] == MODE_TABLE:
+        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, True, False)
+    else:
+        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, False, False)
 
 
 @_jit
@@ -724,19 +723,30 @@ def cost_grad_at(p, q, gx_tab, gy_tab, u, grad, table, closed):
 @_jit
 def closed_plan_kernel(p, q, gx_tab, gy_tab, n, max_iter, rng, best_u, best_j, block, work, hinv, u_out, terms):
     """:func:`plan_kernel` of the closed-stroke formulation."""
-    _plan(p, q, gx_tab, gy_tab, n, max_iter, rng, best_u, best_j, block, work, hinv, u_out, terms, True)
+    if p[P_MODE] == MODE_TABLE:
+        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, True, True)
+        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, True, True)
+    else:
+        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, False, True)
+        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, False, True)
 
 
 @_jit
 def closed_sample_kernel(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out):
     """:func:`sample_kernel` of the closed-stroke formulation."""
-    _sample_only(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, True)
+    if p[P_MODE] == MODE_TABLE:
+        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, True, True)
+    else:
+        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, False, True)
 
 
 @_jit
 def closed_finish_kernel(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms):
     """:func:`finish_kernel` of the closed-stroke formulation."""
-    _finish(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, True)
+    if p[P_MODE] == MODE_TABLE:
+        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, True, True)
+    else:
+        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, False, True)
 
 
 @_jit

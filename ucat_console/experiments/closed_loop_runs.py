@@ -47,7 +47,7 @@ E5_WAKES = ("strouhal_wake", "quasi_steady")
 METRICS = ("power_est", "power_true", "energy_per_metre", "energy_per_metre_true",
            "velocity_mean", "velocity_mae", "velocity_mae_true",
            "depth_mae", "st_mae", "st_plant_mae", "st_in_range", "force_error", "late_plans",
-           "plan_overruns")
+           "plan_overruns", "stroke", "rate", "opening", "winding")
 
 
 def e4_timing(quick: bool) -> tuple[float, float]:

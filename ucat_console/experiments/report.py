@@ -219,11 +219,13 @@ def _e4r(res: dict[str, Any]) -> str:
             out.append(f"\nSettings `{setting}`, plant `{plant}`:\n\n")
             out.append(table(
                 ["v_ref (m/s)", "controller", "mean v", "vel MAE", "power (W)", "true power (W)",
-                 "true J/m", "saving %", "true J/m saving %", "St MAE (plans)", "St MAE (plant)"],
+                 "true J/m", "saving %", "true J/m saving %", "St MAE (plans)", "St MAE (plant)",
+                 "stroke (rad)", "rate (rad/s)", "opening (rad)", "winding (rad/min)"],
                 [[num(r["v_ref"], 1), r["controller"], num(r["velocity_mean"], 3), num(r["velocity_mae"], 3),
                   num(r["power_est"], 3), num(r["power_true"], 3), num(r["energy_per_metre_true"], 3),
                   saving(r, "saving_est"), saving(r, "saving_epm_true"), num(r["st_mae"], 3),
-                  num(r["st_plant_mae"], 3)] for r in rows]))
+                  num(r["st_plant_mae"], 3), num(r["stroke"], 2), num(r["rate"], 2), num(r["opening"], 3),
+                  num(r["winding"], 1)] for r in rows]))
     return "".join(out)
 
 
@@ -253,10 +255,12 @@ def _e6(res: dict[str, Any]) -> str:
            "\nRuns:\n\n"]
     out.append(table(
         ["plant", "v_ref (m/s)", "controller", "mean v", "vel MAE", "true power (W)", "true J/m",
-         "J/m saving %", "St in range %", "baseline out of corridor"],
+         "J/m saving %", "St in range %", "baseline out of corridor", "stroke (rad)", "rate (rad/s)",
+         "opening (rad)"],
         [[r["plant"], num(r["v_ref"], 1), r["controller"], num(r["velocity_mean"], 3), num(r["velocity_mae"], 3),
           num(r["power_true"], 4), num(r["energy_per_metre_true"], 3), saving(r, "saving_epm_true"),
-          num(100.0 * r["st_in_range"], 1), yes_no(r["baseline_out_of_corridor"])] for r in res["rows"]]))
+          num(100.0 * r["st_in_range"], 1), yes_no(r["baseline_out_of_corridor"]), num(r["stroke"], 2),
+          num(r["rate"], 2), num(r["opening"], 3)] for r in res["rows"]]))
     return "".join(out)
 
 

@@ -141,6 +141,7 @@ class _Recorder:
         self.plan_st: list[float] = []
         self.plan_force: list[float] = []
         self.plan_u: dict[int, list[tuple]] = {i: [] for i in range(4)}
+        self.fin_angles: list[tuple[float, ...]] = []  # true, at each power sample in the window
         self.truth: list[tuple] = []
         self.energy: list[tuple[float, float]] = []  # (t, estimator energy)
         self.trace_rate = trace_rate
@@ -160,6 +161,7 @@ class _Recorder:
                 tr = self.loop.truth()
                 self.truth.append((t, tr.velocity[0], tr.depth, tr.velocity[5], sum(tr.fin_energy),
                                    sum(abs(s - 0.3) for s in tr.fin_strouhal) / 4.0))
+                self.fin_angles.append(tr.fin_angles)
             if self.trace_rate > 0.0 and t + 1e-9 >= self._next_trace:
                 self._next_trace += 1.0 / self.trace_rate
                 tr = self.loop.truth()
@@ -251,6 +253,7 @@ def summarise(sc: Scenario, rec: _Recorder, loop: ClosedLoop) -> dict[str, Any]:
         "st_in_range": float(np.mean((st >= mcfg.st_low) & (st <= mcfg.st_high))) if st.size else math.nan,
         "st_plant_mae": float(truth[:, 5].mean()),
         "force_error": float(np.mean(rec.plan_force)) if rec.plan_force else math.nan,
+        **_strokes(rec, span),
         "plans": len(rec.plan_st),
         "late_plans": loop.late_plans,
         "plan_overruns": loop.plan_overruns,
@@ -258,6 +261,19 @@ def summarise(sc: Scenario, rec: _Recorder, loop: ClosedLoop) -> dict[str, Any]:
     }
     if sc.trace_rate > 0.0:
         out["trace"] = {k: [float(x) for x in v] for k, v in rec.trace.items()}
+    return out
+
+
+def _strokes(rec: _Recorder, span: float) -> dict[str, float]:
+    """Mean stroke |d_k| (rad) and rate w_k (rad/s) of the window's plans, their mean
+    opening |d_1 + d_2| (rad), and how far the fins wound up (mean net turn, rad/min)."""
+    u = np.asarray([x for us in rec.plan_u.values() for x in us], dtype=float).reshape(-1, 4)
+    ang = np.asarray(rec.fin_angles)
+    out = {"stroke": math.nan, "rate": math.nan, "opening": math.nan,
+           "winding": float(np.abs(ang[-1] - ang[0]).mean() * 60.0 / span) if len(ang) > 1 and span > 0 else math.nan}
+    if u.size:
+        out.update(stroke=float(np.abs(u[:, :2]).mean()), rate=float(u[:, 2:].mean()),
+                   opening=float(np.abs(u[:, 0] + u[:, 1]).mean()))
     return out
 
 

@@ -35,7 +35,7 @@ from ucat_console.control.baseline import BaselinePlanner, wrap_angle
 from ucat_console.control.cost import cost_terms
 from ucat_console.control.manoeuvre import ManoeuvrePlanner
 from ucat_console.control.mpc import FinMpc
-from ucat_console.control.params import BaselineConfig, ManoeuvreConfig, MpcConfig
+from ucat_console.control.params import FORMULATIONS, BaselineConfig, ManoeuvreConfig, MpcConfig
 from ucat_console.telemetry.messages import FinPlan
 
 Vec4 = tuple[float, float, float, float]
@@ -155,13 +155,15 @@ Planner = Callable[[PlanInputs], FinPlan]
 
 
 def warm_up(cfg: LoopConfig | None = None) -> float:
-    """One plan of each kind: loads the compiled solver from numba's on-disk cache, or
-    compiles it (over a minute, once per machine) and fills that cache. Seconds taken."""
+    """One plan of each kind, both MPC formulations (either may be switched to live):
+    loads the compiled solver from numba's on-disk cache, or compiles it (minutes, once
+    per machine) and fills that cache. Seconds taken."""
     cfg = cfg or LoopConfig()
     x = PlanInputs(t=0.0, fins=(0,), target=(-0.3, 0.0), v_body=0.0, theta0=0.0,
                    u_prev=cfg.initial_u_prev)
     t0 = time.perf_counter()
-    MpcFinPlanner(cfg.mpc, 0)(x)
+    for formulation in FORMULATIONS if cfg.mpc.solver == "numba" else (cfg.mpc.formulation,):
+        MpcFinPlanner(cfg.mpc.replace(formulation=formulation), 0)(x)
     BaselineFinPlanner(cfg.mpc, cfg.baseline)(x)
     return time.perf_counter() - t0
 
