@@ -205,9 +205,9 @@ def closed_terms(p, kst, d1, d2, w1, w2, inv_t, want_grad):
     """The closed-stroke formulation's own terms: (c_St per stroke, c_close, c_energy, and
     their weighted gradient dJ/dd1, dJ/dd2, dJ/dw1, dJ/dw2; zero unless ``want_grad``).
 
-    Compiled on its own rather than inlined: inlined, its code would be compiled into
-    every one of the paper's kernels as well (numba prunes the dead ``closed`` branch only
-    after typing), which made their first compile several times slower."""
+    Compiled on its own rather than inlined: numba inlines before it prunes the dead
+    ``closed`` branch, so inlined code would be typed and compiled into every one of the
+    paper's kernels as well, lengthening their first compile."""
     # per stroke: St_k = kst w_k, c_St = (c(St_1) + c(St_2)) / 2
     x1 = kst * w1 / p[P_ST_OPT]
     x2 = kst * w2 / p[P_ST_OPT]

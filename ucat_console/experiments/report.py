@@ -122,14 +122,14 @@ def _e2(res: dict[str, Any]) -> str:
 def _sensitivity(res: dict[str, Any], keys: Sequence[str], metrics: Sequence[str],
                  key_titles: Sequence[str], titles: Sequence[str]) -> str:
     """The rates from each initial previous plan (the first row: the protocol's)."""
-    rows = [[" ".join(f"{x:g}" for x in r["u_prev0"]), *[str(r[k]) for k in keys],
+    rows = [[num(x, 1) for x in r["u_prev0"]] + [*[str(r[k]) for k in keys],
              *[num(r[m], 3 if "error" in m or m == "stability" else 1) for m in metrics], num(r["frozen_pct"], 1)]
             for r in res.get("u_prev_sensitivity", [])]
     if not rows:
         return ""
     return ("\nThe same from other initial previous plans u_prev (d_1 d_2 w_1 w_2); frozen: plans "
             "exactly the initial u_prev:\n\n"
-            + table(["initial u_prev", *key_titles, *titles, "frozen %"], rows))
+            + table(["u_prev d_1", "d_2", "w_1", "w_2", *key_titles, *titles, "frozen %"], rows))
 
 
 def _e3(res: dict[str, Any]) -> str:
@@ -255,11 +255,11 @@ def _e6(res: dict[str, Any]) -> str:
            "\nRuns:\n\n"]
     out.append(table(
         ["plant", "v_ref (m/s)", "controller", "mean v", "vel MAE", "true power (W)", "true J/m",
-         "J/m saving %", "St in range %", "baseline out of corridor", "stroke (rad)", "rate (rad/s)",
+         "J/m saving %", "St in range (share)", "baseline out of corridor", "stroke (rad)", "rate (rad/s)",
          "opening (rad)"],
         [[r["plant"], num(r["v_ref"], 1), r["controller"], num(r["velocity_mean"], 3), num(r["velocity_mae"], 3),
           num(r["power_true"], 4), num(r["energy_per_metre_true"], 3), saving(r, "saving_epm_true"),
-          num(100.0 * r["st_in_range"], 1), yes_no(r["baseline_out_of_corridor"]), num(r["stroke"], 2),
+          num(r["st_in_range"], 3), yes_no(r["baseline_out_of_corridor"]), num(r["stroke"], 2),
           num(r["rate"], 2), num(r["opening"], 3)] for r in res["rows"]]))
     return "".join(out)
 

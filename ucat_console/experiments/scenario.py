@@ -31,7 +31,13 @@ import numpy as np
 from ucat_console.backend.loop.closed_loop import ClosedLoop, check_setpoints
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.backend.sim.robot_io import SimRobotIO
-from ucat_console.backend.sim.params import FinCoefficients, FinHydroConfig, PlantConfig, VehicleConfig
+from ucat_console.backend.sim.params import (
+    WAKE_OPTIONS,
+    FinCoefficients,
+    FinHydroConfig,
+    PlantConfig,
+    VehicleConfig,
+)
 from ucat_console.control.allocation import BodySetpoints
 from ucat_console.control.baseline import BaselinePlanner
 from ucat_console.control.params import BaselineConfig, BodyConfig, MpcConfig
@@ -65,7 +71,7 @@ def family_hydro(name: str) -> FinHydroConfig | None:
         g = float(gain)
     except ValueError:
         return None
-    if wake not in ("strouhal_wake", "quasi_steady"):
+    if wake not in WAKE_OPTIONS:
         return None
     return FinHydroConfig(coefficients="custom", custom=FinCoefficients(thrust_gain=g), wake=wake)
 
