@@ -27,6 +27,7 @@ import numpy as np
 
 from ucat_console.backend.sessions.reader import SessionSource, open_session
 from ucat_console.config import AppConfig
+from ucat_console.control.estimation import tilt_from_accel
 from ucat_console.control.identification import (
     FinTrack,
     Hull,
@@ -35,6 +36,7 @@ from ucat_console.control.identification import (
     Measurements,
     identify,
 )
+from ucat_console.robot.readings import ImuReading
 from ucat_console.robot.rotations import euler_from_quaternion
 from ucat_console.telemetry import channels as ch
 
@@ -79,14 +81,24 @@ def measurements(source: SessionSource, name: str) -> Measurements:
                             np.array([m.rate for m in ms])) for ms in (data[c] for c in fins))
     dvl = [m for m in data[ch.DVL] if m.valid and math.isfinite(m.vx)]
     imu = data[ch.IMU]
-    att = np.array([m.euler[:2] if m.euler is not None else
-                    euler_from_quaternion(m.quaternion)[:2] if m.quaternion is not None else (math.nan, math.nan)
-                    for m in imu]).reshape(-1, 2)
+    att = np.array([_roll_pitch(m) for m in imu]).reshape(-1, 2)
     return Measurements(
         fins=tracks, dvl_t=np.array([m.t for m in dvl]), dvl_u=np.array([m.vx for m in dvl]),
-        imu_t=np.array([m.t for m in imu]), imu_roll=np.nan_to_num(att[:, 0]),
-        imu_pitch=np.nan_to_num(att[:, 1]), imu_yaw_rate=np.array([m.gyro[2] for m in imu]),
+        imu_t=np.array([m.t for m in imu]), imu_roll=att[:, 0], imu_pitch=att[:, 1],
+        imu_yaw_rate=np.array([m.gyro[2] for m in imu]),
     )
+
+
+def _roll_pitch(m: ImuReading) -> tuple[float, float]:
+    """Roll and pitch (rad) the IMU reports; from the direction of gravity in its
+    accelerometer when it streams no orientation (the hull accelerates at a few
+    hundredths of g at most)."""
+    if m.euler is not None:
+        return m.euler[0], m.euler[1]
+    if m.quaternion is not None:
+        r, pch, _ = euler_from_quaternion(m.quaternion)
+        return r, pch
+    return tilt_from_accel(m.accel_g)
 
 
 @dataclass(frozen=True)
