@@ -1,4 +1,5 @@
-"""Closed-loop experiments: E4 (Table V, Fig. 7), E4R (E4 from rest), E5 (Fig. 8), the sweep.
+"""Closed-loop experiments: E4 (Table V, Fig. 7), E4R (E4 from rest), E5 (Fig. 8), E6 (the
+plant family, each with its identified model), the sweep.
 
 Every run is a :class:`~ucat_console.experiments.scenario.Scenario` executed by
 :func:`~ucat_console.experiments.scenario.run_scenario` on the distributed executor
