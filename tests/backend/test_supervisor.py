@@ -21,6 +21,8 @@ from ucat_console.backend.sim.robot_io import SimRobotIO
 from ucat_console.backend.sessions.reader import SessionReader
 from ucat_console.backend.supervisor import CommandRefused, SteadyPacedClock, Supervisor
 from ucat_console.config import AccessConfig, AppConfig, ConsoleConfig, FailsafeConfig, FailsafeRule, load_config
+from ucat_console.control import FinMpc
+from ucat_console.control.baseline import wrap_angle
 from ucat_console.control.params import MpcConfig
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event
@@ -131,6 +133,10 @@ def test_a_viewer_can_change_nothing(sup: Supervisor) -> None:
         ({"mpc.n_samples": 0}, "out of range"),
         ({"mpc.st_low": 0.4}, "st_low"),  # above st_high = 0.35
         ({"mpc.solver": "scipy"}, "not a tunable"),
+        ({"mpc.formulation": "closed"}, "formulation.*not allowed"),
+        ({"mpc.formulation": 1}, "formulation.*expected a name"),
+        ({"mpc.lam_e": -1.0}, "lam_e.*out of range"),
+        ({"mpc.lam_c": math.nan}, "lam_c.*not a finite"),
         ({"mpc.rho": 1000.0}, "not a tunable"),
         ({"pid.depth.kp": -1.0}, "out of range"),
         ({"pid.roll.kp": 1.0}, "not a tunable"),
@@ -191,6 +197,28 @@ def test_tuning_reaches_the_loop_is_journalled_and_reverts_in_one_step(sup: Supe
     assert sup.loop.mpc_config.lam_st == 5.0
     assert sup.loop.body.depth_pid.gains.kp == 5.0
     assert sup.journal()[-1].new in (5.0,)
+
+
+def test_formulation_switches_live_and_back(sup: Supervisor) -> None:
+    sup.arm(PILOT)
+    sup.set_setpoints(PILOT, velocity=0.2)
+    sup.step(3.0)
+    plans: list = []
+    sup.stream.subscribe(lambda c, m: plans.append(m), [ch.fin_plan(0)])
+    sup.set_params(PILOT, {"mpc.formulation": "closed_stroke", "mpc.lam_e": 2.0})
+    sup.step(3.0)
+    assert sup.loop.mpc_config.formulation == "closed_stroke" and sup.loop.mpc_config.lam_e == 2.0
+    assert sup.journal()[-1].key in ("mpc.formulation", "mpc.lam_e")
+    # the planner in use changed: a closed-stroke plan's cost includes its energy term
+    new = [p for p in plans if p.t > plans[0].t + 1.0]
+    assert new and all(math.isfinite(p.cost_total) for p in new)
+    last = new[-1]
+    ref = FinMpc(sup.loop.mpc_config).cost(last.u, last.target, last.v_body, wrap_angle(last.theta0),
+                                           last.u_prev)
+    assert ref.energy > 0.0 and last.cost_total == pytest.approx(ref.total, rel=1e-9)
+    sup.set_params(PILOT, {"mpc.formulation": "paper"})
+    sup.step(0.5)
+    assert sup.loop.mpc_config.formulation == "paper"
 
 
 def test_mode_switch_reaches_the_loop_and_is_an_event(sup: Supervisor) -> None:

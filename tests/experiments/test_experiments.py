@@ -68,7 +68,7 @@ def check_report_agrees_with_json(report: str, doc: dict) -> int:
 
 def test_number_format_and_names() -> None:
     assert num(0.12345, 3) == "0.123" and num(None, 2) == "n/a" and num(float("nan"), 1) == "n/a"
-    assert parse_names(["e4", "all"]) == ["E4", "E1", "E2", "E3", "E5"]
+    assert parse_names(["e4", "all"]) == ["E4", "E1", "E2", "E3", "E4R", "E5", "E6"]
     with pytest.raises(ValueError, match="E9"):
         parse_names(["E9"])
     assert clean_json({"a": (1.0, float("nan"))}) == {"a": [1.0, None]}
@@ -87,6 +87,30 @@ def test_render_reads_only_the_json(tmp_path: Path) -> None:
     text = render(doc)
     assert "| full | 0.1559 | 0.3123 | 0.0285 | 0.0200 | 88.0 | 88.0 | 1.625 | 1.500 |" in text
     assert check_report_agrees_with_json(text, doc) >= 9
+
+
+def test_savings_only_where_both_runs_track() -> None:
+    from ucat_console.experiments.closed_loop_runs import _add_savings
+    from ucat_console.experiments.report import sweep_table
+
+    def row(mode: str, mae: float, power: float, lam: float | None) -> dict:
+        return {"plant": "p", "v_ref": 0.2, "mode": mode, "lam_st": lam, "lam_d": lam, "power_est": power,
+                "power_true": power, "energy_per_metre": 5 * power, "energy_per_metre_true": 5 * power,
+                "velocity_mae": mae, "st_mae": 0.1, "depth_mae": 0.01}
+
+    rows = [row("baseline", 0.01, 0.10, None), row("mpc", 0.02, 0.08, 1.0), row("mpc", 0.12, 0.01, 2.0)]
+    _add_savings(rows, ("plant", "v_ref"))
+    assert rows[1]["comparable"] and rows[1]["saving_est"] == pytest.approx(20.0)
+    assert rows[1]["saving_epm_true"] == pytest.approx(20.0)
+    # 90 % less power, but 0.12 m/s off the reference: no saving is quoted
+    assert not rows[2]["comparable"] and math.isnan(rows[2]["saving_est"])
+    text = sweep_table({"rows": rows})
+    assert "| 0.2 | mpc | 2.00 | 2.00 | 0.0100 | 0.050 | not comparable | not comparable | 0.1200 |" in text
+    assert "| 0.2 | mpc | 1.00 | 1.00 | 0.0800 | 0.400 | 20.0 | 20.0 |" in text
+    # a baseline that does not track makes every row of its group not comparable
+    rows = [row("baseline", 0.05, 0.10, None), row("mpc", 0.01, 0.08, 1.0)]
+    _add_savings(rows, ("plant", "v_ref"))
+    assert not rows[1]["comparable"] and "not comparable" in sweep_table({"rows": rows})
 
 
 def test_unknown_experiment_and_impossible_setpoints_exit_non_zero(tmp_path: Path,
@@ -117,7 +141,7 @@ def test_quick_experiments_write_complete_reports_that_agree_with_their_json(tmp
     assert main(["experiment", "all", "--quick", "--out", str(out), "--seed", "1"]) == 0
     doc = json.loads((out / "results.json").read_text())
     report = (out / "report.md").read_text()
-    assert list(doc["experiments"]) == ["E1", "E2", "E3", "E4", "E5"]
+    assert list(doc["experiments"]) == ["E1", "E2", "E3", "E4", "E4R", "E5", "E6"]
     for name, res in doc["experiments"].items():
         assert f"## {name}:" in report
         assert res["figures"] and all((out / f).stat().st_size > 1000 for f in res["figures"])
@@ -139,5 +163,8 @@ def test_quick_experiments_write_complete_reports_that_agree_with_their_json(tmp
     rows = sdoc["experiments"]["sweep"]["rows"]
     assert sorted(r["mode"] for r in rows) == ["baseline", "mpc"]
     assert (sweep / "sweep.csv").read_text().count("\n") == 3
-    assert check_report_agrees_with_json((sweep / "sweep.md").read_text(), sdoc) == 2 * 7
+    # v_ref, power, J/m, vel MAE, St MAE, depth MAE in both rows, lam_st and lam_d in the MPC's,
+    # and the two savings in each row that tracks
+    savings = sum(2 for r in rows if r["comparable"])
+    assert check_report_agrees_with_json((sweep / "sweep.md").read_text(), sdoc) == 2 * 6 + 2 + savings
     assert (sweep / "sweep_power_vs_error.png").exists()

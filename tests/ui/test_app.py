@@ -277,3 +277,13 @@ def test_the_events_list_shows_the_chosen_severities(app: ConsoleApp) -> None:
     pilot.severity.value = "all"
     pilot.show_events(force=True)
     assert "info\\_code" in pilot.events.content
+
+
+def test_the_formulation_is_switched_from_the_tuning_tab(app: ConsoleApp) -> None:
+    pilot = page(app, 3, pilot=True)
+    box = pilot.params["mpc.formulation"]
+    assert set(box.options) == {"paper", "closed_stroke"} and box.value == "paper"
+    box.value = "closed_stroke"
+    assert pilot.act(pilot._apply_tuning, tuning=True)
+    assert app.sup.tuning()["mpc"].formulation == "closed_stroke"
+    assert "mpc.formulation = closed_stroke" in pilot.messages[-1]

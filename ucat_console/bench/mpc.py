@@ -6,6 +6,10 @@ after each cycle theta <- wrap(theta + d_1 + d_2) and u_prev <- u. Each solver, 
 (sampling only / two-stage) and N runs the protocol with its own planner seeded once.
 A solve's time is the wall time of the whole ``FinMpc.plan`` call.
 
+Both cost formulations run the same protocol (``MpcConfig.formulation``); the scipy
+reference solves the paper's only. Their mean costs are of different functions and are
+not compared with each other.
+
 Fixed cases (targets, speeds, angles and previous plans drawn once from a seed) measure
 solution quality against an exhaustive search: 20,000 samples, then scipy's L-BFGS-B
 from the 8 best, and the production refinement from the same 8, keeping the best.
@@ -26,6 +30,7 @@ from ucat_console.control import FinMpc, MpcConfig
 
 PAPER_NS = (250, 500, 1000, 1500, 2000, 5000)
 SOLVERS = ("numba", "scipy")
+FORMULATIONS = ("paper", "closed_stroke")
 STAGES = ("sampling", "two_stage")
 V_BODY = 0.3
 CYCLES = 5
@@ -48,12 +53,13 @@ class RunResult:
     n: int
     solver: str
     stage: str
+    formulation: str = "paper"
     costs: list[float] = field(default_factory=list)
     times_s: list[float] = field(default_factory=list)
 
     def merge(self, other: RunResult) -> RunResult:
-        return RunResult(self.n, self.solver, self.stage, self.costs + other.costs,
-                         self.times_s + other.times_s)
+        return RunResult(self.n, self.solver, self.stage, self.formulation,
+                         self.costs + other.costs, self.times_s + other.times_s)
 
     def row(self) -> dict:
         t = np.asarray(self.times_s) * 1e6
@@ -61,6 +67,7 @@ class RunResult:
             "n": self.n,
             "solver": self.solver,
             "stage": self.stage,
+            "formulation": self.formulation,
             "mean_cost": float(np.mean(self.costs)),
             "p50_us": float(np.percentile(t, 50)),
             "p99_us": float(np.percentile(t, 99)),
@@ -75,7 +82,7 @@ def run_protocol(
     """Section 11's sequential protocol for one configuration (``targets``: a subset of the
     121, for reduced runs)."""
     mpc = FinMpc(cfg, seed=seed)
-    result = RunResult(cfg.n_samples, cfg.solver, "two_stage" if refine else "sampling")
+    result = RunResult(cfg.n_samples, cfg.solver, "two_stage" if refine else "sampling", cfg.formulation)
     clock = time.perf_counter
     for f_target in protocol_targets() if targets is None else targets:
         theta, u_prev = 0.0, U_PREV0
@@ -214,17 +221,17 @@ def first_call_latency() -> dict[str, float]:
 
 def format_table(rows: list[dict]) -> str:
     """Rows as a Table-IV-like text table with numba/scipy speed-up ratios."""
-    by = {(r["n"], r["solver"], r["stage"]): r for r in rows}
+    by = {(r["n"], r["solver"], r["stage"], r.get("formulation", "paper")): r for r in rows}
     ns = sorted({r["n"] for r in rows})
     lines = [
-        f"{'N':>6} | {'solver':>6} | {'sampling: cost':>14} {'p50 us':>9} {'p99 us':>9} "
+        f"{'N':>6} | {'solver':>6} | {'formulation':>13} | {'sampling: cost':>14} {'p50 us':>9} {'p99 us':>9} "
         f"| {'two-stage: cost':>15} {'p50 us':>9} {'p99 us':>9}"
     ]
     lines.append("-" * len(lines[0]))
     for n in ns:
-        for solver in SOLVERS:
-            s = by.get((n, solver, "sampling"))
-            t = by.get((n, solver, "two_stage"))
+        for solver, form in [(s, f) for f in FORMULATIONS for s in SOLVERS]:
+            s = by.get((n, solver, "sampling", form))
+            t = by.get((n, solver, "two_stage", form))
             if not s and not t:
                 continue
             cells = []
@@ -233,9 +240,9 @@ def format_table(rows: list[dict]) -> str:
                     cells.append(f"{r['mean_cost']:>{w}.4f} {r['p50_us']:>9.1f} {r['p99_us']:>9.1f}")
                 else:
                     cells.append(f"{'-':>{w}} {'-':>9} {'-':>9}")
-            lines.append(f"{n:>6} | {solver:>6} | {cells[0]} | {cells[1]}")
+            lines.append(f"{n:>6} | {solver:>6} | {form:>13} | {cells[0]} | {cells[1]}")
         for stage in STAGES:
-            a, b = by.get((n, "numba", stage)), by.get((n, "scipy", stage))
+            a, b = by.get((n, "numba", stage, "paper")), by.get((n, "scipy", stage, "paper"))
             if a and b:
                 lines.append(
                     f"{'':>6}   speed-up {stage}: p50 x{b['p50_us'] / a['p50_us']:.0f}, "

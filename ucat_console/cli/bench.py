@@ -16,6 +16,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--n", type=int, nargs="+", default=None, metavar="N",
                    help="sample counts (default: the paper's 250 500 1000 1500 2000 5000)")
     p.add_argument("--solvers", nargs="+", choices=("numba", "scipy"), default=["numba", "scipy"])
+    p.add_argument("--formulations", nargs="+", choices=("paper", "closed_stroke"),
+                   default=["paper", "closed_stroke"],
+                   help="cost formulations (closed_stroke: compiled solver only)")
     p.add_argument("--stages", nargs="+", choices=("sampling", "two_stage"),
                    default=["sampling", "two_stage"])
     p.add_argument("--seeds", type=int, default=1,
@@ -63,20 +66,23 @@ def run_mpc(args: argparse.Namespace) -> int:
         raise ValueError(f"--json: directory {args.json.parent} does not exist")
     cpu = pin_to_one_core(args.cpu)
     base = MpcConfig()
+    # the scipy reference solves the paper's formulation only
+    combos = [(s, f) for f in args.formulations for s in args.solvers
+              if f == "paper" or s == "numba"]
     # compile / load every kernel before timing anything
-    for solver in args.solvers:
-        FinMpc(base.replace(solver=solver)).plan((-0.5, 0.5), 0.3, 0.0, B.U_PREV0)
+    for solver, form in combos:
+        FinMpc(base.replace(solver=solver, formulation=form)).plan((-0.5, 0.5), 0.3, 0.0, B.U_PREV0)
     first_call = {} if args.no_first_call else B.first_call_latency()
 
     runs = []
     if args.seeds < 1:
         raise ValueError(f"--seeds: {args.seeds} must be at least 1")
-    total = len(ns) * len(args.solvers) * len(args.stages) * 121 * B.CYCLES * args.seeds
+    total = len(ns) * len(combos) * len(args.stages) * 121 * B.CYCLES * args.seeds
     with tqdm(total=total, desc="bench mpc", unit="solve", file=sys.stderr) as bar:
         for n in ns:
-            for solver in args.solvers:
+            for solver, form in combos:
                 for stage in args.stages:
-                    cfg = base.replace(n_samples=n, solver=solver)
+                    cfg = base.replace(n_samples=n, solver=solver, formulation=form)
                     res = None
                     for seed in range(args.seeds):
                         r = B.run_protocol(cfg, refine=stage == "two_stage", seed=seed,

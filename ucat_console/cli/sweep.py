@@ -9,7 +9,8 @@ from ucat_console.experiments.scenario import PLANT_VARIANTS
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("sweep", help="MPC weight sweep over the E4 protocol (table + plot)")
+    p = sub.add_parser("sweep", help="MPC weight sweep over the E4 protocol (table + plot; savings and "
+                                     "energy per metre where both runs track)")
     p.add_argument("--lam-st", type=float, nargs="+", default=[1.0, 2.5, 5.0, 10.0], metavar="X",
                    help="values of lam_st")
     p.add_argument("--lam-d", type=float, nargs="+", default=[0.3, 1.0, 3.0], metavar="X",
@@ -19,6 +20,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seeds", type=int, default=2, help="runs per point (seeds S..S+n-1)")
     p.add_argument("--seed", type=int, default=0, help="first seed")
     p.add_argument("--plant", choices=tuple(PLANT_VARIANTS), default="strouhal_wake")
+    p.add_argument("--formulation", choices=("paper", "closed_stroke"), default="paper",
+                   help="the MPC's cost formulation")
     p.add_argument("--quick", action="store_true", help="short runs")
     p.add_argument("--out", type=Path, default=Path("sweep-out"), help="output directory")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS", help="dask scheduler address")
@@ -36,6 +39,7 @@ def run(args: argparse.Namespace) -> int:
     doc = run_sweep_command(
         args.out, lam_st=args.lam_st, lam_d=args.lam_d, speeds=args.velocities, seeds=args.seeds,
         quick=args.quick, seed=args.seed, plant=args.plant, scheduler=args.scheduler,
+        formulation=args.formulation,
     )
     print(f"sweep: {len(doc['experiments']['sweep']['rows'])} rows in "
           f"{doc['experiments']['sweep']['runtime_s']:.1f} s; wrote {args.out}/sweep.csv, sweep.md, report.md")

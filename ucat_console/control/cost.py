@@ -3,6 +3,32 @@
 Vectorised numpy over any number of candidate plans ``u = [d_1, d_2, w_1, w_2]``
 (shape ``(..., 4)``). This is the readable reference that the scipy solver uses and that
 the compiled kernels in :mod:`ucat_console.control.mpc_kernels` are tested against.
+
+Two formulations (``MpcConfig.formulation``):
+
+- ``"paper"``: eq 17, ``J = lam_f c_force + lam_St c_St(St) + lam_a c_amp + lam_d c_diff``
+  with St the cycle's (eq 10).
+- ``"closed_stroke"``: the same force, amplitude and smoothness terms, and
+
+      c_St     = (c_St(St_1) + c_St(St_2)) / 2,   St_k = w_k L_f / (2 max(V_B, v_floor))
+      c_close  = |d_1 + d_2|                      (the cycle ends where it started)
+      c_energy = sum_k (k_D |d_k| w_k^2 + I w_k^2 / 2) / sum_k dt_k
+      J = lam_f c_force + lam_St c_St + lam_a c_amp + lam_d c_diff + lam_c c_close + lam_e c_energy
+
+  St_k is the Strouhal number of a cycle of two strokes like stroke k, so a slow and a fast
+  stroke each pay for their own St and cannot average into the corridor (eq 10 averages the
+  two durations: a 0.9 rad/s stroke and an 8 rad/s return give a cycle St in the corridor).
+  c_energy is the model's mechanical power over the cycle, W: each stroke turns the fin
+  through |d_k| at the mean rate w_k, so its drag energy is k_D w_k^3 dt_k = k_D |d_k| w_k^2
+  (k_D = 0.5 rho C_D A_f r_c^3, :func:`ucat_console.control.power.drag_coefficient`), and it
+  starts from rest, so the motor (which does not regenerate) pays I w_k^2 / 2 to accelerate
+  the fin (I = ``fin_inertia``). It is the cycle's energy divided by the cycle's duration,
+  not the energy alone: a plan is one cycle of a receding horizon, and a short cycle that
+  costs less energy but repeats more often would spend more per second and per metre.
+  With the L1 force term the energy term does not trade force for power while
+  ``lam_e dP/dF < lam_f`` (dP/dF = 1.5 P/F for F ~ w^2, P ~ w^3; at most about 1.1 W/N
+  within the rate limits with the paper's coefficients): it chooses among the plans that
+  make the force the most economical one.
 """
 
 from __future__ import annotations
@@ -14,6 +40,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ucat_console.control.fin_model import ForceTable, bilinear, rotate, stroke_force_body
 from ucat_console.control.params import MpcConfig
+from ucat_console.control.power import drag_coefficient
 
 H = 2  # strokes per cycle
 
@@ -32,6 +59,20 @@ def stroke_strouhal(w: float, v_body: float, cfg: MpcConfig) -> float:
     """St of one stroke at mean rate ``w``: :func:`strouhal` of a cycle of two such strokes,
     ``w L_f / (2 max(V_B, v_floor))`` (the stroke angle cancels)."""
     return abs(float(w)) * cfg.fin_length / (2.0 * max(float(v_body), cfg.v_floor))
+
+
+def stroke_strouhals(u: ArrayLike, v_body: float, cfg: MpcConfig) -> NDArray:
+    """St_k of each stroke, shape (..., H): :func:`stroke_strouhal` of its mean rate."""
+    w = np.asarray(u, dtype=float)[..., H:]
+    return np.abs(w) * cfg.fin_length / (2.0 * max(float(v_body), cfg.v_floor))
+
+
+def cycle_power(u: ArrayLike, cfg: MpcConfig) -> NDArray:
+    """The model's mean mechanical power (W) of cycles ``u``: drag and inertia (module docstring)."""
+    u = np.asarray(u, dtype=float)
+    a, w = np.abs(u[..., :H]), u[..., H:]
+    energy = (drag_coefficient(cfg) * a * w**2 + 0.5 * cfg.fin_inertia * w**2).sum(axis=-1)
+    return energy / (a / w).sum(axis=-1)
 
 
 def eta_hat(st: ArrayLike, cfg: MpcConfig) -> NDArray:
@@ -54,8 +95,10 @@ class CostBreakdown:
     strouhal_penalty: float  # c_St
     amplitude: float  # c_amp, m
     smoothness: float  # c_diff
-    st: float
+    st: float  # the cycle's St (eq 10), in both formulations
     mean_force: tuple[float, float]  # (f_bar_x, f_bar_y), N, body frame
+    closure: float = 0.0  # c_close, rad (closed_stroke; 0 for the paper's cost)
+    energy: float = 0.0  # c_energy, W (closed_stroke; 0 for the paper's cost)
 
 
 def mean_force(
@@ -89,17 +132,25 @@ def cost_terms(
     cfg: MpcConfig,
     table: ForceTable | None = None,
 ) -> dict[str, NDArray]:
-    """Every term of J (eqs 13-17) for plans ``u`` of shape (..., 4)."""
+    """Every term of J for plans ``u`` of shape (..., 4) in the configured formulation
+    (module docstring; eqs 13-17 for the paper's)."""
     u = np.asarray(u, dtype=float)
     u_prev = np.asarray(u_prev, dtype=float)
     fbx, fby = mean_force(u, theta0, cfg, table)
     c_force = np.abs(fbx - f_target[0]) + np.abs(fby - f_target[1])
     st = strouhal(u, v_body, cfg)
-    c_st = strouhal_penalty(st, cfg)
     amp_k = np.abs(u[..., :H]) * cfg.fin_length / 2.0
     c_amp = np.maximum(0.0, cfg.a_min - amp_k).sum(axis=-1)
     c_diff = 0.5 * np.abs(u - u_prev).sum(axis=-1)
-    total = cfg.lam_f * c_force + cfg.lam_st * c_st + cfg.lam_a * c_amp + cfg.lam_d * c_diff
+    if cfg.formulation == "closed_stroke":
+        c_st = strouhal_penalty(stroke_strouhals(u, v_body, cfg), cfg).mean(axis=-1)
+        c_close = np.abs(u[..., 0] + u[..., 1])
+        c_energy = cycle_power(u, cfg)
+    else:
+        c_st = strouhal_penalty(st, cfg)
+        c_close = c_energy = np.zeros_like(c_force)
+    total = (cfg.lam_f * c_force + cfg.lam_st * c_st + cfg.lam_a * c_amp + cfg.lam_d * c_diff
+             + cfg.lam_c * c_close + cfg.lam_e * c_energy)
     return {
         "total": total,
         "force": c_force,
@@ -109,6 +160,8 @@ def cost_terms(
         "st": st,
         "fbx": fbx,
         "fby": fby,
+        "closure": c_close,
+        "energy": c_energy,
     }
 
 
@@ -122,4 +175,6 @@ def breakdown_from_terms(terms: dict[str, NDArray]) -> CostBreakdown:
         smoothness=float(terms["smoothness"]),
         st=float(terms["st"]),
         mean_force=(float(terms["fbx"]), float(terms["fby"])),
+        closure=float(terms["closure"]),
+        energy=float(terms["energy"]),
     )

@@ -11,6 +11,8 @@ sampler contract and one cost definition:
   ``maxiter=max_iter`` from the best sample.
 
 Both keep each stroke's sign from its warm start and never return a plan worse than it.
+The compiled solver also solves the closed-stroke formulation (``formulation =
+"closed_stroke"``, see :mod:`ucat_console.control.cost`), with its own compiled entry points.
 
 Time: like the rest of the core, the planner reads no clock. A caller that wants the two
 stages timed gives the planner its clock (``FinMpc(cfg, clock=time.perf_counter)``); the
@@ -108,6 +110,11 @@ class FinMpc:
             self.table = None
             self._gx = self._gy = np.zeros((2, 2))
             self._params = K.pack_params(cfg, None)
+        closed = cfg.formulation == "closed_stroke"
+        self._plan_kernel = K.closed_plan_kernel if closed else K.plan_kernel
+        self._sample_kernel = K.closed_sample_kernel if closed else K.sample_kernel
+        self._finish_kernel = K.closed_finish_kernel if closed else K.finish_kernel
+        self._cost_kernel = K.closed_cost_kernel if closed else K.cost_kernel
         self._rng = np.zeros(1, dtype=np.uint64)
         self._rng[0] = np.uint64(seed if seed is not None else 0x5EED)
         self._best_u = np.zeros((cfg.refine_starts, 4))
@@ -143,7 +150,7 @@ class FinMpc:
                 )
         problem = K.pack_problem(f, v, th, up)
         terms = np.zeros(K.N_TERMS)
-        K.cost_kernel(
+        self._cost_kernel(
             self._params, problem, self._gx, self._gy, np.asarray(uu), np.zeros(4), terms
         )
         return _breakdown(terms)
@@ -154,7 +161,7 @@ class FinMpc:
         uu = np.asarray(u, dtype=float)
         problem = K.pack_problem(f, v, th, up)
         grad = np.zeros(4)
-        K.cost_kernel(self._params, problem, self._gx, self._gy, uu, grad, np.zeros(K.N_TERMS))
+        self._cost_kernel(self._params, problem, self._gx, self._gy, uu, grad, np.zeros(K.N_TERMS))
         return grad
 
     # ------------------------------------------------------------------ planning
@@ -174,17 +181,17 @@ class FinMpc:
         max_iter = cfg.max_iter if refine else 0
         clock = self._clock
         if clock is None:
-            K.plan_kernel(
+            self._plan_kernel(
                 self._params, problem, self._gx, self._gy, cfg.n_samples, max_iter, self._rng,
                 self._best_u, self._best_j, self._block, self._work, self._hinv, self._u, self._terms,
             )
             t_sample = t_refine = math.nan
         else:
             t0 = clock()
-            K.sample_kernel(self._params, problem, self._gx, self._gy, cfg.n_samples, self._rng,
+            self._sample_kernel(self._params, problem, self._gx, self._gy, cfg.n_samples, self._rng,
                             self._best_u, self._best_j, self._block, self._u)
             t1 = clock()
-            K.finish_kernel(self._params, problem, self._gx, self._gy, max_iter, self._best_u,
+            self._finish_kernel(self._params, problem, self._gx, self._gy, max_iter, self._best_u,
                             self._best_j, self._work, self._hinv, self._u, self._terms)
             t_sample, t_refine = t1 - t0, clock() - t1
         u = self._u.tolist()
@@ -261,4 +268,6 @@ def _breakdown(terms: np.ndarray) -> CostBreakdown:
         smoothness=t[K.T_DIFF],
         st=t[K.T_ST],
         mean_force=(t[K.T_FBX], t[K.T_FBY]),
+        closure=t[K.T_CLOSE],
+        energy=t[K.T_ENERGY],
     )

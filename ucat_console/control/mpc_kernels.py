@@ -18,6 +18,14 @@ No clock is read here: a caller timing the two stages calls :func:`sample_kernel
 between them. Over 500 lines because this is one compiled solver whose parts inline into
 one another (cost, gradient, sampler, quasi-Newton step); split, it would be one algorithm
 spread over files.
+
+The closed-stroke formulation (``control.cost``) is the same solver with the flag
+``closed`` (a compile-time constant, like ``table``), behind its own entry points
+(``closed_*_kernel``), so the paper's kernels compile and run as before. Its sampler draws
+half of the stroke pairs closed (d_2 = -d_1); a closed warm start is refined on the closed
+subspace (the gradient projected onto d_2 = -d_1, every trial point kept on it), so a plan
+that closes comes back closed exactly; the other warm starts are refined freely and pay
+``lam_c |d_1 + d_2|``.
 """
 
 from __future__ import annotations
@@ -31,6 +39,7 @@ from numba.core import types
 from numba.extending import intrinsic
 
 from ucat_console.control.params import MpcConfig
+from ucat_console.control.power import drag_coefficient
 
 # --- layout of the constant parameter vector -------------------------------------------
 P_LAM_F, P_LAM_ST, P_LAM_A, P_LAM_D = 0, 1, 2, 3
@@ -38,7 +47,8 @@ P_Q, P_CL, P_CD, P_LF = 4, 5, 6, 7
 P_ST_OPT, P_ETA_MAX, P_VFLOOR, P_AMIN = 8, 9, 10, 11
 P_DEPS, P_DMAX, P_WMIN, P_WMAX = 12, 13, 14, 15
 P_TD0, P_THD, P_TW0, P_THW, P_MODE = 16, 17, 18, 19, 20
-N_PARAMS = 21
+P_LAM_C, P_LAM_E, P_KD, P_INERTIA = 21, 22, 23, 24  # the closed-stroke formulation's
+N_PARAMS = 25
 MODE_ANALYTIC, MODE_TABLE = 0.0, 1.0
 
 # --- layout of the per-solve problem vector ---------------------------------------------
@@ -47,8 +57,8 @@ Q_PREV = 5  # 5..8: u_prev
 N_PROBLEM = 9
 
 # --- layout of the terms output ---------------------------------------------------------
-T_TOTAL, T_FORCE, T_ST_PEN, T_AMP, T_DIFF, T_ST, T_FBX, T_FBY = range(8)
-N_TERMS = 8
+T_TOTAL, T_FORCE, T_ST_PEN, T_AMP, T_DIFF, T_ST, T_FBX, T_FBY, T_CLOSE, T_ENERGY = range(10)
+N_TERMS = 10
 
 
 def pack_params(cfg: MpcConfig, table_axes: tuple[float, float, float, float] | None) -> tuple:
@@ -62,6 +72,8 @@ def pack_params(cfg: MpcConfig, table_axes: tuple[float, float, float, float] | 
     p[P_CL], p[P_CD], p[P_LF] = cfg.c_l, cfg.c_d, cfg.fin_length
     p[P_ST_OPT], p[P_ETA_MAX], p[P_VFLOOR], p[P_AMIN] = cfg.st_opt, cfg.eta_max, cfg.v_floor, cfg.a_min
     p[P_DEPS], p[P_DMAX], p[P_WMIN], p[P_WMAX] = cfg.d_eps, cfg.d_max, cfg.w_min, cfg.w_max
+    p[P_LAM_C], p[P_LAM_E] = cfg.lam_c, cfg.lam_e
+    p[P_KD], p[P_INERTIA] = drag_coefficient(cfg), cfg.fin_inertia
     if table_axes is None:
         p[P_MODE] = MODE_ANALYTIC
     else:
@@ -188,12 +200,53 @@ def stroke_force(p, gx_tab, gy_tab, d, w, cd, sd, table):
     return gx, gy, dgx_dd, dgy_dd, dgx_dw, dgy_dw
 
 
+@_jit
+def closed_terms(p, kst, d1, d2, w1, w2, inv_t, want_grad):
+    """The closed-stroke formulation's own terms: (c_St per stroke, c_close, c_energy, and
+    their weighted gradient dJ/dd1, dJ/dd2, dJ/dw1, dJ/dw2; zero unless ``want_grad``).
+
+    Compiled on its own rather than inlined: numba inlines before it prunes the dead
+    ``closed`` branch, so inlined code would be typed and compiled into every one of the
+    paper's kernels as well, lengthening their first compile."""
+    # per stroke: St_k = kst w_k, c_St = (c(St_1) + c(St_2)) / 2
+    x1 = kst * w1 / p[P_ST_OPT]
+    x2 = kst * w2 / p[P_ST_OPT]
+    ex1 = exp_neg(1.0 - x1)
+    ex2 = exp_neg(1.0 - x2)
+    c1 = p[P_ETA_MAX] - p[P_ETA_MAX] * x1 * ex1
+    c2 = p[P_ETA_MAX] - p[P_ETA_MAX] * x2 * ex2
+    c_st = 0.5 * (max(c1, 0.0) + max(c2, 0.0))
+    # the opening of the cycle, and the model's mean mechanical power (drag, inertia)
+    opening = d1 + d2
+    a1 = abs(d1)
+    a2 = abs(d2)
+    kd = p[P_KD]
+    half_i = 0.5 * p[P_INERTIA]
+    c_energy = (kd * (a1 * w1 * w1 + a2 * w2 * w2) + half_i * (w1 * w1 + w2 * w2)) * inv_t
+    if not want_grad:
+        return c_st, abs(opening), c_energy, 0.0, 0.0, 0.0, 0.0
+    # dc(St_k)/dw_k = -eta_max e^{1-x_k} (1 - x_k) kst / St_opt, halved
+    kk = -0.5 * p[P_LAM_ST] * p[P_ETA_MAX] * kst / p[P_ST_OPT]
+    g_w1 = kk * ex1 * (1.0 - x1) if c1 > 0.0 else 0.0
+    g_w2 = kk * ex2 * (1.0 - x2) if c2 > 0.0 else 0.0
+    lc = p[P_LAM_C] * _sgn(opening)
+    # P = E / T: dP = (dE - P dT) / T, with dT/dd_k = sgn(d_k) / w_k, dT/dw_k = -|d_k| / w_k^2
+    le = p[P_LAM_E] * inv_t
+    g_d1 = lc + le * (kd * _sgn(d1) * w1 * w1 - c_energy * _sgn(d1) / w1)
+    g_d2 = lc + le * (kd * _sgn(d2) * w2 * w2 - c_energy * _sgn(d2) / w2)
+    g_w1 += le * (2.0 * kd * a1 * w1 + 2.0 * half_i * w1 + c_energy * a1 / (w1 * w1))
+    g_w2 += le * (2.0 * kd * a2 * w2 + 2.0 * half_i * w2 + c_energy * a2 / (w2 * w2))
+    return c_st, abs(opening), c_energy, g_d1, g_d2, g_w1, g_w2
+
+
 @_inline
-def cost_eval(p, q, gx_tab, gy_tab, d1, d2, w1, w2, want_grad, table):
+def cost_eval(p, q, gx_tab, gy_tab, d1, d2, w1, w2, want_grad, table, closed):
     """J at u = (d1, d2, w1, w2) as a tuple of scalars: (J, c_force, c_St, c_amp,
-    c_diff, St, f_bar_x, f_bar_y, dJ/dd1, dJ/dd2, dJ/dw1, dJ/dw2); the gradient is zero
-    unless ``want_grad``; ``table`` selects the tabulated force model. Inlined, so
-    constant flags remove the code they switch off, and unused terms cost nothing."""
+    c_diff, St, f_bar_x, f_bar_y, c_close, c_energy, dJ/dd1, dJ/dd2, dJ/dw1, dJ/dw2);
+    the gradient is zero unless ``want_grad``; ``table`` selects the tabulated force
+    model, ``closed`` the closed-stroke formulation (c_close and c_energy are 0 without
+    it). Inlined, so constant flags remove the code they switch off, and unused terms
+    cost nothing."""
     a1 = abs(d1)
     a2 = abs(d2)
     s1 = _sgn(d1)
@@ -225,13 +278,20 @@ def cost_eval(p, q, gx_tab, gy_tab, d1, d2, w1, w2, want_grad, table):
     kst = p[P_LF] / (2.0 * v)
     ssum = a1 + a2
     st = kst * ssum * inv_t
-    x = st / p[P_ST_OPT]
-    ex1 = exp_neg(1.0 - x)
-    eta = p[P_ETA_MAX] * x * ex1
-    c_st = p[P_ETA_MAX] - eta
-    st_active = c_st > 0.0
-    if not st_active:
-        c_st = 0.0
+    if closed:
+        c_st, c_close, c_energy, k_d1, k_d2, k_w1, k_w2 = closed_terms(
+            p, kst, d1, d2, w1, w2, inv_t, want_grad)
+        st_active = False
+        x = ex1 = 0.0
+    else:
+        c_close = c_energy = k_d1 = k_d2 = k_w1 = k_w2 = 0.0
+        x = st / p[P_ST_OPT]
+        ex1 = exp_neg(1.0 - x)
+        eta = p[P_ETA_MAX] * x * ex1
+        c_st = p[P_ETA_MAX] - eta
+        st_active = c_st > 0.0
+        if not st_active:
+            c_st = 0.0
     half_l = 0.5 * p[P_LF]
     m1 = p[P_AMIN] - a1 * half_l
     m2 = p[P_AMIN] - a2 * half_l
@@ -250,8 +310,10 @@ def cost_eval(p, q, gx_tab, gy_tab, d1, d2, w1, w2, want_grad, table):
     lam_a = p[P_LAM_A]
     lam_d = p[P_LAM_D]
     total = lam_f * c_force + lam_st * c_st + lam_a * c_amp + lam_d * c_diff
+    if closed:
+        total += p[P_LAM_C] * c_close + p[P_LAM_E] * c_energy
     if not want_grad:
-        return total, c_force, c_st, c_amp, c_diff, st, fbx, fby, 0.0, 0.0, 0.0, 0.0
+        return total, c_force, c_st, c_amp, c_diff, st, fbx, fby, c_close, c_energy, 0.0, 0.0, 0.0, 0.0
     # --- gradient (sub-gradient at kinks: sign(0) = 0) ---------------------------------
     sx = _sgn(ex) * lam_f
     sy = _sgn(ey) * lam_f
@@ -297,13 +359,18 @@ def cost_eval(p, q, gx_tab, gy_tab, d1, d2, w1, w2, want_grad, table):
         g_d2 += k * (s2 - ssum * inv_t * dt2_d)
         g_w1 += k * (-ssum * inv_t * dt1_w)
         g_w2 += k * (-ssum * inv_t * dt2_w)
+    if closed:
+        g_d1 += k_d1
+        g_d2 += k_d2
+        g_w1 += k_w1
+        g_w2 += k_w2
     if m1 > 0.0:
         g_d1 -= lam_a * half_l * s1
     if m2 > 0.0:
         g_d2 -= lam_a * half_l * s2
     hd = 0.5 * lam_d
     return (
-        total, c_force, c_st, c_amp, c_diff, st, fbx, fby,
+        total, c_force, c_st, c_amp, c_diff, st, fbx, fby, c_close, c_energy,
         g_d1 + hd * _sgn(e_d1),
         g_d2 + hd * _sgn(e_d2),
         g_w1 + hd * _sgn(e_w1),
@@ -312,20 +379,20 @@ def cost_eval(p, q, gx_tab, gy_tab, d1, d2, w1, w2, want_grad, table):
 
 
 @_inline
-def cost_grad(p, q, gx_tab, gy_tab, x, grad, table):
+def cost_grad(p, q, gx_tab, gy_tab, x, grad, table, closed):
     """J at x (len 4) with its gradient written to ``grad``."""
-    r = cost_eval(p, q, gx_tab, gy_tab, x[0], x[1], x[2], x[3], True, table)
-    grad[0] = r[8]
-    grad[1] = r[9]
-    grad[2] = r[10]
-    grad[3] = r[11]
+    r = cost_eval(p, q, gx_tab, gy_tab, x[0], x[1], x[2], x[3], True, table, closed)
+    grad[0] = r[10]
+    grad[1] = r[11]
+    grad[2] = r[12]
+    grad[3] = r[13]
     return r[0]
 
 
 @_jit
-def cost_terms_at(p, q, gx_tab, gy_tab, u, terms, table):
+def cost_terms_at(p, q, gx_tab, gy_tab, u, terms, table, closed):
     """Write J and its terms at u (len 4) to ``terms``; returns J."""
-    r = cost_eval(p, q, gx_tab, gy_tab, u[0], u[1], u[2], u[3], False, table)
+    r = cost_eval(p, q, gx_tab, gy_tab, u[0], u[1], u[2], u[3], False, table, closed)
     for i in range(N_TERMS):
         terms[i] = r[i]
     return r[0]
@@ -345,14 +412,18 @@ def _rand(state):
 SAMPLE_BLOCK = 64
 FTOL = 2.220446049250313e-09  # scipy's L-BFGS-B default factr * eps
 PGTOL = 1e-5
+#: a refined closed-stroke plan that opens by at most this much (rad) is refined again on
+#: the closed subspace, and taken if it is as good within the stopping tolerance FTOL
+CLOSE_SNAP = 1e-3
 
 
 @_inline
-def sample_stage(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, table):
+def sample_stage(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, table, closed):
     """Stage 1: n admissible samples; keeps the best len(best_j) (sorted) in best_u.
 
     Samples are drawn and costed in blocks of SAMPLE_BLOCK (``block`` is a (5, B)
-    scratch array) so that the cost loop runs on SIMD lanes."""
+    scratch array) so that the cost loop runs on SIMD lanes. With ``closed``, half of
+    the pairs (at random) are closed: |d_2| = |d_1|."""
     k = best_j.shape[0]
     for i in range(k):
         best_j[i] = np.inf
@@ -372,6 +443,9 @@ def sample_stage(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, table):
         for i in range(m):
             a1 = d_eps + d_span * _rand(rng)
             a2 = d_eps + d_span * _rand(rng)
+            if closed:
+                if _rand(rng) < 0.5:
+                    a2 = a1
             bw1[i] = w_lo + w_span * _rand(rng)
             bw2[i] = w_lo + w_span * _rand(rng)
             if _rand(rng) < 0.5:
@@ -381,7 +455,7 @@ def sample_stage(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, table):
                 bd1[i] = -a1
                 bd2[i] = a2
         for i in range(m):
-            bj[i] = cost_eval(p, q, gx_tab, gy_tab, bd1[i], bd2[i], bw1[i], bw2[i], False, table)[0]
+            bj[i] = cost_eval(p, q, gx_tab, gy_tab, bd1[i], bd2[i], bw1[i], bw2[i], False, table, closed)[0]
         for i in range(m):
             j = bj[i]
             if j < best_j[k - 1]:
@@ -419,12 +493,21 @@ def _box(p, x0, lo, hi):
         hi[2 + k] = p[P_WMAX]
 
 
+@_jit
+def _tie(v):
+    """Project a gradient onto the closed subspace d_2 = -d_1."""
+    a = 0.5 * (v[0] - v[1])
+    v[0] = a
+    v[1] = -a
+
+
 @_inline
-def refine(p, q, gx_tab, gy_tab, x, max_iter, work, hinv, table):
+def refine(p, q, gx_tab, gy_tab, x, max_iter, work, hinv, table, closed):
     """Stage 2: projected BFGS from x (updated in place) inside its sign box.
 
     ``work`` is an (8, 4) scratch array (rows 0-6 used), ``hinv`` a (4, 4) one. Returns the final cost,
-    which is never above the cost at the start."""
+    which is never above the cost at the start. With ``closed``, a closed start
+    (d_2 = -d_1) is refined on the closed subspace, so the result is closed exactly."""
     lo = work[0]
     hi = work[1]
     g = work[2]
@@ -433,7 +516,10 @@ def refine(p, q, gx_tab, gy_tab, x, max_iter, work, hinv, table):
     dirn = work[5]
     yv = work[6]
     _box(p, x, lo, hi)
-    j = cost_grad(p, q, gx_tab, gy_tab, x, g, table)
+    tied = closed and x[0] + x[1] == 0.0
+    j = cost_grad(p, q, gx_tab, gy_tab, x, g, table, closed)
+    if tied:
+        _tie(g)
     _identity(hinv)
     fresh = True
     for _ in range(max_iter):
@@ -470,12 +556,17 @@ def refine(p, q, gx_tab, gy_tab, x, max_iter, work, hinv, table):
                 elif v > hi[a]:
                     v = hi[a]
                 xn[a] = v
-                if v != x[a]:
+            if tied:
+                xn[1] = -xn[0]
+            for a in range(4):
+                if xn[a] != x[a]:
                     moved = True
-                dec += g[a] * (v - x[a])
+                dec += g[a] * (xn[a] - x[a])
             if not moved:
                 break
-            jn = cost_grad(p, q, gx_tab, gy_tab, xn, gn, table)
+            jn = cost_grad(p, q, gx_tab, gy_tab, xn, gn, table, closed)
+            if tied:
+                _tie(gn)
             if jn <= j + 1e-4 * dec and jn < j:
                 accepted = True
                 break
@@ -534,77 +625,133 @@ def refine(p, q, gx_tab, gy_tab, x, max_iter, work, hinv, table):
 
 
 @_inline
-def _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, table):
+def _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, table, closed):
     """Stage 1: draw n samples, keep the best len(best_j); u_out = the best."""
-    sample_stage(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, table)
+    sample_stage(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, table, closed)
     for c in range(4):
         u_out[c] = best_u[0, c]
 
 
 @_inline
-def _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, table):
-    """Stage 2: refine the kept samples (none when max_iter is 0), then the final terms."""
+def _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, table, closed):
+    """Stage 2: refine the kept samples (none when max_iter is 0), then the final terms.
+
+    In the closed-stroke formulation one more start follows: a best plan that opens by at
+    most CLOSE_SNAP is refined again from its projection on the closed subspace (the L1
+    closure term's minimum lies there, which a free refinement only approaches) and taken
+    if it is as good within the stopping tolerance. One refine call site for all starts, so
+    the solver is inlined once per kernel."""
     j_best = best_j[0]
     if max_iter > 0:
         x = work[7]
-        for s in range(best_j.shape[0]):
-            if not best_j[s] < np.inf:
-                break
-            for c in range(4):
-                x[c] = best_u[s, c]
-            j = refine(p, q, gx_tab, gy_tab, x, max_iter, work, hinv, table)
-            if j < j_best:
-                j_best = j
+        k = best_j.shape[0]
+        for s in range(k + 1):
+            if s < k:
+                if not best_j[s] < np.inf:
+                    continue
+                for c in range(4):
+                    x[c] = best_u[s, c]
+            else:
+                opening = u_out[0] + u_out[1]
+                if not (closed and opening != 0.0 and abs(opening) <= CLOSE_SNAP):
+                    break
+                x[0] = 0.5 * (u_out[0] - u_out[1])
+                x[1] = -x[0]
+                x[2] = u_out[2]
+                x[3] = u_out[3]
+            j = refine(p, q, gx_tab, gy_tab, x, max_iter, work, hinv, table, closed)
+            if j < j_best or (s == k and j <= j_best + FTOL * max(abs(j_best), 1.0)):
+                j_best = min(j, j_best)
                 for c in range(4):
                     u_out[c] = x[c]
-    cost_terms_at(p, q, gx_tab, gy_tab, u_out, terms, table)
+    cost_terms_at(p, q, gx_tab, gy_tab, u_out, terms, table, closed)
 
 
+# The entry points branch on the force model themselves, with the flags as literals: one
+# more inlined layer between them and the solver would multiply numba's inlining time.
 @_jit
 def plan_kernel(p, q, gx_tab, gy_tab, n, max_iter, rng, best_u, best_j, block, work, hinv, u_out, terms):
     """One solve: sampling, refinement of the best len(best_j) samples, final terms
     (compiled once per force model: ``table`` is a constant in each branch)."""
     if p[P_MODE] == MODE_TABLE:
-        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, True)
-        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, True)
+        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, True, False)
+        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, True, False)
     else:
-        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, False)
-        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, False)
+        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, False, False)
+        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, False, False)
 
 
 @_jit
 def sample_kernel(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out):
     """The first half of :func:`plan_kernel` (for a caller timing the two stages)."""
     if p[P_MODE] == MODE_TABLE:
-        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, True)
+        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, True, False)
     else:
-        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, False)
+        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, False, False)
 
 
 @_jit
 def finish_kernel(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms):
     """The second half of :func:`plan_kernel` (for a caller timing the two stages)."""
     if p[P_MODE] == MODE_TABLE:
-        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, True)
+        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, True, False)
     else:
-        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, False)
+        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, False, False)
 
 
 @_jit
 def refine_kernel(p, q, gx_tab, gy_tab, x, max_iter, work, hinv):
     """Stage 2 alone from the start point x (updated in place); returns the cost."""
-    return refine(p, q, gx_tab, gy_tab, x, max_iter, work, hinv, p[P_MODE] == MODE_TABLE)
+    return refine(p, q, gx_tab, gy_tab, x, max_iter, work, hinv, p[P_MODE] == MODE_TABLE, False)
 
 
 @_jit
 def cost_kernel(p, q, gx_tab, gy_tab, u, grad, terms):
     """J, its gradient and its terms at one point (for callers outside the solver)."""
     table = p[P_MODE] == MODE_TABLE
-    cost_terms_at(p, q, gx_tab, gy_tab, u, terms, table)
-    return cost_grad_at(p, q, gx_tab, gy_tab, u, grad, table)
+    cost_terms_at(p, q, gx_tab, gy_tab, u, terms, table, False)
+    return cost_grad_at(p, q, gx_tab, gy_tab, u, grad, table, False)
 
 
 @_jit
-def cost_grad_at(p, q, gx_tab, gy_tab, u, grad, table):
+def cost_grad_at(p, q, gx_tab, gy_tab, u, grad, table, closed):
     """J at u with its gradient written to ``grad`` (not inlined)."""
-    return cost_grad(p, q, gx_tab, gy_tab, u, grad, table)
+    return cost_grad(p, q, gx_tab, gy_tab, u, grad, table, closed)
+
+
+# --- the closed-stroke formulation: the same solves with ``closed`` set ------------------
+@_jit
+def closed_plan_kernel(p, q, gx_tab, gy_tab, n, max_iter, rng, best_u, best_j, block, work, hinv, u_out, terms):
+    """:func:`plan_kernel` of the closed-stroke formulation."""
+    if p[P_MODE] == MODE_TABLE:
+        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, True, True)
+        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, True, True)
+    else:
+        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, False, True)
+        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, False, True)
+
+
+@_jit
+def closed_sample_kernel(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out):
+    """:func:`sample_kernel` of the closed-stroke formulation."""
+    if p[P_MODE] == MODE_TABLE:
+        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, True, True)
+    else:
+        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, False, True)
+
+
+@_jit
+def closed_finish_kernel(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms):
+    """:func:`finish_kernel` of the closed-stroke formulation."""
+    if p[P_MODE] == MODE_TABLE:
+        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, True, True)
+    else:
+        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, False, True)
+
+
+@_jit
+def closed_cost_kernel(p, q, gx_tab, gy_tab, u, grad, terms):
+    """:func:`cost_kernel` of the closed-stroke formulation."""
+    table = p[P_MODE] == MODE_TABLE
+    cost_terms_at(p, q, gx_tab, gy_tab, u, terms, table, True)
+    return cost_grad_at(p, q, gx_tab, gy_tab, u, grad, table, True)

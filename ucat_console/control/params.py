@@ -10,16 +10,33 @@ from dataclasses import dataclass
 
 from ucat_console.typedconf import Config, param, require_below
 
+#: the MPC's cost formulations: the paper's eq 17, and the closed-stroke cost
+#: (``control.cost``: strokes that close, the Strouhal penalty per stroke, an energy term)
+FORMULATIONS = ("paper", "closed_stroke")
+
 
 @dataclass(frozen=True)
 class MpcConfig(Config):
     """The fin MPC (control.md sections 1-5, paper Table I)."""
 
+    formulation: str = param(
+        "paper", choices=FORMULATIONS,
+        doc="cost: the paper's eq 17, or closed strokes with a per-stroke St penalty and an energy term",
+    )
     # cost weights (eq 17)
     lam_f: float = param(1.5, lo=0.0, hi=100.0, doc="weight of the force tracking error")
     lam_st: float = param(5.0, lo=0.0, hi=100.0, doc="weight of the Strouhal penalty")
     lam_a: float = param(1.0, lo=0.0, hi=100.0, doc="weight of the amplitude penalty")
     lam_d: float = param(1.0, lo=0.0, hi=100.0, doc="weight of the smoothness penalty")
+    # weights of the closed-stroke formulation only
+    lam_c: float = param(
+        0.3, lo=0.0, hi=100.0, unit="1/rad",
+        doc="closed_stroke: weight of the opening |d_1 + d_2| of a cycle that does not close",
+    )
+    lam_e: float = param(
+        1.0, lo=0.0, hi=1000.0, unit="1/W",
+        doc="closed_stroke: weight of the cycle's mechanical energy per second (the model's drag and inertia)",
+    )
     # horizon and solver
     horizon: int = param(2, choices=(2,), doc="strokes per cycle H (the solver is built for H=2)")
     n_samples: int = param(500, lo=1, hi=100_000, doc="stage-1 samples N")
@@ -39,6 +56,9 @@ class MpcConfig(Config):
     r_c: float = param(0.10, lo=0.0, hi=2.0, lo_open=True, unit="m", doc="radius of gyration r_c")
     c_d: float = param(0.70, lo=0.0, hi=20.0, doc="drag coefficient C_D")
     c_l: float = param(0.25, lo=0.0, hi=20.0, doc="lift coefficient C_L")
+    fin_inertia: float = param(
+        2.8e-5, lo=0.0, hi=1.0, unit="kg m2", doc="fin inertia about its axis (the energy term's model)"
+    )
     # Strouhal surrogate (eqs 10-12)
     st_opt: float = param(0.30, lo=0.01, hi=2.0, doc="optimal Strouhal number")
     eta_max: float = param(1.0, lo=0.0, hi=10.0, lo_open=True, doc="surrogate scale")
@@ -56,6 +76,11 @@ class MpcConfig(Config):
         require_below(self, "d_eps", "d_max")
         require_below(self, "w_min", "w_max")
         require_below(self, "st_low", "st_high")
+        if self.formulation == "closed_stroke" and self.solver != "numba":
+            raise ValueError(
+                "solver: the closed_stroke formulation is solved by the compiled solver only "
+                f"(solver = 'numba'), got {self.solver!r}"
+            )
 
     @property
     def weights(self) -> tuple[float, float, float, float]:
@@ -117,3 +142,45 @@ class PowerConfig(Config):
     filter_tau: float = param(
         0.02, lo=0.0, hi=1.0, unit="s", doc="first-order low-pass on rate and acceleration"
     )
+
+
+def _check_steps(steps: tuple[tuple[float, float, float], ...]) -> None:
+    if not steps:
+        raise ValueError("steps: the manoeuvre needs at least one step")
+    for i, step in enumerate(steps):
+        if len(step) != 3:
+            raise ValueError(f"steps[{i}]: expected (centre offset rad, stroke rad, rate rad/s), got {step!r}")
+        offset, stroke, rate = step
+        if not -1.6 <= offset <= 1.6:
+            raise ValueError(f"steps[{i}]: centre offset {offset!r} rad is out of range; allowed: [-1.6, 1.6]")
+        if not 0.05 <= stroke <= 3.14159:
+            raise ValueError(f"steps[{i}]: stroke {stroke!r} rad is out of range; allowed: [0.05, 3.14159]")
+        if not 0.1 <= rate <= 50.0:
+            raise ValueError(f"steps[{i}]: rate {rate!r} rad/s is out of range; allowed: [0.1, 50.0]")
+
+
+@dataclass(frozen=True)
+class ManoeuvreConfig(Config):
+    """The identification manoeuvre (mode "identify"): fixed strokes, step after step.
+
+    Each step holds a symmetric stroke pair of ``stroke`` rad at the mean rate ``rate`` about
+    the forward-thrust centre of the controller's model turned by ``centre offset``, for
+    ``step_s`` seconds; several centres are needed to tell C_L from C_D (the mean thrust of
+    one centre is one combination of the two), several rates and strokes to span the
+    speeds. After the last step the fins hold still.
+    """
+
+    steps: tuple[tuple[float, float, float], ...] = param(
+        ((0.0, 0.6, 2.0), (0.0, 1.2, 2.0), (0.0, 0.6, 4.0), (0.0, 1.2, 4.0),
+         (-0.5, 0.8, 3.0), (0.5, 0.8, 3.0)),
+        doc="(centre offset rad, stroke rad, mean rate rad/s) of each step",
+    )
+    step_s: float = param(20.0, lo=2.0, hi=600.0, unit="s", doc="how long each step is held")
+
+    def _check(self) -> None:
+        _check_steps(self.steps)
+
+    @property
+    def duration(self) -> float:
+        """The whole manoeuvre (s)."""
+        return self.step_s * len(self.steps)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import importlib.util
 
-EXPERIMENTS = ("E1", "E2", "E3", "E4", "E5")
+EXPERIMENTS = ("E1", "E2", "E3", "E4", "E4R", "E5", "E6")
 #: what the experiments, sweeps and the MPC benchmark import beyond the console
 EXTRA_MODULES = ("matplotlib", "dask", "distributed", "tqdm")
 

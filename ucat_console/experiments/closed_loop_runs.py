@@ -1,36 +1,54 @@
-"""Closed-loop experiments: E4 (Table V, Fig. 7), E5 (Fig. 8) and the weight sweep.
+"""Closed-loop experiments: E4 (Table V, Fig. 7), E4R (E4 from rest), E5 (Fig. 8), E6 (the
+plant family, each with its identified model), the sweep.
 
 Every run is a :class:`~ucat_console.experiments.scenario.Scenario` executed by
 :func:`~ucat_console.experiments.scenario.run_scenario` on the distributed executor
 (``distributed.run_all``), so seeds, plant variants and weight grids spread over the
 workers; the aggregation here is plain arithmetic over the returned numbers.
+
+Savings (power and energy per metre, against the baseline at the same reference) are
+quoted only where both runs track: velocity MAE at most :data:`TRACKING_MAE` for the
+baseline and for the controller compared. Elsewhere they are "not comparable" (NaN with
+``comparable`` False): a controller that never reached its speed has nothing to save.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ucat_console.control.params import MpcConfig
+from ucat_console.control.params import BodyConfig, MpcConfig
 from ucat_console.experiments import paper
 from ucat_console.experiments.distributed import run_all
-from ucat_console.experiments.scenario import PLANT_VARIANTS, Scenario, plant_assumptions, run_scenario
+from ucat_console.experiments.scenario import (
+    PLANT_VARIANTS,
+    Scenario,
+    family_name,
+    hydro_of,
+    plant_assumptions,
+    plant_config,
+    run_scenario,
+)
 
 CONTROLLERS = ("baseline", "mpc", "mpc_sync")
 E4_SPEEDS = (0.1, 0.2, 0.3, 0.4)
 E4_DEPTH = 1.0
 #: a run "reaches" its reference when the mean true speed is at least this share of it
 REACHED_SHARE = 0.9
+#: both runs track when their velocity MAE (DVL against the reference) is at most this (m/s)
+TRACKING_MAE = 0.03
 E5_CURRENT = (0.03, 0.02, 0.0)
 E5_START_DEPTH = 0.5
 E5_WAKES = ("strouhal_wake", "quasi_steady")
 
-METRICS = ("power_est", "power_true", "velocity_mean", "velocity_mae", "velocity_mae_true",
+METRICS = ("power_est", "power_true", "energy_per_metre", "energy_per_metre_true",
+           "velocity_mean", "velocity_mae", "velocity_mae_true",
            "depth_mae", "st_mae", "st_plant_mae", "st_in_range", "force_error", "late_plans",
-           "plan_overruns")
+           "plan_overruns", "stroke", "rate", "opening", "winding")
 
 
 def e4_timing(quick: bool) -> tuple[float, float]:
@@ -81,15 +99,27 @@ def aggregate(runs: list[dict[str, Any]], keys: Sequence[str]) -> list[dict[str,
     return rows
 
 
+def tracks(row: dict[str, Any]) -> bool:
+    """Whether a run (or a row of runs) held its reference: velocity MAE <= TRACKING_MAE."""
+    return bool(row["velocity_mae"] <= TRACKING_MAE)
+
+
+def _saving(base: float, value: float) -> float:
+    return 100.0 * (base - value) / base if base > 0.0 else math.nan
+
+
 def _add_savings(rows: list[dict[str, Any]], group: Sequence[str]) -> None:
-    """saving_est / saving_true (%) of each row against the baseline row of its group."""
+    """saving_est / saving_true (% of mean power) and saving_epm / saving_epm_true (% of
+    energy per metre) of each row against the baseline row of its group, where both track."""
     base = {tuple(r[k] for k in group): r for r in rows if r["mode"] == "baseline"}
     for r in rows:
         b = base.get(tuple(r[k] for k in group))
-        for kind in ("est", "true"):
-            ok = b is not None and b[f"power_{kind}"] > 0.0
-            r[f"saving_{kind}"] = (100.0 * (b[f"power_{kind}"] - r[f"power_{kind}"]) / b[f"power_{kind}"]
-                                   if ok else math.nan)
+        r["tracks"] = tracks(r)
+        r["comparable"] = bool(b is not None and tracks(b) and tracks(r))
+        pairs = (("est", "power_est"), ("true", "power_true"), ("epm", "energy_per_metre"),
+                 ("epm_true", "energy_per_metre_true"))
+        for kind, key in pairs:
+            r[f"saving_{kind}"] = _saving(b[key], r[key]) if r["comparable"] else math.nan
 
 
 def run_e4(client: Any, quick: bool, seed: int, speeds: Sequence[float] | None = None,
@@ -131,13 +161,12 @@ def _e4_claims(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
             continue
         ours = [by[(v, mode)]["saving_est"] for v in speeds]
         ref = [paper.TABLE_V[v][mode][1] for v in speeds]  # type: ignore[index]
-        reached = all(by[(v, "baseline")]["reached"] and by[(v, mode)]["reached"] for v in speeds
-                      if (v, "baseline") in by)
+        reached = all(by[(v, mode)]["comparable"] for v in speeds)
         out.append({
             "claim": f"{label} saves mechanical power vs the baseline at " + " / ".join(f"{v:g}" for v in speeds) + " m/s",
             "paper": " / ".join(f"{x:.1f}" for x in ref) + " %",
             "ours": " / ".join("n/a" if math.isnan(x) else f"{x:.1f}" for x in ours) + " %"
-                    + ("" if reached else " (not both at the reference: not comparable)"),
+                    + ("" if reached else f" (not both tracking, vel MAE <= {TRACKING_MAE:g} m/s: not comparable)"),
             "reproduced": bool(reached and all(not math.isnan(x) and x > 0.0 for x in ours)),
         })
     if (0.4, "baseline") in by:
@@ -151,6 +180,202 @@ def _e4_claims(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
                     "ours": f"{min(maes):.3f}-{max(maes):.3f} m/s (runs that reached)",
                     "reproduced": bool(min(maes) >= 0.0 and max(maes) <= 0.08)})
     return out
+
+
+# ---------------------------------------------------------------------------- E4R
+#: E4R's controllers: E4's three and the closed-stroke formulation (four MPC fins)
+E4R_CONTROLLERS = ("baseline", "mpc", "mpc_sync", "mpc_closed")
+#: the file whose settings E4R runs beside the paper's (the console's simulated default)
+SIM_TUNED = Path(__file__).resolve().parents[2] / "config" / "sim-tuned.toml"
+
+
+def e4r_settings() -> dict[str, tuple[MpcConfig, BodyConfig]]:
+    """E4R's settings: the paper's (the defaults) and ``config/sim-tuned.toml``'s."""
+    from ucat_console.config import AppConfig
+
+    if not SIM_TUNED.is_file():
+        raise ValueError(f"E4R: {SIM_TUNED} not found (E4R runs from the project's source tree)")
+    tuned = AppConfig.from_toml(SIM_TUNED)
+    return {"paper": (MpcConfig(), BodyConfig()), "sim_tuned": (tuned.mpc, tuned.body)}
+
+
+def controller_mode(controller: str, mpc: MpcConfig) -> tuple[str, MpcConfig]:
+    """The loop mode and MPC configuration of an E4R / E6 controller name."""
+    if controller == "mpc_closed":
+        return "mpc", mpc.replace(formulation="closed_stroke")
+    return controller, mpc
+
+
+def e4r_scenarios(quick: bool, seed: int, speeds: Sequence[float] | None = None,
+                  depth: float = E4_DEPTH) -> list[Scenario]:
+    speeds = tuple(speeds) if speeds else ((0.2,) if quick else E4_SPEEDS)
+    seeds = (seed,) if quick else (seed, seed + 1, seed + 2)
+    settle, window = e4_timing(quick)
+    out = []
+    for name, (mpc, body) in e4r_settings().items():
+        for variant in PLANT_VARIANTS:
+            for v in speeds:
+                for ctrl in E4R_CONTROLLERS:
+                    mode, m = controller_mode(ctrl, mpc)
+                    for s in seeds:
+                        out.append(Scenario(mode=mode, v_ref=v, depth=depth, seed=s, plant=variant,
+                                            settle_s=settle, window_s=window, start_velocity=0.0,
+                                            mpc=m, body=body, tag=f"{name}:{ctrl}"))
+    for sc in out:
+        sc.check()
+    return out
+
+
+def _settings_summary(mpc: MpcConfig, body: BodyConfig) -> dict[str, float]:
+    return {"lam_f": mpc.lam_f, "lam_st": mpc.lam_st, "lam_a": mpc.lam_a, "lam_d": mpc.lam_d,
+            "velocity_kp": body.velocity.kp, "velocity_ki": body.velocity.ki,
+            "velocity_limit": body.velocity.limit}
+
+
+def _label(runs: list[dict[str, Any]], keys: Sequence[str]) -> None:
+    """Scenario tags ``a:b`` -> scenario fields ``keys`` = (a, b)."""
+    for r in runs:
+        for k, v in zip(keys, r["scenario"]["tag"].split(":")):
+            r["scenario"][k] = v
+
+
+def run_e4r(client: Any, quick: bool, seed: int, speeds: Sequence[float] | None = None,
+            depth: float = E4_DEPTH, progress: bool = True) -> dict[str, Any]:
+    """E4 from rest under the paper's settings and under sim-tuned's, every plant variant."""
+    scenarios = e4r_scenarios(quick, seed, speeds, depth)
+    runs = run_all(client, run_scenario, scenarios, "E4R runs", progress)
+    _label(runs, ("settings", "controller"))
+    rows = aggregate(runs, ("settings", "plant", "v_ref", "controller"))
+    for r in rows:
+        r["mode"] = "baseline" if r["controller"] == "baseline" else r["controller"]
+    _add_savings(rows, ("settings", "plant", "v_ref"))
+    settle, window = e4_timing(quick)
+    order = list(e4r_settings())
+    return {
+        "protocol": {"depth": depth, "speeds": sorted({s.v_ref for s in scenarios}),
+                     "controllers": list(E4R_CONTROLLERS), "settings": order,
+                     "seeds": sorted({s.seed for s in scenarios}), "settle_s": settle,
+                     "window_s": window, "tracking_mae": TRACKING_MAE,
+                     "sim_tuned": _settings_summary(*e4r_settings()["sim_tuned"])},
+        "plants": {v: plant_assumptions(v) for v in PLANT_VARIANTS},
+        "rows": sorted(rows, key=lambda r: (order.index(r["settings"]), list(PLANT_VARIANTS).index(r["plant"]),
+                                            r["v_ref"], E4R_CONTROLLERS.index(r["controller"]))),
+    }
+
+
+# ---------------------------------------------------------------------------- E6
+#: E6's plant family (declared before it was run: docs/experiments/e6-declaration.md)
+E6_GAINS = (1.0, 2.3, 4.6, 9.2)
+E6_WAKES = ("strouhal_wake", "quasi_steady")
+E6_SPEEDS = (0.1, 0.2, 0.3)
+#: baseline (eq 19 with the paper's C_D); the same with the identified C_D; the shipped MPC
+#: (paper formulation, the paper's model); the same with the identified model; the
+#: closed-stroke formulation with the identified model. Savings are against "baseline".
+E6_CONTROLLERS = ("baseline", "baseline_id", "mpc", "mpc_id", "mpc_closed_id")
+#: the target: at least this saving of true energy per metre where the baseline leaves the corridor
+E6_TARGET_PCT = 10.0
+#: the baseline "leaves the corridor" where fewer than this share of its plans have St in it
+E6_CORRIDOR_SHARE = 0.5
+
+
+def e6_plants(quick: bool) -> list[str]:
+    gains = (1.0, 4.6) if quick else E6_GAINS
+    return [family_name(g, w) for g in gains for w in E6_WAKES]
+
+
+def identify_plant(plant: str, seed: int, quick: bool) -> dict[str, Any]:
+    """Run and record the identification manoeuvre on ``plant`` (headless, in a temporary
+    sessions directory) and fit the fin coefficients to it (``ucat-console identify``'s path)."""
+    import tempfile
+
+    from ucat_console.backend.access import LOCAL
+    from ucat_console.backend.identification import ManoeuvreRun, identify_sessions
+    from ucat_console.backend.loop.clock import SimulatedClock
+    from ucat_console.backend.supervisor import Supervisor
+    from ucat_console.config import AccessConfig, AppConfig, ConsoleConfig
+    from ucat_console.control.params import ManoeuvreConfig
+
+    app = AppConfig(plant=plant_config(plant, seed), console=ConsoleConfig(sim_depth=3.0, record_on_arm=False),
+                    access=AccessConfig(token="e6-identify"))
+    if quick:
+        app = app.replace(loop=app.loop.replace(manoeuvre=ManoeuvreConfig(step_s=12.0)))
+    with tempfile.TemporaryDirectory() as tmp:
+        sup = Supervisor(app, clock=SimulatedClock(), sessions_dir=tmp)
+        try:
+            sup.arm(LOCAL)
+            sup.step(1.0)
+            run = ManoeuvreRun(sup, LOCAL)
+            run.start()
+            sup.step(run.duration + 0.2)
+            run.poll()
+        finally:
+            sup.stop()
+        r = identify_sessions([run.paths[0].name], tmp).result
+    return {"plant": plant, "c_d": r.c_d, "c_l": r.c_l, "c_d_ci": r.c_d_ci, "c_l_ci": r.c_l_ci,
+            "windows": len(r.windows), "steady_windows": r.steady_windows, "rms_residual": r.rms_residual}
+
+
+def e6_scenarios(quick: bool, seed: int, identified: dict[str, dict[str, Any]]) -> list[Scenario]:
+    mpc, body = e4r_settings()["sim_tuned"]
+    seeds = (seed,) if quick else (seed, seed + 1, seed + 2)
+    speeds = (0.2,) if quick else E6_SPEEDS
+    settle, window = e4_timing(quick)
+    out = []
+    for plant in e6_plants(quick):
+        ident = identified[plant]
+        model = mpc.replace(c_d=ident["c_d"], c_l=ident["c_l"])
+        configs = {"baseline": ("baseline", mpc), "baseline_id": ("baseline", model),
+                   "mpc": ("mpc", mpc), "mpc_id": ("mpc", model),
+                   "mpc_closed_id": ("mpc", model.replace(formulation="closed_stroke"))}
+        for v in speeds:
+            for ctrl in E6_CONTROLLERS:
+                mode, m = configs[ctrl]
+                for s in seeds:
+                    out.append(Scenario(mode=mode, v_ref=v, seed=s, plant=plant, settle_s=settle,
+                                        window_s=window, start_velocity=0.0, mpc=m, body=body,
+                                        tag=f"E6:{ctrl}"))
+    for sc in out:
+        sc.check()
+    return out
+
+
+def run_e6(client: Any, quick: bool, seed: int, progress: bool = True) -> dict[str, Any]:
+    """Where St-awareness pays: the family of plants, each with its identified model."""
+    plants = e6_plants(quick)
+    idents = run_all(client, identify_plant, [(p, seed, quick) for p in plants], "E6 identification",
+                     progress, star=True)
+    identified = {d["plant"]: d for d in idents}
+    scenarios = e6_scenarios(quick, seed, identified)
+    runs = run_all(client, run_scenario, scenarios, "E6 runs", progress)
+    _label(runs, ("experiment", "controller"))
+    rows = aggregate(runs, ("plant", "v_ref", "controller"))
+    for r in rows:
+        r["mode"] = r["controller"]
+    _add_savings(rows, ("plant", "v_ref"))
+    base = {(r["plant"], r["v_ref"]): r for r in rows if r["controller"] == "baseline"}
+    for r in rows:
+        b = base[(r["plant"], r["v_ref"])]
+        r["baseline_out_of_corridor"] = bool(b["st_in_range"] < E6_CORRIDOR_SHARE)
+    for p in plants:
+        h = hydro_of(p)
+        identified[p]["thrust_gain"] = h.custom.thrust_gain
+        identified[p]["wake"] = h.wake
+    target_rows = [r for r in rows if r["controller"] == "mpc_closed_id" and r["baseline_out_of_corridor"]]
+    met = [r for r in target_rows if r["comparable"] and r["saving_epm_true"] >= E6_TARGET_PCT]
+    settle, window = e4_timing(quick)
+    return {
+        "protocol": {"plants": plants, "speeds": sorted({s.v_ref for s in scenarios}),
+                     "controllers": list(E6_CONTROLLERS), "seeds": sorted({s.seed for s in scenarios}),
+                     "settle_s": settle, "window_s": window, "tracking_mae": TRACKING_MAE,
+                     "target_pct": E6_TARGET_PCT, "corridor_share": E6_CORRIDOR_SHARE,
+                     "settings": _settings_summary(*e4r_settings()["sim_tuned"]),
+                     "closed_stroke": {"lam_c": MpcConfig().lam_c, "lam_e": MpcConfig().lam_e}},
+        "identified": [identified[p] for p in plants],
+        "rows": sorted(rows, key=lambda r: (plants.index(r["plant"]), r["v_ref"],
+                                            E6_CONTROLLERS.index(r["controller"]))),
+        "target": {"cases": len(target_rows), "comparable": sum(r["comparable"] for r in target_rows),
+                   "met": len(met)},
+    }
 
 
 # ---------------------------------------------------------------------------- E5
@@ -212,7 +437,8 @@ def run_e5(client: Any, quick: bool, seed: int, depth: float = 3.0,
 
 # ---------------------------------------------------------------------------- sweep
 def sweep_scenarios(lam_st: Sequence[float], lam_d: Sequence[float], speeds: Sequence[float],
-                    seeds: Sequence[int], quick: bool, plant: str = "strouhal_wake") -> list[Scenario]:
+                    seeds: Sequence[int], quick: bool, plant: str = "strouhal_wake",
+                    formulation: str = "paper") -> list[Scenario]:
     settle, window = e4_timing(quick)
     out = []
     for v in speeds:
@@ -222,7 +448,8 @@ def sweep_scenarios(lam_st: Sequence[float], lam_d: Sequence[float], speeds: Seq
             for a in lam_st:
                 for d in lam_d:
                     out.append(Scenario(mode="mpc", v_ref=v, seed=s, plant=plant, settle_s=settle,
-                                        window_s=window, mpc=MpcConfig(lam_st=a, lam_d=d), tag="sweep"))
+                                        window_s=window, mpc=MpcConfig(lam_st=a, lam_d=d, formulation=formulation),
+                                        tag="sweep"))
     for sc in out:
         sc.check()
     return out
@@ -230,8 +457,8 @@ def sweep_scenarios(lam_st: Sequence[float], lam_d: Sequence[float], speeds: Seq
 
 def run_sweep(client: Any, lam_st: Sequence[float], lam_d: Sequence[float], speeds: Sequence[float],
               seeds: Sequence[int], quick: bool, plant: str = "strouhal_wake",
-              progress: bool = True) -> dict[str, Any]:
-    scenarios = sweep_scenarios(lam_st, lam_d, speeds, seeds, quick, plant)
+              progress: bool = True, formulation: str = "paper") -> dict[str, Any]:
+    scenarios = sweep_scenarios(lam_st, lam_d, speeds, seeds, quick, plant, formulation)
     runs = run_all(client, run_scenario, scenarios, "sweep runs", progress)
     for r in runs:
         base = r["scenario"]["mode"] == "baseline"
@@ -240,7 +467,7 @@ def run_sweep(client: Any, lam_st: Sequence[float], lam_d: Sequence[float], spee
     rows = aggregate(runs, ("plant", "v_ref", "mode", "lam_st", "lam_d"))
     _add_savings(rows, ("plant", "v_ref"))
     settle, window = e4_timing(quick)
-    return {"protocol": {"plant": plant, "speeds": list(speeds), "seeds": list(seeds),
+    return {"protocol": {"plant": plant, "formulation": formulation, "speeds": list(speeds), "seeds": list(seeds),
                          "lam_st": list(lam_st), "lam_d": list(lam_d), "settle_s": settle,
                          "window_s": window, "depth": E4_DEPTH},
             "rows": rows}

@@ -68,15 +68,19 @@ def task_client(address: str | None = None, n_workers: int | None = None,
             cluster.close()
 
 
-def run_all(client: Any, fn: Callable[[T], R], items: Sequence[T], desc: str,
-            progress: bool = True) -> list[R]:
-    """``[fn(x) for x in items]`` on the cluster, with a tqdm bar; errors are raised here."""
+def run_all(client: Any, fn: Callable[..., R], items: Sequence[Any], desc: str,
+            progress: bool = True, star: bool = False) -> list[R]:
+    """``[fn(x) for x in items]`` on the cluster, with a tqdm bar; errors are raised here.
+    With ``star``, each item is a tuple of arguments: ``fn(*x)``."""
     from dask.distributed import as_completed
     from tqdm import tqdm
 
     if not items:
         return []
-    futures = client.map(fn, list(items), pure=False)
+    if star:
+        futures = client.map(fn, *zip(*items), pure=False)
+    else:
+        futures = client.map(fn, list(items), pure=False)
     index = {f.key: i for i, f in enumerate(futures)}
     out: list[Any] = [None] * len(futures)
     with tqdm(total=len(futures), desc=desc, unit="run", file=sys.stderr, disable=not progress) as bar:

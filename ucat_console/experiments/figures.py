@@ -10,8 +10,10 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+from ucat_console.experiments.closed_loop_runs import TRACKING_MAE  # noqa: E402
+
 CORRIDOR_COLOUR = "#cfe8cf"
-MODE_COLOURS = {"baseline": "tab:gray", "mpc": "tab:blue", "mpc_sync": "tab:orange"}
+MODE_COLOURS = {"baseline": "tab:gray", "mpc": "tab:blue", "mpc_sync": "tab:orange", "mpc_closed": "tab:green"}
 
 
 def _save(fig: Any, path: Path) -> str:
@@ -120,12 +122,73 @@ def e5_figure(traces: dict[str, Any], res: dict[str, Any], out: Path) -> str:
     return _save(fig, out / "e5_field.png")
 
 
+def e4r_figure(res: dict[str, Any], out: Path) -> str:
+    """True energy per metre against the reference, per setting and plant (E4R)."""
+    settings, plants = res["protocol"]["settings"], list(res["plants"])
+    fig, axes = plt.subplots(len(settings), len(plants), figsize=(4 * len(plants), 3.2 * len(settings)),
+                             squeeze=False, sharex=True)
+    for i, setting in enumerate(settings):
+        for j, plant in enumerate(plants):
+            ax = axes[i][j]
+            for ctrl in res["protocol"]["controllers"]:
+                rows = [r for r in res["rows"] if r["settings"] == setting and r["plant"] == plant
+                        and r["controller"] == ctrl]
+                v = [r["v_ref"] for r in rows]
+                ax.plot(v, [r["energy_per_metre_true"] for r in rows], "o-", label=ctrl,
+                        color=MODE_COLOURS.get(ctrl))
+                for r in rows:
+                    if not r["tracks"]:
+                        ax.plot(r["v_ref"], r["energy_per_metre_true"], "x", color="k")
+            ax.set_yscale("log")
+            ax.set_title(f"{setting}, {plant}", fontsize=8)
+            ax.set_xlabel("reference (m/s)")
+            ax.set_ylabel("true energy per metre (J/m)")
+    axes[0][0].legend(fontsize=7, title="x: not tracking", title_fontsize=7)
+    return _save(fig, out / "e4r_energy_per_metre.png")
+
+
+def e6_figure(res: dict[str, Any], out: Path) -> str:
+    """True energy-per-metre saving against the thrust gain (E6): the closed-stroke MPC with
+    its identified model (solid) and eq 19 with the identified C_D (dotted), comparable
+    cases only; savings below the axis are drawn on it (with their value)."""
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
+    gains = {d["plant"]: d["thrust_gain"] for d in res["identified"]}
+    wakes = {d["plant"]: d["wake"] for d in res["identified"]}
+    lo = -100.0
+    colours = ("tab:blue", "tab:orange", "tab:green", "tab:red")
+    for ax, wake in zip(axes, ("strouhal_wake", "quasi_steady")):
+        for ctrl, style in (("mpc_closed_id", "o-"), ("baseline_id", "^:")):
+            for v, colour in zip(res["protocol"]["speeds"], colours):
+                rows = sorted((r for r in res["rows"] if r["controller"] == ctrl and r["v_ref"] == v
+                               and wakes[r["plant"]] == wake and r["comparable"]),
+                              key=lambda r: gains[r["plant"]])
+                g = [gains[r["plant"]] for r in rows]
+                y = [max(lo, r["saving_epm_true"]) for r in rows]
+                ax.plot(g, y, style, color=colour, label=f"{ctrl} {v:g} m/s", ms=5)
+                for r, gg, yy in zip(rows, g, y):
+                    if r["saving_epm_true"] < lo:
+                        ax.annotate(f"{r['saving_epm_true']:.0f}", (gg, yy), fontsize=6,
+                                    xytext=(3, 3), textcoords="offset points")
+        ax.axhline(res["protocol"]["target_pct"], color="tab:red", lw=0.8, ls="--")
+        ax.axhline(0.0, color="k", lw=0.6)
+        ax.set_xscale("log")
+        ax.set_xlim(0.8 * min(gains.values()), 1.25 * max(gains.values()))
+        ax.set_xticks(sorted(set(gains.values())), [f"{g:g}" for g in sorted(set(gains.values()))])
+        ax.set_ylim(lo - 8.0, 70.0)
+        ax.set_xlabel("soft-fin thrust gain G")
+        ax.set_title(f"{wake} (dashed: the {res['protocol']['target_pct']:g} % target)", fontsize=9)
+    axes[0].set_ylabel("true energy per metre saved vs baseline (%)")
+    axes[1].legend(fontsize=6, ncol=2)
+    return _save(fig, out / "e6_saving_vs_gain.png")
+
+
 def sweep_figure(res: dict[str, Any], out: Path) -> str:
     fig, ax = plt.subplots(figsize=(6, 4.5))
     for r in res["rows"]:
         label = "baseline" if r["mode"] == "baseline" else f"st {r['lam_st']:g} d {r['lam_d']:g}"
         ax.scatter(r["velocity_mae"], r["power_est"], color=MODE_COLOURS.get(r["mode"]), s=18)
         ax.annotate(f"{label} @{r['v_ref']:g}", (r["velocity_mae"], r["power_est"]), fontsize=6)
+    ax.axvline(TRACKING_MAE, color="0.6", ls="--", lw=0.8)  # savings are quoted left of it only
     ax.set_xlabel("velocity MAE (m/s)")
     ax.set_ylabel("mean mechanical power (W)")
     return _save(fig, out / "sweep_power_vs_error.png")

@@ -15,6 +15,8 @@ TITLES = {
     "E2": "E2: Strouhal corridor, baseline vs MPC (paper Fig. 6)",
     "E3": "E3: cost-term ablation (paper Table III)",
     "E4": "E4: closed loop, power and tracking (paper Table V, Fig. 7)",
+    "E4R": "E4R: E4 from rest, the paper's settings and config/sim-tuned.toml",
+    "E6": "E6: where St-awareness pays: a family of plants, each with its identified model",
     "E5": "E5: field-style circle at 3 m with a current (paper Fig. 8)",
     "sweep": "Weight sweep over the E4 protocol",
 }
@@ -31,6 +33,13 @@ def num(x: Any, digits: int) -> str:
 
 def yes_no(x: bool) -> str:
     return "yes" if x else "no"
+
+
+def saving(r: dict[str, Any], key: str) -> str:
+    """A saving cell: the number where both runs track, else "not comparable"."""
+    if r.get("comparable") is False:
+        return "not comparable"
+    return num(r[key], 1)
 
 
 def table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
@@ -105,7 +114,22 @@ def _e2(res: dict[str, Any]) -> str:
     out.append(table(["V (m/s)", "controller", "St mean", "St max", "St in band %", "St slope per N",
                       "St-force correlation", "force error per fin (N)", "max per fin (N)",
                       "body force error (N)"], rows))
+    out.append(_sensitivity(res, ["v"], ["st_in_range_pct", "force_error_fin"],
+                            ["V (m/s)"], ["MPC St in band %", "force error per fin (N)"]))
     return "".join(out)
+
+
+def _sensitivity(res: dict[str, Any], keys: Sequence[str], metrics: Sequence[str],
+                 key_titles: Sequence[str], titles: Sequence[str]) -> str:
+    """The rates from each initial previous plan (the first row: the protocol's)."""
+    rows = [[num(x, 1) for x in r["u_prev0"]] + [*[str(r[k]) for k in keys],
+             *[num(r[m], 3 if "error" in m or m == "stability" else 1) for m in metrics], num(r["frozen_pct"], 1)]
+            for r in res.get("u_prev_sensitivity", [])]
+    if not rows:
+        return ""
+    return ("\nThe same from other initial previous plans u_prev (d_1 d_2 w_1 w_2); frozen: plans "
+            "exactly the initial u_prev:\n\n"
+            + table(["u_prev d_1", "d_2", "w_1", "w_2", *key_titles, *titles, "frozen %"], rows))
 
 
 def _e3(res: dict[str, Any]) -> str:
@@ -119,6 +143,22 @@ def _e3(res: dict[str, Any]) -> str:
     out.append(table(["configuration", "paper force error (N)", "ours force error (N)", "paper St deviation",
                       "ours St deviation", "paper in range %", "ours in range %", "paper stability",
                       "ours stability"], rows))
+    out.append(_sensitivity(res, ["config"], ["force_error", "in_range_pct", "stability"],
+                            ["configuration"], ["force error (N)", "in range %", "stability"]))
+    if "corridor_bounds" in res:
+        b = res["table_iv_bound"]
+        out.append(f"\nWhat the paper's numbers allow. Table IV's mean two-stage cost {b['mean_cost']:g} at N = 500 "
+                   f"with lam_f = {b['lam_f']:g} bounds its mean force error: every other term is >= 0, so "
+                   f"c_force <= J / lam_f = {num(b['force_error_at_most'], 3)} N. Inside the corridor a stroke "
+                   "pair with equal rates has w <= 2 V St_high / L_f, where the model's largest mean force is "
+                   "F_max; over the grid no such plan can have a mean force error below "
+                   "mean(max(0, |f*| - F_max)):\n\n")
+        out.append(table(["V (m/s)", "w at St 0.35 (rad/s)", "F_max, d_2 = -d_1 (N)", "F_max, any pair (N)",
+                          "grid mean |f*| (N)", "least mean force error in the corridor (N)"],
+                         [[num(r["v"], 1), num(r["w_max_in_corridor"], 2), num(r["f_max_symmetric"], 3),
+                           num(r["f_max"], 3),
+                           num(r["mean_demand"], 3), num(r["least_mean_force_error"], 3)]
+                          for r in res["corridor_bounds"]]))
     return "".join(out)
 
 
@@ -138,7 +178,8 @@ def _e4(res: dict[str, Any]) -> str:
            f"each run starts cruising at its reference, settles {p['settle_s']:g} s and is measured over "
            f"{p['window_s']:g} s. Power is the encoder-based estimate of control.md section 9 (the paper's "
            f"method); true power is the plant's shaft power. Savings are against the baseline at the same "
-           f"reference, where the baseline reached it (>= {p['reached_share']:g} of the reference).\n\n"
+           f"reference, where both track (velocity MAE <= {p.get('tracking_mae', 0.03):g} m/s; else not "
+           f"comparable); reached: mean speed >= {p['reached_share']:g} of the reference.\n\n"
            "Plant assumptions:\n\n", _plants(res["plants"]), "\n"]
     for plant in res["plants"]:
         out.append(f"\nPlant `{plant}`:\n\n")
@@ -146,7 +187,7 @@ def _e4(res: dict[str, Any]) -> str:
         for r in (r for r in res["rows"] if r["plant"] == plant):
             rows.append([num(r["v_ref"], 1), r["mode"], num(r["paper_power"], 3), num(r["power_est"], 4),
                          num(r["power_est_sd"], 4), num(r["power_true"], 4), num(r["paper_saving"], 1),
-                         num(r["saving_est"], 1), num(r["saving_true"], 1), num(r["paper_velocity_mae"], 4),
+                         saving(r, "saving_est"), saving(r, "saving_true"), num(r["paper_velocity_mae"], 4),
                          num(r["velocity_mae"], 4), num(r["velocity_mean"], 3), yes_no(r["reached"]),
                          num(r["paper_st_mae"], 4), num(r["st_mae"], 4), num(r["st_plant_mae"], 4),
                          num(r["depth_mae"], 4), num(r["late_plans"], 1)])
@@ -155,6 +196,71 @@ def _e4(res: dict[str, Any]) -> str:
                           "paper vel MAE", "ours vel MAE", "mean speed", "reached", "paper St MAE",
                           "ours St MAE (plans)", "ours St MAE (plant)", "depth MAE (m)", "late plans"], rows))
         out.append("\n" + _claims(res["claims"][plant]))
+    return "".join(out)
+
+
+def _e4r(res: dict[str, Any]) -> str:
+    p = res["protocol"]
+    t = p["sim_tuned"]
+    out = [f"Protocol: from rest (hull still, fins at the forward-thrust centre), depth {p['depth']} m, "
+           f"references {', '.join(str(v) for v in p['speeds'])} m/s, controllers "
+           f"{', '.join(p['controllers'])} (mpc_closed: the closed-stroke formulation with the same "
+           f"model and weights), seeds {', '.join(str(s) for s in p['seeds'])}; settle {p['settle_s']:g} s, "
+           f"measured over {p['window_s']:g} s. Settings: `paper` (the defaults: Table I) and `sim_tuned` "
+           f"(config/sim-tuned.toml: lam_f {t['lam_f']:g}, lam_st {t['lam_st']:g}, lam_d {t['lam_d']:g}, "
+           f"velocity PID kp {t['velocity_kp']:g} ki {t['velocity_ki']:g} limit {t['velocity_limit']:g} N). "
+           f"Power is the estimate (control.md section 9), true power the plant's shaft power, J/m the true "
+           f"energy per metre; savings where both track (velocity MAE <= {p['tracking_mae']:g} m/s).\n\n"]
+    for setting in p["settings"]:
+        for plant in res["plants"]:
+            rows = [r for r in res["rows"] if r["settings"] == setting and r["plant"] == plant]
+            if not rows:
+                continue
+            out.append(f"\nSettings `{setting}`, plant `{plant}`:\n\n")
+            out.append(table(
+                ["v_ref (m/s)", "controller", "mean v", "vel MAE", "power (W)", "true power (W)",
+                 "true J/m", "saving %", "true J/m saving %", "St MAE (plans)", "St MAE (plant)",
+                 "stroke (rad)", "rate (rad/s)", "opening (rad)", "winding (rad/min)"],
+                [[num(r["v_ref"], 1), r["controller"], num(r["velocity_mean"], 3), num(r["velocity_mae"], 3),
+                  num(r["power_est"], 3), num(r["power_true"], 3), num(r["energy_per_metre_true"], 3),
+                  saving(r, "saving_est"), saving(r, "saving_epm_true"), num(r["st_mae"], 3),
+                  num(r["st_plant_mae"], 3), num(r["stroke"], 2), num(r["rate"], 2), num(r["opening"], 3),
+                  num(r["winding"], 1)] for r in rows]))
+    return "".join(out)
+
+
+def _e6(res: dict[str, Any]) -> str:
+    p = res["protocol"]
+    t = p["settings"]
+    out = [f"Declared before it was run (docs/experiments/e6-declaration.md). Plants: the paper's fin "
+           f"coefficients with a soft-fin thrust gain G, each with and without the Strouhal wake "
+           f"({', '.join(p['plants'])}). Each plant's model is identified first from its own recorded "
+           f"identification manoeuvre (`ucat-console identify`'s path). Runs from rest at "
+           f"{', '.join(str(v) for v in p['speeds'])} m/s, seeds {', '.join(str(s) for s in p['seeds'])}, "
+           f"settle {p['settle_s']:g} s, measured {p['window_s']:g} s, config/sim-tuned.toml's weights and "
+           f"PIDs (lam_f {t['lam_f']:g}, lam_st {t['lam_st']:g}, lam_d {t['lam_d']:g}; velocity ki "
+           f"{t['velocity_ki']:g}, limit {t['velocity_limit']:g} N), closed-stroke lam_c "
+           f"{p['closed_stroke']['lam_c']:g} /rad, lam_e {p['closed_stroke']['lam_e']:g} /W. Controllers: "
+           f"baseline (eq 19 with the paper's C_D; savings are against it), baseline_id (eq 19 with the "
+           f"identified C_D), mpc (the paper's formulation and model), mpc_id (the "
+           f"paper's formulation, identified model), mpc_closed_id (closed strokes, identified model). "
+           f"Savings of true energy per metre (shaft energy over distance) against the baseline where both "
+           f"track (vel MAE <= {p['tracking_mae']:g} m/s); the baseline leaves the corridor where fewer than "
+           f"{100 * p['corridor_share']:g} % of its plans have St in [0.25, 0.35].\n\n",
+           "Identified models:\n\n",
+           table(["plant", "thrust gain", "wake", "C_D", "+-", "C_L", "+-", "windows", "steady", "rms (N)"],
+                 [[d["plant"], num(d["thrust_gain"], 1), d["wake"], num(d["c_d"], 3), num(d["c_d_ci"], 3),
+                   num(d["c_l"], 3), num(d["c_l_ci"], 3), str(d["windows"]), str(d["steady_windows"]),
+                   num(d["rms_residual"], 3)] for d in res["identified"]]),
+           "\nRuns:\n\n"]
+    out.append(table(
+        ["plant", "v_ref (m/s)", "controller", "mean v", "vel MAE", "true power (W)", "true J/m",
+         "J/m saving %", "St in range (share)", "baseline out of corridor", "stroke (rad)", "rate (rad/s)",
+         "opening (rad)"],
+        [[r["plant"], num(r["v_ref"], 1), r["controller"], num(r["velocity_mean"], 3), num(r["velocity_mae"], 3),
+          num(r["power_true"], 4), num(r["energy_per_metre_true"], 3), saving(r, "saving_epm_true"),
+          num(r["st_in_range"], 3), yes_no(r["baseline_out_of_corridor"]), num(r["stroke"], 2),
+          num(r["rate"], 2), num(r["opening"], 3)] for r in res["rows"]]))
     return "".join(out)
 
 
@@ -178,7 +284,7 @@ def _e5(res: dict[str, Any]) -> str:
 
 def _sweep(res: dict[str, Any]) -> str:
     p = res["protocol"]
-    out = [f"Protocol: the E4 protocol on plant `{p['plant']}`, references "
+    out = [f"Protocol: the E4 protocol on plant `{p['plant']}`, formulation {p.get('formulation', 'paper')}, references "
            f"{', '.join(str(v) for v in p['speeds'])} m/s, seeds {', '.join(str(s) for s in p['seeds'])}, "
            f"lam_st in {p['lam_st']}, lam_d in {p['lam_d']}, settle {p['settle_s']:g} s, window {p['window_s']:g} s.\n\n"]
     out.append(sweep_table(res))
@@ -187,13 +293,14 @@ def _sweep(res: dict[str, Any]) -> str:
 
 def sweep_table(res: dict[str, Any]) -> str:
     rows = [[num(r["v_ref"], 1), r["mode"], num(r["lam_st"], 2), num(r["lam_d"], 2), num(r["power_est"], 4),
-             num(r["saving_est"], 1), num(r["velocity_mae"], 4), num(r["st_mae"], 4), num(r["depth_mae"], 4)]
+             num(r["energy_per_metre"], 3), saving(r, "saving_est"), saving(r, "saving_epm"),
+             num(r["velocity_mae"], 4), num(r["st_mae"], 4), num(r["depth_mae"], 4)]
             for r in sorted(res["rows"], key=lambda r: (r["v_ref"], r["mode"], r["lam_st"] or 0.0, r["lam_d"] or 0.0))]
-    return table(["v_ref (m/s)", "controller", "lam_st", "lam_d", "power (W)", "saving %", "vel MAE (m/s)",
-                  "St MAE", "depth MAE (m)"], rows)
+    return table(["v_ref (m/s)", "controller", "lam_st", "lam_d", "power (W)", "energy per metre (J/m)",
+                  "saving %", "J/m saving %", "vel MAE (m/s)", "St MAE", "depth MAE (m)"], rows)
 
 
-_SECTIONS = {"E1": _e1, "E2": _e2, "E3": _e3, "E4": _e4, "E5": _e5, "sweep": _sweep}
+_SECTIONS = {"E1": _e1, "E2": _e2, "E3": _e3, "E4": _e4, "E4R": _e4r, "E5": _e5, "E6": _e6, "sweep": _sweep}
 
 
 def render(doc: dict[str, Any]) -> str:

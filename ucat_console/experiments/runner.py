@@ -26,7 +26,7 @@ from ucat_console.experiments.report import render
 
 log = logging.getLogger(__name__)
 
-_CLOSED = ("E4", "E5")
+_CLOSED = ("E4", "E4R", "E5", "E6")
 
 
 def parse_names(names: Sequence[str]) -> list[str]:
@@ -107,6 +107,8 @@ def run_experiments(
     # setpoints are checked before anything runs
     if "E4" in ids:
         closed.e4_scenarios(quick, seed, speeds, closed.E4_DEPTH if depth is None else depth)
+    if "E4R" in ids:
+        closed.e4r_scenarios(quick, seed, speeds, closed.E4_DEPTH if depth is None else depth)
     if "E5" in ids:
         closed.e5_scenarios(quick, seed, 3.0 if depth is None else depth)
     tmp = prepare_output(out)
@@ -165,6 +167,18 @@ def _run_one(name: str, tmp: Path, quick: bool, seed: int, client: Any,
         res["findings"] = _e4_findings(res)
         _write_csv(tmp / "e4_runs.csv", res["rows"])
         return res
+    if name == "E4R":
+        res = closed.run_e4r(client, quick, seed, speeds, closed.E4_DEPTH if depth is None else depth, progress)
+        res["figures"] = [figures.e4r_figure(res, tmp)]
+        res["findings"] = _e4r_findings(res)
+        _write_csv(tmp / "e4r_runs.csv", res["rows"])
+        return res
+    if name == "E6":
+        res = closed.run_e6(client, quick, seed, progress)
+        res["figures"] = [figures.e6_figure(res, tmp)]
+        res["findings"] = _e6_findings(res)
+        _write_csv(tmp / "e6_runs.csv", res["rows"])
+        return res
     if name == "E5":
         res, traces = closed.run_e5(client, quick, seed, 3.0 if depth is None else depth, progress)
         res["figures"] = [figures.e5_figure(traces, res, tmp)]
@@ -201,6 +215,36 @@ def _e4_findings(res: dict[str, Any]) -> list[str]:
     return out
 
 
+def _e4r_findings(res: dict[str, Any]) -> list[str]:
+    out = []
+    for setting in res["protocol"]["settings"]:
+        for plant in res["plants"]:
+            rows = [r for r in res["rows"] if r["settings"] == setting and r["plant"] == plant]
+            lost = [f"{r['controller']} at {r['v_ref']:g}" for r in rows if not r["tracks"]]
+            if lost:
+                out.append(f"`{setting}`, `{plant}`: not tracking (vel MAE > "
+                           f"{res['protocol']['tracking_mae']:g} m/s): " + ", ".join(lost) + ".")
+    return out
+
+
+def _e6_findings(res: dict[str, Any]) -> list[str]:
+    t, p = res["target"], res["protocol"]
+    rows = [r for r in res["rows"] if r["controller"] == "mpc_closed_id"]
+    comparable = [r for r in rows if r["comparable"]]
+    out = [f"Target ({p['target_pct']:g} % less true energy per metre than the baseline at matched tracking "
+           f"where the baseline leaves the corridor): {t['cases']} plant-speed cases where the baseline leaves "
+           f"it, {t['comparable']} of them comparable (both track), met in {t['met']}."]
+    if comparable:
+        s = [r["saving_epm_true"] for r in comparable]
+        out.append(f"Closed-stroke MPC with the identified model, wherever both track ({len(comparable)} of "
+                   f"{len(rows)} cases): true energy-per-metre saving {min(s):.1f} to {max(s):.1f} % "
+                   f"(mean {sum(s) / len(s):.1f} %).")
+    lost = [f"{r['plant']} at {r['v_ref']:g}" for r in rows if not r["tracks"]]
+    if lost:
+        out.append("Closed-stroke MPC not tracking: " + ", ".join(lost) + ".")
+    return out
+
+
 def _write_csv(path: Path, rows: Sequence[dict[str, Any]]) -> None:
     if not rows:
         return
@@ -212,7 +256,7 @@ def _write_csv(path: Path, rows: Sequence[dict[str, Any]]) -> None:
 def run_sweep_command(
     out: Path, *, lam_st: Sequence[float], lam_d: Sequence[float], speeds: Sequence[float],
     seeds: int, quick: bool, seed: int, plant: str, scheduler: str | None, progress: bool = True,
-    command: str = "",
+    command: str = "", formulation: str = "paper",
 ) -> dict[str, Any]:
     """The weight sweep: DIR/sweep.csv, sweep.md (table), the plot, results.json, report.md."""
     if seeds < 1:
@@ -222,12 +266,12 @@ def run_sweep_command(
             if not 0.0 <= v <= 100.0:
                 raise ValueError(f"{name}: {v!r} is out of range; allowed: [0.0, 100.0]")
     seed_list = [seed + k for k in range(seeds)]
-    closed.sweep_scenarios(lam_st, lam_d, speeds, seed_list, quick, plant)  # validates setpoints
+    closed.sweep_scenarios(lam_st, lam_d, speeds, seed_list, quick, plant, formulation)  # validates setpoints
     tmp = prepare_output(out)
     try:
         t0 = time.perf_counter()
         with task_client(scheduler) as client:
-            res = closed.run_sweep(client, lam_st, lam_d, speeds, seed_list, quick, plant, progress)
+            res = closed.run_sweep(client, lam_st, lam_d, speeds, seed_list, quick, plant, progress, formulation)
         res["runtime_s"] = time.perf_counter() - t0
         res["figures"] = [figures.sweep_figure(res, tmp)]
         doc = {"meta": {"title": "Weight sweep", "command": command or "ucat-console sweep", "quick": quick,

@@ -10,7 +10,14 @@ Start: the plant starts level at the run's start depth, already surging at the s
 velocity (default: the reference), with every fin at rest at :data:`START_FIN_ANGLE`, the
 angle about which a symmetric stroke pair pushes straight forward under the controller's
 model (the baseline's oscillation centre for a pure thrust demand). The runs measure
-cruising, as the paper does after settling; a start from rest is a different experiment.
+cruising, as the paper does after settling; ``start_velocity = 0`` starts them from rest
+(E4R and E6). ``body`` is the body-frame layer (the paper's PIDs by default,
+``config/sim-tuned.toml``'s in E4R's second setting) and ``plant`` one of
+:data:`PLANT_VARIANTS` or a family member ``gain<G>_<wake>`` (:func:`family_hydro`).
+
+Energy per metre: the mechanical energy spent over the window divided by the distance the
+hull travelled through the water in it (true surge integrated), for the estimate
+(``energy_per_metre``) and for the plant's shaft energy (``energy_per_metre_true``).
 """
 
 from __future__ import annotations
@@ -24,10 +31,16 @@ import numpy as np
 from ucat_console.backend.loop.closed_loop import ClosedLoop, check_setpoints
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.backend.sim.robot_io import SimRobotIO
-from ucat_console.backend.sim.params import FinHydroConfig, PlantConfig, VehicleConfig
+from ucat_console.backend.sim.params import (
+    WAKE_OPTIONS,
+    FinCoefficients,
+    FinHydroConfig,
+    PlantConfig,
+    VehicleConfig,
+)
 from ucat_console.control.allocation import BodySetpoints
 from ucat_console.control.baseline import BaselinePlanner
-from ucat_console.control.params import BaselineConfig, MpcConfig
+from ucat_console.control.params import BaselineConfig, BodyConfig, MpcConfig
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.stream import TelemetryStream
 
@@ -43,18 +56,43 @@ PLANT_VARIANTS: dict[str, FinHydroConfig] = {
 START_FIN_ANGLE = BaselinePlanner(MpcConfig(), BaselineConfig()).centre(-1.0, 0.0, 0.0)
 
 
+def family_name(gain: float, wake: str) -> str:
+    """The name of a member of E6's plant family: ``gain4.6_strouhal_wake``."""
+    return f"gain{gain:g}_{wake}"
+
+
+def family_hydro(name: str) -> FinHydroConfig | None:
+    """The hydrodynamics of a family member ``gain<G>_<wake>`` (the paper's coefficients, a
+    soft-fin thrust gain G); None if ``name`` is not of that form."""
+    if not name.startswith("gain") or "_" not in name:
+        return None
+    gain, _, wake = name[4:].partition("_")
+    try:
+        g = float(gain)
+    except ValueError:
+        return None
+    if wake not in WAKE_OPTIONS:
+        return None
+    return FinHydroConfig(coefficients="custom", custom=FinCoefficients(thrust_gain=g), wake=wake)
+
+
+def hydro_of(variant: str) -> FinHydroConfig:
+    """A named variant's or a family member's hydrodynamics, or ValueError naming it."""
+    h = PLANT_VARIANTS.get(variant) or family_hydro(variant)
+    if h is None:
+        raise ValueError(f"plant: {variant!r} is not one of {', '.join(PLANT_VARIANTS)} "
+                         "or gain<G>_strouhal_wake / gain<G>_quasi_steady")
+    return h
+
+
 def plant_config(variant: str, seed: int, current: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> PlantConfig:
     """The plant of a named variant with the sensor-noise seed and a water current (NED, m/s)."""
-    if variant not in PLANT_VARIANTS:
-        raise ValueError(f"plant: {variant!r} is not one of {', '.join(PLANT_VARIANTS)}")
-    return PlantConfig(
-        hydro=PLANT_VARIANTS[variant], seed=seed, vehicle=VehicleConfig(current_ned=current)
-    )
+    return PlantConfig(hydro=hydro_of(variant), seed=seed, vehicle=VehicleConfig(current_ned=current))
 
 
 def plant_assumptions(variant: str) -> dict[str, Any]:
     """What the report states about a plant variant: wake, coefficients, gain, wake shape."""
-    h = PLANT_VARIANTS[variant]
+    h = hydro_of(variant)
     c = h.resolved()
     return {
         "variant": variant, "wake": h.wake, "coefficients": h.coefficients, "rho": c.rho,
@@ -80,11 +118,12 @@ class Scenario:
     start_velocity: float | None = None  # default: the velocity setpoint
     current: tuple[float, float, float] = (0.0, 0.0, 0.0)
     mpc: MpcConfig = field(default_factory=MpcConfig)
+    body: BodyConfig = field(default_factory=BodyConfig)
     trace_rate: float = 0.0  # Hz of the returned trace; 0: none
     tag: str = ""
 
     def loop_config(self) -> LoopConfig:
-        return LoopConfig(mode=self.mode, planner_seed=self.seed, mpc=self.mpc)
+        return LoopConfig(mode=self.mode, planner_seed=self.seed, mpc=self.mpc, body=self.body)
 
     def check(self) -> None:
         """Refuse setpoints outside the loop's envelope before anything runs."""
@@ -108,6 +147,7 @@ class _Recorder:
         self.plan_st: list[float] = []
         self.plan_force: list[float] = []
         self.plan_u: dict[int, list[tuple]] = {i: [] for i in range(4)}
+        self.fin_angles: list[tuple[float, ...]] = []  # true, at each power sample in the window
         self.truth: list[tuple] = []
         self.energy: list[tuple[float, float]] = []  # (t, estimator energy)
         self.trace_rate = trace_rate
@@ -127,6 +167,7 @@ class _Recorder:
                 tr = self.loop.truth()
                 self.truth.append((t, tr.velocity[0], tr.depth, tr.velocity[5], sum(tr.fin_energy),
                                    sum(abs(s - 0.3) for s in tr.fin_strouhal) / 4.0))
+                self.fin_angles.append(tr.fin_angles)
             if self.trace_rate > 0.0 and t + 1e-9 >= self._next_trace:
                 self._next_trace += 1.0 / self.trace_rate
                 tr = self.loop.truth()
@@ -197,10 +238,13 @@ def summarise(sc: Scenario, rec: _Recorder, loop: ClosedLoop) -> dict[str, Any]:
     dvl = np.asarray(rec.dvl_v)
     st = np.asarray(rec.plan_st)
     u_true = truth[:, 1]
+    distance = float(np.trapezoid(u_true, truth[:, 0]))
     out: dict[str, Any] = {
         "scenario": _scenario_dict(sc),
         "power_est": power_est,
         "power_true": power_true,
+        "energy_per_metre": power_est * span / distance if distance > 0.0 else math.nan,
+        "energy_per_metre_true": power_true * span / distance if distance > 0.0 else math.nan,
         "velocity_mean": float(u_true.mean()),
         "velocity_mae": float(np.abs(dvl - sc.v_ref).mean()) if dvl.size else math.nan,
         "velocity_mae_true": float(np.abs(u_true - sc.v_ref).mean()),
@@ -215,6 +259,7 @@ def summarise(sc: Scenario, rec: _Recorder, loop: ClosedLoop) -> dict[str, Any]:
         "st_in_range": float(np.mean((st >= mcfg.st_low) & (st <= mcfg.st_high))) if st.size else math.nan,
         "st_plant_mae": float(truth[:, 5].mean()),
         "force_error": float(np.mean(rec.plan_force)) if rec.plan_force else math.nan,
+        **_strokes(rec, span),
         "plans": len(rec.plan_st),
         "late_plans": loop.late_plans,
         "plan_overruns": loop.plan_overruns,
@@ -225,8 +270,23 @@ def summarise(sc: Scenario, rec: _Recorder, loop: ClosedLoop) -> dict[str, Any]:
     return out
 
 
+def _strokes(rec: _Recorder, span: float) -> dict[str, float]:
+    """Mean stroke |d_k| (rad) and rate w_k (rad/s) of the window's plans, their mean
+    opening |d_1 + d_2| (rad), and how far the fins wound up (mean net turn, rad/min)."""
+    u = np.asarray([x for us in rec.plan_u.values() for x in us], dtype=float).reshape(-1, 4)
+    ang = np.asarray(rec.fin_angles)
+    out = {"stroke": math.nan, "rate": math.nan, "opening": math.nan,
+           "winding": float(np.abs(ang[-1] - ang[0]).mean() * 60.0 / span) if len(ang) > 1 and span > 0 else math.nan}
+    if u.size:
+        out.update(stroke=float(np.abs(u[:, :2]).mean()), rate=float(u[:, 2:].mean()),
+                   opening=float(np.abs(u[:, 0] + u[:, 1]).mean()))
+    return out
+
+
 def _scenario_dict(sc: Scenario) -> dict[str, Any]:
     d = asdict(sc)
-    d["mpc"] = {k: d["mpc"][k] for k in ("lam_f", "lam_st", "lam_a", "lam_d", "n_samples")}
+    d["mpc"] = {k: d["mpc"][k] for k in ("formulation", "lam_f", "lam_st", "lam_a", "lam_d", "lam_c", "lam_e",
+                                         "n_samples", "c_d", "c_l")}
+    d["body"] = {"velocity": d["body"]["velocity"]}
     d["current"] = list(sc.current)
     return d

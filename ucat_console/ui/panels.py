@@ -63,6 +63,7 @@ class ParamSpec:
     hint: str
     step: float
     is_int: bool
+    choices: tuple[str, ...] | None = None  # a choice field: a dropdown, not a number
 
 
 def param_specs(tuning: dict[str, Any]) -> dict[str, list[ParamSpec]]:
@@ -75,6 +76,11 @@ def param_specs(tuning: dict[str, Any]) -> dict[str, list[ParamSpec]]:
         for name in names:
             f = by_name[name]
             value = getattr(cfg, name)
+            if f.metadata.get("choices") is not None:  # e.g. mpc.formulation
+                specs.append(ParamSpec(f"{block}.{name}", name, f.metadata.get("doc", ""), 0.0, False,
+                                       tuple(f.metadata["choices"])))
+                continue
+
             is_int = isinstance(value, int)
             prefix = block.split(".", 1)[1] + " " if block.startswith("pid.") else ""
             label = f"{prefix}{name} {describe_range(f)}"
@@ -157,8 +163,13 @@ class ControlPanel:
                 for block, specs in param_specs(tuning).items():
                     with gui.add_folder(BLOCK_TITLES.get(block, block), expand_by_default=block == "mpc"):
                         for s in specs:
-                            value = float(getattr(tuning[block], s.key.rpartition(".")[2]))
-                            self.params[s.key] = gui.add_number(s.label, value, step=s.step, hint=s.hint)
+                            value = getattr(tuning[block], s.key.rpartition(".")[2])
+                            if s.choices is not None:
+                                self.params[s.key] = gui.add_dropdown(s.label, s.choices, initial_value=value,
+                                                                      hint=s.hint)
+                            else:
+                                self.params[s.key] = gui.add_number(s.label, float(value), step=s.step,
+                                                                    hint=s.hint)
 
         with within(c.get("session")):
             with gui.add_folder("View and recording", order=20.0):
@@ -364,7 +375,8 @@ class ControlPanel:
             self.show("tuning unchanged", tuning=True)
             return
         self.sup.set_params(self.cid, changes)
-        self.show("applied: " + ", ".join(f"{k} = {v:g}" for k, v in changes.items()), tuning=True)
+        self.show("applied: " + ", ".join(f"{k} = {v:g}" if not isinstance(v, str) else f"{k} = {v}"
+                                          for k, v in changes.items()), tuning=True)
 
     def _set_history(self) -> None:
         self.app.set_history(self.cid, self.history.value)
@@ -435,7 +447,8 @@ class ControlPanel:
             self._push(f"sp.{k}", self.sp_inputs[k], round(float(getattr(sp, k)), 4), force)
         for key, handle in self.params.items():
             self._set_prop(handle, "disabled", not pilot)
-            self._push(key, handle, float(sup.param_value(key)), force)
+            v = sup.param_value(key)
+            self._push(key, handle, v if isinstance(v, str) else float(v), force)
         for h in (self.apply_sp, self.apply_tuning, self.revert, self.save, self.history, self.note, self.marker,
                   self.marker_key, self.stop_key, self.disarm_key, *self.key_commands.values()):
             self._set_prop(h, "disabled", not pilot)

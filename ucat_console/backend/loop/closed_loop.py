@@ -59,6 +59,7 @@ from ucat_console.backend.loop.clock import Clock, SimulatedClock
 from ucat_console.backend.loop.config import MODES, LoopConfig
 from ucat_console.backend.loop.planners import (
     BaselineFinPlanner,
+    ManoeuvreFinPlanner,
     MpcFinPlanner,
     PlanInputs,
     PlanJob,
@@ -560,6 +561,8 @@ class ClosedLoop:
     def _make_planner(self, mode: str, index: int) -> Planner:
         if mode == "baseline":
             return BaselineFinPlanner(self._mpc_cfg, self._baseline_cfg)
+        if mode == "identify":
+            return ManoeuvreFinPlanner(self.cfg.manoeuvre, self._mpc_cfg)
         seed = int(np.random.SeedSequence([self.cfg.planner_seed, self._generation, index]).generate_state(1)[0])
         return MpcFinPlanner(self._mpc_cfg, seed)
 

@@ -14,14 +14,15 @@ from ucat_console.control.params import (
     BaselineConfig,
     BodyConfig,
     ExecutorConfig,
+    ManoeuvreConfig,
     MpcConfig,
     PowerConfig,
 )
 from ucat_console.typedconf import Config, param
 
 #: controller modes: four MPC fins, three MPC problems with the rear pair synchronised,
-#: the inverse-model baseline
-MODES = ("mpc", "mpc_sync", "baseline")
+#: the inverse-model baseline, the identification manoeuvre (``manoeuvre``; fin targets ignored)
+MODES = ("mpc", "mpc_sync", "baseline", "identify")
 
 
 @dataclass(frozen=True)
@@ -60,6 +61,7 @@ class LoopConfig(Config):
     body: BodyConfig = BodyConfig()
     executor: ExecutorConfig = ExecutorConfig()
     power: PowerConfig = PowerConfig()
+    manoeuvre: ManoeuvreConfig = ManoeuvreConfig()
 
     def _check(self) -> None:
         if len(self.initial_u_prev) != 4:

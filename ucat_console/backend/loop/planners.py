@@ -9,7 +9,9 @@ whether it came late filled in (:func:`dataclasses.replace`):
 * :class:`MpcFinPlanner`: the Strouhal-aware MPC (``control.mpc.FinMpc``), for the modes
   "mpc" and "mpc_sync";
 * :class:`BaselineFinPlanner`: the inverse-model baseline (``control.baseline``), whose
-  plan is scored with the MPC's cost so St and force error are reported the same way.
+  plan is scored with the MPC's cost so St and force error are reported the same way;
+* :class:`ManoeuvreFinPlanner`: the identification manoeuvre (``control.manoeuvre``), mode
+  "identify", timed from its first plan and scored the same way.
 
 Services decide where a planner runs: :class:`InlinePlanning` calls it at once in the
 loop's thread (headless), :class:`ThreadedPlanning` gives each logical fin its own thread
@@ -31,8 +33,9 @@ import numpy as np
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.control.baseline import BaselinePlanner, wrap_angle
 from ucat_console.control.cost import cost_terms
+from ucat_console.control.manoeuvre import ManoeuvrePlanner
 from ucat_console.control.mpc import FinMpc
-from ucat_console.control.params import BaselineConfig, MpcConfig
+from ucat_console.control.params import FORMULATIONS, BaselineConfig, ManoeuvreConfig, MpcConfig
 from ucat_console.telemetry.messages import FinPlan
 
 Vec4 = tuple[float, float, float, float]
@@ -108,41 +111,59 @@ class BaselineFinPlanner:
         t0 = time.perf_counter()
         theta, offset = _wrapped(x.theta0)
         b = self._planner.plan(x.target[0], x.target[1], theta)
-        u = b.u
-        commands = _shift(b.commands, offset)
-        if min(abs(u[0]), abs(u[1])) < 1e-9:  # holding still: no stroke, no frequency
-            st, fbx, fby = 0.0, 0.0, 0.0
-            force = abs(x.target[0]) + abs(x.target[1])
-            terms = None
-        else:
-            terms = cost_terms(np.asarray(u), np.asarray(x.target), x.v_body, theta, np.asarray(x.u_prev), self.cfg)
-            st, fbx, fby = float(terms["st"]), float(terms["fbx"]), float(terms["fby"])
-            force = float(terms["force"])
-        solve = time.perf_counter() - t0
-        if terms is None:
-            return _plan(x, u=u, commands=commands, cost_total=self.cfg.lam_f * force,
-                         cost_force=force, cost_strouhal=0.0, cost_amplitude=0.0,
-                         cost_smoothness=0.0, st=st, mean_force=(fbx, fby), solve_time=solve,
-                         amplitude=b.amplitude, centre=b.centre)
-        return _plan(
-            x, u=u, commands=commands, cost_total=float(terms["total"]), cost_force=force,
-            cost_strouhal=float(terms["strouhal_penalty"]), cost_amplitude=float(terms["amplitude"]),
-            cost_smoothness=float(terms["smoothness"]), st=st, mean_force=(fbx, fby),
-            solve_time=solve, amplitude=b.amplitude, centre=b.centre,
-        )
+        return _scored(self.cfg, x, theta, b.u, _shift(b.commands, offset), t0,
+                       amplitude=b.amplitude, centre=b.centre)
+
+
+def _scored(cfg: MpcConfig, x: PlanInputs, theta: float, u: Vec4, commands: Vec4, t0: float,
+            **extra: float) -> FinPlan:
+    """The FinPlan of a plan made without the MPC, scored with the MPC's cost of ``cfg``
+    (``t0``: ``time.perf_counter()`` when the plan was begun)."""
+    if min(abs(u[0]), abs(u[1])) < 1e-9:  # holding still: no stroke, no frequency
+        force = abs(x.target[0]) + abs(x.target[1])
+        return _plan(x, u=u, commands=commands, cost_total=cfg.lam_f * force, cost_force=force,
+                     cost_strouhal=0.0, cost_amplitude=0.0, cost_smoothness=0.0, st=0.0,
+                     mean_force=(0.0, 0.0), solve_time=time.perf_counter() - t0, **extra)
+    terms = cost_terms(np.asarray(u), np.asarray(x.target), x.v_body, theta, np.asarray(x.u_prev), cfg)
+    return _plan(
+        x, u=u, commands=commands, cost_total=float(terms["total"]), cost_force=float(terms["force"]),
+        cost_strouhal=float(terms["strouhal_penalty"]), cost_amplitude=float(terms["amplitude"]),
+        cost_smoothness=float(terms["smoothness"]), st=float(terms["st"]),
+        mean_force=(float(terms["fbx"]), float(terms["fby"])), solve_time=time.perf_counter() - t0,
+        **extra,
+    )
+
+
+class ManoeuvreFinPlanner:
+    """The identification manoeuvre for one fin; its clock starts at its first plan."""
+
+    def __init__(self, cfg: ManoeuvreConfig, mpc: MpcConfig) -> None:
+        self.cfg = mpc
+        self._planner = ManoeuvrePlanner(cfg, mpc)
+        self._t0: float | None = None
+
+    def __call__(self, x: PlanInputs) -> FinPlan:
+        t0 = time.perf_counter()
+        if self._t0 is None:
+            self._t0 = x.t
+        theta, offset = _wrapped(x.theta0)
+        u, commands = self._planner.plan(x.t - self._t0, theta)
+        return _scored(self.cfg, x, theta, u, _shift(commands, offset), t0)
 
 
 Planner = Callable[[PlanInputs], FinPlan]
 
 
 def warm_up(cfg: LoopConfig | None = None) -> float:
-    """One plan of each kind: loads the compiled solver from numba's on-disk cache, or
-    compiles it (over a minute, once per machine) and fills that cache. Seconds taken."""
+    """One plan of each kind, both MPC formulations (either may be switched to live):
+    loads the compiled solver from numba's on-disk cache, or compiles it (minutes, once
+    per machine) and fills that cache. Seconds taken."""
     cfg = cfg or LoopConfig()
     x = PlanInputs(t=0.0, fins=(0,), target=(-0.3, 0.0), v_body=0.0, theta0=0.0,
                    u_prev=cfg.initial_u_prev)
     t0 = time.perf_counter()
-    MpcFinPlanner(cfg.mpc, 0)(x)
+    for formulation in FORMULATIONS if cfg.mpc.solver == "numba" else (cfg.mpc.formulation,):
+        MpcFinPlanner(cfg.mpc.replace(formulation=formulation), 0)(x)
     BaselineFinPlanner(cfg.mpc, cfg.baseline)(x)
     return time.perf_counter() - t0
 

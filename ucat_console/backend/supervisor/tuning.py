@@ -23,7 +23,8 @@ from ucat_console.typedconf import check_value
 
 #: what the operator may tune live: block -> fields (PID blocks are "pid.<loop>")
 TUNABLE: dict[str, tuple[str, ...]] = {
-    "mpc": ("lam_f", "lam_st", "lam_a", "lam_d", "st_opt", "st_low", "st_high", "n_samples"),
+    "mpc": ("formulation", "lam_f", "lam_st", "lam_a", "lam_d", "lam_c", "lam_e", "st_opt", "st_low",
+            "st_high", "n_samples"),
     **{f"pid.{loop}": ("kp", "ki", "kd", "limit") for loop in PID_LOOPS},
     "baseline": ("frequency",),
 }
@@ -123,7 +124,7 @@ class Tuning:
             f = next(f for f in fields(cfg) if f.name == name)
             if f.metadata.get("choices") is not None:
                 if not isinstance(value, str):
-                    raise CommandRefused(f"{key}: expected one of {', '.join(map(str, f.metadata['choices']))}, "
+                    raise CommandRefused(f"{key}: expected a name, one of {', '.join(map(str, f.metadata['choices']))}; "
                                          f"got {value!r}")
                 v: Any = value
             else:

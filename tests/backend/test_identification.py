@@ -1,0 +1,108 @@
+"""The fin model identified from a recorded identification manoeuvre on the simulated robot.
+
+Recordings are real MCAP sessions written by the supervisor's recorder while the closed
+loop runs the manoeuvre (mode "identify") on the simulated U-CAT, headless."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+
+from ucat_console.backend.access import AccessDenied
+from ucat_console.backend.identification import ManoeuvreRun, identify_sessions
+from ucat_console.backend.loop.clock import SimulatedClock
+from ucat_console.backend.sessions.recorder import Recorder
+from ucat_console.backend.sim.params import FinCoefficients, FinHydroConfig, PlantConfig
+from ucat_console.backend.supervisor import CommandRefused, Supervisor
+from ucat_console.cli import main
+from ucat_console.config import AccessConfig, AppConfig, ConsoleConfig
+from ucat_console.control.params import ManoeuvreConfig
+from ucat_console.robot.readings import DvlVelocity, ImuReading
+from ucat_console.telemetry import TelemetryStream
+from ucat_console.telemetry import channels as ch
+
+TOKEN = "pool-side-token"
+PILOT = 1
+
+
+def app_config(hydro: FinHydroConfig, manoeuvre: ManoeuvreConfig | None = None) -> AppConfig:
+    cfg = AppConfig(plant=PlantConfig(hydro=hydro), console=ConsoleConfig(sim_depth=3.0),
+                    access=AccessConfig(token=TOKEN))
+    return cfg if manoeuvre is None else cfg.replace(loop=cfg.loop.replace(manoeuvre=manoeuvre))
+
+
+def record_manoeuvre(cfg: AppConfig, directory: Path) -> Path:
+    sup = Supervisor(cfg, clock=SimulatedClock(), sessions_dir=directory)
+    try:
+        sup.client_connected(PILOT)
+        assert sup.take_control(PILOT, TOKEN)
+        run = ManoeuvreRun(sup, PILOT)
+        with pytest.raises(CommandRefused, match="arm"):
+            run.start()
+        sup.arm(PILOT)
+        sup.step(1.0)
+        run.start()
+        assert sup.mode == "identify"
+        sup.step(run.duration + 0.2)
+        assert run.poll() and sup.mode == "mpc"  # the previous mode is back
+        assert not sup.recorder.recording
+        return run.paths[0]
+    finally:
+        sup.stop()
+
+
+@pytest.mark.parametrize("plant, c_d, c_l", [
+    # the plant's own model: quasi-steady, no thrust gain, coefficients unlike the paper's
+    (FinHydroConfig(coefficients="custom", custom=FinCoefficients(c_d=2.0, c_l=0.6), wake="quasi_steady"), 2.0, 0.6),
+    # the soft fin without the wake: effective coefficients are the gain times the paper's
+    (FinHydroConfig(coefficients="soft_fin", wake="quasi_steady"), 4.6 * 0.7, 4.6 * 0.25),
+])
+def test_manoeuvre_recording_recovers_the_plants_coefficients(tmp_path: Path, plant, c_d, c_l) -> None:
+    path = record_manoeuvre(app_config(plant), tmp_path)
+    rep = identify_sessions([path.name], tmp_path)
+    r = rep.result
+    assert r.c_d == pytest.approx(c_d, rel=0.10) and r.c_l == pytest.approx(c_l, rel=0.10)
+    assert r.steady_windows >= 5 and 0.0 < r.c_d_ci < 0.2 * c_d
+    assert "recorded" in rep.config_source  # the hull came from the recording's configuration
+    fragment = tmp_path / "identified.toml"
+    fragment.write_text(rep.toml)
+    loaded = AppConfig.from_toml(fragment).mpc
+    assert loaded.c_d == pytest.approx(r.c_d, rel=1e-5) and loaded.c_l == pytest.approx(r.c_l, rel=1e-5)
+
+
+def test_recording_without_a_steady_segment_is_refused_naming_why(tmp_path: Path) -> None:
+    # steps of 3 s: the hull (time constant about 9 s) never settles
+    short = ManoeuvreConfig(steps=((0.0, 0.6, 2.0), (0.0, 1.2, 4.0), (0.0, 0.6, 3.0)), step_s=3.0)
+    path = record_manoeuvre(app_config(FinHydroConfig(), short), tmp_path)
+    with pytest.raises(ValueError, match=r"no steady segment: .*accelerating.*of the drag"):
+        identify_sessions([path.name], tmp_path)
+
+
+def test_file_without_fin_channels_is_refused_naming_them(tmp_path: Path, capsys) -> None:
+    stream = TelemetryStream()
+    rec = Recorder(stream, directory=tmp_path, epoch_offset=1_700_000_000.0)
+    sid = rec.start(label="sensors-only")
+    for k in range(50):
+        t = 0.1 * k
+        stream.publish(ch.DVL, DvlVelocity(t, 0.2, 0.0, 0.0, True, 5.0, 0.001))
+        stream.publish(ch.IMU, ImuReading(t, (0.0, 0.0, -1.0), (0.0, 0.0, 0.0)))
+    rec.stop()
+    with pytest.raises(ValueError, match=r"no fin channels fin/0/state.*encoder angle and rate"):
+        identify_sessions([sid], tmp_path)
+    assert main(["identify", sid, "--dir", str(tmp_path), "--out", str(tmp_path / "out")]) == 2
+    assert "fin/0/state" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
+def test_manoeuvre_is_the_pilots_command(tmp_path: Path) -> None:
+    sup = Supervisor(app_config(FinHydroConfig()), clock=SimulatedClock(), sessions_dir=tmp_path)
+    try:
+        sup.client_connected(2)
+        with pytest.raises(AccessDenied):
+            ManoeuvreRun(sup, 2).start()
+        assert sup.mode == "mpc" and not sup.recorder.recording
+    finally:
+        sup.stop()
+    assert math.isclose(ManoeuvreRun(sup, 2).duration, ManoeuvreConfig().duration + ManoeuvreRun.TAIL_S)

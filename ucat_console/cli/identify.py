@@ -1,0 +1,94 @@
+"""``ucat-console identify SESSION...``: the fin model identified from recordings.
+
+Fits the controller's C_D and C_L (or ``--fit scale``: one factor on both) to the recorded
+encoder angles and rates, DVL speed and IMU of the sessions (ids or part files), with the
+hull's damping and added mass from ``--config`` (default: the configuration the first
+session recorded), prints the coefficients with 95 % intervals and writes, into ``--out``,
+``identified.toml`` (the ``[mpc]`` fragment to load), ``identify.json`` (every window) and
+``residuals.png`` (with the ``experiments`` extra).
+
+``--run`` first runs the identification manoeuvre (mode "identify") on the configured robot
+and records it: on the simulated robot as fast as it computes (``--realtime`` for real
+time), on the device rig in real time; the manoeuvre's steps are ``[loop.manoeuvre]``.
+``ucat-console run --headless --mode identify --record --duration S`` records the same.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import importlib.util
+import json
+from pathlib import Path
+from typing import Any
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("identify", help="identify the fin coefficients from recorded sessions")
+    p.add_argument("sessions", nargs="*", metavar="SESSION", help="session ids or part files")
+    p.add_argument("--run", action="store_true", help="first run and record the identification manoeuvre")
+    p.add_argument("--realtime", action="store_true", help="with --run on the simulated robot: real time")
+    p.add_argument("--config", type=Path, default=None, metavar="FILE",
+                   help="configuration (TOML): the hull, the model to start from, the robot for --run")
+    p.add_argument("--fit", choices=("coefficients", "scale"), default="coefficients",
+                   help="fit C_D and C_L, or one scale of the configured pair")
+    p.add_argument("--window", type=float, default=None, metavar="S", help="force-balance window (s)")
+    p.add_argument("--dir", type=Path, default=None,
+                   help="sessions directory (default: sessions/ at the project root)")
+    p.add_argument("--out", type=Path, default=Path("identify-out"), help="output directory")
+    p.set_defaults(func=run)
+
+
+def _record_manoeuvre(cfg: Any, directory: Path | None, realtime: bool) -> Path:
+    from ucat_console.backend.access import LOCAL
+    from ucat_console.backend.identification import ManoeuvreRun
+    from ucat_console.backend.loop.clock import SimulatedClock
+    from ucat_console.backend.supervisor import Supervisor
+
+    fast = cfg.robot == "sim" and not realtime
+    sup = Supervisor(cfg, clock=SimulatedClock() if fast else None, sessions_dir=directory)
+    try:
+        sup.start()
+        sup.arm(LOCAL)
+        man = ManoeuvreRun(sup, LOCAL)
+        print(f"identification manoeuvre: {len(cfg.loop.manoeuvre.steps)} steps of "
+              f"{cfg.loop.manoeuvre.step_s:g} s, recording session {man.start()}", flush=True)
+        paths = man.wait()
+    finally:
+        sup.stop()
+    if not paths:
+        raise ValueError("identify --run: the manoeuvre recorded nothing")
+    return paths[0]
+
+
+def run(args: argparse.Namespace) -> int:
+    from ucat_console.backend.identification import identify_sessions, residual_plots
+    from ucat_console.config import load_config
+    from ucat_console.control.identification import IdentifyConfig
+
+    if not args.sessions and not args.run:
+        raise ValueError("identify: name at least one SESSION, or --run the manoeuvre")
+    if args.out.exists() and not args.out.is_dir():
+        raise ValueError(f"--out: {args.out} exists and is not a directory")
+    icfg = IdentifyConfig(fit=args.fit) if args.window is None else IdentifyConfig(fit=args.fit, window_s=args.window)
+    cfg = load_config(args.config) if args.config is not None else None
+    sessions = list(args.sessions)
+    if args.run:
+        sessions.append(str(_record_manoeuvre(cfg or load_config(None), args.dir, args.realtime)))
+    rep = identify_sessions(sessions, args.dir, cfg, icfg)
+    r = rep.result
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "identified.toml").write_text(rep.toml)
+    doc = {"sessions": list(rep.sessions), "config": rep.config_source,
+           "result": {k: v for k, v in dataclasses.asdict(r).items() if k != "windows"},
+           "windows": [dataclasses.asdict(w) for w in r.windows]}
+    (args.out / "identify.json").write_text(json.dumps(doc, indent=1, default=float))
+    print(f"identified from {len(rep.sessions)} session(s), hull from {rep.config_source}: "
+          f"{len(r.windows)} windows ({r.steady_windows} steady), rms residual {r.rms_residual:.4f} N")
+    print(f"  c_d = {r.c_d:.4f} +- {r.c_d_ci:.4f}   c_l = {r.c_l:.4f} +- {r.c_l_ci:.4f}   (95 %)")
+    if importlib.util.find_spec("matplotlib") is not None:
+        print(f"wrote {residual_plots(r, args.out / 'residuals.png')}")
+    else:
+        print("residual plots need matplotlib (pip install 'ucat-console[experiments]')")
+    print(f"wrote {args.out / 'identified.toml'} (load it with --config) and {args.out / 'identify.json'}")
+    return 0
