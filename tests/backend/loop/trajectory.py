@@ -1,0 +1,93 @@
+"""A closed-loop run on the simulated robot, recorded as numbers, for the trajectory
+equivalence test (``test_trajectory_fixture.py``).
+
+``python tests/backend/loop/trajectory.py`` writes ``fixtures/trajectory_<mode>.npz`` from
+the code as it stands; the fixtures kept in the repository were written by the closed loop
+before its per-sample path was compiled, so the test holds the new path to the old
+trajectory.
+
+Each scenario starts the simulated U-CAT at 1 m depth surging at 0.2 m/s with the
+configuration of ``config/sim-tuned.toml``, runs one mode with a velocity, depth and yaw
+rate setpoint, switches mode half way (bumpless hand-over), and records every message of
+every channel (numbers only: each message flattened into one row per channel).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from ucat_console.backend.loop.closed_loop import ClosedLoop
+from ucat_console.backend.sim.robot_io import SimRobotIO
+from ucat_console.config import AppConfig
+from ucat_console.control.allocation import BodySetpoints
+from ucat_console.telemetry import TelemetryStream
+from ucat_console.telemetry.messages import FinPlan
+
+ROOT = Path(__file__).resolve().parents[3]
+TUNED = ROOT / "config" / "sim-tuned.toml"
+FIXTURES = Path(__file__).resolve().parent / "fixtures"
+
+#: (first mode, mode after the switch)
+SCENARIOS = {"mpc": "mpc_sync", "mpc_sync": "baseline", "baseline": "mpc"}
+SWITCH_AT = 6.0
+DURATION = 12.0
+
+
+def _numbers(value: object, out: list[float]) -> None:
+    if dataclasses.is_dataclass(value):
+        for f in dataclasses.fields(value):
+            _numbers(getattr(value, f.name), out)
+    elif isinstance(value, (tuple, list)):
+        for v in value:
+            _numbers(v, out)
+    elif isinstance(value, bool):
+        out.append(float(value))
+    elif isinstance(value, (int, float)):
+        out.append(float(value))
+    elif value is None:
+        out.append(math.nan)
+    # text (mode names, messages) is left out
+
+
+def run(mode: str) -> dict[str, np.ndarray]:
+    """Every channel's messages of the scenario starting in ``mode``, one row each."""
+    app = AppConfig.from_toml(TUNED)
+    rows: dict[str, list[list[float]]] = {}
+
+    def record(channel: str, message: object) -> None:
+        if channel == "events":
+            return  # their data carries wall-clock solve times
+        if isinstance(message, FinPlan):
+            message = dataclasses.replace(message, solve_time=0.0)  # wall-clock time
+        row: list[float] = []
+        _numbers(message, row)
+        rows.setdefault(channel, []).append(row)
+
+    stream = TelemetryStream()
+    stream.subscribe(record)
+    io = SimRobotIO(depth=1.0, velocity=0.2)
+    loop = ClosedLoop(app.loop.replace(mode=mode), io, stream,
+                      setpoints=BodySetpoints(velocity=0.2, depth=1.2, yaw_rate=0.05))
+    loop.run_until(SWITCH_AT)
+    loop.set_mode(SCENARIOS[mode])
+    loop.run_until(DURATION)
+    truth = io.truth()
+    loop.close()
+    out = {ch.replace("/", "."): np.array(r, dtype=float) for ch, r in rows.items()}
+    t_row: list[float] = []
+    _numbers(truth, t_row)
+    out["truth"] = np.array(t_row)
+    out["counters"] = np.array([loop.plans_made, loop.late_plans, loop.stroke_timeouts], dtype=float)
+    return out
+
+
+if __name__ == "__main__":
+    FIXTURES.mkdir(exist_ok=True)
+    for m in (sys.argv[1:] or list(SCENARIOS)):
+        np.savez_compressed(FIXTURES / f"trajectory_{m}.npz", **run(m))
+        print("wrote", FIXTURES / f"trajectory_{m}.npz")
