@@ -56,6 +56,9 @@ def test_partial_file_keeps_defaults_elsewhere(tmp_path: Path) -> None:
         ("[loop.mpc]\nlam_st = 1.0\n", "loop.mpc"),
         ('robot = "boat"\n', "robot"),
         ("[console]\nnope = 1\n", "console.nope"),
+        # a page is gone after three unanswered heartbeats: they must fit in the pilot's timeout
+        ("[console]\nheartbeat_period = 1.0\n", "console.heartbeat_period"),
+        ("[failsafe.pilot_gone]\ntimeout = 0.5\n", "failsafe.pilot_gone.timeout"),
     ],
 )
 def test_bad_values_are_refused_naming_the_key(tmp_path: Path, text: str, key: str) -> None:

@@ -172,6 +172,14 @@ class AppConfig(Config):
     executor = property(lambda self: self.loop.executor, doc="the executors (``loop.executor``)")
     power = property(lambda self: self.loop.power, doc="the power estimate (``loop.power``)")
 
+    def _check(self) -> None:
+        hb, gone = self.console.heartbeat_period, self.failsafe.pilot_gone.timeout
+        if 3.0 * hb > gone:
+            raise ValueError(
+                f"console.heartbeat_period: {hb:g} s is too long for failsafe.pilot_gone.timeout "
+                f"{gone:g} s: a page is asked for a heartbeat every period and is gone after "
+                f"three unanswered ones at the least; allowed: at most {gone / 3.0:g} s")
+
     def replace(self, **changes: Any) -> Self:
         """A copy with ``changes``; a controller block given by name (``mpc=...``) goes into
         the loop's configuration (after a ``loop`` given in the same call)."""

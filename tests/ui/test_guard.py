@@ -7,6 +7,7 @@ so they can send what no browser page would, stop answering, or stop reading.
 
 from __future__ import annotations
 
+import logging
 import threading
 from pathlib import Path
 from typing import Iterator
@@ -250,7 +251,8 @@ def test_twenty_pages_connecting_at_once_all_get_working_controls(console: Conso
 
 
 # ------------------------------------------------------------------ incoming updates
-def test_crafted_updates_from_a_viewer_change_nothing(console: Console) -> None:
+def test_crafted_updates_from_a_viewer_change_nothing(console: Console, caplog) -> None:
+    caplog.set_level(logging.WARNING, logger="ucat_console.ui.guard")
     pilot, pilot_id = pilot_page(console)
     viewer = console.page()
     v_id = console.cid_of(viewer)
@@ -272,13 +274,16 @@ def test_crafted_updates_from_a_viewer_change_nothing(console: Console) -> None:
     viewer.update(v_arm, value=True)  # pilot-only
     viewer.update(v_velocity, value=0.5)  # pilot-only
     viewer.update(p_velocity, value=0.5)  # another page's input
+    p_speed = pilot.wait_for("Speed [")
+    viewer.update(p_speed, value=4.0)  # another page's review: its playback speed
+    viewer.update(pilot.wait_for("Play", "GuiButtonMessage"), value=True)  # and its Play
     viewer.update("no-such-uuid", value=1)
     viewer.send({"type": "ShareUrlRequest"})
     viewer.send({"type": "FileTransferStartUpload", "source_component_uuid": v_open, "transfer_uuid": "t",
                  "filename": "x", "mime_type": "text/plain", "part_count": 1, "size_bytes": 10})
     viewer.send_raw(b"\x00not msgpack")
     viewer.send_raw("a text frame")
-    wait_for(lambda: len(app.guard.refusals) >= n + 13, what="every crafted message refused")
+    wait_for(lambda: len(app.guard.refusals) >= n + 15, what="every crafted message refused")
 
     assert len(review.open_button._impl.update_cb) == callbacks_before
     assert review.open_button.label == "Open" and not review.open_button.disabled
@@ -286,6 +291,8 @@ def test_crafted_updates_from_a_viewer_change_nothing(console: Console) -> None:
     assert not sup.armed and sup.setpoints.velocity == 0.0
     assert app.panels[pilot_id].sp_inputs["velocity"].value == 0.0
     assert app.panels[v_id].note.value == ""
+    assert app.reviews[pilot_id].speed.value == 1.0  # the pilot's review is the pilot's own
+    assert app.reviews[pilot_id].player is None or not app.reviews[pilot_id].player.playing
     # the page still works: its own allowed controls still answer
     viewer.click("Refresh list")
     viewer.set_value("Review note", "fine")
@@ -295,4 +302,10 @@ def test_crafted_updates_from_a_viewer_change_nothing(console: Console) -> None:
     big.wait_for("Take control")
     big.update(big.wait_for("Review note"), value="y" * (MAX_FRAME + 1))
     wait_for(lambda: big.closed, what="the oversized frame closing the socket")
+    wait_for(lambda: any("over the limit" in why for _, why in app.guard.refusals),
+             what="the oversized frame refused with a reason")
     assert all(r.note.value != "y" * (MAX_FRAME + 1) for r in app.reviews.values())
+    # refusals are log lines with their reason, never tracebacks
+    lines = [r for r in caplog.records if r.name == "ucat_console.ui.guard"]
+    assert any(r.getMessage().startswith(f"refused from page {v_id}:") for r in lines)
+    assert all(r.exc_info is None for r in lines)

@@ -267,6 +267,25 @@ def test_a_counterfactual_replay_shows_progress_runs_one_at_a_time_and_cancels(
     assert not panel.replay_progress.visible and "| all |" in panel.replay_table.content
 
 
+def test_the_pilots_replay_cancels_another_pages_running_one(panel: PlaybackPanel, run: Run) -> None:
+    panel.open(run.path.name)
+    job = panel.run_counterfactual("lam_st=2.0")  # a viewer's page (no priority)
+    server2 = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    pilot = PlaybackPanel(server2.gui, server2.scene, AppConfig().plant.geometry, directory=run.directory,
+                          replay_slot=panel.replay_slot, may_replay=lambda: True)
+    try:
+        pilot.open(run.path.name)
+        mine = pilot.run_counterfactual("lam_st=3.0")
+        assert job.done and job.cancelled and job.result is None
+        panel._tick_job()  # the viewer's panel shows why
+        assert "cancelled: the pilot's page started one" in panel.replay_table.content
+        assert panel.replay_slot.job is mine and not mine.cancelled
+        mine.cancel()
+    finally:
+        pilot.stop()
+        server2.stop()
+
+
 def test_a_page_may_not_start_a_replay_when_the_console_says_no(run: Run) -> None:
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
 

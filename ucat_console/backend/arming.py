@@ -25,8 +25,10 @@ import math
 import threading
 from typing import Callable
 
-from ucat_console.robot.readings import DepthReading, DvlVelocity, FinFeedback, ImuReading
+import numpy as np
+
 from ucat_console.robot.fins import N_FINS
+from ucat_console.robot.readings import DepthReading, DvlVelocity, FinFeedback, FinFeedbacks, ImuReading
 from ucat_console.robot.interface import RobotIO, RobotTruth
 from ucat_console.robot.readings import Reading
 
@@ -42,6 +44,8 @@ def _finite(*values: float) -> bool:
 
 def reading_finite(r: Reading) -> tuple[str, bool]:
     """(sensor name, whether every value the loop uses is finite)."""
+    if isinstance(r, FinFeedbacks):
+        return "fin", math.isfinite(r.t) and bool(np.isfinite(r.position_rad).all() and np.isfinite(r.velocity_rad_s).all())
     if isinstance(r, FinFeedback):
         return "fin", _finite(r.position_rad, r.velocity_rad_s, r.t)
     if isinstance(r, ImuReading):
@@ -153,7 +157,10 @@ class ArmingGate(RobotIO):
                             self._on_invalid(s, "non-finite values")
                 break
         for r in out:
-            if type(r) is FinFeedback:
+            tp = type(r)
+            if tp is FinFeedbacks:
+                self.measured = r.position_rad.tolist()
+            elif tp is FinFeedback:
                 self.measured[r.fin] = r.position_rad
         return out
 

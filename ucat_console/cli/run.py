@@ -75,7 +75,7 @@ def _foxglove_server(port: int, cfg: Any, sup: Any) -> Any:
     return fox
 
 
-#: how often the page's address and the pilot token are printed again (s)
+#: how often the page's address and the pilot token are printed again on a terminal (s)
 TOKEN_REPEAT = 60.0
 
 
@@ -178,6 +178,8 @@ def run(args: argparse.Namespace) -> int:
         period = cfg.console.health_period
         next_health = time.monotonic() + period
         next_token = time.monotonic() + TOKEN_REPEAT
+        # again and again only where a person reads it: never into a file or a log collector
+        repeat_token = sys.stdout.isatty()
         while sup.running:
             if args.duration is not None and sup.loop.time >= args.duration:
                 break
@@ -186,7 +188,7 @@ def run(args: argparse.Namespace) -> int:
             if now >= next_health:
                 next_health += period
                 print(sup.health().line(), flush=True)
-            if app is not None and now >= next_token:  # the token stays findable on the terminal
+            if app is not None and now >= next_token and repeat_token:  # findable on the terminal
                 next_token += TOKEN_REPEAT
                 print(f"U-CAT console on {app.url}  pilot token: {sup.access.token}", flush=True)
         if sup.fault:

@@ -31,6 +31,7 @@ A logical target is the force *each* of its physical fins must produce.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from math import isfinite
 
 from ucat_console.control.argcheck import finite, in_range
 from ucat_console.control.filters import MedianFilter
@@ -76,9 +77,11 @@ def allocate(fx_body: float, fy_body: float, yaw: float, *, sync: bool = False) 
     ``fx_body`` is F_x* (N, forward < 0), ``fy_body`` is F_y* (N), ``yaw`` the front-pair
     thrust differential (N, > 0 turns to starboard). See the module docstring for signs.
     """
-    fx = finite("fx_body", fx_body)
-    fy = finite("fy_body", fy_body)
-    m = finite("yaw", yaw)
+    fx, fy, m = float(fx_body), float(fy_body), float(yaw)
+    if not (isfinite(fx) and isfinite(fy) and isfinite(m)):  # inline: this runs at the control rate
+        finite("fx_body", fx)
+        finite("fy_body", fy)
+        finite("yaw", m)
     axial = 0.25 * fx
     front_s = (axial + 0.5 * m, 0.5 * fy)
     front_p = (axial - 0.5 * m, 0.5 * fy)
@@ -177,22 +180,35 @@ class BodyController:
         the DVL's reported fault, not the start-up's."""
         return self.last_depth_t is not None and (self.last_dvl_t is not None or self.dvl_missing > 0)
 
+    # the readings' checks are inline: these run on every sample
     def on_dvl(self, reading: DvlVelocity) -> None:
         if not reading.valid:
             self.dvl_missing += 1
             return
-        self.velocity_filter.push(finite("dvl.vx", reading.vx))
-        self.last_dvl_t = finite("dvl.t", reading.t)
+        v, t = reading.vx, reading.t
+        if not (isfinite(v) and isfinite(t)):
+            finite("dvl.vx", v)
+            finite("dvl.t", t)
+        self.velocity_filter.push(v)
+        self.last_dvl_t = t
         self._new_v = True
 
     def on_depth(self, reading: DepthReading) -> None:
-        self.depth_filter.push(finite("depth.depth_m", reading.depth_m))
-        self.last_depth_t = finite("depth.t", reading.t)
+        z, t = reading.depth_m, reading.t
+        if not (isfinite(z) and isfinite(t)):
+            finite("depth.depth_m", z)
+            finite("depth.t", t)
+        self.depth_filter.push(z)
+        self.last_depth_t = t
         self._new_z = True
 
     def on_imu(self, reading: ImuReading) -> None:
-        self._yaw_rate = finite("imu.gyro[2]", reading.gyro[2])
-        self.last_imu_t = finite("imu.t", reading.t)
+        r, t = reading.gyro[2], reading.t
+        if not (isfinite(r) and isfinite(t)):
+            finite("imu.gyro[2]", r)
+            finite("imu.t", t)
+        self._yaw_rate = r
+        self.last_imu_t = t
         self._new_r = True
 
     def update(self, t: float, setpoints: BodySetpoints, *, sync: bool = False) -> BodyStep:

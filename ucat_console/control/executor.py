@@ -44,6 +44,7 @@ from dataclasses import dataclass
 
 from ucat_console.control.argcheck import finite, in_range
 from ucat_console.control.params import ExecutorConfig
+from ucat_console.control.stroke_watch import TIMEOUT, StrokeWatches
 
 #: largest accepted stroke rate in a plan (rad/s), a sanity bound on the input
 MAX_PLAN_RATE = 100.0
@@ -119,111 +120,56 @@ def _check_commands(commands: Sequence[float]) -> tuple[tuple[float, float], ...
     return tuple(strokes)
 
 
-class _FinWatch:
-    """Feedback predictor and end-of-stroke detection for one physical fin."""
-
-    def __init__(self, fin: int, cfg: ExecutorConfig) -> None:
-        self.fin = fin
-        self.cfg = cfg
-        self.t_fb: float | None = None
-        self.w_fb = 0.0
-        self.a = 0.0
-        self.theta_fb: float | None = None
-        self.target: float | None = None  # target of the current / last stroke
-        self.active = False
-        self.done = True
-        self.t_start = 0.0
-        self.direction = 0.0
-        self.armed = True
-        self.planned = 0.0
-        self.timeout_at = math.inf
-
-    def start(self, t: float, theta_from: float | None, theta_ref: float, w_ref: float) -> None:
-        cfg = self.cfg
-        if theta_from is None:
-            theta_from = self.target if self.target is not None else self.theta_fb
-        if theta_from is None:
-            length = None
-            self.direction = 0.0
-            self.planned = math.pi / w_ref
-        else:
-            delta = theta_ref - theta_from
-            length = abs(delta)
-            self.direction = math.copysign(1.0, delta) if delta != 0.0 else 0.0
-            self.planned = length / w_ref
-        short = length is not None and length < cfg.w_threshold * cfg.min_stroke_time
-        self.armed = short or w_ref <= cfg.w_threshold
-        self.t_start = t
-        self.timeout_at = t + max(cfg.stroke_timeout_min, cfg.stroke_timeout_factor * self.planned)
-        self.target = theta_ref
-        self.active = True
-        self.done = False
-
-    def feed(self, t_fb: float, w_fb: float, theta_fb: float | None) -> None:
-        if self.t_fb is not None:
-            if t_fb < self.t_fb:
-                raise ValueError(
-                    f"t_fb: {t_fb!r} is earlier than the last feedback at {self.t_fb!r}"
-                )
-            if t_fb == self.t_fb:
-                return  # the same sample again
-            self.a = (w_fb - self.w_fb) / (t_fb - self.t_fb)
-        self.t_fb, self.w_fb = t_fb, w_fb
-        if theta_fb is not None:
-            self.theta_fb = theta_fb
-        if self.active and not self.armed and t_fb >= self.t_start:
-            moving = self.direction * w_fb if self.direction else abs(w_fb)
-            if moving > self.cfg.w_threshold:
-                self.armed = True
-
-    def check(self, t_now: float, predict: bool) -> str | None:
-        """Mark the stroke done and return why ("stopped" / "timeout"), or None."""
-        if self.done:
-            return None
-        cfg = self.cfg
-        if (
-            predict
-            and self.armed
-            and self.t_fb is not None
-            and self.t_fb >= self.t_start
-            and t_now - self.t_start >= cfg.min_stroke_time
-        ):
-            w_pred = self.w_fb + self.a * (t_now - self.t_fb)
-            moving = self.direction * w_pred if self.direction else abs(w_pred)
-            if moving < cfg.w_threshold:
-                self.done = True
-                return "stopped"
-        if t_now >= self.timeout_at:
-            self.done = True
-            return "timeout"
-        return None
-
-
 class FinExecutor:
-    """Algorithm 2 for one fin, or for a synchronised pair (see :meth:`synced`)."""
+    """Algorithm 2 for one fin, or for a synchronised pair (see :meth:`synced`).
 
-    def __init__(self, cfg: ExecutorConfig, fins: int | tuple[int, ...] = 0) -> None:
+    The per-sample stroke-end detection lives in a :class:`StrokeWatches` table: the
+    executor's own (one row per fin), or ``watches`` shared by every executor of a loop, in
+    which fin ``f`` is row ``f``; an executor given a shared table drives its rows only from
+    :meth:`take_over` on (until then another executor may still be finishing on them).
+    """
+
+    def __init__(self, cfg: ExecutorConfig, fins: int | tuple[int, ...] = 0, *,
+                 watches: StrokeWatches | None = None) -> None:
         fins_t = (fins,) if isinstance(fins, int) else tuple(fins)
         if not fins_t or len(set(fins_t)) != len(fins_t):
             raise ValueError(f"fins: expected distinct fin ids, got {fins!r}")
         self.cfg = cfg
         self.fins = fins_t
-        self.reset()
+        if watches is None:
+            self.watches = StrokeWatches(cfg, len(fins_t))
+            self.rows = tuple(range(len(fins_t)))
+        else:
+            n = watches.table.shape[0]
+            if not all(isinstance(f, int) and 0 <= f < n for f in fins_t):
+                raise ValueError(f"fins: {fins!r} are not rows of the shared table (0..{n - 1})")
+            self.watches = watches
+            self.rows = fins_t
+        self._row = dict(zip(fins_t, self.rows))
+        self._reset_plans()
 
     @classmethod
-    def synced(cls, cfg: ExecutorConfig, fins: tuple[int, int] = (2, 3)) -> FinExecutor:
+    def synced(cls, cfg: ExecutorConfig, fins: tuple[int, int] = (2, 3), *,
+               watches: StrokeWatches | None = None) -> FinExecutor:
         """One executor driving a fin pair that starts every stroke together (sync mode)."""
         if len(fins) != 2:
             raise ValueError(f"fins: a synchronised pair needs 2 fins, got {fins!r}")
-        return cls(cfg, tuple(fins))
+        return cls(cfg, tuple(fins), watches=watches)
 
     @property
     def sync(self) -> bool:
         return len(self.fins) > 1
 
+    def take_over(self) -> None:
+        """Start driving the fins: their rows of the table are fresh (no feedback, no stroke)."""
+        self.watches.clear(self.rows)
+
     def reset(self) -> None:
         """Forget plans, strokes and counters (a fresh executor: the next plan is not late)."""
-        self._watch = {f: _FinWatch(f, self.cfg) for f in self.fins}
+        self.watches.clear(self.rows)
+        self._reset_plans()
+
+    def _reset_plans(self) -> None:
         self._queue: list[tuple[float, float]] = []
         self._pending: tuple[tuple[float, float], ...] | None = None
         self._running = False
@@ -256,7 +202,7 @@ class FinExecutor:
 
     def angle(self, fin: int | None = None) -> float | None:
         """Last feedback angle of ``fin`` (the only fin by default)."""
-        return self._watch[self._fin(fin)].theta_fb
+        return self.watches.angle(self._row[self._fin(fin)])
 
     # -- inputs --------------------------------------------------------------------------
     def load(
@@ -306,7 +252,7 @@ class FinExecutor:
             theta_fb = finite("theta_fb", theta_fb)
         if t_now < t_fb:
             raise ValueError(f"t_now: {t_now!r} is earlier than the feedback time t_fb={t_fb!r}")
-        self._watch[fin].feed(t_fb, w_fb, theta_fb)
+        self.watches.feed(self._row[fin], t_fb, w_fb, theta_fb)
         return self._advance(t_now, predict=True)
 
     def tick(self, t_now: float) -> list[Action]:
@@ -319,7 +265,7 @@ class FinExecutor:
             if len(self.fins) != 1:
                 raise ValueError(f"fin: required for a synchronised pair {self.fins}")
             return self.fins[0]
-        if fin not in self._watch:
+        if fin not in self._row:
             raise ValueError(
                 f"fin: {fin!r} is not driven by this executor; allowed: {self.fins}"
             )
@@ -342,22 +288,30 @@ class FinExecutor:
         theta_ref, w_ref = self._queue.pop(0)
         self.stroke_index += 1
         self._running = True
-        for fin in self.fins:
-            self._watch[fin].start(t, theta_from, theta_ref, w_ref)
+        for fin, row in zip(self.fins, self.rows):
+            self.watches.start(row, t, theta_from, theta_ref, w_ref)
             actions.append(SendToServo(t, fin, theta_ref, w_ref, self.plan_id, self.stroke_index))
         if not self._queue:
             actions.append(PlanRequest(t=t, fins=self.fins, theta_start=theta_ref))
 
     def _advance(self, t_now: float, predict: bool) -> list[Action]:
+        if not self._running:
+            return []
+        return self.stroke_checked(t_now, [self.watches.check(r, t_now, predict) for r in self.rows])
+
+    def stroke_checked(self, t_now: float, found: Sequence[int]) -> list[Action]:
+        """Act on the check of each fin's row at ``t_now`` (``found[k]`` for ``fins[k]``: the
+        table's NOTHING, STOPPED or TIMEOUT): the loop calls this when its compiled feedback
+        pass saw one of this executor's strokes end."""
         actions: list[Action] = []
         if not self._running:
             return actions
-        for fin in self.fins:
-            w = self._watch[fin]
-            if w.check(t_now, predict) == "timeout":
+        w = self.watches
+        for fin, row, code in zip(self.fins, self.rows, found):
+            if code == TIMEOUT:
                 self.timeouts += 1
-                actions.append(StrokeTimeout(t_now, fin, t_now - w.t_start, w.planned))
-        if not all(self._watch[f].done for f in self.fins):
+                actions.append(StrokeTimeout(t_now, fin, t_now - w.started(row), w.planned(row)))
+        if not all(w.done(r) for r in self.rows):
             return actions
         self.strokes_done += 1
         self._running = False

@@ -136,9 +136,15 @@ class ExecutorConfig(Config):
 
 @dataclass(frozen=True)
 class PowerConfig(Config):
-    """Power estimate from encoder positions (control.md section 9)."""
+    """Power estimate from encoder positions (control.md section 9), with the fin's own
+    coefficients: the controller's model (``MpcConfig``) may be identified or tuned to other
+    values, the measured power is not."""
 
     fin_inertia: float = param(2.8e-5, lo=0.0, hi=1.0, unit="kg m2", doc="fin inertia I")
+    rho: float = param(1000.0, lo=1.0, hi=2000.0, lo_open=True, unit="kg/m3", doc="water density")
+    fin_area: float = param(0.020, lo=0.0, hi=1.0, lo_open=True, unit="m2", doc="fin planform A_f")
+    r_c: float = param(0.10, lo=0.0, hi=2.0, lo_open=True, unit="m", doc="fin radius of gyration r_c")
+    c_d: float = param(0.70, lo=0.0, hi=20.0, doc="the fin's drag coefficient C_D (of the drag power)")
     filter_tau: float = param(
         0.02, lo=0.0, hi=1.0, unit="s", doc="first-order low-pass on rate and acceleration"
     )

@@ -12,6 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Annotated
 
+import numpy as np
+
 from ucat_console.robot.fields import RPY, WXYZ, XYZ, Doc
 
 Time = Annotated[float, Doc("time on the receiving clock", unit="s")]
@@ -78,5 +80,20 @@ class FinFeedback:
     state: str = "operation_enabled"
 
 
+@dataclass(frozen=True, eq=False)
+class FinFeedbacks:
+    """Encoder feedback of every fin sampled at the same time ``t`` (the simulated robot's
+    drives report together): angles and rates at the fin, in the robot's fin order. The
+    arrays are read-only; the loop takes them as they are, with no per-fin object."""
+
+    t: float
+    position_rad: np.ndarray
+    velocity_rad_s: np.ndarray
+
+    def feedback(self, fin: int) -> FinFeedback:
+        """Fin ``fin``'s part as a :class:`FinFeedback`."""
+        return FinFeedback(self.t, fin, float(self.position_rad[fin]), float(self.velocity_rad_s[fin]))
+
+
 #: any reading a robot delivers
-Reading = ImuReading | DvlVelocity | DepthReading | FinFeedback
+Reading = ImuReading | DvlVelocity | DepthReading | FinFeedback | FinFeedbacks

@@ -276,11 +276,14 @@ class ConsoleApp:
             replay_slot=self.replay_slot, may_replay=lambda: self._may_replay(cid), plot_height=PLOT_HEIGHT,
         )
 
-    def _may_replay(self, cid: int | None) -> None:
+    def _may_replay(self, cid: int | None) -> bool:
         """CommandRefused unless page ``cid`` may start a counterfactual replay now: any page
-        while the robot is disarmed; only the pilot while it is armed (the replay takes CPU)."""
-        if self.sup.armed and (cid is None or not self.sup.access.is_pilot(cid)):
+        while the robot is disarmed; only the pilot while it is armed (the replay takes CPU).
+        True for the pilot's page, whose replay cancels another page's running one."""
+        pilot = cid is not None and self.sup.access.is_pilot(cid)
+        if self.sup.armed and not pilot:
             raise CommandRefused("counterfactual replay: while the robot is armed only the pilot may start one")
+        return pilot
 
     def _on_disconnect(self, client: viser.ClientHandle) -> None:
         cid = client.client_id

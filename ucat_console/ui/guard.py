@@ -321,20 +321,21 @@ class PageGuard:
 
     def _why_refused(self, page: _Page, message: Any) -> str | None:
         now = self.clock()
+        tp = type(message)
+        if tp is vm.LocalStorageGetItemResponseMessage:
+            uid = message.request_uuid
+            if isinstance(uid, str) and uid.startswith(_HB_PREFIX):  # before the rate limit:
+                page.last_answer = now  # a busy page never loses its proof of life
+                page.answers += 1
+                return "heartbeat"  # taken here; viser has nothing to do with it
         page.tokens = min(2 * MESSAGE_RATE, page.tokens + (now - page.refill) * MESSAGE_RATE)
         page.refill = now
         if page.tokens < 1.0:
             return f"over the message rate of {MESSAGE_RATE:g}/s"
         page.tokens -= 1.0
-        tp = type(message)
         if tp is vm.ViewerCameraMessage:
             return None
         if tp is vm.LocalStorageGetItemResponseMessage:
-            uid = message.request_uuid
-            if isinstance(uid, str) and uid.startswith(_HB_PREFIX):
-                page.last_answer = now
-                page.answers += 1
-                return "heartbeat"  # taken here; viser has nothing to do with it
             value = message.value
             return None if value is None or (isinstance(value, str) and len(value) <= MAX_TEXT) else \
                 "a stored value over the size limit"

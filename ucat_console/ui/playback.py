@@ -114,7 +114,7 @@ class PlaybackPanel:
         plot_container: Any = None,
         allow: Callable[..., None] | None = None,
         replay_slot: ReplaySlot | None = None,
-        may_replay: Callable[[], None] = lambda: None,
+        may_replay: Callable[[], bool | None] = lambda: None,
         plot_height: int = 170,
     ) -> None:
         self.directory = files.sessions_dir(directory)
@@ -463,8 +463,8 @@ class PlaybackPanel:
             raise ValueError("no session open: choose one and press Open")
         weights = parse_weights(text)  # type: ignore[arg-type]
         replay_config(recorded_config(r), weights)  # a weight out of range: refused here, at once
-        self.may_replay()
-        job = self.replay_slot.start(r.session_id, self.directory, weights, owner=self)
+        pilot = bool(self.may_replay())
+        job = self.replay_slot.start(r.session_id, self.directory, weights, owner=self, preempt=pilot)
         self.job, self._job_weights = job, weights
         self.replay_progress.value = 0.0
         self.replay_progress.visible = self.cancel_button.visible = True
@@ -500,7 +500,8 @@ class PlaybackPanel:
             self.replay_table.content = replay_markdown(job.result, self._job_weights)
             self.show(f"counterfactual replay: {len(job.result.rows)} plans")
         elif job.cancelled:
-            self.replay_table.content = "Counterfactual replay cancelled."
+            self.replay_table.content = ("Counterfactual replay cancelled." if job.cancelled_by is None
+                                         else f"Counterfactual replay cancelled: {job.cancelled_by}.")
             self.show("counterfactual replay cancelled")
         else:
             self.replay_table.content = ""

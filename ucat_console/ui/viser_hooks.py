@@ -21,6 +21,8 @@ from typing import Any
 
 import viser
 import viser.infra._infra as vinfra
+from websockets.exceptions import ConnectionClosed
+from websockets.frames import CloseCode
 
 _PENDING: list[Any] = []
 _PENDING_LOCK = threading.Lock()
@@ -73,7 +75,13 @@ def install() -> None:
         if guard is None:
             return await real_consumer(websocket, handle_message, message_class)
         while True:
-            raw = await websocket.recv()
+            try:
+                raw = await websocket.recv()
+            except ConnectionClosed as e:
+                if e.sent is not None and e.sent.code == CloseCode.MESSAGE_TOO_BIG:
+                    guard.refuse(guard.client_of(websocket),
+                                 f"a frame over the limit of {guard.max_frame} bytes: its socket is closed")
+                raise
             client = guard.client_of(websocket)
             if not isinstance(raw, bytes):
                 guard.refuse(client, "a text frame (the console speaks binary messages only)")

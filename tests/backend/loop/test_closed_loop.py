@@ -17,7 +17,9 @@ from ucat_console.backend.sim.robot_io import SimRobotIO
 from ucat_console.robot.fins import PAPER_TO_ROBOT as PAPER_TO_PLANT_FIN
 from ucat_console.robot.fins import ROBOT_TO_PAPER as PLANT_TO_PAPER
 from ucat_console.control.allocation import BodySetpoints
-from ucat_console.control.params import BaselineConfig, BodyConfig, MpcConfig, PidGains
+from ucat_console.control.params import BaselineConfig, BodyConfig, MpcConfig, PidGains, PowerConfig
+from ucat_console.control.power import PowerEstimator
+from ucat_console.robot.readings import FinFeedbacks
 from ucat_console.experiments.scenario import START_FIN_ANGLE
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.stream import TelemetryStream
@@ -269,3 +271,40 @@ def test_the_first_plans_wait_for_the_first_dvl_report(lock: bool) -> None:
     assert max(abs(p.target[1]) for p in plans) > 0.05
     if not lock:
         assert all(c.force_x == 0.0 for c in log.get(ch.BODY_COMMAND))  # no speed measured: no surge command
+
+
+class RecordingRobot(SimRobotIO):
+    """The simulated robot, keeping every encoder sample it delivers."""
+
+    def __init__(self, **kw) -> None:
+        super().__init__(**kw)
+        self.samples: list[tuple[float, np.ndarray]] = []
+
+    def advance_to(self, t: float) -> list:
+        out = super().advance_to(t)
+        for r in out:
+            if isinstance(r, FinFeedbacks):
+                self.samples.append((r.t, r.position_rad))
+        return out
+
+
+def test_the_power_estimate_uses_the_fins_coefficients_not_the_controllers() -> None:
+    """An MPC given other fin coefficients (identified: C_D 3.22) plans with them; the power
+    is still the fins' own (PowerConfig), as an estimate over the same encoder samples says."""
+    io = RecordingRobot(depth=1.0, velocity=0.2)
+    stream = TelemetryStream()
+    log = Log(stream)
+    identified = TUNED_MPC.replace(c_d=3.22, c_l=1.15)
+    loop = ClosedLoop(LoopConfig(mode="mpc", mpc=identified, body=STRONG_BODY), io, stream,
+                      setpoints=BodySetpoints(velocity=0.2, depth=1.0))
+    loop.run_until(6.0)
+    loop.close()
+    last = log.get(ch.POWER)[-1]
+    fins = [PowerEstimator(PowerConfig()) for _ in range(4)]
+    for t, pos in io.samples:
+        if t <= last.t + 1e-9:
+            for f in range(4):
+                fins[f].update(t, float(pos[f]))
+    assert last.energy > 0.0
+    assert last.energy == pytest.approx(sum(f.energy for f in fins), rel=1e-9)
+    assert last.per_fin == pytest.approx(tuple(f.last.p_fin for f in fins), rel=1e-9)

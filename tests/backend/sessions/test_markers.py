@@ -23,6 +23,19 @@ def test_a_note_is_limited_in_bytes_not_characters(tmp_path):
     assert [m.t for m in MarkerStore(tmp_path, "s1").markers] == [1.0]
 
 
+def test_a_note_is_counted_as_the_file_stores_it(tmp_path):
+    store = MarkerStore(tmp_path, "s4")
+    store.add(1.0, "ü" * (MAX_NOTE_BYTES // 2))  # stored as UTF-8, not as \u escapes
+    with pytest.raises(ValueError, match="over the limit"):
+        store.add(2.0, "\x01" * (MAX_NOTE_BYTES // 6 + 1))  # a control character is stored as \u0001
+    with pytest.raises(ValueError, match="over the limit"):
+        store.add(2.0, '"' * (MAX_NOTE_BYTES // 2 + 1))  # a quote as \"
+    with pytest.raises(ValueError, match="not valid text"):
+        store.add(2.0, "\ud800")
+    size = store.path.stat().st_size
+    assert MAX_NOTE_BYTES <= size < MAX_NOTE_BYTES + 200  # the note as UTF-8, plus the marker's JSON
+
+
 def test_a_session_keeps_at_most_max_markers(tmp_path):
     path = tmp_path / "s2.markers.json"
     full = [{"t": float(i), "note": "", "created": 0.0} for i in range(MAX_MARKERS)]

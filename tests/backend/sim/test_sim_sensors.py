@@ -23,7 +23,7 @@ from ucat_console.backend.sim.sensors import (
     current_from_pressure,
 )
 from ucat_console.backend.sim.vehicle import initial_state
-from ucat_console.robot.readings import DepthReading, DvlVelocity, FinFeedback, ImuReading
+from ucat_console.robot.readings import DepthReading, DvlVelocity, FinFeedbacks, ImuReading
 from ucat_console.robot.rotations import quaternion_from_euler
 
 G0 = 9.80665
@@ -48,7 +48,8 @@ def test_rates_over_two_seconds() -> None:
     assert counts[ImuReading] == 200  # 100 Hz
     assert counts[DvlVelocity] == 16  # 8 Hz
     assert counts[DepthReading] == 40  # 20 Hz
-    assert counts[FinFeedback] == 4 * 200  # 100 Hz per fin
+    assert counts[FinFeedbacks] == 200  # 100 Hz, every fin
+    assert all(r.position_rad.shape == (4,) for r in readings if isinstance(r, FinFeedbacks))
     imu_t = np.array([r.t for r in readings if isinstance(r, ImuReading)])
     assert np.diff(imu_t) == pytest.approx(0.01)
 
@@ -178,7 +179,8 @@ def _trace(seed: int) -> list:
 
 def _same(a: list, b: list) -> bool:
     def key(r: object) -> tuple:
-        return tuple(str(v) for v in vars(r).values())  # str(nan) == str(nan)
+        return tuple(str(v.tolist() if isinstance(v, np.ndarray) else v)  # str(nan) == str(nan)
+                     for v in vars(r).values())
 
     return len(a) == len(b) and all(type(x) is type(y) and key(x) == key(y) for x, y in zip(a, b))
 
@@ -187,5 +189,25 @@ def test_deterministic_for_a_seed() -> None:
     a, b, c = _trace(5), _trace(5), _trace(6)
     assert _same(a, b)
     assert not _same(a, c)
-    fins = [r for r in a if isinstance(r, FinFeedback)]
-    assert any(r.velocity_rad_s != 0.0 for r in fins)
+    fins = [r for r in a if isinstance(r, FinFeedbacks)]
+    assert any((r.velocity_rad_s != 0.0).any() for r in fins)
+
+
+def test_the_compiled_encoders_report_what_robot_servo_quantise_says() -> None:
+    """The sampler's encoders against the Python quantiser (halves rounded to even too)."""
+    from ucat_console.robot.servo import quantise
+
+    servo = ServoConfig()
+    suite = SensorSuite(SensorsConfig(), servo, seed=0)
+    k, q = servo.units.quadcounts_per_rad, servo.units.rate_quantum
+    rng = np.random.default_rng(3)
+    xv = initial_state()
+    for n in range(300):
+        theta = rng.normal(0.0, 3.0, 4)
+        omega = rng.normal(0.0, 5.0, 4)
+        if n % 3 == 0:  # exactly half a count / half a rate step
+            theta[0] = (round(theta[0] * k) + 0.5) / k
+            omega[1] = (round(omega[1] / q) + 0.5) * q
+        fb = [r for r in suite.sample(n * 0.01, xv, theta, omega) if isinstance(r, FinFeedbacks)][0]
+        for i in range(4):
+            assert (fb.position_rad[i], fb.velocity_rad_s[i]) == quantise(theta[i], omega[i], k, q)

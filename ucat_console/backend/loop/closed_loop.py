@@ -85,7 +85,8 @@ from ucat_console.control.executor import (
 )
 from ucat_console.control.cost import stroke_strouhal
 from ucat_console.control.params import BaselineConfig, MpcConfig, PidGains
-from ucat_console.control.power import PowerEstimator
+from ucat_console.control.power import PowerBank
+from ucat_console.control.stroke_watch import BACKWARDS, StrokeWatches, feedback_kernel
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.messages import (
@@ -100,7 +101,7 @@ from ucat_console.telemetry.messages import (
 )
 from ucat_console.robot.fins import N_FINS, PAPER_TO_ROBOT, ROBOT_TO_PAPER
 from ucat_console.robot.interface import RobotIO, RobotTruth
-from ucat_console.robot.readings import DepthReading, DvlVelocity, FinFeedback, ImuReading
+from ucat_console.robot.readings import DepthReading, DvlVelocity, FinFeedback, FinFeedbacks, ImuReading
 from ucat_console.telemetry.stream import TelemetryStream
 
 log = logging.getLogger(__name__)
@@ -186,7 +187,14 @@ class ClosedLoop:
         self._fb_rate = [0.0] * N_FINS
         self._cmd_angle = [0.0] * N_FINS
         self._cmd_rate = [0.0] * N_FINS
-        self._power = [PowerEstimator(cfg.power, cfg.mpc) for _ in range(N_FINS)]
+        self._power = PowerBank(cfg.power, N_FINS)  # rows: robot order
+        # the executors' stroke-end table (rows: paper order) and, per fin, the rows of the
+        # executor that owns it (checked after each of its samples, as that executor would)
+        self._watches = StrokeWatches(cfg.executor, N_FINS)
+        self._members = np.full((N_FINS, 2), -1, dtype=np.int64)
+        self._found = np.zeros(2, dtype=np.int64)
+        self._all_rows = np.array([ROBOT_TO_PAPER[pf] for pf in range(N_FINS)], dtype=np.int64)
+        self._fin_rows = [self._all_rows[pf:pf + 1] for pf in range(N_FINS)]
         # estimate
         self._attitude = AttitudeEstimator()
         self._q: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
@@ -390,19 +398,19 @@ class ClosedLoop:
         driving = self._driving()
         for r in readings:
             tp = type(r)
-            if tp is FinFeedback:
+            if tp is FinFeedbacks:
+                pos, vel = r.position_rad, r.velocity_rad_s
+                self._fb_angle = pos.tolist()
+                self._fb_rate = vel.tolist()
+                self._power.update_all(r.t, pos, driving)
+                self._feedback(self._all_rows, r.t, vel, pos, t)
+            elif tp is FinFeedback:
                 pf = r.fin
-                p = ROBOT_TO_PAPER[pf]
                 self._fb_angle[pf] = r.position_rad
                 self._fb_rate[pf] = r.velocity_rad_s
-                self._power[pf].update(r.t, r.position_rad, accumulate=driving)
-                owner = self._owner[p]
-                t_now = t if t >= r.t else r.t
-                actions = owner.executor.on_feedback(
-                    r.t, r.velocity_rad_s, t_now, fin=p, theta_fb=r.position_rad
-                )
-                if actions:
-                    self._handle(owner, actions, t_now)
+                self._power.update(pf, r.t, r.position_rad, driving)
+                self._feedback(self._fin_rows[pf], r.t, np.array([r.velocity_rad_s]),
+                               np.array([r.position_rad]), t)
             elif tp is ImuReading:
                 self.body.on_imu(r)
                 self._gyro = r.gyro
@@ -421,6 +429,27 @@ class ClosedLoop:
                 stream.publish(ch.DVL, r)
             else:
                 raise ValueError(f"reading: unexpected type {tp.__name__} from the robot")
+
+    def _feedback(self, rows: np.ndarray, t_fb: float, rates: np.ndarray, angles: np.ndarray, t: float) -> None:
+        """Encoder samples of the fins ``rows`` (paper order) taken at ``t_fb``, through the
+        compiled stroke-end pass; each executor that saw a stroke end acts at once."""
+        t_now = t if t >= t_fb else t_fb
+        w = self._watches
+        n = rows.shape[0]
+        k = 0
+        while True:
+            k = feedback_kernel(w.table, self._members, rows, t_fb, rates, angles, t_now, k,
+                                w.w_th, w.min_time, self._found)
+            if k == n:
+                return
+            if k < 0:
+                fin = PAPER_TO_ROBOT[int(rows[BACKWARDS - k])]
+                raise ValueError(f"fin {fin}: feedback at t={t_fb!r} is earlier than its last sample")
+            owner = self._owner[int(rows[k])]
+            actions = owner.executor.stroke_checked(t_now, self._found[:len(owner.fins)].tolist())
+            if actions:
+                self._handle(owner, actions, t_now)
+            k += 1
 
     def _dead_reckon(self, r: DvlVelocity, driving: bool) -> None:
         if self._dvl_t is not None:
@@ -535,16 +564,25 @@ class ClosedLoop:
         self._generation += 1
         out = []
         for i, fins in enumerate(groups):
-            ex = FinExecutor.synced(self.cfg.executor, fins) if len(fins) == 2 else FinExecutor(self.cfg.executor, fins[0])
+            ex = (FinExecutor.synced(self.cfg.executor, fins, watches=self._watches) if len(fins) == 2
+                  else FinExecutor(self.cfg.executor, fins[0], watches=self._watches))
             out.append(_Actuator(i, fins, ex, self._make_planner(mode, i), mode, self.cfg.initial_u_prev))
         return out
 
     def _install_actuators(self, actuators: list[_Actuator]) -> None:
         self._actuators = actuators
         for act in actuators:
-            for p in act.fins:
-                self._owner[p] = act
+            self._take_over(act)
         self._handover = False
+
+    def _take_over(self, act: _Actuator) -> None:
+        """``act`` drives its fins from now on: their feedback goes to its executor."""
+        rows = act.executor.rows
+        for p in act.fins:
+            self._owner[p] = act
+            self._members[p, :] = -1
+            self._members[p, :len(rows)] = rows
+        act.executor.take_over()
 
     def _apply_restart(self, t: float) -> None:
         self.body.reset()
@@ -605,8 +643,7 @@ class ClosedLoop:
             if all(p.idle for p in n.predecessors):
                 n.active = True
                 n.predecessors = []
-                for p in n.fins:
-                    self._owner[p] = n
+                self._take_over(n)
                 if n.ready is not None:
                     inputs, outcome = n.ready
                     n.ready = None
@@ -673,14 +710,13 @@ class ClosedLoop:
         ))
 
     def _publish_power(self, t: float) -> None:
-        per = []
+        bank = self._power
+        per = [bank.p_fin(pf) for pf in range(N_FINS)]
         energy = 0.0
         mean = 0.0
-        for est in self._power:
-            last = est.last
-            per.append(last.p_fin if last is not None else 0.0)
-            energy += est.energy
-            m = est.mean_power
+        for pf in range(N_FINS):
+            energy += bank.energy(pf)
+            m = bank.mean_power(pf)
             mean += m if m is not None else 0.0
         d = self.distance
         self.stream.publish(ch.POWER, Power(

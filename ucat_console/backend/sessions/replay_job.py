@@ -78,6 +78,7 @@ class ReplayJob:
         self.result: ReplayResult | None = None
         self.error = ""
         self.cancelled = False
+        self.cancelled_by: str | None = None
         self._done = threading.Event()
         self._reader = threading.Thread(target=self._read, name="replay-job", daemon=True)
         self._reader.start()
@@ -117,11 +118,12 @@ class ReplayJob:
     def wait(self, timeout: float | None = None) -> bool:
         return self._done.wait(timeout)
 
-    def cancel(self) -> None:
-        """End the replay now (nothing is kept of it)."""
+    def cancel(self, by: str | None = None) -> None:
+        """End the replay now (nothing is kept of it); ``by`` says who for its page."""
         if self.done:
             return
         self.cancelled = True
+        self.cancelled_by = by
         self._proc.terminate()
         self._proc.join(timeout=5.0)
         if self._proc.is_alive():
@@ -137,12 +139,16 @@ class ReplaySlot:
         self.job: ReplayJob | None = None
 
     def start(self, session: str | Path, directory: str | Path, weights: Mapping[str, float],
-              owner: Any = None) -> ReplayJob:
-        """A new job, or ValueError while another one runs."""
+              owner: Any = None, *, preempt: bool = False) -> ReplayJob:
+        """A new job; while another one runs, ValueError, unless ``preempt`` (the pilot's
+        page), which cancels the running one first."""
         with self._lock:
-            if self.job is not None and not self.job.done:
-                raise ValueError(f"a counterfactual replay of {self.job.session} is running; "
-                                 "wait for it or cancel it first")
+            running = self.job
+            if running is not None and not running.done:
+                if not preempt:
+                    raise ValueError(f"a counterfactual replay of {running.session} is running; "
+                                     "wait for it or cancel it first")
+                running.cancel("the pilot's page started one")
             self.job = ReplayJob(session, directory, weights, owner=owner)
             return self.job
 

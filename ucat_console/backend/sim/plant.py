@@ -34,7 +34,7 @@ from ucat_console.backend.sim.fin_hydro import (
     hydro_params,
 )
 from ucat_console.backend.sim.params import PlantConfig
-from ucat_console.backend.sim.sensors import SensorSuite
+from ucat_console.backend.sim.sensors import SensorSuite, sense
 from ucat_console.backend.sim.vehicle import (
     NU,
     NWORK,
@@ -152,6 +152,22 @@ def advance_steps(
     return math.isfinite(total)
 
 
+@njit(cache=True)
+def advance_and_sense(xv: np.ndarray, xf: np.ndarray, cmd: np.ndarray, mats: np.ndarray, pv: np.ndarray,
+                      ph: np.ndarray, signs: np.ndarray, servo: np.ndarray, n_steps: int, t: float,
+                      sf: np.ndarray, imu_noise: np.ndarray, out: np.ndarray) -> int:
+    """:func:`advance_steps` in place for ``n_steps`` (to time ``t``), then the sensors'
+    samples due at ``t`` (``sensors.sense``): one compiled call per event of the loop.
+    ``mats`` holds M_RB, M_A and M^-1, ``servo`` the acceleration, maximum rate, fin inertia
+    and time step. Returns the sensors' mask, or -1 when the state is no longer finite."""
+    if n_steps > 0:
+        ok = advance_steps(xv, xf, cmd, mats[0], mats[1], mats[2], pv, ph, signs,
+                           servo[0], servo[1], servo[2], servo[3], n_steps, xv, xf)
+        if not ok:
+            return -1
+    return sense(xv, xf[:, F_THETA], xf[:, F_OMEGA], t, sf, imu_noise, out)
+
+
 def _finite(name: str, values: tuple[float, ...] | list[float], n: int) -> tuple[float, ...]:
     try:
         out = tuple(float(v) for v in values)
@@ -169,6 +185,7 @@ class Plant:
         self._cfg = cfg if cfg is not None else PlantConfig()
         c = self._cfg
         self._mrb, self._ma, self._minv = vehicle_matrices(c.vehicle)
+        self._mats = np.stack([self._mrb, self._ma, self._minv])
         self._tau_ext = (0.0,) * 6
         self._pv = vehicle_params(c.vehicle, self._tau_ext)
         self._ph = hydro_params(c.hydro, c.fins)
@@ -176,6 +193,7 @@ class Plant:
         self._acc = float(c.servo.acceleration)
         self._max_rate = float(c.servo.max_rate)
         self._fin_inertia = float(c.fins.fin_inertia)
+        self._servo_consts = np.array([self._acc, self._max_rate, self._fin_inertia, float(c.dt)])
         self._sensors = SensorSuite(c.sensors, c.servo, c.seed)
         self._xv = np.zeros(NX)
         self._xf = np.zeros((N_FINS, NF))
@@ -276,6 +294,21 @@ class Plant:
         self._steps += n
         if not ok:
             raise FloatingPointError(f"plant state diverged at t={self.time:.3f} s: {self._xv!r}")
+
+    def advance_and_sample(self, t: float) -> list[Reading]:
+        """:meth:`advance_to` ``t``, then :meth:`sample_sensors`, in one compiled call."""
+        if not math.isfinite(t):
+            raise ValueError(f"t: expected a finite time, got {t!r}")
+        n = max(0, math.ceil((t - self.time) / self._cfg.dt - 1e-6))
+        t_after = (self._steps + n) * self._cfg.dt
+        s = self._sensors
+        mask = advance_and_sense(self._xv, self._xf, self._cmd, self._mats, self._pv, self._ph, self._signs,
+                                 self._servo_consts, n, t_after, s.state, s.imu_noise(), s.out)
+        self._steps += n
+        self._t_goal = t_after
+        if mask < 0:
+            raise FloatingPointError(f"plant state diverged at t={self.time:.3f} s: {self._xv!r}")
+        return s.readings(mask, t_after, self._xv) if mask else []
 
     # ----------------------------------------------------------------- sensors
     def sample_sensors(self, t: float | None = None) -> list[Reading]:

@@ -39,8 +39,7 @@ class SimRobotIO(RobotIO):
         return self.plant.next_sensor_time()
 
     def advance_to(self, t: float) -> list[Reading]:
-        self.plant.advance_to(t)
-        return self.plant.sample_sensors()
+        return self.plant.advance_and_sample(t)
 
     def truth(self) -> RobotTruth:
         p = self.plant

@@ -23,7 +23,6 @@ one sensor's sampling does not shift another's noise.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
@@ -31,9 +30,8 @@ from numba import njit
 from ucat_console.backend.sim.params import PressureModelConfig, SensorsConfig, ServoConfig
 from ucat_console.backend.sim.vehicle import NU, NU_DOT, POS, QUAT
 from ucat_console.robot.fins import N_FINS
-from ucat_console.robot.readings import DepthReading, DvlVelocity, FinFeedback, ImuReading, Reading
+from ucat_console.robot.readings import DepthReading, DvlVelocity, FinFeedbacks, ImuReading, Reading
 from ucat_console.robot.rotations import quat_mul, quat_to_euler
-from ucat_console.robot.servo import quantise
 from ucat_console.robot.units import (
     GRAVITY,
     LOOP_MAX_MA,
@@ -102,6 +100,73 @@ def imu_kernel(
     out[10], out[11], out[12] = quat_to_euler(qw, qx, qy, qz)
 
 
+# which sensor (schedule index), and its bit in a sample mask
+IMU, PRESSURE, DVL, FINS = 0, 1, 2, 3
+# the suite's numbers, one array for the compiled sampler: per sensor its schedule (first
+# sample time, period, samples taken), the earliest due time, the IMU's biases, the
+# encoders' resolution, and the next row of the IMU noise block
+S_T0 = 0
+S_PERIOD = 4
+S_K = 8
+S_NEXT = 12
+S_GYRO_BIAS = 13
+S_ACCEL_BIAS = 16
+S_COUNTS = 19
+S_RATE_STEP = 20
+S_IMU_ROW = 21
+NS = 22
+# the sampler's output: the IMU (accel 3, gyro 3, q 4, euler 3), then fin angles and rates
+O_IMU = 0
+O_FIN_POS = 13
+O_FIN_VEL = 17
+NO = 21
+
+
+@njit(cache=True)
+def _take(sf: np.ndarray, i: int, t: float) -> bool:
+    """Sensor ``i``'s schedule: True when a sample is due at ``t``, and move past ``t``
+    (missed samples are skipped)."""
+    t0, period, k = sf[S_T0 + i], sf[S_PERIOD + i], sf[S_K + i]
+    if t + 1e-9 < t0 + k * period:
+        return False
+    sf[S_K + i] = max(k + 1.0, math.floor((t - t0) / period + 1e-9) + 1.0)
+    return True
+
+
+@njit(cache=True)
+def sense(xv: np.ndarray, fin_theta: np.ndarray, fin_omega: np.ndarray, t: float, sf: np.ndarray,
+          imu_noise: np.ndarray, out: np.ndarray) -> int:
+    """Take the samples due at ``t``: the IMU's and the encoders' into ``out``; returns the
+    mask of sensors sampled (bit ``1 << IMU`` ...: the caller makes the pressure and DVL
+    readings, whose noise streams it draws)."""
+    if t + 1e-9 < sf[S_NEXT]:
+        return 0
+    mask = 0
+    if _take(sf, IMU, t):
+        row = int(sf[S_IMU_ROW])
+        imu_kernel(xv, imu_noise[row], sf[S_GYRO_BIAS:S_GYRO_BIAS + 3], sf[S_ACCEL_BIAS:S_ACCEL_BIAS + 3],
+                   out[O_IMU:O_IMU + 13])
+        sf[S_IMU_ROW] = row + 1
+        mask |= 1 << IMU
+    if _take(sf, PRESSURE, t):
+        mask |= 1 << PRESSURE
+    if _take(sf, DVL, t):
+        mask |= 1 << DVL
+    if _take(sf, FINS, t):
+        k, q = sf[S_COUNTS], sf[S_RATE_STEP]
+        for i in range(fin_theta.shape[0]):  # whole counts, whole rate steps (robot.servo.quantise)
+            out[O_FIN_POS + i] = np.rint(fin_theta[i] * k) / k
+            out[O_FIN_VEL + i] = np.rint(fin_omega[i] / q) * q
+        mask |= 1 << FINS
+    nxt = math.inf
+    for i in range(4):
+        due = sf[S_T0 + i] + sf[S_K + i] * sf[S_PERIOD + i]
+        if due < nxt:
+            nxt = due
+    sf[S_NEXT] = nxt
+    return mask
+
+
 class _Noise:
     """Rows of scaled standard normals drawn from one Generator in blocks, used in order."""
 
@@ -110,55 +175,34 @@ class _Noise:
         self._scale = np.asarray(scale, dtype=float)
         self._block = block
         self._i = block
-        self._buf = np.empty((0, len(scale)))
+        self.buf = np.empty((0, len(scale)))
         self._rows: list[list[float]] = []
 
-    def _refill(self) -> None:
-        self._buf = self._rng.standard_normal((self._block, len(self._scale))) * self._scale
-        self._rows = self._buf.tolist()
+    def refill(self) -> None:
+        self.buf = self._rng.standard_normal((self._block, len(self._scale))) * self._scale
+        self._rows = self.buf.tolist()
         self._i = 0
-
-    def next_array(self) -> np.ndarray:
-        if self._i >= self._block:
-            self._refill()
-        row = self._buf[self._i]
-        self._i += 1
-        return row
 
     def next_list(self) -> list[float]:
         if self._i >= self._block:
-            self._refill()
+            self.refill()
         row = self._rows[self._i]
         self._i += 1
         return row
 
 
-@dataclass
-class _Schedule:
-    period: float
-    t0: float = 0.0
-    k: int = 0
-
-    @property
-    def due(self) -> float:
-        return self.t0 + self.k * self.period
-
-    def take(self, t: float) -> bool:
-        """True when a sample is due at time t; moves past t (missed samples are skipped)."""
-        if t + 1e-9 < self.due:
-            return False
-        self.k = max(self.k + 1, math.floor((t - self.t0) / self.period + 1e-9) + 1)
-        return True
-
-
 class SensorSuite:
-    """All sensors of the plant; :meth:`sample` returns the readings due at a time."""
+    """All sensors of the plant; :meth:`sample` returns the readings due at a time.
+
+    The IMU and the encoders, sampled at 100 Hz, are the compiled :func:`sense` (the plant
+    calls it in the same compiled call as its physics); the pressure sensor and the DVL,
+    at 20 and 8 Hz, are made here from its mask."""
 
     def __init__(self, cfg: SensorsConfig, servo: ServoConfig, seed: int) -> None:
         self._cfg = cfg
         self._servo = servo
-        self._counts_per_rad = servo.units.quadcounts_per_rad
-        self._rate_quantum = servo.units.rate_quantum
+        self.state = np.zeros(NS)
+        self.out = np.zeros(NO)
         self.reset(seed)
 
     def reset(self, seed: int, t0: float = 0.0) -> None:
@@ -166,25 +210,46 @@ class SensorSuite:
         imu_ss, dvl_ss, p_ss = np.random.SeedSequence(seed).spawn(3)
         rng_imu = np.random.default_rng(imu_ss)
         icfg = self._cfg.imu
-        self.gyro_bias = rng_imu.normal(0.0, icfg.gyro_bias_std, 3)
-        self.accel_bias = rng_imu.normal(0.0, icfg.accel_bias_std, 3)
+        sf = self.state
+        sf[S_GYRO_BIAS:S_GYRO_BIAS + 3] = rng_imu.normal(0.0, icfg.gyro_bias_std, 3)
+        sf[S_ACCEL_BIAS:S_ACCEL_BIAS + 3] = rng_imu.normal(0.0, icfg.accel_bias_std, 3)
         self._imu_noise = _Noise(
             rng_imu, [icfg.accel_noise_std] * 3 + [icfg.gyro_noise_std] * 3 + [icfg.attitude_noise_std] * 3
         )
-        self._imu_out = np.empty(13)
+        self._imu_noise.refill()
+        sf[S_IMU_ROW] = 0.0
         dcfg = self._cfg.dvl
         # the fourth column stays a standard normal: it decides dropouts
         self._dvl_noise = _Noise(np.random.default_rng(dvl_ss), [dcfg.noise_std] * 3 + [1.0])
         self._p_noise = _Noise(np.random.default_rng(p_ss), [self._cfg.pressure.noise_std_pa])
-        self._imu = _Schedule(1.0 / icfg.rate, t0)
-        self._dvl = _Schedule(1.0 / self._cfg.dvl.rate, t0)
-        self._pressure = _Schedule(1.0 / self._cfg.pressure.rate, t0)
-        self._fins = _Schedule(1.0 / self._servo.feedback_rate, t0)
+        rates = (icfg.rate, self._cfg.pressure.rate, self._cfg.dvl.rate, self._servo.feedback_rate)
+        for i, rate in enumerate(rates):
+            sf[S_T0 + i] = t0
+            sf[S_PERIOD + i] = 1.0 / rate
+            sf[S_K + i] = 0.0
+        sf[S_NEXT] = t0
+        sf[S_COUNTS] = self._servo.units.quadcounts_per_rad
+        sf[S_RATE_STEP] = self._servo.units.rate_quantum
         self._last_t = -math.inf
+
+    @property
+    def gyro_bias(self) -> np.ndarray:
+        return self.state[S_GYRO_BIAS:S_GYRO_BIAS + 3].copy()
+
+    @property
+    def accel_bias(self) -> np.ndarray:
+        return self.state[S_ACCEL_BIAS:S_ACCEL_BIAS + 3].copy()
 
     def next_due(self) -> float:
         """Earliest time at which some sensor has a sample due."""
-        return min(self._imu.due, self._dvl.due, self._pressure.due, self._fins.due)
+        return float(self.state[S_NEXT])
+
+    def imu_noise(self) -> np.ndarray:
+        """The IMU's noise block for the next compiled sample (a new block once one is used up)."""
+        if self.state[S_IMU_ROW] >= self._imu_noise.buf.shape[0]:
+            self._imu_noise.refill()
+            self.state[S_IMU_ROW] = 0.0
+        return self._imu_noise.buf
 
     def sample(
         self, t: float, xv: np.ndarray, fin_theta: np.ndarray, fin_omega: np.ndarray
@@ -195,34 +260,28 @@ class SensorSuite:
         if t < self._last_t:
             raise ValueError(f"t: sensor time went backwards ({t} < {self._last_t})")
         self._last_t = t
-        out: list[Reading] = []
-        if t + 1e-9 < self.next_due():
-            return out
-        if self._imu.take(t):
-            out.append(self._imu_reading(t, xv))
-        if self._pressure.take(t):
-            out.append(self._depth_reading(t, xv))
-        if self._dvl.take(t):
-            out.append(self._dvl_reading(t, xv))
-        if self._fins.take(t):
-            k, q = self._counts_per_rad, self._rate_quantum
-            th = fin_theta.tolist()
-            om = fin_omega.tolist()
-            for i in range(N_FINS):
-                out.append(FinFeedback(t, i, *quantise(th[i], om[i], k, q)))
-        return out
+        mask = sense(xv, fin_theta, fin_omega, t, self.state, self.imu_noise(), self.out)
+        return self.readings(mask, t, xv) if mask else []
 
-    def _imu_reading(self, t: float, xv: np.ndarray) -> ImuReading:
-        o = self._imu_out
-        imu_kernel(xv, self._imu_noise.next_array(), self.gyro_bias, self.accel_bias, o)
-        v = o.tolist()
-        return ImuReading(
-            t=t,
-            accel_g=(v[0], v[1], v[2]),
-            gyro=(v[3], v[4], v[5]),
-            quaternion=(v[6], v[7], v[8], v[9]),
-            euler=(v[10], v[11], v[12]),
-        )
+    def readings(self, mask: int, t: float, xv: np.ndarray) -> list[Reading]:
+        """The readings of the sensors in ``mask`` (from :func:`sense` at ``t``), in the order
+        IMU, pressure, DVL, encoders."""
+        self._last_t = t
+        out: list[Reading] = []
+        o = self.out
+        if mask & (1 << IMU):
+            v = o[O_IMU:O_IMU + 13].tolist()
+            out.append(ImuReading(t, (v[0], v[1], v[2]), (v[3], v[4], v[5]), (v[6], v[7], v[8], v[9]),
+                                  (v[10], v[11], v[12])))
+        if mask & (1 << PRESSURE):
+            out.append(self._depth_reading(t, xv))
+        if mask & (1 << DVL):
+            out.append(self._dvl_reading(t, xv))
+        if mask & (1 << FINS):
+            pos, vel = o[O_FIN_POS:O_FIN_POS + N_FINS].copy(), o[O_FIN_VEL:O_FIN_VEL + N_FINS].copy()
+            pos.flags.writeable = vel.flags.writeable = False
+            out.append(FinFeedbacks(t, pos, vel))
+        return out
 
     def _depth_reading(self, t: float, xv: np.ndarray) -> DepthReading:
         c = self._cfg.pressure
