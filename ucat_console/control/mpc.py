@@ -124,6 +124,7 @@ class FinMpc:
         self._hinv = np.zeros((4, 4))
         self._u = np.zeros(4)
         self._terms = np.zeros(K.N_TERMS)
+        self._grad = np.zeros(4)
         self._np_rng = np.random.default_rng(seed)
 
     # ------------------------------------------------------------------ validation
@@ -154,6 +155,15 @@ class FinMpc:
             self._params, problem, self._gx, self._gy, np.asarray(uu), np.zeros(4), terms
         )
         return _breakdown(terms)
+
+    def score(self, u: tuple[float, float, float, float], f_target: tuple[float, float], v_body: float,
+              theta0: float, u_prev: tuple[float, float, float, float]) -> CostBreakdown:
+        """:meth:`cost` of a plan made elsewhere (the baseline's, the manoeuvre's), which may
+        lie outside the MPC's box: no argument checks (the caller's values are its own)."""
+        problem = K.pack_problem(f_target, v_body, theta0, u_prev)
+        self._cost_kernel(self._params, problem, self._gx, self._gy, np.asarray(u, dtype=float),
+                          self._grad, self._terms)
+        return _breakdown(self._terms)
 
     def cost_gradient(self, u, f_target, v_body, theta0, u_prev) -> np.ndarray:
         """Analytic (sub)gradient of J at ``u`` (compiled)."""

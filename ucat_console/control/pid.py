@@ -18,6 +18,8 @@ measurement, equals ``output`` (bumpless transfer when a loop is switched on).
 
 from __future__ import annotations
 
+from math import isfinite
+
 from ucat_console.control.argcheck import finite
 from ucat_console.control.params import PidGains
 
@@ -59,15 +61,20 @@ class Pid:
         pair the derivative acts on the measurement only, so a setpoint step gives no kick.
         ``t`` must not decrease; a repeated ``t`` neither integrates nor differentiates anew.
         """
-        t = finite("t", t)
         if isinstance(target, tuple):
             if len(target) != 2:
                 raise ValueError(f"target: expected (setpoint, measurement), got {target!r}")
-            sp = finite("setpoint", target[0])
-            y = finite("measurement", target[1])
+            sp, y = target
+            if not (isfinite(sp) and isfinite(y) and isfinite(t)):  # inline: the control rate
+                finite("setpoint", sp)
+                finite("measurement", y)
+                finite("t", t)
             e = sp - y
         else:
-            e = finite("error", target)
+            e = target
+            if not (isfinite(e) and isfinite(t)):
+                finite("error", e)
+                finite("t", t)
             y = -e
         g = self.gains
         p = g.kp * e

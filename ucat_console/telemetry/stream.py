@@ -13,7 +13,7 @@ import logging
 import threading
 from typing import Any, Callable, Iterable
 
-from ucat_console.telemetry.channels import message_type
+from ucat_console.telemetry.channels import CHANNELS, message_type
 
 log = logging.getLogger(__name__)
 
@@ -25,6 +25,16 @@ class TelemetryStream:
         self._lock = threading.Lock()
         self._subs: tuple[tuple[Subscriber, frozenset[str] | None], ...] = ()
         self._validate = validate
+        self._wanted: frozenset[str] = frozenset()
+
+    def wants(self, channel: str) -> bool:
+        """Whether a subscriber takes ``channel`` now: a publisher may leave a message that
+        nobody takes unbuilt (the headless runs of the experiments subscribe to few)."""
+        return channel in self._wanted
+
+    def _update_wanted(self) -> None:
+        every = frozenset(CHANNELS)
+        self._wanted = frozenset().union(*(every if c is None else c for _, c in self._subs))
 
     def subscribe(self, callback: Subscriber, channels: Iterable[str] | None = None) -> Callable[[], None]:
         """Call ``callback(channel, message)`` for each message (of ``channels`` only,
@@ -37,16 +47,18 @@ class TelemetryStream:
         entry = (callback, chans)
         with self._lock:
             self._subs = self._subs + (entry,)
+            self._update_wanted()
 
         def unsubscribe() -> None:
             with self._lock:
                 self._subs = tuple(s for s in self._subs if s is not entry)
+                self._update_wanted()
 
         return unsubscribe
 
     def publish(self, channel: str, message: Any) -> None:
         if self._validate:
-            expected = message_type(channel)
+            expected = CHANNELS.get(channel) or message_type(channel)
             if type(message) is not expected:
                 raise TypeError(
                     f"channel {channel!r} carries {expected.__name__}, got {type(message).__name__}"

@@ -109,6 +109,7 @@ log = logging.getLogger(__name__)
 #: events closer than this (s) are simultaneous
 _EPS = 1e-7
 PID_LOOPS = ("velocity", "depth", "yaw_rate")
+_FIN_STATE = tuple(ch.fin_state(pf) for pf in range(N_FINS))
 
 
 def check_setpoints(cfg: LoopConfig, sp: BodySetpoints) -> BodySetpoints:
@@ -418,15 +419,18 @@ class ClosedLoop:
                     self._q = r.quaternion
                 else:
                     self._q = self._attitude.update(r).q
-                stream.publish(ch.IMU, r)
+                if stream.wants(ch.IMU):
+                    stream.publish(ch.IMU, r)
             elif tp is DepthReading:
                 self.body.on_depth(r)
-                stream.publish(ch.DEPTH, r)
+                if stream.wants(ch.DEPTH):
+                    stream.publish(ch.DEPTH, r)
             elif tp is DvlVelocity:
                 self.body.on_dvl(r)
                 if r.valid:
                     self._dead_reckon(r, driving)
-                stream.publish(ch.DVL, r)
+                if stream.wants(ch.DVL):
+                    stream.publish(ch.DVL, r)
             else:
                 raise ValueError(f"reading: unexpected type {tp.__name__} from the robot")
 
@@ -469,7 +473,8 @@ class ClosedLoop:
             self._v_body = cmd.velocity
         if cmd.depth is not None:
             self._depth = cmd.depth
-        self.stream.publish(ch.BODY_COMMAND, BodyCommand(t, cmd.fx, cmd.fy, cmd.yaw))
+        if self.stream.wants(ch.BODY_COMMAND):
+            self.stream.publish(ch.BODY_COMMAND, BodyCommand(t, cmd.fx, cmd.fy, cmd.yaw))
         if not self.body.sensors_reported:
             return  # the first plans wait for the first DVL and depth reports: no stroke from a guess
         for act in self._actuators:
@@ -524,10 +529,11 @@ class ClosedLoop:
         for a in actions:
             if type(a) is LatePlan:
                 late = True
-        publish = self.stream.publish
+        stream = self.stream
         for p in act.fins:
             pf = PAPER_TO_ROBOT[p]
-            publish(ch.fin_plan(pf), replace(outcome, t=t, fin=pf, mode=act.mode, late=late))
+            if stream.wants(ch.fin_plan(pf)):
+                stream.publish(ch.fin_plan(pf), replace(outcome, t=t, fin=pf, mode=act.mode, late=late))
         self._handle(act, actions, t)
 
     def _handle(self, act: _Actuator, actions: list, t: float) -> None:
@@ -691,18 +697,21 @@ class ClosedLoop:
         self.stream.publish(ch.EVENTS, Event(t=t, source="loop", code=code, message=message, level=level, data=data))
 
     def _publish_state(self, t: float) -> None:
-        publish = self.stream.publish
-        g = self._gyro
-        publish(ch.BODY_STATE, BodyState(
-            t=t, position=(self._xy[0], self._xy[1], self._depth), orientation=self._q,
-            velocity=self._dvl_v, rates=g, depth=self._depth,
-        ))
+        stream = self.stream
+        if stream.wants(ch.BODY_STATE):
+            stream.publish(ch.BODY_STATE, BodyState(
+                t=t, position=(self._xy[0], self._xy[1], self._depth), orientation=self._q,
+                velocity=self._dvl_v, rates=self._gyro, depth=self._depth,
+            ))
         ang, rate, ca, cr = self._fb_angle, self._fb_rate, self._cmd_angle, self._cmd_rate
-        for pf in range(N_FINS):
-            a = ang[pf]
-            publish(ch.fin_state(pf), FinState(t, pf, 0.0 if a != a else a, rate[pf], ca[pf], cr[pf]))
+        for pf, channel in enumerate(_FIN_STATE):
+            if stream.wants(channel):
+                a = ang[pf]
+                stream.publish(channel, FinState(t, pf, 0.0 if a != a else a, rate[pf], ca[pf], cr[pf]))
 
     def _publish_stroke(self, t: float, fin: int, stroke: float, rate: float) -> None:
+        if not self.stream.wants(ch.fin_strouhal(fin)):
+            return
         m = self._mpc_cfg
         self.stream.publish(ch.fin_strouhal(fin), FinStrouhal(
             t, fin, stroke_strouhal(rate, self._v_body, m), m.st_low, m.st_high, m.st_opt,
@@ -710,6 +719,8 @@ class ClosedLoop:
         ))
 
     def _publish_power(self, t: float) -> None:
+        if not self.stream.wants(ch.POWER):
+            return
         bank = self._power
         per = [bank.p_fin(pf) for pf in range(N_FINS)]
         energy = 0.0

@@ -28,11 +28,9 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Callable, Hashable
 
-import numpy as np
 
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.control.baseline import BaselinePlanner, wrap_angle
-from ucat_console.control.cost import cost_terms
 from ucat_console.control.manoeuvre import ManoeuvrePlanner
 from ucat_console.control.mpc import FinMpc
 from ucat_console.control.params import FORMULATIONS, BaselineConfig, ManoeuvreConfig, MpcConfig
@@ -106,31 +104,30 @@ class BaselineFinPlanner:
     def __init__(self, cfg: MpcConfig, bcfg: BaselineConfig) -> None:
         self.cfg = cfg
         self._planner = BaselinePlanner(cfg, bcfg)
+        self._scorer = FinMpc(cfg)
 
     def __call__(self, x: PlanInputs) -> FinPlan:
         t0 = time.perf_counter()
         theta, offset = _wrapped(x.theta0)
         b = self._planner.plan(x.target[0], x.target[1], theta)
-        return _scored(self.cfg, x, theta, b.u, _shift(b.commands, offset), t0,
+        return _scored(self._scorer, x, theta, b.u, _shift(b.commands, offset), t0,
                        amplitude=b.amplitude, centre=b.centre)
 
 
-def _scored(cfg: MpcConfig, x: PlanInputs, theta: float, u: Vec4, commands: Vec4, t0: float,
+def _scored(scorer: FinMpc, x: PlanInputs, theta: float, u: Vec4, commands: Vec4, t0: float,
             **extra: float) -> FinPlan:
-    """The FinPlan of a plan made without the MPC, scored with the MPC's cost of ``cfg``
+    """The FinPlan of a plan made without the MPC, scored with the MPC's (compiled) cost
     (``t0``: ``time.perf_counter()`` when the plan was begun)."""
     if min(abs(u[0]), abs(u[1])) < 1e-9:  # holding still: no stroke, no frequency
         force = abs(x.target[0]) + abs(x.target[1])
-        return _plan(x, u=u, commands=commands, cost_total=cfg.lam_f * force, cost_force=force,
+        return _plan(x, u=u, commands=commands, cost_total=scorer.config.lam_f * force, cost_force=force,
                      cost_strouhal=0.0, cost_amplitude=0.0, cost_smoothness=0.0, st=0.0,
                      mean_force=(0.0, 0.0), solve_time=time.perf_counter() - t0, **extra)
-    terms = cost_terms(np.asarray(u), np.asarray(x.target), x.v_body, theta, np.asarray(x.u_prev), cfg)
+    c = scorer.score(u, x.target, x.v_body, theta, x.u_prev)
     return _plan(
-        x, u=u, commands=commands, cost_total=float(terms["total"]), cost_force=float(terms["force"]),
-        cost_strouhal=float(terms["strouhal_penalty"]), cost_amplitude=float(terms["amplitude"]),
-        cost_smoothness=float(terms["smoothness"]), st=float(terms["st"]),
-        mean_force=(float(terms["fbx"]), float(terms["fby"])), solve_time=time.perf_counter() - t0,
-        **extra,
+        x, u=u, commands=commands, cost_total=c.total, cost_force=c.force,
+        cost_strouhal=c.strouhal_penalty, cost_amplitude=c.amplitude, cost_smoothness=c.smoothness,
+        st=c.st, mean_force=c.mean_force, solve_time=time.perf_counter() - t0, **extra,
     )
 
 
@@ -140,6 +137,7 @@ class ManoeuvreFinPlanner:
     def __init__(self, cfg: ManoeuvreConfig, mpc: MpcConfig) -> None:
         self.cfg = mpc
         self._planner = ManoeuvrePlanner(cfg, mpc)
+        self._scorer = FinMpc(mpc)
         self._t0: float | None = None
 
     def __call__(self, x: PlanInputs) -> FinPlan:
@@ -148,7 +146,7 @@ class ManoeuvreFinPlanner:
             self._t0 = x.t
         theta, offset = _wrapped(x.theta0)
         u, commands = self._planner.plan(x.t - self._t0, theta)
-        return _scored(self.cfg, x, theta, u, _shift(commands, offset), t0)
+        return _scored(self._scorer, x, theta, u, _shift(commands, offset), t0)
 
 
 Planner = Callable[[PlanInputs], FinPlan]

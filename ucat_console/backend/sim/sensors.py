@@ -278,9 +278,9 @@ class SensorSuite:
         if mask & (1 << DVL):
             out.append(self._dvl_reading(t, xv))
         if mask & (1 << FINS):
-            pos, vel = o[O_FIN_POS:O_FIN_POS + N_FINS].copy(), o[O_FIN_VEL:O_FIN_VEL + N_FINS].copy()
-            pos.flags.writeable = vel.flags.writeable = False
-            out.append(FinFeedbacks(t, pos, vel))
+            fb = o[O_FIN_POS:O_FIN_VEL + N_FINS].copy()
+            fb.flags.writeable = False
+            out.append(FinFeedbacks(t, fb[:N_FINS], fb[N_FINS:]))
         return out
 
     def _depth_reading(self, t: float, xv: np.ndarray) -> DepthReading:
