@@ -191,7 +191,11 @@ def test_tuning_reaches_the_loop_is_journalled_and_reverts_in_one_step(sup: Supe
     assert (entries["mpc.lam_st"].who, entries["mpc.lam_st"].old, entries["mpc.lam_st"].new) == (
         f"client {PILOT}", 5.0, 2.0)
     assert (entries["pid.depth.kp"].old, entries["pid.depth.kp"].new) == (5.0, 7.0)
-    assert "tuning" in ev.codes("operator") and "tuning" in ev.codes("loop")
+    # one event for each tuned block, when the loop applies it, naming who
+    tuning = [e for e in ev.events if e.code == "tuning"]
+    assert sorted(e.data["block"] for e in tuning) == ["mpc", "pid.depth"]
+    assert all(e.source == "loop" and e.data["who"] == f"client {PILOT}" for e in tuning)
+    assert "mpc.lam_st 5.0 -> 2.0" in next(e.message for e in tuning if e.data["block"] == "mpc")
     sup.revert_tuning(PILOT)
     sup.step(0.2)
     assert sup.loop.mpc_config.lam_st == 5.0
@@ -226,7 +230,9 @@ def test_mode_switch_reaches_the_loop_and_is_an_event(sup: Supervisor) -> None:
     sup.set_mode(PILOT, "baseline")
     sup.step(0.5)
     assert sup.loop.mode == "baseline"
-    assert "mode" in ev.codes("loop") and "mode" in ev.codes("operator")
+    modes = [e for e in ev.events if e.code == "mode"]  # one event, the loop's, naming who
+    assert len(modes) == 1 and modes[0].source == "loop" and modes[0].data["who"] == f"client {PILOT}"
+    assert sup.journal()[-1].key == "mode"
 
 
 def test_status_messages_carry_arming_pilot_and_failsafes(sup: Supervisor) -> None:

@@ -178,13 +178,6 @@ class SafetyMonitor:
             self._had_pilot = False
             self._pilot_left = None
 
-    def reset_sensor_timers(self, now: float) -> None:
-        """Start the silence timers afresh (e.g. after the robot was started)."""
-        with self._lock:
-            for s in SENSORS:
-                self._last_valid[s] = float(now)
-                self._invalid[s] = 0
-
     # ------------------------------------------------------------------ evaluation
     def check(self, now: float) -> list[Transition]:
         """Evaluate every failsafe at ``now``; the ones that triggered or cleared."""

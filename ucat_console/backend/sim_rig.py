@@ -2,8 +2,8 @@
 
 It joins the plant (``backend/sim``) to the emulators (``backend/devices``), so it sits
 above both, beside ``backend/rig.py``, which builds the robots: the plant and the drivers
-never import each other. The page reads the rig's fault tables (:data:`EMULATOR_FAULTS`,
-:data:`DEFAULT_EMCY`) from here.
+never import each other. The page gets the rig's fault tables (:data:`EMULATOR_FAULTS`,
+:data:`DEFAULT_EMCY`) through the supervisor (``RigControl.fault_tables``).
 
 The rig is the robot's side of the wire in simulation. A thread steps the plant
 (``backend.sim``) in real time, or ``pace`` times faster, and its sensor models feed the

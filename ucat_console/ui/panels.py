@@ -199,7 +199,7 @@ class ControlPanel:
         self.faults: RigFaultInputs | None = None
         if sup.rig is not None:
             with within(c.get("safety")):
-                self.faults = RigFaultInputs(gui)
+                self.faults = RigFaultInputs(gui, sup.rig_control.fault_tables())
 
         # the one-key marker (the note typed above goes with it)
         self.marker_key = gui.add_command("Add marker", description="a marker with the note typed in 'Marker note'",

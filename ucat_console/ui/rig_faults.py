@@ -13,9 +13,8 @@ class RigFaultInputs:
     the console and the failsafes do when a drive faults or a sensor goes silent, garbled,
     invalid or slow. Only built when the robot is the simulated rig; only the pilot injects."""
 
-    def __init__(self, gui: Any) -> None:
-        from ucat_console.backend.sim_rig import DEFAULT_EMCY, EMULATOR_FAULTS
-
+    def __init__(self, gui: Any, tables: tuple[dict[str, tuple[str, ...]], int]) -> None:
+        EMULATOR_FAULTS, DEFAULT_EMCY = tables  # the supervisor's (RigControl.fault_tables)
         self.faults_of = EMULATOR_FAULTS
         device = next(iter(EMULATOR_FAULTS))
         with gui.add_folder("Rig faults (simulated devices)", order=50.0):

@@ -50,6 +50,7 @@ from __future__ import annotations
 import logging
 import math
 import queue
+import threading
 from dataclasses import fields, replace
 from typing import Any, Callable
 
@@ -165,8 +166,12 @@ class ClosedLoop:
         setpoints: BodySetpoints | None = None,
         source: str = "sim",
         driving: Callable[[], bool] | None = None,
+        status: Callable[[float], Status] | None = None,
     ) -> None:
         self.cfg = cfg
+        # the Status message at time t: the supervisor's (armed, pilot, failsafes) when one
+        # runs this loop, else what the loop knows (driving, no pilot, no failsafes)
+        self._status = status or self._own_status
         # whether the fins are being driven (the supervisor: armed); the distance travelled
         # and the fins' energy and mean power count only then, not DVL noise or drift at rest
         self._driving = driving or (lambda: True)
@@ -176,10 +181,16 @@ class ClosedLoop:
         self._planning: PlanningService = ThreadedPlanning() if self.clock.threaded else PlanningService()
         self._source = source
         self.body = BodyController(cfg.body)
+        # in force (the loop's thread), and as commanded (any thread; in force from the next event)
         self._mpc_cfg = cfg.mpc
         self._baseline_cfg = cfg.baseline
         self._setpoints = self.check_setpoints(setpoints or BodySetpoints())
         self._mode = cfg.mode
+        self._cmd_lock = threading.Lock()
+        self._commanded: dict[str, Any] = {
+            "mode": self._mode, "setpoints": self._setpoints, "mpc": cfg.mpc, "baseline": cfg.baseline,
+            **{f"pid.{loop}": getattr(cfg.body, loop) for loop in PID_LOOPS},
+        }
         self._commands: queue.SimpleQueue[Callable[[float], None]] = queue.SimpleQueue()
         self._stop = False
         self._t = 0.0
@@ -226,17 +237,29 @@ class ClosedLoop:
         """Simulated time of the last event processed (s)."""
         return self._t
 
+    # What the loop is commanded to do; in force from its next event. The loop is the one
+    # owner of these: the supervisor and the page read them here.
     @property
     def mode(self) -> str:
-        return self._mode
+        return self._commanded["mode"]
 
     @property
     def setpoints(self) -> BodySetpoints:
-        return self._setpoints
+        return self._commanded["setpoints"]
 
     @property
     def mpc_config(self) -> MpcConfig:
-        return self._mpc_cfg
+        return self._commanded["mpc"]
+
+    @property
+    def baseline_config(self) -> BaselineConfig:
+        return self._commanded["baseline"]
+
+    def pid_gains(self, loop: str) -> PidGains:
+        """The gains of the body-frame PID ``loop`` ("velocity", "depth" or "yaw_rate")."""
+        if loop not in PID_LOOPS:
+            raise ValueError(f"loop: {loop!r} is not one of {', '.join(PID_LOOPS)}")
+        return self._commanded[f"pid.{loop}"]
 
     @property
     def planner_threads(self) -> int:
@@ -261,41 +284,55 @@ class ClosedLoop:
 
     def set_setpoints(
         self, velocity: float | None = None, depth: float | None = None, yaw_rate: float | None = None
-    ) -> None:
-        """New setpoints (unchanged where None), checked against the envelope now."""
-        cur = self._setpoints
-        sp = self.check_setpoints(BodySetpoints(
-            velocity=cur.velocity if velocity is None else velocity,
-            depth=cur.depth if depth is None else depth,
-            yaw_rate=cur.yaw_rate if yaw_rate is None else yaw_rate,
-        ))
-        self._commands.put(lambda t: self._apply_setpoints(sp, t))
+    ) -> BodySetpoints:
+        """New setpoints (unchanged where None), checked against the envelope now; the
+        setpoints commanded before (they are in force from the next event)."""
+        with self._cmd_lock:
+            cur = self._commanded["setpoints"]
+            sp = self.check_setpoints(BodySetpoints(
+                velocity=cur.velocity if velocity is None else velocity,
+                depth=cur.depth if depth is None else depth,
+                yaw_rate=cur.yaw_rate if yaw_rate is None else yaw_rate,
+            ))
+            self._commanded["setpoints"] = sp
+            self._commands.put(lambda t: self._apply_setpoints(sp, t))
+        return cur
 
-    def set_mode(self, mode: str) -> None:
-        """Switch the fin controller while swimming (bumpless; an Event with code "mode")."""
+    def set_mode(self, mode: str, who: str = "") -> str:
+        """Switch the fin controller while swimming (bumpless; an Event with code "mode"
+        naming ``who``); the mode commanded before."""
         if mode not in MODES:
             raise ValueError(f"mode: {mode!r} is not one of {', '.join(MODES)}")
-        self._commands.put(lambda t: self._apply_mode(mode, t))
+        with self._cmd_lock:
+            old = self._commanded["mode"]
+            self._commanded["mode"] = mode
+            self._commands.put(lambda t: self._apply_mode(mode, t, who))
+        return old
 
-    def set_mpc_config(self, cfg: MpcConfig) -> None:
+    def set_mpc_config(self, cfg: MpcConfig, who: str = "") -> None:
         """New MPC configuration (e.g. ``loop.mpc_config.replace(lam_st=2.0)``) from the next plan."""
         if not isinstance(cfg, MpcConfig):
             raise ValueError(f"mpc config: expected an MpcConfig, got {type(cfg).__name__}")
         MpcFinPlanner(cfg, 0)  # a configuration the planner refuses fails here, in the caller
-        self._commands.put(lambda t: self._apply_mpc(cfg, t))
+        self._command("mpc", cfg, lambda t: self._apply_mpc(cfg, t, who))
 
-    def set_baseline_config(self, cfg: BaselineConfig) -> None:
+    def set_baseline_config(self, cfg: BaselineConfig, who: str = "") -> None:
         if not isinstance(cfg, BaselineConfig):
             raise ValueError(f"baseline config: expected a BaselineConfig, got {type(cfg).__name__}")
-        self._commands.put(lambda t: self._apply_baseline(cfg, t))
+        self._command("baseline", cfg, lambda t: self._apply_baseline(cfg, t, who))
 
-    def set_pid_gains(self, loop: str, gains: PidGains) -> None:
+    def set_pid_gains(self, loop: str, gains: PidGains, who: str = "") -> None:
         """New gains of one body-frame PID ("velocity", "depth" or "yaw_rate")."""
         if loop not in PID_LOOPS:
             raise ValueError(f"loop: {loop!r} is not one of {', '.join(PID_LOOPS)}")
         if not isinstance(gains, PidGains):
             raise ValueError(f"gains: expected PidGains, got {type(gains).__name__}")
-        self._commands.put(lambda t: self._apply_gains(loop, gains, t))
+        self._command(f"pid.{loop}", gains, lambda t: self._apply_gains(loop, gains, t, who))
+
+    def _command(self, key: str, value: Any, apply: Callable[[float], None]) -> None:
+        with self._cmd_lock:
+            self._commanded[key] = value
+            self._commands.put(apply)
 
     def restart(self) -> None:
         """Start the body loops and every fin afresh, as at start-up (an Event with code
@@ -610,7 +647,7 @@ class ClosedLoop:
         seed = int(np.random.SeedSequence([self.cfg.planner_seed, self._generation, index]).generate_state(1)[0])
         return MpcFinPlanner(self._mpc_cfg, seed)
 
-    def _apply_mode(self, mode: str, t: float) -> None:
+    def _apply_mode(self, mode: str, t: float, who: str = "") -> None:
         if mode == self._mode:
             return
         old = self._mode
@@ -637,7 +674,8 @@ class ClosedLoop:
             self._request(n, t, theta0)
         self._actuators = news
         self._handover = True
-        self._event(t, "mode", f"controller {old} -> {mode}", "info", {"from": old, "to": mode})
+        self._event(t, "mode", f"{who + ': ' if who else ''}controller {old} -> {mode}", "info",
+                    {"from": old, "to": mode, **({"who": who} if who else {})})
         self._check_handovers(t)
         self._publish_status(t)
 
@@ -658,35 +696,37 @@ class ClosedLoop:
                 waiting = True
         self._handover = waiting
 
-    def _apply_mpc(self, cfg: MpcConfig, t: float) -> None:
+    def _apply_mpc(self, cfg: MpcConfig, t: float, who: str) -> None:
         old, self._mpc_cfg = self._mpc_cfg, cfg
         self._generation += 1
         for act in self._actuators:
             act.planner = self._make_planner(act.mode, act.index)
-        self._tuning_event(t, "mpc", old, cfg)
+        self._tuning_event(t, "mpc", old, cfg, who)
 
-    def _apply_baseline(self, cfg: BaselineConfig, t: float) -> None:
+    def _apply_baseline(self, cfg: BaselineConfig, t: float, who: str) -> None:
         old, self._baseline_cfg = self._baseline_cfg, cfg
         for act in self._actuators:
             if act.mode == "baseline":
                 act.planner = self._make_planner("baseline", act.index)
-        self._tuning_event(t, "baseline", old, cfg)
+        self._tuning_event(t, "baseline", old, cfg, who)
 
-    def _apply_gains(self, loop: str, gains: PidGains, t: float) -> None:
+    def _apply_gains(self, loop: str, gains: PidGains, t: float, who: str) -> None:
         pid = {"velocity": self.body.velocity_pid, "depth": self.body.depth_pid,
                "yaw_rate": self.body.yaw_pid}[loop]
         old = pid.gains
         pid.set_gains(gains)
-        self._tuning_event(t, f"pid.{loop}", old, gains)
+        self._tuning_event(t, f"pid.{loop}", old, gains, who)
 
-    def _tuning_event(self, t: float, block: str, old: Any, new: Any) -> None:
+    def _tuning_event(self, t: float, block: str, old: Any, new: Any, who: str) -> None:
+        """The one event of a tuning change: what changed in ``block``, and who changed it."""
         changes = {}
         for f in fields(new):
             a, b = getattr(old, f.name), getattr(new, f.name)
             if a != b:
                 changes[f.name] = [_jsonable(a), _jsonable(b)]
-        text = ", ".join(f"{k} {v[0]} -> {v[1]}" for k, v in changes.items()) or "no change"
-        self._event(t, "tuning", f"{block}: {text}", "info", {"block": block, "changes": changes})
+        text = ", ".join(f"{block}.{k} {v[0]} -> {v[1]}" for k, v in changes.items()) or f"{block}: no change"
+        self._event(t, "tuning", f"{who + ': ' if who else ''}{text}", "info",
+                    {"block": block, "changes": changes, **({"who": who} if who else {})})
 
     def _apply_setpoints(self, sp: BodySetpoints, t: float) -> None:
         self._setpoints = sp
@@ -735,12 +775,13 @@ class ClosedLoop:
             energy=energy, distance=d, energy_per_metre=energy / d if d > 0.0 else math.nan,
         ))
 
+    def _own_status(self, t: float) -> Status:
+        return Status(t=t, armed=self._driving(), mode=self._mode, pilot="", failsafes=(),
+                      late_plans=self.late_plans, source=self._source)
+
     def _publish_status(self, t: float) -> None:
         sp = self._setpoints
-        self.stream.publish(ch.STATUS, Status(
-            t=t, armed=True, mode=self._mode, pilot="", failsafes=(), late_plans=self.late_plans,
-            source=self._source,
-        ))
+        self.stream.publish(ch.STATUS, self._status(t))
         self.stream.publish(ch.SETPOINTS, Setpoints(t, sp.velocity, sp.depth, sp.yaw_rate))
 
 

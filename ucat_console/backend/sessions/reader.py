@@ -14,6 +14,10 @@ the part numbers and parts that disagree on the session or its ``epoch_offset``;
 Times given to and returned by the reader are seconds on the recorded stream's clock (the
 messages' ``t``); the file's ``epoch_offset`` converts them to the file's nanoseconds.
 Time ranges are half-open, ``[start, end)``, as mcap's ``starting_at``/``ending_before``.
+
+Over 500 lines because the one part file and the whole session are one interface with one
+base (records in time order, ``state_at``, events, the refusals above): split, the checks
+a part and a session share would be read in two places.
 """
 
 from __future__ import annotations

@@ -28,6 +28,14 @@ class RigControl:
             )
         return sup.rig
 
+    def fault_tables(self) -> tuple[dict[str, tuple[str, ...]], int]:
+        """(the faults each emulated device takes, the default EMCY code) for the page's
+        inputs; CommandRefused when the robot is not the simulated rig."""
+        self._rig("fault injection")
+        from ucat_console.backend.sim_rig import DEFAULT_EMCY, EMULATOR_FAULTS
+
+        return EMULATOR_FAULTS, DEFAULT_EMCY
+
     def inject_fault(self, who: Actor, device: object, fault: object, **kw: Any) -> Event:
         """Start an emulator fault on the simulated rig (the pilot rehearsing a failsafe).
 

@@ -117,16 +117,15 @@ class Supervisor:
             self.gate = ArmingGate(inner, on_invalid=self._on_invalid_reading)
             self.clock: Clock = clock if clock is not None else SteadyPacedClock(1.0)
             start_depth = cfg.console.sim_depth if cfg.robot == "sim" else 0.0
-            self._setpoints = BodySetpoints(depth=min(start_depth, cfg.loop.max_depth))
             self.loop = ClosedLoop(
-                cfg.loop, self.gate, self._loop_stream, self.clock, setpoints=self._setpoints,
-                source=cfg.robot, driving=lambda: self.gate.armed,
+                cfg.loop, self.gate, self._loop_stream, self.clock,
+                setpoints=BodySetpoints(depth=min(start_depth, cfg.loop.max_depth)),
+                source=cfg.robot, driving=lambda: self.gate.armed, status=self.status,
             )
         except BaseException:
             inner.close()
             self._close_robot()
             raise
-        self._mode = cfg.loop.mode
         self.journal_log = Journal(lambda: self.loop.time)
         self.tuning_state = Tuning(cfg, self.loop, self.journal_log)
         self.arm_requests = ArmRequests(cfg.access.confirm_timeout)
@@ -177,7 +176,7 @@ class Supervisor:
         self._thread = threading.Thread(target=self._run, name="supervisor-loop", daemon=True)
         self.commands.thread = self._thread
         self._thread.start()
-        log.info("supervisor started (robot %s, mode %s)", self.cfg.robot, self._mode)
+        log.info("supervisor started (robot %s, mode %s)", self.cfg.robot, self.loop.mode)
 
     def step(self, duration: float) -> None:
         """Run the loop for ``duration`` s in the calling thread (tests; no thread started)."""
@@ -263,9 +262,7 @@ class Supervisor:
 
     # ================================================================== telemetry
     def _forward(self, channel: str, msg: Any) -> None:
-        if channel == ch.STATUS:
-            msg = self.status(msg.t)
-        elif not self.gate.armed:
+        if not self.gate.armed:
             tp = type(msg)
             if tp is FinState:
                 a, r = self.gate.sent[msg.fin]
@@ -297,7 +294,7 @@ class Supervisor:
 
     def status(self, t: float | None = None) -> Status:
         return Status(
-            t=self.loop.time if t is None else t, armed=self.gate.armed, mode=self._mode,
+            t=self.loop.time if t is None else t, armed=self.gate.armed, mode=self.loop.mode,
             pilot="" if self.access.pilot is None else str(self.access.pilot),
             failsafes=self.safety.active(), late_plans=self.loop.late_plans, source=self.cfg.robot,
         )
@@ -327,11 +324,13 @@ class Supervisor:
 
     @property
     def mode(self) -> str:
-        return self._mode
+        """The commanded mode (the loop's)."""
+        return self.loop.mode
 
     @property
     def setpoints(self) -> BodySetpoints:
-        return self._setpoints
+        """The commanded setpoints (the loop's)."""
+        return self.loop.setpoints
 
     def tuning(self) -> dict[str, Any]:
         """The commanded tuning: block -> config (MpcConfig, PidGains, BaselineConfig)."""
@@ -351,7 +350,7 @@ class Supervisor:
         lag_max = clock.lag_max if isinstance(clock, PacedClock) else 0.0
         pilot = self.access.pilot
         return Health(
-            t=self.loop.time, mode=self._mode, armed=self.gate.armed, lag=self._lag,
+            t=self.loop.time, mode=self.loop.mode, armed=self.gate.armed, lag=self._lag,
             lag_max=max(lag_max, self._lag), late_plans=self.loop.late_plans,
             plan_overruns=self.loop.plan_overruns, failsafes=self.safety.active(),
             clients=len(self.access.clients), pilot="" if pilot is None else actor_name(pilot),
@@ -363,7 +362,7 @@ class Supervisor:
         t = self.tuning()
         body = self.cfg.body.replace(**{loop: t[f"pid.{loop}"] for loop in PID_LOOPS})
         return self.cfg.replace(mpc=t["mpc"], baseline=t["baseline"], body=body,
-                                loop=self.cfg.loop.replace(mode=self._mode))
+                                loop=self.cfg.loop.replace(mode=self.loop.mode))
 
     def _weights(self) -> dict[str, float]:
         m = self.tuning()["mpc"]
@@ -507,7 +506,7 @@ class Supervisor:
             elif rule.action in ("hold", "surface"):
                 if rule.action == "hold":
                     body = self._last_body
-                    depth = body.depth if body is not None and math.isfinite(body.depth) else self._setpoints.depth
+                    depth = body.depth if body is not None and math.isfinite(body.depth) else self.loop.setpoints.depth
                     depth = round(min(max(depth, 0.0), self.cfg.loop.max_depth), 3)  # to the mm
                 else:
                     depth = 0.0
@@ -526,14 +525,10 @@ class Supervisor:
         if not isinstance(mode, str) or mode not in MODES:
             raise CommandRefused(f"mode: {mode!r} is not one of {', '.join(MODES)}")
         with self._lock:
-            old = self._mode
-            if mode == old:
+            if mode == self.loop.mode:
                 return
-            self.loop.set_mode(mode)
-            self._mode = mode
+            old = self.loop.set_mode(mode, actor_name(who))  # its event names who
         self.journal_log.add(actor_name(who), "mode", old, mode)
-        self._publish_event("operator", "mode", f"{actor_name(who)}: mode {old} -> {mode}", "info",
-                            {"who": str(who), "from": old, "to": mode})
         self._publish_status()
         self._notify()
 
@@ -550,7 +545,7 @@ class Supervisor:
             raise CommandRefused(
                 f"setpoints: failsafe {', '.join(holding)} holds the setpoints until its cause clears"
             )
-        cur = self._setpoints
+        cur = self.loop.setpoints
         try:
             sp = self.loop.check_setpoints(BodySetpoints(
                 velocity=values.get("velocity", cur.velocity), depth=values.get("depth", cur.depth),
@@ -562,9 +557,7 @@ class Supervisor:
 
     def _apply_setpoints(self, sp: BodySetpoints, who: str, quiet: bool = False) -> None:
         with self._lock:
-            old = self._setpoints
-            self.loop.set_setpoints(velocity=sp.velocity, depth=sp.depth, yaw_rate=sp.yaw_rate)
-            self._setpoints = sp
+            old = self.loop.set_setpoints(velocity=sp.velocity, depth=sp.depth, yaw_rate=sp.yaw_rate)
         changes = {}
         for k in SETPOINTS:
             a, b = getattr(old, k), getattr(sp, k)
@@ -591,13 +584,8 @@ class Supervisor:
         self.set_params(who, {key: value})
 
     def _apply_tuning(self, new_blocks: Mapping[str, Any], who: str) -> None:
-        diffs = self.tuning_state.apply(new_blocks, who)
-        if not diffs:
-            return
-        self._publish_event("operator", "tuning", f"{who}: " + ", ".join(
-            f"{k} {fmt(v[0])} -> {fmt(v[1])}" for k, v in diffs.items()), "info",
-            {"who": who, "changes": diffs})
-        self._notify()
+        if self.tuning_state.apply(new_blocks, who):  # the loop's event of each block names who
+            self._notify()
 
     def save_baseline(self, who: Actor) -> None:
         """The present tuning becomes the one to revert to."""

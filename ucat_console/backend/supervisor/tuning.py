@@ -97,12 +97,13 @@ class Tuning:
         self.loop = loop
         self.journal = journal
         self._lock = threading.Lock()
-        self._blocks = tuning_blocks(cfg)
-        self._saved = dict(self._blocks)
+        self._saved = tuning_blocks(cfg)
 
     def blocks(self) -> dict[str, Any]:
-        with self._lock:
-            return dict(self._blocks)
+        """The tuning commanded now (held by the loop, its one owner)."""
+        loop = self.loop
+        return {"mpc": loop.mpc_config, "baseline": loop.baseline_config,
+                **{f"pid.{name}": loop.pid_gains(name) for name in PID_LOOPS}}
 
     def saved(self) -> dict[str, Any]:
         with self._lock:
@@ -152,17 +153,17 @@ class Tuning:
         """Hand checked blocks to the loop and journal them; the changed fields (key -> [old, new])."""
         diffs: dict[str, list[Any]] = {}
         with self._lock:
+            current = self.blocks()
             for block, new in new_blocks.items():
-                old = self._blocks[block]
+                old = current[block]
                 if new == old:
                     continue
                 if block == "mpc":
-                    self.loop.set_mpc_config(new)
+                    self.loop.set_mpc_config(new, who)
                 elif block == "baseline":
-                    self.loop.set_baseline_config(new)
+                    self.loop.set_baseline_config(new, who)
                 else:
-                    self.loop.set_pid_gains(block.split(".", 1)[1], new)
-                self._blocks[block] = new
+                    self.loop.set_pid_gains(block.split(".", 1)[1], new, who)
                 for f in fields(new):
                     a, b = getattr(old, f.name), getattr(new, f.name)
                     if a != b:
@@ -174,5 +175,5 @@ class Tuning:
     def save(self, who: str) -> None:
         """The present tuning becomes the one to revert to."""
         with self._lock:
-            self._saved = dict(self._blocks)
+            self._saved = self.blocks()
         self.journal.add(who, "tuning", "saved", "baseline")
