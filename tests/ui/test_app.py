@@ -287,3 +287,17 @@ def test_the_formulation_is_switched_from_the_tuning_tab(app: ConsoleApp) -> Non
     assert pilot.act(pilot._apply_tuning, tuning=True)
     assert app.sup.tuning()["mpc"].formulation == "closed_stroke"
     assert "mpc.formulation = closed_stroke" in pilot.messages[-1]
+
+
+def test_recording_buttons_follow_the_recording_and_setpoints_show_rounded(app: ConsoleApp) -> None:
+    pilot = page(app, 1, pilot=True)
+    pilot.refresh()
+    assert not pilot.rec_start.disabled and pilot.rec_stop.disabled
+    app.sup.start_recording(1)
+    pilot.refresh()
+    assert pilot.rec_start.disabled and not pilot.rec_stop.disabled  # no second start while recording
+    app.sup.stop_recording(1)
+    # a depth held by a failsafe is the measured one; the box shows it to 4 places at most
+    app.sup.set_setpoints(1, depth=1.0110210123)
+    pilot.refresh()
+    assert pilot.sp_inputs["depth"].value == 1.011

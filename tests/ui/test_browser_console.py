@@ -20,6 +20,7 @@ from ucat_console.backend.access import LOCAL  # noqa: E402
 from ucat_console.backend.supervisor import Supervisor  # noqa: E402
 from ucat_console.bench.ui import CHROMIUM, CHROMIUM_ARGS  # noqa: E402
 from ucat_console.config import AccessConfig, AppConfig, ConsoleConfig  # noqa: E402
+from ucat_console.telemetry.events import Event  # noqa: E402
 from ucat_console.ui.app import ConsoleApp  # noqa: E402
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
@@ -118,6 +119,48 @@ def test_status_bar_armed_state_and_disarm_are_on_screen_on_every_tab(browser: B
     page.close()
 
 
+def test_a_full_bar_keeps_the_armed_state_and_disarm_on_screen(browser: Browser, console: Console) -> None:
+    """A named pilot, a recording and an active failsafe fill the bar at 1280 px: the text
+    in between gives way, never the armed state or DISARM."""
+    sup = console.sup
+    page = open_page(browser, console, 1280, 800)
+    take_control(page)
+    name = gui_input(page, "Your name")
+    name.fill("Operator on the far deck of the pool")
+    name.press("Enter")
+    sup.start_recording(LOCAL, "a full bar")
+    sup.report_event(Event(sup.loop.time, "epos2.fin0", "emcy", "a drive fault, to fill the bar", "error", {}))
+    expect(page.locator("#ucat-failsafes")).to_contain_text("motor")
+    expect(page.locator("#ucat-rec")).to_contain_text("REC")
+    for sel in ("#ucat-armed", "#ucat-disarm", "#ucat-theme"):
+        assert inside_viewport(page, sel), sel
+    page.screenshot(path=str(ARTIFACTS / "console-1280x800-full-bar.png"))
+    sup.stop_recording(LOCAL)
+    page.close()
+
+
+def test_a_number_box_left_without_a_number_gets_its_value_back(browser: Browser, console: Console) -> None:
+    sup = console.sup
+    page = open_page(browser, console)
+    take_control(page)
+    page.get_by_role("tab", name="Tuning", exact=True).click()
+    box = gui_input(page, "lam_st ")
+    before = box.input_value()
+    assert float(before) == sup.loop.mpc_config.lam_st
+    box.click()
+    box.press("Control+a")
+    box.press("Backspace")
+    box.type("abc")
+    box.press("Tab")  # leave the box
+    expect(box).to_have_value(before)
+    assert sup.loop.mpc_config.lam_st == float(before)  # nothing changed in force
+    box.fill("4.5")  # and the box still works
+    box.press("Tab")
+    page.get_by_role("button", name="Apply tuning").click()
+    wait_for(lambda: sup.loop.mpc_config.lam_st == 4.5, what="a typed weight applied")
+    page.close()
+
+
 def test_keys_drive_the_pilot_and_do_nothing_for_a_viewer(browser: Browser, console: Console) -> None:
     sup = console.sup
     pilot = open_page(browser, console)
@@ -167,6 +210,8 @@ def test_the_link_loss_banner_shows_when_the_console_stops_and_goes_when_it_retu
     expect(banner).to_be_visible()
     expect(banner).to_contain_text("LINK LOST")
     expect(banner).to_contain_text("pilot_gone")  # what the robot does meanwhile
+    expect(page.locator("#ucat-info")).to_contain_text("LINK LOST")  # the bar is not live either
+    expect(page.locator("#ucat-armed")).to_have_text(re.compile(r"ARMED\?$"))
     page.screenshot(path=str(ARTIFACTS / "console-link-lost.png"))
     back = Console(tmp_path, port=port)
     try:

@@ -8,9 +8,13 @@ every text the server sends is set as text). The server installs the script once
 then sends the bar's state a few times a second (:func:`update_source`). Two things the
 page does on its own:
 
-* **Link loss**: when no state has arrived for :data:`LINK_LOST_AFTER` s, a full-width
-  banner says the link is lost and what the robot does meanwhile (the configured
-  pilot-gone failsafe, as last told by the server); it goes with the next state.
+* **Link loss**: when no state has arrived for :data:`LINK_LOST_AFTER` s (checked every
+  0.25 s, so within 1.75 s), a full-width banner says the link is lost and what the robot
+  does meanwhile (the configured pilot-gone failsafe, as last told by the server), and the
+  bar shows its last state greyed with a question mark (nothing in it is live); both go
+  with the next state.
+* **Number boxes**: viser sends nothing for a number box left empty or holding text that is
+  no number; on leaving such a box the page puts back the number it held.
 * **DISARM** (the bar's button, and the Esc key through the console's command) and the
   gamepad send their messages through the page's own viser connection
   (``window.__viserMutable.sendMessage``, viser's client, checked with viser 1.1.1 by the
@@ -51,7 +55,11 @@ INSTALL = r"""
       letter-spacing: 0.04em; }
     #ucat-bar .armed.on { background: #d7263d; color: #fff; }
     #ucat-bar .armed.off { background: #2f6f3e; color: #fff; }
+    #ucat-bar > * { flex-shrink: 0; }
     #ucat-bar .item { opacity: 0.95; }
+    #ucat-bar #ucat-info, #ucat-bar #ucat-lights, #ucat-bar #ucat-battery { flex-shrink: 1; min-width: 0;
+      overflow: hidden; text-overflow: ellipsis; }
+    #ucat-bar .armed.stale { background: #6b7280; }
     #ucat-bar .rec { color: #ff5c5c; font-weight: 700; }
     #ucat-bar .fs { color: #fff; background: #b45309; padding: 2px 8px; border-radius: 3px; font-weight: 700; }
     #ucat-bar .light-dot { display: inline-flex; align-items: center; gap: 4px; margin-right: 6px; cursor: help; }
@@ -108,12 +116,21 @@ INSTALL = r"""
       banner.append(document.createTextNode("LINK LOST: this page no longer reaches the console"));
       const s = u.state;
       banner.append(el("small", "", s ? s.link_policy : "the robot's failsafes act on their own"));
+      // the bar shows what was last known, as such: nothing here is live any more
+      if (s) {
+        armed.textContent = (s.armed ? "ARMED" : "DISARMED") + "?";
+        armed.className = "armed stale";
+        armed.title = "last known state: the link is lost";
+        info.textContent = `mode ${s.mode}  ·  pilot: ${s.pilot}  ·  LINK LOST`;
+      }
+      disarm.disabled = true;
     }
   };
   u.render = (s) => {
     u.state = s; u.last = Date.now(); showBanner(false);
     armed.textContent = s.armed ? "ARMED" : "DISARMED";
     armed.className = "armed " + (s.armed ? "on" : "off");
+    armed.title = "";
     info.textContent = `mode ${s.mode}  ·  pilot: ${s.pilot}  ·  link ok`;
     rec.textContent = s.recording ? `● REC ${s.recording}` : "";
     fs.style.display = s.failsafes.length ? "inline" : "none";
@@ -130,6 +147,22 @@ INSTALL = r"""
     theme.textContent = s.dark ? "☀ light" : "☾ dark";
   };
   setInterval(() => { if (u.state && Date.now() - u.last > LOST_MS) showBanner(true); }, 250);
+  // ------------------------------------------------------------ number boxes
+  // viser sends nothing for a number box left empty or holding no number ("abc"), so the box
+  // would stay blank while the value in force is another: on leaving it, the box gets back
+  // the number it held (and sends it, the value in force, through its own input).
+  const numberBox = (e) => e && e.tagName === "INPUT" && e.closest && e.closest(".mantine-NumberInput-root");
+  const setNative = Object.getOwnPropertyDescriptor(HTMLInputElement.prototype, "value").set;
+  document.addEventListener("focusin", (ev) => { const e = ev.target;
+    if (numberBox(e)) e.dataset.ucatBefore = e.value; }, true);
+  document.addEventListener("focusout", (ev) => { const e = ev.target;
+    if (!numberBox(e) || e.dataset.ucatBefore === undefined) return;
+    const text = e.value.trim();
+    if (text === "" || text === "-" || !isFinite(Number(text.replace(/,/g, "")))) {
+      setNative.call(e, e.dataset.ucatBefore);
+      e.dispatchEvent(new Event("input", {bubbles: true}));
+    }
+  }, true);
   // ------------------------------------------------------------ gamepad
   const axis = (v) => (Math.abs(v) < DEAD ? 0 : (v - Math.sign(v) * DEAD) / (1 - DEAD));
   const padSend = (cmd) => {
