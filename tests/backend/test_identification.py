@@ -5,6 +5,7 @@ loop runs the manoeuvre (mode "identify") on the simulated U-CAT, headless."""
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -70,6 +71,13 @@ def test_manoeuvre_recording_recovers_the_plants_coefficients(tmp_path: Path, pl
     fragment.write_text(rep.toml)
     loaded = AppConfig.from_toml(fragment).mpc
     assert loaded.c_d == pytest.approx(r.c_d, rel=1e-5) and loaded.c_l == pytest.approx(r.c_l, rel=1e-5)
+    # the command line does the same and writes the fragment, the figures and the residual plot
+    out = tmp_path / "out"
+    assert main(["identify", path.name, "--dir", str(tmp_path), "--out", str(out)]) == 0
+    assert AppConfig.from_toml(out / "identified.toml").mpc.c_d == pytest.approx(r.c_d, rel=1e-5)
+    doc = json.loads((out / "identify.json").read_text())
+    assert doc["result"]["c_d"] == pytest.approx(r.c_d, rel=1e-9) and len(doc["windows"]) == len(r.windows)
+    assert (out / "residuals.png").stat().st_size > 1000
 
 
 def test_recording_without_a_steady_segment_is_refused_naming_why(tmp_path: Path) -> None:

@@ -13,7 +13,7 @@ from support import wait_for
 
 from ucat_console.backend.loop.clock import SimulatedClock
 from ucat_console.backend.supervisor import CommandRefused, Supervisor
-from ucat_console.config import AccessConfig, AppConfig, load_config
+from ucat_console.config import AccessConfig, AppConfig, ConsoleConfig, load_config
 from ucat_console.telemetry import channels as ch
 from ucat_console.ui.app import ConsoleApp, is_loopback
 from ucat_console.ui.panels import ControlPanel, esc, param_specs, step_for
@@ -301,3 +301,51 @@ def test_recording_buttons_follow_the_recording_and_setpoints_show_rounded(app: 
     app.sup.set_setpoints(1, depth=1.0110210123)
     pilot.refresh()
     assert pilot.sp_inputs["depth"].value == 1.011
+
+
+def test_the_pilot_identifies_the_fin_model_from_the_session_tab(tmp_path: Path) -> None:
+    cfg = AppConfig(access=AccessConfig(token=TOKEN), console=ConsoleConfig(sim_depth=3.0))
+    sup = Supervisor(cfg, clock=SimulatedClock(), sessions_dir=tmp_path)
+    a = ConsoleApp(sup, port=0)
+    try:
+        viewer = page(a, 2, pilot=False)
+        pilot = page(a, 1, pilot=True)
+        ident = pilot.identify
+        assert pilot.act(ident.start) is False and "arm" in pilot.messages[-1]  # armed first
+        sup.arm(1)
+        sup.step(1.0)
+        assert viewer.act(viewer.identify.start) is False and "read-only" in viewer.messages[-1]
+        assert pilot.act(ident.start) and sup.mode == "identify" and sup.recorder.recording
+        pilot.refresh()
+        assert ident.progress.visible and ident.stop.visible
+        sup.step(sup.manoeuvre.duration + 0.5)
+        assert sup.manoeuvre.finished and sup.mode == "mpc" and not sup.recorder.recording
+        pilot.refresh()
+        assert ident.session.value == sup.manoeuvre.session  # the manoeuvre's recording, chosen
+        assert viewer.act(viewer.identify.start_fit) is False  # the pilot's
+        assert pilot.act(ident.start_fit)
+        ident._fitting.join(120.0)
+        pilot.refresh()
+        r = ident.report.result
+        assert r.c_d > 0.0 and r.steady_windows >= 3
+        assert "C_D" in ident.result.content and ident.use.visible
+        assert pilot.act(ident.use_fit)
+        sup.step(0.2)
+        assert sup.loop.mpc_config.c_d == pytest.approx(r.c_d, rel=1e-5)
+        assert sup.loop.mpc_config.c_l == pytest.approx(r.c_l, rel=1e-5)
+        assert {e.key for e in sup.journal()[-2:]} == {"mpc.c_d", "mpc.c_l"}
+    finally:
+        a.stop()
+        sup.stop()
+
+
+def test_a_recording_the_fit_refuses_is_shown_with_the_reason(app: ConsoleApp) -> None:
+    pilot = page(app, 1, pilot=True)
+    app.sup.start_recording(1)
+    app.sup.step(0.5)  # disarmed: no steady window where the fins beat
+    app.sup.stop_recording(1)
+    pilot.refresh(force=True)
+    assert pilot.act(pilot.identify.start_fit)
+    pilot.identify._fitting.join(60.0)
+    pilot.refresh()
+    assert "Fit refused" in pilot.identify.result.content and not pilot.identify.use.visible

@@ -11,8 +11,10 @@
 * :class:`ManoeuvreRun` runs the identification manoeuvre (mode "identify") on a running
   :class:`~ucat_console.backend.supervisor.Supervisor`, the pilot's command: it records a
   session while the fins step through the manoeuvre, then puts the previous mode back and
-  stops the recording. ``start`` / ``poll`` / ``finish`` let a page drive it without
-  blocking; :meth:`ManoeuvreRun.wait` blocks (the command line).
+  stops the recording (the console's own act: it happens whoever flies by then, and at
+  once when the robot is disarmed before the end). ``start`` / ``poll`` / ``finish`` drive
+  it without blocking (the supervisor polls its run after every chunk of the loop);
+  :meth:`ManoeuvreRun.wait` blocks (the command line).
 """
 
 from __future__ import annotations
@@ -184,6 +186,7 @@ class ManoeuvreRun:
         self.paths: list[Path] = []
         self._previous = ""
         self._t0 = math.nan
+        self._finished = False
 
     @property
     def duration(self) -> float:
@@ -216,22 +219,31 @@ class ManoeuvreRun:
             return 0.0
         return min(1.0, max(0.0, (self.sup.loop.time - self._t0) / self.duration))
 
+    @property
+    def finished(self) -> bool:
+        return self._finished
+
     def poll(self) -> bool:
-        """Finish when the manoeuvre is over; True once finished."""
-        if self.paths:
+        """Finish when the manoeuvre is over (or the robot was disarmed); True once finished."""
+        if self._finished:
             return True
-        if self.progress >= 1.0:
+        if self.progress >= 1.0 or not self.sup.armed:
             self.finish()
             return True
         return False
 
     def finish(self) -> list[Path]:
         """The previous mode back, the recording stopped; the session's files."""
+        from ucat_console.backend.access import LOCAL
+
+        if self._finished:
+            return self.paths
+        self._finished = True
         sup = self.sup
         if sup.mode == "identify":
-            sup.set_mode(self.who, self._previous or "mpc")
+            sup.set_mode(LOCAL, self._previous or "mpc")
         if sup.recorder.recording and sup.recorder.session_id == self.session:
-            self.paths = sup.stop_recording(self.who)
+            self.paths = sup.stop_recording(LOCAL)
         return self.paths
 
     def wait(self, poll_s: float = 0.2) -> list[Path]:

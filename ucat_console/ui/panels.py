@@ -29,6 +29,7 @@ from ucat_console.backend.supervisor import SETPOINTS, TUNABLE, CommandRefused
 from ucat_console.typedconf import describe_range
 from ucat_console.ui.driving import KEY_MAP, KEYS, Driving
 from ucat_console.ui.markdown import _set, esc, events_markdown, within
+from ucat_console.ui.identify_inputs import IdentifyInputs
 from ucat_console.ui.rig_faults import RigFaultInputs
 
 if TYPE_CHECKING:
@@ -36,7 +37,8 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-MODE_LABELS = {"mpc": "MPC", "mpc_sync": "MPC, rear fins synchronised", "baseline": "baseline inverse model"}
+MODE_LABELS = {"mpc": "MPC", "mpc_sync": "MPC, rear fins synchronised", "baseline": "baseline inverse model",
+               "identify": "the identification manoeuvre (Session tab)"}
 REFUSALS = (AccessDenied, CommandRefused, ValueError)
 #: the events list's filters: name -> the levels shown
 SEVERITY_FILTERS = {
@@ -182,6 +184,9 @@ class ControlPanel:
                 self.note = gui.add_text("Marker note", "")
                 self.marker = gui.add_button("Add marker", hint="or press M")
                 self.follow = gui.add_checkbox("Follow the robot", True, hint="the 3-D view keeps the robot in view")
+            self.identify = IdentifyInputs(gui, sup, client_id, getattr(app, "sessions_dir", None) or
+                                           sup.recorder.directory, self.show,
+                                           getattr(app, "request_refresh", lambda: None))
             with gui.add_folder("Events", order=30.0):
                 self.severity = gui.add_dropdown("Show", tuple(SEVERITY_FILTERS), initial_value="warnings and errors",
                                                  hint="which events the list shows")
@@ -211,6 +216,7 @@ class ControlPanel:
         self.stop_key = gui.add_command("Drive: stop", description="velocity and yaw rate to 0", hotkey="space")
         self.disarm_key = gui.add_command("DISARM", description="motors off now", hotkey="escape")
         self._events_shown = ""
+        self._listed: tuple[bool, bool] | None = None
 
         self._wire()
         self._register_inputs()
@@ -223,7 +229,7 @@ class ControlPanel:
         pilot = [self.release, self.handover, self.decline, self.arm, self.disarm, self.mode,
                  *self.sp_inputs.values(), self.apply_sp, self.apply_tuning, self.revert, self.save,
                  *self.params.values(), self.history, self.rec_start, self.rec_stop, self.marker,
-                 self.reset_drives, self.zero_depth]
+                 self.reset_drives, self.zero_depth, *self.identify.handles()]
         if self.faults is not None:
             f = self.faults
             pilot += [f.device, f.fault, f.fin, f.code, f.duration, f.inject, f.clear]
@@ -268,6 +274,11 @@ class ControlPanel:
         if self.reset_drives is not None:
             self.reset_drives.on_click(self._guard(self._reset_drive_faults))
             self.zero_depth.on_click(self._guard(self._zero_depth))
+        ident = self.identify
+        ident.run.on_click(self._guard(ident.start))
+        ident.stop.on_click(self._guard(ident.stop_run))
+        ident.fit.on_click(self._guard(ident.start_fit))
+        ident.use.on_click(self._guard(ident.use_fit, tuning=True))
         if self.faults is not None:
             f = self.faults
             f.device.on_update(lambda _: f.show_faults_of_device())
@@ -461,6 +472,12 @@ class ControlPanel:
             self._set_prop(self.zero_depth, "disabled", not pilot or armed)
         if self.faults is not None:
             self.faults.enable(pilot)
+        run = sup.manoeuvre
+        listed = (recording, run is not None and run.finished)
+        if force or listed != self._listed:  # a recording ended: it may be fitted
+            self._listed = listed
+            self.identify.list_sessions()
+        self.identify.refresh(pilot)
 
     @staticmethod
     def _set_prop(handle: Any, name: str, value: Any) -> None:

@@ -51,6 +51,7 @@ from typing import TYPE_CHECKING, Any, Callable, Mapping
 from ucat_console.backend import redaction
 from ucat_console.backend.access import LOCAL, AccessControl, AccessDenied, AccessState, Actor, actor_name
 from ucat_console.backend.arming import ArmingGate
+from ucat_console.backend.identification import ManoeuvreRun
 from ucat_console.backend.loop.clock import Clock, PacedClock
 from ucat_console.backend.loop.closed_loop import PID_LOOPS, ClosedLoop
 from ucat_console.backend.loop.config import MODES
@@ -132,6 +133,8 @@ class Supervisor:
         self.commands = LoopCommands()
         self.commands.why_not_running = lambda: self.fault
         self._armed_at: float | None = None
+        #: the identification manoeuvre last started (None: none yet)
+        self.manoeuvre: ManoeuvreRun | None = None
         self._last_body: BodyState | None = None
         self._lag = 0.0
         self.fault = ""
@@ -259,6 +262,12 @@ class Supervisor:
             self._on_failsafe(tr)
         self.bursts.check(now)
         self.recording.check(now, self.gate.armed)
+        run = self.manoeuvre
+        if run is not None and not run.finished:
+            try:
+                run.poll()
+            except Exception:
+                log.exception("finishing the identification manoeuvre failed")
 
     # ================================================================== telemetry
     def _forward(self, channel: str, msg: Any) -> None:
@@ -626,6 +635,30 @@ class Supervisor:
                                  {"note": note, "who": str(who)})
         self._notify()
         return ev
+
+    # ================================================================== identification
+    def start_manoeuvre(self, who: Actor) -> ManoeuvreRun:
+        """The identification manoeuvre, recorded (pilot, armed; one at a time); it ends by
+        itself (its steps done, or the robot disarmed) and its session is then fitted with
+        ``backend.identification.identify_sessions``."""
+        with self._lock:
+            if self.manoeuvre is not None and not self.manoeuvre.finished:
+                raise CommandRefused("identification manoeuvre: one is running")
+            run = ManoeuvreRun(self, who)
+            run.start()
+            self.manoeuvre = run
+        self._notify()
+        return run
+
+    def stop_manoeuvre(self, who: Actor) -> list[Path]:
+        """End the running manoeuvre now (pilot): the previous mode back, the recording kept."""
+        self.access.require_pilot(who, "identification manoeuvre")
+        run = self.manoeuvre
+        if run is None or run.finished:
+            raise CommandRefused("identification manoeuvre: none is running")
+        paths = run.finish()
+        self._notify()
+        return paths
 
     # ================================================================== the robot's devices
     @property

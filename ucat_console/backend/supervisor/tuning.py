@@ -24,7 +24,7 @@ from ucat_console.typedconf import check_value
 #: what the operator may tune live: block -> fields (PID blocks are "pid.<loop>")
 TUNABLE: dict[str, tuple[str, ...]] = {
     "mpc": ("formulation", "lam_f", "lam_st", "lam_a", "lam_d", "lam_c", "lam_e", "st_opt", "st_low",
-            "st_high", "n_samples"),
+            "st_high", "n_samples", "c_d", "c_l"),
     **{f"pid.{loop}": ("kp", "ki", "kd", "limit") for loop in PID_LOOPS},
     "baseline": ("frequency",),
 }
