@@ -25,7 +25,7 @@ def test_csv_columns_are_mcap_paths_flattened_from_the_type():
     assert columns(BodyState) == [
         "log_time_ns", "t",
         "position.x", "position.y", "position.z",
-        "orientation.w", "orientation.x", "orientation.y", "orientation.z",
+        "orientation.x", "orientation.y", "orientation.z", "orientation.w",  # as in the MCAP messages
         "velocity.x", "velocity.y", "velocity.z",
         "rates.x", "rates.y", "rates.z",
         "depth",
@@ -61,6 +61,9 @@ def test_csv_export_matches_the_recorded_values(sessions, tmp_path):
             assert (math.isnan(x) and math.isnan(b.position[i])) or x == b.position[i]
         d = float(row["depth"])
         assert (math.isnan(d) and math.isnan(b.depth)) or d == b.depth
+        for i, name in enumerate("wxyz"):  # held w first, written by name
+            q = float(row[f"orientation.{name}"])
+            assert (math.isnan(q) and math.isnan(b.orientation[i])) or q == b.orientation[i]
     with open(out / "status.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
     assert [r["armed"] for r in rows] == ["true", "false", "true"]

@@ -7,7 +7,7 @@ after ``log_time_ns`` (the file's UNIX nanoseconds; ``t`` is the message's own t
 named by their MCAP message paths (as Foxglove and PlotJuggler name them):
 
     scalar field                 its name                       ``depth``
-    named vector                 ``name.part`` for each part    ``position.x``, ``orientation.w``
+    named vector                 ``name.part`` for each part    ``position.x``, ``orientation.x``
     per-fin array                ``name[i]`` for each element   ``per_fin[0]`` ... ``per_fin[3]``
     variable-length tuple        its name, as a JSON array      ``failsafes``: ``[]``, ``["dvl"]``
     dict (Event.data)            its name, as compact JSON      ``data``
@@ -49,6 +49,7 @@ from ucat_console.backend.sessions.schema import (
     FieldSpec,
     field_specs,
 )
+from ucat_console.robot.fields import WXYZ
 from ucat_console.telemetry.channels import message_type
 
 TIME_COLUMN = "log_time_ns"
@@ -69,6 +70,12 @@ def _dtype(s: FieldSpec) -> str:
     return "decimal" if s.kind == INT and s.wide else _DTYPES[s.kind]
 
 
+def _order(s: FieldSpec) -> range | tuple[int, ...]:
+    """The order of a field's numbers in the CSV: a quaternion x, y, z, w as in the MCAP
+    messages (the Python messages hold it w first), everything else as held."""
+    return (1, 2, 3, 0) if s.names == WXYZ else range(s.length)
+
+
 def column_specs(cls: type) -> list[dict[str, Any]]:
     """The sidecar's description of each column of message type ``cls``."""
     out: list[dict[str, Any]] = [{
@@ -77,7 +84,8 @@ def column_specs(cls: type) -> list[dict[str, Any]]:
     }]
     for s in field_specs(cls):
         doc = s.doc
-        for path in s.paths():
+        paths = s.paths()
+        for path in (paths if s.kind != FLOATS else [paths[i] for i in _order(s)]):
             out.append({
                 "name": path,
                 "dtype": _dtype(s),
@@ -112,7 +120,7 @@ def row(msg: Any, log_time_ns: int) -> list[str]:
     for s in field_specs(type(msg)):
         v = getattr(msg, s.name)
         if s.kind == FLOATS:
-            out += [""] * s.length if v is None else [repr(float(x)) for x in v]
+            out += [""] * s.length if v is None else [repr(float(v[i])) for i in _order(s)]
         elif v is None:
             out.append("")
         else:
