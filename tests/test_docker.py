@@ -93,7 +93,7 @@ def test_the_rootfs_check_knows_every_instruction_of_the_dockerfile() -> None:
                                           "ENTRYPOINT", "CMD"}
     runs = [rest for word, rest in steps if word == "RUN"]
     assert any(r.startswith("apt-get update") and "can-utils" in r for r in runs)  # joined lines
-    assert any("warm_up()" in r for r in runs)  # the planners are compiled into the image
+    assert any("ucat-console prepare" in r for r in runs)  # the compiled code goes into the image
     assert ("ENTRYPOINT", dockerfile_instruction("ENTRYPOINT")) in steps
 
 

@@ -25,7 +25,12 @@ class SlowPreparation:
         self.error = ""
         self.go = threading.Event()
         self.on_progress = on_progress
+        self.steps = prepare.steps_for(cfg)
+        self.complete = False
         on_progress(Progress(0, 2, "the planners"))
+
+    def done(self, key) -> bool:
+        return self.complete
 
     def wait(self, timeout=None) -> bool:
         self.go.wait()
@@ -41,7 +46,7 @@ def test_the_page_is_served_while_compiling_and_the_console_takes_over(tmp_path:
     monkeypatch.setattr(prepare, "start", lambda cfg, cb: slow.append(SlowPreparation(cfg, cb)) or slow[-1])
     cfg = AppConfig(console=ConsoleConfig(port=0, record_on_arm=False, heartbeat_period=0.1))
     out: dict = {}
-    t = threading.Thread(target=lambda: out.setdefault("cfg", run_cli._prepare_with_page(cfg)), daemon=True)
+    t = threading.Thread(target=lambda: out.setdefault("cfg", run_cli._prepare_with_page(cfg)[0]), daemon=True)
     t.start()
     url = wait_for(lambda: next((w for w in capsys.readouterr().out.split() if w.startswith("http://")), None),
                    what="the loading page's address")
@@ -72,8 +77,37 @@ def test_the_page_is_served_while_compiling_and_the_console_takes_over(tmp_path:
 
 
 def test_a_real_preparation_reports_its_steps_and_finishes() -> None:
+    """The needed steps first (ready), the other formulation's planner in the background
+    (complete); each step's time is reported."""
     seen: list[Progress] = []
-    prep = prepare.start(AppConfig(), seen.append)
-    assert prep.wait(600.0) and not prep.error
-    assert seen[-1].done == seen[-1].total == 2 and seen[-1].text() == "ready"
-    assert [p.step for p in seen[:-1]] == ["the planners", "the simulated robot and the closed loop"]
+    cfg = AppConfig()
+    prep = prepare.start(cfg, seen.append)
+    assert prep.wait(900.0) and not prep.error
+    needed = [s.key for s in prepare.steps_for(cfg) if s.needed]
+    assert needed == ["planner:paper", "loop", "plant"]
+    assert all(prep.done(k) for k in needed)
+    assert seen[-1].done == seen[-1].total == 3 and seen[-1].text() == "ready"
+    assert prep.wait_all(900.0) and not prep.error and prep.done("planner:closed_stroke")
+    assert set(prep.seconds) == {"planner:paper", "loop", "plant", "planner:closed_stroke"}
+    assert prep.ready_after is not None and prep.complete_after >= prep.ready_after
+
+
+def test_a_formulation_still_compiling_cannot_be_switched_to(tmp_path: Path) -> None:
+    from ucat_console.backend.loop.clock import SimulatedClock
+    from ucat_console.backend.supervisor import CommandRefused
+
+    compiled = {"paper"}
+    sup = Supervisor(AppConfig(), clock=SimulatedClock(), sessions_dir=tmp_path,
+                     planner_ready=lambda f: f in compiled)
+    try:
+        try:
+            sup.set_params("local", {"mpc.formulation": "closed_stroke"})
+            raise AssertionError("the switch was taken")
+        except CommandRefused as e:
+            assert "still being compiled" in str(e)
+        assert sup.loop.mpc_config.formulation == "paper"
+        compiled.add("closed_stroke")  # the background compile is done
+        sup.set_params("local", {"mpc.formulation": "closed_stroke"})
+        assert sup.loop.mpc_config.formulation == "closed_stroke"
+    finally:
+        sup.stop()

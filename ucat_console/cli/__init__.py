@@ -12,7 +12,7 @@ import logging
 import sys
 
 #: sub-command modules under ucat_console.cli
-COMMANDS = ["bench", "devices", "sessions", "replay", "identify", "experiment", "sweep", "run"]
+COMMANDS = ["bench", "devices", "sessions", "replay", "identify", "experiment", "sweep", "run", "prepare"]
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -44,6 +44,35 @@ def register(sub: argparse._SubParsersAction) -> None:
     bench_sessions.register(kinds)
     bench_ui.register_bench(kinds)
     bench_safety.register_bench(kinds)
+    c = kinds.add_parser("compile", help="cold compile of every preparation step, serial and in parallel")
+    c.add_argument("--config", type=Path, default=None, metavar="FILE", help="the configuration to compile for")
+    c.add_argument("--workers", type=int, nargs="+", default=[1, 2], help="process counts to measure")
+    c.add_argument("--json", type=Path, default=None, help="write the results as JSON")
+    c.set_defaults(func=run_compile)
+
+
+def run_compile(args: argparse.Namespace) -> int:
+    from ucat_console.bench.machine import machine_info
+    from ucat_console.cli.prepare import measure_cold
+    from ucat_console.config import load_config
+
+    if args.json is not None and not args.json.parent.exists():
+        raise ValueError(f"--json: directory {args.json.parent} does not exist")
+    cfg = load_config(args.config)
+    runs = []
+    for w in args.workers:
+        if w < 1:
+            raise ValueError(f"--workers: {w} must be >= 1")
+        r = measure_cold(cfg, w)
+        runs.append(r)
+        print(f"{w} process{'es' if w > 1 else ''}: ready for the console {r['ready_s']:.1f} s, "
+              f"everything {r['complete_s']:.1f} s", flush=True)
+        for s in r["steps"]:
+            print(f"    {s['text']}: {r['seconds'][s['key']]:.1f} s{'' if s['needed'] else ' (after the start)'}")
+    if args.json:
+        args.json.write_text(json.dumps({"runs": runs, "machine": machine_info(None)}, indent=2))
+        print(f"wrote {args.json}")
+    return 0
 
 
 def run_mpc(args: argparse.Namespace) -> int:

@@ -79,9 +79,10 @@ def _foxglove_server(port: int, cfg: Any, sup: Any) -> Any:
 TOKEN_REPEAT = 60.0
 
 
-def _prepare_with_page(cfg: Any) -> Any:
-    """Serve the loading page at once and compile in a child process; the configuration with
-    the port the page got (the console takes it over)."""
+def _prepare_with_page(cfg: Any) -> tuple[Any, Any]:
+    """Serve the loading page at once and compile in child processes; (the configuration
+    with the port the page got (the console takes it over), the preparation, which goes on
+    with what may wait)."""
     from ucat_console.backend import prepare
     from ucat_console.ui.loading import LoadingPage
 
@@ -106,7 +107,7 @@ def _prepare_with_page(cfg: Any) -> Any:
     if prep.error:
         raise RuntimeError(f"preparing the compiled code failed: {prep.error}")
     print(f"ready in {time.monotonic() - t0:.1f} s", flush=True)
-    return cfg.replace(console=cfg.console.replace(port=port))
+    return cfg.replace(console=cfg.console.replace(port=port)), prep
 
 
 def run(args: argparse.Namespace) -> int:
@@ -133,17 +134,27 @@ def run(args: argparse.Namespace) -> int:
         raise KeyboardInterrupt
 
     previous = signal.signal(signal.SIGTERM, on_term)
+    prep = None
     if args.headless:
-        print("loading the planners (the first start on a machine compiles them, about a minute)",
-              flush=True)
+        print("loading the planners (the first start on a machine compiles them: "
+              "`ucat-console prepare` shows how long each part takes)", flush=True)
     else:
         try:
-            cfg = _prepare_with_page(cfg)
+            cfg, prep = _prepare_with_page(cfg)
         except KeyboardInterrupt:
             print("\nstopped while starting", file=sys.stderr)
             signal.signal(signal.SIGTERM, previous)
             return 1
-    sup = Supervisor(cfg, clock=SimulatedClock() if args.fast else None)
+    planner_ready = None
+    if prep is not None:
+        from ucat_console.backend.prepare import planner_step
+
+        planner_ready = lambda f: prep.done(planner_step(f))  # noqa: E731
+        background = [s for s in prep.steps if not s.needed]
+        if background and not prep.complete:
+            print("compiling in the background: " + ", ".join(s.text for s in background)
+                  + " (switching to it waits for this)", flush=True)
+    sup = Supervisor(cfg, clock=SimulatedClock() if args.fast else None, planner_ready=planner_ready)
     app = None
     fox = None
     last_power: list[Any] = [None]
@@ -180,6 +191,7 @@ def run(args: argparse.Namespace) -> int:
         next_token = time.monotonic() + TOKEN_REPEAT
         # again and again only where a person reads it: never into a file or a log collector
         repeat_token = sys.stdout.isatty()
+        announced = prep is None or prep.complete
         while sup.running:
             if args.duration is not None and sup.loop.time >= args.duration:
                 break
@@ -188,6 +200,10 @@ def run(args: argparse.Namespace) -> int:
             if now >= next_health:
                 next_health += period
                 print(sup.health().line(), flush=True)
+            if prep is not None and prep.complete and not announced:
+                announced = True
+                print("compiled in the background: everything is ready" if not prep.error
+                      else f"the background compile failed: {prep.error}", flush=True)
             if app is not None and now >= next_token and repeat_token:  # findable on the terminal
                 next_token += TOKEN_REPEAT
                 print(f"U-CAT console on {app.url}  pilot token: {sup.access.token}", flush=True)
@@ -203,6 +219,8 @@ def run(args: argparse.Namespace) -> int:
             fox.stop()
         if app is not None:
             app.stop()
+        if prep is not None:
+            prep.cancel()  # a background compile still running is not waited for
         signal.signal(signal.SIGTERM, previous)
     p = last_power[0]
     print(h.line())

@@ -110,11 +110,8 @@ class FinMpc:
             self.table = None
             self._gx = self._gy = np.zeros((2, 2))
             self._params = K.pack_params(cfg, None)
-        closed = cfg.formulation == "closed_stroke"
-        self._plan_kernel = K.closed_plan_kernel if closed else K.plan_kernel
-        self._sample_kernel = K.closed_sample_kernel if closed else K.sample_kernel
-        self._finish_kernel = K.closed_finish_kernel if closed else K.finish_kernel
-        self._cost_kernel = K.closed_cost_kernel if closed else K.cost_kernel
+        (self._plan_kernel, self._sample_kernel, self._finish_kernel,
+         self._cost_kernel) = K.KERNELS[(cfg.formulation, cfg.force_model)]
         self._rng = np.zeros(1, dtype=np.uint64)
         self._rng[0] = np.uint64(seed if seed is not None else 0x5EED)
         self._best_u = np.zeros((cfg.refine_starts, 4))

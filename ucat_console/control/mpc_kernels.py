@@ -20,8 +20,9 @@ one another (cost, gradient, sampler, quasi-Newton step); split, it would be one
 spread over files.
 
 The closed-stroke formulation (``control.cost``) is the same solver with the flag
-``closed`` (a compile-time constant, like ``table``), behind its own entry points
-(``closed_*_kernel``), so the paper's kernels compile and run as before. Its sampler draws
+``closed`` (a compile-time constant, like ``table``). Each formulation and force model has
+its own entry points (:data:`KERNELS`), so a configuration compiles only the solver it
+runs. Its sampler draws
 half of the stroke pairs closed (d_2 = -d_1); a closed warm start is refined on the closed
 subspace (the gradient projected onto d_2 = -d_1, every trial point kept on it), so a plan
 that closes comes back closed exactly; the other warm starts are refined freely and pay
@@ -667,50 +668,64 @@ def _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_o
     cost_terms_at(p, q, gx_tab, gy_tab, u_out, terms, table, closed)
 
 
-# The entry points branch on the force model themselves, with the flags as literals: one
-# more inlined layer between them and the solver would multiply numba's inlining time.
+# The entry points: one per formulation and force model, each with its flags as literals
+# (one more inlined layer between them and the solver would multiply numba's inlining
+# time), so a configuration compiles only the solver it runs: the analytic force model's
+# kernels by default, the table's only where ``force_model = "table"`` asks for them.
 @_jit
 def plan_kernel(p, q, gx_tab, gy_tab, n, max_iter, rng, best_u, best_j, block, work, hinv, u_out, terms):
-    """One solve: sampling, refinement of the best len(best_j) samples, final terms
-    (compiled once per force model: ``table`` is a constant in each branch)."""
-    if p[P_MODE] == MODE_TABLE:
-        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, True, False)
-        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, True, False)
-    else:
-        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, False, False)
-        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, False, False)
+    """One solve (analytic force model): sampling, refinement of the best len(best_j)
+    samples, final terms."""
+    _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, False, False)
+    _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, False, False)
 
 
 @_jit
 def sample_kernel(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out):
     """The first half of :func:`plan_kernel` (for a caller timing the two stages)."""
-    if p[P_MODE] == MODE_TABLE:
-        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, True, False)
-    else:
-        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, False, False)
+    _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, False, False)
 
 
 @_jit
 def finish_kernel(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms):
     """The second half of :func:`plan_kernel` (for a caller timing the two stages)."""
-    if p[P_MODE] == MODE_TABLE:
-        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, True, False)
-    else:
-        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, False, False)
+    _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, False, False)
+
+
+@_jit
+def cost_kernel(p, q, gx_tab, gy_tab, u, grad, terms):
+    """J, its gradient and its terms at one point (for callers outside the solver)."""
+    cost_terms_at(p, q, gx_tab, gy_tab, u, terms, False, False)
+    return cost_grad_at(p, q, gx_tab, gy_tab, u, grad, False, False)
+
+
+@_jit
+def table_plan_kernel(p, q, gx_tab, gy_tab, n, max_iter, rng, best_u, best_j, block, work, hinv, u_out, terms):
+    """:func:`plan_kernel` with the force table."""
+    _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, True, False)
+    _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, True, False)
+
+
+@_jit
+def table_sample_kernel(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out):
+    _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, True, False)
+
+
+@_jit
+def table_finish_kernel(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms):
+    _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, True, False)
+
+
+@_jit
+def table_cost_kernel(p, q, gx_tab, gy_tab, u, grad, terms):
+    cost_terms_at(p, q, gx_tab, gy_tab, u, terms, True, False)
+    return cost_grad_at(p, q, gx_tab, gy_tab, u, grad, True, False)
 
 
 @_jit
 def refine_kernel(p, q, gx_tab, gy_tab, x, max_iter, work, hinv):
     """Stage 2 alone from the start point x (updated in place); returns the cost."""
     return refine(p, q, gx_tab, gy_tab, x, max_iter, work, hinv, p[P_MODE] == MODE_TABLE, False)
-
-
-@_jit
-def cost_kernel(p, q, gx_tab, gy_tab, u, grad, terms):
-    """J, its gradient and its terms at one point (for callers outside the solver)."""
-    table = p[P_MODE] == MODE_TABLE
-    cost_terms_at(p, q, gx_tab, gy_tab, u, terms, table, False)
-    return cost_grad_at(p, q, gx_tab, gy_tab, u, grad, table, False)
 
 
 @_jit
@@ -723,35 +738,55 @@ def cost_grad_at(p, q, gx_tab, gy_tab, u, grad, table, closed):
 @_jit
 def closed_plan_kernel(p, q, gx_tab, gy_tab, n, max_iter, rng, best_u, best_j, block, work, hinv, u_out, terms):
     """:func:`plan_kernel` of the closed-stroke formulation."""
-    if p[P_MODE] == MODE_TABLE:
-        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, True, True)
-        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, True, True)
-    else:
-        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, False, True)
-        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, False, True)
+    _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, False, True)
+    _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, False, True)
 
 
 @_jit
 def closed_sample_kernel(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out):
-    """:func:`sample_kernel` of the closed-stroke formulation."""
-    if p[P_MODE] == MODE_TABLE:
-        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, True, True)
-    else:
-        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, False, True)
+    _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, False, True)
 
 
 @_jit
 def closed_finish_kernel(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms):
-    """:func:`finish_kernel` of the closed-stroke formulation."""
-    if p[P_MODE] == MODE_TABLE:
-        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, True, True)
-    else:
-        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, False, True)
+    _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, False, True)
 
 
 @_jit
 def closed_cost_kernel(p, q, gx_tab, gy_tab, u, grad, terms):
-    """:func:`cost_kernel` of the closed-stroke formulation."""
-    table = p[P_MODE] == MODE_TABLE
-    cost_terms_at(p, q, gx_tab, gy_tab, u, terms, table, True)
-    return cost_grad_at(p, q, gx_tab, gy_tab, u, grad, table, True)
+    cost_terms_at(p, q, gx_tab, gy_tab, u, terms, False, True)
+    return cost_grad_at(p, q, gx_tab, gy_tab, u, grad, False, True)
+
+
+@_jit
+def closed_table_plan_kernel(p, q, gx_tab, gy_tab, n, max_iter, rng, best_u, best_j, block, work, hinv, u_out,
+                             terms):
+    _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, True, True)
+    _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, True, True)
+
+
+@_jit
+def closed_table_sample_kernel(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out):
+    _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, True, True)
+
+
+@_jit
+def closed_table_finish_kernel(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms):
+    _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, hinv, u_out, terms, True, True)
+
+
+@_jit
+def closed_table_cost_kernel(p, q, gx_tab, gy_tab, u, grad, terms):
+    cost_terms_at(p, q, gx_tab, gy_tab, u, terms, True, True)
+    return cost_grad_at(p, q, gx_tab, gy_tab, u, grad, True, True)
+
+
+#: (formulation, force model) -> the entry points (plan, sample, finish, cost)
+KERNELS = {
+    ("paper", "analytic"): (plan_kernel, sample_kernel, finish_kernel, cost_kernel),
+    ("paper", "table"): (table_plan_kernel, table_sample_kernel, table_finish_kernel, table_cost_kernel),
+    ("closed_stroke", "analytic"): (closed_plan_kernel, closed_sample_kernel, closed_finish_kernel,
+                                    closed_cost_kernel),
+    ("closed_stroke", "table"): (closed_table_plan_kernel, closed_table_sample_kernel,
+                                 closed_table_finish_kernel, closed_table_cost_kernel),
+}

@@ -152,17 +152,21 @@ class ManoeuvreFinPlanner:
 Planner = Callable[[PlanInputs], FinPlan]
 
 
-def warm_up(cfg: LoopConfig | None = None) -> float:
-    """One plan of each kind, both MPC formulations (either may be switched to live):
-    loads the compiled solver from numba's on-disk cache, or compiles it (minutes, once
+def warm_up(cfg: LoopConfig | None = None, formulations: tuple[str, ...] | None = None) -> float:
+    """One plan of each kind: the MPC in ``formulations`` (default: every formulation, as
+    either may be switched to live) and the baseline scored with each: loads the compiled
+    solver from numba's on-disk cache, or compiles it (a minute or more a formulation, once
     per machine) and fills that cache. Seconds taken."""
     cfg = cfg or LoopConfig()
     x = PlanInputs(t=0.0, fins=(0,), target=(-0.3, 0.0), v_body=0.0, theta0=0.0,
                    u_prev=cfg.initial_u_prev)
+    if formulations is None:
+        formulations = FORMULATIONS if cfg.mpc.solver == "numba" else (cfg.mpc.formulation,)
     t0 = time.perf_counter()
-    for formulation in FORMULATIONS if cfg.mpc.solver == "numba" else (cfg.mpc.formulation,):
-        MpcFinPlanner(cfg.mpc.replace(formulation=formulation), 0)(x)
-    BaselineFinPlanner(cfg.mpc, cfg.baseline)(x)
+    for formulation in formulations:
+        m = cfg.mpc.replace(formulation=formulation)
+        MpcFinPlanner(m, 0)(x)
+        BaselineFinPlanner(m, cfg.baseline)(x)
     return time.perf_counter() - t0
 
 

@@ -97,7 +97,11 @@ class Supervisor:
         robot_factory: RobotFactory | None = None,
         clock: Clock | None = None,
         sessions_dir: str | Path | None = None,
+        planner_ready: Callable[[str], bool] | None = None,
     ) -> None:
+        """``planner_ready(formulation)``: whether that formulation's planner is compiled
+        (a preparation running in child processes, ``backend.prepare``); without it every
+        formulation is loaded, or compiled here, before the robot starts."""
         self.cfg = cfg = cfg or AppConfig()
         self.stream = TelemetryStream()
         self._loop_stream = TelemetryStream(validate=False)
@@ -109,7 +113,8 @@ class Supervisor:
         self.safety = SafetyMonitor(cfg.failsafe)
         # the compiled solver first: a compile holds the interpreter for a minute or more,
         # which the drivers' heartbeat supervision would read as silent drives
-        log.debug("planners warmed up in %.2f s", warm_up(cfg.loop))
+        mine = (cfg.mpc.formulation,) if planner_ready is not None else None
+        log.debug("planners warmed up in %.2f s", warm_up(cfg.loop, formulations=mine))
         factory = robot_factory or ROBOT_FACTORIES[cfg.robot]
         inner, self._close_robot = factory(cfg, self.report_event)
         #: the simulated rig behind the drivers (robot "rig" on "sim-devices"), else None
@@ -128,7 +133,7 @@ class Supervisor:
             self._close_robot()
             raise
         self.journal_log = Journal(lambda: self.loop.time)
-        self.tuning_state = Tuning(cfg, self.loop, self.journal_log)
+        self.tuning_state = Tuning(cfg, self.loop, self.journal_log, planner_ready or (lambda f: True))
         self.arm_requests = ArmRequests(cfg.access.confirm_timeout)
         self.commands = LoopCommands()
         self.commands.why_not_running = lambda: self.fault

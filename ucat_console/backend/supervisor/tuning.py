@@ -93,9 +93,11 @@ def tuning_blocks(cfg: AppConfig) -> dict[str, Any]:
 class Tuning:
     """The commanded tuning of one closed loop (module docstring)."""
 
-    def __init__(self, cfg: AppConfig, loop: ClosedLoop, journal: Journal) -> None:
+    def __init__(self, cfg: AppConfig, loop: ClosedLoop, journal: Journal,
+                 planner_ready: Callable[[str], bool] = lambda f: True) -> None:
         self.loop = loop
         self.journal = journal
+        self.planner_ready = planner_ready
         self._lock = threading.Lock()
         self._saved = tuning_blocks(cfg)
 
@@ -146,6 +148,12 @@ class Tuning:
                     MpcFinPlanner(new, 0)
                 except ValueError as e:
                     raise CommandRefused(f"mpc: {e}") from None
+                f = new.formulation
+                if f != current["mpc"].formulation and not self.planner_ready(f):
+                    raise CommandRefused(
+                        f"mpc.formulation: the {f} planner is still being compiled in the background "
+                        "(a compile here would hold the loop for a minute); try again when the "
+                        "console's terminal says it is compiled")
             out[block] = new
         return out
 

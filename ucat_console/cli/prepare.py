@@ -1,0 +1,55 @@
+"""``ucat-console prepare``: compile (or load) everything a configuration runs, before it runs.
+
+The same preparation as the console's first start (``backend.prepare``), every step
+waited for, in up to two child processes, with each step's time: run it once after an
+install (the Docker image does, at build time) so that no start compiles.
+``ucat-console bench compile`` measures the same steps cold, in a cache of its own.
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("prepare", help="compile (or load) the planners, the loop and the plant before a run")
+    p.add_argument("--config", type=Path, default=None, metavar="FILE", help="the configuration to prepare for")
+    p.add_argument("--workers", type=int, default=None, help="child processes (default: cores, at most 2)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ucat_console.backend.prepare import Preparation
+    from ucat_console.config import load_config
+
+    cfg = load_config(args.config)
+    prep = Preparation(cfg, workers=args.workers)
+    prep.wait_all()
+    for s in prep.steps:
+        if s.key in prep.seconds:
+            print(f"  {s.text}: {prep.seconds[s.key]:.1f} s{'' if s.needed else ' (may wait: compiled after the start)'}")
+    if prep.error:
+        print(f"preparing failed: {prep.error}")
+        return 1
+    print(f"ready for the console in {prep.ready_after:.1f} s, everything in {prep.complete_after:.1f} s")
+    return 0
+
+
+def measure_cold(cfg, workers: int) -> dict:
+    """Every step compiled from nothing (a numba cache of its own, removed afterwards) by
+    ``workers`` processes: per-step seconds, and the wall time to ready and to complete."""
+    from ucat_console.backend.prepare import Preparation
+
+    with tempfile.TemporaryDirectory(prefix="ucat-numba-cache-") as cache:
+        t0 = time.perf_counter()
+        prep = Preparation(cfg, workers=workers, env={"NUMBA_CACHE_DIR": cache})
+        prep.wait_all()
+        wall = time.perf_counter() - t0
+    if prep.error:
+        raise RuntimeError(f"compiling failed: {prep.error}")
+    return {"workers": workers, "seconds": dict(prep.seconds), "ready_s": prep.ready_after,
+            "complete_s": prep.complete_after, "wall_s": wall,
+            "steps": [{"key": s.key, "text": s.text, "needed": s.needed} for s in prep.steps]}
