@@ -444,10 +444,10 @@ def test_the_planners_are_compiled_before_the_robot_starts(tmp_path: Path, monke
     order: list[str] = []
     warm_up = supervisor_module.warm_up
 
-    def spy(cfg):
+    def spy(cfg, formulations=None):
         order.append("planners")
         assert cfg.mpc == cfg_in.mpc and cfg.baseline == cfg_in.baseline
-        return warm_up(cfg)
+        return warm_up(cfg, formulations)
 
     def robot(c, ev):
         order.append("robot")
