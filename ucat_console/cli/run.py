@@ -97,7 +97,8 @@ def _prepare_with_page(cfg: Any) -> tuple[Any, Any]:
 
     prep = prepare.start(cfg, progress)
     try:
-        prep.wait()
+        while not prep.wait(15.0):  # a compile gives no progress of its own: the time it has taken
+            print(f"  still {prep.progress.text()} ({time.monotonic() - t0:.0f} s)", flush=True)
     except BaseException:
         prep.cancel()
         page.stop()

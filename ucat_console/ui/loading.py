@@ -12,6 +12,7 @@ inputs at all: nothing a page sends changes anything.
 from __future__ import annotations
 
 import threading
+import time
 from typing import Any
 
 import viser._messages as vm
@@ -34,9 +35,11 @@ class LoadingPage:
         gui = self.server.gui
         self.text = gui.add_markdown("**Starting the console.** Preparing the compiled planners ...")
         self.bar = gui.add_progress_bar(0.0, animated=True)
-        gui.add_markdown("The first start on a machine compiles the planners (about a minute); later "
-                         "starts take seconds. This page turns into the console when it is ready; "
-                         "arming is possible from then on.")
+        gui.add_markdown("The first start on a machine compiles the planners (one to two minutes on "
+                         "two cores, `ucat-console bench compile` measures it); later starts take "
+                         "seconds. This page turns into the console when it is ready; arming is "
+                         "possible from then on.")
+        self._t0 = time.monotonic()
         self._progress = Progress(0, 1, "the planners")
         self._lock = threading.Lock()
         self._stop = threading.Event()
@@ -54,8 +57,13 @@ class LoadingPage:
     def set_progress(self, p: Progress) -> None:
         with self._lock:
             self._progress = p
-        self.text.content = f"**Starting the console.** {p.text().capitalize()} ..."
+        self._show()
         self.bar.value = 100.0 * p.done / max(p.total, 1)
+
+    def _show(self) -> None:
+        p = self._progress
+        self.text.content = (f"**Starting the console.** {p.text().capitalize()} ... "
+                             f"({time.monotonic() - self._t0:.0f} s)")
 
     def _state(self) -> dict[str, Any]:
         p = self._progress
@@ -67,7 +75,11 @@ class LoadingPage:
                 "dark": True, "disarm_uuid": "", "drive_uuid": "", "theme_uuid": ""}
 
     def _run(self) -> None:
+        ticks = 0
         while not self._stop.wait(0.25):
+            ticks += 1
+            if ticks % 4 == 0:  # the time taken, every second: a compile shows no progress of its own
+                self._show()
             src = page_script.update_source(self._state())
             for client in self.server.get_clients().values():
                 try:
