@@ -62,6 +62,8 @@ from ucat_console.ui.status_bar import bar_state
 from ucat_console.ui.view import StreamView
 
 log = logging.getLogger(__name__)
+#: how far (m) the followed robot moves before the camera follows it
+FOLLOW_STEP = 0.02
 
 _EVENTS_KEPT = 200
 _QUIET_EVENTS = frozenset({"stroke_timeout"})
@@ -392,7 +394,9 @@ class ConsoleApp:
             p = scene.world_position() if scene is not None else None
             if p is None:
                 continue
-            if page.followed is not None and math.dist(p, page.followed) > 1e-4:
+            if page.followed is not None and math.dist(p, page.followed) < FOLLOW_STEP:
+                continue  # the camera moves in steps: each move costs the page a re-render
+            if page.followed is not None:
                 cam = page.client.camera  # keep the camera's offset from the robot, look at it
                 offset = tuple(float(a - b) for a, b in zip(cam.position, page.followed))
                 try:

@@ -105,24 +105,30 @@ class IdentifyInputs:
 
     # ------------------------------------------------------------------ state -> page
     def refresh(self, pilot: bool) -> None:
+        """Show the run and the fit; a property is set only when it changes (a refresh of an
+        unchanged page sends nothing)."""
         run = self.sup.manoeuvre
         running = run is not None and not run.finished
-        for h in (self.run, self.fit, self.session):
-            if h.disabled != (not pilot):
-                h.disabled = not pilot
-        if self.run.disabled != (not pilot or running or not self.sup.armed):
-            self.run.disabled = not pilot or running or not self.sup.armed
-        self.stop.visible = running and pilot
-        self.progress.visible = running
+        _prop(self.fit, "disabled", not pilot)
+        _prop(self.session, "disabled", not pilot)
+        _prop(self.run, "disabled", not pilot or running or not self.sup.armed)
+        _prop(self.stop, "visible", running and pilot)
+        _prop(self.progress, "visible", running)
         if running:
-            self.progress.value = round(100.0 * run.progress, 1)
+            _prop(self.progress, "value", round(100.0 * run.progress, 1))
+        text = self.result.content
         if self.error:
-            self.result.content = f"**Fit refused**: {esc(self.error)}"
+            text = f"**Fit refused**: {esc(self.error)}"
         elif self.report is not None:
             r = self.report.result
-            self.result.content = (
-                f"**{esc(', '.join(self.report.sessions))}**: C_D **{r.c_d:.4g}** +- {r.c_d_ci:.2g}, "
-                f"C_L **{r.c_l:.4g}** +- {r.c_l_ci:.2g} (95 %); {r.steady_windows} steady of "
-                f"{len(r.windows)} windows, rms residual {r.rms_residual:.3g} N; hull from "
-                f"{esc(self.report.config_source)}")
-        self.use.visible = self.report is not None and pilot
+            text = (f"**{esc(', '.join(self.report.sessions))}**: C_D **{r.c_d:.4g}** +- {r.c_d_ci:.2g}, "
+                    f"C_L **{r.c_l:.4g}** +- {r.c_l_ci:.2g} (95 %); {r.steady_windows} steady of "
+                    f"{len(r.windows)} windows, rms residual {r.rms_residual:.3g} N; hull from "
+                    f"{esc(self.report.config_source)}")
+        _prop(self.result, "content", text)
+        _prop(self.use, "visible", self.report is not None and pilot)
+
+
+def _prop(handle: Any, name: str, value: Any) -> None:
+    if getattr(handle, name) != value:
+        setattr(handle, name, value)

@@ -106,6 +106,7 @@ class RobotScene:
         self._trail_next = 0
         self._trail_dirty = False
         self.updates = 0
+        self._shown: list[tuple[float, float]] = [(math.nan, math.nan)] * 4  # (angle, commanded) per fin
         self.position: tuple[float, float, float] | None = None  # the robot's last NED position
 
         r = self.root
@@ -151,11 +152,17 @@ class RobotScene:
             self.body.wxyz = body.orientation
             self.position = body.position
             self._add_trail_point(body.position)
+        shown = self._shown
         for i, f in enumerate(fins):
             if f is None:
                 continue
-            self.blades[i].wxyz = turn_about_z(f.angle)
-            self.ghosts[i].wxyz = turn_about_z(f.angle_cmd)
+            # only what changed: viser compares every value it is given (numpy, costly) and
+            # a commanded angle changes a few times a second
+            if shown[i][0] != f.angle:
+                self.blades[i].wxyz = turn_about_z(f.angle)
+            if shown[i][1] != f.angle_cmd:
+                self.ghosts[i].wxyz = turn_about_z(f.angle_cmd)
+            shown[i] = (f.angle, f.angle_cmd)
         self.updates += 1
 
     def update_label(self, body: BodyState | None) -> None:
