@@ -236,8 +236,11 @@ class ConsoleApp:
         with self._build_lock:
             if cid not in self.guard.clients:
                 return  # gone while waiting
-            panel = panels.ControlPanel(self, cid, client.gui, client, containers, allow=self._allow(cid))
-            review = self.build_review(client.gui, client.scene, cid)
+            # one atomic batch: the page gets its controls only with the guard's rules for
+            # them, so nothing it sends at once is refused as "not an input of this page"
+            with client.atomic():
+                panel = panels.ControlPanel(self, cid, client.gui, client, containers, allow=self._allow(cid))
+                review = self.build_review(client.gui, client.scene, cid)
             with self._lock:
                 self.panels[cid] = panel
                 self.pages[cid] = _Page(client, self.cfg.dark)
@@ -417,6 +420,9 @@ class ConsoleApp:
             try:
                 p.refresh()
             except Exception:
+                if p.cid not in self.guard.clients:  # the page went while it was refreshed
+                    log.debug("client %s left during a refresh", p.cid)
+                    continue
                 log.exception("refreshing the controls of client %s failed", p.cid)
 
 
