@@ -176,17 +176,15 @@ class _Noise:
         self._block = block
         self._i = block
         self.buf = np.empty((0, len(scale)))
-        self._rows: list[list[float]] = []
 
     def refill(self) -> None:
         self.buf = self._rng.standard_normal((self._block, len(self._scale))) * self._scale
-        self._rows = self.buf.tolist()
         self._i = 0
 
     def next_list(self) -> list[float]:
         if self._i >= self._block:
             self.refill()
-        row = self._rows[self._i]
+        row = self.buf[self._i].tolist()
         self._i += 1
         return row
 
