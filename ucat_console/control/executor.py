@@ -33,12 +33,16 @@ Sync mode: an executor built with two fins (:meth:`FinExecutor.synced`) drives b
 the same plan and starts every stroke on both fins together, once both have finished the
 previous stroke.
 
+The per-sample part (feeding a sample, checking for a stroke's end) is the compiled
+:mod:`ucat_console.control.stroke_watch`; the closed loop runs it over all fins at once
+and calls :meth:`FinExecutor.stroke_checked` when a stroke ended, so this class acts only
+a few times a second per fin.
+
 Fin ids are whatever the caller uses (e.g. ``FinFeedback.fin``). Time is always an argument.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
