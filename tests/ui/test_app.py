@@ -16,7 +16,8 @@ from ucat_console.backend.supervisor import CommandRefused, Supervisor
 from ucat_console.config import AccessConfig, AppConfig, ConsoleConfig, load_config
 from ucat_console.telemetry import channels as ch
 from ucat_console.ui.app import ConsoleApp, is_loopback
-from ucat_console.ui.panels import ControlPanel, esc, param_specs, step_for
+from ucat_console.ui.panels import ControlPanel, esc
+from ucat_console.ui.tuning_inputs import param_specs, step_for
 
 ROOT = Path(__file__).resolve().parents[2]
 TOKEN = "pool-side-token"
