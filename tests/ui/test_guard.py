@@ -277,13 +277,16 @@ def test_crafted_updates_from_a_viewer_change_nothing(console: Console, caplog) 
     p_speed = pilot.wait_for("Speed [")
     viewer.update(p_speed, value=4.0)  # another page's review: its playback speed
     viewer.update(pilot.wait_for("Play", "GuiButtonMessage"), value=True)  # and its Play
+    # the identification folder is the pilot's: its own page's buttons, pressed by a viewer
+    viewer.update(viewer.wait_for("Run the identification manoeuvre", "GuiButtonMessage"), value=True)
+    viewer.update(viewer.wait_for("Fit the fin model", "GuiButtonMessage"), value=True)
     viewer.update("no-such-uuid", value=1)
     viewer.send({"type": "ShareUrlRequest"})
     viewer.send({"type": "FileTransferStartUpload", "source_component_uuid": v_open, "transfer_uuid": "t",
                  "filename": "x", "mime_type": "text/plain", "part_count": 1, "size_bytes": 10})
     viewer.send_raw(b"\x00not msgpack")
     viewer.send_raw("a text frame")
-    wait_for(lambda: len(app.guard.refusals) >= n + 15, what="every crafted message refused")
+    wait_for(lambda: len(app.guard.refusals) >= n + 17, what="every crafted message refused")
 
     assert len(review.open_button._impl.update_cb) == callbacks_before
     assert review.open_button.label == "Open" and not review.open_button.disabled
@@ -292,6 +295,7 @@ def test_crafted_updates_from_a_viewer_change_nothing(console: Console, caplog) 
     assert app.panels[pilot_id].sp_inputs["velocity"].value == 0.0
     assert app.panels[v_id].note.value == ""
     assert app.reviews[pilot_id].speed.value == 1.0  # the pilot's review is the pilot's own
+    assert sup.manoeuvre is None and app.panels[v_id].identify._fitting is None  # nothing started
     assert app.reviews[pilot_id].player is None or not app.reviews[pilot_id].player.playing
     # the page still works: its own allowed controls still answer
     viewer.click("Refresh list")

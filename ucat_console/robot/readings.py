@@ -90,10 +90,6 @@ class FinFeedbacks:
     position_rad: np.ndarray
     velocity_rad_s: np.ndarray
 
-    def feedback(self, fin: int) -> FinFeedback:
-        """Fin ``fin``'s part as a :class:`FinFeedback`."""
-        return FinFeedback(self.t, fin, float(self.position_rad[fin]), float(self.velocity_rad_s[fin]))
-
 
 #: any reading a robot delivers
 Reading = ImuReading | DvlVelocity | DepthReading | FinFeedback | FinFeedbacks
