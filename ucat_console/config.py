@@ -70,7 +70,7 @@ class ConsoleConfig(Config):
         doc="a viewer's page that has not answered for this long is closed (the pilot's: failsafe.pilot_gone.timeout)",
     )
     scene_rate: float = param(40.0, lo=1.0, hi=60.0, unit="Hz", doc="3-D view update rate")
-    plot_rate: float = param(10.0, lo=1.0, hi=30.0, unit="Hz", doc="plot refresh rate")
+    plot_rate: float = param(12.0, lo=1.0, hi=30.0, unit="Hz", doc="plot refresh rate")
     history: float = param(30.0, lo=5.0, hi=600.0, unit="s", doc="initial plot history window")
     dark: bool = param(True, doc="dark theme for a page that has not chosen (each browser remembers its choice)")
     shadows: bool = param(False, doc="shadows in the 3-D view (costly where the browser renders in software)")

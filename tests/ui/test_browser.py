@@ -112,7 +112,7 @@ def test_the_page_loads_and_shows_the_robot(browser: Browser, console: Console) 
         "() => { const t = window.__viserSceneTree; return t && t.getState()['/ned/ucat/hull'] !== undefined; }",
         timeout=15_000,
     )
-    for name in ("/ned/ucat/fin0/blade/plate", "/ned/ucat/fin3/ghost/plate", "/ned/ucat/heading", "/surface",
+    for name in ("/ned/ucat/blades", "/ned/ucat/ghosts", "/ned/ucat/heading", "/surface",
                  "/floor", "/ned/trail"):
         assert page.evaluate(f"() => window.__viserSceneTree.getState()['{name}'] !== undefined"), name
     expect(page.get_by_text("St per fin 0-3")).to_be_visible()

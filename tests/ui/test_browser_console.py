@@ -1,6 +1,7 @@
 """The operator's page at the pool side, in headless Chromium: the fixed status bar and DISARM
-on every tab at 1280x800 and 1920x1080, the link-loss banner, keyboard driving (and a
-viewer's keys doing nothing), the theme remembered across reloads, review plots drawn
+on every tab at 1280x800 and 1920x1080, the link-loss banner, keyboard and gamepad driving
+(a gamepad stood in by the page's ``navigator.getGamepads``; a viewer's keys and stick doing
+nothing), the theme remembered across reloads, review plots drawn
 whichever plot tab was chosen first. Screenshots go to ``test-artifacts/``."""
 
 from __future__ import annotations
@@ -184,6 +185,64 @@ def test_keys_drive_the_pilot_and_do_nothing_for_a_viewer(browser: Browser, cons
     expect(pilot.locator("#ucat-armed")).to_have_text("ARMED")
     pilot.keyboard.press("Escape")
     wait_for(lambda: not sup.armed, what="Esc disarming")
+
+
+#: a gamepad the page can poll (headless Chromium has none): ``window.__pad`` is the test's stick
+FAKE_GAMEPAD = """
+window.__pad = {id: "test pad", index: 0, connected: true, mapping: "standard", axes: [0, 0, 0, 0],
+                buttons: Array.from({length: 16}, () => ({pressed: false, touched: false, value: 0}))};
+Object.defineProperty(Navigator.prototype, "getGamepads",
+                      {value: () => [window.__pad.connected ? window.__pad : null], configurable: true});
+"""
+
+
+def page_with_gamepad(browser: Browser, console: Console) -> tuple[Page, object]:
+    ctx = browser.new_context(viewport={"width": 1280, "height": 800})
+    ctx.add_init_script(FAKE_GAMEPAD)
+    return open_page(browser, console, context=ctx), ctx
+
+
+def wait_for_polls(page: Page, n: int = 3) -> None:
+    """Until the page's script has polled its gamepad ``n`` more times."""
+    start = page.evaluate("() => window.__ucat.pad.polls")
+    page.wait_for_function(f"() => window.__ucat.pad.polls >= {start + n}")
+
+
+def test_the_gamepad_drives_the_pilot_stops_when_lost_and_disarms(browser: Browser, console: Console) -> None:
+    sup = console.sup
+    lc = sup.cfg.loop
+    pilot, pilot_ctx = page_with_gamepad(browser, console)
+    viewer, viewer_ctx = page_with_gamepad(browser, console)
+    take_control(pilot)
+    assert pilot.evaluate("() => document.hasFocus()")
+    # a viewer's stick does nothing: its page sends nothing, and the setpoints stay
+    viewer.evaluate("() => { window.__pad.axes[1] = -1.0; }")
+    wait_for_polls(viewer)
+    assert viewer.evaluate("() => window.__ucat.pad.sent") is None
+    assert sup.setpoints.velocity == 0.0
+    # the pilot's stick: full forward is the envelope's velocity, half right half its yaw rate
+    pilot.evaluate("() => { window.__pad.axes[1] = -1.0; window.__pad.axes[0] = 0.575; }")
+    wait_for(lambda: sup.setpoints.velocity == pytest.approx(lc.max_velocity), what="stick forward")
+    wait_for(lambda: sup.setpoints.yaw_rate == pytest.approx(0.5 * lc.max_yaw_rate), what="stick right")
+    # within the dead zone is zero: released, the page sends zeros once
+    pilot.evaluate("() => { window.__pad.axes[1] = -0.1; window.__pad.axes[0] = 0.0; }")
+    wait_for(lambda: sup.setpoints.velocity == 0.0 and sup.setpoints.yaw_rate == 0.0, what="stick released")
+    # the gamepad lost while pushed: driving stops (no runaway stick)
+    pilot.evaluate("() => { window.__pad.axes[1] = -1.0; }")
+    wait_for(lambda: sup.setpoints.velocity > 0.0, what="stick forward again")
+    pilot.evaluate("() => { window.__pad.connected = false;"
+                   " window.dispatchEvent(new Event('gamepaddisconnected')); }")
+    wait_for(lambda: sup.setpoints.velocity == 0.0, what="driving stopped with the gamepad gone")
+    assert [(e.key, e.new) for e in sup.journal(3) if e.key == "gamepad"][-1] == ("gamepad", "off")
+    # button 1 (B / circle) disarms
+    pilot.evaluate("() => { window.__pad.connected = true; window.__pad.axes[1] = 0.0; }")
+    sup.arm(LOCAL)
+    expect(pilot.locator("#ucat-armed")).to_have_text("ARMED")
+    pilot.evaluate("() => { window.__pad.buttons[1].pressed = true; window.__pad.buttons[1].value = 1; }")
+    wait_for(lambda: not sup.armed, what="the gamepad's disarm button")
+    assert sup.setpoints.velocity == 0.0  # the viewer's stick, held forward all along, did nothing
+    pilot_ctx.close()
+    viewer_ctx.close()
 
 
 def test_the_theme_switch_is_remembered_across_reloads(browser: Browser, console: Console) -> None:

@@ -1,16 +1,17 @@
 """3-D view geometry: the fins' mount frames match the plant's fin planes; the fin plate is a
-closed mesh."""
+closed mesh; the hull is drawn from the configured geometry."""
 
 from __future__ import annotations
 
 import math
+import types
 
 import numpy as np
 import pytest
 
 from ucat_console.backend.sim.params import PlantConfig
-from ucat_console.robot.geometry import fin_mount, fin_plane_axes
-from ucat_console.ui.scene import fin_plate_mesh, turn_about_z
+from ucat_console.robot.geometry import Geometry, fin_mount, fin_plane_axes
+from ucat_console.ui.scene import RobotScene, blade_wxyzs, fin_plate_mesh, turn_about_z
 
 
 def rotate(q: tuple[float, float, float, float], v: np.ndarray) -> np.ndarray:
@@ -32,6 +33,12 @@ def test_a_fins_chord_at_angle_theta_follows_the_fin_plane(fin: int) -> None:
         # chord = mount rotation applied to the blade's x axis turned by theta
         chord = rotate(q, rotate(turn_about_z(theta), np.array([1.0, 0.0, 0.0])))
         np.testing.assert_allclose(chord, math.cos(theta) * xm + math.sin(theta) * ym, atol=1e-12)
+        # the batched blades' orientation (float32, as sent) points the same way
+        angles = [0.0] * 4
+        angles[fin] = theta
+        wxyz = blade_wxyzs([fin_mount(cfg.geometry, i)[1] for i in range(4)], angles)[fin]
+        np.testing.assert_allclose(rotate(tuple(wxyz), np.array([1.0, 0.0, 0.0])),
+                                   math.cos(theta) * xm + math.sin(theta) * ym, atol=1e-6)
     # the blade sits outside the hull, on the fin's side
     half_width = cfg.vehicle.hull_size[1] / 2
     assert abs(pos[1]) > half_width
@@ -50,3 +57,35 @@ def test_the_fin_plate_is_a_closed_mesh_of_the_blade_size() -> None:
             key = (min(a, b), max(a, b))
             edges[key] = edges.get(key, 0) + 1
     assert set(edges.values()) == {2}
+
+
+class SceneCalls:
+    """A stand-in for viser's scene API that records what is added (name -> keyword arguments)."""
+
+    def __init__(self) -> None:
+        self.added: dict[str, dict] = {}
+
+    def __getattr__(self, method: str):
+        def add(name: str, *args, **kwargs):
+            self.added[name] = {"method": method, **kwargs}
+            return types.SimpleNamespace()
+
+        return add
+
+
+def test_the_hull_is_an_ellipsoid_of_the_configured_size_with_the_fins_outside_it() -> None:
+    geometry = Geometry(hull_size=(0.8, 0.4, 0.2))
+    calls = SceneCalls()
+    RobotScene(calls, geometry, trail_points=10, trail_spacing=0.05)
+    hull = calls.added["/ned/ucat/hull"]
+    assert hull["method"] == "add_icosphere" and hull["radius"] == 1.0
+    assert hull["scale"] == pytest.approx((0.4, 0.2, 0.1))  # the half-sizes: an ellipsoid
+    positions = calls.added["/ned/ucat/blades"]["batched_positions"]
+    np.testing.assert_allclose(calls.added["/ned/ucat/ghosts"]["batched_positions"], positions)
+    for i in range(4):
+        pos, _ = fin_mount(geometry, i)
+        np.testing.assert_allclose(positions[i], pos, atol=1e-6)
+        # each fin's shaft lies outside the ellipsoid
+        assert sum((p / h) ** 2 for p, h in zip(pos, (0.4, 0.2, 0.1))) > 1.0
+    nose = calls.added["/ned/ucat/nose"]["position"]
+    assert nose[0] == pytest.approx(0.4 - 0.01)  # at the bow of this hull

@@ -43,7 +43,7 @@ INSTALL = r"""
 (() => {
   if (window.__ucat) return;
   const LOST_MS = %(lost_ms)d, DEAD = %(dead)f;
-  const u = window.__ucat = {state: null, last: 0, lost: false, pad: {sent: null, at: 0, active: false}};
+  const u = window.__ucat = {state: null, last: 0, lost: false, pad: {sent: null, at: 0, active: false, polls: 0}};
   const css = document.createElement("style");
   css.textContent = `
     #ucat-bar { position: fixed; top: 0; left: 0; right: 0; height: 46px; z-index: 2147483000;
@@ -178,6 +178,7 @@ INSTALL = r"""
   window.addEventListener("gamepaddisconnected", stopPad);
   setInterval(() => {
     const s = u.state;
+    u.pad.polls += 1;
     if (!s || !s.you_pilot || !navigator.getGamepads || !document.hasFocus()) { stopPad(); return; }
     const pad = Array.from(navigator.getGamepads()).find((p) => p && p.connected);
     if (!pad) { stopPad(); return; }

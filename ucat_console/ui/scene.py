@@ -12,10 +12,11 @@ page that reviews a session hides the live robot for itself (a page-scoped, invi
 
 Fins. Each fin works in its own plane (``robot.geometry.fin_plane_axes``): the fin's
 chord points along ``cos(theta) x_m + sin(theta) y_m``, turning about the plane's normal.
-Node ``fin<i>`` is the fin's mount (``robot.geometry.fin_mount``) with axes (x_m, y_m,
-normal); its children ``blade`` (measured angle) and ``ghost`` (commanded angle,
-translucent) turn about the mount's z axis. Fins are numbered in the robot's order, as in
-the telemetry.
+A fin's mount (``robot.geometry.fin_mount``) has axes (x_m, y_m, normal); its blade is the
+mount turned about the mount's z axis by the fin's angle (:func:`blade_wxyzs`). The four
+blades (measured angles) are one batched mesh, ``blades``, and the four ghosts (commanded
+angles, translucent) another, ``ghosts``: one message moves all four, and the page draws
+them in one call each. Instances are in the robot's fin order, as in the telemetry.
 
 The hull is an icosphere scaled to the hull's half-sizes (viser scales nodes per axis); the
 fin plate is a small extruded outline built here (:func:`fin_plate_mesh`: a dozen points
@@ -32,6 +33,7 @@ import numpy as np
 from ucat_console.robot.fins import N_FINS
 from ucat_console.robot.geometry import BLADE_LENGTH_FACTOR, BLADE_SPAN, BLADE_THICKNESS, Geometry, fin_mount
 from ucat_console.robot.look import FIN_COLOUR, GHOST_COLOUR, HULL_COLOUR, NOSE_COLOUR
+from ucat_console.robot.rotations import quaternion_multiply
 from ucat_console.telemetry.messages import BodyState, FinState
 
 WATER_COLOUR = (64, 140, 200)
@@ -48,6 +50,19 @@ REVIEW_ROOT = "/review"
 
 def turn_about_z(theta: float) -> tuple[float, float, float, float]:
     return (math.cos(theta / 2), 0.0, 0.0, math.sin(theta / 2))
+
+
+def _changed(a: float, b: float) -> bool:
+    return a != b and not (math.isnan(a) and math.isnan(b))
+
+
+def blade_wxyzs(mount_wxyz: Sequence[Sequence[float]], angles: Sequence[float]) -> np.ndarray:
+    """The blades' orientations (n, 4) in the body frame: each fin's mount turned by its
+    angle about the mount's z axis (an angle that is not a number leaves the blade neutral)."""
+    out = np.empty((len(mount_wxyz), 4), dtype=np.float32)
+    for i, (q, a) in enumerate(zip(mount_wxyz, angles)):
+        out[i] = quaternion_multiply(q, turn_about_z(a if math.isfinite(a) else 0.0))
+    return out
 
 
 def fin_plate_mesh(length: float, span: float, thickness: float) -> tuple[np.ndarray, np.ndarray]:
@@ -85,9 +100,10 @@ def add_pool(scene: Any, *, floor_depth: float, shadows: bool = False, environme
                                    intensity=1.6)
     # the grids as lines: a grid plane is a shader over every pixel it covers, which a
     # browser drawing in software pays on every frame (half its frame rate, measured)
-    scene.add_line_segments("/surface", grid_lines(POOL_SIZE, 2.0, 0.0), WATER_COLOUR, line_width=1.0)
+    scene.add_line_segments("/surface", grid_lines(POOL_SIZE, 2.0, 0.0), WATER_COLOUR, thickness=1.0,
+                            thickness_units="screen")
     scene.add_line_segments("/floor", grid_lines(POOL_SIZE, 1.0, -float(floor_depth)), FLOOR_COLOUR,
-                            line_width=1.0)
+                            thickness=1.0, thickness_units="screen")
 
 
 def grid_lines(size: float, step: float, z: float) -> np.ndarray:
@@ -130,19 +146,16 @@ class RobotScene:
         scene.add_arrows(f"{r}/ucat/heading", np.array([[[half[0] + 0.02, 0.0, 0.0], [half[0] + 0.25, 0.0, 0.0]]]),
                          HEADING_COLOUR, shaft_radius=0.008, head_radius=0.022, head_length=0.05)
         verts, faces = fin_plate_mesh(self.fin_length, BLADE_SPAN, BLADE_THICKNESS)
-        self.blades = []
-        self.ghosts = []
-        for i in range(N_FINS):
-            pos, q = fin_mount(geometry, i)
-            scene.add_frame(f"{r}/ucat/fin{i}", show_axes=False, position=pos, wxyz=q)
-            blade = scene.add_frame(f"{r}/ucat/fin{i}/blade", show_axes=False)
-            scene.add_mesh_simple(f"{r}/ucat/fin{i}/blade/plate", verts, faces, color=FIN_COLOUR,
-                                  side="double")
-            ghost = scene.add_frame(f"{r}/ucat/fin{i}/ghost", show_axes=False)
-            scene.add_mesh_simple(f"{r}/ucat/fin{i}/ghost/plate", verts, faces, color=GHOST_COLOUR,
-                                  opacity=0.35, side="double", cast_shadow=False)
-            self.blades.append(blade)
-            self.ghosts.append(ghost)
+        mounts = [fin_mount(geometry, i) for i in range(N_FINS)]
+        self.mount_wxyz = [q for _, q in mounts]
+        positions = np.array([p for p, _ in mounts], dtype=np.float32)
+        neutral = blade_wxyzs(self.mount_wxyz, [0.0] * N_FINS)
+        self.blades = scene.add_batched_meshes_simple(
+            f"{r}/ucat/blades", verts, faces, batched_wxyzs=neutral, batched_positions=positions,
+            batched_colors=FIN_COLOUR, lod="off", side="double")
+        self.ghosts = scene.add_batched_meshes_simple(
+            f"{r}/ucat/ghosts", verts, faces, batched_wxyzs=neutral, batched_positions=positions,
+            batched_colors=GHOST_COLOUR, lod="off", opacity=0.35, side="double", cast_shadow=False)
         self.label = scene.add_label(f"{r}/ucat/depth", "depth -", position=(0.0, 0.0, -0.35),
                                      anchor="bottom-center")
         self.trail = scene.add_line_segments(f"{r}/trail", np.zeros((1, 2, 3)), TRAIL_COLOUR,
@@ -161,17 +174,15 @@ class RobotScene:
             self.body.wxyz = body.orientation
             self.position = body.position
             self._add_trail_point(body.position)
+        # only what changed: viser compares every value it is given (numpy, costly), and
+        # the commanded angles change a few times a second
         shown = self._shown
-        for i, f in enumerate(fins):
-            if f is None:
-                continue
-            # only what changed: viser compares every value it is given (numpy, costly) and
-            # a commanded angle changes a few times a second
-            if shown[i][0] != f.angle:
-                self.blades[i].wxyz = turn_about_z(f.angle)
-            if shown[i][1] != f.angle_cmd:
-                self.ghosts[i].wxyz = turn_about_z(f.angle_cmd)
-            shown[i] = (f.angle, f.angle_cmd)
+        now = [(f.angle, f.angle_cmd) if f is not None else s for f, s in zip(fins, shown)]
+        if any(_changed(a[0], b[0]) for a, b in zip(now, shown)):
+            self.blades.batched_wxyzs = blade_wxyzs(self.mount_wxyz, [a for a, _ in now])
+        if any(_changed(a[1], b[1]) for a, b in zip(now, shown)):
+            self.ghosts.batched_wxyzs = blade_wxyzs(self.mount_wxyz, [c for _, c in now])
+        self._shown = now
         self.updates += 1
 
     def update_label(self, body: BodyState | None) -> None:
