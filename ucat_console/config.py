@@ -95,6 +95,11 @@ class ConsoleConfig(Config):
     )
     sessions_dir: str = param("", doc="where recordings go; empty: sessions/ at the project root")
     sim_depth: float = param(0.5, lo=0.0, hi=100.0, unit="m", doc="depth the simulated robot starts at")
+    sim_early: float = param(
+        0.01, lo=0.0, hi=0.02, unit="s",
+        doc="simulated robot only: loop events due within this much wall time run at once, together "
+        "(fewer wake-ups of the loop; 0: each waits for its own time)",
+    )
     floor_depth: float = param(3.0, lo=0.1, hi=1000.0, unit="m", doc="depth of the floor grid in the 3-D view")
     drive_velocity_step: float = param(0.05, lo=0.001, hi=1.0, unit="m/s", doc="W/S key: forward velocity step")
     drive_yaw_step: float = param(0.05, lo=0.001, hi=2.0, unit="rad/s", doc="Q/E key: yaw rate step")

@@ -20,6 +20,7 @@ from ucat_console.backend.loop.clock import SimulatedClock
 from ucat_console.backend.sim.robot_io import SimRobotIO
 from ucat_console.backend.sessions.reader import SessionReader
 from ucat_console.backend.supervisor import CommandRefused, SteadyPacedClock, Supervisor
+from ucat_console.backend.supervisor.robots import sim_robot
 from ucat_console.config import AccessConfig, AppConfig, ConsoleConfig, FailsafeConfig, FailsafeRule, load_config
 from ucat_console.control import FinMpc
 from ucat_console.control.baseline import wrap_angle
@@ -678,3 +679,15 @@ def test_a_single_overrun_keeps_its_own_message(sup: Supervisor) -> None:
     sup.step(2.0)
     [o] = [e for e in ev.events if e.code == "plan_overrun"]
     assert o.message == "plan for fins [2] ready 3.0 ms after its deadline" and o.data["count"] == 1
+
+
+def test_only_the_simulated_robot_runs_events_early(tmp_path: Path) -> None:
+    """A computed reading can run before its time; a device's cannot: a robot other than
+    the simulator gets a clock that waits for every event."""
+    cfg = make_config().replace(console=ConsoleConfig(supervise_period=0.05, record_tail=1.0, sim_early=0.015))
+    for robot, early in (("sim", 0.015), ("rig", 0.0)):
+        sup = Supervisor(cfg.replace(robot=robot), robot_factory=sim_robot, sessions_dir=tmp_path)
+        try:
+            assert isinstance(sup.clock, SteadyPacedClock) and sup.clock.early == early, robot
+        finally:
+            sup.stop()

@@ -32,11 +32,14 @@ README, never test assertions.
 from __future__ import annotations
 
 import argparse
+import collections
 import json
 import logging
 import os
+import re
 import statistics
 import tempfile
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -98,6 +101,23 @@ def _percentile(xs: list[float], q: float) -> float:
     s = sorted(xs)
     k = min(len(s) - 1, max(0, round(q * (len(s) - 1))))
     return s[k]
+
+
+def _thread_cpu_seconds() -> dict[str, float]:
+    """CPU seconds of this process's live threads by thread name (Linux /proc); numbered
+    names (``Thread-3 (...)``, ``ThreadPoolExecutor-0_1``) are summed under their stem."""
+    tick = os.sysconf("SC_CLK_TCK")
+    names = {t.native_id: t.name for t in threading.enumerate()}
+    out: dict[str, float] = collections.defaultdict(float)
+    for entry in Path(f"/proc/{os.getpid()}/task").iterdir():
+        try:
+            fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        name = names.get(int(entry.name), "(not a Python thread)")
+        name = re.sub(r"[-_]\d.*$", "", re.sub(r"^Thread-\d+ ", "", name))
+        out[name] += (int(fields[11]) + int(fields[12])) / tick
+    return dict(out)
 
 
 def _descendant_cpu_seconds() -> dict[str, float]:
@@ -169,10 +189,12 @@ def measure_ui(duration: float = 20.0, pages: int = 2, warmup: float = 5.0, velo
                 scene0, plots0 = app.scene.updates, app.plots.updates
                 cpu0, wall0 = time.process_time(), time.perf_counter()
                 browser0 = _descendant_cpu_seconds()
+                threads0 = _thread_cpu_seconds()
                 load0 = os.getloadavg()[0]
                 time.sleep(duration)
                 cpu1, wall1 = time.process_time(), time.perf_counter()
                 browser1 = _descendant_cpu_seconds()
+                threads1 = _thread_cpu_seconds()
                 scene1, plots1 = app.scene.updates, app.plots.updates
                 results = [page.evaluate("() => { const b = window.__ucatBench; b.counting = false; return b; }")
                            for page in opened]
@@ -206,6 +228,9 @@ def measure_ui(duration: float = 20.0, pages: int = 2, warmup: float = 5.0, velo
         "configured_plot_rate": cfg.console.plot_rate,
         "supervisor_cpu_percent": 100.0 * (cpu1 - cpu0) / elapsed,
         "browser_cpu_percent": {k: 100.0 * (browser1[k] - browser0[k]) / elapsed for k in browser0},
+        "supervisor_threads_cpu_percent": {
+            k: 100.0 * (v - threads0.get(k, 0.0)) / elapsed
+            for k, v in sorted(threads1.items(), key=lambda kv: threads0.get(kv[0], 0.0) - kv[1])},
         "recording": health.recording,
         "loop_lag_max_ms": health.lag_max * 1e3,
         "late_plans": health.late_plans,
@@ -234,6 +259,8 @@ def format_result(r: dict[str, Any]) -> str:
     lines.append(f"supervisor CPU {r['supervisor_cpu_percent']:.0f} % of one core; loop lag max "
                  f"{r['loop_lag_max_ms']:.0f} ms; late plans {r['late_plans']}, hand-over overruns "
                  f"{r['plan_overruns']}")
+    lines.append("supervisor CPU by thread: " + ", ".join(
+        f"{k} {v:.1f} %" for k, v in r["supervisor_threads_cpu_percent"].items() if v >= 0.5))
     return "\n".join(lines)
 
 

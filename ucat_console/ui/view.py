@@ -40,7 +40,7 @@ from ucat_console.ui.scene import LIVE_ROOT, RobotScene
 log = logging.getLogger(__name__)
 
 SLOW_PERIOD = 0.25  # s: trail, label, status
-_TICK = 1.0 / 60.0  # s: the UI thread's longest sleep
+_TICK = 1.0 / 60.0  # s: the UI thread's longest sleep (``on_tick`` runs at least this often)
 
 
 def from_page(fn: Callable[[], Any], act: Callable[[Callable[[], Any]], Any]) -> Callable[[Any], None]:
@@ -137,6 +137,7 @@ class StreamView:
         self.plots = LivePlots(gui, self.feeder, rate=plot_rate, max_points=max_plot_points, corridor=corridor,
                                height=plot_height)
         self._stop = threading.Event()
+        self._wake = threading.Event()  # a new body state, or stop()
         self._thread: threading.Thread | None = None
         self.tick_errors = 0
 
@@ -153,6 +154,7 @@ class StreamView:
             self.body = msg
             self.body_wall = time.time()
             self.body_seq += 1
+            self._wake.set()
         elif tp is FinState:
             self.fins[msg.fin] = msg
 
@@ -211,6 +213,7 @@ class StreamView:
 
     def stop(self) -> None:
         self._stop.set()
+        self._wake.set()
         t, self._thread = self._thread, None
         if t is not None and t is not threading.current_thread():
             t.join(timeout=5.0)
@@ -220,6 +223,7 @@ class StreamView:
         next_scene = next_plot = next_slow = time.perf_counter()
         last_seq, last_rows = -1, -1
         while not self._stop.is_set():
+            self._wake.clear()  # a body state from here on wakes the wait below
             now = time.perf_counter()
             try:
                 if self.body_seq != last_seq and now >= next_scene:
@@ -242,5 +246,10 @@ class StreamView:
             except Exception:
                 self.tick_errors += 1
                 log.exception("%s update failed", self.name)
-            wake = min(next_scene, next_plot, next_slow) - time.perf_counter()
-            self._stop.wait(min(max(wake, 0.002), _TICK))
+            # wake when something is due: a pose (a new body state, not before its time),
+            # the plots, the slow work; not to poll for a body state (each wake-up costs CPU)
+            if self.body_seq != last_seq:
+                wake, event = min(next_scene, next_plot, next_slow), self._stop
+            else:
+                wake, event = min(next_plot, next_slow), self._wake
+            event.wait(min(max(wake - time.perf_counter(), 0.001), _TICK))

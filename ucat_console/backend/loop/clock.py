@@ -49,14 +49,23 @@ class SimulatedClock(Clock):
 
 
 class PacedClock(Clock):
-    """Real time, ``pace`` times faster than the wall clock (1.0: real time)."""
+    """Real time, ``pace`` times faster than the wall clock (1.0: real time).
+
+    ``early`` (s of wall time): an event due less than this from now runs at once instead
+    of being waited for, so that events close together share one wake-up of the loop (each
+    wake-up costs CPU, about 0.1 ms of a core on a virtual machine). Only for a robot whose
+    readings are computed (the simulator): a device's reading is not there before its time.
+    0 waits for every event."""
 
     threaded = True
 
-    def __init__(self, pace: float = 1.0) -> None:
+    def __init__(self, pace: float = 1.0, early: float = 0.0) -> None:
         if not math.isfinite(pace) or not 0.0 < pace <= 1000.0:
             raise ValueError(f"pace: {pace!r} is out of range; allowed: (0, 1000]")
+        if not math.isfinite(early) or not 0.0 <= early <= 0.1:
+            raise ValueError(f"early: {early!r} is out of range; allowed: [0, 0.1] s")
         self.pace = float(pace)
+        self.early = float(early)
         self._wall0 = time.perf_counter()
         self._wake = threading.Event()
         self.lag_max = 0.0  # s of wall time the loop has been behind, at most
@@ -71,7 +80,8 @@ class PacedClock(Clock):
     def wait_until(self, t: float) -> None:
         delay = self.wall_deadline(t) - time.perf_counter()
         if delay > 0.0:
-            self._wake.wait(delay)
+            if delay >= self.early:
+                self._wake.wait(delay)
         else:
             self.lag_max = max(self.lag_max, -delay)
 

@@ -48,8 +48,8 @@ def simulated_rig(robot_io: RobotIO) -> SimRig | None:
 class SteadyPacedClock(PacedClock):
     """A :class:`PacedClock` anchored once: the loop runs in chunks without drifting."""
 
-    def __init__(self, pace: float = 1.0) -> None:
-        super().__init__(pace)
+    def __init__(self, pace: float = 1.0, early: float = 0.0) -> None:
+        super().__init__(pace, early)
         self._anchored = False
 
     def start(self, t0: float) -> None:

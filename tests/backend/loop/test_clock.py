@@ -1,0 +1,54 @@
+"""The paced clock: which events it waits for (an event due sooner than ``early`` runs at
+once, together with the one before it; later ones are waited for), and its bounds."""
+
+from __future__ import annotations
+
+import pytest
+
+from ucat_console.backend.loop.clock import PacedClock
+from ucat_console.backend.supervisor.robots import SteadyPacedClock
+
+
+class Waits:
+    """Stands in for the clock's wake-up event: records each wait instead of sleeping."""
+
+    def __init__(self) -> None:
+        self.timeouts: list[float] = []
+
+    def wait(self, timeout: float) -> bool:
+        self.timeouts.append(timeout)
+        return False
+
+    def set(self) -> None:
+        pass
+
+    def clear(self) -> None:
+        pass
+
+
+@pytest.mark.parametrize("cls", [PacedClock, SteadyPacedClock])
+def test_an_event_due_within_early_runs_at_once_and_a_later_one_is_waited_for(cls) -> None:
+    clock = cls(1.0, early=0.05)
+    clock.start(0.0)
+    waits = clock._wake = Waits()
+    clock.wait_until(0.01)  # due in at most 10 ms: run now, with what came before
+    assert waits.timeouts == []
+    clock.wait_until(30.0)  # due in about 30 s: waited for
+    assert len(waits.timeouts) == 1 and 29.0 < waits.timeouts[0] <= 30.0
+
+
+def test_without_early_every_event_still_ahead_is_waited_for() -> None:
+    clock = PacedClock(1.0)
+    clock.start(0.0)
+    waits = clock._wake = Waits()
+    clock.wait_until(30.0)
+    clock.wait_until(60.0)
+    assert len(waits.timeouts) == 2
+    clock.wait_until(-1.0)  # already past: no wait, counted as lag
+    assert len(waits.timeouts) == 2 and clock.lag_max >= 1.0
+
+
+@pytest.mark.parametrize("early", [-0.001, 0.2, float("nan")])
+def test_early_out_of_range_is_refused_by_name(early: float) -> None:
+    with pytest.raises(ValueError, match="early"):
+        PacedClock(1.0, early=early)
