@@ -40,7 +40,7 @@ from ucat_console.ui.scene import LIVE_ROOT, RobotScene
 log = logging.getLogger(__name__)
 
 SLOW_PERIOD = 0.25  # s: trail, label, status
-_TICK = 1.0 / 60.0  # s: the UI thread's longest sleep (``on_tick`` runs at least this often)
+_TICK = 0.05  # s: the UI thread's longest sleep (``on_tick`` runs at least this often)
 
 
 def from_page(fn: Callable[[], Any], act: Callable[[Callable[[], Any]], Any]) -> Callable[[Any], None]:
@@ -226,30 +226,34 @@ class StreamView:
             self._wake.clear()  # a body state from here on wakes the wait below
             now = time.perf_counter()
             try:
-                if self.body_seq != last_seq and now >= next_scene:
-                    last_seq = self.body_seq
-                    next_scene = max(next_scene + scene_period, now - scene_period)
-                    self.tick_scene()
-                if now >= next_plot:
-                    next_plot = max(next_plot + plot_period, now - plot_period)
-                    if self.sample_rows:
-                        if self.feeder.sample():
+                # one batch: the pages' server is woken once for all of this pass's messages
+                with self._atomic():
+                    if self.body_seq != last_seq and now >= next_scene:
+                        last_seq = self.body_seq
+                        next_scene = max(next_scene + scene_period, now - scene_period)
+                        self.tick_scene()
+                    if now >= next_plot:
+                        next_plot = max(next_plot + plot_period, now - plot_period)
+                        if self.sample_rows:
+                            if self.feeder.sample():
+                                self.refresh_plots()
+                        elif self.sampler.rows != last_rows:
+                            last_rows = self.sampler.rows
                             self.refresh_plots()
-                    elif self.sampler.rows != last_rows:
-                        last_rows = self.sampler.rows
-                        self.refresh_plots()
-                if now >= next_slow:
-                    next_slow = now + SLOW_PERIOD
-                    self.tick_slow()
-                if self.on_tick is not None:
-                    self.on_tick()
+                    if now >= next_slow:
+                        next_slow = now + SLOW_PERIOD
+                        self.tick_slow()
+                    if self.on_tick is not None:
+                        self.on_tick()
             except Exception:
                 self.tick_errors += 1
                 log.exception("%s update failed", self.name)
-            # wake when something is due: a pose (a new body state, not before its time),
-            # the plots, the slow work; not to poll for a body state (each wake-up costs CPU)
-            if self.body_seq != last_seq:
+            # wake when something is due, not to poll (each wake-up costs CPU): before the
+            # next pose may go, at that time, whether a body state came meanwhile or not;
+            # after it, at the body state's arrival; and for the plots and the slow work
+            now = time.perf_counter()
+            if now < next_scene or self.body_seq != last_seq:
                 wake, event = min(next_scene, next_plot, next_slow), self._stop
             else:
                 wake, event = min(next_plot, next_slow), self._wake
-            event.wait(min(max(wake - time.perf_counter(), 0.001), _TICK))
+            event.wait(min(max(wake - now, 0.001), _TICK))
