@@ -313,3 +313,34 @@ def test_crafted_updates_from_a_viewer_change_nothing(console: Console, caplog) 
     lines = [r for r in caplog.records if r.name == "ucat_console.ui.guard"]
     assert any(r.getMessage().startswith(f"refused from page {v_id}:") for r in lines)
     assert all(r.exc_info is None for r in lines)
+
+
+def test_raw_gamepad_messages_drive_only_the_pilot_and_only_within_the_envelope(console: Console) -> None:
+    """The page's hidden gamepad input, written by a raw client: a viewer's stick is refused,
+    the pilot's malformed or out-of-range sticks are refused with a reason and change nothing."""
+    pilot, pilot_id = pilot_page(console)
+    viewer = console.page()
+    app, sup = console.app, console.sup
+    envelope = sup.cfg.loop.max_velocity
+    n = len(app.guard.refusals)
+    viewer.update(viewer.wait_for("gamepad"), value='{"v": 1, "r": 0, "dz": 0}')  # pilot-only
+    viewer.update(pilot.wait_for("gamepad"), value='{"v": 1, "r": 0, "dz": 0}')  # another page's
+    wait_for(lambda: len(app.guard.refusals) >= n + 2, what="the viewer's sticks refused")
+    assert sup.setpoints.velocity == 0.0
+
+    pad = pilot.wait_for("gamepad")
+    pilot.update(pad, value='{"v": 0.5, "r": 0, "dz": 0}')
+    wait_for(lambda: sup.setpoints.velocity == pytest.approx(0.5 * envelope), what="the pilot's stick")
+    panel = app.panels[pilot_id]
+    m, n = len(panel.messages), len(app.guard.refusals)
+    bad = ["not json", '{"v": 5, "r": 0, "dz": 0}', '{"v": 1}', '{"v": true, "r": 0, "dz": 0}',
+           '{"v": NaN, "r": 0, "dz": 0}', '{"v": 0, "r": 0, "dz": 0, "x": 1}', "[1, 2, 3]", 7, "x" * 201]
+    for value in bad:
+        pilot.update(pad, value=value)
+    # each refused once: by the guard (not text, over the input's limit) or, with its reason
+    # shown on the page, by the stick's parser
+    wait_for(lambda: len(panel.messages) - m + len(app.guard.refusals) - n >= len(bad),
+             what="every bad stick message refused")
+    assert all(text.startswith("gamepad:") for text in panel.messages[m:])
+    assert sup.setpoints.velocity == pytest.approx(0.5 * envelope)  # nothing applied
+    assert not pilot.closed  # a bad value is refused, not a reason to drop the page
