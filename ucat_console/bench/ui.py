@@ -103,37 +103,44 @@ def _percentile(xs: list[float], q: float) -> float:
     return s[k]
 
 
+def _stat_fields(stat: Path) -> list[str]:
+    """The fields of a /proc ``stat`` file after the command name (parent pid first)."""
+    return stat.read_text().rsplit(")", 1)[1].split()
+
+
+def _cpu_seconds(fields: list[str]) -> float:
+    """User plus system CPU seconds from :func:`_stat_fields`."""
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def _thread_cpu_seconds() -> dict[str, float]:
     """CPU seconds of this process's live threads by thread name (Linux /proc); numbered
     names (``Thread-3 (...)``, ``ThreadPoolExecutor-0_1``) are summed under their stem."""
-    tick = os.sysconf("SC_CLK_TCK")
     names = {t.native_id: t.name for t in threading.enumerate()}
     out: dict[str, float] = collections.defaultdict(float)
     for entry in Path(f"/proc/{os.getpid()}/task").iterdir():
         try:
-            fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+            fields = _stat_fields(entry / "stat")
         except OSError:
             continue
         name = names.get(int(entry.name), "(not a Python thread)")
         name = re.sub(r"[-_]\d.*$", "", re.sub(r"^Thread-\d+ ", "", name))
-        out[name] += (int(fields[11]) + int(fields[12])) / tick
+        out[name] += _cpu_seconds(fields)
     return dict(out)
 
 
 def _descendant_cpu_seconds() -> dict[str, float]:
     """CPU seconds of this process's descendant Chromium processes by kind (Linux /proc)."""
     procs: dict[int, tuple[int, str, float]] = {}
-    tick = os.sysconf("SC_CLK_TCK")
     for entry in Path("/proc").iterdir():
         if not entry.name.isdigit():
             continue
         try:
-            stat = (entry / "stat").read_text()
+            fields = _stat_fields(entry / "stat")
             cmdline = (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
         except OSError:
             continue
-        fields = stat.rsplit(")", 1)[1].split()
-        procs[int(entry.name)] = (int(fields[1]), cmdline, (int(fields[11]) + int(fields[12])) / tick)
+        procs[int(entry.name)] = (int(fields[1]), cmdline, _cpu_seconds(fields))
     mine, frontier = set(), {os.getpid()}
     while frontier:
         frontier = {pid for pid, (ppid, _, _) in procs.items() if ppid in frontier} - mine

@@ -121,9 +121,11 @@ class Supervisor:
         self.rig: SimRig | None = simulated_rig(inner)
         try:
             self.gate = ArmingGate(inner, on_invalid=self._on_invalid_reading)
-            early = cfg.console.sim_early if cfg.robot == "sim" else 0.0  # a device's reading is not early
+            sim = cfg.robot == "sim"
+            # a computed reading may be taken early, a device's not before its time
+            early = cfg.console.sim_early if sim else 0.0
             self.clock: Clock = clock if clock is not None else SteadyPacedClock(1.0, early)
-            start_depth = cfg.console.sim_depth if cfg.robot == "sim" else 0.0
+            start_depth = cfg.console.sim_depth if sim else 0.0
             self.loop = ClosedLoop(
                 cfg.loop, self.gate, self._loop_stream, self.clock,
                 setpoints=BodySetpoints(depth=min(start_depth, cfg.loop.max_depth)),
