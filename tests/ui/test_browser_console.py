@@ -7,7 +7,6 @@ whichever plot tab was chosen first. Screenshots go to ``test-artifacts/``."""
 from __future__ import annotations
 
 import re
-import time
 from pathlib import Path
 from typing import Iterator
 
@@ -103,7 +102,7 @@ def test_status_bar_armed_state_and_disarm_are_on_screen_on_every_tab(browser: B
     ARTIFACTS.mkdir(exist_ok=True)
     for tab in TABS:
         page.get_by_role("tab", name=tab, exact=True).click()
-        page.wait_for_timeout(300)
+        expect(page.get_by_role("tab", name=tab, exact=True)).to_have_attribute("aria-selected", "true")
         for sel in ("#ucat-bar", "#ucat-armed", "#ucat-disarm"):
             assert inside_viewport(page, sel), (tab, sel)
         # mode and setpoints without scrolling
@@ -286,7 +285,8 @@ def test_review_plots_draw_whichever_plot_tab_was_chosen_first(browser: Browser,
     sup.arm(LOCAL)
     sup.set_setpoints(LOCAL, velocity=0.2)  # the velocity line leaves its dashed target
     sup.start_recording(LOCAL, "plots")
-    time.sleep(4.0)
+    t0 = sup.loop.time
+    wait_for(lambda: sup.loop.time >= t0 + 4.0, what="four seconds recorded")
     [path] = sup.stop_recording(LOCAL)
     sup.disarm(LOCAL)
     page = open_page(browser, console)
