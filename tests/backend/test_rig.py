@@ -29,7 +29,7 @@ from ucat_console.robot.units import DriveUnits
 from ucat_console.backend.loop.clock import PacedClock
 from ucat_console.backend.loop.closed_loop import ClosedLoop
 from ucat_console.backend.loop.config import LoopConfig
-from ucat_console.backend.sim.robot_io import SimRobotIO
+from ucat_console.backend.sim_robot_io import SimRobotIO
 from ucat_console.backend.rig import build_robot_io, connect_events, rig_of
 from ucat_console.cli.devices import synthetic_depth, synthetic_dvl, synthetic_imu
 from ucat_console.control.allocation import BodySetpoints

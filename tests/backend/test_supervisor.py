@@ -17,7 +17,7 @@ from support import wait_for
 from ucat_console.backend.access import LOCAL, AccessDenied
 from ucat_console.robot.readings import DepthReading
 from ucat_console.backend.loop.clock import SimulatedClock
-from ucat_console.backend.sim.robot_io import SimRobotIO
+from ucat_console.backend.sim_robot_io import SimRobotIO
 from ucat_console.backend.sessions.reader import SessionReader
 from ucat_console.backend.supervisor import CommandRefused, SteadyPacedClock, Supervisor
 from ucat_console.backend.supervisor.robots import sim_robot

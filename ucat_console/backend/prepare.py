@@ -82,12 +82,16 @@ def run_step(key: str, cfg: AppConfig) -> None:
 
         warm_up_loop(cfg.loop)
     elif key == "plant":
-        from ucat_console.backend.sim.robot_io import SimRobotIO
+        from ucat_console.backend.loop.closed_loop import ClosedLoop
+        from ucat_console.backend.sim_robot_io import SimRobotIO
 
         io = SimRobotIO(cfg.plant, depth=1.0, velocity=0.1)
-        io.advance_to(0.05)
+        io.advance_to(0.05)  # the plant one event at a time (behind the console's arming gate)
         io.plant.advance(0.002)
         io.plant.sample_sensors()
+        # the plant running the loop's core (headless runs), before any plan is due
+        with ClosedLoop(cfg.loop.replace(mode="baseline"), SimRobotIO(cfg.plant, depth=1.0)) as loop:
+            loop.run_until(0.05)
     else:
         raise ValueError(f"step: {key!r} is not a preparation step")
 

@@ -20,7 +20,7 @@ from typing import Any, Callable
 from ucat_console.backend.devices.config import DevicesConfig
 from ucat_console.backend.devices.device_robot_io import DeviceRobotIO
 from ucat_console.backend.sim_rig import SimRig
-from ucat_console.backend.sim.robot_io import SimRobotIO
+from ucat_console.backend.sim_robot_io import SimRobotIO
 from ucat_console.robot.interface import RobotIO
 from ucat_console.backend.sim.params import PlantConfig
 from ucat_console.telemetry.events import EventSink

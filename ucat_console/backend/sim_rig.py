@@ -45,7 +45,7 @@ from ucat_console.backend.devices.faults import Fault, as_fault
 from ucat_console.backend.devices.imu_emulator import ImuEmulator
 from ucat_console.backend.devices.pressure_emulator import PressureEmulator
 from ucat_console.robot.readings import DepthReading, DvlVelocity, ImuReading
-from ucat_console.backend.sim.robot_io import SimRobotIO
+from ucat_console.backend.sim_robot_io import SimRobotIO
 from ucat_console.robot.interface import RobotTruth
 from ucat_console.backend.sim.params import PlantConfig
 from ucat_console.telemetry.events import Event, EventSink, ignore_events

@@ -21,7 +21,7 @@ import time
 
 from ucat_console.backend.loop.closed_loop import ClosedLoop
 from ucat_console.backend.loop.config import MODES, LoopConfig
-from ucat_console.backend.sim.robot_io import SimRobotIO
+from ucat_console.backend.sim_robot_io import SimRobotIO
 from ucat_console.control.allocation import BodySetpoints
 from ucat_console.telemetry.stream import TelemetryStream
 

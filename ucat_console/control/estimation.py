@@ -32,9 +32,11 @@ from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
+from numba.extending import register_jitable
 
 from ucat_console.robot.readings import ImuReading
 from ucat_console.robot.rotations import (
+    quat_to_rot,
     Quaternion,
     Vector3,
     euler_from_quaternion,
@@ -231,15 +233,27 @@ class AttitudeEstimator:
 MAX_DEAD_RECKONING_GAP = 1.0
 
 
+@register_jitable
+def dead_reckon_into(xy: np.ndarray, q: np.ndarray, velocity: np.ndarray, dt: float, r: np.ndarray) -> None:
+    """Move ``xy`` (north, east; in place) at the body-frame ``velocity`` (m/s) for ``dt``
+    seconds (clipped to 0 .. :data:`MAX_DEAD_RECKONING_GAP`) with attitude ``q`` (``r``: a
+    3x3 scratch array). The one definition: :func:`dead_reckon` runs it as Python, the
+    closed loop's compiled core compiled."""
+    dt = min(max(dt, 0.0), MAX_DEAD_RECKONING_GAP)
+    quat_to_rot(q, r)
+    vx, vy, vz = velocity[0], velocity[1], velocity[2]
+    x = xy[0] + dt * (r[0, 0] * vx + r[0, 1] * vy + r[0, 2] * vz)
+    y = xy[1] + dt * (r[1, 0] * vx + r[1, 1] * vy + r[1, 2] * vz)
+    xy[0] = x
+    xy[1] = y
+
+
 def dead_reckon(
     xy: tuple[float, float], q: Sequence[float], velocity: Sequence[float], dt: float
 ) -> tuple[float, float]:
     """North and east position after moving at the body-frame ``velocity`` (m/s) for ``dt``
     seconds (clipped to 0 .. :data:`MAX_DEAD_RECKONING_GAP`) with attitude ``q``."""
-    dt = min(max(dt, 0.0), MAX_DEAD_RECKONING_GAP)
-    vx, vy, vz = velocity
-    r = rotation_matrix(q)
-    return (
-        xy[0] + dt * (float(r[0, 0]) * vx + float(r[0, 1]) * vy + float(r[0, 2]) * vz),
-        xy[1] + dt * (float(r[1, 0]) * vx + float(r[1, 1]) * vy + float(r[1, 2]) * vz),
-    )
+    out = np.array(xy, dtype=float)
+    dead_reckon_into(out, np.asarray(q, dtype=float), np.asarray(velocity, dtype=float), float(dt),
+                     np.empty((3, 3)))
+    return float(out[0]), float(out[1])

@@ -18,41 +18,126 @@ measurement, equals ``output`` (bumpless transfer when a loop is switched on).
 
 from __future__ import annotations
 
+import math
 from math import isfinite
+
+import numpy as np
+from numba.extending import register_jitable
 
 from ucat_console.control.argcheck import finite
 from ucat_console.control.params import PidGains
 
+# layout of one PID's numbers (a row of a float array): its state, then its gains
+PID_INTEGRAL = 0  # integral term, in output units
+PID_OUTPUT = 1  # the last output
+PID_SATURATED = 2  # 1.0: the last output was limited
+PID_T = 3  # time of the last sample (NaN: none yet)
+PID_Y = 4  # the last measurement, or -error (NaN: none yet)
+PID_P = 5  # the last proportional term
+PID_D = 6  # the last derivative term
+PID_KP, PID_KI, PID_KD, PID_LIMIT = 7, 8, 9, 10
+NPID = 11
+#: what :func:`pid_step` returns for a time earlier than the last update (nothing changed)
+EARLIER = math.inf
+
+
+@register_jitable
+def pid_reset(s: np.ndarray) -> None:
+    """Forget the integral, the last sample and the last output (the gains stay)."""
+    s[PID_INTEGRAL] = 0.0
+    s[PID_OUTPUT] = 0.0
+    s[PID_SATURATED] = 0.0
+    s[PID_T] = math.nan
+    s[PID_Y] = math.nan
+    s[PID_P] = 0.0
+    s[PID_D] = 0.0
+
+
+@register_jitable
+def pid_step(s: np.ndarray, e: float, y: float, t: float) -> float:
+    """One update of the PID ``s`` at time ``t`` with error ``e`` and measurement ``y``
+    (``-e`` without one); the limited output, or :data:`EARLIER` when ``t`` is before the
+    last update. The one definition of the step (module docstring): :class:`Pid` runs it
+    as Python, the closed loop's compiled core compiled."""
+    kp = s[PID_KP]
+    limit = s[PID_LIMIT]
+    p = kp * e
+    d = s[PID_D]
+    dt = 0.0
+    t_last = s[PID_T]
+    if not math.isnan(t_last):
+        if t < t_last:
+            return EARLIER
+        dt = t - t_last
+    if dt > 0.0 and not math.isnan(s[PID_Y]):
+        d = -s[PID_KD] * (y - s[PID_Y]) / dt
+    integral = s[PID_INTEGRAL]
+    if dt > 0.0:
+        candidate = integral + s[PID_KI] * e * dt
+        unsat = p + candidate + d
+        pushes_out = (unsat > limit and e > 0.0) or (unsat < -limit and e < 0.0)
+        if not pushes_out:
+            integral = min(limit, max(-limit, candidate))
+    u = p + integral + d
+    out = min(limit, max(-limit, u))
+    s[PID_SATURATED] = 1.0 if out != u else 0.0
+    s[PID_INTEGRAL] = integral
+    s[PID_OUTPUT] = out
+    s[PID_P] = p
+    s[PID_D] = d
+    if dt > 0.0 or math.isnan(t_last):
+        s[PID_T] = t
+        s[PID_Y] = y
+    return out
+
+
+def set_pid_gains(s: np.ndarray, gains: PidGains) -> None:
+    """New gains in the PID ``s``, keeping the integral (clipped to the new limit)."""
+    s[PID_KP], s[PID_KI], s[PID_KD], s[PID_LIMIT] = gains.kp, gains.ki, gains.kd, gains.limit
+    s[PID_INTEGRAL] = min(gains.limit, max(-gains.limit, float(s[PID_INTEGRAL])))
+
 
 class Pid:
-    """One PID loop; ``update`` returns the limited output."""
+    """One PID loop; ``update`` returns the limited output. Its numbers are a row of
+    ``state`` (layout ``PID_*``): its own, or a row of a table another owner shares (the
+    closed loop's compiled core runs the same rows)."""
 
-    def __init__(self, gains: PidGains) -> None:
+    def __init__(self, gains: PidGains, state: np.ndarray | None = None) -> None:
+        self.state = np.zeros(NPID) if state is None else state
         self.gains = gains
+        self.state[PID_KP], self.state[PID_KI], self.state[PID_KD], self.state[PID_LIMIT] = (
+            gains.kp, gains.ki, gains.kd, gains.limit)
         self.reset()
 
     def reset(self) -> None:
         """Forget the integral, the last sample and the last output."""
-        self.integral = 0.0  # integral term, in output units
-        self.output = 0.0
-        self.saturated = False
-        self._t: float | None = None
-        self._y: float | None = None  # last measurement (or -error)
-        self._p = 0.0
-        self._d = 0.0
+        pid_reset(self.state)
+
+    @property
+    def integral(self) -> float:
+        return float(self.state[PID_INTEGRAL])
+
+    @property
+    def output(self) -> float:
+        return float(self.state[PID_OUTPUT])
+
+    @property
+    def saturated(self) -> bool:
+        return bool(self.state[PID_SATURATED] != 0.0)
 
     def set_gains(self, gains: PidGains) -> None:
         """New gains, keeping the integral (clipped to the new limit)."""
         self.gains = gains
-        self.integral = min(gains.limit, max(-gains.limit, self.integral))
+        set_pid_gains(self.state, gains)
 
     def preset(self, output: float) -> None:
         """Make the next output equal ``output`` for the same inputs (bumpless transfer)."""
         out = finite("output", output)
         lim = self.gains.limit
         out = min(lim, max(-lim, out))
-        self.integral = min(lim, max(-lim, out - self._p - self._d))
-        self.output = out
+        s = self.state
+        s[PID_INTEGRAL] = min(lim, max(-lim, out - float(s[PID_P]) - float(s[PID_D])))
+        s[PID_OUTPUT] = out
 
     def update(self, target: float | tuple[float, float], t: float) -> float:
         """Advance to time ``t`` (s) and return the output.
@@ -65,7 +150,7 @@ class Pid:
             if len(target) != 2:
                 raise ValueError(f"target: expected (setpoint, measurement), got {target!r}")
             sp, y = target
-            if not (isfinite(sp) and isfinite(y) and isfinite(t)):  # inline: the control rate
+            if not (isfinite(sp) and isfinite(y) and isfinite(t)):
                 finite("setpoint", sp)
                 finite("measurement", y)
                 finite("t", t)
@@ -76,29 +161,7 @@ class Pid:
                 finite("error", e)
                 finite("t", t)
             y = -e
-        g = self.gains
-        p = g.kp * e
-        d = self._d
-        dt = 0.0
-        if self._t is not None:
-            if t < self._t:
-                raise ValueError(f"t: {t!r} is earlier than the last update at {self._t!r}")
-            dt = t - self._t
-        if dt > 0.0 and self._y is not None:
-            d = -g.kd * (y - self._y) / dt
-        integral = self.integral
-        if dt > 0.0:
-            candidate = integral + g.ki * e * dt
-            unsat = p + candidate + d
-            pushes_out = (unsat > g.limit and e > 0.0) or (unsat < -g.limit and e < 0.0)
-            if not pushes_out:
-                integral = min(g.limit, max(-g.limit, candidate))
-        u = p + integral + d
-        out = min(g.limit, max(-g.limit, u))
-        self.saturated = out != u
-        self.integral = integral
-        self.output = out
-        self._p, self._d = p, d
-        if dt > 0.0 or self._t is None:
-            self._t, self._y = t, y
+        out = pid_step(self.state, float(e), float(y), float(t))
+        if out == EARLIER:
+            raise ValueError(f"t: {t!r} is earlier than the last update at {float(self.state[PID_T])!r}")
         return out

@@ -30,7 +30,7 @@ import numpy as np
 
 from ucat_console.backend.loop.closed_loop import ClosedLoop, check_setpoints
 from ucat_console.backend.loop.config import LoopConfig
-from ucat_console.backend.sim.robot_io import SimRobotIO
+from ucat_console.backend.sim_robot_io import SimRobotIO
 from ucat_console.backend.sim.params import (
     WAKE_OPTIONS,
     FinCoefficients,

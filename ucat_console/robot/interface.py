@@ -1,7 +1,7 @@
 """The closed loop's view of the robot: fin commands out, sensor readings in.
 
 :class:`RobotIO` is deliberately small, like python-can's ``BusABC``: the loop never knows
-whether the readings come from the in-process simulator (``backend.sim.robot_io.SimRobotIO``),
+whether the readings come from the in-process simulator (``backend.sim_robot_io.SimRobotIO``),
 from the device drivers talking to emulators (``backend.devices.device_robot_io``), or from
 the real robot. It lives here, in the robot's description, so that the loop, the plant and
 the drivers meet on it without importing each other.
@@ -22,12 +22,19 @@ Contract:
   on their own, returns the time it next wants to be polled.
 * :meth:`RobotIO.truth` is the simulator's true state (None on a real robot); only
   experiments and the 3-D view's "truth" overlay read it, never the controller.
+* A robot whose readings are computed in-process (the simulator) may say
+  :attr:`RobotIO.runs_core` and run the loop's compiled per-sample core itself
+  (:meth:`RobotIO.run_core`, ``control.loop_core``): it advances to each event the core
+  asks for and hands it the readings as rows (``robot.reading_rows``), all in compiled
+  code, until the core has something for the loop to do. Every other robot is driven
+  through :meth:`RobotIO.advance_to`, one event at a time.
 """
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
+from typing import Any
 
 from ucat_console.robot.readings import Reading
 
@@ -68,6 +75,14 @@ class RobotIO(ABC):
 
     #: the fins are moved by motor drives with power stages, powered only while armed
     has_drives: bool = False
+    #: the robot runs the loop's compiled core itself (:meth:`run_core`)
+    runs_core: bool = False
+
+    def run_core(self, core: Any) -> int:
+        """Run the loop's core (a ``control.loop_core.LoopCore``) with this robot
+        delivering its readings, until the core returns something other than "readings";
+        that status. Only for a robot that :attr:`runs_core`."""
+        raise NotImplementedError(f"{type(self).__name__} does not run the loop's core")
 
     def enable_drives(self) -> bool:
         """Power the fin drives for set-points (on arming); False when a drive did not come

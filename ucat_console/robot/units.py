@@ -24,6 +24,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from numba.extending import register_jitable
+
 #: standard gravity (m/s2)
 GRAVITY = 9.80665
 #: fresh and salt water density (kg/m3)
@@ -49,21 +51,25 @@ _SECONDS_PER_MINUTE = 60.0
 # ---------------------------------------------------------------- pressure and depth
 
 
+@register_jitable
 def current_to_pressure(current_ma: float, p_min_pa: float, span_pa: float) -> float:
     """Gauge pressure (Pa) from loop current (mA)."""
     return p_min_pa + (current_ma - LOOP_ZERO_MA) / LOOP_SPAN_MA * span_pa
 
 
+@register_jitable
 def pressure_to_current(pressure_pa: float, p_min_pa: float, span_pa: float) -> float:
     """Loop current (mA) for a gauge pressure (Pa); inverse of :func:`current_to_pressure`."""
     return LOOP_ZERO_MA + (pressure_pa - p_min_pa) / span_pa * LOOP_SPAN_MA
 
 
+@register_jitable
 def pressure_to_depth(pressure_pa: float, surface_pressure_pa: float, rho: float) -> float:
     """Depth (m, positive down) below the zeroed surface."""
     return (pressure_pa - surface_pressure_pa) / (rho * GRAVITY)
 
 
+@register_jitable
 def depth_to_pressure(depth_m: float, surface_pressure_pa: float, rho: float) -> float:
     """Gauge pressure (Pa) at a depth; inverse of :func:`pressure_to_depth`."""
     return surface_pressure_pa + depth_m * rho * GRAVITY

@@ -32,6 +32,11 @@ class TelemetryStream:
         nobody takes unbuilt (the headless runs of the experiments subscribe to few)."""
         return channel in self._wanted
 
+    @property
+    def wanted(self) -> frozenset[str]:
+        """The channels a subscriber takes now (a new set object after each change)."""
+        return self._wanted
+
     def _update_wanted(self) -> None:
         every = frozenset(CHANNELS)
         self._wanted = frozenset().union(*(every if c is None else c for _, c in self._subs))

@@ -13,7 +13,7 @@ from ucat_console.backend.loop.clock import PacedClock
 from ucat_console.backend.loop.closed_loop import ClosedLoop
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.backend.loop.planners import BaselineFinPlanner, PlanInputs
-from ucat_console.backend.sim.robot_io import SimRobotIO
+from ucat_console.backend.sim_robot_io import SimRobotIO
 from ucat_console.robot.fins import PAPER_TO_ROBOT as PAPER_TO_PLANT_FIN
 from ucat_console.robot.fins import ROBOT_TO_PAPER as PLANT_TO_PAPER
 from ucat_console.control.allocation import BodySetpoints

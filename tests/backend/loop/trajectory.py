@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from ucat_console.backend.loop.closed_loop import ClosedLoop
-from ucat_console.backend.sim.robot_io import SimRobotIO
+from ucat_console.backend.sim_robot_io import SimRobotIO
 from ucat_console.config import AppConfig
 from ucat_console.control.allocation import BodySetpoints
 from ucat_console.telemetry import TelemetryStream

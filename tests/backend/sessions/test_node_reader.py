@@ -15,7 +15,7 @@ from session_helpers import BIG_SEED, FIXTURES, awkward_items, record, same
 
 from ucat_console.backend.loop.closed_loop import ClosedLoop
 from ucat_console.backend.loop.config import LoopConfig
-from ucat_console.backend.sim.robot_io import SimRobotIO
+from ucat_console.backend.sim_robot_io import SimRobotIO
 from ucat_console.backend.sessions import codec
 from ucat_console.backend.sessions.recorder import Recorder
 from ucat_console.backend.sessions.schema import json_schema_bytes

@@ -2,7 +2,7 @@
 
 ``robot`` picks one of three robots behind the same closed loop:
 
-* ``"sim"``: the in-process simulated U-CAT (``backend.sim.robot_io.SimRobotIO``), no devices;
+* ``"sim"``: the in-process simulated U-CAT (``backend.sim_robot_io.SimRobotIO``), no devices;
 * ``"sim-devices"``: the simulated U-CAT behind protocol-exact emulators (EPOS2 nodes on a
   python-can ``virtual`` bus, the IMU and the pressure ADC on ptys, the DVL on 127.0.0.1),
   reached through the same drivers as the real robot. The emulators' endpoints replace

@@ -23,6 +23,9 @@ class Clock(ABC):
 
     #: True when planners run in their own threads under this clock
     threaded: bool = False
+    #: True when events wait for the wall clock: the loop runs the events up to
+    #: :meth:`horizon` at once and waits (:meth:`wait_until`) for a later one
+    paced: bool = False
 
     def start(self, t0: float) -> None:
         """The loop is at simulated time ``t0`` now."""
@@ -33,6 +36,11 @@ class Clock(ABC):
 
     def wall_deadline(self, t: float) -> float:
         """The wall-clock time (``time.perf_counter``) at which simulated ``t`` is due."""
+        return math.inf
+
+    def horizon(self, t_done: float) -> float:
+        """The latest simulated time whose events may run now (the loop has reached
+        ``t_done``); infinite when nothing is paced."""
         return math.inf
 
     def interrupt(self) -> None:
@@ -58,6 +66,7 @@ class PacedClock(Clock):
     0 waits for every event."""
 
     threaded = True
+    paced = True
 
     def __init__(self, pace: float = 1.0, early: float = 0.0) -> None:
         if not math.isfinite(pace) or not 0.0 < pace <= 1000.0:
@@ -84,6 +93,16 @@ class PacedClock(Clock):
                 self._wake.wait(delay)
         else:
             self.lag_max = max(self.lag_max, -delay)
+
+    def horizon(self, t_done: float) -> float:
+        """Events due less than ``early`` of wall time from now run now (see the class
+        docstring); the loop's lag behind the wall clock at ``t_done`` counts in
+        :attr:`lag_max`."""
+        now = time.perf_counter()
+        lag = now - self.wall_deadline(t_done)
+        if lag > self.lag_max:
+            self.lag_max = lag
+        return (now + self.early - self._wall0) * self.pace
 
     def interrupt(self) -> None:
         self._wake.set()

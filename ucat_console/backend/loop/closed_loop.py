@@ -16,6 +16,15 @@ and publishes what it does on a :class:`TelemetryStream` (channels of
 ``status_rate``, and Events (``mode``, ``tuning``, ``late_plan``, ``plan_overrun``,
 ``stroke_timeout``).
 
+Per sample, compiled. Everything the loop does on every sample (the readings into the
+estimate and the body-frame loops, the power estimate, the executors' stroke-end watch,
+the control ticks, the telemetry ticks' numbers) and the scheduling of its events is the
+compiled core's, ``control.loop_core``, on arrays this class owns. The core returns here
+only when Python has something to do: an executor saw a stroke end (it sends the next
+stroke, or asks for a plan), a plan is due, a status tick, the robot's readings (unless the
+robot runs the core itself: the simulator, ``RobotIO.run_core``), telemetry to publish. So
+the loop's Python runs a few times a second per fin, not on every sample.
+
 Time. Everything happens at simulated event times: sensor samples (the robot says when the
 next is due), control / telemetry ticks, and plan hand-overs. A plan requested at ``t`` is
 handed to its executor at ``t + plan_latency``, whatever the clock, so the headless clock
@@ -36,9 +45,11 @@ old ones are idle. Tuning (MPC weights, PID gains) applies from the next plan / 
 Mutators may be called from any thread: they are validated at once and applied by the
 loop's thread at its next event.
 
-Estimation (the attitude EKF, dead reckoning) is the core's (``control.estimation``); this
-module schedules, hands plans over between modes and publishes. It is over 500 lines
-because those three share the actuators' hand-over state, which one loop thread owns.
+Estimation: the attitude comes from the IMU's own filter, or from the core's EKF
+(``control.estimation``, run here on each IMU reading when configured); dead reckoning is
+the core's. This module schedules the plans, hands them over between modes and publishes.
+It is over 500 lines because those three share the actuators' hand-over state, which one
+loop thread owns.
 
 Fins: the controller uses the paper's order (0 front-starboard, 1 front-port,
 2 rear-starboard, 3 rear-port); the robot and the telemetry use the robot's order,
@@ -68,14 +79,19 @@ from ucat_console.backend.loop.planners import (
     Planner,
     ThreadedPlanning,
 )
+from ucat_console.control import loop_core as lc
 from ucat_console.control.allocation import (
+    B_FX,
+    B_FY,
+    B_YAW,
+    BODY_FIELDS,
+    EARLIER_T,
     INDEPENDENT_FINS,
     SYNC_FINS,
     BodyController,
     BodySetpoints,
-    allocate,
 )
-from ucat_console.control.estimation import MAX_DEAD_RECKONING_GAP, AttitudeEstimator, dead_reckon
+from ucat_console.control.estimation import AttitudeEstimator
 from ucat_console.control.executor import (
     CycleComplete,
     FinExecutor,
@@ -84,10 +100,11 @@ from ucat_console.control.executor import (
     SendToServo,
     StrokeTimeout,
 )
+from ucat_console.control.argcheck import finite
 from ucat_console.control.cost import stroke_strouhal
 from ucat_console.control.params import BaselineConfig, MpcConfig, PidGains
-from ucat_console.control.power import PowerBank
-from ucat_console.control.stroke_watch import BACKWARDS, StrokeWatches, feedback_kernel
+from ucat_console.control.power import P_T, PowerBank, drag_coefficient
+from ucat_console.control.stroke_watch import W_T_FB, StrokeWatches
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.messages import (
@@ -100,17 +117,21 @@ from ucat_console.telemetry.messages import (
     Setpoints,
     Status,
 )
-from ucat_console.robot.fins import N_FINS, PAPER_TO_ROBOT, ROBOT_TO_PAPER
+from ucat_console.robot import reading_rows as rr
+from ucat_console.robot.fins import N_FINS, PAPER_TO_ROBOT
 from ucat_console.robot.interface import RobotIO, RobotTruth
-from ucat_console.robot.readings import DepthReading, DvlVelocity, FinFeedback, FinFeedbacks, ImuReading
+from ucat_console.robot.readings import DepthReading, DvlVelocity, ImuReading, Reading
 from ucat_console.telemetry.stream import TelemetryStream
 
 log = logging.getLogger(__name__)
 
 #: events closer than this (s) are simultaneous
-_EPS = 1e-7
+_EPS = lc.EPS
 PID_LOOPS = ("velocity", "depth", "yaw_rate")
 _FIN_STATE = tuple(ch.fin_state(pf) for pf in range(N_FINS))
+#: the telemetry a flag of the core asks for
+_WANTED = ((lc.F_BODY_COMMAND, (ch.BODY_COMMAND,)), (lc.F_STATE, (ch.BODY_STATE, *_FIN_STATE)),
+           (lc.F_POWER, (ch.POWER,)), (lc.F_IMU, (ch.IMU,)), (lc.F_DEPTH, (ch.DEPTH,)), (lc.F_DVL, (ch.DVL,)))
 
 
 def check_setpoints(cfg: LoopConfig, sp: BodySetpoints) -> BodySetpoints:
@@ -193,40 +214,32 @@ class ClosedLoop:
         }
         self._commands: queue.SimpleQueue[Callable[[float], None]] = queue.SimpleQueue()
         self._stop = False
-        self._t = 0.0
-        # fin state, robot order
-        self._fb_angle = [math.nan] * N_FINS
-        self._fb_rate = [0.0] * N_FINS
-        self._cmd_angle = [0.0] * N_FINS
-        self._cmd_rate = [0.0] * N_FINS
         self._power = PowerBank(cfg.power, N_FINS)  # rows: robot order
         # the executors' stroke-end table (rows: paper order) and, per fin, the rows of the
         # executor that owns it (checked after each of its samples, as that executor would)
         self._watches = StrokeWatches(cfg.executor, N_FINS)
         self._members = np.full((N_FINS, 2), -1, dtype=np.int64)
         self._found = np.zeros(2, dtype=np.int64)
-        self._all_rows = np.array([ROBOT_TO_PAPER[pf] for pf in range(N_FINS)], dtype=np.int64)
-        self._fin_rows = [self._all_rows[pf:pf + 1] for pf in range(N_FINS)]
-        # estimate
+        # the per-sample core (control.loop_core): the estimate, the body-frame loops, the
+        # power estimate, the stroke ends and the schedule, on these arrays
+        pcfg = cfg.power
+        self._core = lc.LoopCore(
+            self.body.state, self._watches.table, self._members, self._found, self._power.table,
+            rates=(cfg.control_rate, cfg.state_rate, cfg.power_rate, cfg.status_rate),
+            w_th=self._watches.w_th, min_time=self._watches.min_time, k_drag=drag_coefficient(pcfg),
+            inertia=float(pcfg.fin_inertia), tau=float(pcfg.filter_tau))
+        self._s = self._core.s
         self._attitude = AttitudeEstimator()
-        self._q: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
-        self._gyro: tuple[float, float, float] = (0.0, 0.0, 0.0)
-        self._dvl_v: tuple[float, float, float] = (0.0, 0.0, 0.0)
-        self._dvl_t: float | None = None
-        self._xy = [0.0, 0.0]
-        self._depth = 0.0
-        self.distance = 0.0
-        # body command and allocation
-        self._fx = self._fy = self._yaw = 0.0
-        self._v_body = 0.0
-        self._targets: tuple[tuple[float, float], ...] = allocate(0.0, 0.0, 0.0, sync=self._sync).targets
+        self._ekf = cfg.attitude != "imu"
+        self._fed: list[Reading] = []  # the readings of the event, as the robot gave them (None: rows)
+        self._wanted_key: frozenset[str] | None = None
+        self._wanted_flags = 0
+        lc.set_targets(self._s, 0.0, 0.0, 0.0, self._sync)
         # counters
         self.late_plans = 0
         self.plan_overruns = 0
         self.stroke_timeouts = 0
         self.plans_made = 0
-        # timers (counts of ticks done; the next tick is at count / rate)
-        self._n_control = self._n_state = self._n_power = self._n_status = 0
         self._generation = 0
         self._owner: list[_Actuator] = [None] * N_FINS  # type: ignore[list-item]
         self._install_actuators(self._new_actuators(self._mode))
@@ -235,7 +248,16 @@ class ClosedLoop:
     @property
     def time(self) -> float:
         """Simulated time of the last event processed (s)."""
-        return self._t
+        return float(self._s[lc.C_T])
+
+    @property
+    def _t(self) -> float:
+        return float(self._s[lc.C_T])
+
+    @property
+    def distance(self) -> float:
+        """Metres travelled while driving (dead reckoning)."""
+        return float(self._s[lc.C_DISTANCE])
 
     # What the loop is commanded to do; in force from its next event. The loop is the one
     # owner of these: the supervisor and the page read them here.
@@ -271,7 +293,7 @@ class ClosedLoop:
 
     def fin_command(self, fin: int) -> tuple[float, float]:
         """(target angle, profile velocity) last sent to robot fin ``fin``."""
-        return self._cmd_angle[fin], self._cmd_rate[fin]
+        return float(self._s[lc.C_CMD_ANGLE + fin]), float(self._s[lc.C_CMD_RATE + fin])
 
     @property
     def _sync(self) -> bool:
@@ -345,6 +367,7 @@ class ClosedLoop:
     def stop(self) -> None:
         """Make :meth:`run_until` return at its next event (any thread)."""
         self._stop = True
+        self._s[lc.C_FLAGS] = int(self._s[lc.C_FLAGS]) | lc.F_STOP
         self.clock.interrupt()
 
     def close(self) -> None:
@@ -366,61 +389,149 @@ class ClosedLoop:
         self.run_until(self._t + duration)
 
     def run_until(self, t_end: float) -> None:
-        """Process every event up to simulated time ``t_end`` (s)."""
+        """Process every event up to simulated time ``t_end`` (s).
+
+        The per-sample work is the compiled core's (``control.loop_core``): it runs the
+        events and returns here only for what the loop does in Python (module docstring of
+        the core), each handled below; a robot that can run the core itself (the simulator)
+        does the sampling in compiled code too."""
         if not math.isfinite(t_end):
             raise ValueError(f"t_end: expected a finite time, got {t_end!r}")
         self._stop = False
         self.clock.start(self._t)
+        s = self._s
+        s[lc.C_T_END] = t_end
+        s[lc.C_HORIZON] = math.inf
+        paced = self.clock.paced
+        if paced:
+            s[lc.C_HORIZON] = self.clock.horizon(self._t)
         io = self.io
-        cfg = self.cfg
-        p_control, p_state = 1.0 / cfg.control_rate, 1.0 / cfg.state_rate
-        p_power, p_status = 1.0 / cfg.power_rate, 1.0 / cfg.status_rate
+        runs_core = io.runs_core
         commands = self._commands
-        while not self._stop:
-            if not commands.empty():
-                self._drain_commands()
-            t_control = self._n_control * p_control
-            t_state = self._n_state * p_state
-            t_power = self._n_power * p_power
-            t_status = self._n_status * p_status
-            t_next = min(io.next_reading_time(), t_control, t_state, t_power, t_status)
-            for act in self._actuators:
-                if act.t_deliver < t_next:
-                    t_next = act.t_deliver
-            if t_next > t_end + _EPS:
-                if t_end > self._t:  # the robot reaches t_end; nothing is due before then
-                    readings = io.advance_to(t_end)
-                    self._t = t_end
-                    if readings:
-                        self._on_readings(readings, t_end)
+        while True:
+            self._inputs(not commands.empty())
+            if runs_core and s[lc.C_ROWS_PENDING] == 0.0:
+                st = io.run_core(self._core)
+            else:
+                if s[lc.C_ROWS_PENDING] != 0.0:
+                    self._feed(io.advance_to(float(s[lc.C_T_NEXT])))
+                    continue
+                s[lc.C_T_ROBOT] = io.next_reading_time()
+                st = self._core.step()
+            if s[lc.C_OUT_N]:
+                self._publish_outbox()
+            if st == lc.END:
                 break
-            self.clock.wait_until(t_next)
-            readings = io.advance_to(t_next)
-            t = t_next if t_next > self._t else self._t
-            self._t = t
-            lim = t + _EPS
-            # 1. plan hand-overs
-            for act in self._actuators:
-                if act.t_deliver <= lim:
-                    self._deliver(act, t)
-            # 2. readings
-            if readings:
-                self._on_readings(readings, t)
-            if self._handover:
-                self._check_handovers(t)
-            # 3. control and telemetry ticks
-            if t_control <= lim:
-                self._n_control += 1
+            t = float(s[lc.C_T])
+            if st == lc.READINGS:
+                continue  # the robot's readings (above)
+            if st == lc.WAIT:
+                self.clock.wait_until(float(s[lc.C_T_NEXT]))
+                if self._stop:
+                    break
+                s[lc.C_HORIZON] = max(float(s[lc.C_T_NEXT]), self.clock.horizon(t))
+            elif st == lc.STROKE:
+                owner = self._owner[int(s[lc.C_STROKE_ROW])]
+                t_now = float(s[lc.C_T_NOW])
+                actions = owner.executor.stroke_checked(t_now, self._found[:len(owner.fins)].tolist())
+                if actions:
+                    self._handle(owner, actions, t_now)
+            elif st == lc.DELIVER:
+                lim = t + _EPS
+                for act in self._actuators:
+                    if act.t_deliver <= lim:
+                        self._deliver(act, t)
+            elif st == lc.CONTROL:
                 self._control(t)
-            if t_state <= lim:
-                self._n_state += 1
-                self._publish_state(t)
-            if t_power <= lim:
-                self._n_power += 1
-                self._publish_power(t)
-            if t_status <= lim:
-                self._n_status += 1
+            elif st == lc.HANDOVER:
+                self._check_handovers(t)
+            elif st == lc.STATUS:
                 self._publish_status(t)
+            elif st == lc.EKF:
+                r = self._reading(int(s[lc.C_CURSOR]))
+                assert type(r) is ImuReading
+                s[lc.C_Q:lc.C_Q + 4] = self._attitude.update(r).q
+            elif st == lc.COMMANDS:
+                self._drain_commands()
+            elif st == lc.OUTBOX:
+                pass  # published above
+            elif st == lc.ERROR:
+                self._raise_core_error()
+            else:
+                raise RuntimeError(f"closed loop: the core returned {st}")
+            if paced:
+                s[lc.C_HORIZON] = max(float(s[lc.C_HORIZON]), self.clock.horizon(float(s[lc.C_T])))
+
+    def _inputs(self, commands_waiting: bool) -> None:
+        """What the core needs of the loop before a step: when plans are due, the flags."""
+        s = self._s
+        t_deliver = math.inf
+        requests = False
+        for act in self._actuators:
+            if act.t_deliver < t_deliver:
+                t_deliver = act.t_deliver
+            if not act.requested and act.active:
+                requests = True
+        s[lc.C_T_DELIVER] = t_deliver
+        wanted = self.stream.wanted
+        if wanted is not self._wanted_key:
+            self._wanted_key = wanted
+            self._wanted_flags = sum(f for f, chans in _WANTED if any(c in wanted for c in chans))
+        flags = self._wanted_flags
+        if self._handover:
+            flags |= lc.F_HANDOVER
+        if requests:
+            flags |= lc.F_REQUESTS
+        if self._driving():
+            flags |= lc.F_DRIVING
+        if self._sync:
+            flags |= lc.F_SYNC
+        if self._ekf:
+            flags |= lc.F_EKF
+        if commands_waiting:
+            flags |= lc.F_COMMANDS
+        if self._stop:
+            flags |= lc.F_STOP
+        s[lc.C_FLAGS] = flags
+        sp = self._setpoints
+        s[lc.C_SP_V], s[lc.C_SP_Z], s[lc.C_SP_R] = sp.velocity, sp.depth, sp.yaw_rate
+
+    def _feed(self, readings: list[Reading]) -> None:
+        """The robot's readings of the event, into the core's rows."""
+        s = self._s
+        rows = self._core.rows
+        if len(readings) > rows.shape[0]:
+            self._core.rows = rows = np.zeros((len(readings), rr.ROW))
+        for k, r in enumerate(readings):
+            rr.to_row(r, rows[k])
+        self._fed = readings
+        s[lc.C_NROWS] = len(readings)
+        s[lc.C_ROWS_PENDING] = 0.0
+
+    def _reading(self, k: int) -> Reading:
+        """The event's reading ``k``: the robot's own object, or made from its row."""
+        if self.io.runs_core:
+            return rr.from_row(self._core.rows[k])
+        return self._fed[k]
+
+    def _raise_core_error(self) -> None:
+        """The core refused a reading (or a control step): the ValueError naming what."""
+        s = self._s
+        code, what = int(s[lc.C_ERR_CODE]), int(s[lc.C_ERR])
+        if code == lc.ERR_BODY and what == EARLIER_T:
+            raise ValueError(f"t: {self._t!r} is earlier than the last update of a body-frame loop")
+        r = self._reading(int(s[lc.C_CURSOR]))
+        if code == lc.ERR_BODY:
+            name = BODY_FIELDS[what]
+            value = r.t if name.endswith(".t") else (
+                r.gyro[2] if type(r) is ImuReading else r.depth_m if type(r) is DepthReading else r.vx)  # type: ignore[union-attr]
+            finite(name, value)  # raises, naming the field
+        if code == lc.ERR_POWER:
+            raise ValueError(f"t: {r.t!r} is not after fin {what}'s last sample at "
+                             f"{float(self._power.table[what, P_T])!r}")
+        if code == lc.ERR_BACKWARDS:
+            raise ValueError(f"fin {what}: feedback at t={r.t!r} is earlier than its last sample")
+        raise ValueError(f"reading: the loop's core refused {r!r} (error {code})")
 
     def _drain_commands(self) -> None:
         while True:
@@ -430,99 +541,22 @@ class ClosedLoop:
                 return
             fn(self._t)
 
-    # ------------------------------------------------------------------ readings
-    def _on_readings(self, readings: list, t: float) -> None:
-        stream = self.stream
-        driving = self._driving()
-        for r in readings:
-            tp = type(r)
-            if tp is FinFeedbacks:
-                pos, vel = r.position_rad, r.velocity_rad_s
-                self._fb_angle = pos.tolist()
-                self._fb_rate = vel.tolist()
-                self._power.update_all(r.t, pos, driving)
-                self._feedback(self._all_rows, r.t, vel, pos, t)
-            elif tp is FinFeedback:
-                pf = r.fin
-                self._fb_angle[pf] = r.position_rad
-                self._fb_rate[pf] = r.velocity_rad_s
-                self._power.update(pf, r.t, r.position_rad, driving)
-                self._feedback(self._fin_rows[pf], r.t, np.array([r.velocity_rad_s]),
-                               np.array([r.position_rad]), t)
-            elif tp is ImuReading:
-                self.body.on_imu(r)
-                self._gyro = r.gyro
-                if self.cfg.attitude == "imu" and r.quaternion is not None:
-                    self._q = r.quaternion
-                else:
-                    self._q = self._attitude.update(r).q
-                if stream.wants(ch.IMU):
-                    stream.publish(ch.IMU, r)
-            elif tp is DepthReading:
-                self.body.on_depth(r)
-                if stream.wants(ch.DEPTH):
-                    stream.publish(ch.DEPTH, r)
-            elif tp is DvlVelocity:
-                self.body.on_dvl(r)
-                if r.valid:
-                    self._dead_reckon(r, driving)
-                if stream.wants(ch.DVL):
-                    stream.publish(ch.DVL, r)
-            else:
-                raise ValueError(f"reading: unexpected type {tp.__name__} from the robot")
-
-    def _feedback(self, rows: np.ndarray, t_fb: float, rates: np.ndarray, angles: np.ndarray, t: float) -> None:
-        """Encoder samples of the fins ``rows`` (paper order) taken at ``t_fb``, through the
-        compiled stroke-end pass; each executor that saw a stroke end acts at once."""
-        t_now = t if t >= t_fb else t_fb
-        w = self._watches
-        n = rows.shape[0]
-        k = 0
-        while True:
-            k = feedback_kernel(w.table, self._members, rows, t_fb, rates, angles, t_now, k,
-                                w.w_th, w.min_time, self._found)
-            if k == n:
-                return
-            if k < 0:
-                fin = PAPER_TO_ROBOT[int(rows[BACKWARDS - k])]
-                raise ValueError(f"fin {fin}: feedback at t={t_fb!r} is earlier than its last sample")
-            owner = self._owner[int(rows[k])]
-            actions = owner.executor.stroke_checked(t_now, self._found[:len(owner.fins)].tolist())
-            if actions:
-                self._handle(owner, actions, t_now)
-            k += 1
-
-    def _dead_reckon(self, r: DvlVelocity, driving: bool) -> None:
-        if self._dvl_t is not None:
-            dt = min(max(r.t - self._dvl_t, 0.0), MAX_DEAD_RECKONING_GAP)
-            self._xy[0], self._xy[1] = dead_reckon((self._xy[0], self._xy[1]), self._q, (r.vx, r.vy, r.vz), dt)
-            if driving:
-                self.distance += dt * math.hypot(r.vx, r.vy)
-        self._dvl_t = r.t
-        self._dvl_v = (r.vx, r.vy, r.vz)
-
     # ------------------------------------------------------------------ control
     def _control(self, t: float) -> None:
-        cmd = self.body.update(t, self._setpoints, sync=self._sync)
-        self._fx, self._fy, self._yaw = cmd.fx, cmd.fy, cmd.yaw
-        self._targets = cmd.allocation.targets
-        if cmd.velocity is not None:
-            self._v_body = cmd.velocity
-        if cmd.depth is not None:
-            self._depth = cmd.depth
-        if self.stream.wants(ch.BODY_COMMAND):
-            self.stream.publish(ch.BODY_COMMAND, BodyCommand(t, cmd.fx, cmd.fy, cmd.yaw))
+        """After a control tick (the core ran the body-frame loops): the first plans."""
         if not self.body.sensors_reported:
             return  # the first plans wait for the first DVL and depth reports: no stroke from a guess
         for act in self._actuators:
             if not act.requested and act.active:
-                angle = self._fb_angle[PAPER_TO_ROBOT[act.fins[0]]]
+                angle = float(self._s[lc.C_FB_ANGLE + PAPER_TO_ROBOT[act.fins[0]]])
                 if not math.isnan(angle):
                     self._request(act, t, angle)
 
     def _request(self, act: _Actuator, t: float, theta0: float) -> None:
+        s = self._s
+        k = lc.C_TARGETS + 2 * act.index
         inputs = PlanInputs(
-            t=t, fins=act.fins, target=self._targets[act.index], v_body=self._v_body,
+            t=t, fins=act.fins, target=(float(s[k]), float(s[k + 1])), v_body=float(s[lc.C_V_BODY]),
             theta0=theta0, u_prev=act.u_prev,
         )
         act.job = self._planning.submit(act.key, act.planner, inputs)
@@ -579,9 +613,9 @@ class ClosedLoop:
             if tp is SendToServo:
                 pf = PAPER_TO_ROBOT[a.fin]
                 self.io.command_fin(pf, a.theta_ref, a.w_ref)
-                self._publish_stroke(t, pf, a.theta_ref - self._cmd_angle[pf], a.w_ref)
-                self._cmd_angle[pf] = a.theta_ref
-                self._cmd_rate[pf] = a.w_ref
+                self._publish_stroke(t, pf, a.theta_ref - float(self._s[lc.C_CMD_ANGLE + pf]), a.w_ref)
+                self._s[lc.C_CMD_ANGLE + pf] = a.theta_ref
+                self._s[lc.C_CMD_RATE + pf] = a.w_ref
             elif tp is PlanRequest:
                 if not act.retiring:
                     self._request(act, t, a.theta_start)
@@ -652,7 +686,8 @@ class ClosedLoop:
             return
         old = self._mode
         self._mode = mode
-        self._targets = allocate(self._fx, self._fy, self._yaw, sync=self._sync).targets
+        b = self.body.state
+        lc.set_targets(self._s, float(b[B_FX]), float(b[B_FY]), float(b[B_YAW]), self._sync)
         for act in self._actuators:  # no more plans for the old controller
             act.retiring = True
             act.job = None
@@ -668,7 +703,7 @@ class ClosedLoop:
             ref = self._owner[n.fins[0]]
             theta0 = ref.end_angle()
             if theta0 is None:
-                a = self._fb_angle[PAPER_TO_ROBOT[n.fins[0]]]
+                a = float(self._s[lc.C_FB_ANGLE + PAPER_TO_ROBOT[n.fins[0]]])
                 theta0 = 0.0 if math.isnan(a) else a
             n.u_prev = ref.u_prev
             self._request(n, t, theta0)
@@ -736,42 +771,63 @@ class ClosedLoop:
     def _event(self, t: float, code: str, message: str, level: str, data: dict) -> None:
         self.stream.publish(ch.EVENTS, Event(t=t, source="loop", code=code, message=message, level=level, data=data))
 
-    def _publish_state(self, t: float) -> None:
+    def _publish_outbox(self) -> None:
+        """The core's telemetry rows as messages, in the order it kept them."""
+        s = self._s
+        out = self._core.out
+        n = int(s[lc.C_OUT_N])
+        s[lc.C_OUT_N] = 0.0
         stream = self.stream
+        for k in range(n):
+            o = out[k]
+            kind = o[lc.O_KIND]
+            if kind == lc.O_STATE:
+                self._publish_state(o.tolist())
+            elif kind == lc.O_POWER:
+                self._publish_power(o.tolist())
+            elif kind == lc.O_BODY_COMMAND:
+                v = o[:lc.O_V + 3].tolist()
+                stream.publish(ch.BODY_COMMAND, BodyCommand(v[lc.O_T], v[lc.O_V], v[lc.O_V + 1], v[lc.O_V + 2]))
+            else:
+                r = rr.from_row(o[:rr.ROW])
+                stream.publish(_READING_CHANNEL[type(r)], r)
+
+    def _publish_state(self, v: list[float]) -> None:
+        stream = self.stream
+        t, b = v[lc.O_T], lc.O_V
         if stream.wants(ch.BODY_STATE):
             stream.publish(ch.BODY_STATE, BodyState(
-                t=t, position=(self._xy[0], self._xy[1], self._depth), orientation=self._q,
-                velocity=self._dvl_v, rates=self._gyro, depth=self._depth,
+                t=t, position=(v[b], v[b + 1], v[b + 2]), orientation=(v[b + 3], v[b + 4], v[b + 5], v[b + 6]),
+                velocity=(v[b + 7], v[b + 8], v[b + 9]), rates=(v[b + 10], v[b + 11], v[b + 12]), depth=v[b + 13],
             ))
-        ang, rate, ca, cr = self._fb_angle, self._fb_rate, self._cmd_angle, self._cmd_rate
+        f = lc.O_STATE_FINS
         for pf, channel in enumerate(_FIN_STATE):
             if stream.wants(channel):
-                a = ang[pf]
-                stream.publish(channel, FinState(t, pf, 0.0 if a != a else a, rate[pf], ca[pf], cr[pf]))
+                a = v[f + pf]
+                stream.publish(channel, FinState(t, pf, 0.0 if a != a else a, v[f + N_FINS + pf],
+                                                 v[f + 2 * N_FINS + pf], v[f + 3 * N_FINS + pf]))
 
     def _publish_stroke(self, t: float, fin: int, stroke: float, rate: float) -> None:
         if not self.stream.wants(ch.fin_strouhal(fin)):
             return
         m = self._mpc_cfg
+        v_body = float(self._s[lc.C_V_BODY])
         self.stream.publish(ch.fin_strouhal(fin), FinStrouhal(
-            t, fin, stroke_strouhal(rate, self._v_body, m), m.st_low, m.st_high, m.st_opt,
-            self._v_body, stroke, rate,
+            t, fin, stroke_strouhal(rate, v_body, m), m.st_low, m.st_high, m.st_opt,
+            v_body, stroke, rate,
         ))
 
-    def _publish_power(self, t: float) -> None:
-        if not self.stream.wants(ch.POWER):
-            return
-        bank = self._power
-        per = [bank.p_fin(pf) for pf in range(N_FINS)]
+    def _publish_power(self, v: list[float]) -> None:
+        per = [0.0 if x != x else x for x in v[lc.O_V:lc.O_V + N_FINS]]
         energy = 0.0
         mean = 0.0
         for pf in range(N_FINS):
-            energy += bank.energy(pf)
-            m = bank.mean_power(pf)
-            mean += m if m is not None else 0.0
-        d = self.distance
+            energy += v[lc.O_POWER_ENERGY + pf]
+            m = v[lc.O_POWER_MEAN + pf]
+            mean += m if m == m else 0.0
+        d = v[lc.O_POWER_DISTANCE]
         self.stream.publish(ch.POWER, Power(
-            t=t, per_fin=(per[0], per[1], per[2], per[3]), total=sum(per), mean_total=mean,
+            t=v[lc.O_T], per_fin=(per[0], per[1], per[2], per[3]), total=sum(per), mean_total=mean,
             energy=energy, distance=d, energy_per_metre=energy / d if d > 0.0 else math.nan,
         ))
 
@@ -783,6 +839,10 @@ class ClosedLoop:
         sp = self._setpoints
         self.stream.publish(ch.STATUS, self._status(t))
         self.stream.publish(ch.SETPOINTS, Setpoints(t, sp.velocity, sp.depth, sp.yaw_rate))
+
+
+#: the channel of each kind of reading the loop publishes
+_READING_CHANNEL = {ImuReading: ch.IMU, DepthReading: ch.DEPTH, DvlVelocity: ch.DVL}
 
 
 def _jsonable(v: Any) -> Any:

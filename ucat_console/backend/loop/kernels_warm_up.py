@@ -2,9 +2,10 @@
 
 :func:`warm_up_loop` runs a :class:`~ucat_console.backend.loop.closed_loop.ClosedLoop` for
 half a second on :class:`_StubRobot`, which delivers every kind of reading the loop takes
-(the fins' feedback together and one by one, as read-only and as fresh arrays), so every
-kernel the loop calls is compiled for the argument types it meets at run time: the stroke-
-end table, the power estimate, the estimator's rotations, and the baseline's scoring.
+(the fins' feedback together and one by one), so every kernel the loop calls is compiled
+for the argument types it meets at run time: the per-sample core (``control.loop_core``:
+the body-frame loops, the stroke-end table, the power estimate, dead reckoning) and the
+baseline's scoring.
 """
 
 from __future__ import annotations

@@ -34,7 +34,7 @@ from ucat_console.backend.sim.fin_hydro import (
     hydro_params,
 )
 from ucat_console.backend.sim.params import PlantConfig
-from ucat_console.backend.sim.sensors import SensorSuite, sense
+from ucat_console.backend.sim.sensors import SensorSuite, sample_rows, sense
 from ucat_console.backend.sim.vehicle import (
     NU,
     NWORK,
@@ -47,6 +47,7 @@ from ucat_console.backend.sim.vehicle import (
     vehicle_params,
     vehicle_step,
 )
+from ucat_console.robot import reading_rows as rr
 from ucat_console.robot.fins import N_FINS
 from ucat_console.robot.readings import Reading
 from ucat_console.robot.rotations import euler_from_quaternion, quat_to_rot, quaternion_from_euler
@@ -168,6 +169,26 @@ def advance_and_sense(xv: np.ndarray, xf: np.ndarray, cmd: np.ndarray, mats: np.
     return sense(xv, xf[:, F_THETA], xf[:, F_OMEGA], t, sf, imu_noise, out)
 
 
+@njit(cache=True)
+def sample_plant(xv: np.ndarray, xf: np.ndarray, cmd: np.ndarray, mats: np.ndarray, pv: np.ndarray, ph: np.ndarray,
+                 signs: np.ndarray, servo: np.ndarray, steps: np.ndarray, t: float, sf: np.ndarray, out: np.ndarray,
+                 imu_noise: np.ndarray, p_noise: np.ndarray, dvl_noise: np.ndarray, rows: np.ndarray) -> int:
+    """Whole physics steps up to the first step at or after ``t`` (``steps[0]`` counts
+    them), then the readings due there as rows (``robot.reading_rows``) into ``rows``: their
+    number, or -1 when the state is no longer finite. The noise blocks must each have a row
+    left (:meth:`SensorSuite.noise`)."""
+    dt = servo[3]
+    n = max(0, math.ceil((t - steps[0] * dt) / dt - 1e-6))
+    t_after = (steps[0] + n) * dt
+    mask = advance_and_sense(xv, xf, cmd, mats, pv, ph, signs, servo, n, t_after, sf, imu_noise, out)
+    steps[0] += n
+    if mask < 0:
+        return -1
+    if mask == 0:
+        return 0
+    return sample_rows(mask, t_after, xv, sf, out, p_noise, dvl_noise, rows, 0)
+
+
 def _finite(name: str, values: tuple[float, ...] | list[float], n: int) -> tuple[float, ...]:
     try:
         out = tuple(float(v) for v in values)
@@ -198,7 +219,7 @@ class Plant:
         self._xv = np.zeros(NX)
         self._xf = np.zeros((N_FINS, NF))
         self._cmd = np.zeros((N_FINS, 2))
-        self._steps = 0
+        self._step_count = np.zeros(1, dtype=np.int64)  # physics steps since the reset
         self._t_goal = 0.0
         self.reset()
 
@@ -206,6 +227,10 @@ class Plant:
     @property
     def cfg(self) -> PlantConfig:
         return self._cfg
+
+    @property
+    def _steps(self) -> int:
+        return int(self._step_count[0])
 
     @property
     def time(self) -> float:
@@ -238,7 +263,7 @@ class Plant:
         self._xf[:, F_THETA_START] = angles
         self._cmd[:, C_TARGET] = angles
         self._cmd[:, C_PROFILE_VELOCITY] = self._cfg.servo.max_rate
-        self._steps = 0
+        self._step_count[0] = 0
         self._t_goal = 0.0
         self._sensors.reset(self._cfg.seed if seed is None else seed)
 
@@ -291,7 +316,7 @@ class Plant:
             self._xv, self._xf, self._cmd, self._mrb, self._ma, self._minv, self._pv, self._ph,
             self._signs, self._acc, self._max_rate, self._fin_inertia, dt, n, self._xv, self._xf,
         )
-        self._steps += n
+        self._step_count[0] += n
         if not ok:
             raise FloatingPointError(f"plant state diverged at t={self.time:.3f} s: {self._xv!r}")
 
@@ -299,16 +324,34 @@ class Plant:
         """:meth:`advance_to` ``t``, then :meth:`sample_sensors`, in one compiled call."""
         if not math.isfinite(t):
             raise ValueError(f"t: expected a finite time, got {t!r}")
-        n = max(0, math.ceil((t - self.time) / self._cfg.dt - 1e-6))
-        t_after = (self._steps + n) * self._cfg.dt
         s = self._sensors
-        mask = advance_and_sense(self._xv, self._xf, self._cmd, self._mats, self._pv, self._ph, self._signs,
-                                 self._servo_consts, n, t_after, s.state, s.imu_noise(), s.out)
-        self._steps += n
-        self._t_goal = t_after
-        if mask < 0:
-            raise FloatingPointError(f"plant state diverged at t={self.time:.3f} s: {self._xv!r}")
-        return s.readings(mask, t_after, self._xv) if mask else []
+        imu, p, dvl = s.noise()
+        n = sample_plant(self._xv, self._xf, self._cmd, self._mats, self._pv, self._ph, self._signs,
+                         self._servo_consts, self._step_count, t, s.state, s.out, imu, p, dvl, s.rows)
+        self._t_goal = self.time
+        if n < 0:
+            raise self.diverged()
+        return [rr.from_row(s.rows[k]) for k in range(n)]
+
+    def kernel_arrays(self) -> tuple[np.ndarray, ...]:
+        """The arrays :func:`sample_plant` takes before ``t`` (vehicle and fin state, fin
+        commands, matrices, parameters, servo constants, the step count), for compiled
+        callers that advance and sample the plant themselves; the sensors' are
+        :meth:`SensorSuite.kernel_arrays`."""
+        return (self._xv, self._xf, self._cmd, self._mats, self._pv, self._ph, self._signs,
+                self._servo_consts, self._step_count)
+
+    @property
+    def sensors(self) -> SensorSuite:
+        return self._sensors
+
+    def diverged(self) -> FloatingPointError:
+        """The error of a state that is no longer finite."""
+        return FloatingPointError(f"plant state diverged at t={self.time:.3f} s: {self._xv!r}")
+
+    def synced(self) -> None:
+        """After a compiled caller advanced the plant (:meth:`kernel_arrays`)."""
+        self._t_goal = self.time
 
     # ----------------------------------------------------------------- sensors
     def sample_sensors(self, t: float | None = None) -> list[Reading]:

@@ -26,11 +26,13 @@ import math
 
 import numpy as np
 from numba import njit
+from numba.extending import register_jitable
 
 from ucat_console.backend.sim.params import PressureModelConfig, SensorsConfig, ServoConfig
 from ucat_console.backend.sim.vehicle import NU, NU_DOT, POS, QUAT
 from ucat_console.robot.fins import N_FINS
-from ucat_console.robot.readings import DepthReading, DvlVelocity, FinFeedbacks, ImuReading, Reading
+from ucat_console.robot import reading_rows as rr
+from ucat_console.robot.readings import Reading
 from ucat_console.robot.rotations import quat_mul, quat_to_euler
 from ucat_console.robot.units import (
     GRAVITY,
@@ -43,17 +45,29 @@ from ucat_console.robot.units import (
 )
 
 
+@register_jitable
+def loop_current(gauge_pa: float, span_pa: float) -> float:
+    """Loop current (mA) of the transducer at a gauge pressure, saturating at the NE 43 limits."""
+    i = pressure_to_current(gauge_pa, 0.0, span_pa)
+    return min(max(i, LOOP_MIN_MA), LOOP_MAX_MA)
+
+
+@register_jitable
+def adc_current(current_ma: float, adc_bits: int, full_scale_ma: float) -> float:
+    """The current the ADC reports: a whole code of ``adc_bits`` over 0..full scale."""
+    full = (1 << adc_bits) - 1
+    code = min(max(round(current_ma / full_scale_ma * full), 0), full)
+    return code * full_scale_ma / full
+
+
 def current_from_pressure(gauge_pa: float, cfg: PressureModelConfig) -> float:
     """Loop current (mA) of the transducer at a gauge pressure, saturating at the NE 43 limits."""
-    i = pressure_to_current(gauge_pa, 0.0, cfg.span_pa)
-    return min(max(i, LOOP_MIN_MA), LOOP_MAX_MA)
+    return loop_current(gauge_pa, cfg.span_pa)
 
 
 def adc_quantise(current_ma: float, cfg: PressureModelConfig) -> float:
     """The current the ADC reports: a whole code of ``adc_bits`` over 0..full scale."""
-    full = (1 << cfg.adc_bits) - 1
-    code = min(max(round(current_ma / cfg.adc_full_scale_ma * full), 0), full)
-    return code * cfg.adc_full_scale_ma / full
+    return adc_current(current_ma, cfg.adc_bits, cfg.adc_full_scale_ma)
 
 
 @njit(cache=True)
@@ -114,7 +128,18 @@ S_ACCEL_BIAS = 16
 S_COUNTS = 19
 S_RATE_STEP = 20
 S_IMU_ROW = 21
-NS = 22
+S_P_ROW = 22  # the next row of the pressure noise block
+S_DVL_ROW = 23  # the next row of the DVL's
+S_RHO = 24  # the pressure model: water density, span, ADC bits and full scale
+S_SPAN = 25
+S_ADC_BITS = 26
+S_ADC_FS = 27
+S_DVL_STD = 28  # the DVL model: noise, dropout probability, valid altitudes, bottom depth
+S_DROPOUT = 29
+S_ALT_MIN = 30
+S_ALT_MAX = 31
+S_BOTTOM = 32
+NS = 33
 # the sampler's output: the IMU (accel 3, gyro 3, q 4, euler 3), then fin angles and rates
 O_IMU = 0
 O_FIN_POS = 13
@@ -167,40 +192,109 @@ def sense(xv: np.ndarray, fin_theta: np.ndarray, fin_omega: np.ndarray, t: float
     return mask
 
 
-class _Noise:
-    """Rows of scaled standard normals drawn from one Generator in blocks, used in order."""
+@njit(cache=True)
+def sample_rows(mask: int, t: float, xv: np.ndarray, sf: np.ndarray, out: np.ndarray, p_noise: np.ndarray,
+                dvl_noise: np.ndarray, rows: np.ndarray, first: int) -> int:
+    """The readings of the sensors in ``mask`` (from :func:`sense` at ``t``) as rows
+    (``robot.reading_rows``) from ``rows[first]`` on, in the order IMU, pressure, DVL,
+    encoders; the pressure and DVL readings draw the next row of their noise blocks.
+    Returns the row after the last one written."""
+    k = first
+    if mask & (1 << IMU):
+        r = rows[k]
+        r[rr.KIND] = rr.IMU
+        r[rr.T] = t
+        for i in range(13):
+            r[rr.IMU_ACCEL + i] = out[O_IMU + i]
+        k += 1
+    if mask & (1 << PRESSURE):
+        i = int(sf[S_P_ROW])
+        sf[S_P_ROW] = i + 1
+        rho = sf[S_RHO]
+        span = sf[S_SPAN]
+        gauge = depth_to_pressure(xv[POS + 2], 0.0, rho)
+        gauge += p_noise[i, 0]
+        current = adc_current(loop_current(gauge, span), int(sf[S_ADC_BITS]), sf[S_ADC_FS])
+        measured = current_to_pressure(current, 0.0, span)
+        r = rows[k]
+        r[rr.KIND] = rr.DEPTH
+        r[rr.T] = t
+        r[rr.DEPTH_M] = pressure_to_depth(measured, 0.0, rho)
+        r[rr.DEPTH_PA] = measured
+        k += 1
+    if mask & (1 << DVL):
+        i = int(sf[S_DVL_ROW])  # drawn every time: the stream ignores validity
+        sf[S_DVL_ROW] = i + 1
+        n = dvl_noise[i]
+        drop = 0.5 * math.erfc(-n[3] / math.sqrt(2.0)) < sf[S_DROPOUT]  # uniform via the normal CDF
+        altitude = sf[S_BOTTOM] - xv[POS + 2]
+        in_range = sf[S_ALT_MIN] <= altitude <= sf[S_ALT_MAX]
+        r = rows[k]
+        r[rr.KIND] = rr.DVL
+        r[rr.T] = t
+        if not in_range or drop:
+            r[rr.DVL_V] = math.nan
+            r[rr.DVL_V + 1] = math.nan
+            r[rr.DVL_V + 2] = math.nan
+            r[rr.DVL_VALID] = 0.0
+            r[rr.DVL_ALTITUDE] = altitude if in_range else math.nan
+            r[rr.DVL_FOM] = math.nan
+        else:
+            r[rr.DVL_V] = xv[NU] + n[0]
+            r[rr.DVL_V + 1] = xv[NU + 1] + n[1]
+            r[rr.DVL_V + 2] = xv[NU + 2] + n[2]
+            r[rr.DVL_VALID] = 1.0
+            r[rr.DVL_ALTITUDE] = altitude
+            r[rr.DVL_FOM] = sf[S_DVL_STD]
+        k += 1
+    if mask & (1 << FINS):
+        r = rows[k]
+        r[rr.KIND] = rr.FINS
+        r[rr.T] = t
+        for i in range(2 * N_FINS):
+            r[rr.FINS_ANGLE + i] = out[O_FIN_POS + i]
+        k += 1
+    return k
 
-    def __init__(self, rng: np.random.Generator, scale: list[float], block: int = 512) -> None:
+
+class _Noise:
+    """Rows of scaled standard normals drawn from one Generator in blocks, used in order;
+    the next row to use is ``state[row]`` (compiled code takes the rows)."""
+
+    def __init__(self, rng: np.random.Generator, scale: list[float], state: np.ndarray, row: int,
+                 block: int = 512) -> None:
         self._rng = rng
         self._scale = np.asarray(scale, dtype=float)
         self._block = block
-        self._i = block
-        self.buf = np.empty((0, len(scale)))
+        self._state = state
+        self._row = row
+        self.refill()
 
     def refill(self) -> None:
         self.buf = self._rng.standard_normal((self._block, len(self._scale))) * self._scale
-        self._i = 0
+        self._state[self._row] = 0.0
 
-    def next_list(self) -> list[float]:
-        if self._i >= self._block:
+    def rows(self) -> np.ndarray:
+        """The block holding the next row (a new block once one is used up)."""
+        if self._state[self._row] >= self._block:
             self.refill()
-        row = self.buf[self._i].tolist()
-        self._i += 1
-        return row
+        return self.buf
 
 
 class SensorSuite:
     """All sensors of the plant; :meth:`sample` returns the readings due at a time.
 
-    The IMU and the encoders, sampled at 100 Hz, are the compiled :func:`sense` (the plant
-    calls it in the same compiled call as its physics); the pressure sensor and the DVL,
-    at 20 and 8 Hz, are made here from its mask."""
+    The sensors are compiled (:func:`sense`, :func:`sample_rows`): the plant calls them in
+    the same compiled call as its physics, and writes the readings as rows
+    (``robot.reading_rows``) that compiled code reads as they are; :meth:`readings` makes
+    reading objects of them."""
 
     def __init__(self, cfg: SensorsConfig, servo: ServoConfig, seed: int) -> None:
         self._cfg = cfg
         self._servo = servo
         self.state = np.zeros(NS)
         self.out = np.zeros(NO)
+        self.rows = np.zeros((4, rr.ROW))
         self.reset(seed)
 
     def reset(self, seed: int, t0: float = 0.0) -> None:
@@ -212,15 +306,15 @@ class SensorSuite:
         sf[S_GYRO_BIAS:S_GYRO_BIAS + 3] = rng_imu.normal(0.0, icfg.gyro_bias_std, 3)
         sf[S_ACCEL_BIAS:S_ACCEL_BIAS + 3] = rng_imu.normal(0.0, icfg.accel_bias_std, 3)
         self._imu_noise = _Noise(
-            rng_imu, [icfg.accel_noise_std] * 3 + [icfg.gyro_noise_std] * 3 + [icfg.attitude_noise_std] * 3
+            rng_imu, [icfg.accel_noise_std] * 3 + [icfg.gyro_noise_std] * 3 + [icfg.attitude_noise_std] * 3,
+            sf, S_IMU_ROW,
         )
-        self._imu_noise.refill()
-        sf[S_IMU_ROW] = 0.0
         dcfg = self._cfg.dvl
         # the fourth column stays a standard normal: it decides dropouts
-        self._dvl_noise = _Noise(np.random.default_rng(dvl_ss), [dcfg.noise_std] * 3 + [1.0])
-        self._p_noise = _Noise(np.random.default_rng(p_ss), [self._cfg.pressure.noise_std_pa])
-        rates = (icfg.rate, self._cfg.pressure.rate, self._cfg.dvl.rate, self._servo.feedback_rate)
+        self._dvl_noise = _Noise(np.random.default_rng(dvl_ss), [dcfg.noise_std] * 3 + [1.0], sf, S_DVL_ROW)
+        pcfg = self._cfg.pressure
+        self._p_noise = _Noise(np.random.default_rng(p_ss), [pcfg.noise_std_pa], sf, S_P_ROW)
+        rates = (icfg.rate, pcfg.rate, dcfg.rate, self._servo.feedback_rate)
         for i, rate in enumerate(rates):
             sf[S_T0 + i] = t0
             sf[S_PERIOD + i] = 1.0 / rate
@@ -228,6 +322,10 @@ class SensorSuite:
         sf[S_NEXT] = t0
         sf[S_COUNTS] = self._servo.units.quadcounts_per_rad
         sf[S_RATE_STEP] = self._servo.units.rate_quantum
+        sf[S_RHO], sf[S_SPAN] = pcfg.water_density, pcfg.span_pa
+        sf[S_ADC_BITS], sf[S_ADC_FS] = pcfg.adc_bits, pcfg.adc_full_scale_ma
+        sf[S_DVL_STD], sf[S_DROPOUT] = dcfg.noise_std, dcfg.dropout_probability
+        sf[S_ALT_MIN], sf[S_ALT_MAX], sf[S_BOTTOM] = dcfg.altitude_min, dcfg.altitude_max, dcfg.bottom_depth
         self._last_t = -math.inf
 
     @property
@@ -242,12 +340,26 @@ class SensorSuite:
         """Earliest time at which some sensor has a sample due."""
         return float(self.state[S_NEXT])
 
+    def noise(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The IMU's, the pressure sensor's and the DVL's noise blocks for the next compiled
+        sample (a new block for each one used up)."""
+        return self._imu_noise.rows(), self._p_noise.rows(), self._dvl_noise.rows()
+
     def imu_noise(self) -> np.ndarray:
-        """The IMU's noise block for the next compiled sample (a new block once one is used up)."""
-        if self.state[S_IMU_ROW] >= self._imu_noise.buf.shape[0]:
-            self._imu_noise.refill()
-            self.state[S_IMU_ROW] = 0.0
-        return self._imu_noise.buf
+        """The IMU's noise block for the next compiled sample."""
+        return self._imu_noise.rows()
+
+    def kernel_arrays(self) -> tuple[np.ndarray, ...]:
+        """The arrays compiled sampling takes (``plant.sample_plant`` after ``t``): the state,
+        the IMU's outputs, the noise blocks (new ones for those used up), the rows."""
+        imu, p, dvl = self.noise()
+        return self.state, self.out, imu, p, dvl, self.rows
+
+    def noise_used_up(self) -> bool:
+        """Whether a noise block has no row left (:meth:`kernel_arrays` gives new ones)."""
+        sf = self.state
+        return bool(sf[S_IMU_ROW] >= self._imu_noise.buf.shape[0] or sf[S_P_ROW] >= self._p_noise.buf.shape[0]
+                    or sf[S_DVL_ROW] >= self._dvl_noise.buf.shape[0])
 
     def sample(
         self, t: float, xv: np.ndarray, fin_theta: np.ndarray, fin_omega: np.ndarray
@@ -265,53 +377,6 @@ class SensorSuite:
         """The readings of the sensors in ``mask`` (from :func:`sense` at ``t``), in the order
         IMU, pressure, DVL, encoders."""
         self._last_t = t
-        out: list[Reading] = []
-        o = self.out
-        if mask & (1 << IMU):
-            v = o[O_IMU:O_IMU + 13].tolist()
-            out.append(ImuReading(t, (v[0], v[1], v[2]), (v[3], v[4], v[5]), (v[6], v[7], v[8], v[9]),
-                                  (v[10], v[11], v[12])))
-        if mask & (1 << PRESSURE):
-            out.append(self._depth_reading(t, xv))
-        if mask & (1 << DVL):
-            out.append(self._dvl_reading(t, xv))
-        if mask & (1 << FINS):
-            fb = o[O_FIN_POS:O_FIN_VEL + N_FINS].copy()
-            fb.flags.writeable = False
-            out.append(FinFeedbacks(t, fb[:N_FINS], fb[N_FINS:]))
-        return out
-
-    def _depth_reading(self, t: float, xv: np.ndarray) -> DepthReading:
-        c = self._cfg.pressure
-        gauge = depth_to_pressure(float(xv[POS + 2]), 0.0, c.water_density)
-        gauge += self._p_noise.next_list()[0]
-        measured = current_to_pressure(adc_quantise(current_from_pressure(gauge, c), c), 0.0, c.span_pa)
-        return DepthReading(
-            t=t, depth_m=pressure_to_depth(measured, 0.0, c.water_density), pressure_pa=measured
-        )
-
-    def _dvl_reading(self, t: float, xv: np.ndarray) -> DvlVelocity:
-        c = self._cfg.dvl
-        n = self._dvl_noise.next_list()  # drawn every time: the stream ignores validity
-        drop = 0.5 * math.erfc(-n[3] / math.sqrt(2.0)) < c.dropout_probability  # uniform via the normal CDF
-        altitude = c.bottom_depth - float(xv[POS + 2])
-        in_range = c.altitude_min <= altitude <= c.altitude_max
-        if not in_range or drop:
-            return DvlVelocity(
-                t=t,
-                vx=math.nan,
-                vy=math.nan,
-                vz=math.nan,
-                valid=False,
-                altitude=altitude if in_range else math.nan,
-                fom=math.nan,
-            )
-        return DvlVelocity(
-            t=t,
-            vx=float(xv[NU]) + n[0],
-            vy=float(xv[NU + 1]) + n[1],
-            vz=float(xv[NU + 2]) + n[2],
-            valid=True,
-            altitude=altitude,
-            fom=c.noise_std,
-        )
+        _, p_noise, dvl_noise = self.noise()
+        n = sample_rows(mask, t, xv, self.state, self.out, p_noise, dvl_noise, self.rows, 0)
+        return [rr.from_row(self.rows[k]) for k in range(n)]

@@ -10,7 +10,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Callable
 
 from ucat_console.backend.loop.clock import PacedClock
-from ucat_console.backend.sim.robot_io import SimRobotIO
+from ucat_console.backend.sim_robot_io import SimRobotIO
 from ucat_console.config import AppConfig
 from ucat_console.robot.interface import RobotIO
 from ucat_console.telemetry.events import EventSink

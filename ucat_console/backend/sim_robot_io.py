@@ -1,0 +1,117 @@
+"""The in-process simulated U-CAT as a robot: :class:`SimRobotIO` (``robot.interface``).
+
+Here the plant (``backend.sim``) and the closed loop's per-sample core (``control.loop_core``)
+meet, as the emulators and the plant meet in ``sim_rig.py``: neither imports the other.
+:func:`run_core_on_plant` runs the core with the plant as its robot in one compiled call:
+whenever the core asks for the readings of an event, the plant's physics runs to it and its
+sensors sample into the core's rows, with no Python in between, until the core has
+something for the loop to do (``SimRobotIO.run_core``). The loop's trajectory is the same as
+when it drives the plant through :meth:`SimRobotIO.advance_to`, one event at a time.
+"""
+
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+from ucat_console.backend.sim.params import PlantConfig
+from ucat_console.backend.sim.plant import Plant, sample_plant
+from ucat_console.backend.sim.sensors import S_DVL_ROW, S_IMU_ROW, S_NEXT, S_P_ROW
+from ucat_console.control.loop_core import C_NROWS, C_ROWS_PENDING, C_T_NEXT, C_T_ROBOT, READINGS, LoopCore, core_step
+from ucat_console.robot.interface import RobotIO, RobotTruth
+from ucat_console.robot.readings import Reading
+
+#: what :func:`run_core_on_plant` returns besides the core's own statuses
+NEED_NOISE = -1  # a noise block is used up: new blocks, then call again
+DIVERGED = -2  # the plant's state is no longer finite
+
+
+@njit(cache=True)
+def run_core_on_plant(s, body, watch, members, found, power, rows, outbox, fin_rows, r3,
+                      xv, xf, cmd, mats, pv, ph, signs, servo, steps,
+                      sf, out, imu_noise, p_noise, dvl_noise, _sensor_rows) -> int:
+    """``control.loop_core.core_step`` (its arrays first) with the plant (``Plant.kernel_arrays``,
+    ``SensorSuite.kernel_arrays``) as its robot; what the core returns for the loop, or
+    NEED_NOISE, or DIVERGED. After NEED_NOISE the core goes on where it was."""
+    while True:
+        if s[C_ROWS_PENDING] != 0.0:
+            if (sf[S_IMU_ROW] >= imu_noise.shape[0] or sf[S_P_ROW] >= p_noise.shape[0]
+                    or sf[S_DVL_ROW] >= dvl_noise.shape[0]):
+                return NEED_NOISE
+            n = sample_plant(xv, xf, cmd, mats, pv, ph, signs, servo, steps, s[C_T_NEXT], sf, out, imu_noise,
+                             p_noise, dvl_noise, rows)
+            if n < 0:
+                return DIVERGED
+            s[C_NROWS] = n
+            s[C_ROWS_PENDING] = 0.0
+        s[C_T_ROBOT] = sf[S_NEXT]
+        st = core_step(s, body, watch, members, found, power, rows, outbox, fin_rows, r3)
+        if st != READINGS:
+            return st
+
+
+class SimRobotIO(RobotIO):
+    """The in-process simulated U-CAT (``backend.sim.Plant``), headless or paced.
+
+    The plant starts level at ``depth`` (m) with heading ``yaw`` (rad), surging at
+    ``velocity`` (m/s, body x; 0: at rest), all fins at rest at angle 0; ``seed`` restarts
+    the sensor noise (default: the plant configuration's seed).
+    """
+
+    def __init__(
+        self, cfg: PlantConfig | None = None, *, depth: float = 0.0, yaw: float = 0.0,
+        velocity: float = 0.0, seed: int | None = None,
+    ) -> None:
+        if not math.isfinite(depth) or depth < 0.0:
+            raise ValueError(f"depth: the start depth must be finite and >= 0 m, got {depth!r}")
+        if not math.isfinite(velocity) or abs(velocity) > 5.0:
+            raise ValueError(f"velocity: the start surge must be finite and within 5 m/s, got {velocity!r}")
+        self.plant = Plant(cfg)
+        self.plant.reset(
+            position_ned=(0.0, 0.0, float(depth)), euler=(0.0, 0.0, float(yaw)),
+            body_velocity=(float(velocity), 0.0, 0.0, 0.0, 0.0, 0.0), seed=seed,
+        )
+
+    @property
+    def runs_core(self) -> bool:  # type: ignore[override]
+        """The plant's physics and sensors run with the loop's core in compiled code; not
+        for a subclass that changes the readings (its :meth:`advance_to` is the robot)."""
+        return type(self).advance_to is SimRobotIO.advance_to
+
+    def command_fin(self, fin: int, target_rad: float, profile_velocity_rad_s: float) -> None:
+        self.plant.command_fin(fin, target_rad, profile_velocity_rad_s)
+
+    def run_core(self, core: LoopCore) -> int:
+        plant = self.plant
+        sensors = plant.sensors
+        arrays = core.arrays() + plant.kernel_arrays()
+        while True:
+            st = run_core_on_plant(*arrays, *sensors.kernel_arrays())
+            if st != NEED_NOISE:
+                break
+        plant.synced()
+        if st == DIVERGED:
+            raise plant.diverged()
+        return st
+
+    def next_reading_time(self) -> float:
+        return self.plant.next_sensor_time()
+
+    def advance_to(self, t: float) -> list[Reading]:
+        return self.plant.advance_and_sample(t)
+
+    def truth(self) -> RobotTruth:
+        p = self.plant
+        pos, q = p.pose()
+        return RobotTruth(
+            t=p.time,
+            position=pos,
+            orientation=q,
+            euler=p.euler(),
+            velocity=p.body_velocity(),
+            fin_angles=p.fin_angles(),
+            fin_rates=p.fin_rates(),
+            fin_strouhal=p.fin_strouhal(),
+            fin_energy=p.fin_energy(),
+        )
