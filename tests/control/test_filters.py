@@ -57,3 +57,26 @@ def test_lowpass_bad_input():
     lp.update(0.0, 1.0)
     with pytest.raises(ValueError, match="t"):
         lp.update(0.0, 0.5)
+
+
+def test_the_compiled_median_is_the_reference_on_random_streams():
+    """The median's functions compiled (as the loop's core runs them) against the deque
+    median the loop ran before, for every window from 1 to 9 and odd and even counts."""
+    import numpy as np
+    from numba import njit
+
+    from control.reference_kernels import ReferenceMedian
+    from ucat_console.control.filters import median_clear, median_push, median_size, median_value
+
+    push = njit(lambda b, w, x: median_push(b, 0, w, x))
+    value = njit(lambda b, w: median_value(b, 0, w))
+    rng = np.random.default_rng(7)
+    for window in range(1, 10):
+        buf = np.zeros(median_size(window))
+        median_clear(buf, 0)
+        ref = ReferenceMedian(window)
+        assert math.isnan(value(buf, window)) and ref.value is None
+        for x in rng.normal(0, 1, 60).round(2):  # rounded: ties
+            push(buf, window, float(x))
+            ref.push(float(x))
+            assert value(buf, window) == ref.value

@@ -52,3 +52,27 @@ def test_without_early_every_event_still_ahead_is_waited_for() -> None:
 def test_early_out_of_range_is_refused_by_name(early: float) -> None:
     with pytest.raises(ValueError, match="early"):
         PacedClock(1.0, early=early)
+
+
+def test_the_horizon_is_the_simulated_time_due_within_early_and_lag_is_kept() -> None:
+    """The loop runs every event up to :meth:`horizon` at once: events due within ``early``
+    of wall time from now (``pace`` times faster in simulated time); how far the loop is
+    behind the wall clock when it reports its time counts in ``lag_max``."""
+    import math
+    import time
+
+    from ucat_console.backend.loop.clock import SimulatedClock
+
+    clock = PacedClock(2.0, early=0.05)
+    started = time.perf_counter()
+    clock.start(10.0)  # simulated 10 s is due now
+    before = time.perf_counter()
+    h = clock.horizon(10.0)
+    after = time.perf_counter()
+    # simulated time due at wall time t is (t - wall0) * pace; the horizon is early later
+    assert (before + 0.05 - clock._wall0) * 2.0 <= h <= (after + 0.05 - clock._wall0) * 2.0
+    assert h > 10.0 + 0.1 - 1e-9
+    assert clock.lag_max <= after - started  # at 10 s the loop was on time
+    clock.horizon(9.0)  # a loop still at 9 s is half a second of wall time behind (pace 2)
+    assert clock.lag_max >= 0.5
+    assert SimulatedClock().horizon(3.0) == math.inf

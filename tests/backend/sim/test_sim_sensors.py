@@ -211,3 +211,37 @@ def test_the_compiled_encoders_report_what_robot_servo_quantise_says() -> None:
         fb = [r for r in suite.sample(n * 0.01, xv, theta, omega) if isinstance(r, FinFeedbacks)][0]
         for i in range(4):
             assert (fb.position_rad[i], fb.velocity_rad_s[i]) == quantise(theta[i], omega[i], k, q)
+
+
+def test_the_compiled_pressure_and_dvl_readings_are_the_reference_ones() -> None:
+    """The sensor rows the plant writes in compiled code (``sample_rows``) against the
+    Python readings the simulator made before: the same depth, pressure, velocities,
+    validity and altitude from the same true state and noise rows, over depths that take
+    the DVL out of its range and with dropouts."""
+    from control.reference_kernels import reference_depth, reference_dvl
+    from ucat_console.backend.sim import sensors as S
+    from ucat_console.robot import reading_rows as rr
+
+    cfg = SensorsConfig(dvl=DvlModelConfig(dropout_probability=0.2, bottom_depth=3.0, altitude_max=2.5))
+    suite = SensorSuite(cfg, ServoConfig(), seed=4)
+    rng = np.random.default_rng(2)
+    pc, dc = cfg.pressure, cfg.dvl
+    mask = (1 << S.PRESSURE) | (1 << S.DVL)
+    checked_invalid = 0
+    for k in range(300):
+        xv = initial_state((0.0, 0.0, float(rng.uniform(0.0, 2.9))), body_velocity=tuple(rng.normal(0, 0.3, 6)))
+        _, p_noise, dvl_noise = suite.noise()
+        ip, idv = int(suite.state[S.S_P_ROW]), int(suite.state[S.S_DVL_ROW])
+        n_p, n_dvl = float(p_noise[ip, 0]), tuple(dvl_noise[idv].tolist())
+        n = S.sample_rows(mask, 0.01 * k, xv, suite.state, suite.out, p_noise, dvl_noise, suite.rows, 0)
+        assert n == 2
+        depth, row = float(xv[2]), suite.rows
+        assert (row[0, rr.DEPTH_M], row[0, rr.DEPTH_PA]) == reference_depth(
+            depth, n_p, pc.water_density, pc.span_pa, pc.adc_bits, pc.adc_full_scale_ma)
+        vx, vy, vz, valid, alt = reference_dvl(tuple(xv[7:10].tolist()), depth, n_dvl, dc.dropout_probability,
+                                               dc.bottom_depth, dc.altitude_min, dc.altitude_max)
+        got = row[1, rr.DVL_V:rr.DVL_V + 3].tolist() + [bool(row[1, rr.DVL_VALID]), row[1, rr.DVL_ALTITUDE]]
+        np.testing.assert_array_equal(np.array(got[:3] + got[4:], dtype=float), np.array([vx, vy, vz, alt]))
+        assert got[3] == valid
+        checked_invalid += not valid
+    assert 30 < checked_invalid < 270  # both kinds were compared
