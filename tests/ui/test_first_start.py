@@ -51,10 +51,11 @@ def test_the_page_is_served_while_compiling_and_the_console_takes_over(tmp_path:
     url = wait_for(lambda: next((w for w in capsys.readouterr().out.split() if w.startswith("http://")), None),
                    what="the loading page's address")
     page = RawPage(url)
+    # the page first shows the start, then the preparation's progress
     text = wait_for(lambda: next((str(e.get("_markdown")) for e in page.elements.values()
-                                  if "Starting the console" in str(e.get("_markdown", ""))), None),
+                                  if "step 1 of 2" in str(e.get("_markdown", ""))), None),
                     what="the progress shown")
-    assert "step 1 of 2" in text
+    assert "Starting the console" in text
     assert page.find("Arm motors") is None and page.find("Take control") is None  # nothing to arm yet
     page.update("any", value=True)  # whatever a page sends, there is no input to take it
     slow[0].go.set()

@@ -165,7 +165,7 @@ def _refine_from(mpc: FinMpc, case: FixedCase, u0: np.ndarray) -> float:
 
     problem = K.pack_problem(case.f_target, case.v_body, case.theta0, case.u_prev)
     x = np.array(u0, dtype=float)
-    return K.refine_kernel(mpc._params, problem, mpc._gx, mpc._gy, x, 200, np.zeros((8, 4)), np.zeros((4, 4)))
+    return K.refine_kernel(mpc._params, problem, mpc._gx, mpc._gy, x, 200, np.zeros((8, 4)), np.zeros((1, K.RUN)))
 
 
 def quality_gap(

@@ -33,7 +33,7 @@ Two formulations (``MpcConfig.formulation``):
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -86,9 +86,10 @@ def strouhal_penalty(st: ArrayLike, cfg: MpcConfig) -> NDArray:
     return np.maximum(0.0, cfg.eta_max - eta_hat(st, cfg))
 
 
-@dataclass(frozen=True)
-class CostBreakdown:
-    """J and its unweighted terms for one plan (what the console shows)."""
+class CostBreakdown(NamedTuple):
+    """J and its unweighted terms for one plan (what the console shows). A typed named
+    tuple, not a dataclass: one is built for every solve, and a tuple is built four times
+    faster (a frozen dataclass sets each field through ``object.__setattr__``)."""
 
     total: float
     force: float  # c_force, N (1-norm)

@@ -25,8 +25,7 @@ which times the whole call) the solve is one compiled call and both times are Na
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Callable, Sequence
+from typing import Callable, NamedTuple, Sequence
 
 import numpy as np
 
@@ -42,9 +41,9 @@ MAX_ANGLE = 4.0 * math.pi
 MAX_RATE_PREV = 1000.0
 
 
-@dataclass(frozen=True)
-class Plan:
-    """One planned cycle of one fin."""
+class Plan(NamedTuple):
+    """One planned cycle of one fin (a typed named tuple, like :class:`CostBreakdown`:
+    one is built for every solve)."""
 
     u: tuple[float, float, float, float]  # [d_1, d_2, w_1, w_2]
     cost: CostBreakdown
@@ -118,7 +117,7 @@ class FinMpc:
         self._best_j = np.zeros(cfg.refine_starts)
         self._block = np.zeros((5, K.SAMPLE_BLOCK))
         self._work = np.zeros((8, 4))
-        self._hinv = np.zeros((4, 4))
+        self._runs = np.zeros((cfg.refine_starts + 1, K.RUN))
         self._u = np.zeros(4)
         self._terms = np.zeros(K.N_TERMS)
         self._grad = np.zeros(4)
@@ -126,6 +125,22 @@ class FinMpc:
 
     # ------------------------------------------------------------------ validation
     def _inputs(self, f_target, v_body, theta0, u_prev) -> tuple[tuple, float, float, tuple]:
+        """The planner's inputs as numbers, each finite and in its range; ValueError naming
+        the first that is not (the common case, all good, is checked in one expression)."""
+        try:
+            fx, fy = f_target
+            u0, u1, u2, u3 = u_prev
+            f = (float(fx), float(fy))
+            v, th = float(v_body), float(theta0)
+            up = (float(u0), float(u1), float(u2), float(u3))
+        except (TypeError, ValueError):
+            pass  # the checks below say what is wrong
+        else:
+            t, r = MAX_TARGET_N, MAX_RATE_PREV
+            if (-t <= f[0] <= t and -t <= f[1] <= t and -MAX_SPEED <= v <= MAX_SPEED
+                    and -MAX_ANGLE <= th <= MAX_ANGLE and -r <= up[0] <= r and -r <= up[1] <= r
+                    and -r <= up[2] <= r and -r <= up[3] <= r):
+                return f, v, th, up
         f = _check_vector("f_target", f_target, 2, -MAX_TARGET_N, MAX_TARGET_N)
         v = _check_finite("v_body", v_body, -MAX_SPEED, MAX_SPEED)
         th = _check_finite("theta0", theta0, -MAX_ANGLE, MAX_ANGLE)
@@ -190,7 +205,7 @@ class FinMpc:
         if clock is None:
             self._plan_kernel(
                 self._params, problem, self._gx, self._gy, cfg.n_samples, max_iter, self._rng,
-                self._best_u, self._best_j, self._block, self._work, self._hinv, self._u, self._terms,
+                self._best_u, self._best_j, self._block, self._work, self._runs, self._u, self._terms,
             )
             t_sample = t_refine = math.nan
         else:
@@ -199,7 +214,7 @@ class FinMpc:
                             self._best_u, self._best_j, self._block, self._u)
             t1 = clock()
             self._finish_kernel(self._params, problem, self._gx, self._gy, max_iter, self._best_u,
-                            self._best_j, self._work, self._hinv, self._u, self._terms)
+                            self._best_j, self._work, self._runs, self._u, self._terms)
             t_sample, t_refine = t1 - t0, clock() - t1
         u = self._u.tolist()
         if not all(map(math.isfinite, u)) or not math.isfinite(self._terms[K.T_TOTAL]):

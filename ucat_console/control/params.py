@@ -44,6 +44,11 @@ class MpcConfig(Config):
     refine_starts: int = param(
         6, lo=1, hi=64, doc="best samples refined by the production solver (the paper refines 1)"
     )
+    refine_screen: int = param(
+        4, lo=0, hi=10_000,
+        doc="iterations every refined sample gets before the refine_keep best go on to max_iter",
+    )
+    refine_keep: int = param(2, lo=1, hi=64, doc="refined samples that go on to max_iter")
     solver: str = param("numba", choices=("numba", "scipy"), doc="stage-2 implementation")
     force_model: str = param("analytic", choices=("analytic", "table"), doc="fin force model")
     table_path: str | None = param(None, doc="force table file (.npz); None: built from the model")

@@ -1,4 +1,4 @@
-"""The closed loop's trajectory is the one recorded before its per-sample path was compiled.
+"""The closed loop's trajectory is the recorded one (``trajectory.py`` says when it was).
 
 The fixtures (``fixtures/trajectory_<mode>.npz``, written by ``trajectory.py``) hold every
 message of a 12-s run in each mode with a mode switch half way. The run now must give the

@@ -2,9 +2,13 @@
 equivalence test (``test_trajectory_fixture.py``).
 
 ``python tests/backend/loop/trajectory.py`` writes ``fixtures/trajectory_<mode>.npz`` from
-the code as it stands; the fixtures kept in the repository were written by the closed loop
-before its per-sample path was compiled, so the test holds the new path to the old
-trajectory.
+the code as it stands. The fixtures kept in the repository hold the loop to the trajectory
+of the code before a change that must not move it: they were written before the loop's
+per-sample path was compiled (the kernels, then the whole per-sample core), which left the
+trajectory as it was, and written again when the MPC's refinement changed (its line search
+and the refinement of the best samples only), which changes the plans by design: then the
+baseline scenario's first six seconds, before it switches to the MPC, stayed the same to
+1e-12.
 
 Each scenario starts the simulated U-CAT at 1 m depth surging at 0.2 m/s with the
 configuration of ``config/sim-tuned.toml``, runs one mode with a velocity, depth and yaw
