@@ -93,3 +93,50 @@ def test_span_pins_keep_a_minimum_axis_span_around_the_data() -> None:
     assert np.allclose(hi - lo, 0.2) and lo[0] < 0.999 and hi[0] > 1.002
     lo, hi = span_pins(np.array([np.nan, np.nan]), np.array([np.nan, np.nan]), span=0.1)
     assert np.allclose(hi - lo, 0.1)
+
+
+def test_a_page_receives_the_plots_and_the_pose_the_view_sends() -> None:
+    """The live view's plots and robot pose, set without viser's casts (``ui.fast_props``),
+    reach a page (a raw websocket client) as the values the view computed."""
+    import viser
+
+    from support import wait_for
+    from ucat_console.bench.raw_page import RawPage
+    from ucat_console.robot.geometry import Geometry
+    from ucat_console.telemetry.messages import BodyState, Setpoints
+    from ucat_console.ui.view import StreamView
+
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        view = StreamView(server.scene, server.gui, Geometry(), plot_rate=10.0, scene_rate=40.0, max_plot_points=200,
+                          history=lambda: 10.0, max_history=30.0, corridor=lambda: (0.25, 0.35), trail_points=50,
+                          trail_spacing=0.05)
+        view.show()
+        page = RawPage(f"http://127.0.0.1:{server.get_port()}")
+        for k in range(5):
+            t = 0.1 * k
+            view.feeder.on_message(ch.BODY_STATE, BodyState(t, (0.1 * k, 0.0, 1.0 + 0.01 * k), (1.0, 0.0, 0.0, 0.0),
+                                                            (0.2, 0.0, 0.0), (0.0, 0.0, 0.05), 1.0 + 0.01 * k))
+            view.feeder.on_message(ch.SETPOINTS, Setpoints(t, 0.2, 1.2, 0.0))
+            view.feeder.sample()
+        view.refresh_plots()
+        view.on_message(ch.BODY_STATE, BodyState(0.4, (0.4, -0.1, 1.04), (0.9, 0.1, 0.0, 0.4243),
+                                                 (0.2, 0.0, 0.0), (0.0, 0.0, 0.05), 1.04))
+        view.tick_scene()
+        depth_uuid = view.plots.depth._impl.uuid
+        data = wait_for(lambda: (d := page.elements.get(depth_uuid, {}).get("data")) is not None and len(d[0]) == 5
+                        and d, what="the depth plot's five rows")
+        t, depth, target = (np.asarray(a) for a in data[:3])
+        np.testing.assert_allclose(t, [0.0, 0.1, 0.2, 0.3, 0.4])
+        np.testing.assert_allclose(depth, [1.0, 1.01, 1.02, 1.03, 1.04])
+        np.testing.assert_allclose(target, 1.2)
+        assert t.dtype == np.float64
+        node = wait_for(lambda: page.nodes.get("/ned/ucat") if "wxyz" in page.nodes.get("/ned/ucat", {}) else None,
+                        what="the robot's pose")
+        assert node["position"] == (0.4, -0.1, 1.04)
+        assert node["wxyz"] == (0.9, 0.1, 0.0, 0.4243)
+        np.testing.assert_array_equal(view.scene.body.position, (0.4, -0.1, 1.04))  # the handle holds it too
+        assert view.tick_errors == 0
+        page.close()
+    finally:
+        server.stop()

@@ -13,6 +13,11 @@ the failsafes need the readings), so the gate sits between it and the robot:
   it) and reported through ``on_invalid(sensor, description)``; the failsafes then see
   the sensor as silent.
 
+A robot that runs the loop's core itself (the simulator, ``RobotIO.run_core``) runs it
+through the gate too: its readings never leave compiled code, and they cannot be
+non-finite (they are sampled from a state its physics keep finite: a diverging state is an
+error of the robot), so the gate's part there is the commands and the stop set-points.
+
 :meth:`ArmingGate.disarm` may be called from any thread and stops commands at once; the
 stop set-points go out from the loop's thread (the next command or
 :meth:`ArmingGate.flush`), because the robot is driven by that thread only.
@@ -23,7 +28,7 @@ from __future__ import annotations
 import logging
 import math
 import threading
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 
@@ -123,6 +128,17 @@ class ArmingGate(RobotIO):
     @property
     def has_drives(self) -> bool:  # type: ignore[override]
         return self.inner.has_drives
+
+    @property
+    def runs_core(self) -> bool:  # type: ignore[override]
+        return self.inner.runs_core
+
+    def run_core(self, core: Any) -> int:
+        if self._stop_pending:
+            self.flush()
+        st = self.inner.run_core(core)
+        self.measured = core.fin_angles()
+        return st
 
     def enable_drives(self) -> bool:
         return self.inner.enable_drives()

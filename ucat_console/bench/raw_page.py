@@ -19,6 +19,7 @@ import time
 from typing import Any
 
 import msgspec.msgpack
+import numpy as np
 import viser
 import websockets.sync.client
 import zstandard
@@ -31,11 +32,28 @@ CAMERA = {
 
 
 def decode_batch(frame: bytes) -> list[dict[str, Any]]:
-    """The messages of one server frame (binary arrays left as placeholders)."""
+    """The messages of one server frame, with their arrays (the binary buffers that follow
+    the compressed messages, each 8-byte aligned) as numpy arrays."""
     n = int.from_bytes(frame[0:8], "little")
     c = int.from_bytes(frame[8:16], "little")
-    inner = zstandard.ZstdDecompressor().decompress(frame[16:16 + c], max_output_size=n)
-    return list(msgspec.msgpack.decode(inner)["messages"])
+    inner = msgspec.msgpack.decode(
+        zstandard.ZstdDecompressor().decompress(frame[16:16 + c], max_output_size=n))
+    buffers, offset = [], 16 + c
+    for length in inner.get("binaryBufferLengths", ()):
+        offset += (8 - offset % 8) % 8
+        buffers.append(frame[offset:offset + length])
+        offset += length
+    return [_with_arrays(m, buffers) for m in inner["messages"]]
+
+
+def _with_arrays(v: Any, buffers: list[bytes]) -> Any:
+    if isinstance(v, dict):
+        if "__binary_index" in v and "dtype" in v:
+            return np.frombuffer(buffers[v["__binary_index"]], dtype=np.dtype(v["dtype"]))
+        return {k: _with_arrays(x, buffers) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_with_arrays(x, buffers) for x in v]
+    return v
 
 
 class RawPage:
@@ -57,6 +75,7 @@ class RawPage:
         self._lock = threading.Lock()
         self.elements: dict[str, dict[str, Any]] = {}  # uuid -> {"type", **props}
         self.notifications: list[str] = []
+        self.nodes: dict[str, dict[str, Any]] = {}  # scene node name -> its last pose and properties
         self.heartbeats = 0
         self.closed = False
         self._reading = threading.Event()
@@ -101,6 +120,12 @@ class RawPage:
                     el.update(m["updates"])
             elif tp == "GuiRemoveMessage":
                 self.elements.pop(m["uuid"], None)
+            elif tp == "SetPositionMessage":
+                self.nodes.setdefault(m["name"], {})["position"] = tuple(m["position"])
+            elif tp == "SetOrientationMessage":
+                self.nodes.setdefault(m["name"], {})["wxyz"] = tuple(m["wxyz"])
+            elif tp == "SceneNodeUpdateMessage":
+                self.nodes.setdefault(m["name"], {}).update(m["updates"])
             elif tp == "NotificationShowMessage":
                 self.notifications.append(str(m.get("props", {}).get("body", "")))
             elif tp.startswith("Gui") and "uuid" in m and isinstance(m.get("props"), dict):

@@ -539,6 +539,10 @@ class LoopCore:
         return core_step(self.s, self.body, self.watch, self.members, self.found, self.power, self.rows,
                          self.out, self.fin_rows, self.r3)
 
+    def fin_angles(self) -> list[float]:
+        """Each fin's last encoder angle (robot order; NaN: none yet)."""
+        return self.s[C_FB_ANGLE:C_FB_ANGLE + N_FINS].tolist()
+
     def arrays(self) -> tuple[np.ndarray, ...]:
         """The arrays :func:`core_step` takes, in its order (for a robot running the core)."""
         return (self.s, self.body, self.watch, self.members, self.found, self.power, self.rows, self.out,

@@ -55,6 +55,7 @@ from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.messages import FinPlan
 from ucat_console.ui import markdown, page_script, panels
+from ucat_console.ui.fast_props import set_prop
 from ucat_console.ui.guard import PageGuard
 from ucat_console.ui.playback import PlaybackPanel
 from ucat_console.ui.scene import add_pool
@@ -346,8 +347,8 @@ class ConsoleApp:
     def _probe(self) -> None:
         body, probe = self.view.body, self.probe
         if probe is not None and body is not None:
-            probe.content = (f'<span id="ucat-probe" data-seq="{self.view.body_seq}" '
-                             f'data-wall="{self.view.body_wall * 1e3:.1f}" data-t="{body.t:.3f}"></span>')
+            set_prop(probe, "content", f'<span id="ucat-probe" data-seq="{self.view.body_seq}" '
+                                       f'data-wall="{self.view.body_wall * 1e3:.1f}" data-t="{body.t:.3f}"></span>')
 
     def _tick(self) -> None:
         if self._dirty.is_set():

@@ -31,6 +31,7 @@ import numpy as np
 
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.messages import BodyState, FinPlan, Power, Setpoints, Status
+from ucat_console.ui.fast_props import set_prop
 
 N_FINS = ch.N_FINS
 #: below this forward speed (m/s) no Strouhal number is shown
@@ -275,16 +276,18 @@ class LivePlots:
             return
         for j in range(1, r.shape[1]):
             r[:, j] = filled(r[:, j])
-        t = r[:, 0]
+        col = np.ascontiguousarray(r.T)  # each series one contiguous array, as the page takes it
+        t = col[0]
         lo, hi = self.corridor()
         c = COL
-        armed, speed = r[:, c["armed"]], r[:, c["velocity"]]
-        shown = [st_shown(r[:, c[f"st{i}"]], armed, speed) for i in range(N_FINS)]
+        armed, speed = col[c["armed"]], col[c["velocity"]]
+        shown = [st_shown(col[c[f"st{i}"]], armed, speed) for i in range(N_FINS)]
         above = np.max([a for _, a in shown], axis=0) if len(t) else np.zeros(0)
-        self.st.data = (t, np.full_like(t, hi), np.full_like(t, lo), *(v for v, _ in shown), above)
+        # new float64 arrays each time: set without viser's casts and comparisons (ui.fast_props)
+        set_prop(self.st, "data", (t, np.full_like(t, hi), np.full_like(t, lo), *(v for v, _ in shown), above))
         for chart, name in ((self.depth, "depth"), (self.velocity, "velocity"), (self.yaw_rate, "yaw_rate")):
-            value, target = r[:, c[name]], r[:, c[f"{name}_sp"]]
-            chart.data = (t, value, target, *span_pins(value, target, span=MIN_SPAN[name]))
-        self.power.data = (t, *(r[:, c[f"p{i}"]] for i in range(N_FINS)), r[:, c["p_total"]], r[:, c["p_mean"]],
-                           r[:, c["energy_per_metre"]])
+            value, target = col[c[name]], col[c[f"{name}_sp"]]
+            set_prop(chart, "data", (t, value, target, *span_pins(value, target, span=MIN_SPAN[name])))
+        set_prop(self.power, "data", (t, *(col[c[f"p{i}"]] for i in range(N_FINS)), col[c["p_total"]],
+                                      col[c["p_mean"]], col[c["energy_per_metre"]]))
         self.updates += 1

@@ -228,11 +228,15 @@ class StreamView:
             try:
                 # one batch: the pages' server is woken once for all of this pass's messages
                 with self._atomic():
-                    if self.body_seq != last_seq and now >= next_scene:
+                    posed = self.body_seq != last_seq and now >= next_scene
+                    if posed:
                         last_seq = self.body_seq
                         next_scene = max(next_scene + scene_period, now - scene_period)
                         self.tick_scene()
-                    if now >= next_plot:
+                    # plots and slow work due before the next pose go with this one (one
+                    # batch for the pages' server to send instead of two)
+                    early = scene_period if posed else 0.0
+                    if now >= next_plot - early:
                         next_plot = max(next_plot + plot_period, now - plot_period)
                         if self.sample_rows:
                             if self.feeder.sample():
@@ -240,7 +244,7 @@ class StreamView:
                         elif self.sampler.rows != last_rows:
                             last_rows = self.sampler.rows
                             self.refresh_plots()
-                    if now >= next_slow:
+                    if now >= next_slow - early:
                         next_slow = now + SLOW_PERIOD
                         self.tick_slow()
                     if self.on_tick is not None:
@@ -250,10 +254,12 @@ class StreamView:
                 log.exception("%s update failed", self.name)
             # wake when something is due, not to poll (each wake-up costs CPU): before the
             # next pose may go, at that time, whether a body state came meanwhile or not;
-            # after it, at the body state's arrival; and for the plots and the slow work
+            # after it, at the body state's arrival; for the plots and the slow work a
+            # pose's time later (a pose pass takes them before then while poses come)
             now = time.perf_counter()
+            later = min(next_plot, next_slow) + scene_period
             if now < next_scene or self.body_seq != last_seq:
-                wake, event = min(next_scene, next_plot, next_slow), self._stop
+                wake, event = min(next_scene, later), self._stop
             else:
-                wake, event = min(next_plot, next_slow), self._wake
+                wake, event = later, self._wake
             event.wait(min(max(wake - now, 0.001), _TICK))

@@ -21,6 +21,8 @@ import math
 import re
 from typing import Any, Callable
 
+import msgspec
+
 from ucat_console.backend.sessions.schema import (
     BOOL,
     FLOAT,
@@ -137,9 +139,22 @@ def _encoder(cls: type) -> Callable[[Any], dict[str, Any]]:
     return _make_encoder(cls)
 
 
+_JSON = msgspec.json.Encoder()
+
+
+def compact_json(obj: Any) -> bytes:
+    """``obj`` (dicts, lists, strings, numbers) as compact JSON bytes, by msgspec: seven
+    times faster than the standard library's encoder, which the recorder would spend most of
+    its time in (a thousand messages a second at the pool). The numbers must be finite:
+    msgspec writes a non-finite one as null, and every caller has taken them out already
+    (the codec names them in the message's ``nonfinite`` field; a derived Foxglove message is
+    not made from a non-finite value)."""
+    return _JSON.encode(obj)
+
+
 def encode(msg: Any) -> bytes:
     """A message dataclass -> compact JSON bytes (ValueError naming a bad field)."""
-    return json.dumps(_encoder(type(msg))(msg), separators=(",", ":"), allow_nan=False).encode()
+    return compact_json(_encoder(type(msg))(msg))
 
 
 # ---------------------------------------------------------------------- decoding

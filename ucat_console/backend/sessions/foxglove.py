@@ -36,6 +36,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, Sequence
 
+from ucat_console.backend.sessions.codec import compact_json
 from ucat_console.telemetry.channels import BODY_STATE, EVENTS, N_FINS, fin_state
 from ucat_console.telemetry.events import LEVELS, Event
 from ucat_console.telemetry.messages import BodyState, FinState
@@ -179,8 +180,7 @@ def schema_bytes(schema: dict[str, Any]) -> bytes:
     return json.dumps(schema, indent=1).encode()
 
 
-def encode(obj: dict[str, Any]) -> bytes:
-    return json.dumps(obj, separators=(",", ":"), allow_nan=False).encode()
+encode = compact_json
 
 
 # ---------------------------------------------------------------------- messages
