@@ -99,7 +99,11 @@ def _optional(values: list[float]) -> tuple[float, ...] | None:
 
 def from_row(row: np.ndarray) -> Reading:
     """The reading that ``row`` stands for."""
-    v = row.tolist()
+    return reading_of(row.tolist())
+
+
+def reading_of(v: list[float]) -> Reading:
+    """The reading that the numbers of a row (``row.tolist()``) stand for."""
     kind, t = v[KIND], v[T]
     if kind == IMU:
         return ImuReading(t, (v[IMU_ACCEL], v[IMU_ACCEL + 1], v[IMU_ACCEL + 2]),
@@ -112,7 +116,7 @@ def from_row(row: np.ndarray) -> Reading:
         return DvlVelocity(t=t, vx=v[DVL_V], vy=v[DVL_V + 1], vz=v[DVL_V + 2], valid=v[DVL_VALID] != 0.0,
                            altitude=v[DVL_ALTITUDE], fom=v[DVL_FOM])
     if kind == FINS:
-        fb = row[FINS_ANGLE:FINS_RATE + N_FINS].copy()
+        fb = np.array(v[FINS_ANGLE:FINS_RATE + N_FINS])
         fb.flags.writeable = False
         return FinFeedbacks(t, fb[:N_FINS], fb[N_FINS:])
     if kind == FIN:

@@ -774,22 +774,20 @@ class ClosedLoop:
     def _publish_outbox(self) -> None:
         """The core's telemetry rows as messages, in the order it kept them."""
         s = self._s
-        out = self._core.out
         n = int(s[lc.C_OUT_N])
         s[lc.C_OUT_N] = 0.0
+        rows = self._core.out[:n].tolist()
         stream = self.stream
-        for k in range(n):
-            o = out[k]
-            kind = o[lc.O_KIND]
+        for v in rows:
+            kind = v[lc.O_KIND]
             if kind == lc.O_STATE:
-                self._publish_state(o.tolist())
+                self._publish_state(v)
             elif kind == lc.O_POWER:
-                self._publish_power(o.tolist())
+                self._publish_power(v)
             elif kind == lc.O_BODY_COMMAND:
-                v = o[:lc.O_V + 3].tolist()
                 stream.publish(ch.BODY_COMMAND, BodyCommand(v[lc.O_T], v[lc.O_V], v[lc.O_V + 1], v[lc.O_V + 2]))
             else:
-                r = rr.from_row(o[:rr.ROW])
+                r = rr.reading_of(v)
                 stream.publish(_READING_CHANNEL[type(r)], r)
 
     def _publish_state(self, v: list[float]) -> None:

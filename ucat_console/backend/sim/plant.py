@@ -146,7 +146,7 @@ def advance_steps(
             xf_out[i, F_THRUST_FACTOR] = scale
             add_fin_wrench(fx, fy, signs[i, 0], signs[i, 1], signs[i, 2], ph, tau)
         # 3. hull
-        vehicle_step(xv_out, tau, mrb, ma, minv, pv, dt, r, work)
+        vehicle_step(xv_out, tau, mrb, ma, minv, pv, dt, r, nuc, work)
     total = 0.0
     for j in range(xv_out.shape[0]):
         total += xv_out[j]

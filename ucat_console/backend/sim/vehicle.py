@@ -31,7 +31,7 @@ import numpy as np
 from numba import njit
 
 from ucat_console.backend.sim.params import VehicleConfig
-from ucat_console.robot.rotations import quat_mul, quat_to_rot, skew
+from ucat_console.robot.rotations import quat_mul, skew
 from ucat_console.robot.units import GRAVITY
 
 # state layout
@@ -148,16 +148,16 @@ def body_acceleration(
     minv: np.ndarray,
     pv: np.ndarray,
     r: np.ndarray,
+    nuc: np.ndarray,
     work: np.ndarray,
     out: np.ndarray,
 ) -> None:
-    """nu_dot (6) for state ``xv`` under the fin wrench ``tau_fins``; ``r`` must hold R(q)."""
+    """nu_dot (6) for state ``xv`` under the fin wrench ``tau_fins``; ``r`` must hold R(q)
+    and ``nuc`` the current in the body frame (:func:`body_current`)."""
     nu = xv[NU : NU + 6]
     f = work[0:6]  # total generalised force
     nur = work[6:12]
     p = work[12:18]
-    nuc = work[18:21]
-    body_current(r, pv, nuc)
     for i in range(6):
         nur[i] = nu[i]
     for i in range(3):
@@ -210,16 +210,16 @@ def vehicle_step(
     pv: np.ndarray,
     dt: float,
     r: np.ndarray,
+    nuc: np.ndarray,
     work: np.ndarray,
 ) -> None:
     """Advance ``xv`` in place by one step ``dt`` (semi-implicit Euler, exact quaternion update).
 
-    ``r`` (3x3) and ``work`` (``NWORK``) are scratch buffers; on return ``r`` holds R(q) of the
-    state at the start of the step.
+    ``r`` must hold R(q) of the state and ``nuc`` its body-frame current (:func:`body_current`),
+    as the caller has them for the fin forces; ``work`` (``NWORK``) is scratch.
     """
-    quat_to_rot(xv[QUAT : QUAT + 4], r)
     acc = xv[NU_DOT : NU_DOT + 6]
-    body_acceleration(xv, tau_fins, mrb, ma, minv, pv, r, work, acc)
+    body_acceleration(xv, tau_fins, mrb, ma, minv, pv, r, nuc, work, acc)
     for i in range(6):
         xv[NU + i] += acc[i] * dt
     u, v, w = xv[NU], xv[NU + 1], xv[NU + 2]
