@@ -205,7 +205,11 @@ def run(args: argparse.Namespace) -> int:
     print(f"seek: {seek['hours']} h, {seek['messages']:,} messages, {seek['chunks']} chunks, "
           f"{seek['bytes'] / 1e6:.1f} MB; open {seek['open_s'] * 1e3:.0f} ms; state_at median "
           f"{seek['median_ms']:.1f} ms, p95 {seek['p95_ms']:.1f} ms, max {seek['max_ms']:.1f} ms")
+    from ucat_console.bench.machine import machine_info, speed_line
+
+    machine = machine_info(None)
+    print(speed_line(machine))
     if args.json:
-        args.json.write_text(json.dumps({"throughput": thr, "seek": seek}, indent=2))
+        args.json.write_text(json.dumps({"throughput": thr, "seek": seek, "machine": machine}, indent=2))
         print(f"wrote {args.json}")
     return 0

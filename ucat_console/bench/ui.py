@@ -287,8 +287,12 @@ def run_ui(args: argparse.Namespace) -> int:
         raise ValueError(f"--json: directory {args.json.parent} does not exist")
     if not Path(args.chromium).exists():
         raise ValueError(f"--chromium: {args.chromium} not found")
+    from ucat_console.bench.machine import machine_info, speed_line
+
     r = measure_ui(duration=args.duration, pages=args.pages, warmup=args.warmup, chromium=args.chromium)
+    r["machine"] = machine_info(None)
     print(format_result(r))
+    print(speed_line(r["machine"]))
     if args.json is not None:
         args.json.write_text(json.dumps(r, indent=2))
         print(f"wrote {args.json}")

@@ -82,7 +82,7 @@ def run_mpc(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from ucat_console.bench import mpc as B
-    from ucat_console.bench.machine import machine_info, pin_to_one_core
+    from ucat_console.bench.machine import machine_info, pin_to_one_core, speed_line
     from ucat_console.control import FinMpc, MpcConfig
 
     ns = args.n or list(B.PAPER_NS)
@@ -126,6 +126,8 @@ def run_mpc(args: argparse.Namespace) -> int:
         )
 
     print(B.format_table(runs))
+    machine = machine_info(cpu)
+    print(speed_line(machine))
     if first_call:
         print(f"\nfirst plan in a fresh process: {first_call['cached_first_plan_s'] * 1e3:.0f} ms "
               f"with the compiled cache, {first_call['cold_first_plan_s']:.1f} s cold (compiling)")
@@ -135,7 +137,7 @@ def run_mpc(args: argparse.Namespace) -> int:
             print(f"  {name:>12}: mean {g['mean_gap']:.4f}  p90 {g['p90_gap']:.4f}  "
                   f"max {g['max_gap']:.4f}")
     if args.json:
-        doc = {"runs": runs, "machine": machine_info(cpu), "first_call": first_call,
+        doc = {"runs": runs, "machine": machine, "first_call": first_call,
                "quality_gap": gap, "protocol": {"v_body": B.V_BODY, "cycles": B.CYCLES,
                                                 "targets": 121, "u_prev0": B.U_PREV0,
                                                 "seeds": args.seeds}}
@@ -146,7 +148,7 @@ def run_mpc(args: argparse.Namespace) -> int:
 
 def run_sim(args: argparse.Namespace) -> int:
     from ucat_console.bench.sim import TELEMETRY, measure_realtime_factor
-    from ucat_console.bench.machine import machine_info, pin_to_one_core
+    from ucat_console.bench.machine import machine_info, pin_to_one_core, speed_line
 
     if not 0.0 < args.seconds <= 3600.0:
         raise ValueError(f"--seconds: {args.seconds} must be in (0, 3600]")
@@ -162,8 +164,10 @@ def run_sim(args: argparse.Namespace) -> int:
             print(f"closed loop, {mode:>8}, {telemetry:>10}: {median:,.0f}x real time (median of "
                   f"{len(per_chunk)} chunks, {min(per_chunk):,.0f}-{max(per_chunk):,.0f}x; one core, "
                   f"1 kHz physics)", flush=True)
+    machine = machine_info(cpu)
+    print(speed_line(machine))
     if args.json:
         args.json.write_text(json.dumps({"realtime_factor": factors, "chunks": chunks,
-                                         "seconds": args.seconds, "machine": machine_info(cpu)}, indent=2))
+                                         "seconds": args.seconds, "machine": machine}, indent=2))
         print(f"wrote {args.json}")
     return 0

@@ -38,7 +38,7 @@ import numpy as np
 from numba.extending import register_jitable
 
 from ucat_console.control.argcheck import finite, in_range
-from ucat_console.control.filters import MED_RING, MedianFilter, median_clear, median_push, median_size, median_value
+from ucat_console.control.filters import MedianFilter, median_clear, median_push, median_size, median_value
 from ucat_console.control.params import BodyConfig
 from ucat_console.control.pid import EARLIER, NPID, Pid, pid_reset, pid_step
 from ucat_console.robot.readings import DepthReading, DvlVelocity, ImuReading
@@ -182,20 +182,13 @@ def body_size(window: int) -> int:
     return B_FILTERS + 2 * median_size(window)
 
 
-def _filter_base(b: np.ndarray, k: int) -> tuple[int, int]:
-    w = int(b[B_WINDOW])
-    return B_FILTERS + k * median_size(w), w
-
-
 @register_jitable
 def body_reset(b: np.ndarray) -> None:
     """Forget every reading and output (the gains stay)."""
     for k in range(3):
         pid_reset(b[B_PIDS + k * NPID:B_PIDS + (k + 1) * NPID])
-    w = int(b[B_WINDOW])
-    size = MED_RING + 2 * w
     median_clear(b, B_FILTERS)
-    median_clear(b, B_FILTERS + size)
+    median_clear(b, B_FILTERS + median_size(int(b[B_WINDOW])))
     b[B_DVL_MISSING] = 0.0
     b[B_LAST_DVL_T] = math.nan
     b[B_LAST_DEPTH_T] = math.nan
@@ -234,7 +227,7 @@ def body_on_depth(b: np.ndarray, z: float, t: float) -> int:
     if not math.isfinite(t):
         return BAD_DEPTH_T
     w = int(b[B_WINDOW])
-    median_push(b, B_FILTERS + MED_RING + 2 * w, w, z)
+    median_push(b, B_FILTERS + median_size(w), w, z)
     b[B_LAST_DEPTH_T] = t
     b[B_NEW_Z] = 1.0
     return BODY_OK
@@ -267,7 +260,7 @@ def body_update(b: np.ndarray, t: float, sp_v: float, sp_z: float, sp_r: float) 
         return BAD_T, math.nan, math.nan
     w = int(b[B_WINDOW])
     v = median_value(b, B_FILTERS, w)
-    z = median_value(b, B_FILTERS + MED_RING + 2 * w, w)
+    z = median_value(b, B_FILTERS + median_size(w), w)
     r = b[B_YAW_RATE]
     status = BODY_OK
     if b[B_NEW_V] != 0.0 and not math.isnan(v):
@@ -320,8 +313,8 @@ class BodyController:
         self.velocity_pid = Pid(cfg.velocity, self.state[B_PIDS:B_PIDS + NPID])
         self.depth_pid = Pid(cfg.depth, self.state[B_PIDS + NPID:B_PIDS + 2 * NPID])
         self.yaw_pid = Pid(cfg.yaw_rate, self.state[B_PIDS + 2 * NPID:B_PIDS + 3 * NPID])
-        self.velocity_filter = MedianFilter(w, self.state, _filter_base(self.state, 0)[0])
-        self.depth_filter = MedianFilter(w, self.state, _filter_base(self.state, 1)[0])
+        self.velocity_filter = MedianFilter(w, self.state, B_FILTERS)
+        self.depth_filter = MedianFilter(w, self.state, B_FILTERS + median_size(w))
         self.reset()
 
     def reset(self) -> None:

@@ -17,6 +17,7 @@ MED_NEXT = 1
 MED_RING = 2
 
 
+@register_jitable
 def median_size(window: int) -> int:
     """Numbers a median filter of ``window`` samples takes (:func:`median_push`)."""
     return MED_RING + 2 * window

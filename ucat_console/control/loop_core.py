@@ -137,15 +137,14 @@ F_STOP = 4096  # stop at the next event's start
 # ticks (C_DUE)
 DUE_CONTROL, DUE_STATE, DUE_POWER, DUE_STATUS, DUE_DELIVER = 1, 2, 4, 8, 16
 
-# phases
-PH_IDLE = 0.0  # before an event
-PH_SAMPLED = 1.0  # the readings of C_T_NEXT are in
-PH_READINGS = 2.0
-PH_HANDOVER = 3.0
-PH_CONTROL = 4.0
-PH_STATE = 5.0
-PH_POWER = 6.0
-PH_STATUS = 7.0
+# phases: how far the event is (the step goes on with what comes next)
+PH_IDLE = 0.0  # between events
+PH_SAMPLED = 1.0  # the readings of C_T_NEXT are asked for (or in): plan hand-overs next
+PH_READINGS = 2.0  # the readings are being taken
+PH_HANDOVER = 3.0  # the readings are taken and the hand-over checked: the control tick next
+PH_CONTROL = 4.0  # the control tick is done: the state tick next
+PH_STATE = 5.0  # the state tick is done: the power tick next
+PH_POWER = 6.0  # the power tick is done: the status tick next
 PH_FINAL_WAIT = 8.0  # the readings up to C_T_END are asked for
 PH_FINAL = 9.0  # they are in: take them, then the run is over
 

@@ -231,7 +231,7 @@ class ClosedLoop:
         self._s = self._core.s
         self._attitude = AttitudeEstimator()
         self._ekf = cfg.attitude != "imu"
-        self._fed: list[Reading] = []  # the readings of the event, as the robot gave them (None: rows)
+        self._fed: list[Reading] = []  # the event's readings as objects (a robot running the core gives rows)
         self._wanted_key: frozenset[str] | None = None
         self._wanted_flags = 0
         lc.set_targets(self._s, 0.0, 0.0, 0.0, self._sync)
