@@ -43,16 +43,16 @@ def decode_batch(frame: bytes) -> list[dict[str, Any]]:
         offset += (8 - offset % 8) % 8
         buffers.append(frame[offset:offset + length])
         offset += length
-    return [_with_arrays(m, buffers) for m in inner["messages"]]
+    return [with_arrays(m, buffers) for m in inner["messages"]]
 
 
-def _with_arrays(v: Any, buffers: list[bytes]) -> Any:
+def with_arrays(v: Any, buffers: list[bytes]) -> Any:
     if isinstance(v, dict):
         if "__binary_index" in v and "dtype" in v:
             return np.frombuffer(buffers[v["__binary_index"]], dtype=np.dtype(v["dtype"]))
-        return {k: _with_arrays(x, buffers) for k, x in v.items()}
+        return {k: with_arrays(x, buffers) for k, x in v.items()}
     if isinstance(v, (list, tuple)):
-        return [_with_arrays(x, buffers) for x in v]
+        return [with_arrays(x, buffers) for x in v]
     return v
 
 

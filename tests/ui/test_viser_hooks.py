@@ -1,0 +1,163 @@
+"""The wire form viser's senders share between pages (:mod:`ucat_console.ui.viser_hooks`):
+every page still receives exactly the messages and arrays the server sent, wherever a
+message's arrays fall in a page's batch, and a scene file is still written right."""
+
+from __future__ import annotations
+
+from typing import Any, Iterator
+
+import threading
+import types
+
+import msgspec.msgpack
+import numpy as np
+import pytest
+import viser
+import viser._messages as vm
+import viser.infra._infra as vinfra
+import zstandard
+from support import wait_for
+
+from ucat_console.bench.raw_page import RawPage, with_arrays
+from ucat_console.ui import viser_hooks
+
+
+def _cloud(name: str, n: int, seed: int) -> vm.PointCloudMessage:
+    rng = np.random.default_rng(seed)
+    return vm.PointCloudMessage(name, vm.PointCloudProps(
+        points=rng.normal(size=(n, 3)).astype(np.float32),
+        colors=rng.integers(0, 255, size=(n, 3), dtype=np.uint8),
+        point_size=0.01, point_shape="square", precision="float32", scale=1.0, point_shading="flat"))
+
+
+def test_the_kept_wire_form_equals_viser_s_own_at_every_position_in_a_batch() -> None:
+    viser_hooks.install()
+    real = vm.PointCloudMessage.as_serializable_dict.__wrapped__
+    msg = _cloud("/c", 50, 1)
+    for ahead in (0, 3, 0, 7, 3):  # arrays already in the batch before this message's
+        filler = [memoryview(bytes([i])) for i in range(ahead)]
+        shared_buffers, own_buffers = list(filler), list(filler)
+        shared = msg.as_serializable_dict(shared_buffers)
+        own = real(msg, own_buffers)
+        assert shared == own
+        assert [bytes(b) for b in shared_buffers] == [bytes(b) for b in own_buffers]
+        assert len(own_buffers) == ahead + 2  # the points and the colours
+    # arrays inline (no buffer list): viser's own form, not the batch's
+    inline = msg.as_serializable_dict()
+    assert bytes(inline["props"]["points"]) == msg.props.points.tobytes()
+
+
+def test_a_scene_file_s_merging_of_equal_arrays_leaves_the_kept_forms_alone() -> None:
+    viser_hooks.install()
+    real = vm.PointCloudMessage.as_serializable_dict.__wrapped__
+    a, b = _cloud("/a", 4, 1), _cloud("/b", 5, 2)
+    c = vm.PointCloudMessage("/c", b.props)  # b's arrays: the file keeps them once
+    handler = types.SimpleNamespace(_record_lock=threading.Lock(), _record_handles=[])
+    file = vinfra.StateSerializer(handler, filter=lambda m: True)
+    handler._record_handles.append(file)
+    for m in (a, b, c):
+        file._insert_message(m)
+    file.serialize()  # rewrites c's indices (4, 5) to b's (2, 3) in the file's forms
+    for ahead in (4, 2, 0):
+        filler = [memoryview(bytes([i])) for i in range(ahead)]
+        assert c.as_serializable_dict(list(filler)) == real(c, list(filler))
+
+
+class _Recorder(RawPage):
+    """A raw page that keeps every point cloud it receives (name -> points, colours)."""
+
+    def __init__(self, url: str) -> None:
+        self.clouds: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        super().__init__(url)
+
+    def _apply(self, m: dict[str, Any]) -> None:
+        if m.get("type") == "PointCloudMessage":
+            self.clouds[m["name"]] = (m["props"]["points"], m["props"]["colors"])
+        super()._apply(m)
+
+
+@pytest.fixture
+def server() -> Iterator[viser.ViserServer]:
+    viser_hooks.install()
+    s = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    yield s
+    s.stop()
+
+
+def test_two_pages_receive_every_array_the_server_sent(server: viser.ViserServer) -> None:
+    url = f"http://127.0.0.1:{server.get_port()}"
+    pages = [_Recorder(url), _Recorder(url)]
+    try:
+        wait_for(lambda: len(server.get_clients()) == 2, what="two pages connected")
+        sent: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        for k in range(40):  # many per batch: later clouds' arrays fall after earlier ones'
+            name = f"/cloud{k % 8}"
+            points = np.random.default_rng(k).normal(size=(10 + k, 3)).astype(np.float32)
+            colors = np.full((10 + k, 3), k, dtype=np.uint8)
+            server.scene.add_point_cloud(name, points, colors, point_size=0.01, precision="float32")
+            sent[name] = (points, colors)
+        for page in pages:
+            def arrived(page: _Recorder = page) -> bool:
+                return all(name in page.clouds and len(page.clouds[name][0]) == 3 * len(p)
+                           for name, (p, _) in sent.items())
+            wait_for(arrived, what="the last point clouds on a page")
+            for name, (points, colors) in sent.items():
+                got_points, got_colors = page.clouds[name]
+                np.testing.assert_array_equal(got_points.reshape(-1, 3), points)
+                np.testing.assert_array_equal(got_colors.reshape(-1, 3), colors)
+        # a page that connects later is sent the kept messages again, at other positions
+        late = _Recorder(url)
+        pages.append(late)
+        wait_for(lambda: len(late.clouds) == len(sent), what="the scene on a late page")
+        for name, (points, colors) in sent.items():
+            np.testing.assert_array_equal(late.clouds[name][0].reshape(-1, 3), points)
+            np.testing.assert_array_equal(late.clouds[name][1].reshape(-1, 3), colors)
+    finally:
+        for page in pages:
+            page.close()
+
+
+def test_a_scene_file_holds_every_array_and_leaves_the_pages_forms_alone(server: viser.ViserServer) -> None:
+    url = f"http://127.0.0.1:{server.get_port()}"
+    same = np.ones((5, 3), dtype=np.float32)  # equal arrays: the file merges them
+    other = np.arange(12, dtype=np.float32).reshape(4, 3)
+    page = _Recorder(url)
+    try:
+        server.scene.add_point_cloud("/a", other, np.full((4, 3), 9, np.uint8), point_size=0.01, precision="float32")
+        server.scene.add_point_cloud("/b", same, np.zeros((5, 3), np.uint8), point_size=0.01, precision="float32")
+        server.scene.add_point_cloud("/c", same, np.zeros((5, 3), np.uint8), point_size=0.01, precision="float32")
+        wait_for(lambda: len(page.clouds) == 3, what="the clouds on the page")
+        data = server.get_scene_serializer().serialize()
+    finally:
+        page.close()
+    clouds = {m["name"]: m["props"] for _, m in _scene_file_messages(data)
+              if m.get("type") == "PointCloudMessage"}
+    np.testing.assert_array_equal(clouds["/a"]["points"].reshape(-1, 3), other)
+    np.testing.assert_array_equal(clouds["/a"]["colors"].reshape(-1, 3), np.full((4, 3), 9))
+    np.testing.assert_array_equal(clouds["/b"]["points"].reshape(-1, 3), same)
+    np.testing.assert_array_equal(clouds["/c"]["points"].reshape(-1, 3), same)
+    # a page that connects after the file was written still gets each cloud's own arrays
+    late = _Recorder(url)
+    try:
+        wait_for(lambda: len(late.clouds) == 3, what="the scene on a late page")
+        np.testing.assert_array_equal(late.clouds["/a"][0].reshape(-1, 3), other)
+        np.testing.assert_array_equal(late.clouds["/a"][1].reshape(-1, 3), np.full((4, 3), 9))
+        np.testing.assert_array_equal(late.clouds["/c"][0].reshape(-1, 3), same)
+        np.testing.assert_array_equal(late.clouds["/c"][1].reshape(-1, 3), np.zeros((5, 3)))
+    finally:
+        late.close()
+
+
+def _scene_file_messages(data: bytes) -> list[tuple[float, dict[str, Any]]]:
+    """The (time, message) pairs of a viser scene file, with their arrays: the file is
+    [8-byte size][zstd of: 8-byte msgpack length, msgpack, 8-byte aligned buffers]."""
+    size = int.from_bytes(data[0:8], "little")
+    raw = zstandard.ZstdDecompressor().decompress(data[8:], max_output_size=size)
+    n = int.from_bytes(raw[0:8], "little")
+    inner = msgspec.msgpack.decode(raw[8:8 + n])
+    buffers, offset = [], 8 + n
+    for length in inner["binaryBufferLengths"]:
+        offset += (8 - offset % 8) % 8
+        buffers.append(raw[offset:offset + length])
+        offset += length
+    return [(t, with_arrays(m, buffers)) for t, m in inner["messages"]]
