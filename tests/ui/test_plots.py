@@ -72,6 +72,28 @@ def test_filled_replaces_nan_by_the_last_value(a: list, expected: list) -> None:
     np.testing.assert_array_equal(filled(np.array(a)), expected)
 
 
+def _filled_reference(column: list[float]) -> list[float]:
+    finite = [x for x in column if math.isfinite(x)]
+    last, out = (finite[0] if finite else 0.0), []
+    for x in column:
+        last = x if math.isfinite(x) else last
+        out.append(last)
+    return out
+
+
+def test_filled_fills_every_column_of_a_table_on_its_own() -> None:
+    rng = np.random.default_rng(5)
+    for _ in range(30):
+        a = rng.normal(size=(int(rng.integers(1, 12)), 6))
+        a[rng.random(a.shape) < 0.4] = math.nan
+        a[rng.random(a.shape) < 0.05] = math.inf
+        a[:, int(rng.integers(6))] = math.nan  # a column with nothing yet
+        got = filled(a.copy())
+        assert got.shape == a.shape
+        for j in range(a.shape[1]):
+            np.testing.assert_array_equal(got[:, j], _filled_reference(list(a[:, j])))
+
+
 def test_st_is_hidden_while_disarmed_or_still_and_clipped_above_one() -> None:
     from ucat_console.ui.plots import ST_HIDDEN, st_shown
 

@@ -374,12 +374,13 @@ class ConsoleApp:
             if panel is None:
                 continue
             try:
-                panel.show_events()
-                uuids = {"disarm_uuid": panel.disarm._impl.uuid, "drive_uuid": panel.drive_input._impl.uuid,
-                         "theme_uuid": panel.theme_button._impl.uuid}
-                state = bar_state(sup, cid, dark=page.dark, uuids=uuids, loading=self.loading)
-                page.client._websock_connection.queue_message(
-                    vm.RunJavascriptMessage(source=page_script.update_source(state)))
+                with page.client.atomic():  # the page's server woken once for the page's updates
+                    panel.show_events()
+                    uuids = {"disarm_uuid": panel.disarm._impl.uuid, "drive_uuid": panel.drive_input._impl.uuid,
+                             "theme_uuid": panel.theme_button._impl.uuid}
+                    state = bar_state(sup, cid, dark=page.dark, uuids=uuids, loading=self.loading)
+                    page.client._websock_connection.queue_message(
+                        vm.RunJavascriptMessage(source=page_script.update_source(state)))
             except Exception:
                 log.debug("the status bar of client %s was not sent", cid, exc_info=True)
 

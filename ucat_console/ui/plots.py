@@ -161,10 +161,17 @@ class PlotFeeder:
 
 def filled(a: np.ndarray) -> np.ndarray:
     """``a`` with NaN replaced by the last finite value before it (leading NaN by the first
-    finite value; zeros when there is none): uPlot takes NaN for data, not for a gap."""
+    finite value; zeros when there is none): uPlot takes NaN for data, not for a gap. A 2-D
+    ``a`` is filled column by column (each a series in time); only the columns that need it
+    are copied."""
     ok = np.isfinite(a)
     if ok.all():
         return a
+    if a.ndim == 2:
+        out = a.copy()
+        for j in np.flatnonzero(~ok.all(axis=0)):
+            out[:, j] = filled(a[:, j])
+        return out
     if not ok.any():
         return np.zeros_like(a)
     idx = np.where(ok, np.arange(len(a)), 0)
@@ -274,8 +281,7 @@ class LivePlots:
         r = self.rows(window)
         if r.shape[0] < 2 or not r[-1, 0] > r[0, 0]:
             return
-        for j in range(1, r.shape[1]):
-            r[:, j] = filled(r[:, j])
+        r[:, 1:] = filled(r[:, 1:])
         col = np.ascontiguousarray(r.T)  # each series one contiguous array, as the page takes it
         t = col[0]
         lo, hi = self.corridor()

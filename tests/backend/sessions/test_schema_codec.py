@@ -148,6 +148,17 @@ def test_non_finite_numbers_are_left_out_and_listed_by_path():
     assert same(codec.decode(Power, codec.encode(power)), power)
 
 
+def test_large_finite_numbers_whose_sum_is_not_finite_are_kept():
+    big = 1.7e308  # finite; two of them add up to inf
+    msg = BodyState(1.0, (big, big, -big), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (big, big, 0.0), 2.0)
+    obj = json.loads(codec.encode(msg))
+    assert "nonfinite" not in obj
+    assert obj["position"] == {"x": big, "y": big, "z": -big}
+    power = Power(2.0, (big, big, 0.3, 0.4), 1.0, 0.5, 3.0, 0.0, 1.0)
+    assert json.loads(codec.encode(power))["per_fin"] == [big, big, 0.3, 0.4]
+    assert same(codec.decode(BodyState, codec.encode(msg)), msg)
+
+
 def test_a_seed_beyond_2_53_is_a_string_and_comes_back_exact():
     plan = example_message(FinPlan, k=2, nan=False)
     plan = dataclasses.replace(plan, seed=BIG_SEED)

@@ -88,7 +88,7 @@ def _make_encoder(cls: type) -> Callable[[Any], dict[str, Any]]:
             try:
                 kind = s.kind
                 if kind == FLOAT:
-                    x = _float_out(v)
+                    x = v if type(v) is float else _float_out(v)
                     if math.isfinite(x):
                         out[s.name] = x
                     else:
@@ -96,8 +96,10 @@ def _make_encoder(cls: type) -> Callable[[Any], dict[str, Any]]:
                 elif kind == FLOATS:
                     if len(v) != s.length:
                         raise ValueError(f"expected {s.length} values, got {len(v)}")
-                    xs = [_float_out(x) for x in v]
-                    if s.names:
+                    xs = [x if type(x) is float else _float_out(x) for x in v]
+                    if math.isfinite(sum(xs)):  # all finite (one that is not makes the sum so)
+                        out[s.name] = dict(zip(s.names, xs)) if s.names else xs
+                    elif s.names:
                         obj = {}
                         for n, x in zip(s.names, xs):
                             if math.isfinite(x):
