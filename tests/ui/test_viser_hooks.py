@@ -6,12 +6,14 @@ from __future__ import annotations
 
 from typing import Any, Iterator
 
+import asyncio
 import threading
 import types
 
 import msgspec.msgpack
 import numpy as np
 import pytest
+import uvloop
 import viser
 import viser._messages as vm
 import viser.infra._infra as vinfra
@@ -161,3 +163,21 @@ def _scene_file_messages(data: bytes) -> list[tuple[float, dict[str, Any]]]:
         buffers.append(raw[offset:offset + length])
         offset += length
     return [(t, with_arrays(m, buffers)) for t, m in inner["messages"]]
+
+
+def test_viser_s_websocket_thread_runs_on_uvloop_and_the_rest_of_the_process_does_not(
+        server: viser.ViserServer) -> None:
+    assert isinstance(server.get_event_loop(), uvloop.Loop)
+    other = asyncio.new_event_loop()  # asyncio's own, as before
+    try:
+        assert not isinstance(other, uvloop.Loop)
+    finally:
+        other.close()
+    # and pages are served on it
+    page = _Recorder(f"http://127.0.0.1:{server.get_port()}")
+    try:
+        server.scene.add_point_cloud("/p", np.zeros((3, 3), np.float32), np.zeros((3, 3), np.uint8),
+                                     point_size=0.01, precision="float32")
+        wait_for(lambda: "/p" in page.clouds, what="a cloud on the page")
+    finally:
+        page.close()
