@@ -70,11 +70,13 @@ class _Recorder(RawPage):
 
     def __init__(self, url: str) -> None:
         self.clouds: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        self.cloud_frame: dict[str, int] = {}  # the frame each cloud came in
         super().__init__(url)
 
     def _apply(self, m: dict[str, Any]) -> None:
         if m.get("type") == "PointCloudMessage":
             self.clouds[m["name"]] = (m["props"]["points"], m["props"]["colors"])
+            self.cloud_frame[m["name"]] = self.frames
         super()._apply(m)
 
 
@@ -179,5 +181,27 @@ def test_viser_s_websocket_thread_runs_on_uvloop_and_the_rest_of_the_process_doe
         server.scene.add_point_cloud("/p", np.zeros((3, 3), np.float32), np.zeros((3, 3), np.uint8),
                                      point_size=0.01, precision="float32")
         wait_for(lambda: "/p" in page.clouds, what="a cloud on the page")
+    finally:
+        page.close()
+
+
+def test_viser_s_senders_do_not_wait_after_a_batch(server: viser.ViserServer) -> None:
+    """Every message buffer (the broadcast one and each page's) sends what is queued as soon
+    as it is queued: the console batches a pass's messages itself (``server.atomic()``)."""
+    page = _Recorder(f"http://127.0.0.1:{server.get_port()}")
+    try:
+        wait_for(lambda: len(server.get_clients()) == 1, what="the page connected")
+        buffers = [server._websock_server._broadcast_buffer]
+        buffers += [c._websock_connection.get_message_buffer() for c in server.get_clients().values()]
+        assert [b.window_duration_sec for b in buffers] == [0.0, 0.0]
+        # and a batch still arrives whole, in one frame: many messages queued in one atomic block
+        with server.atomic():
+            for k in range(50):
+                server.scene.add_point_cloud(f"/batch/{k}", np.full((2, 3), k, np.float32),
+                                             np.zeros((2, 3), np.uint8), point_size=0.01,
+                                             precision="float32")
+        wait_for(lambda: len(page.clouds) == 50, what="the batch on the page")
+        assert all(page.clouds[f"/batch/{k}"][0][0] == k for k in range(50))
+        assert len({page.cloud_frame[f"/batch/{k}"] for k in range(50)}) == 1
     finally:
         page.close()

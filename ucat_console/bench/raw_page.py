@@ -77,6 +77,7 @@ class RawPage:
         self.notifications: list[str] = []
         self.nodes: dict[str, dict[str, Any]] = {}  # scene node name -> its last pose and properties
         self.heartbeats = 0
+        self.frames = 0  # server frames (batches) received
         self.closed = False
         self._reading = threading.Event()
         self._reading.set()
@@ -97,6 +98,7 @@ class RawPage:
                 self._reading.wait()
                 frame = self.ws.recv()
                 if isinstance(frame, bytes):
+                    self.frames += 1
                     for m in decode_batch(frame):
                         self._apply(m)
         except Exception:
