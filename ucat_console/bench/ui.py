@@ -19,7 +19,9 @@ pages open on it. After a warm-up, for ``duration`` seconds:
   the probe changes on screen (same machine, same clock); p50 / p95 / max;
 * supervisor CPU: the console process's CPU time over the wall time (100 % = one core),
   which includes the loop, the planner threads, the UI thread, the web server and the
-  recorder (recording starts on arming, as at the pool);
+  recorder (recording starts on arming, as at the pool); measured again for another
+  ``duration`` seconds with the probe off (its element updated with every pose and sent to
+  every page is the benchmark's, not the console's), the pages still drawing;
 * browser CPU (Linux): the same for the Chromium processes started for the pages, split
   into the GPU process (where software GL draws the 3-D view when there is no GPU), the
   page renderers and the rest; with the supervisor's share it tells whether the machine
@@ -58,7 +60,7 @@ UNTHROTTLED = ["--disable-background-timer-throttling", "--disable-renderer-back
 #: page-side instrumentation, installed before the page's own scripts
 PAGE_PROBE = r"""
 (() => {
-  const b = window.__ucatBench = {probe: [], delivered: [], redraws: 0, counting: false};
+  const b = window.__ucatBench = {probe: [], delivered: [], redraws: 0, counting: false, changes: 0};
   const NativeWorker = window.Worker;
   window.Worker = class extends NativeWorker {
     constructor(...args) {
@@ -81,11 +83,13 @@ PAGE_PROBE = r"""
   };
   let last = null;
   new MutationObserver(() => {
-    if (!b.counting) return;
     const el = document.getElementById('ucat-probe');
     if (!el) return;
     const seq = el.dataset.seq;
-    if (seq !== last) { last = seq; b.probe.push([Date.now(), Number(seq), Number(el.dataset.wall)]); }
+    if (seq === last) return;
+    last = seq;
+    b.changes++;
+    if (b.counting) b.probe.push([Date.now(), Number(seq), Number(el.dataset.wall)]);
   }).observe(document, {subtree: true, childList: true, attributes: true, characterData: true});
 })();
 """
@@ -206,6 +210,16 @@ def measure_ui(duration: float = 20.0, pages: int = 2, warmup: float = 5.0, velo
                 results = [page.evaluate("() => { const b = window.__ucatBench; b.counting = false; return b; }")
                            for page in opened]
                 n_plots = opened[0].evaluate("() => document.querySelectorAll('.uplot').length")
+                # the supervisor again without the probe (one element more with every pose,
+                # sent to every page: the benchmark's instrument, not the console)
+                probe_cb, app.view.on_pose = app.view.on_pose, None
+                time.sleep(1.0)
+                seen0 = [page.evaluate(_PROBE_CHANGES) for page in opened]
+                cpu2, wall2, threads2 = time.process_time(), time.perf_counter(), _thread_cpu_seconds()
+                time.sleep(duration)
+                cpu3, wall3, threads3 = time.process_time(), time.perf_counter(), _thread_cpu_seconds()
+                seen1 = [page.evaluate(_PROBE_CHANGES) for page in opened]
+                app.view.on_pose = probe_cb
                 browser.close()
             health = sup.health()
         finally:
@@ -234,10 +248,11 @@ def measure_ui(duration: float = 20.0, pages: int = 2, warmup: float = 5.0, velo
         "configured_scene_rate": cfg.console.scene_rate,
         "configured_plot_rate": cfg.console.plot_rate,
         "supervisor_cpu_percent": 100.0 * (cpu1 - cpu0) / elapsed,
+        "supervisor_cpu_percent_without_probe": 100.0 * (cpu3 - cpu2) / (wall3 - wall2),
+        "supervisor_threads_cpu_percent_without_probe": _thread_percent(threads2, threads3, wall3 - wall2),
+        "probe_changes_while_off": [b - a for a, b in zip(seen0, seen1)],
         "browser_cpu_percent": {k: 100.0 * (browser1[k] - browser0[k]) / elapsed for k in browser0},
-        "supervisor_threads_cpu_percent": {
-            k: 100.0 * (v - threads0.get(k, 0.0)) / elapsed
-            for k, v in sorted(threads1.items(), key=lambda kv: threads0.get(kv[0], 0.0) - kv[1])},
+        "supervisor_threads_cpu_percent": _thread_percent(threads0, threads1, elapsed),
         "recording": health.recording,
         "loop_lag_max_ms": health.lag_max * 1e3,
         "late_plans": health.late_plans,
@@ -245,6 +260,16 @@ def measure_ui(duration: float = 20.0, pages: int = 2, warmup: float = 5.0, velo
         "load_average_1min": load0,
         "cpus": os.cpu_count(),
     }
+
+
+def _thread_percent(before: dict[str, float], after: dict[str, float], elapsed: float) -> dict[str, float]:
+    """Each thread's CPU between two readings, as % of one core, largest first."""
+    return {k: 100.0 * (v - before.get(k, 0.0)) / elapsed
+            for k, v in sorted(after.items(), key=lambda kv: before.get(kv[0], 0.0) - kv[1])}
+
+
+#: how often the page has seen the probe change (it keeps counting while not measuring)
+_PROBE_CHANGES = "() => window.__ucatBench.changes"
 
 
 def format_result(r: dict[str, Any]) -> str:
@@ -268,6 +293,10 @@ def format_result(r: dict[str, Any]) -> str:
                  f"{r['plan_overruns']}")
     lines.append("supervisor CPU by thread: " + ", ".join(
         f"{k} {v:.1f} %" for k, v in r["supervisor_threads_cpu_percent"].items() if v >= 0.5))
+    lines.append(f"supervisor CPU without the benchmark's probe {r['supervisor_cpu_percent_without_probe']:.0f} %"
+                 " of one core; by thread: " + ", ".join(
+                     f"{k} {v:.1f} %" for k, v in r["supervisor_threads_cpu_percent_without_probe"].items()
+                     if v >= 0.5))
     return "\n".join(lines)
 
 
