@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import types
 
 import numpy as np
 import pytest
@@ -104,6 +105,13 @@ def test_st_is_hidden_while_disarmed_or_still_and_clipped_above_one() -> None:
     np.testing.assert_array_equal(shown, [0.3, ST_HIDDEN, 1.0, ST_HIDDEN, ST_HIDDEN, 1.0])
     np.testing.assert_array_equal(above, [ST_HIDDEN, ST_HIDDEN, 1.0, ST_HIDDEN, ST_HIDDEN, 1.0])
     assert ST_HIDDEN < 0.0  # below the fixed 0-1 axis
+    # every fin at once: each row as the fin's own
+    fins = np.stack([st, st[::-1], np.full_like(st, 0.5)])
+    shown2, above2 = st_shown(fins, armed, speed)
+    for k in range(3):
+        one = st_shown(fins[k], armed, speed)
+        np.testing.assert_array_equal(shown2[k], one[0])
+        np.testing.assert_array_equal(above2[k], one[1])
 
 
 def test_span_pins_keep_a_minimum_axis_span_around_the_data() -> None:
@@ -125,7 +133,7 @@ def test_a_page_receives_the_plots_and_the_pose_the_view_sends() -> None:
     from support import wait_for
     from ucat_console.bench.raw_page import RawPage
     from ucat_console.robot.geometry import Geometry
-    from ucat_console.telemetry.messages import BodyState, Setpoints
+    from ucat_console.telemetry.messages import BodyState, Setpoints, Status
     from ucat_console.ui.view import StreamView
 
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
@@ -140,6 +148,9 @@ def test_a_page_receives_the_plots_and_the_pose_the_view_sends() -> None:
             view.feeder.on_message(ch.BODY_STATE, BodyState(t, (0.1 * k, 0.0, 1.0 + 0.01 * k), (1.0, 0.0, 0.0, 0.0),
                                                             (0.2, 0.0, 0.0), (0.0, 0.0, 0.05), 1.0 + 0.01 * k))
             view.feeder.on_message(ch.SETPOINTS, Setpoints(t, 0.2, 1.2, 0.0))
+            view.feeder.on_message(ch.STATUS, Status(t, True, "mpc", "", (), 0, "sim"))
+            for fin in range(4):  # fin 3's St above 1: drawn at 1, and marked
+                view.feeder.on_message(ch.fin_plan(fin), types.SimpleNamespace(t=t, st=0.3 + 0.1 * fin + (fin == 3)))
             view.feeder.sample()
         view.refresh_plots()
         view.on_message(ch.BODY_STATE, BodyState(0.4, (0.4, -0.1, 1.04), (0.9, 0.1, 0.0, 0.4243),
@@ -153,6 +164,14 @@ def test_a_page_receives_the_plots_and_the_pose_the_view_sends() -> None:
         np.testing.assert_allclose(depth, [1.0, 1.01, 1.02, 1.03, 1.04])
         np.testing.assert_allclose(target, 1.2)
         assert t.dtype == np.float64
+        st = wait_for(lambda: (d := page.elements.get(view.plots.st._impl.uuid, {}).get("data")) is not None
+                      and len(d[0]) == 5 and d, what="the St plot's five rows")
+        assert len(st) == 1 + 2 + 4 + 1  # t, the corridor's two edges, four fins, the markers
+        np.testing.assert_allclose(np.asarray(st[1]), 0.35)
+        np.testing.assert_allclose(np.asarray(st[2]), 0.25)
+        for fin, want in enumerate((0.3, 0.4, 0.5, 1.0)):
+            np.testing.assert_allclose(np.asarray(st[3 + fin]), want)
+        np.testing.assert_allclose(np.asarray(st[7]), 1.0)
         node = wait_for(lambda: page.nodes.get("/ned/ucat") if "wxyz" in page.nodes.get("/ned/ucat", {}) else None,
                         what="the robot's pose")
         assert node["position"] == (0.4, -0.1, 1.04)

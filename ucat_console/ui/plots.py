@@ -199,7 +199,8 @@ _PIN = {"label": "axis span", "stroke": "rgba(0,0,0,0)", "width": 0.5, "points":
 
 def st_shown(st: np.ndarray, armed: np.ndarray, speed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(St drawn on the 0-1 axis, markers at 1 where St is above 1): hidden values, while
-    disarmed, slower than ST_MIN_SPEED or unknown, go below the axis."""
+    disarmed, slower than ST_MIN_SPEED or unknown, go below the axis. ``st`` may hold one
+    row per fin (k, n) over the same ``armed`` and ``speed`` (n,)."""
     hide = ~(armed > 0.5) | ~(np.abs(speed) >= ST_MIN_SPEED) | ~np.isfinite(st)
     shown = np.where(hide, ST_HIDDEN, np.minimum(st, 1.0))
     above = np.where(~hide & (st > 1.0), 1.0, ST_HIDDEN)
@@ -213,6 +214,9 @@ def span_pins(*series: np.ndarray, span: float) -> tuple[np.ndarray, np.ndarray]
     mid = 0.5 * (vals.min() + vals.max()) if vals.size else 0.0
     n = len(series[0]) if series else 0
     return np.full(n, mid - span / 2), np.full(n, mid + span / 2)
+
+
+_ST_ROWS = [COL[f"st{i}"] for i in range(N_FINS)]
 
 
 class LivePlots:
@@ -287,10 +291,9 @@ class LivePlots:
         lo, hi = self.corridor()
         c = COL
         armed, speed = col[c["armed"]], col[c["velocity"]]
-        shown = [st_shown(col[c[f"st{i}"]], armed, speed) for i in range(N_FINS)]
-        above = np.max([a for _, a in shown], axis=0) if len(t) else np.zeros(0)
+        shown, above = st_shown(col[_ST_ROWS], armed, speed)  # every fin at once: (fins, n)
         # new float64 arrays each time: set without viser's casts and comparisons (ui.fast_props)
-        set_prop(self.st, "data", (t, np.full_like(t, hi), np.full_like(t, lo), *(v for v, _ in shown), above))
+        set_prop(self.st, "data", (t, np.full_like(t, hi), np.full_like(t, lo), *shown, above.max(axis=0)))
         for chart, name in ((self.depth, "depth"), (self.velocity, "velocity"), (self.yaw_rate, "yaw_rate")):
             value, target = col[c[name]], col[c[f"{name}_sp"]]
             set_prop(chart, "data", (t, value, target, *span_pins(value, target, span=MIN_SPAN[name])))
