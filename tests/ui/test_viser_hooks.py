@@ -20,7 +20,7 @@ import viser.infra._infra as vinfra
 import zstandard
 from support import wait_for
 
-from ucat_console.bench.raw_page import RawPage, with_arrays
+from ucat_console.bench.raw_page import RawPage, split_buffers, with_arrays
 from ucat_console.ui import viser_hooks
 
 
@@ -159,11 +159,7 @@ def _scene_file_messages(data: bytes) -> list[tuple[float, dict[str, Any]]]:
     raw = zstandard.ZstdDecompressor().decompress(data[8:], max_output_size=size)
     n = int.from_bytes(raw[0:8], "little")
     inner = msgspec.msgpack.decode(raw[8:8 + n])
-    buffers, offset = [], 8 + n
-    for length in inner["binaryBufferLengths"]:
-        offset += (8 - offset % 8) % 8
-        buffers.append(raw[offset:offset + length])
-        offset += length
+    buffers = split_buffers(raw, 8 + n, inner["binaryBufferLengths"])
     return [(t, with_arrays(m, buffers)) for t, m in inner["messages"]]
 
 

@@ -38,12 +38,19 @@ def decode_batch(frame: bytes) -> list[dict[str, Any]]:
     c = int.from_bytes(frame[8:16], "little")
     inner = msgspec.msgpack.decode(
         zstandard.ZstdDecompressor().decompress(frame[16:16 + c], max_output_size=n))
-    buffers, offset = [], 16 + c
-    for length in inner.get("binaryBufferLengths", ()):
-        offset += (8 - offset % 8) % 8
-        buffers.append(frame[offset:offset + length])
-        offset += length
+    buffers = split_buffers(frame, 16 + c, inner.get("binaryBufferLengths", ()))
     return [with_arrays(m, buffers) for m in inner["messages"]]
+
+
+def split_buffers(data: bytes, offset: int, lengths: Any) -> list[bytes]:
+    """The binary buffers of ``lengths`` bytes each that follow ``offset`` in ``data``, each
+    starting at a multiple of 8 (viser's layout, in a frame and in a scene file alike)."""
+    buffers = []
+    for length in lengths:
+        offset += (8 - offset % 8) % 8
+        buffers.append(data[offset:offset + length])
+        offset += length
+    return buffers
 
 
 def with_arrays(v: Any, buffers: list[bytes]) -> Any:

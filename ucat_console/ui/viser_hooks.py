@@ -141,7 +141,7 @@ def install() -> None:
     vmessages.Message.as_serializable_dict = _shared_wire_form(real_wire_form)
     vinfra.StateSerializer._insert_message = _own_wire_form(real_wire_form)
     if uvloop is not None:
-        vinfra.asyncio = _module_with(asyncio, new_event_loop=uvloop.new_event_loop)
+        vinfra.asyncio = _ModuleView(asyncio, new_event_loop=uvloop.new_event_loop)
     vbuffer.AsyncMessageBuffer.__init__ = _without_window_wait(vbuffer.AsyncMessageBuffer.__init__)
     _INSTALLED = True
 
@@ -205,14 +205,6 @@ def _moved_indices(v: Any, base: int) -> Any:
     if isinstance(v, (list, tuple)):
         return type(v)(_moved_indices(x, base) for x in v)
     return v
-
-
-def _module_with(module: types.ModuleType, **replaced: Any) -> types.ModuleType:
-    """A copy of ``module`` (its names, not its code) with some names replaced."""
-    copy = types.ModuleType(module.__name__, module.__doc__)
-    copy.__dict__.update(module.__dict__)
-    copy.__dict__.update(replaced)
-    return copy
 
 
 class _ModuleView:
