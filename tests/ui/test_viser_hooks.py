@@ -71,12 +71,14 @@ class _Recorder(RawPage):
     def __init__(self, url: str) -> None:
         self.clouds: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self.cloud_frame: dict[str, int] = {}  # the frame each cloud came in
+        self.cloud_bytes: dict[str, bytes] = {}  # that frame as received
         super().__init__(url)
 
     def _apply(self, m: dict[str, Any]) -> None:
         if m.get("type") == "PointCloudMessage":
             self.clouds[m["name"]] = (m["props"]["points"], m["props"]["colors"])
             self.cloud_frame[m["name"]] = self.frames
+            self.cloud_bytes[m["name"]] = self.last_frame
         super()._apply(m)
 
 
@@ -201,3 +203,44 @@ def test_viser_s_senders_do_not_wait_after_a_batch(server: viser.ViserServer) ->
         assert len({page.cloud_frame[f"/batch/{k}"] for k in range(50)}) == 1
     finally:
         page.close()
+
+
+def test_pages_in_step_are_sent_one_encoding_of_a_broadcast_batch(server: viser.ViserServer, monkeypatch) -> None:
+    encoded: list[tuple[str, ...]] = []
+    real = viser_hooks._frame
+
+    def counted(window: Any, zstd: Any) -> bytes:
+        encoded.append(tuple(getattr(m, "name", "") for m in window))
+        return real(window, zstd)
+
+    monkeypatch.setattr(viser_hooks, "_frame", counted)
+    url = f"http://127.0.0.1:{server.get_port()}"
+    pages = [_Recorder(url), _Recorder(url)]
+    try:
+        wait_for(lambda: len(server.get_clients()) == 2, what="two pages connected")
+        server.scene.add_point_cloud("/first", np.zeros((1, 3), np.float32), np.zeros((1, 3), np.uint8),
+                                     point_size=0.01, precision="float32")
+        wait_for(lambda: all("/first" in p.clouds for p in pages), what="the first cloud on both pages")
+        for k in range(5):  # each batch sent once both pages have the one before: in step
+            names = [f"/step{k}/{j}" for j in range(3)]
+            with server.atomic():
+                for j, name in enumerate(names):
+                    server.scene.add_point_cloud(name, np.full((4, 3), k + j, np.float32),
+                                                 np.zeros((4, 3), np.uint8), point_size=0.01,
+                                                 precision="float32")
+            wait_for(lambda: all(n in p.clouds for p in pages for n in names), what=f"batch {k} on both pages")
+            a, b = (p.cloud_bytes[names[0]] for p in pages)
+            assert a == b  # the same frame bytes
+            assert all(p.cloud_bytes[n] is p.cloud_bytes[names[0]] for p in pages for n in names)
+            assert len([w for w in encoded if names[0] in w]) == 1  # encoded once
+        # a page's own messages (its buffer, not the broadcast one) go to that page only
+        own = list(server.get_clients().values())[0]
+        own.scene.add_point_cloud("/own", np.ones((2, 3), np.float32), np.zeros((2, 3), np.uint8),
+                                  point_size=0.01, precision="float32")
+        server.scene.add_point_cloud("/after", np.ones((2, 3), np.float32), np.zeros((2, 3), np.uint8),
+                                     point_size=0.01, precision="float32")
+        wait_for(lambda: all("/after" in p.clouds for p in pages), what="the last cloud on both pages")
+        assert ["/own" in p.clouds for p in pages].count(True) == 1
+    finally:
+        for page in pages:
+            page.close()

@@ -85,6 +85,7 @@ class RawPage:
         self.nodes: dict[str, dict[str, Any]] = {}  # scene node name -> its last pose and properties
         self.heartbeats = 0
         self.frames = 0  # server frames (batches) received
+        self.last_frame = b""  # the frame being applied, as received
         self.closed = False
         self._reading = threading.Event()
         self._reading.set()
@@ -106,6 +107,7 @@ class RawPage:
                 frame = self.ws.recv()
                 if isinstance(frame, bytes):
                     self.frames += 1
+                    self.last_frame = frame
                     for m in decode_batch(frame):
                         self._apply(m)
         except Exception:

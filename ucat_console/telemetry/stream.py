@@ -26,6 +26,10 @@ class TelemetryStream:
         self._subs: tuple[tuple[Subscriber, frozenset[str] | None], ...] = ()
         self._validate = validate
         self._wanted: frozenset[str] = frozenset()
+        # each channel's subscribers in subscription order (a new dict after each change); a
+        # channel that is not one of CHANNELS (published unvalidated) goes to those of all
+        self._by_channel: dict[str, tuple[Subscriber, ...]] = {}
+        self._of_all: tuple[Subscriber, ...] = ()
 
     def wants(self, channel: str) -> bool:
         """Whether a subscriber takes ``channel`` now: a publisher may leave a message that
@@ -39,7 +43,10 @@ class TelemetryStream:
 
     def _update_wanted(self) -> None:
         every = frozenset(CHANNELS)
-        self._wanted = frozenset().union(*(every if c is None else c for _, c in self._subs))
+        subs = self._subs
+        self._wanted = frozenset().union(*(every if c is None else c for _, c in subs))
+        self._by_channel = {name: tuple(cb for cb, c in subs if c is None or name in c) for name in CHANNELS}
+        self._of_all = tuple(cb for cb, c in subs if c is None)
 
     def subscribe(self, callback: Subscriber, channels: Iterable[str] | None = None) -> Callable[[], None]:
         """Call ``callback(channel, message)`` for each message (of ``channels`` only,
@@ -68,9 +75,8 @@ class TelemetryStream:
                 raise TypeError(
                     f"channel {channel!r} carries {expected.__name__}, got {type(message).__name__}"
                 )
-        for callback, chans in self._subs:  # a snapshot: tuples are immutable
-            if chans is not None and channel not in chans:
-                continue
+        # a snapshot: the dict is replaced, never changed
+        for callback in self._by_channel.get(channel, self._of_all):
             try:
                 callback(channel, message)
             except Exception:  # a broken subscriber must not stop the publisher

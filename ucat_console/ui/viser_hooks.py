@@ -1,4 +1,4 @@
-"""The places where the console hooks into viser: the page guard's two, and three for CPU.
+"""The places where the console hooks into viser: the page guard's two, and four for CPU.
 
 viser has no hook for a websocket handshake check or for its incoming messages, so
 :func:`install` replaces two names in viser's websocket module (once, for the process):
@@ -40,14 +40,27 @@ wake-up per page and batch (about 100 a second with two pages) and up to 17 ms o
 pose's latency. :func:`install` makes every message buffer's window duration 0; with two
 browser pages (``bench ui``) viser's websocket thread went from 5.6-6.1 % to 2.9-4.0 % of a
 core and a pose's p95 latency from 76-104 to 57-73 ms.
+
+And pages in step are sent one frame: a broadcast message goes to every page's sender, and
+each used to encode the same window (the wire forms into msgpack, compressed, with the
+arrays after it) for its own page. :func:`install` replaces viser's sender
+(``_message_producer``) with :func:`_sharing_producer`, the same loop that keeps the last
+few frames of the broadcast buffer by the identity of their messages: a page whose window
+holds the same messages as one just sent to another page is sent those bytes. A page that
+lags behind gets a window of its own and encodes it; a page's own buffer is never shared.
+The frame's ``timestampSec`` (the page paces its updates by it) is then the first page's.
 """
 
 from __future__ import annotations
 
 import asyncio
 import threading
+import time
 import types
-from typing import Any
+from typing import Any, Sequence
+
+import msgspec
+import zstandard
 
 import viser
 import viser.infra._async_message_buffer as vbuffer
@@ -143,6 +156,7 @@ def install() -> None:
     if uvloop is not None:
         vinfra.asyncio = _ModuleView(asyncio, new_event_loop=uvloop.new_event_loop)
     vbuffer.AsyncMessageBuffer.__init__ = _without_window_wait(vbuffer.AsyncMessageBuffer.__init__)
+    vinfra._message_producer = _sharing_producer
     _INSTALLED = True
 
 
@@ -181,6 +195,63 @@ def _shared_wire_form(real: Any) -> Any:
     as_serializable_dict.__doc__ = real.__doc__
     as_serializable_dict.__wrapped__ = real  # type: ignore[attr-defined]
     return as_serializable_dict
+
+
+#: the frames each broadcast buffer keeps for its other pages' senders (the last few windows)
+_KEPT_FRAMES = 4
+
+
+def _frame(window: Sequence[Any], zstd: Any) -> bytes:
+    """A window of messages as viser's wire frame (``viser.infra._infra._message_producer``):
+    zstd-compressed msgpack of the messages' wire forms, then their arrays, 8-byte aligned."""
+    arrays: list[memoryview] = []
+    forms = tuple(m.as_serializable_dict(arrays) for m in window)
+    inner = msgspec.msgpack.encode({
+        "messages": forms,
+        "timestampSec": time.perf_counter(),
+        "binaryBufferLengths": tuple(b.nbytes for b in arrays),
+    })
+    compressed = zstd.compress(inner)
+    parts: list[bytes | memoryview] = [len(inner).to_bytes(8, "little"), len(compressed).to_bytes(8, "little"),
+                                       compressed]
+    vinfra._append_aligned_buffers(parts, arrays, 16 + len(compressed))
+    return b"".join(parts)
+
+
+async def _sharing_producer(websocket: Any, buffer: Any, client_id: int, backlog_done_message: Any = None) -> None:
+    """viser's per-page sender (``viser.infra._infra._message_producer``, 1.1.1), sending a
+    window of the broadcast buffer that another page's sender has just sent as the same
+    frame bytes (module docstring)."""
+    window_generator = buffer.window_generator(client_id, backlog_done_message=backlog_done_message)
+    zstd = zstandard.ZstdCompressor(level=1)
+    # only the broadcast buffer (the persistent one) has more than one sender; its senders
+    # all run in the server's one event-loop thread
+    kept: dict[tuple[int, ...], tuple[Sequence[Any], bytes]] | None = None
+    if buffer.persistent_messages:
+        kept = buffer.__dict__.setdefault("_ucat_frames", {})
+    try:
+        while not buffer.done:
+            try:
+                window = await window_generator.__anext__()
+            except StopAsyncIteration:
+                break
+            if kept is None:
+                data = _frame(window, zstd)
+            else:
+                # the key holds while the entry keeps the window's messages alive
+                key = tuple(map(id, window))
+                entry = kept.get(key)
+                if entry is None:
+                    data = _frame(window, zstd)
+                    kept[key] = (window, data)
+                    if len(kept) > _KEPT_FRAMES:
+                        del kept[next(iter(kept))]
+                else:
+                    data = entry[1]
+            await websocket.send(data)
+    finally:
+        # closed at once, as viser's own sender does: its finally releases the GC cursor
+        await window_generator.aclose()
 
 
 def _own_wire_form(real: Any) -> Any:

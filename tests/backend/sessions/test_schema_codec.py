@@ -256,3 +256,74 @@ def test_time_conversion_is_exact_for_simulated_times_under_an_epoch_offset():
     assert codec.from_ns(1_700_000_000_125_000_000, 1_700_000_000.0) == 0.125
     assert schema_name(BodyState) == "ucat_console.BodyState"
     assert [s.paths() for s in field_specs(Power)][1] == [f"per_fin[{i}]" for i in range(4)]
+
+
+def _field_values(spec):
+    """Values of one field as a message may carry them: the common ones, and those the
+    general encoder converts (ints and numpy floats for floats, lists for tuples), refuses,
+    or leaves out (non-finite numbers, None for an optional field)."""
+    import numpy as np
+    from hypothesis import strategies as st
+
+    from ucat_console.backend.sessions.schema import BOOL, FLOAT, FLOATS, INT, STR
+
+    number = st.one_of(
+        st.floats(allow_nan=True, allow_infinity=True),
+        st.sampled_from([0.0, -0.0, 1.7e308, -1.7e308, 5e-324]),
+        st.integers(-10, 10),
+        st.floats(allow_nan=False, width=64).map(np.float64),
+    )
+    if spec.kind == FLOAT:
+        values = number
+    elif spec.kind == FLOATS:
+        n = spec.length
+        values = st.one_of(
+            st.tuples(*[number] * n),
+            st.lists(number, min_size=n, max_size=n),
+            st.tuples(*[number] * (n + 1)),  # the wrong length: refused
+        )
+    elif spec.kind == INT:
+        values = st.one_of(st.integers(), st.booleans(), st.just(1.0))
+    elif spec.kind == BOOL:
+        values = st.one_of(st.booleans(), st.integers(0, 1))
+    elif spec.kind == STR:
+        values = st.one_of(st.text(max_size=8), st.integers(0, 3))
+    else:
+        values = st.nothing()
+    return st.one_of(values, st.none()) if spec.optional else values
+
+
+@pytest.mark.parametrize("cls", TYPES, ids=lambda c: c.__name__)
+def test_the_fast_encoder_gives_what_the_general_one_gives(cls):
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    from ucat_console.backend.sessions.schema import JSON, SEQ
+
+    specs = field_specs(cls)
+    fast = codec._encoder(cls)
+    general = codec._make_encoder(cls)
+    if any(s.kind in (SEQ, JSON) for s in specs):
+        assert fast.__code__ is general.__code__  # no fast path for these kinds
+        return
+    assert fast.__code__ is not general.__code__
+
+    def outcome(enc, msg):
+        try:
+            obj = enc(msg)
+        except ValueError as e:
+            return "refused", str(e)
+        return "encoded", codec.compact_json(obj)
+
+    @settings(max_examples=300, deadline=None)
+    @given(st.fixed_dictionaries({s.name: _field_values(s) for s in specs}))
+    def check(values):
+        msg = object.__new__(cls)  # any values, as a message built elsewhere may hold them
+        for name, v in values.items():
+            object.__setattr__(msg, name, v)
+        assert outcome(fast, msg) == outcome(general, msg)
+
+    check()
+    common = example_message(cls, k=3, nan=False)
+    assert outcome(fast, common) == outcome(general, common)
+    assert outcome(fast, common)[0] == "encoded"

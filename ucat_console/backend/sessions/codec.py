@@ -136,9 +136,63 @@ def _make_encoder(cls: type) -> Callable[[Any], dict[str, Any]]:
     return to_obj
 
 
+def _make_fast_encoder(cls: type, slow: Callable[[Any], dict[str, Any]]) -> Callable[[Any], dict[str, Any]] | None:
+    """The encoder of :func:`_make_encoder` for ``cls``, with a fast path written out for
+    the class's fields (None when a field is of a kind without one: SEQ, JSON).
+
+    The fast path takes the common message: every FLOAT a float and every FLOATS a tuple of
+    floats of its length, all finite (checked by one sum: a value that is not makes the
+    sum so), INT an int, BOOL a bool, STR a str, no optional field left out. It builds the
+    same object as the general encoder, which takes every other message; the recorder
+    encodes some 500 messages a second, and the general loop over the fields was the
+    larger part of its CPU."""
+    specs = field_specs(cls)
+    fetch, checks, floats, items = [], [], [], []
+    for i, s in enumerate(specs):
+        v = f"v{i}"
+        fetch.append(f"    {v} = msg.{s.name}")
+        if s.kind == FLOAT:
+            checks.append(f"type({v}) is float")
+            floats.append(v)
+            items.append(f"{s.name!r}: {v}")
+        elif s.kind == FLOATS:
+            xs = [f"{v}[{j}]" for j in range(s.length)]
+            checks.append(f"type({v}) is tuple and len({v}) == {s.length}")
+            checks.extend(f"type({x}) is float" for x in xs)
+            floats.extend(xs)
+            if s.names:
+                items.append(f"{s.name!r}: {{{', '.join(f'{n!r}: {x}' for n, x in zip(s.names, xs))}}}")
+            else:
+                items.append(f"{s.name!r}: [{', '.join(xs)}]")
+        elif s.kind == INT:
+            checks.append(f"type({v}) is int")
+            items.append(f"{s.name!r}: str({v})" if s.wide else f"{s.name!r}: {v}")
+        elif s.kind == BOOL:
+            checks.append(f"type({v}) is bool")
+            items.append(f"{s.name!r}: {v}")
+        elif s.kind == STR:
+            checks.append(f"type({v}) is str")
+            items.append(f"{s.name!r}: {v}")
+        else:
+            return None
+    if floats:
+        checks.append(f"_isfinite({' + '.join(floats)})")
+    src = "\n".join([
+        "def to_obj(msg):",
+        *fetch,
+        f"    if {' and '.join(checks) or 'True'}:",
+        f"        return {{{', '.join(items)}}}",
+        "    return _slow(msg)",
+    ])
+    scope: dict[str, Any] = {"_isfinite": math.isfinite, "_slow": slow}
+    exec(compile(src, f"<codec encoder of {cls.__name__}>", "exec"), scope)
+    return scope["to_obj"]
+
+
 @functools.cache
 def _encoder(cls: type) -> Callable[[Any], dict[str, Any]]:
-    return _make_encoder(cls)
+    slow = _make_encoder(cls)
+    return _make_fast_encoder(cls, slow) or slow
 
 
 _JSON = msgspec.json.Encoder()
