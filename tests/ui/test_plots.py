@@ -163,7 +163,8 @@ def test_a_page_receives_the_plots_and_the_pose_the_view_sends() -> None:
         np.testing.assert_allclose(t, [0.0, 0.1, 0.2, 0.3, 0.4])
         np.testing.assert_allclose(depth, [1.0, 1.01, 1.02, 1.03, 1.04])
         np.testing.assert_allclose(target, 1.2)
-        assert t.dtype == np.float64
+        assert t.dtype == np.float64  # the time axis keeps its resolution; the values are float32
+        assert depth.dtype == target.dtype == np.float32
         st = wait_for(lambda: (d := page.elements.get(view.plots.st._impl.uuid, {}).get("data")) is not None
                       and len(d[0]) == 5 and d, what="the St plot's five rows")
         assert len(st) == 1 + 2 + 4 + 1  # t, the corridor's two edges, four fins, the markers
@@ -178,6 +179,38 @@ def test_a_page_receives_the_plots_and_the_pose_the_view_sends() -> None:
         assert node["wxyz"] == (0.9, 0.1, 0.0, 0.4243)
         np.testing.assert_array_equal(view.scene.body.position, (0.4, -0.1, 1.04))  # the handle holds it too
         assert view.tick_errors == 0
+        page.close()
+    finally:
+        server.stop()
+
+
+def test_a_value_beyond_float32_reaches_the_page_as_the_largest_finite_one() -> None:
+    import viser
+
+    from support import wait_for
+    from ucat_console.bench.raw_page import RawPage
+    from ucat_console.robot.geometry import Geometry
+    from ucat_console.telemetry.messages import BodyState
+    from ucat_console.ui.view import StreamView
+
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        view = StreamView(server.scene, server.gui, Geometry(), plot_rate=10.0, scene_rate=40.0, max_plot_points=200,
+                          history=lambda: 10.0, max_history=30.0, corridor=lambda: (0.25, 0.35), trail_points=50,
+                          trail_spacing=0.05)
+        page = RawPage(f"http://127.0.0.1:{server.get_port()}")
+        for k, u in enumerate((0.2, 1e300, 2e300)):
+            view.feeder.on_message(ch.BODY_STATE, BodyState(0.1 * k, (0.0, 0.0, 1.0), (1.0, 0.0, 0.0, 0.0),
+                                                            (u, 0.0, 0.0), (0.0, 0.0, 0.0), 1.0))
+            view.feeder.sample()
+        view.refresh_plots()
+        uuid = view.plots.velocity._impl.uuid
+        data = wait_for(lambda: (d := page.elements.get(uuid, {}).get("data")) is not None and len(d[0]) == 3
+                        and d, what="the velocity plot's three rows")
+        u = np.asarray(data[1])
+        big = np.finfo(np.float32).max
+        np.testing.assert_array_equal(u, np.array([0.2, big, big], np.float32))
+        assert np.isfinite(np.asarray(data[3])).all() and np.isfinite(np.asarray(data[4])).all()  # the pins
         page.close()
     finally:
         server.stop()

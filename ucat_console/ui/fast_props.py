@@ -25,9 +25,9 @@ import viser._messages as vm
 
 
 def set_prop(handle: Any, name: str, value: Any) -> None:
-    """``handle.<name> = value`` for a value of the property's own type (float64 arrays
-    for a plot's data, float32 for batched orientations), without the cast and the
-    comparison."""
+    """``handle.<name> = value`` for a value the page takes as it is (arrays of float64
+    or float32 for a plot's data, float32 for batched orientations), without the cast and
+    the comparison."""
     setattr(handle._impl.props, name, value)
     handle._queue_update(name, value)
 

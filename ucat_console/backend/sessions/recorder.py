@@ -50,7 +50,7 @@ _COMPRESSION = {
 }
 #: s, the writer's poll period when the queue is empty: every wake-up costs CPU (about
 #: 0.1 ms of a core on a virtual machine), and messages may wait this long in memory
-_IDLE_SLEEP = 0.05
+_IDLE_SLEEP = 0.1
 _SIZE_CHECK_EVERY = 256  # messages between part-size checks
 
 
