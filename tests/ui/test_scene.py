@@ -89,3 +89,28 @@ def test_the_hull_is_an_ellipsoid_of_the_configured_size_with_the_fins_outside_i
         assert sum((p / h) ** 2 for p, h in zip(pos, (0.4, 0.2, 0.1))) > 1.0
     nose = calls.added["/ned/ucat/nose"]["position"]
     assert nose[0] == pytest.approx(0.4 - 0.01)  # at the bow of this hull
+
+
+def test_the_blades_orientations_are_each_mount_turned_by_its_angle() -> None:
+    from ucat_console.robot.rotations import quaternion_multiply
+
+    cfg = PlantConfig()
+    mounts = [fin_mount(cfg.geometry, i)[1] for i in range(4)]
+    rng = np.random.default_rng(7)
+    for _ in range(50):
+        angles = list(rng.uniform(-3.5, 3.5, size=4))
+        angles[rng.integers(4)] = rng.choice([math.nan, math.inf, -math.inf, angles[0]])
+        got = blade_wxyzs(mounts, angles)
+        assert got.dtype == np.float32 and got.shape == (4, 4)
+        for q, a, row in zip(mounts, angles, got):
+            want = quaternion_multiply(q, turn_about_z(a if math.isfinite(a) else 0.0))
+            np.testing.assert_allclose(row, want, atol=1e-6)
+
+
+def test_the_trail_keeps_points_a_spacing_apart_and_the_newest_when_full() -> None:
+    scene = RobotScene(SceneCalls(), Geometry(), trail_points=4, trail_spacing=0.05)
+    for x in (0.0, 0.01, 0.04, 0.06, 0.1, 0.12, 0.2, 0.3, 0.31, 0.4):
+        scene._add_trail_point((x, 0.0, 1.0))
+    # 0.01 and 0.04 are within 0.05 of 0.0, 0.1 of 0.06, 0.12 kept (0.06 from 0.06), 0.31 of 0.3
+    np.testing.assert_allclose(scene.trail_points()[:, 0], [0.12, 0.2, 0.3, 0.4])
+    np.testing.assert_allclose(scene.trail_points()[:, 2], 1.0)

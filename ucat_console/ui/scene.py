@@ -33,7 +33,6 @@ import numpy as np
 from ucat_console.robot.fins import N_FINS
 from ucat_console.robot.geometry import BLADE_LENGTH_FACTOR, BLADE_SPAN, BLADE_THICKNESS, Geometry, fin_mount
 from ucat_console.robot.look import FIN_COLOUR, GHOST_COLOUR, HULL_COLOUR, NOSE_COLOUR
-from ucat_console.robot.rotations import quaternion_multiply
 from ucat_console.telemetry.messages import BodyState, FinState
 from ucat_console.ui.fast_props import set_pose, set_prop
 
@@ -60,10 +59,13 @@ def _changed(a: float, b: float) -> bool:
 def blade_wxyzs(mount_wxyz: Sequence[Sequence[float]], angles: Sequence[float]) -> np.ndarray:
     """The blades' orientations (n, 4) in the body frame: each fin's mount turned by its
     angle about the mount's z axis (an angle that is not a number leaves the blade neutral)."""
-    out = np.empty((len(mount_wxyz), 4), dtype=np.float32)
-    for i, (q, a) in enumerate(zip(mount_wxyz, angles)):
-        out[i] = quaternion_multiply(q, turn_about_z(a if math.isfinite(a) else 0.0))
-    return out
+    rows = []
+    for (w, x, y, z), a in zip(mount_wxyz, angles):
+        # the product q * (cos(a/2), 0, 0, sin(a/2)) written out (40 times a second)
+        h = 0.5 * a if math.isfinite(a) else 0.0
+        c, s = math.cos(h), math.sin(h)
+        rows.append((w * c - z * s, x * c + y * s, y * c - x * s, w * s + z * c))
+    return np.array(rows, dtype=np.float32).reshape(-1, 4)
 
 
 def fin_plate_mesh(length: float, span: float, thickness: float) -> tuple[np.ndarray, np.ndarray]:
@@ -130,6 +132,7 @@ class RobotScene:
         self._trail = np.zeros((int(trail_points), 3))
         self._trail_n = 0
         self._trail_next = 0
+        self._trail_last: tuple[float, float, float] = (0.0, 0.0, 0.0)  # the newest point
         self._trail_dirty = False
         self.updates = 0
         self._shown: list[tuple[float, float]] = [(math.nan, math.nan)] * 4  # (angle, commanded) per fin
@@ -191,10 +194,9 @@ class RobotScene:
 
     def _add_trail_point(self, p: tuple[float, float, float]) -> None:
         cap = self._trail.shape[0]
-        if self._trail_n:
-            last = self._trail[(self._trail_next - 1) % cap]
-            if math.dist(last, p) < self.trail_spacing:
-                return
+        if self._trail_n and math.dist(self._trail_last, p) < self.trail_spacing:
+            return
+        self._trail_last = p
         self._trail[self._trail_next] = p
         self._trail_next = (self._trail_next + 1) % cap
         self._trail_n = min(self._trail_n + 1, cap)

@@ -104,7 +104,7 @@ class Supervisor:
         formulation is loaded, or compiled here, before the robot starts."""
         self.cfg = cfg = cfg or AppConfig()
         self.stream = TelemetryStream()
-        self._loop_stream = TelemetryStream(validate=False)
+        self._loop_stream = _LoopOutlet(self.stream, self._forward)
         self._lock = threading.RLock()
         self._listeners: list[Callable[[], None]] = []
         self.access = AccessControl(cfg.access)
@@ -165,7 +165,6 @@ class Supervisor:
         self._closed = False
         self._chunks = 0
         self._unsubs = [
-            self._loop_stream.subscribe(self._forward),
             self.stream.subscribe(self.safety.on_message, SAFETY_CHANNELS),
             self.stream.subscribe(self._on_body, [ch.BODY_STATE]),
         ]
@@ -685,3 +684,20 @@ class Supervisor:
 
     def zero_depth(self, who: Actor) -> float:
         return self.rig_control.zero_depth(who)
+
+
+class _LoopOutlet:
+    """The closed loop's stream: what the loop publishes goes through the supervisor's
+    forwarding (``Supervisor._forward``) onto the public stream, and the loop builds what
+    the public stream's subscribers take (``wants``, ``wanted``)."""
+
+    def __init__(self, public: TelemetryStream, forward: Callable[[str, Any], None]) -> None:
+        self._public = public
+        self.publish = forward
+
+    def wants(self, channel: str) -> bool:
+        return self._public.wants(channel)
+
+    @property
+    def wanted(self) -> frozenset[str]:
+        return self._public.wanted
