@@ -119,10 +119,18 @@ def test_span_pins_keep_a_minimum_axis_span_around_the_data() -> None:
 
     depth = np.array([1.000, 1.002, 0.999])
     target = np.array([1.0, 1.0, 1.0])
-    lo, hi = span_pins(depth, target, span=0.2)
+    nothing = np.array([np.nan, np.inf, -np.inf])
+    some = np.array([np.nan, 0.5, 0.25])
+    pins = span_pins(np.array([[depth, target], [nothing, nothing], [some, nothing]]), [0.2, 0.1, 0.4])
+    assert pins.shape == (3, 2, 3) and pins.dtype == np.float64
+    lo, hi = pins[0]
     assert np.allclose(hi - lo, 0.2) and lo[0] < 0.999 and hi[0] > 1.002
-    lo, hi = span_pins(np.array([np.nan, np.nan]), np.array([np.nan, np.nan]), span=0.1)
-    assert np.allclose(hi - lo, 0.1)
+    np.testing.assert_allclose(pins[0].mean(axis=0), 0.5 * (0.999 + 1.002))
+    np.testing.assert_allclose(pins[1], [[-0.05] * 3, [0.05] * 3])  # no finite value: around 0
+    np.testing.assert_allclose(pins[2], [[0.375 - 0.2] * 3, [0.375 + 0.2] * 3])  # finite ones only
+    big = np.finfo(np.float32).max
+    huge = span_pins(np.array([[[big, big], [big, big]]], np.float32), [0.1])
+    assert huge.dtype == np.float32 and np.isfinite(huge).all()  # the middle is taken in float64
 
 
 def test_a_page_receives_the_plots_and_the_pose_the_view_sends() -> None:

@@ -210,17 +210,29 @@ def st_shown(st: np.ndarray, armed: np.ndarray, speed: np.ndarray) -> tuple[np.n
     return shown, above
 
 
-def span_pins(*series: np.ndarray, span: float) -> tuple[np.ndarray, np.ndarray]:
-    """Two constant series around the middle of ``series`` at least ``span`` apart (the
-    value axis then spans at least that)."""
-    vals = np.concatenate([s[np.isfinite(s)] for s in series]) if series else np.zeros(0)
-    mid = 0.5 * (float(vals.min()) + float(vals.max())) if vals.size else 0.0  # in float64: no overflow
-    n = len(series[0]) if series else 0
-    dtype = series[0].dtype if series else np.float64
-    return np.full(n, mid - span / 2, dtype), np.full(n, mid + span / 2, dtype)
+def span_pins(series: np.ndarray, span: Sequence[float]) -> np.ndarray:
+    """For each chart ``c``, two constant series around the middle of ``series[c]`` (its
+    series, (m, n)) at least ``span[c]`` apart (the value axis then spans at least that):
+    (charts, 2, n), of ``series``' type. Non-finite values are left out of the middle; a
+    chart with none has its pins around 0."""
+    charts, n = series.shape[0], series.shape[-1]
+    flat = series.reshape(charts, -1)
+    finite = np.isfinite(flat)
+    lo = np.where(finite, flat, np.inf).min(axis=1).astype(np.float64)
+    hi = np.where(finite, flat, -np.inf).max(axis=1).astype(np.float64)
+    has = finite.any(axis=1)
+    mid = 0.5 * np.where(has, lo, 0.0) + 0.5 * np.where(has, hi, 0.0)  # halves first: no overflow
+    half = 0.5 * np.asarray(span, dtype=np.float64)
+    pins = np.empty((charts, 2, n), series.dtype)
+    pins[:, 0] = (mid - half)[:, None]
+    pins[:, 1] = (mid + half)[:, None]
+    return pins
 
 
 _ST_ROWS = [COL[f"st{i}"] for i in range(N_FINS)]
+_TRACKED = ("depth", "velocity", "yaw_rate")  # the tracking charts: value and target each
+_TRACKED_ROWS = np.array([[COL[name], COL[f"{name}_sp"]] for name in _TRACKED])
+_TRACKED_SPANS = [MIN_SPAN[name] for name in _TRACKED]
 
 
 class LivePlots:
@@ -302,9 +314,10 @@ class LivePlots:
         # new arrays each time: set without viser's casts and comparisons (ui.fast_props)
         set_prop(self.st, "data", (t, np.full(n, hi, VALUES), np.full(n, lo, VALUES), *shown.astype(VALUES),
                                    above.max(axis=0).astype(VALUES)))
-        for chart, name in ((self.depth, "depth"), (self.velocity, "velocity"), (self.yaw_rate, "yaw_rate")):
-            value, target = val[c[name]], val[c[f"{name}_sp"]]
-            set_prop(chart, "data", (t, value, target, *span_pins(value, target, span=MIN_SPAN[name])))
+        tracked = val[_TRACKED_ROWS]  # (charts, value and target, n)
+        pins = span_pins(tracked, _TRACKED_SPANS)
+        for k, chart in enumerate((self.depth, self.velocity, self.yaw_rate)):
+            set_prop(chart, "data", (t, tracked[k, 0], tracked[k, 1], pins[k, 0], pins[k, 1]))
         set_prop(self.power, "data", (t, *(val[c[f"p{i}"]] for i in range(N_FINS)), val[c["p_total"]],
                                       val[c["p_mean"]], val[c["energy_per_metre"]]))
         self.updates += 1
