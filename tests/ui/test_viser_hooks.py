@@ -1,68 +1,23 @@
-"""The wire form viser's senders share between pages (:mod:`ucat_console.ui.viser_hooks`):
-every page still receives exactly the messages and arrays the server sent, wherever a
-message's arrays fall in a page's batch, and a scene file is still written right."""
+"""viser's senders as :mod:`ucat_console.ui.viser_hooks` makes them: every page still
+receives exactly the messages and arrays the server sent (pages in step sharing frames, a
+page joining late, a scene file written meanwhile), on uvloop, without a wait after a batch."""
 
 from __future__ import annotations
 
 from typing import Any, Iterator
 
 import asyncio
-import threading
-import types
 
 import msgspec.msgpack
 import numpy as np
 import pytest
 import uvloop
 import viser
-import viser._messages as vm
-import viser.infra._infra as vinfra
 import zstandard
 from support import wait_for
 
 from ucat_console.bench.raw_page import RawPage, split_buffers, with_arrays
 from ucat_console.ui import viser_hooks
-
-
-def _cloud(name: str, n: int, seed: int) -> vm.PointCloudMessage:
-    rng = np.random.default_rng(seed)
-    return vm.PointCloudMessage(name, vm.PointCloudProps(
-        points=rng.normal(size=(n, 3)).astype(np.float32),
-        colors=rng.integers(0, 255, size=(n, 3), dtype=np.uint8),
-        point_size=0.01, point_shape="square", precision="float32", scale=1.0, point_shading="flat"))
-
-
-def test_the_kept_wire_form_equals_viser_s_own_at_every_position_in_a_batch() -> None:
-    viser_hooks.install()
-    real = vm.PointCloudMessage.as_serializable_dict.__wrapped__
-    msg = _cloud("/c", 50, 1)
-    for ahead in (0, 3, 0, 7, 3):  # arrays already in the batch before this message's
-        filler = [memoryview(bytes([i])) for i in range(ahead)]
-        shared_buffers, own_buffers = list(filler), list(filler)
-        shared = msg.as_serializable_dict(shared_buffers)
-        own = real(msg, own_buffers)
-        assert shared == own
-        assert [bytes(b) for b in shared_buffers] == [bytes(b) for b in own_buffers]
-        assert len(own_buffers) == ahead + 2  # the points and the colours
-    # arrays inline (no buffer list): viser's own form, not the batch's
-    inline = msg.as_serializable_dict()
-    assert bytes(inline["props"]["points"]) == msg.props.points.tobytes()
-
-
-def test_a_scene_file_s_merging_of_equal_arrays_leaves_the_kept_forms_alone() -> None:
-    viser_hooks.install()
-    real = vm.PointCloudMessage.as_serializable_dict.__wrapped__
-    a, b = _cloud("/a", 4, 1), _cloud("/b", 5, 2)
-    c = vm.PointCloudMessage("/c", b.props)  # b's arrays: the file keeps them once
-    handler = types.SimpleNamespace(_record_lock=threading.Lock(), _record_handles=[])
-    file = vinfra.StateSerializer(handler, filter=lambda m: True)
-    handler._record_handles.append(file)
-    for m in (a, b, c):
-        file._insert_message(m)
-    file.serialize()  # rewrites c's indices (4, 5) to b's (2, 3) in the file's forms
-    for ahead in (4, 2, 0):
-        filler = [memoryview(bytes([i])) for i in range(ahead)]
-        assert c.as_serializable_dict(list(filler)) == real(c, list(filler))
 
 
 class _Recorder(RawPage):
@@ -123,7 +78,7 @@ def test_two_pages_receive_every_array_the_server_sent(server: viser.ViserServer
             page.close()
 
 
-def test_a_scene_file_holds_every_array_and_leaves_the_pages_forms_alone(server: viser.ViserServer) -> None:
+def test_a_scene_file_holds_every_array_and_a_later_page_still_gets_each_cloud_s_own(server: viser.ViserServer) -> None:
     url = f"http://127.0.0.1:{server.get_port()}"
     same = np.ones((5, 3), dtype=np.float32)  # equal arrays: the file merges them
     other = np.arange(12, dtype=np.float32).reshape(4, 3)

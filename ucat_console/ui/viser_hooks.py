@@ -1,4 +1,4 @@
-"""The places where the console hooks into viser: the page guard's two, and four for CPU.
+"""The places where the console hooks into viser: the page guard's two, and three for CPU.
 
 viser has no hook for a websocket handshake check or for its incoming messages, so
 :func:`install` replaces two names in viser's websocket module (once, for the process):
@@ -11,17 +11,6 @@ viser has no hook for a websocket handshake check or for its incoming messages, 
   a traceback that closes the connection).
 
 Servers made any other way are left exactly as viser makes them.
-
-And one for every server: viser turns each outgoing message into its wire form once per
-page (every page's connection has its own sender, and a broadcast message reaches each of
-them), which with two pages was the largest part of its websocket thread's CPU.
-:func:`install` makes ``Message.as_serializable_dict`` keep the wire form it computed on
-the message (as viser keeps a message's redundancy key), so that the other pages' senders
-reuse it: the same dict, with the indices of the message's arrays moved to where they
-fall in the other batch. A message is never changed after it is queued (viser
-serialises it later, in its own thread), so the kept form stays the message's. A scene
-file's serializer (``get_scene_serializer``) still makes a form of its own, since it
-rewrites the forms it holds.
 
 And viser's websocket thread runs on uvloop's event loop (libuv's, in C) instead of
 asyncio's own: viser makes its loop with ``asyncio.new_event_loop()``, which :func:`install`
@@ -42,8 +31,9 @@ browser pages (``bench ui``) viser's websocket thread went from 5.6-6.1 % to 2.9
 core and a pose's p95 latency from 76-104 to 57-73 ms.
 
 And pages in step are sent one frame: a broadcast message goes to every page's sender, and
-each used to encode the same window (the wire forms into msgpack, compressed, with the
-arrays after it) for its own page. :func:`install` replaces viser's sender
+each used to encode the same window (each message's wire form, msgpack of them all,
+compressed, with the arrays after it) for its own page, which with two pages was the
+largest part of viser's websocket thread's CPU. :func:`install` replaces viser's sender
 (``_message_producer``) with :func:`_sharing_producer`, the same loop that keeps the last
 few frames of the broadcast buffer by the identity of their messages: a page whose window
 holds the same messages as one just sent to another page is sent those bytes. A page that
@@ -65,7 +55,6 @@ import zstandard
 import viser
 import viser.infra._async_message_buffer as vbuffer
 import viser.infra._infra as vinfra
-import viser.infra._messages as vmessages
 from websockets.exceptions import ConnectionClosed
 from websockets.frames import CloseCode
 
@@ -150,9 +139,6 @@ def install() -> None:
     asyncio_ns = types.SimpleNamespace(server=server_ns)
     vinfra.websockets = _ModuleView(real_ws, asyncio=asyncio_ns)
     vinfra._message_consumer = guarded_consumer
-    real_wire_form = vmessages.Message.as_serializable_dict
-    vmessages.Message.as_serializable_dict = _shared_wire_form(real_wire_form)
-    vinfra.StateSerializer._insert_message = _own_wire_form(real_wire_form)
     if uvloop is not None:
         vinfra.asyncio = _ModuleView(asyncio, new_event_loop=uvloop.new_event_loop)
     vbuffer.AsyncMessageBuffer.__init__ = _without_window_wait(vbuffer.AsyncMessageBuffer.__init__)
@@ -168,33 +154,6 @@ def _without_window_wait(real_init: Any) -> Any:
         self.window_duration_sec = 0.0
 
     return __init__
-
-
-def _shared_wire_form(real: Any) -> Any:
-    """``as_serializable_dict`` computing a message's wire form once for every page."""
-
-    def as_serializable_dict(self: Any, binary_buffers: list[memoryview] | None = None) -> dict[str, Any]:
-        if binary_buffers is None:  # arrays inline: a scene file, not a page's batch
-            return real(self, None)
-        kept = self.__dict__.get("_ucat_wire")
-        if kept is None:
-            arrays: list[memoryview] = []
-            kept = self.__dict__["_ucat_wire"] = (real(self, arrays), arrays, {})
-        wire, arrays, moved = kept
-        if not arrays:
-            return wire
-        base = len(binary_buffers)
-        binary_buffers.extend(arrays)
-        if base == 0:
-            return wire
-        out = moved.get(base)
-        if out is None:
-            out = moved[base] = _moved_indices(wire, base)
-        return out
-
-    as_serializable_dict.__doc__ = real.__doc__
-    as_serializable_dict.__wrapped__ = real  # type: ignore[attr-defined]
-    return as_serializable_dict
 
 
 #: the frames each broadcast buffer keeps for its other pages' senders (the last few windows)
@@ -252,30 +211,6 @@ async def _sharing_producer(websocket: Any, buffer: Any, client_id: int, backlog
     finally:
         # closed at once, as viser's own sender does: its finally releases the GC cursor
         await window_generator.aclose()
-
-
-def _own_wire_form(real: Any) -> Any:
-    """``StateSerializer._insert_message`` (a scene file's) with a wire form of its own.
-
-    The file's serializer rewrites the array indices of the forms it holds in place (when it
-    merges equal arrays), so it must not be handed the form the pages' senders share."""
-
-    def _insert_message(self: Any, message: Any) -> None:
-        if self._filter(message):
-            self._messages.append((self._time, real(message, self._binary_buffers)))
-
-    return _insert_message
-
-
-def _moved_indices(v: Any, base: int) -> Any:
-    """A copy of the wire form ``v`` with every array placeholder's index moved by ``base``."""
-    if isinstance(v, dict):
-        if vmessages.is_binary_placeholder(v):
-            return {**v, "__binary_index": v["__binary_index"] + base}
-        return {k: _moved_indices(x, base) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return type(v)(_moved_indices(x, base) for x in v)
-    return v
 
 
 class _ModuleView:
