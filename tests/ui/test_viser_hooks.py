@@ -199,3 +199,31 @@ def test_pages_in_step_are_sent_one_encoding_of_a_broadcast_batch(server: viser.
     finally:
         for page in pages:
             page.close()
+
+
+def test_a_page_that_stops_reading_holds_up_no_other_and_later_gets_everything(server: viser.ViserServer) -> None:
+    url = f"http://127.0.0.1:{server.get_port()}"
+    pages = [_Recorder(url), _Recorder(url)]
+    reader, frozen = pages
+    try:
+        wait_for(lambda: len(server.get_clients()) == 2, what="two pages connected")
+        frozen.stop_reading()
+        # 40 batches of 1.2 MB, each sent once the reading page has the one before: far more
+        # than the socket buffers and the frozen page's client queue take
+        names = [f"/big/{k}" for k in range(40)]
+        for k, name in enumerate(names):
+            with server.atomic():
+                server.scene.add_point_cloud(name, np.full((100_000, 3), k, np.float32),
+                                             np.zeros((100_000, 3), np.uint8), point_size=0.01,
+                                             precision="float32")
+            wait_for(lambda: name in reader.clouds, what=f"batch {k} on the page still reading")
+        assert not all(n in frozen.clouds for n in names)
+        frozen._reading.set()  # reads again: what piled up for it comes in windows of its own
+        wait_for(lambda: all(n in frozen.clouds for n in names), what="every batch on the page read again",
+                 timeout=60.0)
+        for k, name in enumerate(names):
+            assert frozen.clouds[name][0][0] == k and len(frozen.clouds[name][0]) == 300_000
+        assert len({frozen.cloud_frame[n] for n in names}) < len(names)  # batches merged while it lagged
+    finally:
+        for page in pages:
+            page.close()
