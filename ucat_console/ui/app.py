@@ -54,7 +54,7 @@ from ucat_console.robot.fins import N_FINS
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.messages import FinPlan
-from ucat_console.ui import markdown, page_script, panels
+from ucat_console.ui import markdown, page_script, panels, viser_hooks
 from ucat_console.ui.fast_props import set_prop
 from ucat_console.ui.guard import PageGuard
 from ucat_console.ui.playback import PlaybackPanel
@@ -200,7 +200,8 @@ class ConsoleApp:
     def start(self) -> None:
         if self.view.running:
             raise RuntimeError("the console app is already running")
-        self.view.start()
+        # the live view's callbacks do not block: its passes run on the server's event loop
+        self.view.start(viser_hooks.event_loop(self.server))
 
     def stop(self) -> None:
         self.view.stop()
