@@ -8,7 +8,7 @@ from typing import Any
 import pytest
 import viser
 
-from tests.support import wait_for
+from support import wait_for
 from ucat_console.robot.geometry import Geometry
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.messages import BodyState

@@ -160,6 +160,34 @@ def test_viser_s_senders_do_not_wait_after_a_batch(server: viser.ViserServer) ->
         page.close()
 
 
+def test_the_window_delay_is_one_turn_of_the_loop_and_reports_what_is_done() -> None:
+    """With a window of 0 viser's window loop waits for 0 s (or a flush): one turn of the
+    event loop, in which every other ready task runs; a flush already done is reported done."""
+
+    async def scenario() -> None:
+        loop = asyncio.get_running_loop()
+        ran: list[str] = []
+        flushed = loop.create_future()
+        flushed.set_result(True)
+        waiting = loop.create_future()
+        loop.call_soon(ran.append, "other task")
+        before = len(loop._scheduled) if hasattr(loop, "_scheduled") else None
+        done, pending = await viser_hooks._window_delay([flushed, waiting], timeout=0.0)
+        assert ran == ["other task"]  # the other ready work had its turn
+        assert done == {flushed} and pending == {waiting}
+        if before is not None:
+            assert len(loop._scheduled) == before  # no timer was made for it
+        # a window other than 0 is asyncio's own wait: it times out, or ends with the flush
+        t0 = loop.time()
+        done, pending = await viser_hooks._window_delay([waiting], timeout=0.05)
+        assert not done and pending == {waiting} and loop.time() - t0 >= 0.04
+        loop.call_later(0.01, waiting.set_result, True)
+        done, pending = await viser_hooks._window_delay([waiting], timeout=30.0)
+        assert done == {waiting} and not pending
+
+    asyncio.run(scenario())
+
+
 def test_pages_in_step_are_sent_one_encoding_of_a_broadcast_batch(server: viser.ViserServer, monkeypatch) -> None:
     encoded: list[tuple[str, ...]] = []
     real = viser_hooks._frame

@@ -28,7 +28,10 @@ a review as one batch (``server.atomic()``), so for it that wait only costs a ti
 wake-up per page and batch (about 100 a second with two pages) and up to 17 ms of a
 pose's latency. :func:`install` makes every message buffer's window duration 0; with two
 browser pages (``bench ui``) viser's websocket thread went from 5.6-6.1 % to 2.9-4.0 % of a
-core and a pose's p95 latency from 76-104 to 57-73 ms.
+core and a pose's p95 latency from 76-104 to 57-73 ms. The window loop still waits for that
+duration after each window and each wake-up (``asyncio.wait`` for a flush, with a timeout
+of 0: a future, a timer and callbacks every time, some 200 times a second with two pages);
+:func:`_window_delay` makes that wait the one turn of the event loop it amounts to.
 
 And pages in step are sent one frame: a broadcast message goes to every page's sender, and
 each used to encode the same window (each message's wire form, msgpack of them all,
@@ -75,10 +78,15 @@ def guarded_server(guard: Any, **kwargs: Any) -> viser.ViserServer:
     with _PENDING_LOCK:  # the serve call happens inside the constructor, in viser's thread
         _PENDING.append(guard)
         try:
-            return viser.ViserServer(**kwargs)
+            server = viser.ViserServer(**kwargs)
         finally:
             if guard in _PENDING:
                 _PENDING.remove(guard)
+    # named for thread listings (``bench ui``): the pages' sockets, and the live view's passes
+    thread = getattr(server._websock_server, "_server_thread", None)
+    if thread is not None:
+        thread.name = "viser-websocket"
+    return server
 
 
 def event_loop(server: viser.ViserServer) -> asyncio.AbstractEventLoop:
@@ -151,6 +159,7 @@ def install() -> None:
         vinfra.asyncio = _ModuleView(asyncio, new_event_loop=uvloop.new_event_loop)
     vbuffer.AsyncMessageBuffer.__init__ = _without_window_wait(vbuffer.AsyncMessageBuffer.__init__)
     vinfra._message_producer = _sharing_producer
+    vbuffer.asyncio = _ModuleView(asyncio, wait=_window_delay)
     _INSTALLED = True
 
 
@@ -162,6 +171,18 @@ def _without_window_wait(real_init: Any) -> Any:
         self.window_duration_sec = 0.0
 
     return __init__
+
+
+async def _window_delay(fs: Any, *, timeout: float | None = None) -> tuple[set[Any], set[Any]]:
+    """``asyncio.wait`` for viser's window loop, the only caller in its buffer module, which
+    waits there for the window duration or a flush, whichever is first. With a window of
+    0 (:func:`_without_window_wait`) that wait is one turn of the event loop: here a bare
+    yield, without asyncio's timer, future and callbacks for each window (module docstring)."""
+    if timeout != 0:
+        return await asyncio.wait(fs, timeout=timeout)
+    await asyncio.sleep(0)
+    done = {f for f in fs if f.done()}
+    return done, {f for f in fs if not f.done()}
 
 
 #: the frames each broadcast buffer keeps for its other pages' senders (the last few windows)
