@@ -344,7 +344,7 @@ class ConsoleApp:
         page.client.local_storage.set_item(page_script.THEME_KEY, "dark" if page.dark else "light")
         self._theme(page.client.gui, page.dark)
 
-    # ------------------------------------------------------------------ UI thread (the live view's)
+    # ------------------------------------------------------------------ the live view's passes (the server's event loop)
     def _probe(self) -> None:
         body, probe = self.view.body, self.probe
         if probe is not None and body is not None:

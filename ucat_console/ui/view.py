@@ -49,7 +49,7 @@ from ucat_console.ui.scene import LIVE_ROOT, RobotScene
 log = logging.getLogger(__name__)
 
 SLOW_PERIOD = 0.25  # s: trail, label, status
-_TICK = 0.05  # s: the UI thread's longest sleep (``on_tick`` runs at least this often)
+_TICK = 0.05  # s: the longest time between two passes (``on_tick`` runs at least this often)
 
 
 def from_page(fn: Callable[[], Any], act: Callable[[Callable[[], Any]], Any]) -> Callable[[Any], None]:
