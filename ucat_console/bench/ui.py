@@ -18,7 +18,7 @@ pages open on it. After a warm-up, for ``duration`` seconds:
   BodyState it shows was published on the stream; the page records ``Date.now()`` when
   the probe changes on screen (same machine, same clock); p50 / p95 / max;
 * supervisor CPU: the console process's CPU time over the wall time (100 % = one core),
-  which includes the loop, the planner threads, the web server with the live view's passes, and the
+  which includes the loop, the planner threads, the UI thread, the web server and the
   recorder (recording starts on arming, as at the pool); measured again for another
   ``duration`` seconds with the probe off (its element updated with every pose and sent to
   every page is the benchmark's, not the console's), the pages still drawing;

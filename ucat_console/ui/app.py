@@ -54,7 +54,7 @@ from ucat_console.robot.fins import N_FINS
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.messages import FinPlan
-from ucat_console.ui import markdown, page_script, panels, viser_hooks
+from ucat_console.ui import markdown, page_script, panels
 from ucat_console.ui.fast_props import set_prop
 from ucat_console.ui.guard import PageGuard
 from ucat_console.ui.playback import PlaybackPanel
@@ -200,8 +200,7 @@ class ConsoleApp:
     def start(self) -> None:
         if self.view.running:
             raise RuntimeError("the console app is already running")
-        # the live view's callbacks do not block: its passes run on the server's event loop
-        self.view.start(viser_hooks.event_loop(self.server))
+        self.view.start()
 
     def stop(self) -> None:
         self.view.stop()
@@ -344,7 +343,7 @@ class ConsoleApp:
         page.client.local_storage.set_item(page_script.THEME_KEY, "dark" if page.dark else "light")
         self._theme(page.client.gui, page.dark)
 
-    # ------------------------------------------------------------------ the live view's passes (the server's event loop)
+    # ------------------------------------------------------------------ UI thread (the live view's)
     def _probe(self) -> None:
         body, probe = self.view.body, self.probe
         if probe is not None and body is not None:

@@ -444,8 +444,9 @@ class PageGuard:
             page = self._pages.get(client)
         if page is None or page.ws is None or self.server is None:
             return
+        loop = self.server._websock_server._background_event_loop
         try:
-            viser_hooks.event_loop(self.server).call_soon_threadsafe(page.ws.transport.abort)
+            loop.call_soon_threadsafe(page.ws.transport.abort)
         except RuntimeError:
             pass  # the server's loop has stopped
 

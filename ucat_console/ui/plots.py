@@ -1,7 +1,7 @@
 """Live plots: a stream subscriber fills fixed-size ring buffers; uPlot charts show a window.
 
 :class:`PlotFeeder` subscribes to the telemetry stream and keeps only the latest value of
-each plotted quantity (O(1) per message, whatever the rate). At each refresh the view's pass
+each plotted quantity (O(1) per message, whatever the rate). At each refresh the UI thread
 calls :meth:`PlotFeeder.sample`, which appends one row (time, values) to a
 :class:`RingBuffer` of fixed capacity (the longest history window times the refresh
 rate). :class:`LivePlots` then sends the rows of the chosen history window, decimated to

@@ -3,20 +3,13 @@
 
 A view subscribes to a stream, keeps the latest body state and fin states (O(1) per
 message), draws them in a :class:`~ucat_console.ui.scene.RobotScene` and fills the plots
-(:class:`~ucat_console.ui.plots.LivePlots` on a :class:`~ucat_console.ui.plots.PlotFeeder`)
-in passes that push, whatever the telemetry rate:
+(:class:`~ucat_console.ui.plots.LivePlots` on a :class:`~ucat_console.ui.plots.PlotFeeder`),
+from a UI thread of its own that pushes, whatever the telemetry rate:
 
 * the robot's pose on each new body state, at most ``scene_rate`` times a second (inside
   ``atomic()``, so a page applies the pose and the fins together);
 * the plots at ``plot_rate`` when rows were added;
 * the trail, the depth label and the view's own slow work (``on_slow``) at 4 Hz.
-
-The passes run in a UI thread of the view's own (each page's review: its callbacks wait for
-the review's player), or as callbacks of the pages' server's event loop (the live view,
-``start(loop)``): there a pass and the sending of its messages share one wake-up of one
-thread, where a thread of its own wakes for the pass and then wakes the server's thread
-(``ucat-console bench ui``, README). A pass on the server's loop must not block: the
-pages' sockets wait while it runs.
 
 Rows of the plots are taken at the UI's pace (``sample_rows=True``: the live view) or by the
 stream's clock (a :class:`StreamSampler` on the stream: review, so that the plots do not
@@ -28,9 +21,7 @@ event that came from a page, not for a value set from code.
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
-import dataclasses
 import logging
 import math
 import threading
@@ -49,7 +40,7 @@ from ucat_console.ui.scene import LIVE_ROOT, RobotScene
 log = logging.getLogger(__name__)
 
 SLOW_PERIOD = 0.25  # s: trail, label, status
-_TICK = 0.05  # s: the longest time between two passes (``on_tick`` runs at least this often)
+_TICK = 0.05  # s: the UI thread's longest sleep (``on_tick`` runs at least this often)
 
 
 def from_page(fn: Callable[[], Any], act: Callable[[Callable[[], Any]], Any]) -> Callable[[Any], None]:
@@ -148,10 +139,6 @@ class StreamView:
         self._stop = threading.Event()
         self._wake = threading.Event()  # a new body state, or stop()
         self._thread: threading.Thread | None = None
-        self._loop: asyncio.AbstractEventLoop | None = None
-        self._timer: asyncio.Handle | None = None
-        self._waiting = False  # on the loop: the next pass waits for a body state
-        self._pacing = _Pacing.from_now()
         self.tick_errors = 0
 
     # ------------------------------------------------------------------ stream side
@@ -167,15 +154,7 @@ class StreamView:
             self.body = msg
             self.body_wall = time.time()
             self.body_seq += 1
-            loop = self._loop
-            if loop is None:
-                self._wake.set()
-            elif self._waiting:
-                self._waiting = False
-                try:
-                    loop.call_soon_threadsafe(self._on_loop)
-                except RuntimeError:
-                    pass  # the loop has closed (the server stopped)
+            self._wake.set()
         elif tp is FinState:
             self.fins[msg.fin] = msg
 
@@ -220,122 +199,67 @@ class StreamView:
         if self.on_slow is not None:
             self.on_slow()
 
-    # ------------------------------------------------------------------ passes
+    # ------------------------------------------------------------------ UI thread
     @property
     def running(self) -> bool:
-        return self._thread is not None or self._loop is not None
+        return self._thread is not None
 
-    def start(self, loop: asyncio.AbstractEventLoop | None = None) -> None:
-        """Run the view's passes: in a UI thread of its own, or, given ``loop`` (the pages'
-        server's event loop, running in its thread), as that loop's callbacks (module
-        docstring). Only a view whose callbacks never block may run on the server's loop."""
-        if self.running:
+    def start(self) -> None:
+        if self._thread is not None:
             return
         self._stop.clear()
-        self._pacing = _Pacing.from_now()
-        if loop is not None:
-            self._loop = loop
-            loop.call_soon_threadsafe(self._on_loop)
-            return
         self._thread = threading.Thread(target=self._run, name=f"ui-{self.name}", daemon=True)
         self._thread.start()
 
     def stop(self) -> None:
         self._stop.set()
         self._wake.set()
-        loop, self._loop = self._loop, None
-        if loop is not None:
-            try:
-                loop.call_soon_threadsafe(self._cancel_timer)
-            except RuntimeError:
-                pass  # the loop has stopped, and its timers with it
         t, self._thread = self._thread, None
         if t is not None and t is not threading.current_thread():
             t.join(timeout=5.0)
 
-    def _pass(self, p: _Pacing) -> tuple[float, bool]:
-        """One pass: what is due of the pose, the plots and the slow work, as one batch (the
-        pages' server is woken once for all of its messages). Returns when the next pass is
-        due (``time.perf_counter``) and whether a body state arriving earlier should wake
-        it: before the next pose may go, at that time, whether a body state came meanwhile
-        or not; after it, at the body state's arrival; for the plots and the slow work a
-        pose's time later (a pose pass takes them before then while poses come)."""
-        scene_period, plot_period = 1.0 / self.scene_rate, 1.0 / self.plot_rate
-        now = time.perf_counter()
-        try:
-            with self._atomic():
-                posed = self.body_seq != p.last_seq and now >= p.next_scene
-                if posed:
-                    p.last_seq = self.body_seq
-                    p.next_scene = max(p.next_scene + scene_period, now - scene_period)
-                    self.tick_scene()
-                # plots and slow work due before the next pose go with this one (one
-                # batch for the pages' server to send instead of two)
-                early = scene_period if posed else 0.0
-                if now >= p.next_plot - early:
-                    p.next_plot = max(p.next_plot + plot_period, now - plot_period)
-                    if self.sample_rows:
-                        if self.feeder.sample():
-                            self.refresh_plots()
-                    elif self.sampler.rows != p.last_rows:
-                        p.last_rows = self.sampler.rows
-                        self.refresh_plots()
-                if now >= p.next_slow - early:
-                    p.next_slow = now + SLOW_PERIOD
-                    self.tick_slow()
-                if self.on_tick is not None:
-                    self.on_tick()
-        except Exception:
-            self.tick_errors += 1
-            log.exception("%s update failed", self.name)
-        later = min(p.next_plot, p.next_slow) + scene_period
-        if time.perf_counter() < p.next_scene or self.body_seq != p.last_seq:
-            return min(p.next_scene, later), False
-        return later, True
-
-    # the view's own thread: wakes when something is due, not to poll (each wake-up costs CPU)
     def _run(self) -> None:
-        p = self._pacing
+        scene_period, plot_period = 1.0 / self.scene_rate, 1.0 / self.plot_rate
+        next_scene = next_plot = next_slow = time.perf_counter()
+        last_seq, last_rows = -1, -1
         while not self._stop.is_set():
             self._wake.clear()  # a body state from here on wakes the wait below
-            wake, on_body = self._pass(p)
-            event = self._wake if on_body else self._stop
-            event.wait(min(max(wake - time.perf_counter(), 0.001), _TICK))
-
-    # on the server's event loop: a timer for what is due, a body state's arrival for the pose
-    def _on_loop(self) -> None:
-        self._cancel_timer()
-        loop = self._loop
-        if loop is None or self._stop.is_set():
-            return
-        self._waiting = False
-        p = self._pacing
-        wake, on_body = self._pass(p)
-        self._timer = loop.call_later(min(max(wake - time.perf_counter(), 0.001), _TICK), self._on_loop)
-        if on_body:
-            self._waiting = True  # on_message, in the stream's thread, calls the next pass
-            if self.body_seq != p.last_seq:  # a body state came before the flag was up
-                self._waiting = False
-                self._cancel_timer()
-                self._timer = loop.call_soon(self._on_loop)
-
-    def _cancel_timer(self) -> None:
-        timer, self._timer = self._timer, None
-        if timer is not None:
-            timer.cancel()
-
-
-@dataclasses.dataclass
-class _Pacing:
-    """When a view's next pose, plot refresh and slow work are due, and what it has shown."""
-
-    next_scene: float
-    next_plot: float
-    next_slow: float
-    last_seq: int = -1  # the body state last posed
-    last_rows: int = -1  # the sampler's rows last plotted (review)
-
-    @classmethod
-    def from_now(cls) -> _Pacing:
-        now = time.perf_counter()
-        return cls(now, now, now)
+            now = time.perf_counter()
+            try:
+                # one batch: the pages' server is woken once for all of this pass's messages
+                with self._atomic():
+                    posed = self.body_seq != last_seq and now >= next_scene
+                    if posed:
+                        last_seq = self.body_seq
+                        next_scene = max(next_scene + scene_period, now - scene_period)
+                        self.tick_scene()
+                    # plots and slow work due before the next pose go with this one (one
+                    # batch for the pages' server to send instead of two)
+                    early = scene_period if posed else 0.0
+                    if now >= next_plot - early:
+                        next_plot = max(next_plot + plot_period, now - plot_period)
+                        if self.sample_rows:
+                            if self.feeder.sample():
+                                self.refresh_plots()
+                        elif self.sampler.rows != last_rows:
+                            last_rows = self.sampler.rows
+                            self.refresh_plots()
+                    if now >= next_slow - early:
+                        next_slow = now + SLOW_PERIOD
+                        self.tick_slow()
+                    if self.on_tick is not None:
+                        self.on_tick()
+            except Exception:
+                self.tick_errors += 1
+                log.exception("%s update failed", self.name)
+            # wake when something is due, not to poll (each wake-up costs CPU): before the
+            # next pose may go, at that time, whether a body state came meanwhile or not;
+            # after it, at the body state's arrival; for the plots and the slow work a
+            # pose's time later (a pose pass takes them before then while poses come)
+            now = time.perf_counter()
+            later = min(next_plot, next_slow) + scene_period
+            if now < next_scene or self.body_seq != last_seq:
+                wake, event = min(next_scene, later), self._stop
+            else:
+                wake, event = later, self._wake
+            event.wait(min(max(wake - now, 0.001), _TICK))

@@ -89,14 +89,6 @@ def guarded_server(guard: Any, **kwargs: Any) -> viser.ViserServer:
     return server
 
 
-def event_loop(server: viser.ViserServer) -> asyncio.AbstractEventLoop:
-    """The event loop of ``server``'s websocket thread (where its pages' messages are sent)."""
-    loop = server._websock_server._background_event_loop
-    if loop is None:
-        raise RuntimeError("the viser server's event loop is not running")
-    return loop
-
-
 def install() -> None:
     """Wrap viser's serve call and message consumer once (idempotent)."""
     global _INSTALLED
