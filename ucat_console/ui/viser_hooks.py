@@ -30,7 +30,7 @@ pose's latency. :func:`install` makes every message buffer's window duration 0; 
 browser pages (``bench ui``) viser's websocket thread went from 5.6-6.1 % to 2.9-4.0 % of a
 core and a pose's p95 latency from 76-104 to 57-73 ms. The window loop still waits for that
 duration after each window and each wake-up (``asyncio.wait`` for a flush, with a timeout
-of 0: a future, a timer and callbacks every time, some 200 times a second with two pages);
+of 0: a future, a timer and callbacks every time, about 250 times a second with two pages);
 :func:`_window_delay` makes that wait the one turn of the event loop it amounts to.
 
 And pages in step are sent one frame: a broadcast message goes to every page's sender, and
@@ -82,7 +82,7 @@ def guarded_server(guard: Any, **kwargs: Any) -> viser.ViserServer:
         finally:
             if guard in _PENDING:
                 _PENDING.remove(guard)
-    # named for thread listings (``bench ui``): the pages' sockets, and the live view's passes
+    # named for thread listings (``bench ui``): the thread of the pages' sockets
     thread = getattr(server._websock_server, "_server_thread", None)
     if thread is not None:
         thread.name = "viser-websocket"
