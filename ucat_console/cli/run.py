@@ -7,8 +7,8 @@
 
 With the page, the motors stay disarmed until the pilot (the page that entered the token
 printed below) arms them. ``--headless`` runs without a page and arms at once with the
-given setpoints, for ``--duration`` seconds of robot time (real time; ``--fast`` runs the
-simulator as fast as it goes). Ctrl-C disarms, stops the motors and closes the files.
+given setpoints, for ``--duration`` seconds of robot time from arming (real time; ``--fast``
+runs the simulator as fast as it goes). Ctrl-C disarms, stops the motors and closes the files.
 """
 
 from __future__ import annotations
@@ -31,7 +31,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--port", type=int, default=None, help="port (default 8080; 0: any free port)")
     p.add_argument("--headless", action="store_true", help="no web page: arm at once and run --duration s")
     p.add_argument("--fast", action="store_true", help="headless simulator runs as fast as it can")
-    p.add_argument("--duration", type=float, default=None, metavar="S", help="stop after S s of robot time")
+    p.add_argument("--duration", type=float, default=None, metavar="S",
+                   help="stop after S s of robot time (headless: from arming)")
     p.add_argument("--mode", choices=MODES, default=None, help="fin controller")
     p.add_argument("--velocity", type=float, default=None, help="forward velocity setpoint, m/s")
     p.add_argument("--depth", type=float, default=None, help="depth setpoint, m")
@@ -184,9 +185,13 @@ def run(args: argparse.Namespace) -> int:
         if app is not None:
             print(f"U-CAT console on {app.url}  (port {app.port})")
             print(f"pilot token: {sup.access.token}")
-        else:
+        t_stop = args.duration
+        if app is None:
             sup.arm(LOCAL)
             print(f"headless run: mode {sup.mode}, setpoints {sup.setpoints}, motors armed")
+            if args.duration is not None:
+                # counted from arming: a fast loop runs on while the command reaches it
+                t_stop = sup.loop.time + args.duration
         period = cfg.console.health_period
         next_health = time.monotonic() + period
         next_token = time.monotonic() + TOKEN_REPEAT
@@ -194,7 +199,7 @@ def run(args: argparse.Namespace) -> int:
         repeat_token = sys.stdout.isatty()
         announced = prep is None or prep.complete
         while sup.running:
-            if args.duration is not None and sup.loop.time >= args.duration:
+            if t_stop is not None and sup.loop.time >= t_stop:
                 break
             time.sleep(0.1 if not args.fast else 0.02)
             now = time.monotonic()
