@@ -178,9 +178,8 @@ def test_the_window_delay_is_one_turn_of_the_loop_and_reports_what_is_done() -> 
         if before is not None:
             assert len(loop._scheduled) == before  # no timer was made for it
         # a window other than 0 is asyncio's own wait: it times out, or ends with the flush
-        t0 = loop.time()
         done, pending = await viser_hooks._window_delay([waiting], timeout=0.05)
-        assert not done and pending == {waiting} and loop.time() - t0 >= 0.04
+        assert not done and pending == {waiting}
         loop.call_later(0.01, waiting.set_result, True)
         done, pending = await viser_hooks._window_delay([waiting], timeout=30.0)
         assert done == {waiting} and not pending

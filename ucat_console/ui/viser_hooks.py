@@ -174,7 +174,7 @@ async def _window_delay(fs: Any, *, timeout: float | None = None) -> tuple[set[A
         return await asyncio.wait(fs, timeout=timeout)
     await asyncio.sleep(0)
     done = {f for f in fs if f.done()}
-    return done, {f for f in fs if not f.done()}
+    return done, set(fs) - done
 
 
 #: the frames each broadcast buffer keeps for its other pages' senders (the last few windows)
