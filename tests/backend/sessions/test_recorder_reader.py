@@ -330,3 +330,33 @@ def test_a_session_written_by_encoding_1_reads_back_the_same_messages(sessions):
     for (ch, msg), (ch2, msg2) in zip(expected, back):
         assert ch == ch2
         assert same(msg, msg2), ch
+
+
+def test_fin_transforms_turn_each_mount_by_its_measured_angle_and_skip_a_non_finite_one(sessions):
+    """Each fin state's transform is its mount's orientation times a turn by the measured
+    angle about the mount's z axis (the general quaternion product), at the mount's
+    position; a NaN or infinite angle gives no transform and the recording goes on."""
+    from ucat_console.backend.sessions.foxglove import robot_geometry
+    from ucat_console.robot.rotations import quaternion_multiply
+
+    rng = random.Random(3)
+    angles = [(i % 4, rng.uniform(-1.2, 1.2)) for i in range(12)]
+    items = [(C.fin_state(fin), FinState(1.0 + 0.1 * k, fin, a, 0.0, 0.0, 0.0)) for k, (fin, a) in enumerate(angles)]
+    items += [(C.fin_state(0), FinState(3.0, 0, math.inf, 0.0, 0.0, 0.0)),
+              (C.fin_state(1), FinState(3.1, 1, math.nan, 0.0, 0.0, 0.0)),
+              (C.SETPOINTS, Setpoints(3.2, 0.3, 1.0, 0.0))]
+    [path] = record(sessions, items, epoch_offset=OFFSET)
+    mounts = robot_geometry().fin_mounts
+    with open(path, "rb") as fh:
+        got = [json.loads(m.data) for _, ch, m in make_reader(fh).iter_messages(topics=["foxglove/tf"])]
+    assert len(got) == len(angles)
+    for tf, (fin, angle) in zip(got, angles):
+        position, orientation = mounts[fin]
+        w, x, y, z = quaternion_multiply(orientation, (math.cos(angle / 2), 0.0, 0.0, math.sin(angle / 2)))
+        assert tf["child_frame_id"] == f"fin{fin}" and tf["parent_frame_id"] == "body"
+        assert [tf["rotation"][k] for k in "wxyz"] == pytest.approx([w, x, y, z], abs=1e-12)
+        assert [tf["translation"][k] for k in "xyz"] == pytest.approx(list(position), abs=1e-15)
+    with SessionReader(path, sessions) as r:
+        back = list(r.messages())
+    assert len(back) == len(items)  # the two non-finite fin states are recorded, and what follows
+    assert math.isinf(back[-3][1].angle) and back[-1][0] == C.SETPOINTS

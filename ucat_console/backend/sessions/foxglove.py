@@ -201,14 +201,21 @@ def _xyzw(q: Quat) -> dict[str, float]:
 
 def _transform(parent: str, child: str, ns: int, translation: Sequence[float],
                rotation: Quat) -> dict[str, Any] | None:
-    if not all(math.isfinite(v) for v in (*translation, *rotation)):
+    """A foxglove.FrameTransform; None when a number of it is not finite. (The recorder
+    makes one with every body state and fin state: written out, without loops.)"""
+    isfinite = math.isfinite
+    x, y, z = translation
+    qw, qx, qy, qz = rotation
+    if not (isfinite(x) and isfinite(y) and isfinite(z) and isfinite(qw) and isfinite(qx) and isfinite(qy)
+            and isfinite(qz)):
         return None
+    sec, nsec = divmod(max(0, int(ns)), 1_000_000_000)
     return {
-        "timestamp": timestamp(ns),
+        "timestamp": {"sec": sec, "nsec": nsec},
         "parent_frame_id": parent,
         "child_frame_id": child,
-        "translation": _xyz(translation),
-        "rotation": _xyzw(rotation),
+        "translation": {"x": float(x), "y": float(y), "z": float(z)},
+        "rotation": {"x": float(qx), "y": float(qy), "z": float(qz), "w": float(qw)},
     }
 
 
@@ -225,21 +232,17 @@ def world_transform(ns: int) -> dict[str, Any]:
     return out
 
 
-def _mul(a: Quat, b: Quat) -> Quat:
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return (aw * bw - ax * bx - ay * by - az * bz,
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw)
-
-
 def fin_transform(state: FinState, mount: tuple[Vec3, Quat], ns: int) -> dict[str, Any] | None:
     """body -> fin<i>: the fin's mount turned about its z axis by the measured angle
     (None when the angle is not finite)."""
-    position, orientation = mount
-    half = state.angle / 2
-    turned = _mul(orientation, (math.cos(half), 0.0, 0.0, math.sin(half)))
+    position, (aw, ax, ay, az) = mount
+    angle = state.angle
+    if not math.isfinite(angle):  # (math.cos refuses an infinite one)
+        return None
+    half = angle / 2
+    bw, bz = math.cos(half), math.sin(half)
+    # the mount's orientation times (cos, 0, 0, sin): a turn about the mount's z axis
+    turned = (aw * bw - az * bz, ax * bw + ay * bz, ay * bw - ax * bz, aw * bz + az * bw)
     return _transform(CHILD_FRAME, fin_frame(state.fin), ns, position, turned)
 
 

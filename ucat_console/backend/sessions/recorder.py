@@ -28,10 +28,11 @@ from pathlib import Path
 from typing import Any, Callable, Mapping
 
 import mcap
-from mcap.writer import CompressionType, Writer
+from mcap.writer import CompressionType
 
 import ucat_console
 from ucat_console.backend.sessions import codec, files, foxglove
+from ucat_console.backend.sessions.mcap_writer import ChunkedWriter
 from ucat_console.backend.sessions.schema import (
     MESSAGE_ENCODING,
     SCHEMA_ENCODING,
@@ -98,7 +99,7 @@ class _Part:
     def __init__(self, path: Path, cfg: RecorderConfig) -> None:
         self.path = path
         self.file = open(path, "xb")
-        self.writer = Writer(
+        self.writer = ChunkedWriter(
             self.file, chunk_size=cfg.chunk_size, compression=_COMPRESSION[cfg.compression]
         )
         self.writer.start(
