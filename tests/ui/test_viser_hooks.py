@@ -7,13 +7,17 @@ from __future__ import annotations
 from typing import Any, Iterator
 
 import asyncio
+import warnings
 
 import msgspec.msgpack
 import numpy as np
 import pytest
 import uvloop
 import viser
+import viser._messages as vm
 import zstandard
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from support import wait_for
 
 from ucat_console.bench.raw_page import RawPage, split_buffers, with_arrays
@@ -254,3 +258,112 @@ def test_a_page_that_stops_reading_holds_up_no_other_and_later_gets_everything(s
     finally:
         for page in pages:
             page.close()
+
+
+# ---------------------------------------------------------------------- wire forms
+def _encoded(form: dict[str, Any], arrays: list[Any]) -> tuple[bytes, list[bytes]]:
+    """A wire form as the frame holds it (msgpack bytes) and its arrays' bytes."""
+    return msgspec.msgpack.encode(form), [bytes(a) for a in arrays]
+
+
+def _both_forms(message: Any, wire_form: Any = viser_hooks._wire_form) -> tuple[Any, Any]:
+    """(viser's own wire form, the console's), each as :func:`_encoded`, or the exception
+    type each raised."""
+    out = []
+    for make in (lambda a: message.as_serializable_dict(a), lambda a: wire_form(message, a)):
+        arrays: list[Any] = []
+        try:
+            out.append(_encoded(make(arrays), arrays))
+        except Exception as e:  # both must refuse the same way
+            out.append(type(e))
+    return out[0], out[1]
+
+
+_scalars = st.one_of(
+    st.none(), st.booleans(), st.integers(-2**63, 2**63 - 1), st.floats(allow_nan=True), st.text(max_size=8),
+    st.floats(width=32).map(np.float32), st.floats().map(np.float64), st.integers(-2**31, 2**31).map(np.int64),
+    st.booleans().map(np.bool_), st.text(max_size=4).map(np.str_),
+)
+_arrays = st.one_of(
+    st.lists(st.floats(width=32), max_size=12).map(lambda v: np.array(v, dtype=np.float32)),
+    st.lists(st.floats(), max_size=12).map(lambda v: np.array(v, dtype=np.float64)),
+    st.lists(st.integers(0, 255), min_size=2, max_size=12).map(lambda v: np.array(v, dtype=np.uint8)[::2]),  # strided
+    st.integers(1, 5).map(lambda n: np.arange(2 * n, dtype=np.float64).reshape(2, n).T),  # not C-contiguous
+)
+_values = st.recursive(
+    st.one_of(_scalars, _arrays),
+    lambda inner: st.one_of(st.lists(inner, max_size=4), st.lists(inner, max_size=4).map(tuple),
+                            st.dictionaries(st.text(max_size=6), inner, max_size=4)),
+    max_leaves=12,
+)
+_coords = st.one_of(st.floats(), st.floats().map(np.float64), st.integers(-5, 5), st.floats(width=32).map(np.float32))
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=st.data())
+def test_a_message_s_wire_form_is_viser_s_own(data: Any) -> None:
+    """The poses, the plots' and blades' updates and the status bar's script with any values
+    (numpy scalars, strided and non-contiguous arrays, nested lists, tuples and dicts, a
+    tuple of the wrong length, NaN): the same wire form and arrays as viser makes, in the
+    same order, or the same refusal."""
+    kind = data.draw(st.sampled_from(["position", "orientation", "gui", "node", "script"]))
+    if kind == "position":
+        n = data.draw(st.sampled_from([3, 3, 3, 2]))
+        pos = data.draw(st.one_of(st.tuples(*[_coords] * n), st.lists(_coords, min_size=3, max_size=3)))
+        message = vm.SetPositionMessage(data.draw(st.one_of(st.text(max_size=8), st.text(max_size=3).map(np.str_))), pos)
+    elif kind == "orientation":
+        n = data.draw(st.sampled_from([4, 4, 4, 5]))
+        message = vm.SetOrientationMessage("/robot", data.draw(st.tuples(*[_coords] * n)))
+    elif kind == "gui":
+        message = vm.GuiUpdateMessage("uuid-1", data.draw(st.dictionaries(st.text(max_size=6), _values, max_size=5)))
+    elif kind == "node":
+        message = vm.SceneNodeUpdateMessage("/robot/blades", data.draw(st.dictionaries(st.text(max_size=6), _values, max_size=5)))
+    else:
+        message = vm.RunJavascriptMessage(source=data.draw(st.text(max_size=40)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # viser warns of a tuple that does not fit its hint
+        theirs, ours = _both_forms(message)
+    assert ours == theirs
+
+
+def test_every_message_of_a_console_session_has_viser_s_wire_form(tmp_path, monkeypatch) -> None:
+    """Every message the console sends a page while it builds the page, arms, swims with
+    the plots and the robot moving, and records: the same wire form as viser's own."""
+    from ucat_console.backend.access import LOCAL
+    from ucat_console.backend.supervisor import Supervisor
+    from ucat_console.config import AppConfig, ConsoleConfig
+    from ucat_console.ui.app import ConsoleApp
+
+    seen: dict[str, int] = {}
+    different: list[str] = []
+    real = viser_hooks._wire_form
+
+    def checked(message: Any, arrays: list[Any]) -> dict[str, Any]:
+        name = type(message).__name__
+        seen[name] = seen.get(name, 0) + 1
+        theirs, ours = _both_forms(message, real)
+        if ours != theirs:
+            different.append(name)
+        return real(message, arrays)
+
+    monkeypatch.setattr(viser_hooks, "_wire_form", checked)
+    sup = Supervisor(AppConfig(console=ConsoleConfig(port=0)), sessions_dir=tmp_path)
+    app = ConsoleApp(sup)
+    app.start()
+    sup.start()
+    page = None
+    try:
+        page = RawPage(app.url)
+        sup.set_setpoints(LOCAL, velocity=0.2)
+        sup.arm(LOCAL)
+        wait_for(lambda: app.plots.updates >= 12 and seen.get("SetPositionMessage", 0) >= 20, timeout=60,
+                 what="the robot swimming on the page, with its plots")
+    finally:
+        if page is not None:
+            page.close()
+        sup.stop()
+        app.stop()
+    assert not different, different
+    for name in ("SetPositionMessage", "SetOrientationMessage", "GuiUpdateMessage", "SceneNodeUpdateMessage",
+                 "RunJavascriptMessage", "GuiUplotMessage"):
+        assert seen.get(name, 0) > 0, (name, seen)

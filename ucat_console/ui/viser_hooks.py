@@ -1,4 +1,4 @@
-"""The places where the console hooks into viser: the page guard's two, and three for CPU.
+"""The places where the console hooks into viser: the page guard's two, and those that save CPU.
 
 viser has no hook for a websocket handshake check or for its incoming messages, so
 :func:`install` replaces two names in viser's websocket module (once, for the process):
@@ -42,6 +42,10 @@ few frames of the broadcast buffer by the identity of their messages: a page who
 holds the same messages as one just sent to another page is sent those bytes. A page that
 lags behind gets a window of its own and encodes it; a page's own buffer is never shared.
 The frame's ``timestampSec`` (the page paces its updates by it) is then the first page's.
+
+And a frame's messages are put in their wire form by a converter made once per message
+class (:func:`_wire_form`) instead of viser's per-value type dispatch: the same dicts and
+arrays, checked against viser's own for every message a console session sends.
 """
 
 from __future__ import annotations
@@ -50,14 +54,17 @@ import asyncio
 import threading
 import time
 import types
+import typing
 from typing import Any, Sequence
 
 import msgspec
+import numpy as np
 import zstandard
 
 import viser
 import viser.infra._async_message_buffer as vbuffer
 import viser.infra._infra as vinfra
+import viser.infra._messages as vmessages
 from websockets.exceptions import ConnectionClosed
 from websockets.frames import CloseCode
 
@@ -185,7 +192,7 @@ def _frame(window: Sequence[Any], zstd: Any) -> bytes:
     """A window of messages as viser's wire frame (``viser.infra._infra._message_producer``):
     zstd-compressed msgpack of the messages' wire forms, then their arrays, 8-byte aligned."""
     arrays: list[memoryview] = []
-    forms = tuple(m.as_serializable_dict(arrays) for m in window)
+    forms = tuple(_wire_form(m, arrays) for m in window)
     inner = msgspec.msgpack.encode({
         "messages": forms,
         "timestampSec": time.perf_counter(),
@@ -196,6 +203,85 @@ def _frame(window: Sequence[Any], zstd: Any) -> bytes:
                                        compressed]
     vinfra._append_aligned_buffers(parts, arrays, 16 + len(compressed))
     return b"".join(parts)
+
+
+def _wire_form(message: Any, arrays: list[memoryview]) -> dict[str, Any]:
+    """``message.as_serializable_dict(arrays)``: the same dict and the same arrays in the same
+    order, by a converter made once per message class (:func:`_wire_converter`)."""
+    convert = _CONVERTERS.get(type(message))
+    if convert is None:
+        convert = _CONVERTERS[type(message)] = _wire_converter(type(message))
+    return convert(message, arrays)
+
+
+_CONVERTERS: dict[type, Any] = {}
+
+
+def _wire_converter(cls: type) -> Any:
+    """A message class's wire form without viser's per-value type dispatch.
+
+    viser's ``as_serializable_dict`` runs ``_prepare_for_serialization`` on every field and,
+    recursively, on every value in it: a cascade of type checks per value, for the 40 poses
+    and 60 plot updates a second the largest part of the frames' encoding. Here each field's
+    conversion is chosen once from its type hint, and values of plain types (str, float,
+    int, bool, None, tuple, list, dict, numpy array) are converted as viser converts them;
+    any other value, or a value that does not fit its hint, goes to viser's own function."""
+    hints = vmessages.get_type_hints_cached(cls)
+    fields = tuple((name, _field_converter(hints[name])) for name in vmessages.wire_field_names(cls))
+    type_name = cls.__name__
+
+    def convert(message: Any, arrays: list[memoryview]) -> dict[str, Any]:
+        out = {name: conv(getattr(message, name), arrays) for name, conv in fields}
+        out["type"] = type_name
+        return out
+
+    return convert
+
+
+def _field_converter(hint: Any) -> Any:
+    prepare = vmessages._prepare_for_serialization
+    args = typing.get_args(hint)
+    if hint is str:
+        def convert_str(v: Any, arrays: list[memoryview]) -> Any:
+            return v if type(v) is str else prepare(v, hint, arrays)
+        return convert_str
+    if typing.get_origin(hint) is tuple and args and Ellipsis not in args and all(a is float for a in args):
+        n = len(args)
+
+        def convert_floats(v: Any, arrays: list[memoryview]) -> Any:
+            if type(v) is tuple and len(v) == n:
+                return tuple([float(x) for x in v])  # viser: float(x) for a float hint
+            return prepare(v, hint, arrays)
+        return convert_floats
+    if typing.get_origin(hint) is dict:
+        def convert_dict(v: Any, arrays: list[memoryview]) -> Any:
+            if type(v) is dict:  # viser: each value as for an Any hint, whatever the dict's hint
+                return {k: _any(x, arrays) for k, x in v.items()}
+            return prepare(v, hint, arrays)
+        return convert_dict
+    if hint is Any:
+        return _any
+    return lambda v, arrays: prepare(v, hint, arrays)
+
+
+_PLAIN = (str, float, int, bool, type(None))
+
+
+def _any(v: Any, arrays: list[memoryview]) -> Any:
+    """viser's ``_prepare_for_serialization(v, Any, arrays)`` for values of plain types."""
+    t = type(v)
+    if t in _PLAIN:
+        return v
+    if t is tuple:
+        return tuple([_any(x, arrays) for x in v])
+    if t is np.ndarray:
+        arrays.append(v.data if v.flags.c_contiguous else v.copy().data)
+        return {"__binary_index": len(arrays) - 1, "dtype": v.dtype.str}
+    if t is list:
+        return [_any(x, arrays) for x in v]
+    if t is dict:
+        return {k: _any(x, arrays) for k, x in v.items()}
+    return vmessages._prepare_for_serialization(v, Any, arrays)
 
 
 async def _sharing_producer(websocket: Any, buffer: Any, client_id: int, backlog_done_message: Any = None) -> None:
