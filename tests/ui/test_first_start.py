@@ -85,11 +85,11 @@ def test_a_real_preparation_reports_its_steps_and_finishes() -> None:
     prep = prepare.start(cfg, seen.append)
     assert prep.wait(900.0) and not prep.error
     needed = [s.key for s in prepare.steps_for(cfg) if s.needed]
-    assert needed == ["planner:paper", "loop", "plant"]
+    assert needed == ["planner:paper", "loop", "plant", "page"]
     assert all(prep.done(k) for k in needed)
-    assert seen[-1].done == seen[-1].total == 3 and seen[-1].text() == "ready"
+    assert seen[-1].done == seen[-1].total == 4 and seen[-1].text() == "ready"
     assert prep.wait_all(900.0) and not prep.error and prep.done("planner:closed_stroke")
-    assert set(prep.seconds) == {"planner:paper", "loop", "plant", "planner:closed_stroke"}
+    assert set(prep.seconds) == {"planner:paper", "loop", "plant", "page", "planner:closed_stroke"}
     assert prep.ready_after is not None and prep.complete_after >= prep.ready_after
 
 

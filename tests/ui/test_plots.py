@@ -8,9 +8,13 @@ import types
 import numpy as np
 import pytest
 
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from plots_reference import chart_data, filled, span_pins, st_shown
+
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.messages import BodyState, Power, Setpoints
-from ucat_console.ui.plots import COL, PlotFeeder, RingBuffer, filled
+from ucat_console.ui.plots import COL, MIN_SPAN, ST_HIDDEN, LivePlots, PlotFeeder, RingBuffer
 
 
 def test_ring_buffer_keeps_the_newest_rows_in_order() -> None:
@@ -96,8 +100,6 @@ def test_filled_fills_every_column_of_a_table_on_its_own() -> None:
 
 
 def test_st_is_hidden_while_disarmed_or_still_and_clipped_above_one() -> None:
-    from ucat_console.ui.plots import ST_HIDDEN, st_shown
-
     st = np.array([0.3, 0.3, 6.0, 0.3, np.nan, 2.7])
     armed = np.array([1.0, 1.0, 1.0, 0.0, 1.0, 1.0])
     speed = np.array([0.2, 0.01, 0.2, 0.2, 0.2, -0.2])
@@ -115,8 +117,6 @@ def test_st_is_hidden_while_disarmed_or_still_and_clipped_above_one() -> None:
 
 
 def test_span_pins_keep_a_minimum_axis_span_around_the_data() -> None:
-    from ucat_console.ui.plots import span_pins
-
     depth = np.array([1.000, 1.002, 0.999])
     target = np.array([1.0, 1.0, 1.0])
     nothing = np.array([np.nan, np.inf, -np.inf])
@@ -222,3 +222,57 @@ def test_a_value_beyond_float32_reaches_the_page_as_the_largest_finite_one() -> 
         page.close()
     finally:
         server.stop()
+
+
+class _Chart:
+    """A uPlot handle as ``ui.fast_props.set_prop`` uses it; keeps the data it was sent."""
+
+    def __init__(self) -> None:
+        self._impl = types.SimpleNamespace(props=types.SimpleNamespace(data=None))
+        self.sent = 0
+
+    def _queue_update(self, name: str, value: object) -> None:
+        self.sent += 1
+
+
+class _Gui:
+    def add_uplot(self, *args: object, **kwargs: object) -> _Chart:
+        return _Chart()
+
+
+_cell = st.one_of(st.floats(-5.0, 5.0), st.floats(-5.0, 5.0), st.floats(-5.0, 5.0),
+                  st.sampled_from([math.nan, math.inf, -math.inf, 1e300, -1e300, 0.0, 1.0, 2.5, 0.015]))
+
+
+@settings(max_examples=200, deadline=None)
+@given(capacity=st.integers(1, 40), rows=st.integers(0, 90), window=st.floats(0.05, 5.0),
+       max_points=st.integers(1, 50), corridor=st.tuples(st.floats(0.0, 1.0), st.floats(0.0, 1.0)),
+       seed=st.integers(0, 2**32 - 1), cells=st.lists(_cell, min_size=1, max_size=60))
+def test_the_compiled_series_are_the_numpy_ones(capacity, rows, window, max_points, corridor, seed, cells) -> None:
+    """Rows with gaps (NaN, infinities, a column never known), values beyond float32,
+    disarmed and slow rows, St above 1, a ring wrapped any number of times, any window and
+    decimation: each chart gets the same arrays, bit for bit, as the numpy refresh sent
+    (``plots_reference``), and nothing where it sent nothing."""
+    rng = np.random.default_rng(seed)
+    feeder = PlotFeeder(capacity)
+    for k in range(rows):
+        row = [cells[int(i)] for i in rng.integers(0, len(cells), len(COL))]
+        row[COL["t"]] = 0.1 * k if rng.random() > 0.05 else 0.1 * (k - 1)  # now and then no time passed
+        row[COL["armed"]] = float(rng.integers(0, 2)) if rng.random() > 0.1 else math.nan
+        feeder.buffer.append(row)
+    plots = LivePlots(_Gui(), feeder, rate=10.0, max_points=max_points, corridor=lambda: corridor)
+    plots.refresh(window)
+    want = chart_data(feeder.buffer, int(math.ceil(window * 10.0)) + 1, max_points, corridor,
+                      [MIN_SPAN[name] for name in ("depth", "velocity", "yaw_rate")])
+    charts = {"st": plots.st, "depth": plots.depth, "velocity": plots.velocity, "yaw_rate": plots.yaw_rate,
+              "power": plots.power}
+    if want is None:
+        assert all(c.sent == 0 for c in charts.values()) and plots.updates == 0
+        return
+    assert plots.updates == 1
+    for name, chart in charts.items():
+        got = chart._impl.props.data
+        assert len(got) == len(want[name]), name
+        for a, b in zip(got, want[name]):
+            assert a.dtype == b.dtype and a.flags.c_contiguous, name
+            np.testing.assert_array_equal(a.view(np.uint8), np.ascontiguousarray(b).view(np.uint8), err_msg=name)

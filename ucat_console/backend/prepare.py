@@ -10,8 +10,8 @@ has cores, two at most: independent kernels compile side by side, and numba's ca
 each from whichever process wrote it).
 
 The steps the console needs before it serves (:attr:`Step.needed`: the configured
-formulation's planner, the closed loop's kernels, and the simulated robot where the robot
-is simulated) go first; :meth:`Preparation.wait` returns when they are done. The rest (the
+formulation's planner, the closed loop's kernels, the page's plot series, and the
+simulated robot where the robot is simulated) go first; :meth:`Preparation.wait` returns when they are done. The rest (the
 other formulation's planner, which the operator may switch to live) compiles on in the
 background; :meth:`Preparation.done` tells whether a step is done, and the supervisor
 refuses a switch to a formulation whose planner is not compiled yet (a compile in the
@@ -61,6 +61,7 @@ def steps_for(cfg: AppConfig) -> list[Step]:
              Step("loop", "the closed loop's per-sample kernels", True)]
     if simulated(cfg):
         steps.append(Step("plant", "the simulated robot", True))
+    steps.append(Step("page", "the page's plot series", True))
     if cfg.mpc.solver == "numba":
         steps += [Step(planner_step(f), _formulation_text(f), False) for f in FORMULATIONS if f != mine]
     return steps
@@ -81,6 +82,10 @@ def run_step(key: str, cfg: AppConfig) -> None:
         from ucat_console.backend.loop.kernels_warm_up import warm_up_loop
 
         warm_up_loop(cfg.loop)
+    elif key == "page":
+        from ucat_console.ui.plots import warm_up
+
+        warm_up()
     elif key == "plant":
         from ucat_console.backend.loop.closed_loop import ClosedLoop
         from ucat_console.backend.sim_robot_io import SimRobotIO

@@ -6,7 +6,9 @@ calls :meth:`PlotFeeder.sample`, which appends one row (time, values) to a
 :class:`RingBuffer` of fixed capacity (the longest history window times the refresh
 rate). :class:`LivePlots` then sends the rows of the chosen history window, decimated to
 at most ``max_plot_points`` per series: the size of a plot update is bounded by the
-configuration, never by the length of the session.
+configuration, never by the length of the session. A value not known at a row (NaN, or
+not finite) is drawn as the last known one before it (uPlot takes NaN for data, not for a
+gap); the series are computed in one compiled pass (:mod:`ucat_console.ui.plot_series`).
 
 Charts (one shared time axis labelled in seconds of stream time, synchronised cursors):
 
@@ -23,15 +25,18 @@ Charts (one shared time axis labelled in seconds of stream time, synchronised cu
 
 from __future__ import annotations
 
+import contextlib
 import math
 import threading
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 import numpy as np
 
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.messages import BodyState, FinPlan, Power, Setpoints, Status
+from ucat_console.ui import plot_series as ps
 from ucat_console.ui.fast_props import set_prop
+from ucat_console.ui.plot_series import window_rows
 
 N_FINS = ch.N_FINS
 #: below this forward speed (m/s) no Strouhal number is shown
@@ -87,6 +92,12 @@ class RingBuffer:
             self._data[self._next] = row
             self._next = (self._next + 1) % self._data.shape[0]
             self._count = min(self._count + 1, self._data.shape[0])
+
+    @contextlib.contextmanager
+    def locked(self) -> Iterator[tuple[np.ndarray, int, int]]:
+        """(the rows' array, the index of the next row written, the rows held), held still."""
+        with self._lock:
+            yield self._data, self._next, self._count
 
     def last(self, n: int, max_points: int | None = None) -> np.ndarray:
         """The last ``n`` rows, oldest first (a copy), keeping at most ``max_points`` of
@@ -162,29 +173,6 @@ class PlotFeeder:
         self._t_last_row = -math.inf
 
 
-def filled(a: np.ndarray) -> np.ndarray:
-    """``a`` with NaN replaced by the last finite value before it (leading NaN by the first
-    finite value; zeros when there is none): uPlot takes NaN for data, not for a gap. A 2-D
-    ``a`` is filled column by column (each a series in time); only the columns that need it
-    are copied."""
-    ok = np.isfinite(a)
-    if ok.all():
-        return a
-    if a.ndim == 2:
-        out = a.copy()
-        for j in np.flatnonzero(~ok.all(axis=0)):
-            out[:, j] = filled(a[:, j])
-        return out
-    if not ok.any():
-        return np.zeros_like(a)
-    idx = np.where(ok, np.arange(len(a)), 0)
-    np.maximum.accumulate(idx, out=idx)
-    out = a[idx]
-    first = int(np.argmax(ok))
-    out[:first] = a[first]
-    return out
-
-
 def _series(label: str, stroke: str, width: float = 1.5, dash: tuple[float, ...] | None = None) -> dict:
     s: dict[str, Any] = {"label": label, "stroke": stroke, "width": width, "points": {"show": False}}
     if dash:
@@ -200,39 +188,12 @@ _CURSOR = {"sync": {"key": "ucat"}}
 _PIN = {"label": "axis span", "stroke": "rgba(0,0,0,0)", "width": 0.5, "points": {"show": False}}
 
 
-def st_shown(st: np.ndarray, armed: np.ndarray, speed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(St drawn on the 0-1 axis, markers at 1 where St is above 1): hidden values, while
-    disarmed, slower than ST_MIN_SPEED or unknown, go below the axis. ``st`` may hold one
-    row per fin (k, n) over the same ``armed`` and ``speed`` (n,)."""
-    hide = ~(armed > 0.5) | ~(np.abs(speed) >= ST_MIN_SPEED) | ~np.isfinite(st)
-    shown = np.where(hide, ST_HIDDEN, np.minimum(st, 1.0))
-    above = np.where(~hide & (st > 1.0), 1.0, ST_HIDDEN)
-    return shown, above
-
-
-def span_pins(series: np.ndarray, span: Sequence[float]) -> np.ndarray:
-    """For each chart ``c``, two constant series around the middle of ``series[c]`` (its
-    series, (m, n)) at least ``span[c]`` apart (the value axis then spans at least that):
-    (charts, 2, n), of ``series``' type. Non-finite values are left out of the middle; a
-    chart with none has its pins around 0."""
-    charts, n = series.shape[0], series.shape[-1]
-    flat = series.reshape(charts, -1)
-    finite = np.isfinite(flat)
-    lo = np.where(finite, flat, np.inf).min(axis=1).astype(np.float64)
-    hi = np.where(finite, flat, -np.inf).max(axis=1).astype(np.float64)
-    has = finite.any(axis=1)
-    mid = 0.5 * np.where(has, lo, 0.0) + 0.5 * np.where(has, hi, 0.0)  # halves first: no overflow
-    half = 0.5 * np.asarray(span, dtype=np.float64)
-    pins = np.empty((charts, 2, n), series.dtype)
-    pins[:, 0] = (mid - half)[:, None]
-    pins[:, 1] = (mid + half)[:, None]
-    return pins
-
-
-_ST_ROWS = [COL[f"st{i}"] for i in range(N_FINS)]
+_ST_COLS = np.array([COL[f"st{i}"] for i in range(N_FINS)], dtype=np.int64)
 _TRACKED = ("depth", "velocity", "yaw_rate")  # the tracking charts: value and target each
-_TRACKED_ROWS = np.array([[COL[name], COL[f"{name}_sp"]] for name in _TRACKED])
-_TRACKED_SPANS = [MIN_SPAN[name] for name in _TRACKED]
+_TRACKED_COLS = np.array([[COL[name], COL[f"{name}_sp"]] for name in _TRACKED], dtype=np.int64)
+_TRACKED_SPANS = np.array([MIN_SPAN[name] for name in _TRACKED])
+_POWER_COLS = np.array([COL[f"p{i}"] for i in range(N_FINS)] + [COL["p_total"], COL["p_mean"], COL["energy_per_metre"]],
+                       dtype=np.int64)
 
 
 class LivePlots:
@@ -291,33 +252,43 @@ class LivePlots:
         )
         self.energy = self.power  # one chart: power and energy per metre
 
-    def rows(self, window: float) -> np.ndarray:
-        """The rows of the last ``window`` seconds, decimated to ``max_points``."""
-        return self.feeder.buffer.last(int(math.ceil(window * self.rate)) + 1, self.max_points)
-
     def refresh(self, window: float) -> None:
         """Send the last ``window`` seconds to every page (nothing until there are two rows:
         a chart needs an x range)."""
-        r = self.rows(window)
-        if r.shape[0] < 2 or not r[-1, 0] > r[0, 0]:
+        got = series_of(self.feeder.buffer, int(math.ceil(window * self.rate)) + 1, self.max_points, self.corridor())
+        if got is None:
             return
-        r[:, 1:] = filled(r[:, 1:])
-        col = np.ascontiguousarray(r.T)  # each series one contiguous array, as the page takes it
-        # the time axis in float64 (it keeps its resolution over a long run), the values in
-        # float32: ample for a chart, and half the bytes sent to every page 12 times a second
-        t = col[0]
-        val = np.clip(col, -_VALUES_MAX, _VALUES_MAX).astype(VALUES)  # a huge value stays finite
-        lo, hi = self.corridor()
-        c = COL
-        shown, above = st_shown(col[_ST_ROWS], col[c["armed"]], col[c["velocity"]])  # every fin at once: (fins, n)
-        n = len(t)
         # new arrays each time: set without viser's casts and comparisons (ui.fast_props)
-        set_prop(self.st, "data", (t, np.full(n, hi, VALUES), np.full(n, lo, VALUES), *shown.astype(VALUES),
-                                   above.max(axis=0).astype(VALUES)))
-        tracked = val[_TRACKED_ROWS]  # (charts, value and target, n)
-        pins = span_pins(tracked, _TRACKED_SPANS)
+        t, v = got
+        set_prop(self.st, "data", (t, *v[ps.ST_HIGH:ps.ST_ABOVE + 1]))
         for k, chart in enumerate((self.depth, self.velocity, self.yaw_rate)):
-            set_prop(chart, "data", (t, tracked[k, 0], tracked[k, 1], pins[k, 0], pins[k, 1]))
-        set_prop(self.power, "data", (t, *(val[c[f"p{i}"]] for i in range(N_FINS)), val[c["p_total"]],
-                                      val[c["p_mean"]], val[c["energy_per_metre"]]))
+            set_prop(chart, "data", (t, *v[ps.TRACKED + 4 * k:ps.TRACKED + 4 * k + 4]))
+        set_prop(self.power, "data", (t, *v[ps.POWER:ps.ROWS]))
         self.updates += 1
+
+
+def series_of(buffer: RingBuffer, n: int, max_points: int,
+              corridor: tuple[float, float]) -> tuple[np.ndarray, np.ndarray] | None:
+    """(the time axis, float64; the value series, float32, by the rows of
+    :mod:`~ucat_console.ui.plot_series`) of the last ``n`` rows of ``buffer``, decimated to
+    ``max_points``; None when there are fewer than two rows or no time passed between the
+    first and the last. The time axis keeps its resolution over a long run; float32 is ample
+    for the values, and half the bytes sent to every page 12 times a second."""
+    lo, hi = corridor
+    with buffer.locked() as (data, next_row, count):
+        n, m, step = window_rows(count, n, max_points)
+        if m < 2:
+            return None
+        t = np.empty(m)
+        v = np.empty((ps.ROWS, m), VALUES)
+        ps.series(data, next_row, n, step, _ST_COLS, COL["armed"], COL["velocity"], _TRACKED_COLS, _TRACKED_SPANS,
+                  _POWER_COLS, float(lo), float(hi), ST_MIN_SPEED, ST_HIDDEN, _VALUES_MAX, t, v)
+    return (t, v) if t[-1] > t[0] else None
+
+
+def warm_up() -> None:
+    """Compile (or load) the plots' series (``ucat-console prepare``)."""
+    buffer = RingBuffer(4, len(COLUMNS))
+    for k in range(4):
+        buffer.append([0.1 * k] + [0.0] * (len(COLUMNS) - 1))
+    series_of(buffer, 4, 3, (0.2, 0.4))
