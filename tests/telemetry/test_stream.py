@@ -85,3 +85,59 @@ def test_an_unvalidated_stream_hands_an_unknown_channel_to_the_subscribers_of_al
     stream.subscribe(lambda c, m: some.append(c), [ch.POWER])
     stream.publish("private/extra", object())
     assert every == ["private/extra"] and some == []
+
+
+def test_published_at_once_each_subscriber_gets_its_channels_in_order_and_a_batch_one_call():
+    """publish_many: subscribers in subscription order, each with the items of its channels in
+    their order; one that takes batches gets them as one list (none when it has none)."""
+    stream = TelemetryStream()
+    got = []
+    stream.subscribe(lambda c, m: got.append(("one", c)), [ch.fin_state(0), ch.SETPOINTS])
+    stream.subscribe_batches(lambda items: got.append(("batch", [c for c, _ in items])), [ch.fin_state(1), ch.SETPOINTS])
+    stream.subscribe_batches(lambda items: got.append(("power", [c for c, _ in items])), [ch.POWER])
+    stream.subscribe_batches(lambda items: got.append(("all", [c for c, _ in items])))
+    sp = Setpoints(1.0, 0.2, 0.5, 0.0)
+    stream.publish_many([(ch.fin_state(1), _fin(1)), (ch.SETPOINTS, sp), (ch.fin_state(0), _fin(0))])
+    assert got == [
+        ("one", "body/setpoints"), ("one", "fin/0/state"),
+        ("batch", ["fin/1/state", "body/setpoints"]),
+        ("all", ["fin/1/state", "body/setpoints", "fin/0/state"]),
+    ]
+    got.clear()
+    stream.publish(ch.SETPOINTS, sp)  # one message: a one-item list for a batch subscriber
+    assert got == [("one", "body/setpoints"), ("batch", ["body/setpoints"]), ("all", ["body/setpoints"])]
+    got.clear()
+    stream.publish_many([])
+    assert got == []
+
+
+def test_published_at_once_one_bad_item_publishes_none():
+    stream = TelemetryStream()
+    got = []
+    stream.subscribe(lambda c, m: got.append(m))
+    stream.subscribe_batches(got.extend)
+    with pytest.raises(TypeError, match="channel 'fin/0/state' carries FinState, got Setpoints"):
+        stream.publish_many([(ch.fin_state(1), _fin(1)), (ch.fin_state(0), Setpoints(1.0, 0.2, 0.5, 0.0))])
+    with pytest.raises(ValueError, match="unknown telemetry channel 'fin/9/state'"):
+        stream.publish_many([(ch.fin_state(1), _fin(1)), ("fin/9/state", _fin())])
+    assert got == []
+
+
+def test_a_failing_batch_subscriber_is_logged_and_the_others_still_receive(caplog):
+    stream = TelemetryStream()
+    got = []
+
+    def broken(items):
+        raise RuntimeError("boom")
+
+    stream.subscribe_batches(broken)
+    stream.subscribe_batches(got.extend)
+    off = stream.subscribe(lambda c, m: got.append(c))
+    with caplog.at_level(logging.ERROR):
+        stream.publish_many([(ch.fin_state(0), _fin()), (ch.fin_state(1), _fin(1))])
+        stream.publish(ch.fin_state(0), _fin())
+    assert len(got) == 2 + 2 + 1 + 1
+    assert sum("failed on 2 messages" in r.getMessage() for r in caplog.records) == 1
+    assert sum("failed on fin/0/state" in r.getMessage() for r in caplog.records) == 1
+    off()
+    assert stream.wanted == frozenset(ch.CHANNELS)  # the batch subscribers take every channel

@@ -280,6 +280,30 @@ def test_the_events_list_shows_the_chosen_severities(app: ConsoleApp) -> None:
     assert "info\\_code" in pilot.events.content
 
 
+def test_the_events_list_is_rebuilt_when_an_event_comes_or_the_filter_changes(app: ConsoleApp, monkeypatch) -> None:
+    """The 4-Hz refresh of a page's events list builds it only when there is something new
+    to show: a new event, or another choice of severity."""
+    from ucat_console.telemetry.events import Event
+    from ucat_console.ui import panels as panels_module
+
+    pilot = page(app, 3, pilot=True)
+    built = []
+    real = panels_module.events_markdown
+    monkeypatch.setattr(panels_module, "events_markdown", lambda events: built.append(len(events)) or real(events))
+    app._on_message(ch.EVENTS, Event(1.0, "test", "first_code", "one", "warning"))
+    pilot.show_events()
+    pilot.show_events()
+    assert built == [1] and "first\\_code" in pilot.events.content
+    app._on_message(ch.EVENTS, Event(2.0, "test", "second_code", "two", "error"))
+    pilot.show_events()
+    assert built == [1, 2] and "second\\_code" in pilot.events.content
+    pilot.severity.value = "errors"
+    pilot.show_events()
+    assert built == [1, 2, 1] and "first\\_code" not in pilot.events.content
+    pilot.show_events()
+    assert built == [1, 2, 1]
+
+
 def test_the_formulation_is_switched_from_the_tuning_tab(app: ConsoleApp) -> None:
     pilot = page(app, 3, pilot=True)
     box = pilot.params["mpc.formulation"]

@@ -82,7 +82,11 @@ class Transition:
 
 
 def _finite(*values: float) -> bool:
-    return all(isinstance(v, (int, float)) and math.isfinite(v) for v in values)
+    isfinite = math.isfinite
+    for v in values:
+        if not (isinstance(v, (int, float)) and isfinite(v)):
+            return False
+    return True
 
 
 def reading_valid(reading: Any) -> bool:
@@ -124,21 +128,30 @@ class SafetyMonitor:
     # ------------------------------------------------------------------ inputs
     def on_message(self, channel: str, msg: Any) -> None:
         """Telemetry subscriber (subscribe it to :data:`CHANNELS`)."""
-        sensor = _SENSOR_OF.get(channel)
-        if sensor is not None:
-            with self._lock:
-                if reading_valid(msg):
+        self.on_messages(((channel, msg),))
+
+    def on_messages(self, items: Any) -> None:
+        """Telemetry subscriber of (channel, message) lists (``subscribe_batches``)."""
+        events = []
+        with self._lock:
+            last_valid, invalid, now = self._last_valid, self._invalid, self._now
+            for channel, msg in items:
+                sensor = _SENSOR_OF.get(channel)
+                if sensor is None:
+                    if channel == ch.EVENTS and isinstance(msg, Event):
+                        events.append(msg)
+                elif reading_valid(msg):
                     t = msg.t
                     # readings carry the loop's time; one off by more than a minute does not
-                    if not (isinstance(t, (int, float)) and abs(t - self._now) <= _CLOCK_SLACK):
-                        t = self._now
-                    self._last_valid[sensor] = max(self._last_valid[sensor], t)
-                    self._invalid[sensor] = 0
+                    if not (isinstance(t, (int, float)) and abs(t - now) <= _CLOCK_SLACK):
+                        t = now
+                    if t > last_valid[sensor]:
+                        last_valid[sensor] = t
+                    invalid[sensor] = 0
                 else:
-                    self._invalid[sensor] += 1
-            return
-        if channel == ch.EVENTS and isinstance(msg, Event):
-            self.on_event(msg)
+                    invalid[sensor] += 1
+        for ev in events:
+            self.on_event(ev)
 
     def on_event(self, ev: Event) -> None:
         with self._lock:

@@ -111,6 +111,7 @@ class ConsoleApp:
         self._lock = threading.Lock()
         self._plans: list[FinPlan | None] = [None] * N_FINS
         self._events: collections.deque[Event] = collections.deque(maxlen=_EVENTS_KEPT)
+        self.events_seen = 0  # events kept so far: the pages' lists change with it
         self._dirty = threading.Event()
         self.panels: dict[int, panels.ControlPanel] = {}
         self.reviews: dict[int, PlaybackPanel] = {}
@@ -220,6 +221,7 @@ class ConsoleApp:
             self._plans[msg.fin] = msg
         elif tp is Event and msg.code not in _QUIET_EVENTS:
             self._events.append(msg)
+            self.events_seen += 1
 
     def recent_events(self) -> list[Event]:
         return list(self._events)

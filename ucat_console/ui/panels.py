@@ -160,6 +160,7 @@ class ControlPanel:
         self.stop_key = gui.add_command("Drive: stop", description="velocity and yaw rate to 0", hotkey="space")
         self.disarm_key = gui.add_command("DISARM", description="motors off now", hotkey="escape")
         self._events_shown = ""
+        self._events_seen: tuple[int, str] | None = None
         self._listed: tuple[bool, bool] | None = None
 
         self._wire()
@@ -431,6 +432,10 @@ class ControlPanel:
 
     def show_events(self, force: bool = False) -> None:
         """The events list, filtered by this page's choice of severity."""
+        seen = (self.app.events_seen, self.severity.value)
+        if not force and seen == self._events_seen:
+            return  # no new event and the same filter: the same list
+        self._events_seen = seen
         levels = SEVERITY_FILTERS.get(self.severity.value, SEVERITY_FILTERS["all"])
         text = events_markdown([e for e in self.app.recent_events() if e.level in levels][-_EVENTS_SHOWN:])
         if force or text != self._events_shown:

@@ -160,7 +160,8 @@ class RobotScene:
         self.ghosts = scene.add_batched_meshes_simple(
             f"{r}/ucat/ghosts", verts, faces, batched_wxyzs=neutral, batched_positions=positions,
             batched_colors=GHOST_COLOUR, lod="off", opacity=0.35, side="double", cast_shadow=False)
-        self.label = scene.add_label(f"{r}/ucat/depth", "depth -", position=(0.0, 0.0, -0.35),
+        self._label_text = "depth -"
+        self.label = scene.add_label(f"{r}/ucat/depth", self._label_text, position=(0.0, 0.0, -0.35),
                                      anchor="bottom-center")
         self.trail = scene.add_line_segments(f"{r}/trail", np.zeros((1, 2, 3)), TRAIL_COLOUR,
                                              thickness=2.0, thickness_units="screen")
@@ -190,7 +191,9 @@ class RobotScene:
 
     def update_label(self, body: BodyState | None) -> None:
         if body is not None:
-            self.label.text = f"depth {body.depth:.2f} m"
+            text = f"depth {body.depth:.2f} m"
+            if text != self._label_text:  # (viser's assignment costs more than the comparison)
+                self.label.text = self._label_text = text
 
     def _add_trail_point(self, p: tuple[float, float, float]) -> None:
         cap = self._trail.shape[0]

@@ -146,17 +146,26 @@ class StreamView:
         """Feed this view from ``stream``; the unsubscribers."""
         plots = self.feeder.on_message if self.sample_rows else self.sampler.on_message
         return [stream.subscribe(plots, PLOT_CHANNELS),
-                stream.subscribe(self.on_message, [ch.BODY_STATE, *(ch.fin_state(i) for i in range(N_FINS))])]
+                stream.subscribe_batches(self.on_messages, [ch.BODY_STATE, *(ch.fin_state(i) for i in range(N_FINS))])]
 
-    def on_message(self, channel: str, msg: Any) -> None:
-        tp = type(msg)
-        if tp is BodyState:
-            self.body = msg
+    def on_messages(self, items: Any) -> None:
+        """The latest body state and fin states of ``items`` ((channel, message) pairs)."""
+        body = None
+        fins = self.fins
+        for _, msg in items:
+            tp = type(msg)
+            if tp is BodyState:
+                body = msg
+            elif tp is FinState:
+                fins[msg.fin] = msg
+        if body is not None:
+            self.body = body
             self.body_wall = time.time()
             self.body_seq += 1
             self._wake.set()
-        elif tp is FinState:
-            self.fins[msg.fin] = msg
+
+    def on_message(self, channel: str, msg: Any) -> None:
+        self.on_messages(((channel, msg),))
 
     def reset(self) -> None:
         """Forget the robot's state and the plot rows (a new source)."""
@@ -181,12 +190,16 @@ class StreamView:
             self.scene = None
 
     def tick_scene(self) -> None:
+        """The robot's pose and fins, as one update of the pages."""
+        with self._atomic():
+            self._pose()
+
+    def _pose(self) -> None:
         s = self.scene
         if s is not None:
-            with self._atomic():
-                s.update_pose(self.body, list(self.fins))
-                if self.on_pose is not None:
-                    self.on_pose()
+            s.update_pose(self.body, list(self.fins))
+            if self.on_pose is not None:
+                self.on_pose()
 
     def refresh_plots(self) -> None:
         self.plots.refresh(float(self.history()))
@@ -232,7 +245,7 @@ class StreamView:
                     if posed:
                         last_seq = self.body_seq
                         next_scene = max(next_scene + scene_period, now - scene_period)
-                        self.tick_scene()
+                        self._pose()  # (inside this pass's atomic())
                     # plots and slow work due before the next pose go with this one (one
                     # batch for the pages' server to send instead of two)
                     early = scene_period if posed else 0.0

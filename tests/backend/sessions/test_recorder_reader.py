@@ -202,6 +202,26 @@ def test_queue_overflow_is_counted_and_reported_as_an_event(sessions):
     assert 0 < n - counts[C.SETPOINTS] <= stats.dropped
 
 
+def test_messages_published_at_once_beyond_the_queue_are_dropped_and_counted_exactly(sessions):
+    """Batches larger than the queue: the recorder keeps what fits, in order, and counts the
+    rest; every message is in the file or counted, none twice."""
+    stream = TelemetryStream()
+    rec = Recorder(stream, RecorderConfig(queue_size=7), directory=sessions)
+    rec.start()
+    n, batch = 5000, 25
+    for k in range(0, n, batch):
+        stream.publish_many([(C.SETPOINTS, Setpoints(0.001 * j, 0.0, 0.0, float(j))) for j in range(k, k + batch)])
+    rec.stop()
+    stats = rec.stats()
+    assert stats.dropped >= (n // batch) * (batch - 7)  # at most the queue's size of each batch fits
+    [path] = rec.paths
+    with SessionReader(path, sessions) as r:
+        kept = [m.yaw_rate for c, m in r.messages() if c == C.SETPOINTS]
+    assert len(kept) + stats.dropped == n
+    assert kept == sorted(kept) and len(set(kept)) == len(kept)
+    assert all(j % batch < 7 for j in kept)  # the first ones of a batch are the ones kept
+
+
 def test_state_at_and_time_ranges_match_brute_force(sessions):
     rng = random.Random(7)
     items = []

@@ -772,38 +772,41 @@ class ClosedLoop:
         self.stream.publish(ch.EVENTS, Event(t=t, source="loop", code=code, message=message, level=level, data=data))
 
     def _publish_outbox(self) -> None:
-        """The core's telemetry rows as messages, in the order it kept them."""
+        """The core's telemetry rows as messages, in the order it kept them, published at
+        once (``publish_many``)."""
         s = self._s
         n = int(s[lc.C_OUT_N])
         s[lc.C_OUT_N] = 0.0
-        rows = self._core.out[:n].tolist()
-        stream = self.stream
-        for v in rows:
+        items: list[tuple[str, Any]] = []
+        add = items.append
+        for v in self._core.out[:n].tolist():
             kind = v[lc.O_KIND]
             if kind == lc.O_STATE:
-                self._publish_state(v)
+                self._state_messages(v, add)
             elif kind == lc.O_POWER:
-                self._publish_power(v)
+                add((ch.POWER, self._power_message(v)))
             elif kind == lc.O_BODY_COMMAND:
-                stream.publish(ch.BODY_COMMAND, BodyCommand(v[lc.O_T], v[lc.O_V], v[lc.O_V + 1], v[lc.O_V + 2]))
+                add((ch.BODY_COMMAND, BodyCommand(v[lc.O_T], v[lc.O_V], v[lc.O_V + 1], v[lc.O_V + 2])))
             else:
                 r = rr.reading_of(v)
-                stream.publish(_READING_CHANNEL[type(r)], r)
+                add((_READING_CHANNEL[type(r)], r))
+        self.stream.publish_many(items)
 
-    def _publish_state(self, v: list[float]) -> None:
-        stream = self.stream
+    def _state_messages(self, v: list[float], add: Callable[[tuple[str, Any]], None]) -> None:
+        """The body state and the fin states of a state row, those a subscriber takes."""
+        wants = self.stream.wants
         t, b = v[lc.O_T], lc.O_V
-        if stream.wants(ch.BODY_STATE):
-            stream.publish(ch.BODY_STATE, BodyState(
+        if wants(ch.BODY_STATE):
+            add((ch.BODY_STATE, BodyState(
                 t=t, position=(v[b], v[b + 1], v[b + 2]), orientation=(v[b + 3], v[b + 4], v[b + 5], v[b + 6]),
                 velocity=(v[b + 7], v[b + 8], v[b + 9]), rates=(v[b + 10], v[b + 11], v[b + 12]), depth=v[b + 13],
-            ))
+            )))
         f = lc.O_STATE_FINS
         for pf, channel in enumerate(_FIN_STATE):
-            if stream.wants(channel):
+            if wants(channel):
                 a = v[f + pf]
-                stream.publish(channel, FinState(t, pf, 0.0 if a != a else a, v[f + N_FINS + pf],
-                                                 v[f + 2 * N_FINS + pf], v[f + 3 * N_FINS + pf]))
+                add((channel, FinState(t, pf, 0.0 if a != a else a, v[f + N_FINS + pf],
+                                       v[f + 2 * N_FINS + pf], v[f + 3 * N_FINS + pf])))
 
     def _publish_stroke(self, t: float, fin: int, stroke: float, rate: float) -> None:
         if not self.stream.wants(ch.fin_strouhal(fin)):
@@ -815,7 +818,7 @@ class ClosedLoop:
             v_body, stroke, rate,
         ))
 
-    def _publish_power(self, v: list[float]) -> None:
+    def _power_message(self, v: list[float]) -> Power:
         per = [0.0 if x != x else x for x in v[lc.O_V:lc.O_V + N_FINS]]
         energy = 0.0
         mean = 0.0
@@ -824,10 +827,10 @@ class ClosedLoop:
             m = v[lc.O_POWER_MEAN + pf]
             mean += m if m == m else 0.0
         d = v[lc.O_POWER_DISTANCE]
-        self.stream.publish(ch.POWER, Power(
+        return Power(
             t=v[lc.O_T], per_fin=(per[0], per[1], per[2], per[3]), total=sum(per), mean_total=mean,
             energy=energy, distance=d, energy_per_metre=energy / d if d > 0.0 else math.nan,
-        ))
+        )
 
     def _own_status(self, t: float) -> Status:
         return Status(t=t, armed=self._driving(), mode=self._mode, pilot="", failsafes=(),

@@ -284,7 +284,7 @@ class Recorder:
                 files.META_NOTES: {"text": notes},
             }
             self._open_part()  # in this thread: a bad directory fails here, loudly
-            self._unsubscribe = self.stream.subscribe(self._on_message)
+            self._unsubscribe = self.stream.subscribe_batches(self._on_messages)
             self._thread = threading.Thread(
                 target=self._run, name=f"recorder-{sid}", daemon=True
             )
@@ -327,12 +327,15 @@ class Recorder:
         self.stop()
 
     # ------------------------------------------------------------------ publisher side
-    def _on_message(self, channel: str, msg: Any) -> None:
-        if len(self._queue) >= self._maxlen:
-            with self._drop_lock:
-                self._dropped += 1
+    def _on_messages(self, items: Any) -> None:
+        room = self._maxlen - len(self._queue)
+        if len(items) <= room:
+            self._queue.extend(items)  # (channel, message) tuples, as the writer takes them
             return
-        self._queue.append((channel, msg))
+        if room > 0:
+            self._queue.extend(items[:room])
+        with self._drop_lock:
+            self._dropped += len(items) - max(room, 0)
 
     # ------------------------------------------------------------------ writer thread
     def _open_part(self) -> None:

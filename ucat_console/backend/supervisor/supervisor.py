@@ -104,7 +104,7 @@ class Supervisor:
         formulation is loaded, or compiled here, before the robot starts."""
         self.cfg = cfg = cfg or AppConfig()
         self.stream = TelemetryStream()
-        self._loop_stream = _LoopOutlet(self.stream, self._forward)
+        self._loop_stream = _LoopOutlet(self.stream, self._forward, self._forward_many)
         self._lock = threading.RLock()
         self._listeners: list[Callable[[], None]] = []
         self.access = AccessControl(cfg.access)
@@ -165,8 +165,8 @@ class Supervisor:
         self._closed = False
         self._chunks = 0
         self._unsubs = [
-            self.stream.subscribe(self.safety.on_message, SAFETY_CHANNELS),
-            self.stream.subscribe(self._on_body, [ch.BODY_STATE]),
+            self.stream.subscribe_batches(self.safety.on_messages, SAFETY_CHANNELS),
+            self.stream.subscribe_batches(self._on_bodies, [ch.BODY_STATE]),
         ]
         self.access.add_listener(self._on_access)
 
@@ -278,19 +278,43 @@ class Supervisor:
 
     # ================================================================== telemetry
     def _forward(self, channel: str, msg: Any) -> None:
-        if not self.gate.armed:
-            tp = type(msg)
+        msg = self._forwarded(channel, msg, self.gate.armed)
+        if msg is not None:
+            self.stream.publish(channel, msg)
+
+    def _forward_many(self, items: Any) -> None:
+        armed = self.gate.armed
+        if armed:
+            for _, msg in items:
+                if type(msg) is Event:
+                    break
+            else:  # armed and no event: every message as the loop made it
+                self.stream.publish_many(items)
+                return
+        out = []
+        for channel, msg in items:
+            msg = self._forwarded(channel, msg, armed)
+            if msg is not None:
+                out.append((channel, msg))
+        self.stream.publish_many(out)
+
+    def _forwarded(self, channel: str, msg: Any, armed: bool) -> Any:
+        """The loop's message as the public stream carries it; None when it is held back.
+        While disarmed, a fin state's commanded angle and rate are the ones the arming gate
+        last sent, and the loop's stroke timeouts are held back."""
+        tp = type(msg)
+        if not armed:
             if tp is FinState:
                 a, r = self.gate.sent[msg.fin]
-                msg = FinState(msg.t, msg.fin, msg.angle, msg.rate, a, r)
-            elif tp is Event and msg.code == "stroke_timeout" and msg.source == "loop":
-                return
-        if channel == ch.EVENTS and type(msg) is Event and self.bursts.take(msg):
-            return
-        self.stream.publish(channel, msg)
+                return FinState(msg.t, msg.fin, msg.angle, msg.rate, a, r)
+            if tp is Event and msg.code == "stroke_timeout" and msg.source == "loop":
+                return None
+        if tp is Event and channel == ch.EVENTS and self.bursts.take(msg):
+            return None
+        return msg
 
-    def _on_body(self, channel: str, msg: BodyState) -> None:
-        self._last_body = msg
+    def _on_bodies(self, items: Any) -> None:
+        self._last_body = items[-1][1]
 
     def report_event(self, event: Event) -> None:
         """Event sink for the robot's devices (any thread): onto the stream."""
@@ -691,9 +715,11 @@ class _LoopOutlet:
     forwarding (``Supervisor._forward``) onto the public stream, and the loop builds what
     the public stream's subscribers take (``wants``, ``wanted``)."""
 
-    def __init__(self, public: TelemetryStream, forward: Callable[[str, Any], None]) -> None:
+    def __init__(self, public: TelemetryStream, forward: Callable[[str, Any], None],
+                 forward_many: Callable[[Any], None]) -> None:
         self._public = public
         self.publish = forward
+        self.publish_many = forward_many
 
     def wants(self, channel: str) -> bool:
         return self._public.wants(channel)
