@@ -269,10 +269,11 @@ class StreamView:
             # next pose may go, at that time, whether a body state came meanwhile or not;
             # after it, at the body state's arrival; for the plots and the slow work a
             # pose's time later (a pose pass takes them before then while poses come)
+            # (a timed wait sleeps: on a virtual machine a sleep's wake-up costs half of an
+            # Event.wait's, and stop() waits for it at most _TICK)
             now = time.perf_counter()
             later = min(next_plot, next_slow) + scene_period
             if now < next_scene or self.body_seq != last_seq:
-                wake, event = min(next_scene, later), self._stop
+                time.sleep(min(max(min(next_scene, later) - now, 0.001), _TICK))
             else:
-                wake, event = later, self._wake
-            event.wait(min(max(wake - now, 0.001), _TICK))
+                self._wake.wait(min(max(later - now, 0.001), _TICK))

@@ -37,6 +37,35 @@ def test_an_event_due_within_early_runs_at_once_and_a_later_one_is_waited_for(cl
     assert len(waits.timeouts) == 1 and clock.early <= waits.timeouts[0] <= 30.0
 
 
+def test_a_short_wait_sleeps_and_a_long_one_waits_for_an_interrupt() -> None:
+    """Up to SLEEP_MAX of wall time the clock sleeps (a cheaper wake-up); a longer wait is on
+    the event that ``interrupt()`` sets, so that a stop does not wait for it."""
+    from ucat_console.backend.loop.clock import SLEEP_MAX
+
+    clock = PacedClock(1.0)
+    clock.start(0.0)
+    waits = clock._wake = Waits()
+    slept: list[float] = []
+    clock._sleep = slept.append
+    clock.wait_until(0.5 * SLEEP_MAX)
+    assert len(slept) == 1 and 0.0 < slept[0] <= 0.5 * SLEEP_MAX and waits.timeouts == []
+    clock.wait_until(30.0)
+    assert len(slept) == 1 and len(waits.timeouts) == 1 and waits.timeouts[0] > SLEEP_MAX
+
+
+def test_an_interrupt_ends_a_long_wait_at_once() -> None:
+    import threading
+
+    clock = PacedClock(1.0)
+    clock.start(0.0)
+    done = threading.Event()
+    waiter = threading.Thread(target=lambda: (clock.wait_until(600.0), done.set()))
+    waiter.start()
+    clock.interrupt()  # before or during the wait: either way it ends (it would last ten minutes)
+    assert done.wait(60.0)
+    waiter.join()
+
+
 def test_without_early_every_event_still_ahead_is_waited_for() -> None:
     clock = PacedClock(1.0)
     clock.start(0.0)

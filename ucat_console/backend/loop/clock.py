@@ -56,6 +56,14 @@ class SimulatedClock(Clock):
         return None
 
 
+#: s of wall time: a wait this short sleeps (``time.sleep``), a longer one waits on an event
+#: that :meth:`PacedClock.interrupt` sets. On the development machine's virtual CPUs a
+#: sleep's wake-up took 65 us of a core, an ``Event.wait``'s 125 us (a condition, a lock and
+#: their system calls): the loop waits some 50 times a second. An interrupt finds a sleep
+#: at most this long to finish.
+SLEEP_MAX = 0.05
+
+
 class PacedClock(Clock):
     """Real time, ``pace`` times faster than the wall clock (1.0: real time).
 
@@ -63,7 +71,7 @@ class PacedClock(Clock):
     of being waited for, so that events close together share one wake-up of the loop (each
     wake-up costs CPU, about 0.1 ms of a core on a virtual machine). Only for a robot whose
     readings are computed (the simulator): a device's reading is not there before its time.
-    0 waits for every event."""
+    0 waits for every event. Waits up to :data:`SLEEP_MAX` sleep."""
 
     threaded = True
     paced = True
@@ -77,6 +85,7 @@ class PacedClock(Clock):
         self.early = float(early)
         self._wall0 = time.perf_counter()
         self._wake = threading.Event()
+        self._sleep = time.sleep
         self.lag_max = 0.0  # s of wall time the loop has been behind, at most
 
     def start(self, t0: float) -> None:
@@ -90,7 +99,10 @@ class PacedClock(Clock):
         delay = self.wall_deadline(t) - time.perf_counter()
         if delay > 0.0:
             if delay >= self.early:
-                self._wake.wait(delay)
+                if delay <= SLEEP_MAX:
+                    self._sleep(delay)
+                else:
+                    self._wake.wait(delay)
         else:
             self.lag_max = max(self.lag_max, -delay)
 
