@@ -711,9 +711,10 @@ class Supervisor:
 
 
 class _LoopOutlet:
-    """The closed loop's stream: what the loop publishes goes through the supervisor's
-    forwarding (``Supervisor._forward``) onto the public stream, and the loop builds what
-    the public stream's subscribers take (``wants``, ``wanted``)."""
+    """The closed loop's stream: what the loop publishes, a message or a step's messages at
+    once, goes through the supervisor's forwarding (``Supervisor._forward``,
+    ``_forward_many``) onto the public stream, and the loop builds what the public stream's
+    subscribers take (``wants``, ``wanted``)."""
 
     def __init__(self, public: TelemetryStream, forward: Callable[[str, Any], None],
                  forward_many: Callable[[Any], None]) -> None:
