@@ -416,11 +416,9 @@ class PageGuard:
                 self.declare_gone(p.client, silent)
                 continue
             p.seq += 1
-            try:
+            try:  # (sent at once: viser's senders do not wait for more after a message, viser_hooks)
                 p.conn.queue_message(vm.LocalStorageGetItemRequestMessage(
                     key=HEARTBEAT_KEY, request_uuid=f"{_HB_PREFIX}{p.seq}"))
-                if self.server is not None:
-                    self.server._websock_server.flush_client(p.client)
             except Exception:
                 log.debug("heartbeat to page %s not sent", p.client, exc_info=True)
 
