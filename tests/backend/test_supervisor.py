@@ -691,3 +691,27 @@ def test_only_the_simulated_robot_runs_events_early(tmp_path: Path) -> None:
             assert isinstance(sup.clock, SteadyPacedClock) and sup.clock.early == early, robot
         finally:
             sup.stop()
+
+
+def test_a_paced_supervisor_does_a_chunks_work_every_period_where_the_loop_waits(tmp_path: Path) -> None:
+    """In real time the loop does the supervisor's work between chunks (failsafes, arming,
+    commands) where it waits for the clock anyway, without returning from its run: at most
+    two periods of loop time apart, and a command queued from another thread still runs."""
+    sup = Supervisor(make_config(), sessions_dir=tmp_path)
+    checks: list[float] = []
+    check = sup.safety.check
+    sup.safety.check = lambda now: checks.append(now) or check(now)  # type: ignore[method-assign]
+    runs = []
+    run_until = sup.loop.run_until
+    sup.loop.run_until = lambda *a, **k: runs.append(a) or run_until(*a, **k)  # type: ignore[method-assign]
+    try:
+        sup.start()
+        wait_for(lambda: sup.loop.time > 1.5, timeout=60.0, what="1.5 s of loop time")
+        sup.set_setpoints(LOCAL, velocity=0.15)  # a command, run by the loop's thread
+        assert sup.setpoints.velocity == 0.15
+    finally:
+        sup.stop()
+    period = sup.cfg.console.supervise_period
+    gaps = [b - a for a, b in zip(checks, checks[1:])]
+    assert len(checks) > 20 and max(gaps) <= 2 * period + 0.02
+    assert len(runs) < len(checks) / 2  # most chunk ends done inside the loop's run

@@ -103,6 +103,35 @@ def test_headless_and_paced_threaded_clocks_give_the_same_trajectory() -> None:
     assert np.array_equal(xa, xb) and np.array_equal(fa[:, :4], fb[:, :4])
 
 
+def test_a_paced_loop_does_its_callers_work_where_it_waits_and_runs_on_to_the_end_it_is_given() -> None:
+    """``between`` runs at each wait of a paced loop and moves the end; the loop does not
+    return until the end given last, and runs as a loop run to that end at once does."""
+    a, io_a, log_a = make_loop("mpc")
+    a.run_until(1.5)
+    b, io_b, log_b = make_loop("mpc", clock=PacedClock(pace=10.0))
+    seen: list[float] = []
+
+    def between(t: float) -> float:
+        seen.append(t)
+        return min(1.5, t + 0.1)
+
+    b.run_until(0.1, between=between)
+    b.close()
+    assert b.time == pytest.approx(1.5)
+    assert len(seen) > 20 and seen == sorted(seen) and seen[-1] > 1.3
+    assert [(p.t, p.fin, p.u) for p in log_a.plans()] == [(p.t, p.fin, p.u) for p in log_b.plans()]
+    xa, fa = io_a.plant.state_arrays()
+    xb, fb = io_b.plant.state_arrays()
+    assert np.array_equal(xa, xb) and np.array_equal(fa[:, :4], fb[:, :4])
+
+
+def test_a_non_finite_end_from_between_is_refused() -> None:
+    loop, _, _ = make_loop("baseline", clock=PacedClock(pace=10.0))
+    with pytest.raises(ValueError, match="between: expected a finite time"):
+        loop.run_until(0.5, between=lambda t: math.nan)
+    loop.close()
+
+
 @pytest.mark.parametrize("first,second", [("mpc", "baseline"), ("mpc", "mpc_sync"), ("mpc_sync", "mpc")])
 def test_mode_switch_is_bumpless(first: str, second: str) -> None:
     loop, io, log = make_loop(first)

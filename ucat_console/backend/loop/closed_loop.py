@@ -388,13 +388,19 @@ class ClosedLoop:
             raise ValueError(f"duration: expected a finite duration >= 0 s, got {duration!r}")
         self.run_until(self._t + duration)
 
-    def run_until(self, t_end: float) -> None:
+    def run_until(self, t_end: float, between: Callable[[float], float] | None = None) -> None:
         """Process every event up to simulated time ``t_end`` (s).
 
         The per-sample work is the compiled core's (``control.loop_core``): it runs the
         events and returns here only for what the loop does in Python (module docstring of
         the core), each handled below; a robot that can run the core itself (the simulator)
-        does the sampling in compiled code too."""
+        does the sampling in compiled code too.
+
+        ``between(t)``, when given, is called each time the loop is about to wait for the
+        clock (a paced one: ``Clock.paced``), at loop time ``t``: its caller's work between
+        two events, done without returning from here (a return and the next call cost the
+        loop a step of its core). It returns the time to run until from then on, ``t_end``
+        or a later one."""
         if not math.isfinite(t_end):
             raise ValueError(f"t_end: expected a finite time, got {t_end!r}")
         self._stop = False
@@ -426,6 +432,13 @@ class ClosedLoop:
             if st == lc.READINGS:
                 continue  # the robot's readings (above)
             if st == lc.WAIT:
+                if between is not None:
+                    t_end = between(t)
+                    if not math.isfinite(t_end):
+                        raise ValueError(f"between: expected a finite time to run until, got {t_end!r}")
+                    s[lc.C_T_END] = t_end
+                    if self._stop:
+                        break
                 self.clock.wait_until(float(s[lc.C_T_NEXT]))
                 if self._stop:
                     break

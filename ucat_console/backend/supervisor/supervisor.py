@@ -251,13 +251,32 @@ class Supervisor:
             self.commands.fail_all("the loop is not running")
 
     def _chunk(self) -> None:
+        """One chunk of ``supervise_period`` of loop time, with the supervisor's work at its
+        start and end. A paced loop does the chunks' ends and starts where it waits for the
+        clock anyway (:meth:`_between`), without returning; it returns (ending a chunk here)
+        only when it has not waited for a whole period more, or is stopped."""
         self.commands.run_pending()
         self.gate.flush()
         self._chunks += 1
         period = self.cfg.console.supervise_period
         t_end = max(self._chunks * period, self.loop.time)
-        self.loop.run_until(t_end)
+        if self.clock.paced:
+            self.loop.run_until(t_end + period, between=self._between)
+        else:
+            self.loop.run_until(t_end)
         self._after_chunk()
+
+    def _between(self, t: float) -> float:
+        """At a wait of the paced loop (loop time ``t``): once the chunk's end is reached,
+        the work of a chunk's end and of the next one's start, as :meth:`_chunk` does; the
+        time the loop may run until without waiting (a period past the chunk's end)."""
+        period = self.cfg.console.supervise_period
+        if t >= self._chunks * period - 1e-9:
+            self._after_chunk()
+            self.commands.run_pending()
+            self.gate.flush()
+            self._chunks = max(self._chunks + 1, math.floor(t / period + 1e-9) + 1)
+        return self._chunks * period + period
 
     def _after_chunk(self) -> None:
         now = self.loop.time
