@@ -134,6 +134,45 @@ def recorder_throughput(n: int = 100_000, directory: Path | None = None) -> dict
     }
 
 
+def mcap_append(n: int = 50_000, rounds: int = 5) -> dict[str, Any]:
+    """us per message of ``add_message`` into an in-memory MCAP file, mcap's ``Writer``
+    against the recorder's ``ChunkedWriter`` (the same bytes: their test), the :data:`MIX`'s
+    first ``n`` messages encoded beforehand; each writer ``rounds`` times, in turns, the
+    median of each and their ratio."""
+    import io
+
+    from mcap.writer import CompressionType, Writer
+
+    from ucat_console.backend.sessions import codec
+    from ucat_console.backend.sessions.mcap_writer import ChunkedWriter
+
+    per_s = sum(rate for rate, _ in MIX.values())
+    msgs = synthetic_messages_between(0.0, n / per_s + 1.0)[:n]
+    order = {channel: k for k, channel in enumerate(MIX)}
+    records = [(order[channel], codec.to_ns(t, 1.7e9), codec.encode(msg)) for t, channel, msg in msgs]
+
+    def once(writer_class: type) -> float:
+        w = writer_class(io.BytesIO(), chunk_size=RecorderConfig().chunk_size, compression=CompressionType.NONE)
+        w.start(profile="ucat", library="bench")
+        schema = w.register_schema("s", "jsonschema", b"{}")
+        ids = [w.register_channel(channel, "json", schema) for channel in MIX]
+        add = w.add_message
+        t0 = time.perf_counter()
+        for k, ns, data in records:
+            add(ids[k], log_time=ns, data=data, publish_time=ns)
+        t1 = time.perf_counter()
+        w.finish()
+        return (t1 - t0) / len(records) * 1e6
+
+    theirs, ours = [], []
+    for _ in range(rounds):
+        theirs.append(once(Writer))
+        ours.append(once(ChunkedWriter))
+    mcap_us, chunked_us = statistics.median(theirs), statistics.median(ours)
+    return {"messages": len(records), "rounds": rounds, "mcap_writer_us": mcap_us,
+            "chunked_writer_us": chunked_us, "ratio": chunked_us / mcap_us}
+
+
 def seek_latency(
     hours: float = 1.0, seeks: int = 50, seed: int = 0, directory: Path | None = None,
     keep: bool = False,
@@ -181,7 +220,7 @@ def seek_latency(
 # ---------------------------------------------------------------------- command line
 def register(kinds: argparse._SubParsersAction) -> None:
     """Add ``bench sessions`` to the ``bench`` command's sub-commands."""
-    p = kinds.add_parser("sessions", help="recorder throughput and seek latency")
+    p = kinds.add_parser("sessions", help="recorder throughput, MCAP append, seek latency")
     p.add_argument("--messages", type=int, default=100_000, help="throughput run length")
     p.add_argument("--hours", type=float, default=1.0, help="synthetic session length")
     p.add_argument("--seeks", type=int, default=50, help="state_at calls timed")
@@ -201,6 +240,10 @@ def run(args: argparse.Namespace) -> int:
     print(f"recorder: {thr['rate_msgs_per_s']:,.0f} messages/s "
           f"({thr['messages']} messages, {thr['dropped']} dropped, "
           f"{thr['publish_us_per_msg']:.1f} us per publish)")
+    append = mcap_append()
+    print(f"MCAP append (in memory, uncompressed chunks, {append['messages']:,} messages, median of "
+          f"{append['rounds']}): mcap's Writer {append['mcap_writer_us']:.2f} us, the recorder's "
+          f"ChunkedWriter {append['chunked_writer_us']:.2f} us a message ({append['ratio']:.2f} times)")
     seek = seek_latency(args.hours, args.seeks, directory=args.dir)
     print(f"seek: {seek['hours']} h, {seek['messages']:,} messages, {seek['chunks']} chunks, "
           f"{seek['bytes'] / 1e6:.1f} MB; open {seek['open_s'] * 1e3:.0f} ms; state_at median "
@@ -210,6 +253,6 @@ def run(args: argparse.Namespace) -> int:
     machine = machine_info(None)
     print(speed_line(machine))
     if args.json:
-        args.json.write_text(json.dumps({"throughput": thr, "seek": seek, "machine": machine}, indent=2))
+        args.json.write_text(json.dumps({"throughput": thr, "mcap_append": append, "seek": seek, "machine": machine}, indent=2))
         print(f"wrote {args.json}")
     return 0
