@@ -114,4 +114,5 @@ class SimRobotIO(RobotIO):
             fin_rates=p.fin_rates(),
             fin_strouhal=p.fin_strouhal(),
             fin_energy=p.fin_energy(),
+            fin_impulse=p.fin_impulse(),
         )

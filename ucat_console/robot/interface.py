@@ -52,6 +52,8 @@ class RobotTruth:
     fin_rates: tuple[float, ...]
     fin_strouhal: tuple[float, ...]
     fin_energy: tuple[float, ...]  # true shaft energy since start, J
+    #: each fin's fin-frame force (f_x, f_y) integrated since start, N s (the simulator's)
+    fin_impulse: tuple[tuple[float, float], ...] = ()
 
     @property
     def depth(self) -> float:

@@ -12,6 +12,7 @@ from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.messages import (
     BodyCommand,
     BodyState,
+    FinCycle,
     FinPlan,
     FinState,
     FinStrouhal,
@@ -44,6 +45,10 @@ def fin_strouhal(fin: int) -> str:
     return f"fin/{fin}/strouhal"
 
 
+def fin_cycle(fin: int) -> str:
+    return f"fin/{fin}/cycle"
+
+
 #: every channel and its message type
 CHANNELS: dict[str, type] = {
     BODY_STATE: BodyState,
@@ -58,6 +63,7 @@ CHANNELS: dict[str, type] = {
     **{fin_state(i): FinState for i in range(N_FINS)},
     **{fin_plan(i): FinPlan for i in range(N_FINS)},
     **{fin_strouhal(i): FinStrouhal for i in range(N_FINS)},
+    **{fin_cycle(i): FinCycle for i in range(N_FINS)},
 }
 
 

@@ -121,6 +121,26 @@ class FinPlan:
 
 
 @dataclass(frozen=True)
+class FinCycle:
+    """One executed cycle of one fin: the force it was asked for, and the force its executed
+    strokes (measured stroke-end angles and times) make by the controller's fin model.
+
+    ``direction_error`` is the angle between the two forces (NaN when either is below
+    1 mN); ``magnitude_error`` is |delivered| - |asked|."""
+
+    t: Time
+    fin: Fin
+    mode: Annotated[str, Doc("fin controller that planned the cycle")]
+    target: Annotated[tuple[float, float], Doc("force asked of the fin (f_x*, f_y*)", "N", "fin model", XY)]
+    delivered: Annotated[tuple[float, float], Doc("cycle-mean force of the executed strokes by the fin model",
+                                                  "N", "fin model", XY)]
+    direction_error: Annotated[float, Doc("angle between the asked and the delivered force", "rad")]
+    magnitude_error: Annotated[float, Doc("|delivered| - |asked|", "N")]
+    duration: Annotated[float, Doc("executed cycle: first stroke sent to last stroke finished", "s")]
+    planned_duration: Annotated[float, Doc("the plan's cycle: sum of |d_k| / w_k", "s")]
+
+
+@dataclass(frozen=True)
 class Power:
     """Mechanical power from encoder positions (control.md section 9)."""
 

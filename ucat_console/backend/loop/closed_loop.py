@@ -102,6 +102,7 @@ from ucat_console.control.executor import (
 )
 from ucat_console.control.argcheck import finite
 from ucat_console.control.cost import stroke_strouhal
+from ucat_console.control.fin_cycle import CycleForce, executed_force, planned_duration
 from ucat_console.control.params import BaselineConfig, MpcConfig, PidGains
 from ucat_console.control.power import P_T, PowerBank, drag_coefficient
 from ucat_console.control.stroke_watch import W_T_FB, StrokeWatches
@@ -110,6 +111,7 @@ from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.messages import (
     BodyCommand,
     BodyState,
+    FinCycle,
     FinPlan,
     FinState,
     FinStrouhal,
@@ -129,6 +131,7 @@ log = logging.getLogger(__name__)
 _EPS = lc.EPS
 PID_LOOPS = ("velocity", "depth", "yaw_rate")
 _FIN_STATE = tuple(ch.fin_state(pf) for pf in range(N_FINS))
+_FIN_CYCLE = tuple(ch.fin_cycle(pf) for pf in range(N_FINS))
 #: the telemetry a flag of the core asks for
 _WANTED = ((lc.F_BODY_COMMAND, (ch.BODY_COMMAND,)), (lc.F_STATE, (ch.BODY_STATE, *_FIN_STATE)),
            (lc.F_POWER, (ch.POWER,)), (lc.F_IMU, (ch.IMU,)), (lc.F_DEPTH, (ch.DEPTH,)), (lc.F_DVL, (ch.DVL,)))
@@ -144,7 +147,7 @@ class _Actuator:
 
     __slots__ = (
         "index", "key", "fins", "executor", "planner", "mode", "u_prev", "job", "t_deliver",
-        "running_end", "pending_end", "active", "predecessors", "ready", "requested", "retiring",
+        "running_end", "pending_end", "active", "predecessors", "ready", "requested", "retiring", "loaded",
     )
 
     def __init__(self, index: int, fins: tuple[int, ...], executor: FinExecutor, planner: Planner,
@@ -165,6 +168,7 @@ class _Actuator:
         self.ready: tuple[PlanInputs, FinPlan] | None = None
         self.requested = False
         self.retiring = False
+        self.loaded: tuple[tuple[float, float], float] = ((0.0, 0.0), 0.0)  # the last plan's target, duration
 
     @property
     def idle(self) -> bool:
@@ -242,6 +246,9 @@ class ClosedLoop:
         self.plans_made = 0
         self._generation = 0
         self._owner: list[_Actuator] = [None] * N_FINS  # type: ignore[list-item]
+        # each fin's cycle being executed (paper order): its plan's mode, target and duration,
+        # and the measured angle and time at each stroke's start
+        self._cycles: list[tuple[str, tuple[float, float], float, list[float], list[float]] | None] = [None] * N_FINS
         self._install_actuators(self._new_actuators(self._mode))
 
     # ------------------------------------------------------------------ public state
@@ -603,6 +610,7 @@ class ClosedLoop:
 
     def _load(self, act: _Actuator, inputs: PlanInputs, outcome: FinPlan, t: float) -> None:
         was_running = act.executor.running
+        act.loaded = (inputs.target, planned_duration(outcome.u))
         actions = act.executor.load(outcome.commands, t, theta_start=inputs.theta0)
         if was_running:
             act.pending_end = outcome.commands[2]
@@ -625,6 +633,7 @@ class ClosedLoop:
             tp = type(a)
             if tp is SendToServo:
                 pf = PAPER_TO_ROBOT[a.fin]
+                self._stroke_begins(act, a.fin, a.stroke, t)
                 self.io.command_fin(pf, a.theta_ref, a.w_ref)
                 self._publish_stroke(t, pf, a.theta_ref - float(self._s[lc.C_CMD_ANGLE + pf]), a.w_ref)
                 self._s[lc.C_CMD_ANGLE + pf] = a.theta_ref
@@ -633,6 +642,8 @@ class ClosedLoop:
                 if not act.retiring:
                     self._request(act, t, a.theta_start)
             elif tp is CycleComplete:
+                for p in a.fins:
+                    self._cycle_ends(p, t)
                 if not a.idle:
                     act.running_end = act.pending_end
                     act.pending_end = None
@@ -647,6 +658,34 @@ class ClosedLoop:
                 self.stroke_timeouts += 1
                 self._event(t, "stroke_timeout", f"fin {a.fin} stroke ended by its timeout",
                             "info", {"fin": a.fin, "elapsed": a.elapsed, "planned": a.planned})
+
+    def _stroke_begins(self, act: _Actuator, fin: int, stroke: int, t: float) -> None:
+        """Paper fin ``fin`` starts stroke ``stroke`` of its plan: a stroke boundary of the
+        cycle being executed (the first stroke begins a cycle)."""
+        angle = float(self._s[lc.C_FB_ANGLE + PAPER_TO_ROBOT[fin]])
+        cycle = self._cycles[fin]
+        if stroke == 0:
+            target, duration = act.loaded
+            self._cycles[fin] = (act.mode, target, duration, [angle], [t])
+        elif cycle is not None:
+            cycle[3].append(angle)
+            cycle[4].append(t)
+
+    def _cycle_ends(self, fin: int, t: float) -> None:
+        """Paper fin ``fin`` finished its plan's last stroke: publish what the cycle delivered."""
+        cycle, self._cycles[fin] = self._cycles[fin], None
+        pf = PAPER_TO_ROBOT[fin]
+        if cycle is None or not self.stream.wants(_FIN_CYCLE[pf]):
+            return
+        mode, target, duration, angles, times = cycle
+        angles.append(float(self._s[lc.C_FB_ANGLE + pf]))
+        times.append(t)
+        if any(a != a for a in angles):
+            return  # a fin without feedback yet
+        c = CycleForce(target, executed_force(angles, times, self._mpc_cfg), t - times[0], duration)
+        self.stream.publish(_FIN_CYCLE[pf], FinCycle(
+            t=t, fin=pf, mode=mode, target=c.target, delivered=c.delivered, direction_error=c.direction_error,
+            magnitude_error=c.magnitude_error, duration=c.duration, planned_duration=c.planned_duration))
 
     # ------------------------------------------------------------------ modes and tuning
     def _new_actuators(self, mode: str) -> list[_Actuator]:

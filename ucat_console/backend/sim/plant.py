@@ -67,7 +67,9 @@ F_THRUST_FACTOR = 7  # last thrust factor (gain x wake)
 F_ALPHA = 8  # last angular acceleration (rad/s2)
 F_POWER = 9  # last true shaft power (W), no regeneration
 F_ENERGY = 10  # shaft energy since reset (J)
-NF = 11
+F_IMPULSE_X = 11  # time integral of the fin-frame force f_x since reset (N s)
+F_IMPULSE_Y = 12  # and of f_y
+NF = 13
 
 # command layout: one row per fin
 C_TARGET = 0
@@ -142,6 +144,8 @@ def advance_steps(
             )
             xf_out[i, F_FX] = fx
             xf_out[i, F_FY] = fy
+            xf_out[i, F_IMPULSE_X] += fx * dt
+            xf_out[i, F_IMPULSE_Y] += fy * dt
             xf_out[i, F_ST] = st
             xf_out[i, F_THRUST_FACTOR] = scale
             add_fin_wrench(fx, fy, signs[i, 0], signs[i, 1], signs[i, 2], ph, tau)
@@ -405,6 +409,11 @@ class Plant:
     def fin_energy(self) -> tuple[float, ...]:
         """True shaft energy per fin since reset (J): I alpha w + drag power, no regeneration."""
         return tuple(float(x) for x in self._xf[:, F_ENERGY])
+
+    def fin_impulse(self) -> tuple[tuple[float, float], ...]:
+        """Each fin's fin-frame force (f_x, f_y) integrated since the reset (N s): the
+        true mean force over a span is the change of this over the span's length."""
+        return tuple((float(x), float(y)) for x, y in self._xf[:, F_IMPULSE_X:F_IMPULSE_Y + 1])
 
     def state_arrays(self) -> tuple[np.ndarray, np.ndarray]:
         """Copies of the vehicle and fin state arrays (layouts in ``vehicle`` and here)."""
