@@ -82,6 +82,12 @@ class MpcConfig(Config):
     w_min: float = param(0.5, lo=0.0, hi=100.0, lo_open=True, unit="rad/s", doc="slowest mean rate")
     w_max: float = param(8.0, lo=0.0, hi=100.0, lo_open=True, unit="rad/s", doc="fastest mean rate")
     a_min: float = param(0.03, lo=0.0, hi=1.0, unit="m", doc="amplitude penalty threshold A_min")
+    # beyond the paper: the cycle's orientation
+    centre_rate: float = param(
+        0.0, lo=0.0, hi=100.0, unit="rad/s",
+        doc="turn each planned cycle (its oscillation centre) so its mean force points along the "
+        "target, at most this fast (0: the paper's MPC, the cycle as solved)",
+    )
 
     def _check(self) -> None:
         require_below(self, "d_eps", "d_max")

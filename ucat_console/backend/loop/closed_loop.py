@@ -729,7 +729,7 @@ class ClosedLoop:
         if mode == "identify":
             return ManoeuvreFinPlanner(self.cfg.manoeuvre, self._mpc_cfg)
         seed = int(np.random.SeedSequence([self.cfg.planner_seed, self._generation, index]).generate_state(1)[0])
-        return MpcFinPlanner(self._mpc_cfg, seed)
+        return MpcFinPlanner(self._mpc_cfg, seed, self.cfg.executor)
 
     def _apply_mode(self, mode: str, t: float, who: str = "") -> None:
         if mode == self._mode:

@@ -76,9 +76,9 @@ class MpcFinPlanner:
     makes an extra revolution. The baseline does the same.
     """
 
-    def __init__(self, cfg: MpcConfig, seed: int) -> None:
+    def __init__(self, cfg: MpcConfig, seed: int, drive: ExecutorConfig | None = None) -> None:
         self.cfg = cfg
-        self._mpc = FinMpc(cfg)
+        self._mpc = FinMpc(cfg, drive=drive)
         self._seed_base = seed << 32
         self._count = 0
 
