@@ -14,7 +14,7 @@ from ucat_console.typedconf import Config, param, require_below
 
 #: the actuation delay (s) and bandwidth factor the designed body layer's default gains are
 #: designed for (control.body_design)
-DESIGN_DELAY, DESIGN_FACTOR = 0.75, 4.0
+DESIGN_DELAY, DESIGN_FACTOR = 1.25, 4.0
 
 #: the MPC's cost formulations: the paper's eq 17, and the closed-stroke cost
 #: (``control.cost``: strokes that close, the Strouhal penalty per stroke, an energy term)
