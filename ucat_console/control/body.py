@@ -395,9 +395,11 @@ def _none(x: float) -> float | None:
 class BodyStep:
     """Output of one body-frame step.
 
-    ``allocation`` holds the fins' targets; ``demand`` and ``applied`` the wrench (surge N,
-    heave N down > 0, yaw N m) before and after the allocation, ``cut`` the axes it cut (the
-    paper layer: the wrench its targets make, twice, nothing cut);
+    ``allocation`` holds the fins' targets; ``outputs`` the loops' outputs in the layer's
+    terms (paper: F_x*, F_y*, the yaw differential; designed: the wrench asked);
+    ``demand`` and ``applied`` the wrench (surge N, heave N down > 0, yaw N m) before and
+    after the allocation, ``cut`` the axes it cut (the paper layer: the wrench its targets
+    make, twice, nothing cut);
     ``velocity``, ``depth`` are the median-filtered measurements and ``yaw_rate`` the last
     gyro rate (None before the first sample); ``*_updated`` tell whether that loop ran on a
     new sample in this step (False: its output is held).
@@ -405,6 +407,7 @@ class BodyStep:
 
     t: float
     allocation: Allocation
+    outputs: tuple[float, float, float]
     demand: tuple[float, float, float]
     applied: tuple[float, float, float]
     cut: tuple[str, ...]
@@ -553,16 +556,17 @@ class BodyController:
         if b[B_LAYER] == 0.0:
             fx, fy, m = float(b[B_FX]), float(b[B_FY]), float(b[B_YAW])
             allocation = allocate(fx, fy, m, sync=sync)
+            outputs = (fx, fy, m)
             demand = applied = tuple(float(x) for x in body_wrench(b))  # type: ignore[assignment]
             cut: tuple[str, ...] = ()
         else:
             per_fin = tuple(body_targets(b, k) for k in range(4))
             allocation = _logical(tuple((float(x), float(y)) for x, y in per_fin), sync)
-            demand = (float(b[B_X]), float(b[B_Z]), float(b[B_N]))
+            demand = outputs = (float(b[B_X]), float(b[B_Z]), float(b[B_N]))
             applied = (float(b[B_APPLIED]), float(b[B_APPLIED + 1]), float(b[B_APPLIED + 2]))
             cut = cut_names(int(b[B_CUT]))
         return BodyStep(
-            t=t, allocation=allocation, demand=demand, applied=applied, cut=cut,
+            t=t, allocation=allocation, outputs=outputs, demand=demand, applied=applied, cut=cut,
             velocity=_none(v), depth=_none(z), yaw_rate=_none(b[B_YAW_RATE]),
             velocity_updated=new_v, depth_updated=new_z, yaw_updated=new_r,
         )
