@@ -387,6 +387,18 @@ def body_wrench(b: np.ndarray) -> tuple[float, float, float]:
     return x, z, n
 
 
+@register_jitable
+def body_references(b: np.ndarray, sp_v: float, sp_z: float, sp_r: float) -> tuple[float, float, float, float]:
+    """(speed, depth, heading, yaw rate) the layer holds the robot to now: the designed
+    layer's references, the paper layer's setpoints (no heading: NaN); a reference not
+    started yet is its setpoint."""
+    if b[B_LAYER] == 0.0:
+        return sp_v, sp_z, math.nan, sp_r
+    v, z, r = b[B_V_REF], b[B_Z_REF], b[B_R_REF]
+    return (sp_v if math.isnan(v) else v, sp_z if math.isnan(z) else z, b[B_HEADING_REF],
+            sp_r if math.isnan(r) else r)
+
+
 def _none(x: float) -> float | None:
     return None if math.isnan(x) else float(x)
 
