@@ -79,7 +79,7 @@ class HullModel(Config):
 #: the speed the surge is linearised about (m/s): the middle of the paper's 0.1-0.4 m/s
 DESIGN_SPEED = 0.2
 #: the position loops' integral zero, as a fraction of the bandwidth
-INTEGRAL_ZERO = 1.0 / 3.0
+INTEGRAL_ZERO = 1.0 / 8.0
 
 
 @dataclass(frozen=True)
