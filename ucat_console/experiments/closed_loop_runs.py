@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from ucat_console.control.params import PAPER_BODY, BodyConfig, MpcConfig
+from ucat_console.control.params import PAPER_BASELINE, PAPER_BODY, BaselineConfig, BodyConfig, MpcConfig
 from ucat_console.experiments import paper
 from ucat_console.experiments.distributed import run_all
 from ucat_console.experiments.scenario import (
@@ -190,14 +190,19 @@ SIM_TUNED = Path(__file__).resolve().parents[2] / "config" / "sim-tuned.toml"
 
 
 def e4r_settings() -> dict[str, tuple[MpcConfig, BodyConfig]]:
-    """E4R's settings: the paper's (its MPC weights and its body layer) and
-    ``config/sim-tuned.toml``'s (the console's: the designed body layer)."""
+    """E4R's settings: the paper's (its MPC weights and its body layer; its baseline, eq 19,
+    :data:`E4R_BASELINES`) and ``config/sim-tuned.toml``'s (the console's: the designed
+    body layer, the fin-model baseline)."""
     from ucat_console.config import AppConfig
 
     if not SIM_TUNED.is_file():
         raise ValueError(f"E4R: {SIM_TUNED} not found (E4R runs from the project's source tree)")
     tuned = AppConfig.from_toml(SIM_TUNED)
     return {"paper": (MpcConfig(), PAPER_BODY), "sim_tuned": (tuned.mpc, tuned.body)}
+
+
+#: each E4R setting's baseline
+E4R_BASELINES = {"paper": PAPER_BASELINE, "sim_tuned": BaselineConfig()}
 
 
 def shipped_body() -> BodyConfig:
@@ -227,7 +232,8 @@ def e4r_scenarios(quick: bool, seed: int, speeds: Sequence[float] | None = None,
                     for s in seeds:
                         out.append(Scenario(mode=mode, v_ref=v, depth=depth, seed=s, plant=variant,
                                             settle_s=settle, window_s=window, start_velocity=0.0,
-                                            mpc=m, body=body, tag=f"{name}:{ctrl}"))
+                                            mpc=m, body=body, baseline=E4R_BASELINES[name],
+                                            tag=f"{name}:{ctrl}"))
     for sc in out:
         sc.check()
     return out
