@@ -133,13 +133,13 @@ def decompress(compression: str, data: bytes, size: int) -> bytes:
         try:
             out = zstandard.ZstdDecompressor().decompress(data, max_output_size=size)
         except zstandard.ZstdError as e:
-            raise ValueError(f"zstd: {e}") from None
+            raise ValueError(f"zstd: {e} (the chunk declares {size} bytes)") from None
     elif compression == "lz4":
         d = lz4.frame.LZ4FrameDecompressor()
         try:
             out = d.decompress(data, max_length=size + 1)
         except RuntimeError as e:
-            raise ValueError(f"lz4: {e}") from None
+            raise ValueError(f"lz4: {e} (the chunk declares {size} bytes)") from None
         if len(out) == size and not d.eof:
             raise ValueError(f"its lz4 frame holds more than the {size} bytes the chunk declares")
     else:
