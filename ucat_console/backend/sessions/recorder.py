@@ -103,7 +103,7 @@ class RecorderStats:
     rejected: int  # messages that could not be encoded
     queued: int
     error: str  # the writer's failure, "" when none
-    kept_until: float  # stream time up to which the last part is whole (the last flush)
+    kept_until: float  # the time of the last message in the last part's last complete flush
 
 
 class _Part:
