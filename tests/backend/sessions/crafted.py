@@ -48,6 +48,7 @@ class CraftedChunk:
     end: int
     index_uncompressed_size: int | None = None  # what the index says (None: the header's)
     index_compressed_size: int | None = None
+    index_channels: tuple[int, ...] = ()  # the channels the index lists (none: any may be in it)
 
 
 def chunk_of(records: Iterable[bytes], start: int, end: int, compression: str = "zstd",
@@ -114,7 +115,8 @@ def write(path: Path, base: Base, chunks: list[CraftedChunk], *, summary_start: 
                              compression=c.compression, data=c.data))
         indexes.append(ChunkIndex(
             message_start_time=c.start, message_end_time=c.end, chunk_start_offset=at,
-            chunk_length=len(out) - at, message_index_offsets={}, message_index_length=0,
+            chunk_length=len(out) - at, message_index_offsets={cid: 0 for cid in c.index_channels},
+            message_index_length=0,
             compression=c.compression,
             compressed_size=len(c.data) if c.index_compressed_size is None else c.index_compressed_size,
             uncompressed_size=c.uncompressed_size if c.index_uncompressed_size is None

@@ -13,8 +13,9 @@ loses about the last half second (plus what was queued); ``repair`` re-indexes t
 A failed write (a full disk, a removed drive, permissions) stops the recording and is an
 alarm: an ``Event`` (source ``"recorder"``, code ``"write_failed"``, level error) on the
 stream, which the ``recording`` failsafe and every page show. The part is cut back to the
-end of its last complete flush, so it ends on a whole record and ``repair`` indexes
-everything up to then (about ``flush_interval`` before the fault). The recorder then is
+end of its last complete chunk (each is handed to the OS as it is closed), so it ends on a
+whole record and ``repair`` indexes everything up to then (at most ``flush_interval`` or one
+chunk before the fault). The recorder then is
 ``failed`` (not ``recording``) until it is started again (a new session, when there is
 space again) or stopped (the failure acknowledged); either publishes an Event with code
 ``"failure_cleared"``.
@@ -103,7 +104,7 @@ class RecorderStats:
     rejected: int  # messages that could not be encoded
     queued: int
     error: str  # the writer's failure, "" when none
-    kept_until: float  # the time of the last message in the last part's last complete flush
+    kept_until: float  # the latest message time in the open part's complete chunks
 
 
 class _Part:
@@ -123,7 +124,6 @@ class _Part:
         self.sequence: dict[int, int] = collections.defaultdict(int)
         self.first_ns: int | None = None
         self.dirty = False
-        self.good = 0  # the file's length at its last complete flush: it ends on a whole record there
 
     def register(self, foxglove_channels: bool) -> None:
         w = self.writer
@@ -156,7 +156,6 @@ class _Part:
         if self.dirty:
             self.writer.flush()
             self.dirty = False
-            self.good = self.file.tell()
 
     def size(self) -> int:
         return self.file.tell()
@@ -168,13 +167,13 @@ class _Part:
             self.file.close()
 
     def abandon(self) -> None:
-        """After a failed write: close the file without finishing it and cut it back to its
-        last complete flush (``repair`` indexes it from there)."""
+        """After a failed write: close the file without finishing it and cut it back to the
+        end of its last complete chunk handed to the OS (``repair`` indexes it up to there)."""
         try:
             self.file.close()  # what is still buffered may not be written: it is cut off below
         except OSError:
             pass
-        os.truncate(self.path, self.good)
+        os.truncate(self.path, self.writer.complete)
 
 
 class Recorder:
@@ -223,7 +222,6 @@ class Recorder:
         self._stopping = False
         self._wake = threading.Event()  # set by stop(): the writer stops polling at once
         self._error = ""
-        self._kept_t = 0.0
         self._session_id = ""
         self._part: _Part | None = None
         self._part_no = 0
@@ -262,7 +260,7 @@ class Recorder:
             rejected=self._rejected,
             queued=len(self._queue),
             error=self._error,
-            kept_until=self._kept_t,
+            kept_until=self._kept_until(),
         )
 
     def start(
@@ -401,8 +399,7 @@ class Recorder:
         for name, data in self._meta.items():
             part.writer.add_metadata(name, dict(data))
         part.register(self.config.foxglove)
-        part.file.flush()
-        part.good = part.file.tell()
+        part.writer.handed_over()
 
     def _next_part(self) -> None:
         assert self._part is not None
@@ -457,6 +454,12 @@ class Recorder:
                     )
                 self._part = None
 
+    def _kept_until(self) -> float:
+        """The stream time of the latest message in the open part's complete chunks."""
+        part = self._part
+        ns = part.writer.complete_ns if part is not None else 0
+        return codec.from_ns(ns, self.epoch_offset) if ns else 0.0
+
     def _fail(self, e: Exception) -> None:
         """The writer failed: stop taking messages, cut the part back to its last complete
         flush, and raise the alarm (an Event on the stream)."""
@@ -467,6 +470,7 @@ class Recorder:
         part = self._part
         path = part.path if part is not None else self._paths[-1]
         log.error("session %s: writing %s failed", self._session_id, path, exc_info=True)
+        kept = self._kept_until()
         cut = ""
         if part is not None:
             try:
@@ -477,10 +481,10 @@ class Recorder:
         error = f"{type(e).__name__}: {e}"
         self._report(Event(
             t=self._last_t, source="recorder", code="write_failed", level="error",
-            message=(f"recording failed: {error}. {path.name} keeps what was recorded up to t={self._kept_t:.1f} s"
+            message=(f"recording failed: {error}. {path.name} keeps what was recorded up to t={kept:.1f} s"
                      f"{cut}; `ucat-console sessions repair` (or Repair in Review) indexes it, and recording "
                      "starts again with Start recording (or on arming) once there is space"),
-            data={"session": self._session_id, "path": str(path), "error": error, "kept_until": self._kept_t},
+            data={"session": self._session_id, "path": str(path), "error": error, "kept_until": kept},
         ))
         self._error = error  # last: whoever sees the failure sees its event already published
 
@@ -525,7 +529,6 @@ class Recorder:
         part = self._part
         if part is not None:
             part.flush()
-            self._kept_t = self._last_t
             if not force and part.size() >= self.config.split_size:
                 self._next_part()
         self._report_losses()
