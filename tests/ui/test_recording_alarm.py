@@ -48,9 +48,9 @@ def events_of(sup: Supervisor) -> list:
 
 
 def check_the_file(path: Path, directory: Path, kept_until: float, bodies: list) -> None:
-    """The part repairs, and holds every body state published before ``kept_until`` (the time
-    of the last message written before the last complete flush: messages of that same tick
-    published after it may be missing)."""
+    """The part repairs, and holds every body state published before ``kept_until`` (the
+    latest message time in its complete chunks: messages of that same tick published after
+    it may be missing)."""
     assert needs_repair(path)
     report = repair(path, directory)
     assert report.repaired and report.messages > 0
