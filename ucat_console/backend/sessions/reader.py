@@ -619,10 +619,13 @@ class SessionReader(_Recording):
             except ValueError as e:
                 raise ValueError(f"{where}: corrupted data: {e}") from None
             messages, kept = self._messages_in(data, ids, lo, hi, where)
+            if kept > need:  # many small messages: their objects outweigh the chunk's bytes
+                budget.reserve(kept - need, f"{where}: its {len(messages)} messages")
         except BaseException:
             budget.release(need)
             raise
-        budget.release(need - kept)
+        if kept < need:
+            budget.release(need - kept)
         return messages, kept
 
     def _messages_in(self, data: bytes, ids: set[int], lo: int | None, hi: int | None,
