@@ -145,7 +145,7 @@ def install() -> None:
             except Exception as e:  # not a viser message
                 guard.refuse(client, f"an undecodable message ({type(e).__name__})")
                 continue
-            if guard.admit(client, message):
+            if guard.admit(client, message) and not guard.take_urgent(client, message):
                 handle_message(message)
 
     server_ns = types.SimpleNamespace(**{k: getattr(real_ws.asyncio.server, k)
@@ -163,13 +163,42 @@ def install() -> None:
 
 
 def _without_window_wait(real_init: Any) -> Any:
-    """``AsyncMessageBuffer.__init__`` with a window duration of 0 (module docstring)."""
+    """``AsyncMessageBuffer.__init__`` with a window duration of 0 (module docstring), and
+    a :class:`_LoopEvent` for its message event."""
 
     def __init__(self: Any, *args: Any, **kwargs: Any) -> None:
         real_init(self, *args, **kwargs)
         self.window_duration_sec = 0.0
+        self.message_event = _LoopEvent(self.event_loop)
 
     return __init__
+
+
+class _LoopEvent(asyncio.Event):
+    """An ``asyncio.Event`` whose ``set()`` from another thread than its loop's does nothing.
+
+    Why (thread safety): viser's ``AsyncMessageBuffer.push``, called from whichever thread
+    updates the page (the live view's, a callback's), sets its ``message_event`` directly,
+    then once more through ``call_soon_threadsafe``. ``asyncio.Event.set`` walks the event's
+    deque of waiters and completes their futures, which is not thread-safe: when the loop's
+    thread added or removed a waiter meanwhile, the pushing thread got "RuntimeError: deque
+    mutated during iteration" (seen in the live view), and a future completed from another
+    thread schedules its callbacks without waking the loop. Every such direct ``set()`` is
+    followed by the loop-thread one (``push``, ``atomic_end``, ``set_done`` all schedule
+    it), so dropping the direct one loses no wake-up; within the loop's thread ``set()`` is
+    asyncio's own."""
+
+    def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
+        super().__init__()
+        self._home = loop
+
+    def set(self) -> None:
+        try:
+            running = asyncio.get_running_loop()
+        except RuntimeError:
+            running = None
+        if running is self._home:
+            super().set()
 
 
 async def _window_delay(fs: Any, *, timeout: float | None = None) -> tuple[set[Any], set[Any]]:
@@ -186,6 +215,16 @@ async def _window_delay(fs: Any, *, timeout: float | None = None) -> tuple[set[A
 
 #: the frames each broadcast buffer keeps for its other pages' senders (the last few windows)
 _KEPT_FRAMES = 4
+
+
+def compressor() -> Any:
+    """A compressor for :func:`encode_frame` (one per thread that encodes)."""
+    return zstandard.ZstdCompressor(level=1)
+
+
+def encode_frame(messages: Sequence[Any], zstd: Any) -> bytes:
+    """``messages`` as one frame of viser's wire format (the page guard's frames sent ahead)."""
+    return _frame(messages, zstd)
 
 
 def _frame(window: Sequence[Any], zstd: Any) -> bytes:
@@ -295,12 +334,26 @@ async def _sharing_producer(websocket: Any, buffer: Any, client_id: int, backlog
     kept: dict[tuple[int, ...], tuple[Sequence[Any], bytes]] | None = None
     if buffer.persistent_messages:
         kept = buffer.__dict__.setdefault("_ucat_frames", {})
+    # a guarded server's page is sent telemetry only while its link has room (the page
+    # guard's "slow links"): the window is taken from the buffer only then, so what waits
+    # meanwhile is coalesced by viser's buffer to the newest value of each property
+    guard = _GUARDS.get(getattr(websocket, "server", None))
+    page = guard.flow(client_id) if guard is not None else None
     try:
         while not buffer.done:
+            if page is not None:
+                await guard.wait_room(page)
             try:
                 window = await window_generator.__anext__()
             except StopAsyncIteration:
                 break
+            if page is not None and page.link.split and len(window) > 1:
+                for message in window:  # a slow link: a frame each, each waiting for room
+                    await guard.wait_room(page)
+                    data = _frame((message,), zstd)
+                    guard.sent(page, len(data))
+                    await websocket.send(data)
+                continue
             if kept is None:
                 data = _frame(window, zstd)
             else:
@@ -314,6 +367,8 @@ async def _sharing_producer(websocket: Any, buffer: Any, client_id: int, backlog
                         del kept[next(iter(kept))]
                 else:
                     data = entry[1]
+            if page is not None:
+                guard.sent(page, len(data))
             await websocket.send(data)
     finally:
         # closed at once, as viser's own sender does: its finally releases the GC cursor

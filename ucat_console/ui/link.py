@@ -1,0 +1,145 @@
+"""How much of what the console sent one page has not yet reached it, and whether its link is slow.
+
+The page guard asks every page for a heartbeat (a request the page's script answers when it
+reads it, :mod:`ucat_console.ui.guard`). Frames reach a page in the order they were sent, so
+an answer to a request says that the page has read every byte sent before that request: the
+bytes in flight are those sent since the last answered request. They sit in the server's
+socket buffers, the network and the page's receive buffers, where nothing can overtake them;
+a heartbeat request sent now is read only after them. :class:`PageLink` counts them, and the
+console sends a page more telemetry only while they are under the page's budget
+(:meth:`PageLink.room`): a page that reads slowly gets less (its poses and plots coalesce in
+viser's buffers, the newest value of each kept), and its heartbeat waits behind at most its
+budget, so a slow link is not a silent page.
+
+* **Budget.** What the page has read over the last :data:`RATE_WINDOW` s, as bytes a second,
+  times :data:`HORIZON` s, and at least :data:`MIN_BUDGET` bytes: a page that reads 50 kB/s
+  has about 20 kB in flight, so a heartbeat reaches it within about half a second; a page on
+  a fast link has room for what the console sends between two heartbeats.
+* **Slow.** A link is slow when its bytes in flight were over the budget (the console held
+  telemetry back) for at least :data:`SLOW_ON` of the last :data:`SLOW_WINDOW` s; it is no
+  longer slow when that share falls under :data:`SLOW_OFF`. The page shows it ("link slow").
+
+Time is an argument of every method (seconds on any monotonic clock); nothing here reads a
+clock, sleeps or sends.
+"""
+
+from __future__ import annotations
+
+import collections
+
+#: the least a page may have in flight (bytes): one large plot update and a heartbeat
+MIN_BUDGET = 16 * 1024
+#: a page may have in flight what it read in this many seconds
+HORIZON = 0.4
+#: the window over which a page's reading rate is measured (s)
+RATE_WINDOW = 2.0
+#: the window over which the time held back is measured (s)
+SLOW_WINDOW = 2.0
+#: share of SLOW_WINDOW held back from which a link is slow, and under which it is not
+SLOW_ON = 0.5
+SLOW_OFF = 0.1
+#: a page whose budget is under this gets each message as a frame of its own (bytes): on a
+#: slow link a heartbeat waits behind the budget and one message, not behind a whole batch
+SPLIT_BELOW = 96 * 1024
+
+
+class PageLink:
+    """The bytes in flight to one page and its budget (module docstring)."""
+
+    def __init__(self, now: float) -> None:
+        self.sent_bytes = 0  # every byte written to the page's socket
+        self.read_bytes = 0  # bytes the page has read, as its last answer tells
+        self.rtt = 0.0  # round trip of the last answered request (s)
+        self.answers = 0
+        self._probes: dict[int, tuple[int, float]] = {}  # request -> (bytes sent with it, time)
+        self._reads: collections.deque[tuple[float, int]] = collections.deque([(now, 0)])
+        self._held: collections.deque[tuple[float, float]] = collections.deque()  # (from, to)
+        self._held_since: float | None = None
+        self.slow = False
+
+    # ------------------------------------------------------------------ events
+    def sent(self, nbytes: int, now: float) -> None:
+        """``nbytes`` written to the page's socket at ``now``."""
+        self.sent_bytes += int(nbytes)
+        self._update(now)
+
+    def probe(self, seq: int, now: float) -> None:
+        """Request ``seq`` has just been written (after its own bytes were counted)."""
+        self._probes[seq] = (self.sent_bytes, now)
+
+    def answered(self, seq: int, now: float) -> bool:
+        """The page answered request ``seq`` at ``now``; False when no such request is
+        outstanding (an answer the console did not ask for tells nothing)."""
+        probe = self._probes.get(seq)
+        if probe is None:
+            return False
+        for s in [s for s in self._probes if s <= seq]:
+            del self._probes[s]
+        read, t_sent = probe
+        self.read_bytes = max(self.read_bytes, read)
+        self.rtt = max(0.0, now - t_sent)
+        self.answers += 1
+        reads = self._reads
+        reads.append((now, self.read_bytes))
+        while len(reads) > 2 and now - reads[1][0] >= RATE_WINDOW:
+            reads.popleft()
+        self._update(now)
+        return True
+
+    # ------------------------------------------------------------------ state
+    @property
+    def in_flight(self) -> int:
+        """Bytes sent that the page has not been seen to read."""
+        return self.sent_bytes - self.read_bytes
+
+    @property
+    def outstanding(self) -> int:
+        """Requests sent and not answered."""
+        return len(self._probes)
+
+    def rate(self) -> float:
+        """What the page read per second over about the last RATE_WINDOW s (bytes/s)."""
+        (t0, b0), (t1, b1) = self._reads[0], self._reads[-1]
+        return (b1 - b0) / (t1 - t0) if t1 > t0 else 0.0
+
+    @property
+    def budget(self) -> int:
+        """Bytes the page may have in flight before telemetry is held back."""
+        return max(MIN_BUDGET, int(self.rate() * HORIZON))
+
+    def room(self) -> bool:
+        """Whether more telemetry may be sent now."""
+        return self.in_flight < self.budget
+
+    @property
+    def split(self) -> bool:
+        """Whether the page gets each message as a frame of its own (:data:`SPLIT_BELOW`)."""
+        return self.budget < SPLIT_BELOW
+
+    def held_share(self, now: float) -> float:
+        """Share of the last SLOW_WINDOW s during which telemetry was held back."""
+        start = now - SLOW_WINDOW
+        total = sum(min(b, now) - max(a, start) for a, b in self._held if b > start)
+        if self._held_since is not None:
+            total += now - max(self._held_since, start)
+        return max(0.0, min(1.0, total / SLOW_WINDOW))
+
+    def _update(self, now: float) -> None:
+        over = not self.room()
+        if over and self._held_since is None:
+            self._held_since = now
+        elif not over and self._held_since is not None:
+            self._held.append((self._held_since, now))
+            self._held_since = None
+        while self._held and self._held[0][1] < now - SLOW_WINDOW:
+            self._held.popleft()
+        self.update_slow(now)
+
+    def update_slow(self, now: float) -> bool:
+        """Whether the link is slow at ``now`` (with hysteresis: SLOW_ON, SLOW_OFF)."""
+        share = self.held_share(now)
+        if self.slow and share < SLOW_OFF:
+            self.slow = False
+        elif not self.slow and share >= SLOW_ON:
+            self.slow = True
+        return self.slow
