@@ -539,13 +539,13 @@ class PageGuard:
         """Return when ``page`` may be sent more telemetry (its bytes in flight under its
         budget); while it may not, one heartbeat request is out to learn when it may."""
         link = page.link
-        while not link.room() and not page.gone:
+        while not link.room(self.clock()) and not page.gone:
             if link.outstanding == 0:
                 await self._send(page, None)
             if page.room is None:
                 page.room = asyncio.Event()
             page.room.clear()
-            if link.room():
+            if link.room(self.clock()):
                 return
             await page.room.wait()
 

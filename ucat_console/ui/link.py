@@ -11,10 +11,15 @@ console sends a page more telemetry only while they are under the page's budget
 viser's buffers, the newest value of each kept), and its heartbeat waits behind at most its
 budget, so a slow link is not a silent page.
 
-* **Budget.** What the page has read over the last :data:`RATE_WINDOW` s, as bytes a second,
-  times :data:`HORIZON` s, and at least :data:`MIN_BUDGET` bytes: a page that reads 50 kB/s
-  has about 20 kB in flight, so a heartbeat reaches it within about half a second; a page on
-  a fast link has room for what the console sends between two heartbeats.
+* **Budget.** Adjusted by the round trips of the heartbeat requests, to keep them short:
+  a request that comes back within :data:`TARGET_RTT` s after at least half the budget was
+  in flight ahead of it grows the budget by the bytes it acknowledged (about doubling it
+  each round trip while the page keeps up); one that takes longer shrinks it by
+  :data:`SHRINK`; always between :data:`MIN_BUDGET` and :data:`MAX_BUDGET`. And while a
+  request is out for longer than TARGET_RTT the page is behind: nothing more is sent until
+  it answers. A page reading 50 kB/s settles at a few tens of kB in flight (a heartbeat
+  reaches it within about half a second); a page on a fast link that answers quickly
+  grows its budget past what the console sends.
 * **Slow.** A link is slow when its bytes in flight were over the budget (the console held
   telemetry back) for at least :data:`SLOW_ON` of the last :data:`SLOW_WINDOW` s; it is no
   longer slow when that share falls under :data:`SLOW_OFF`. The page shows it ("link slow").
@@ -27,12 +32,15 @@ from __future__ import annotations
 
 import collections
 
-#: the least a page may have in flight (bytes): one large plot update and a heartbeat
+#: the least a page may have in flight (bytes): a large plot update and a heartbeat
 MIN_BUDGET = 16 * 1024
-#: a page may have in flight what it read in this many seconds
-HORIZON = 0.4
-#: the window over which a page's reading rate is measured (s)
-RATE_WINDOW = 2.0
+#: the budget of a new page (bytes), and the most
+START_BUDGET = 32 * 1024
+MAX_BUDGET = 16 * 1024 * 1024
+#: the round trip a heartbeat request should take at most (s)
+TARGET_RTT = 0.5
+#: the budget's factor after a slow round trip
+SHRINK = 0.7
 #: the window over which the time held back is measured (s)
 SLOW_WINDOW = 2.0
 #: share of SLOW_WINDOW held back from which a link is slow, and under which it is not
@@ -51,8 +59,8 @@ class PageLink:
         self.read_bytes = 0  # bytes the page has read, as its last answer tells
         self.rtt = 0.0  # round trip of the last answered request (s)
         self.answers = 0
-        self._probes: dict[int, tuple[int, float]] = {}  # request -> (bytes sent with it, time)
-        self._reads: collections.deque[tuple[float, int]] = collections.deque([(now, 0)])
+        self.budget = START_BUDGET  # bytes the page may have in flight before telemetry is held back
+        self._probes: dict[int, tuple[int, float, bool]] = {}  # request -> (bytes sent with it, time, budget in use)
         self._held: collections.deque[tuple[float, float]] = collections.deque()  # (from, to)
         self._held_since: float | None = None
         self.slow = False
@@ -65,7 +73,7 @@ class PageLink:
 
     def probe(self, seq: int, now: float) -> None:
         """Request ``seq`` has just been written (after its own bytes were counted)."""
-        self._probes[seq] = (self.sent_bytes, now)
+        self._probes[seq] = (self.sent_bytes, now, 2 * self.in_flight >= self.budget)
 
     def answered(self, seq: int, now: float) -> bool:
         """The page answered request ``seq`` at ``now``; False when no such request is
@@ -75,14 +83,15 @@ class PageLink:
             return False
         for s in [s for s in self._probes if s <= seq]:
             del self._probes[s]
-        read, t_sent = probe
+        read, t_sent, in_use = probe
+        acknowledged = max(0, read - self.read_bytes)
         self.read_bytes = max(self.read_bytes, read)
         self.rtt = max(0.0, now - t_sent)
         self.answers += 1
-        reads = self._reads
-        reads.append((now, self.read_bytes))
-        while len(reads) > 2 and now - reads[1][0] >= RATE_WINDOW:
-            reads.popleft()
+        if self.rtt > TARGET_RTT:
+            self.budget = max(MIN_BUDGET, int(self.budget * SHRINK))
+        elif in_use:
+            self.budget = min(MAX_BUDGET, self.budget + acknowledged)
         self._update(now)
         return True
 
@@ -97,19 +106,13 @@ class PageLink:
         """Requests sent and not answered."""
         return len(self._probes)
 
-    def rate(self) -> float:
-        """What the page read per second over about the last RATE_WINDOW s (bytes/s)."""
-        (t0, b0), (t1, b1) = self._reads[0], self._reads[-1]
-        return (b1 - b0) / (t1 - t0) if t1 > t0 else 0.0
+    def late(self, now: float) -> bool:
+        """Whether a request has been out for longer than TARGET_RTT (the page is behind)."""
+        return any(now - t > TARGET_RTT for _, t, _ in self._probes.values())
 
-    @property
-    def budget(self) -> int:
-        """Bytes the page may have in flight before telemetry is held back."""
-        return max(MIN_BUDGET, int(self.rate() * HORIZON))
-
-    def room(self) -> bool:
-        """Whether more telemetry may be sent now."""
-        return self.in_flight < self.budget
+    def room(self, now: float) -> bool:
+        """Whether more telemetry may be sent at ``now``."""
+        return self.in_flight < self.budget and not self.late(now)
 
     @property
     def split(self) -> bool:
@@ -125,7 +128,7 @@ class PageLink:
         return max(0.0, min(1.0, total / SLOW_WINDOW))
 
     def _update(self, now: float) -> None:
-        over = not self.room()
+        over = not self.room(now)
         if over and self._held_since is None:
             self._held_since = now
         elif not over and self._held_since is not None:

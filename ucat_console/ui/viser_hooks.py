@@ -51,6 +51,7 @@ arrays, checked against viser's own for every message a console session sends.
 from __future__ import annotations
 
 import asyncio
+import itertools
 import threading
 import time
 import types
@@ -339,6 +340,7 @@ async def _sharing_producer(websocket: Any, buffer: Any, client_id: int, backlog
     # meanwhile is coalesced by viser's buffer to the newest value of each property
     guard = _GUARDS.get(getattr(websocket, "server", None))
     page = guard.flow(client_id) if guard is not None else None
+    last_sent: dict[str, int] = {}  # a large update's key -> when it last went (_send_thinned)
     try:
         while not buffer.done:
             if page is not None:
@@ -347,12 +349,8 @@ async def _sharing_producer(websocket: Any, buffer: Any, client_id: int, backlog
                 window = await window_generator.__anext__()
             except StopAsyncIteration:
                 break
-            if page is not None and page.link.split and len(window) > 1:
-                for message in window:  # a slow link: a frame each, each waiting for room
-                    await guard.wait_room(page)
-                    data = _frame((message,), zstd)
-                    guard.sent(page, len(data))
-                    await websocket.send(data)
+            if page is not None and page.link.split:
+                await _send_thinned(websocket, buffer, guard, page, window, zstd, last_sent)
                 continue
             if kept is None:
                 data = _frame(window, zstd)
@@ -373,6 +371,56 @@ async def _sharing_producer(websocket: Any, buffer: Any, client_id: int, backlog
     finally:
         # closed at once, as viser's own sender does: its finally releases the GC cursor
         await window_generator.aclose()
+
+
+#: an update whose frame is over this many bytes goes after the small ones on a slow link
+_SMALL_FRAME = 2048
+
+
+async def _send_thinned(websocket: Any, buffer: Any, guard: Any, page: Any, window: Sequence[Any], zstd: Any,
+                        last_sent: dict[str, int]) -> None:
+    """A window for a page on a slow link (the page guard's budget is small): a frame per
+    message, each sent only when the link has room, so that a heartbeat waits behind one
+    message at most. Updates newer ones have replaced in viser's buffer meanwhile are not
+    sent (the newer one comes with the next window: the page gets the newest value, not
+    every one); small messages go first, in their order (the robot's pose); large updates
+    (a plot's arrays) after them, the one sent longest ago first, so that every plot gets
+    its turn. An update followed in the window by another message of its element keeps its
+    place."""
+    frames = [(m, _frame((m,), zstd)) for m in window]
+    keys = [m.entity_state_key() for m in window]
+    small: list[tuple[Any, bytes]] = []
+    large: list[tuple[Any, bytes]] = []
+    for k, (m, data) in enumerate(frames):
+        movable = _is_update(m) and len(data) > _SMALL_FRAME and (keys[k] is None or keys[k] not in keys[k + 1:])
+        (large if movable else small).append((m, data))
+    large.sort(key=lambda md: last_sent.get(md[0].redundancy_key(), -1))
+    for m, data in small + large:
+        if _superseded(buffer, m):
+            continue
+        await guard.wait_room(page)
+        if _superseded(buffer, m):
+            continue
+        guard.sent(page, len(data))
+        await websocket.send(data)
+        if len(data) > _SMALL_FRAME:
+            last_sent[m.redundancy_key()] = next(_SENT_ORDER)
+
+
+_SENT_ORDER = itertools.count()  # (event-loop thread)
+
+
+def _is_update(message: Any) -> bool:
+    return str(message.lifecycle_phase or "").startswith("update")
+
+
+def _superseded(buffer: Any, message: Any) -> bool:
+    """Whether viser's buffer holds a newer message of the same redundancy key (an update
+    that replaced this one: viser's own coalescing, for a message already taken from it)."""
+    if not _is_update(message):
+        return False
+    newest = buffer.id_from_redundancy_key.get(message.redundancy_key())
+    return newest is not None and buffer.message_from_id.get(newest) is not message
 
 
 class _ModuleView:
