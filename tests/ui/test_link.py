@@ -56,11 +56,11 @@ def test_the_budget_grows_while_heartbeats_come_back_quickly_and_shrinks_when_th
         t += rtt
         assert link.answered(seq, t)
 
-    round_trip(100, 0.01)  # quick, but with the budget unused: no reason to grow
-    assert link.budget == link_mod.START_BUDGET
+    round_trip(100, 0.01)  # quick, but with the budget unused: no reason to grow; it decays
+    assert link.budget == int(link_mod.START_BUDGET * link_mod.DECAY)
     for _ in range(4):  # quick with the budget in use: it doubles each round trip
         round_trip(link.budget, 0.05)
-    assert link.budget == 16 * link_mod.START_BUDGET and not link.split
+    assert link.budget == 16 * int(link_mod.START_BUDGET * link_mod.DECAY) and not link.split
     for _ in range(100):
         round_trip(link.budget, 0.05)
     assert link.budget == link_mod.MAX_BUDGET
@@ -68,6 +68,9 @@ def test_the_budget_grows_while_heartbeats_come_back_quickly_and_shrinks_when_th
         round_trip(1000, link_mod.TARGET_RTT + 0.1)
     assert link.budget == MIN_BUDGET and link.split
     assert link.in_flight == 0 and link.room(t)
+    for _ in range(100):  # quick again but unused: no more than the minimum
+        round_trip(100, 0.01)
+    assert link.budget == MIN_BUDGET
     link.sent(MIN_BUDGET, t)
     assert not link.room(t)  # over the budget
 
@@ -302,6 +305,16 @@ def test_a_pilot_that_stops_reading_is_declared_gone(slow_link: SlowLink) -> Non
     t0 = sim.clock.t
     sim.run(10.0)
     assert sim.gone and sim.clock.t - t0 < 2.5
+
+
+def test_a_pilot_whose_link_drops_to_50_kb_s_stays_the_pilot(slow_link: SlowLink) -> None:
+    sim = slow_link
+    sim.rate = 10e6  # a fast link first: the page keeps up, its budget is what it uses
+    sim.run(10.0)
+    assert not sim.slow_seen
+    sim.rate = 50_000.0
+    sim.run(30.0)
+    assert not sim.gone and max(sim.rtts) < 1.5 and sim.guard.flow(0).link.slow
 
 
 def test_a_fast_page_gets_every_batch_at_once_and_is_not_slow() -> None:

@@ -15,7 +15,10 @@ budget, so a slow link is not a silent page.
   a request that comes back within :data:`TARGET_RTT` s after at least half the budget was
   in flight ahead of it grows the budget by the bytes it acknowledged (about doubling it
   each round trip while the page keeps up); one that takes longer shrinks it by
-  :data:`SHRINK`; always between :data:`MIN_BUDGET` and :data:`MAX_BUDGET`. And while a
+  :data:`SHRINK`; one that came back with less than half the budget in flight ahead of it
+  (the budget not in use) shrinks it by :data:`DECAY`, so that a page that has loaded keeps
+  no more budget than its telemetry uses (what a link that suddenly slows down has in
+  flight); always between :data:`MIN_BUDGET` and :data:`MAX_BUDGET`. And while a
   request is out for longer than TARGET_RTT the page is behind: nothing more is sent until
   it answers. A page reading 50 kB/s settles at a few tens of kB in flight (a heartbeat
   reaches it within about half a second); a page on a fast link that answers quickly
@@ -39,8 +42,9 @@ START_BUDGET = 32 * 1024
 MAX_BUDGET = 16 * 1024 * 1024
 #: the round trip a heartbeat request should take at most (s)
 TARGET_RTT = 0.5
-#: the budget's factor after a slow round trip
+#: the budget's factor after a slow round trip, and after one with the budget not in use
 SHRINK = 0.7
+DECAY = 0.9
 #: the window over which the time held back is measured (s)
 SLOW_WINDOW = 2.0
 #: share of SLOW_WINDOW held back from which a link is slow, and under which it is not
@@ -92,6 +96,8 @@ class PageLink:
             self.budget = max(MIN_BUDGET, int(self.budget * SHRINK))
         elif in_use:
             self.budget = min(MAX_BUDGET, self.budget + acknowledged)
+        else:
+            self.budget = max(MIN_BUDGET, int(self.budget * DECAY))
         self._update(now)
         return True
 

@@ -139,7 +139,7 @@ class ControlPanel:
             self.identify = IdentifyInputs(gui, sup, client_id, getattr(app, "sessions_dir", None) or
                                            sup.recorder.directory, self.show,
                                            getattr(app, "request_refresh", lambda: None),
-                                           sessions=listing.sessions if listing is not None else None)
+                                           sessions=(lambda: listing.sessions()) if listing is not None else None)
             with gui.add_folder("Events", order=30.0):
                 self.severity = gui.add_dropdown("Show", tuple(SEVERITY_FILTERS), initial_value="warnings and errors",
                                                  hint="which events the list shows")
@@ -481,7 +481,7 @@ class ControlPanel:
             if jobs is None:
                 self.identify.list_sessions()
             else:
-                jobs.submit(self.cid, "list sessions", self._list_sessions, coalesce=True)
+                jobs.submit(self.cid, "list sessions to fit", self._list_sessions, coalesce=True)
         self.identify.refresh(pilot)
 
     def _list_sessions(self) -> None:

@@ -213,7 +213,7 @@ class PlaybackPanel:
         if jobs is None:
             self.refresh_sessions()
         else:
-            jobs("list sessions", lambda: self.act(self.refresh_sessions), True)
+            jobs("Refresh list", lambda: self.act(self.refresh_sessions), True)
         self._set_enabled()
 
     # ------------------------------------------------------------------ callbacks
