@@ -11,18 +11,21 @@ console sends a page more telemetry only while they are under the page's budget
 viser's buffers, the newest value of each kept), and its heartbeat waits behind at most its
 budget, so a slow link is not a silent page.
 
-* **Budget.** Adjusted by the round trips of the heartbeat requests, to keep them short:
-  a request that comes back within :data:`TARGET_RTT` s after at least half the budget was
-  in flight ahead of it grows the budget by the bytes it acknowledged (about doubling it
-  each round trip while the page keeps up); one that takes longer shrinks it by
-  :data:`SHRINK`; one that came back with less than half the budget in flight ahead of it
-  (the budget not in use) shrinks it by :data:`DECAY`, so that a page that has loaded keeps
-  no more budget than its telemetry uses (what a link that suddenly slows down has in
-  flight); always between :data:`MIN_BUDGET` and :data:`MAX_BUDGET`. And while a
-  request is out for longer than TARGET_RTT the page is behind: nothing more is sent until
-  it answers. A page reading 50 kB/s settles at a few tens of kB in flight (a heartbeat
-  reaches it within about half a second); a page on a fast link that answers quickly
-  grows its budget past what the console sends.
+* **Budget.** Adjusted at each answer by the request's round trip and by how much the
+  budget held the telemetry back, to keep the round trips short and the budget no larger
+  than the page needs: one that took longer than :data:`TARGET_RTT` shrinks the budget by
+  :data:`SHRINK`; a quick one while the telemetry was held back at least
+  :data:`GROW_HELD` of the last :data:`SLOW_WINDOW` s (the budget is what limits the page)
+  grows it by the bytes it acknowledged (about doubling it each round trip); a quick one
+  while the telemetry was hardly held back (under :data:`DECAY_HELD`) lets it decay by
+  :data:`DECAY` down to :data:`START_BUDGET`, so a page on a fast link keeps little in
+  flight (what a link that suddenly slows down has to drain). Always between
+  :data:`MIN_BUDGET` and :data:`MAX_BUDGET`. And
+  while a request is out for longer than TARGET_RTT the page is behind: nothing more is
+  sent until it answers. A page reading 50 kB/s settles at a few tens of kB in flight (a
+  heartbeat reaches it within about half a second); a page whose answers come late for
+  another reason than its link (a browser busy rendering) grows its budget while they
+  still come within TARGET_RTT.
 * **Slow.** A link is slow when its bytes in flight were over the budget (the console held
   telemetry back) for at least :data:`SLOW_ON` of the last :data:`SLOW_WINDOW` s; it is no
   longer slow when that share falls under :data:`SLOW_OFF`. The page shows it ("link slow").
@@ -45,14 +48,15 @@ TARGET_RTT = 0.5
 #: the budget's factor after a slow round trip, and after one with the budget not in use
 SHRINK = 0.7
 DECAY = 0.9
+#: held back at least this share of the last SLOW_WINDOW s: the budget limits the page;
+#: under DECAY_HELD: it does not
+GROW_HELD = 0.25
+DECAY_HELD = 0.05
 #: the window over which the time held back is measured (s)
 SLOW_WINDOW = 2.0
 #: share of SLOW_WINDOW held back from which a link is slow, and under which it is not
 SLOW_ON = 0.5
 SLOW_OFF = 0.1
-#: a page whose budget is under this gets each message as a frame of its own (bytes): on a
-#: slow link a heartbeat waits behind the budget and one message, not behind a whole batch
-SPLIT_BELOW = 96 * 1024
 
 
 class PageLink:
@@ -64,7 +68,7 @@ class PageLink:
         self.rtt = 0.0  # round trip of the last answered request (s)
         self.answers = 0
         self.budget = START_BUDGET  # bytes the page may have in flight before telemetry is held back
-        self._probes: dict[int, tuple[int, float, bool]] = {}  # request -> (bytes sent with it, time, budget in use)
+        self._probes: dict[int, tuple[int, float]] = {}  # request -> (bytes sent with it, time)
         self._held: collections.deque[tuple[float, float]] = collections.deque()  # (from, to)
         self._held_since: float | None = None
         self.slow = False
@@ -77,7 +81,7 @@ class PageLink:
 
     def probe(self, seq: int, now: float) -> None:
         """Request ``seq`` has just been written (after its own bytes were counted)."""
-        self._probes[seq] = (self.sent_bytes, now, 2 * self.in_flight >= self.budget)
+        self._probes[seq] = (self.sent_bytes, now)
 
     def answered(self, seq: int, now: float) -> bool:
         """The page answered request ``seq`` at ``now``; False when no such request is
@@ -87,17 +91,18 @@ class PageLink:
             return False
         for s in [s for s in self._probes if s <= seq]:
             del self._probes[s]
-        read, t_sent, in_use = probe
+        read, t_sent = probe
         acknowledged = max(0, read - self.read_bytes)
         self.read_bytes = max(self.read_bytes, read)
         self.rtt = max(0.0, now - t_sent)
         self.answers += 1
+        held = self.held_share(now)
         if self.rtt > TARGET_RTT:
             self.budget = max(MIN_BUDGET, int(self.budget * SHRINK))
-        elif in_use:
+        elif held >= GROW_HELD:
             self.budget = min(MAX_BUDGET, self.budget + acknowledged)
-        else:
-            self.budget = max(MIN_BUDGET, int(self.budget * DECAY))
+        elif held < DECAY_HELD:
+            self.budget = max(min(self.budget, START_BUDGET), int(self.budget * DECAY))
         self._update(now)
         return True
 
@@ -114,7 +119,7 @@ class PageLink:
 
     def late(self, now: float) -> bool:
         """Whether a request has been out for longer than TARGET_RTT (the page is behind)."""
-        return any(now - t > TARGET_RTT for _, t, _ in self._probes.values())
+        return any(now - t > TARGET_RTT for _, t in self._probes.values())
 
     def room(self, now: float) -> bool:
         """Whether more telemetry may be sent at ``now``."""
@@ -122,8 +127,11 @@ class PageLink:
 
     @property
     def split(self) -> bool:
-        """Whether the page gets each message as a frame of its own (:data:`SPLIT_BELOW`)."""
-        return self.budget < SPLIT_BELOW
+        """Whether the page's batches go in parts (the page's sender): on a slow link, one
+        whose last round trip took longer than TARGET_RTT, or one not yet measured, so that
+        a heartbeat waits behind the budget and one part, not a whole batch. A fast page
+        gets each batch whole (one encoding, shared with the other pages in step)."""
+        return self.answers == 0 or self.slow or self.rtt > TARGET_RTT
 
     def held_share(self, now: float) -> float:
         """Share of the last SLOW_WINDOW s during which telemetry was held back."""

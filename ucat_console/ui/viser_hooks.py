@@ -1,14 +1,20 @@
-"""The places where the console hooks into viser: the page guard's two, and those that save CPU.
+"""The places where the console hooks into viser: the page guard's, and those that save CPU.
 
-viser has no hook for a websocket handshake check or for its incoming messages, so
-:func:`install` replaces two names in viser's websocket module (once, for the process):
+viser has no hook for a websocket handshake check, for its incoming messages or for pacing
+what a page is sent, so :func:`install` replaces names in viser's websocket module (once,
+for the process):
 
 * the ``websockets`` serve call: for a server made by :func:`guarded_server`, every
   websocket upgrade goes through the guard's handshake check first, and frames are
   limited to :data:`ucat_console.ui.guard.MAX_FRAME` bytes;
 * the per-connection message consumer: for such a server, every message is decoded here
   and handed to viser only when the guard admits it (an undecodable one is refused, not
-  a traceback that closes the connection).
+  a traceback that closes the connection), and not at all when it is one of the pilot's
+  safety commands, which the guard runs on its own thread (``PageGuard.take_urgent``);
+* the per-page sender (below): for such a server, a page is sent telemetry only while its
+  link has room (``PageGuard.wait_room``, :mod:`ucat_console.ui.link`), and a page on a
+  slow link gets its batches in parts, thinned (:func:`_send_thinned`). :func:`encode_frame` makes the
+  frames the guard sends ahead of the telemetry (heartbeat requests, the status bar).
 
 Servers made any other way are left exactly as viser makes them.
 
@@ -46,6 +52,10 @@ The frame's ``timestampSec`` (the page paces its updates by it) is then the firs
 And a frame's messages are put in their wire form by a converter made once per message
 class (:func:`_wire_form`) instead of viser's per-value type dispatch: the same dicts and
 arrays, checked against viser's own for every message a console session sends.
+
+And (thread safety) every message buffer's event is a :class:`_LoopEvent`, set only in the
+event loop's thread: viser set it from whichever thread queued a message, which raced the
+loop ("deque mutated during iteration").
 """
 
 from __future__ import annotations
@@ -349,7 +359,7 @@ async def _sharing_producer(websocket: Any, buffer: Any, client_id: int, backlog
                 window = await window_generator.__anext__()
             except StopAsyncIteration:
                 break
-            if page is not None and page.link.split:
+            if page is not None and page.link.split and len(window) > 1:
                 await _send_thinned(websocket, buffer, guard, page, window, zstd, last_sent)
                 continue
             if kept is None:
@@ -373,38 +383,42 @@ async def _sharing_producer(websocket: Any, buffer: Any, client_id: int, backlog
         await window_generator.aclose()
 
 
-#: an update whose frame is over this many bytes goes after the small ones on a slow link
+#: an update whose frame is over this many bytes goes after the small ones in a thinned batch
 _SMALL_FRAME = 2048
 
 
 async def _send_thinned(websocket: Any, buffer: Any, guard: Any, page: Any, window: Sequence[Any], zstd: Any,
                         last_sent: dict[str, int]) -> None:
-    """A window for a page on a slow link (the page guard's budget is small): a frame per
-    message, each sent only when the link has room, so that a heartbeat waits behind one
-    message at most. Updates newer ones have replaced in viser's buffer meanwhile are not
-    sent (the newer one comes with the next window: the page gets the newest value, not
-    every one); small messages go first, in their order (the robot's pose); large updates
-    (a plot's arrays) after them, the one sent longest ago first, so that every plot gets
-    its turn. An update followed in the window by another message of its element keeps its
-    place."""
+    """A window for a page on a slow link, sent in parts, each only when the link has room,
+    so that a heartbeat waits behind one part at most: the small messages (the robot's pose and fins) together, in
+    their order, then the large updates (a plot's arrays) one by one, the one sent longest
+    ago first, so that every plot gets its turn. An update a newer one has replaced in
+    viser's buffer meanwhile is not sent (the newer one comes with the next window: the
+    page gets the newest value, not every one). An update followed in the window by another
+    message of its element keeps its place among the small ones."""
     frames = [(m, _frame((m,), zstd)) for m in window]
     keys = [m.entity_state_key() for m in window]
-    small: list[tuple[Any, bytes]] = []
+    parts: list[list[tuple[Any, bytes]]] = [[]]  # runs of small messages, and what must keep its place
     large: list[tuple[Any, bytes]] = []
     for k, (m, data) in enumerate(frames):
-        movable = _is_update(m) and len(data) > _SMALL_FRAME and (keys[k] is None or keys[k] not in keys[k + 1:])
-        (large if movable else small).append((m, data))
+        if len(data) <= _SMALL_FRAME:
+            parts[-1].append((m, data))
+        elif _is_update(m) and (keys[k] is None or keys[k] not in keys[k + 1:]):
+            large.append((m, data))
+        else:
+            parts += [[(m, data)], []]
     large.sort(key=lambda md: last_sent.get(md[0].redundancy_key(), -1))
-    for m, data in small + large:
-        if _superseded(buffer, m):
-            continue
+    parts += [[md] for md in large]
+    for part in parts:
         await guard.wait_room(page)
-        if _superseded(buffer, m):
+        live = [(m, d) for m, d in part if not _superseded(buffer, m)]
+        if not live:
             continue
+        data = live[0][1] if len(live) == 1 else _frame(tuple(m for m, _ in live), zstd)
         guard.sent(page, len(data))
         await websocket.send(data)
-        if len(data) > _SMALL_FRAME:
-            last_sent[m.redundancy_key()] = next(_SENT_ORDER)
+        if len(live) == 1 and len(data) > _SMALL_FRAME:
+            last_sent[live[0][0].redundancy_key()] = next(_SENT_ORDER)
 
 
 _SENT_ORDER = itertools.count()  # (event-loop thread)
