@@ -244,7 +244,7 @@ class ConsoleApp:
         """A page has shown (its first camera report): its script, theme, controls and review."""
         cid = client.client_id
         containers = {"tuning": self.tab_tuning, "session": self.tab_session, "safety": self.tab_safety}
-        self.guard.send_now(cid, [vm.RunJavascriptMessage(source=page_script.INSTALL)])  # the bar first
+        self.guard.send_first(cid, [vm.RunJavascriptMessage(source=page_script.INSTALL)])  # the bar first
         with self._build_lock:
             if cid not in self.guard.clients:
                 return  # gone while waiting
@@ -350,12 +350,13 @@ class ConsoleApp:
         gui.configure_theme(control_width="medium", show_share_button=False, dark_mode=dark)
 
     def _remembered_theme(self, cid: int) -> None:
-        """The theme this page's browser chose before (it asks the page; no answer: the default)."""
+        """The theme this page's browser chose before (it asks the page; no answer within 20 s,
+        which a page loading on a slow link or a busy machine may take: the default)."""
         page = self.pages.get(cid)
         if page is None:
             return
         try:
-            stored = page.client.local_storage.get_item(page_script.THEME_KEY, timeout=5.0)
+            stored = page.client.local_storage.get_item(page_script.THEME_KEY, timeout=20.0)
         except Exception:
             stored = None
         if stored in ("dark", "light"):
@@ -407,8 +408,8 @@ class ConsoleApp:
                          "theme_uuid": panel.theme_button._impl.uuid}
                 state = bar_state(sup, cid, dark=page.dark, uuids=uuids, loading=self.loading,
                                   link_slow=self.guard.link_slow(cid))
-                # ahead of the page's telemetry: what the pilot must see first
-                self.guard.send_now(cid, [vm.RunJavascriptMessage(source=page_script.update_source(state))])
+                # what the pilot must see first (ahead of the telemetry on a slow link)
+                self.guard.send_first(cid, [vm.RunJavascriptMessage(source=page_script.update_source(state))])
             except Exception:
                 log.debug("the status bar of client %s was not sent", cid, exc_info=True)
 

@@ -28,8 +28,9 @@ as its TCP connection is open. :class:`PageGuard` stands between the websocket a
   browser, a page that stops reading, or a cut Wi-Fi link is noticed in seconds, not at
   the TCP retransmission timeout. A page that wakes up reconnects as a new page. Only an
   answer to a request the guard sent counts.
-* **Slow links.** The heartbeat request (and the status bar, :meth:`PageGuard.send_now`)
-  is sent as a frame of its own, ahead of the page's queued telemetry; the telemetry goes
+* **Slow links.** The heartbeat request (and, while the link is slow, the status bar,
+  :meth:`PageGuard.send_first`) is sent as a frame of its own, ahead of the page's queued
+  telemetry; the telemetry goes
   only while the page's bytes in flight are under its budget (:mod:`ucat_console.ui.link`),
   so what a heartbeat waits behind is bounded and a page that reads slowly gets its poses
   and plots coalesced (viser keeps the newest value of each) instead of a growing backlog.
@@ -492,13 +493,20 @@ class PageGuard:
             self._send_soon(p, None)
 
     # ------------------------------------------------------------------ frames sent ahead
-    def send_now(self, client: int, messages: Any) -> None:
-        """Send ``messages`` to page ``client`` as a frame of their own, ahead of the page's
-        queued telemetry (any thread): the status bar, what the pilot must see first."""
+    def send_first(self, client: int, messages: Any) -> None:
+        """Send ``messages`` to page ``client`` (any thread): the status bar, what the pilot
+        must see first. While the page's link is slow, as a frame of their own ahead of its
+        queued telemetry; otherwise in the page's next batch, as viser sends (a browser
+        works per frame: no more frames than the link needs)."""
         with self._lock:
             page = self._pages.get(client)
-        if page is not None:
+        if page is None:
+            return
+        if page.link.slow or page.conn is None:
             self._send_soon(page, tuple(messages))
+            return
+        for m in messages:
+            page.conn.queue_message(m)
 
     def _send_soon(self, page: _Page, messages: tuple[Any, ...] | None) -> None:
         loop = self.loop

@@ -129,8 +129,9 @@ class PageLink:
     def split(self) -> bool:
         """Whether the page's batches go in parts (the page's sender): on a slow link, one
         whose last round trip took longer than TARGET_RTT, or one not yet measured, so that
-        a heartbeat waits behind the budget and one part, not a whole batch. A fast page
-        gets each batch whole (one encoding, shared with the other pages in step)."""
+        a heartbeat waits behind the budget and one part, not a whole batch. Any other page
+        gets each batch whole (one encoding, shared with the other pages in step; a browser
+        works per frame)."""
         return self.answers == 0 or self.slow or self.rtt > TARGET_RTT
 
     def held_share(self, now: float) -> float:
