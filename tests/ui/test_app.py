@@ -16,6 +16,7 @@ from ucat_console.backend.supervisor import CommandRefused, Supervisor
 from ucat_console.config import AccessConfig, AppConfig, ConsoleConfig, load_config
 from ucat_console.telemetry import channels as ch
 from ucat_console.ui.app import ConsoleApp, is_loopback
+from ucat_console.ui.identify_inputs import NO_SESSION
 from ucat_console.ui.panels import ControlPanel, esc
 from ucat_console.ui.tuning_inputs import param_specs, step_for
 
@@ -345,8 +346,9 @@ def test_the_pilot_identifies_the_fin_model_from_the_session_tab(tmp_path: Path)
         assert ident.progress.visible and ident.stop.visible
         sup.step(sup.manoeuvre.duration + 0.5)
         assert sup.manoeuvre.finished and sup.mode == "mpc" and not sup.recorder.recording
-        pilot.refresh()
-        assert ident.session.value == sup.manoeuvre.session  # the manoeuvre's recording, chosen
+        pilot.refresh()  # the sessions are listed by the console's page jobs
+        wait_for(lambda: ident.session.value == sup.manoeuvre.session,
+                 what="the manoeuvre's recording chosen")
         assert viewer.act(viewer.identify.start_fit) is False  # the pilot's
         assert pilot.act(ident.start_fit)
         ident._fitting.join(120.0)
@@ -370,6 +372,7 @@ def test_a_recording_the_fit_refuses_is_shown_with_the_reason(app: ConsoleApp) -
     app.sup.step(0.5)  # disarmed: no steady window where the fins beat
     app.sup.stop_recording(1)
     pilot.refresh(force=True)
+    wait_for(lambda: pilot.identify.session.value != NO_SESSION, what="the recording listed")
     assert pilot.act(pilot.identify.start_fit)
     pilot.identify._fitting.join(60.0)
     pilot.refresh()

@@ -115,8 +115,10 @@ def pilot_label(sup: Any, client: int | None) -> str:
     return f"{name} (client {p})" if name else f"client {p}"
 
 
-def bar_state(sup: Any, client: int | None, *, dark: bool, uuids: dict[str, str], loading: str = "") -> dict[str, Any]:
-    """The bar's state for page ``client`` (JSON-ready)."""
+def bar_state(sup: Any, client: int | None, *, dark: bool, uuids: dict[str, str], loading: str = "",
+              link_slow: bool = False) -> dict[str, Any]:
+    """The bar's state for page ``client`` (JSON-ready); ``link_slow``: the page's link is
+    slow and its telemetry thinned (:mod:`ucat_console.ui.link`)."""
     return {
         "armed": bool(sup.armed),
         "mode": MODE_LABELS.get(sup.mode, sup.mode),
@@ -128,6 +130,7 @@ def bar_state(sup: Any, client: int | None, *, dark: bool, uuids: dict[str, str]
         "lights": [x.as_dict() for x in lights(sup, loading)],
         "battery": "no battery sensor",
         "link_policy": link_policy(sup),
+        "link_slow": bool(link_slow),
         "dark": bool(dark),
         **uuids,
     }
