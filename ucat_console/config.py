@@ -87,6 +87,12 @@ class ConsoleConfig(Config):
         0.05, lo=0.005, hi=0.5, unit="s",
         doc="the loop runs in chunks of this length; arming, failsafes and status act between chunks",
     )
+    max_lag: float = param(
+        0.25, lo=0.02, hi=10.0, unit="s",
+        doc="a real-time loop held back further than this behind the wall clock (a busy computer) "
+        "skips ahead to the present and records the stall (Event loop/stall) instead of replaying "
+        "the missed time; a shorter lag is caught up",
+    )
     health_period: float = param(5.0, lo=0.5, hi=3600.0, unit="s", doc="terminal health line period")
     record_on_arm: bool = param(True, doc="start recording when the motors are armed")
     record_tail: float = param(

@@ -124,7 +124,7 @@ class Supervisor:
             sim = cfg.robot == "sim"
             # a computed reading may be taken early, a device's not before its time
             early = cfg.console.sim_early if sim else 0.0
-            self.clock: Clock = clock if clock is not None else SteadyPacedClock(1.0, early)
+            self.clock: Clock = clock if clock is not None else SteadyPacedClock(1.0, early, cfg.console.max_lag)
             start_depth = cfg.console.sim_depth if sim else 0.0
             self.loop = ClosedLoop(
                 cfg.loop, self.gate, self._loop_stream, self.clock,
@@ -158,8 +158,8 @@ class Supervisor:
             notify=self._notify,
         )
         self.rig_control = RigControl(self)
-        #: plan overruns, one event per burst
-        self.bursts = BurstFolder(lambda ev: self.stream.publish(ch.EVENTS, ev))
+        #: plan overruns and the loop's stalls, one event per burst
+        self.bursts = BurstFolder(lambda ev: self.stream.publish(ch.EVENTS, ev), ("plan_overrun", "stall"))
         self._thread: threading.Thread | None = None
         self._stopping = False
         self._closed = False
@@ -413,7 +413,7 @@ class Supervisor:
             lag_max=max(lag_max, self._lag), late_plans=self.loop.late_plans,
             plan_overruns=self.loop.plan_overruns, failsafes=self.safety.active(),
             clients=len(self.access.clients), pilot="" if pilot is None else actor_name(pilot),
-            recording=self.recording.session_id, fault=self.fault,
+            recording=self.recording.session_id, fault=self.fault, stalls=self.loop.stalls,
         )
 
     def current_config(self) -> AppConfig:
