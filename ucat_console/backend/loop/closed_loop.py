@@ -135,6 +135,14 @@ _WANTED = ((lc.F_BODY_COMMAND, (ch.BODY_COMMAND, ch.BODY_ALLOCATION)), (lc.F_STA
            (lc.F_POWER, (ch.POWER,)), (lc.F_IMU, (ch.IMU,)), (lc.F_DEPTH, (ch.DEPTH,)), (lc.F_DVL, (ch.DVL,)))
 
 
+def kept_waiting(done: float, arrived: float, deadline: float) -> float:
+    """How long past its hand-over deadline a plan kept the loop waiting (s of wall time;
+    > 0: an overrun): ``done`` when the plan was made, ``arrived`` when the loop reached its
+    hand-over, ``deadline`` when the hand-over was due. A loop that came late to a plan
+    done in time, or a plan done before the loop came, is no overrun."""
+    return done - max(arrived, deadline)
+
+
 def check_setpoints(cfg: LoopConfig, sp: BodySetpoints) -> BodySetpoints:
     """``sp`` if it lies inside the envelope of ``cfg``, else ValueError naming the value."""
     return sp.within(cfg.max_velocity, cfg.max_depth, cfg.max_yaw_rate)
@@ -604,7 +612,7 @@ class ClosedLoop:
         if self._planning.threaded:  # the loop waited for it, past the wall-clock deadline
             arrived = time.perf_counter()
             outcome = job.wait()
-            late = job.done_wall - max(arrived, self.clock.wall_deadline(deadline))
+            late = kept_waiting(job.done_wall, arrived, self.clock.wall_deadline(deadline))
         else:  # the solve took longer than the hand-over allows
             outcome = job.wait()
             late = outcome.solve_time - self.cfg.plan_latency
