@@ -11,12 +11,16 @@ Failsafes (``FailsafeConfig`` has one rule, action and timeout, for each):
 
 * ``pilot_gone``: a pilot was in control and no pilot page has been connected for
   ``timeout`` s; clears when a pilot takes control again.
-* ``imu`` / ``dvl`` / ``depth``: no valid reading for ``timeout`` s (silent, or only
-  invalid readings: a DVL report with ``valid`` False, a non-finite value); clears with the
-  next valid reading.
+* ``imu`` / ``dvl`` / ``depth``: no valid reading for ``timeout`` s; clears with the next
+  valid reading. The cause says what happened since the last valid reading: ``silent``
+  (nothing came), ``garbled`` (messages dropped as corrupt), ``invalid`` (readings that
+  came without valid data: a DVL report with ``valid`` False, a non-finite value, a
+  broken current loop), ``port error``, ``unreachable``, from the readings and from the
+  sensor's driver events (``devices.reporting.READING_FAULTS``).
 * ``motor``: a motor controller reported a fault (an Event from a source ``epos2.*`` with a
   code of :data:`MOTOR_FAULTS`) that has lasted ``timeout`` s; clears when every such fault
-  has been reported cleared (:data:`MOTOR_CLEARS`).
+  has been reported cleared (:data:`MOTOR_CLEARS`). The cause names each drive and what
+  it reported (the event's message: the EMCY code and its name, how long no heartbeat came).
 * ``planner_late``: at least ``late_plans`` late plans (loop Events ``late_plan``) within
   the last ``timeout`` s; clears when fewer remain in that window.
 
@@ -35,6 +39,7 @@ import threading
 from dataclasses import dataclass
 from typing import Any
 
+from ucat_console.backend.devices.reporting import READING_FAULTS
 from ucat_console.robot.readings import DepthReading, DvlVelocity, ImuReading
 from ucat_console.config import FailsafeConfig, FailsafeRule
 from ucat_console.telemetry import channels as ch
@@ -102,6 +107,34 @@ def reading_valid(reading: Any) -> bool:
 
 _CLOCK_SLACK = 60.0  # s
 _SENSOR_OF = {ch.IMU: "imu", ch.DVL: "dvl", ch.DEPTH: "depth"}
+#: the failsafe sensor of each sensor driver's event source
+_SENSOR_OF_SOURCE = {"imu": "imu", "dvl": "dvl", "pressure": "depth"}
+#: how a label reads with its count (messages or readings since the last valid one)
+_COUNTED = {"garbled": "corrupt messages dropped", "invalid": "invalid readings"}
+
+
+def fault_label(kinds: dict[str, Any]) -> str:
+    """What happened to a sensor since its last valid reading, from the kinds seen with
+    their counts (``{"garbled": [12, t]}`` -> ``"garbled: 12 corrupt messages dropped"``):
+    ``silent`` only when nothing else was seen (a garbled line is not a silent one)."""
+    parts = [f"{kind}: {int(n[0])} {_COUNTED[kind]}" if kind in _COUNTED else kind
+             for kind, n in kinds.items() if kind != "silent"]
+    return ", ".join(parts) or "silent"
+
+
+def _note(kinds: dict[str, list[float]], kind: str, n: int, t: float) -> None:
+    """``n`` more of ``kind`` at time ``t``."""
+    seen = kinds.get(kind)
+    if seen is None:
+        kinds[kind] = [float(n), t]
+    else:
+        seen[0] += n
+        seen[1] = max(seen[1], t)
+
+
+def _stamp(t: Any, now: float) -> float:
+    """A message's time, or ``now`` when it carries none near the loop's time."""
+    return float(t) if isinstance(t, (int, float)) and abs(t - now) <= _CLOCK_SLACK else now
 
 
 class SafetyMonitor:
@@ -112,10 +145,11 @@ class SafetyMonitor:
         self._lock = threading.Lock()
         self._now = float(t0)
         self._last_valid: dict[str, float] = {s: float(t0) for s in SENSORS}
-        self._invalid: dict[str, int] = {s: 0 for s in SENSORS}  # invalid readings since the last valid one
+        # what happened to each sensor since its last valid reading: kind -> [count, last time]
+        self._kinds: dict[str, dict[str, list[float]]] = {s: {} for s in SENSORS}
         self._had_pilot = False
         self._pilot_left: float | None = None
-        self._motor: dict[str, dict[str, float]] = {}  # source -> fault code -> since
+        self._motor: dict[str, dict[str, tuple[float, str]]] = {}  # source -> fault code -> (since, message)
         self._late: collections.deque[float] = collections.deque()
         self._active: dict[str, float] = {}  # name -> since
         self._cause: dict[str, str] = {n: "" for n in FAILSAFES}
@@ -134,7 +168,7 @@ class SafetyMonitor:
         """Telemetry subscriber of (channel, message) lists (``subscribe_batches``)."""
         events = []
         with self._lock:
-            last_valid, invalid, now = self._last_valid, self._invalid, self._now
+            last_valid, kinds, now = self._last_valid, self._kinds, self._now
             for channel, msg in items:
                 sensor = _SENSOR_OF.get(channel)
                 if sensor is None:
@@ -147,18 +181,28 @@ class SafetyMonitor:
                         t = now
                     if t > last_valid[sensor]:
                         last_valid[sensor] = t
-                    invalid[sensor] = 0
+                    k = kinds[sensor]
+                    if k:  # what happened before this reading is over (a fault reported after it is not)
+                        for kind in [kind for kind, (_, seen) in k.items() if seen <= t]:
+                            del k[kind]
                 else:
-                    invalid[sensor] += 1
+                    _note(kinds[sensor], "invalid", 1, _stamp(msg.t, now))
         for ev in events:
             self.on_event(ev)
 
     def on_event(self, ev: Event) -> None:
         with self._lock:
-            if ev.source.startswith("epos2"):
+            sensor = _SENSOR_OF_SOURCE.get(ev.source)
+            if sensor is not None:
+                kind = READING_FAULTS.get(ev.code)
+                if kind is not None:
+                    suppressed = ev.data.get("suppressed", 0) if isinstance(ev.data, dict) else 0
+                    n = 1 + (suppressed if isinstance(suppressed, int) else 0)
+                    _note(self._kinds[sensor], kind, n, _stamp(ev.t, self._now))
+            elif ev.source.startswith("epos2"):
                 faults = self._motor.setdefault(ev.source, {})
                 if ev.code in MOTOR_FAULTS:
-                    faults.setdefault(ev.code, self._now)
+                    faults.setdefault(ev.code, (self._now, ev.message or ev.code))
                 elif ev.code in MOTOR_CLEARS:
                     for code in MOTOR_CLEARS[ev.code]:
                         faults.pop(code, None)
@@ -172,7 +216,7 @@ class SafetyMonitor:
         if sensor not in SENSORS:
             raise ValueError(f"sensor: {sensor!r} is not one of {', '.join(SENSORS)}")
         with self._lock:
-            self._invalid[sensor] += 1
+            _note(self._kinds[sensor], "invalid", 1, self._now)
 
     def pilot_present(self, now: float | None = None) -> None:
         with self._lock:
@@ -226,16 +270,14 @@ class SafetyMonitor:
             rule = getattr(cfg, s)
             quiet = now - self._last_valid[s]
             if quiet > rule.timeout:
-                n = self._invalid[s]
-                what = f"{n} invalid readings" if n else "silent"
-                causes[s] = f"{s.upper()} without a valid reading for {quiet:.1f} s ({what})"
+                causes[s] = f"{s.upper()} without a valid reading for {quiet:.1f} s ({fault_label(self._kinds[s])})"
         faults = []
         for source, codes in sorted(self._motor.items()):
-            for code, since in sorted(codes.items()):
+            for code, (since, message) in sorted(codes.items()):
                 if now - since >= cfg.motor.timeout:
-                    faults.append(f"{source} {code}")
+                    faults.append(f"{source}: {message}")
         if faults:
-            causes["motor"] = "motor controller fault: " + ", ".join(faults)
+            causes["motor"] = "motor controller fault: " + "; ".join(faults)
         window = cfg.planner_late.timeout
         late = self._late
         while late and now - late[0] > window:
@@ -245,12 +287,14 @@ class SafetyMonitor:
         return causes
 
     # ------------------------------------------------------------------ reading
-    def sensor_silence(self, sensor: str, now: float) -> tuple[float, int]:
-        """(seconds since ``sensor``'s last valid reading at ``now``, invalid readings since)."""
+    def sensor_silence(self, sensor: str, now: float) -> tuple[float, str]:
+        """(seconds since ``sensor``'s last valid reading at ``now``, what happened since:
+        :func:`fault_label`, "" when nothing was reported)."""
         if sensor not in SENSORS:
             raise ValueError(f"sensor: {sensor!r} is not one of {', '.join(SENSORS)}")
         with self._lock:
-            return max(0.0, now - self._last_valid[sensor]), self._invalid[sensor]
+            kinds = self._kinds[sensor]
+            return max(0.0, now - self._last_valid[sensor]), fault_label(kinds) if kinds else ""
 
     def recent_late_plans(self) -> int:
         """Late plans within the planner_late window (at the last check)."""
@@ -258,9 +302,9 @@ class SafetyMonitor:
             return len(self._late)
 
     def motor_faults(self) -> list[str]:
-        """The motor controller faults reported and not cleared ("source code")."""
+        """The motor controller faults reported and not cleared ("source: what it reported")."""
         with self._lock:
-            return [f"{src} {code}" for src, codes in sorted(self._motor.items()) for code in sorted(codes)]
+            return [f"{src}: {codes[code][1]}" for src, codes in sorted(self._motor.items()) for code in sorted(codes)]
 
     def active(self) -> tuple[str, ...]:
         with self._lock:

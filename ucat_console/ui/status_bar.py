@@ -39,11 +39,11 @@ def lights(sup: Any, loading: str = "") -> list[Light]:
     out: list[Light] = []
     for sensor in SENSORS:
         rule = safety.rule(sensor)
-        quiet, invalid = safety.sensor_silence(sensor, now)
+        quiet, what = safety.sensor_silence(sensor, now)
         if sensor in active:
             out.append(Light(LIGHTS[sensor], "bad", f"failsafe {sensor}: {active[sensor].cause}"))
-        elif quiet > 0.5 * rule.timeout or invalid:
-            what = f"{invalid} invalid readings" if invalid else "no reading"
+        elif quiet > 0.5 * rule.timeout or what:
+            what = what or "no reading"
             out.append(Light(LIGHTS[sensor], "warn", f"{what} for {quiet:.1f} s (failsafe after {rule.timeout:g} s)"))
         else:
             out.append(Light(LIGHTS[sensor], "ok", f"valid reading {quiet:.2f} s ago"))
