@@ -15,8 +15,10 @@ One TOML file configures a run; every table is optional::
     [loop]
     mode = "mpc_sync"
     [failsafe.pilot_gone]
-    action = "surface"
+    action = "hold"
     timeout = 3.0
+    escalate = "surface"
+    escalate_after = 20.0
 
 One tree, each value held once: the controller blocks (``mpc``, ``body``, ``baseline``,
 ``executor``, ``power``) live in the closed loop's :class:`LoopConfig` (``app.loop``, what
@@ -46,6 +48,10 @@ from ucat_console.typedconf import Config, coerce, from_dict, param, to_dict
 ROBOTS = ("sim", "rig")
 #: what a failsafe does when it triggers
 FAILSAFE_ACTIONS = ("hold", "surface", "disarm", "warn")
+#: how strongly each action acts: an escalation acts more strongly than the action before it
+ACTION_STRENGTH = {"warn": 0, "hold": 1, "surface": 2, "disarm": 3}
+#: what a failsafe may do when its cause lasts on (``none``: nothing more)
+ESCALATIONS = ("none", "hold", "surface", "disarm")
 #: the controller blocks: held by the loop's configuration, top-level tables in a file
 LOOP_BLOCKS = ("mpc", "baseline", "body", "executor", "power")
 
@@ -136,9 +142,15 @@ class AccessConfig(Config):
             raise ValueError(f"token: a fixed token needs at least 8 characters, got {len(self.token)}")
 
 
+_ESCALATE_DOC = ("what the failsafe does when its cause lasts escalate_after s after it triggered: "
+                 "none (nothing more), hold, surface or disarm")
+_ESCALATE_AFTER_DOC = "how long the failsafe acts before it escalates"
+
+
 @dataclass(frozen=True)
 class FailsafeRule(Config):
-    """What one failsafe does, and after how long its cause triggers it."""
+    """What one failsafe does, after how long its cause triggers it, and what it does when the
+    cause lasts on (``escalate``, ``escalate_after`` s after it triggered)."""
 
     action: str = param(
         "hold", choices=FAILSAFE_ACTIONS,
@@ -146,13 +158,34 @@ class FailsafeRule(Config):
         "disarm: motors off; warn: show and record only",
     )
     timeout: float = param(2.0, lo=0.0, hi=3600.0, unit="s", doc="how long the cause lasts before it triggers")
+    escalate: str = param("none", choices=ESCALATIONS, doc=_ESCALATE_DOC)
+    escalate_after: float = param(30.0, lo=0.0, hi=3600.0, unit="s", doc=_ESCALATE_AFTER_DOC)
+
+    def _check(self) -> None:
+        if self.escalate != "none" and ACTION_STRENGTH[self.escalate] < ACTION_STRENGTH[self.action]:
+            stronger = [a for a in ESCALATIONS[1:] if ACTION_STRENGTH[a] >= ACTION_STRENGTH[self.action]]
+            raise ValueError(f"escalate: {self.escalate!r} would act less strongly than action "
+                             f"{self.action!r}; allowed: none, {', '.join(stronger)}")
+
+    @property
+    def escalates(self) -> bool:
+        """Whether the escalation acts more strongly than the action (otherwise it is none)."""
+        return self.escalate != "none" and ACTION_STRENGTH[self.escalate] > ACTION_STRENGTH[self.action]
+
+
+@dataclass(frozen=True)
+class PilotGoneRule(FailsafeRule):
+    """The pilot-gone failsafe: hold where the robot is, then, if no pilot has come back
+    after 30 s, disarm (ArduSub's default GCS failsafe disarms after 5 s)."""
+
+    escalate: str = param("disarm", choices=ESCALATIONS, doc=_ESCALATE_DOC)
 
 
 @dataclass(frozen=True)
 class FailsafeConfig(Config):
     """Every failsafe; each is shown, recorded, and latched until its cause clears."""
 
-    pilot_gone: FailsafeRule = FailsafeRule("hold", 2.0)
+    pilot_gone: PilotGoneRule = PilotGoneRule()
     imu: FailsafeRule = FailsafeRule("disarm", 1.0)
     dvl: FailsafeRule = FailsafeRule("hold", 2.0)
     depth: FailsafeRule = FailsafeRule("disarm", 1.0)

@@ -56,6 +56,35 @@ def test_pilot_gone_triggers_after_its_timeout_and_latches_until_a_pilot_returns
     assert m.active() == ()
 
 
+def test_a_failsafe_escalates_once_when_its_cause_lasts_and_clears_with_it() -> None:
+    cfg = FailsafeConfig(pilot_gone=FailsafeRule("hold", 2.0, "disarm", 30.0))
+    m = SafetyMonitor(cfg)
+    m.pilot_present()
+    feed_all(m, 0.0)
+    m.check(0.0)
+    m.pilot_left(1.0)
+    seen = []
+    for k in range(1, 400):  # 0.1 s checks up to 39.9 s, the sensors talking
+        t = 0.1 * k
+        feed_all(m, t)
+        seen += [(round(tr.t, 1), tr.action, tr.escalated) for tr in m.check(t)]
+    # hold 2 s after the pilot left, disarm 30 s after that, each once
+    assert seen == [(3.0, "hold", False), (33.0, "disarm", True)]
+    assert next(st for st in m.states() if st.name == "pilot_gone").action == "disarm"
+    m.pilot_present()
+    (tr,) = m.check(40.0)
+    assert (tr.name, tr.active, tr.action) == ("pilot_gone", False, "disarm")
+    assert next(st for st in m.states() if st.name == "pilot_gone").action == "hold"  # afresh
+
+
+def test_an_escalation_no_stronger_than_the_action_does_nothing() -> None:
+    m = SafetyMonitor(FailsafeConfig(pilot_gone=FailsafeRule("disarm", 2.0, "disarm", 1.0)))
+    m.pilot_present()
+    m.pilot_left(0.0)
+    seen = [tr.action for k in range(100) for tr in m.check(0.1 * k) if tr.name == "pilot_gone"]
+    assert seen == ["disarm"]
+
+
 def test_no_pilot_ever_means_no_pilot_gone() -> None:
     m = SafetyMonitor()
     m.pilot_left(0.0)

@@ -3,9 +3,14 @@
 The :class:`SafetyMonitor` is a telemetry subscriber (sensor channels and events) plus two
 inputs from the supervisor (the pilot's presence, :meth:`SafetyMonitor.pilot_left` and
 :meth:`SafetyMonitor.pilot_present`). :meth:`SafetyMonitor.check` is called with the
-present time; it returns the failsafes that triggered or cleared since the last call. The
-supervisor carries out the configured action (hold, surface, disarm, warn) and records an
-Event for each change.
+present time; it returns the failsafes that triggered, escalated or cleared since the last
+call. The supervisor carries out the action each carries (hold, surface, disarm, warn) and
+records an Event for each change.
+
+Escalation: a rule with ``escalate`` (hold, surface, disarm: acting more strongly than its
+``action``) escalates when its failsafe has been active for ``escalate_after`` s: a second
+Transition, active, with the escalated action (``escalated`` True). By default only
+``pilot_gone`` escalates: hold, then disarm after 30 s.
 
 Failsafes (``FailsafeConfig`` has one rule, action and timeout, for each):
 
@@ -68,7 +73,7 @@ class FailsafeState:
     """One failsafe as shown: its rule, whether it is active, and why."""
 
     name: str
-    action: str
+    action: str  # the action in force: the escalated one once the failsafe escalated
     timeout: float
     active: bool
     since: float | None  # time it triggered
@@ -77,13 +82,16 @@ class FailsafeState:
 
 @dataclass(frozen=True)
 class Transition:
-    """A failsafe that triggered (``active``) or cleared at time ``t``."""
+    """A failsafe that triggered (``active``), escalated (``active`` and ``escalated``: its
+    cause lasted the rule's ``escalate_after``; ``action`` is the escalated one) or cleared
+    at time ``t``."""
 
     name: str
     active: bool
     t: float
     action: str
     cause: str
+    escalated: bool = False
 
 
 def _finite(*values: float) -> bool:
@@ -152,6 +160,7 @@ class SafetyMonitor:
         self._motor: dict[str, dict[str, tuple[float, str]]] = {}  # source -> fault code -> (since, message)
         self._late: collections.deque[float] = collections.deque()
         self._active: dict[str, float] = {}  # name -> since
+        self._escalated: set[str] = set()  # active failsafes whose escalation acted
         self._cause: dict[str, str] = {n: "" for n in FAILSAFES}
 
     def rule(self, name: str) -> FailsafeRule:
@@ -253,10 +262,18 @@ class SafetyMonitor:
                     out.append(Transition(name, True, now, rule.action, cause))
                 elif cause is None and was:
                     del self._active[name]
-                    out.append(Transition(name, False, now, rule.action, self._cause[name]))
+                    action = rule.escalate if name in self._escalated else rule.action
+                    self._escalated.discard(name)
+                    out.append(Transition(name, False, now, action, self._cause[name]))
+                elif (cause is not None and rule.escalates and name not in self._escalated
+                      and now - self._active[name] >= rule.escalate_after):
+                    self._escalated.add(name)
+                    out.append(Transition(name, True, now, rule.escalate,
+                                          f"{cause}, {now - self._active[name]:.1f} s after it triggered",
+                                          escalated=True))
         for tr in out:
-            log.log(logging.ERROR if tr.active else logging.INFO, "failsafe %s %s: %s",
-                    tr.name, "triggered" if tr.active else "cleared", tr.cause)
+            how = "escalated" if tr.escalated else "triggered" if tr.active else "cleared"
+            log.log(logging.ERROR if tr.active else logging.INFO, "failsafe %s %s: %s", tr.name, how, tr.cause)
         return out
 
     def _causes(self, now: float) -> dict[str, str]:
@@ -320,7 +337,8 @@ class SafetyMonitor:
             for name in FAILSAFES:
                 rule: FailsafeRule = getattr(self.cfg, name)
                 out.append(FailsafeState(
-                    name=name, action=rule.action, timeout=rule.timeout,
+                    name=name, action=rule.escalate if name in self._escalated else rule.action,
+                    timeout=rule.timeout,
                     active=name in self._active, since=self._active.get(name),
                     cause=self._cause[name],
                 ))

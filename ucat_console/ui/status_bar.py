@@ -75,8 +75,10 @@ def lights(sup: Any, loading: str = "") -> list[Light]:
 def link_policy(sup: Any) -> str:
     """What the robot does when the pilot's page is lost, as the banner says it."""
     rule = sup.cfg.failsafe.pilot_gone
+    then = (f", and {ACTIONS.get(rule.escalate, rule.escalate)} {rule.escalate_after:g} s later if no pilot "
+            f"has taken control (then: {rule.escalate})" if rule.escalates else "")
     return (f"If this page was the pilot's, the robot {ACTIONS.get(rule.action, rule.action)} "
-            f"{rule.timeout:g} s after the page's last answer (failsafe pilot_gone: {rule.action}). "
+            f"{rule.timeout:g} s after the page's last answer (failsafe pilot_gone: {rule.action}){then}. "
             "Reload the page when the link is back; the token is needed again.")
 
 

@@ -558,12 +558,18 @@ class Supervisor:
     def _on_failsafe(self, tr: Transition) -> None:
         rule = self.safety.rule(tr.name)
         if tr.active:
-            self._publish_event("failsafe", tr.name, f"{tr.name}: {tr.cause}; action: {rule.action}", "error",
-                                {"action": rule.action, "timeout": rule.timeout, "cause": tr.cause})
-            if rule.action == "disarm":
+            data = {"action": tr.action, "timeout": rule.timeout, "cause": tr.cause}
+            if tr.escalated:
+                message = (f"{tr.name}: {tr.cause}; escalated after {rule.escalate_after:g} s of "
+                           f"{rule.action}: {tr.action}")
+                data.update(escalated=True, escalate_after=rule.escalate_after, before=rule.action)
+            else:
+                message = f"{tr.name}: {tr.cause}; action: {tr.action}"
+            self._publish_event("failsafe", tr.name, message, "error", data)
+            if tr.action == "disarm":
                 self._disarm("failsafe", f"failsafe {tr.name}")
-            elif rule.action in ("hold", "surface"):
-                if rule.action == "hold":
+            elif tr.action in ("hold", "surface"):
+                if tr.action == "hold":
                     body = self._last_body
                     depth = body.depth if body is not None and math.isfinite(body.depth) else self.loop.setpoints.depth
                     depth = round(min(max(depth, 0.0), self.cfg.loop.max_depth), 3)  # to the mm
