@@ -103,7 +103,13 @@ class ConsoleConfig(Config):
     record_on_arm: bool = param(True, doc="start recording when the motors are armed")
     record_tail: float = param(
         5.0, lo=0.0, hi=3600.0, unit="s",
-        doc="a recording started by arming stops this long after disarming",
+        doc="a recording started by arming stops this long after disarming, and after the last "
+        "fault (a failsafe, a drive fault) cleared, so that its clearing is recorded",
+    )
+    record_tail_max: float = param(
+        120.0, lo=0.0, hi=86400.0, unit="s",
+        doc="a recording started by arming stops this long after disarming at the latest, "
+        "whether or not the faults have cleared",
     )
     sessions_dir: str = param("", doc="where recordings go; empty: sessions/ at the project root")
     sim_depth: float = param(0.5, lo=0.0, hi=100.0, unit="m", doc="depth the simulated robot starts at")
@@ -118,6 +124,11 @@ class ConsoleConfig(Config):
     drive_depth_step: float = param(0.1, lo=0.01, hi=5.0, unit="m", doc="R/F key: depth step")
     drive_depth_rate: float = param(0.2, lo=0.01, hi=2.0, unit="m/s",
                                     doc="gamepad: depth change at full stick")
+
+    def _check(self) -> None:
+        if self.record_tail_max < self.record_tail:
+            raise ValueError(f"record_tail_max: {self.record_tail_max:g} s is shorter than record_tail "
+                             f"{self.record_tail:g} s; allowed: at least record_tail")
 
 
 @dataclass(frozen=True)

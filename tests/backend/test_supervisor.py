@@ -459,6 +459,60 @@ def test_automatic_recording_stops_after_the_tail(sup: Supervisor) -> None:
     assert sup.recorder.paths[0].stat().st_size > 0
 
 
+def _stopped(sup: Supervisor) -> bool:
+    deadline = time.monotonic() + 10.0  # the recorder closes in its own thread
+    while sup.recorder.recording and time.monotonic() < deadline:
+        time.sleep(0.02)
+    return not sup.recorder.recording
+
+
+def test_an_automatic_recording_runs_on_until_the_fault_has_cleared(tmp_path: Path) -> None:
+    """A drive fault disarms the robot; the recording goes on while it lasts and for the
+    tail after it cleared, so the file holds the clearing."""
+    sup = Supervisor(make_config(), clock=SimulatedClock(), sessions_dir=tmp_path)  # record_tail 1 s
+    try:
+        sup.client_connected(PILOT)
+        sup.take_control(PILOT, TOKEN)
+        sup.arm(PILOT)
+        sup.step(0.5)
+        sup.report_event(Event(0.0, "epos2.2", "fault", "node in fault state", "error"))
+        sup.step(0.1)
+        assert not sup.armed and sup.safety.active() == ("motor",)
+        sup.step(5.0)  # far past the tail: the fault lasts
+        assert sup.recorder.recording
+        sup.report_event(Event(0.0, "epos2.2", "fault_cleared", "fault cleared", "info"))
+        sup.step(0.5)
+        assert sup.safety.active() == () and sup.recorder.recording  # the tail after the clearing
+        paths = sup.recorder.paths
+        sup.step(1.0)
+        assert _stopped(sup)
+    finally:
+        sup.stop()
+    with SessionReader(paths[0], tmp_path) as r:
+        events = [(e.source, e.code) for e in r.events()]
+    assert ("epos2.2", "fault") in events and ("supervisor", "disarmed") in events
+    assert ("epos2.2", "fault_cleared") in events and ("failsafe", "cleared") in events
+
+
+def test_a_fault_that_never_clears_records_no_longer_than_the_tail_max(tmp_path: Path) -> None:
+    cfg = make_config().replace(console=ConsoleConfig(supervise_period=0.05, record_tail=1.0, record_tail_max=4.0))
+    sup = Supervisor(cfg, clock=SimulatedClock(), sessions_dir=tmp_path)
+    try:
+        sup.client_connected(PILOT)
+        sup.take_control(PILOT, TOKEN)
+        sup.arm(PILOT)
+        sup.step(0.5)
+        sup.report_event(Event(0.0, "epos2.2", "fault", "node in fault state", "error"))
+        sup.step(3.5)
+        assert not sup.armed and sup.recorder.recording
+        sup.step(0.6)  # 4 s after the disarm
+        assert _stopped(sup) and sup.safety.active() == ("motor",)
+    finally:
+        sup.stop()
+    with pytest.raises(ValueError, match="record_tail_max"):
+        ConsoleConfig(record_tail=10.0, record_tail_max=5.0)
+
+
 def test_the_loop_runs_in_its_own_thread_and_commands_cross_over(tmp_path: Path) -> None:
     sup = Supervisor(make_config(), clock=SteadyPacedClock(pace=10.0), sessions_dir=tmp_path)
     sup.client_connected(PILOT)

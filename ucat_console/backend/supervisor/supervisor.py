@@ -155,7 +155,7 @@ class Supervisor:
         self.recording = SessionRecording(
             self.recorder, config_toml=lambda: self.current_config().to_toml(redact=True),
             weights=self._weights, on_arm=cfg.console.record_on_arm, tail=cfg.console.record_tail,
-            notify=self._notify,
+            tail_max=cfg.console.record_tail_max, notify=self._notify,
         )
         self.rig_control = RigControl(self)
         #: plan overruns and the loop's stalls, one event per burst
@@ -287,7 +287,7 @@ class Supervisor:
         for tr in self.safety.check(now):
             self._on_failsafe(tr)
         self.bursts.check(now)
-        self.recording.check(now, self.gate.armed)
+        self.recording.check(now, self.gate.armed, faulted=bool(self.safety.active() or self.safety.motor_faults()))
         run = self.manoeuvre
         if run is not None and not run.finished:
             try:
