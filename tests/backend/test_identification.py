@@ -114,3 +114,44 @@ def test_manoeuvre_is_the_pilots_command(tmp_path: Path) -> None:
     finally:
         sup.stop()
     assert math.isclose(ManoeuvreRun(sup, 2).duration, ManoeuvreConfig().duration + ManoeuvreRun.TAIL_S)
+
+
+def test_the_heave_trim_is_identified_from_a_recorded_hover(tmp_path: Path, capsys) -> None:
+    """A robot 0.5 % lighter than the water it displaces (1.08 N of net buoyancy), held at
+    2 m without moving: the heave the fins gave in the recorded hover is the trim."""
+    from ucat_console.backend.sim.params import VehicleConfig
+
+    cfg = AppConfig(plant=PlantConfig(vehicle=VehicleConfig(buoyancy_ratio=1.005)),
+                    console=ConsoleConfig(sim_depth=2.0), access=AccessConfig(token=TOKEN))
+    cfg = cfg.replace(loop=cfg.loop.replace(mode="baseline"))
+    sup = Supervisor(cfg, clock=SimulatedClock(), sessions_dir=tmp_path)
+    try:
+        sup.client_connected(PILOT)
+        assert sup.take_control(PILOT, TOKEN)
+        sup.set_setpoints(PILOT, velocity=0.0, depth=2.0)
+        sup.arm(PILOT)
+        sup.step(240.0)  # the depth loop's integral takes the buoyancy up in a minute or two
+        session = sup.recording.session_id
+        sup.disarm(PILOT)
+        sup.step(1.0)
+    finally:
+        sup.stop()
+    net_buoyancy = 0.005 * 22.0 * 9.81  # the hull's weight is its mass's; buoyancy 1.005 times it
+    out = tmp_path / "out"
+    assert main(["identify", "--trim", session, "--dir", str(tmp_path), "--out", str(out)]) == 0
+    text = (out / "identified.toml").read_text()
+    trim = AppConfig.from_toml(out / "identified.toml").body.heave_trim
+    assert trim == pytest.approx(net_buoyancy, rel=0.15)  # down, against the buoyancy
+    assert "heave_trim" in text and "heave trim from" in capsys.readouterr().out
+
+
+def test_the_trim_needs_a_hover(tmp_path: Path) -> None:
+    from ucat_console.control.identification import hover_trim
+
+    t = [0.02 * k for k in range(1000)]
+    with pytest.raises(ValueError, match="no hover"):
+        hover_trim(t, [False] * 1000, [0.0] * 1000, [0.0] * 1000, [1.0] * 1000)
+    with pytest.raises(ValueError, match="at least 10 s"):
+        hover_trim(t[:300], [True] * 300, [0.0] * 300, [0.0] * 300, [1.0] * 300)
+    moving = hover_trim(t, [True] * 1000, [0.0] * 1000, [0.0] * 600 + [0.2] * 400, [1.0] * 600 + [5.0] * 400)
+    assert moving.heave_trim == pytest.approx(1.0) and moving.seconds == pytest.approx(12.0)

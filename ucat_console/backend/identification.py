@@ -32,10 +32,12 @@ from ucat_console.config import AppConfig
 from ucat_console.control.estimation import tilt_from_accel
 from ucat_console.control.identification import (
     FinTrack,
+    HoverTrim,
     Hull,
     Identification,
     IdentifyConfig,
     Measurements,
+    hover_trim,
     identify,
 )
 from ucat_console.robot.readings import ImuReading
@@ -139,6 +141,44 @@ def identify_sessions(sessions: Sequence[str | Path], directory: str | Path | No
     result = identify(recs, app.mpc, hull_of(app), cfg)
     toml = result.toml_fragment(", ".join(names))
     return IdentifyReport(result, tuple(names), source_of_config, toml)
+
+
+def trim_sessions(sessions: Sequence[str | Path], directory: str | Path | None = None) -> tuple[HoverTrim, str]:
+    """The heave trim from the hovers recorded in ``sessions`` (``control.identification.
+    hover_trim``) and the TOML fragment to load; ValueError naming a session without the
+    body layer's channels."""
+    if not sessions:
+        raise ValueError("identify --trim: name at least one session")
+    cols: dict[str, list[float]] = {k: [] for k in ("t", "driving", "depth_error", "speed_ref", "heave")}
+    names = []
+    for s in sessions:
+        src = open_session(s, directory)
+        try:
+            name = str(s)
+            present = {c for c, n in src.message_counts().items() if n > 0}
+            for c in (ch.BODY_TRACKING, ch.BODY_ALLOCATION):
+                if c not in present:
+                    raise ValueError(f"{name}: no {c} channel: the trim needs the body layer's tracking and "
+                                     "allocation (recorded by this version)")
+            heave: dict[float, float] = {}
+            tracking = []
+            for c, m in src.messages([ch.BODY_TRACKING, ch.BODY_ALLOCATION]):
+                if c == ch.BODY_ALLOCATION:
+                    heave[m.t] = m.heave_applied
+                else:
+                    tracking.append(m)
+            for m in tracking:
+                if m.t in heave:
+                    cols["t"].append(m.t)
+                    cols["driving"].append(m.driving)
+                    cols["depth_error"].append(m.depth_error)
+                    cols["speed_ref"].append(m.speed_ref)
+                    cols["heave"].append(heave[m.t])
+            names.append(name)
+        finally:
+            src.close()
+    trim = hover_trim(**{k: np.asarray(v) for k, v in cols.items()})
+    return trim, trim.toml_fragment(", ".join(names))
 
 
 def residual_plots(result: Identification, path: Path) -> Path:

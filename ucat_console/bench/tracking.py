@@ -269,7 +269,7 @@ def plot(logs: dict[str, dict[str, _Log]], out: Path) -> list[Path]:
     figure each (PNG)."""
     from ucat_console.experiments import require_extra
 
-    require_extra("matplotlib", "bench tracking --plots")
+    require_extra("matplotlib")
     import matplotlib
 
     matplotlib.use("Agg")

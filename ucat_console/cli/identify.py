@@ -11,6 +11,11 @@ session recorded), prints the coefficients with 95 % intervals and writes, into 
 and records it: on the simulated robot as fast as it computes (``--realtime`` for real
 time), on the device rig in real time; the manoeuvre's steps are ``[loop.manoeuvre]``.
 ``ucat-console run --headless --mode identify --record --duration S`` records the same.
+
+``--trim`` identifies the designed body layer's heave trim instead (``[body] heave_trim``):
+the heave force the fins gave while the robot hovered at its depth in the sessions
+(``control.identification.hover_trim``); record a hover with ``ucat-console run --headless
+--record --velocity 0 --depth D --duration S`` (or at the pool), then run it on the session.
 """
 
 from __future__ import annotations
@@ -36,6 +41,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--dir", type=Path, default=None,
                    help="sessions directory (default: sessions/ at the project root)")
     p.add_argument("--out", type=Path, default=Path("identify-out"), help="output directory")
+    p.add_argument("--trim", action="store_true",
+                   help="identify the body layer's heave trim from a recorded hover instead")
     p.set_defaults(func=run)
 
 
@@ -61,6 +68,17 @@ def _record_manoeuvre(cfg: Any, directory: Path | None, realtime: bool) -> Path:
     return paths[0]
 
 
+def _trim(args: argparse.Namespace) -> int:
+    from ucat_console.backend.identification import trim_sessions
+
+    trim, toml = trim_sessions(args.sessions, args.dir)
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "identified.toml").write_text(toml)
+    print(f"heave trim from {trim.seconds:.0f} s of hover: {trim.heave_trim:.3f} +- {trim.ci:.3f} N (95 %, down > 0)")
+    print(f"wrote {args.out / 'identified.toml'} (its [body] table: load it with --config)")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     from ucat_console.backend.identification import identify_sessions, residual_plots
     from ucat_console.config import load_config
@@ -70,6 +88,10 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("identify: name at least one SESSION, or --run the manoeuvre")
     if args.out.exists() and not args.out.is_dir():
         raise ValueError(f"--out: {args.out} exists and is not a directory")
+    if args.trim:
+        if args.run:
+            raise ValueError("identify --trim: record a hover first (see --help), then name its session")
+        return _trim(args)
     icfg = IdentifyConfig(fit=args.fit) if args.window is None else IdentifyConfig(fit=args.fit, window_s=args.window)
     cfg = load_config(args.config) if args.config is not None else None
     sessions = list(args.sessions)

@@ -11,8 +11,8 @@ Control.md section 7; ``BodyConfig.layer`` picks one of two layers over the same
   D_z(z_ref') + PI(z_ref - z)`` (down > 0). Heading: ``N = J r_ref' + N_r(r_ref) + kp e +
   ki int e + kd (r_ref - r)`` with ``e = psi_ref - psi`` (wrapped), ``psi_ref`` integrating
   the yaw-rate reference from the heading measured when the loop started (a zero setpoint
-  holds the heading; ``psi_ref`` never runs more than ``max_heading_lead`` ahead of the
-  robot). The wrench goes to :func:`~ucat_console.control.allocation.allocate_wrench`; an
+  holds that heading whatever pushes the robot off it; in a turn ``psi_ref`` never runs more
+  than ``max_heading_lead`` ahead of the robot, and the loop never sees more error than that). The wrench goes to :func:`~ucat_console.control.allocation.allocate_wrench`; an
   axis it cut has its loop's last integration undone (anti-windup fed by the allocation),
   and each loop's output limit is what the fins can deliver on its axis.
 * ``paper`` (section IV.B): ``F_x* = -PID_v(v_ref - v)``, ``F_y* = depth_sign *
@@ -302,12 +302,14 @@ def _designed_loops(b: np.ndarray, t: float, sp_v: float, sp_z: float, sp_r: flo
     if b[B_NEW_R] != 0.0 and not math.isnan(r) and not math.isnan(psi) and not math.isnan(psi_ref) \
             and not math.isnan(r_ref):
         lead = b[B_LEAD]
-        e = min(lead, max(-lead, _wrap(psi_ref - psi)))
+        e_full = _wrap(psi_ref - psi)
+        e = min(lead, max(-lead, e_full))
         out = pid_step_rate(b[B_PIDS + 2 * NPID:B_PIDS + 3 * NPID], e, r_ref - r, t)
         if out == EARLIER:
             status = EARLIER_T
         else:
-            b[B_HEADING_REF] = _wrap(psi + e)
+            if e != e_full and sp_r != 0.0:  # turning faster than the robot: the reference waits
+                b[B_HEADING_REF] = _wrap(psi + e)
             b[B_N] = (b[h + H_YAW_J] * b[B_R_REF_RATE] + b[h + H_YAW_D] * r_ref
                       + b[h + H_YAW_DQ] * r_ref * abs(r_ref) + out)
     return status
@@ -385,6 +387,18 @@ def body_wrench(b: np.ndarray) -> tuple[float, float, float]:
         z -= fy
         n += PAPER_SIDES[k] * arm * fx
     return x, z, n
+
+
+@register_jitable
+def body_references(b: np.ndarray, sp_v: float, sp_z: float, sp_r: float) -> tuple[float, float, float, float]:
+    """(speed, depth, heading, yaw rate) the layer holds the robot to now: the designed
+    layer's references, the paper layer's setpoints (no heading: NaN); a reference not
+    started yet is its setpoint."""
+    if b[B_LAYER] == 0.0:
+        return sp_v, sp_z, math.nan, sp_r
+    v, z, r = b[B_V_REF], b[B_Z_REF], b[B_R_REF]
+    return (sp_v if math.isnan(v) else v, sp_z if math.isnan(z) else z, b[B_HEADING_REF],
+            sp_r if math.isnan(r) else r)
 
 
 def _none(x: float) -> float | None:

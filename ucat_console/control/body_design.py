@@ -9,8 +9,10 @@ fins' force through a delay::
 
 The delay ``tau`` is the fins': a new force target enters at the next cycle a planner
 makes, and that cycle's force acts over its duration, so a change reaches the hull about
-one cycle later (``BodyConfig.actuation_delay``, 0.75 s by default: the MPC's cycles run
-1-1.3 s, the baseline's 0.5 s, plus the sensors' median filters).
+one cycle later. The shipped gains are designed for 1.25 s (``control.params.DESIGN_DELAY``):
+the MPC's cycles last 1.1-1.2 s (median) at 0.2 m/s, 1.7-1.9 s at 0.1 m/s, the baseline's
+0.5 s (``bench tracking``); a loop designed for the longer delay stays stable with the
+shorter one, while one designed for the baseline's delay rings with the MPC's.
 
 Each loop is designed for the closed-loop bandwidth ``w_b = 1 / (k tau)`` (``k =
 BodyConfig.bandwidth_factor``, 4 by default): at ``w_b`` the delay costs ``1/k`` rad (14
@@ -27,11 +29,12 @@ degrees) of phase, so the delay does not make the loop ring or limit-cycle.
   the feed-forward ``X_ff`` is the hull's drag at the setpoint, so the integral only takes
   the model's error.
 * The position loops' integrals (buoyancy, trim, a steady moment) have their zero at
-  ``w_b / 3``: ``ki = kp w_b / 3``.
+  ``w_b / 8``: ``ki = kp w_b / 8`` (closer to the bandwidth, the integral winds up while a
+  push holds the robot off and overshoots by a third on its way back).
 
-With the defaults (eeUVsim's hull, 0.75 s, k = 4: ``w_b`` = 0.333 rad/s) the depth loop is
-kp 7.5 N/m, ki 0.83 N/(m s); the heading loop kp 0.33 N m/rad, kd 1.69 N m s/rad,
-ki 0.037 N m/(rad s); the velocity loop kp 33.6 N s/m, ki 6.9 N/m
+With the defaults (eeUVsim's hull, 1.25 s, k = 4: ``w_b`` = 0.2 rad/s) the depth loop is
+kp 5.16 N/m, ki 0.129 N/(m s); the heading loop kp 0.120 N m/rad, kd 0.890 N m s/rad,
+ki 0.003 N m/(rad s); the velocity loop kp 17.1 N s/m, ki 2.48 N/m
 (:func:`designed_gains`; ``docs/control.md`` works them through).
 """
 
@@ -79,7 +82,7 @@ class HullModel(Config):
 #: the speed the surge is linearised about (m/s): the middle of the paper's 0.1-0.4 m/s
 DESIGN_SPEED = 0.2
 #: the position loops' integral zero, as a fraction of the bandwidth
-INTEGRAL_ZERO = 1.0 / 3.0
+INTEGRAL_ZERO = 1.0 / 8.0
 
 
 @dataclass(frozen=True)

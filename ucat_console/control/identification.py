@@ -283,3 +283,50 @@ def identify(recordings: Sequence[Measurements], mpc: MpcConfig, hull: Hull,
     )
     return Identification(cfg.fit, c_d, c_l, c_d_ci, c_l_ci, scale, scale_ci, fitted,
                           float(np.sqrt(np.mean(r * r))), hull.mass)
+
+
+@dataclass(frozen=True)
+class HoverTrim:
+    """The heave force that holds the robot at its depth (``BodyConfig.heave_trim``), from a
+    hover: its mean, the 95 % half-width, the seconds of hover it saw."""
+
+    heave_trim: float  # N, down > 0
+    ci: float  # N
+    seconds: float
+
+    def toml_fragment(self, source: str) -> str:
+        return (f"# the heave trim from {self.seconds:.0f} s of hover in {source}: "
+                f"{self.heave_trim:.3f} +- {self.ci:.3f} N (95 %)\n[body]\nheave_trim = {self.heave_trim:.4f}\n")
+
+
+def hover_trim(t: ArrayLike, driving: ArrayLike, depth_error: ArrayLike, speed_ref: ArrayLike,
+               heave: ArrayLike, *, band: float = 0.02, still: float = 0.02, min_s: float = 10.0,
+               block_s: float = 1.0) -> HoverTrim:
+    """The trim from the body layer's own record of a hover (``body/tracking`` and the heave
+    applied, ``body/allocation``, at the same times ``t``).
+
+    At a steady depth the hull's heave damping and added mass do nothing, so the heave force
+    the fins were given is what holds the robot: its buoyancy, its trim, a steady vertical
+    disturbance. Samples count while the fins are driven, the depth is within ``band`` of its
+    reference and the speed reference below ``still`` (a hover: the fins beat for depth only).
+    The mean over them is the trim; its interval is from the means of ``block_s`` blocks
+    (neighbouring samples are not independent). ValueError when the record holds less than
+    ``min_s`` of hover."""
+    t = np.asarray(t, dtype=float)
+    ok = (np.asarray(driving, dtype=bool) & (np.abs(np.asarray(depth_error, dtype=float)) <= band)
+          & (np.abs(np.asarray(speed_ref, dtype=float)) <= still))
+    z = np.asarray(heave, dtype=float)
+    ok &= np.isfinite(z)
+    if ok.sum() < 2:
+        raise ValueError(f"trim: no hover in the record (driven, depth within {band:g} m of its reference, "
+                         f"speed reference below {still:g} m/s)")
+    dt = np.median(np.diff(t)) if t.size > 1 else 0.0
+    seconds = float(ok.sum() * dt)
+    if seconds < min_s:
+        raise ValueError(f"trim: {seconds:.1f} s of hover in the record; it needs at least {min_s:g} s")
+    blocks = np.floor((t[ok] - t[ok][0]) / block_s)
+    means = np.array([z[ok][blocks == b].mean() for b in np.unique(blocks)])
+    from scipy import stats  # here only: nothing of the run path loads scipy.stats
+
+    half = float(stats.t.ppf(0.975, means.size - 1) * means.std(ddof=1) / np.sqrt(means.size)) if means.size > 1 else math.inf
+    return HoverTrim(float(z[ok].mean()), half, seconds)

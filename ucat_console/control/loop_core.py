@@ -41,6 +41,7 @@ from numba import njit
 from ucat_console.control.body import (
     B_APPLIED,
     B_CUT,
+    B_HEADING,
     B_LAYER,
     B_N,
     B_X,
@@ -50,6 +51,7 @@ from ucat_console.control.body import (
     body_on_depth,
     body_on_dvl,
     body_on_imu,
+    body_references,
     body_set_heading,
     body_targets,
     body_update,
@@ -182,7 +184,8 @@ O_T = 1
 OUT_ROW = 40
 OUT_ROWS = 64
 # kinds besides the readings' (rr.IMU ... rr.FIN)
-O_BODY_COMMAND = 10.0  # sums of the fins' f_x, f_y, s_lat f_x; the wrench asked (3), applied (3); cut bits
+O_BODY_COMMAND = 10.0  # sums of the fins' f_x, f_y, s_lat f_x; the wrench asked (3), applied (3); cut
+#                         bits; driving; references (speed, depth, heading, yaw rate) and errors (3)
 O_STATE = 11.0  # position (3), q (4), velocity (3), rates (3), depth, then the fins' angle,
 #                 rate, set-point angle and rate (4 each)
 O_POWER = 12.0  # per fin: power (4), energy (4), mean power (4, NaN: none yet); distance
@@ -386,6 +389,13 @@ def _keep_body_command(s: np.ndarray, body: np.ndarray, out: np.ndarray, t: floa
         for k in range(3):
             o[O_V + 6 + k] = body[B_APPLIED + k]
         o[O_V + 9] = body[B_CUT]
+    o[O_V + 10] = 1.0 if (int(s[C_FLAGS]) & F_DRIVING) != 0 else 0.0
+    v_ref, z_ref, psi_ref, r_ref = body_references(body, s[C_SP_V], s[C_SP_Z], s[C_SP_R])
+    o[O_V + 11], o[O_V + 12], o[O_V + 13], o[O_V + 14] = v_ref, z_ref, psi_ref, r_ref
+    o[O_V + 15] = s[C_V_BODY] - v_ref
+    o[O_V + 16] = s[C_DEPTH] - z_ref
+    psi = body[B_HEADING]
+    o[O_V + 17] = (psi - psi_ref + math.pi) % (2.0 * math.pi) - math.pi
 
 
 @njit(cache=True)

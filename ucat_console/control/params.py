@@ -120,6 +120,10 @@ class BaselineConfig(Config):
     )
 
 
+#: the paper's baseline (its eq 19), for the experiments that reproduce it
+PAPER_BASELINE = BaselineConfig(inverse_model="eq19")
+
+
 @dataclass(frozen=True)
 class PidGains(Config):
     kp: float = param(0.0, lo=0.0, hi=1000.0, doc="proportional gain")

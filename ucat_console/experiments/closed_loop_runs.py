@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from ucat_console.control.params import BodyConfig, MpcConfig
+from ucat_console.control.params import PAPER_BASELINE, PAPER_BODY, BaselineConfig, BodyConfig, MpcConfig
 from ucat_console.experiments import paper
 from ucat_console.experiments.distributed import run_all
 from ucat_console.experiments.scenario import (
@@ -70,7 +70,7 @@ def e4_scenarios(quick: bool, seed: int, speeds: Sequence[float] | None = None,
                     trace = 5.0 if (variant == "strouhal_wake" and v == trace_v and s == seed) else 0.0
                     out.append(Scenario(mode=ctrl, v_ref=v, depth=depth, seed=s, plant=variant,
                                         settle_s=settle, window_s=window, trace_rate=trace,
-                                        tag="E4"))
+                                        body=shipped_body(), tag="E4"))
     for sc in out:
         sc.check()
     return out
@@ -190,13 +190,25 @@ SIM_TUNED = Path(__file__).resolve().parents[2] / "config" / "sim-tuned.toml"
 
 
 def e4r_settings() -> dict[str, tuple[MpcConfig, BodyConfig]]:
-    """E4R's settings: the paper's (the defaults) and ``config/sim-tuned.toml``'s."""
+    """E4R's settings: the paper's (its MPC weights and its body layer; its baseline, eq 19,
+    :data:`E4R_BASELINES`) and ``config/sim-tuned.toml``'s (the console's: the designed
+    body layer, the fin-model baseline)."""
     from ucat_console.config import AppConfig
 
     if not SIM_TUNED.is_file():
         raise ValueError(f"E4R: {SIM_TUNED} not found (E4R runs from the project's source tree)")
     tuned = AppConfig.from_toml(SIM_TUNED)
-    return {"paper": (MpcConfig(), BodyConfig()), "sim_tuned": (tuned.mpc, tuned.body)}
+    return {"paper": (MpcConfig(), PAPER_BODY), "sim_tuned": (tuned.mpc, tuned.body)}
+
+
+#: each E4R setting's baseline
+E4R_BASELINES = {"paper": PAPER_BASELINE, "sim_tuned": BaselineConfig()}
+
+
+def shipped_body() -> BodyConfig:
+    """The body layer the console ships (``config/sim-tuned.toml``'s, the designed layer),
+    which E4, E5 and E6 run under."""
+    return e4r_settings()["sim_tuned"][1]
 
 
 def controller_mode(controller: str, mpc: MpcConfig) -> tuple[str, MpcConfig]:
@@ -220,14 +232,16 @@ def e4r_scenarios(quick: bool, seed: int, speeds: Sequence[float] | None = None,
                     for s in seeds:
                         out.append(Scenario(mode=mode, v_ref=v, depth=depth, seed=s, plant=variant,
                                             settle_s=settle, window_s=window, start_velocity=0.0,
-                                            mpc=m, body=body, tag=f"{name}:{ctrl}"))
+                                            mpc=m, body=body, baseline=E4R_BASELINES[name],
+                                            tag=f"{name}:{ctrl}"))
     for sc in out:
         sc.check()
     return out
 
 
-def _settings_summary(mpc: MpcConfig, body: BodyConfig) -> dict[str, float]:
+def _settings_summary(mpc: MpcConfig, body: BodyConfig) -> dict[str, Any]:
     return {"lam_f": mpc.lam_f, "lam_st": mpc.lam_st, "lam_a": mpc.lam_a, "lam_d": mpc.lam_d,
+            "centre_rate": mpc.centre_rate, "body_layer": body.layer, "thrust_gain": body.thrust_gain,
             "velocity_kp": body.velocity.kp, "velocity_ki": body.velocity.ki,
             "velocity_limit": body.velocity.limit}
 
@@ -324,15 +338,19 @@ def e6_scenarios(quick: bool, seed: int, identified: dict[str, dict[str, Any]]) 
     for plant in e6_plants(quick):
         ident = identified[plant]
         model = mpc.replace(c_d=ident["c_d"], c_l=ident["c_l"])
-        configs = {"baseline": ("baseline", mpc), "baseline_id": ("baseline", model),
-                   "mpc": ("mpc", mpc), "mpc_id": ("mpc", model),
-                   "mpc_closed_id": ("mpc", model.replace(formulation="closed_stroke"))}
+        # the body layer's thrust gain is the forward force per unit of the controller's fin
+        # model: the identified scale for the paper's model, 1 for the identified model
+        scale = math.hypot(ident["c_d"], ident["c_l"]) / math.hypot(mpc.c_d, mpc.c_l)
+        paper_body, id_body = body.replace(thrust_gain=scale), body.replace(thrust_gain=1.0)
+        configs = {"baseline": ("baseline", mpc, paper_body), "baseline_id": ("baseline", model, id_body),
+                   "mpc": ("mpc", mpc, paper_body), "mpc_id": ("mpc", model, id_body),
+                   "mpc_closed_id": ("mpc", model.replace(formulation="closed_stroke"), id_body)}
         for v in speeds:
             for ctrl in E6_CONTROLLERS:
-                mode, m = configs[ctrl]
+                mode, m, b = configs[ctrl]
                 for s in seeds:
                     out.append(Scenario(mode=mode, v_ref=v, seed=s, plant=plant, settle_s=settle,
-                                        window_s=window, start_velocity=0.0, mpc=m, body=body,
+                                        window_s=window, start_velocity=0.0, mpc=m, body=b,
                                         tag=f"E6:{ctrl}"))
     for sc in out:
         sc.check()
@@ -381,7 +399,7 @@ def run_e6(client: Any, quick: bool, seed: int, progress: bool = True) -> dict[s
 # ---------------------------------------------------------------------------- E5
 def e5_scenarios(quick: bool, seed: int, depth: float = 3.0) -> list[Scenario]:
     half = 15.0 if quick else 150.0
-    out = [Scenario(mode="mpc_sync", v_ref=0.2, depth=depth, yaw_rate=0.1, seed=seed, plant=w,
+    out = [Scenario(mode="mpc_sync", v_ref=0.2, depth=depth, yaw_rate=0.1, seed=seed, plant=w, body=shipped_body(),
                     settle_s=half, window_s=half, start_depth=E5_START_DEPTH, start_velocity=0.2,
                     current=E5_CURRENT, trace_rate=2.0, tag="E5") for w in E5_WAKES]
     for sc in out:
@@ -444,12 +462,12 @@ def sweep_scenarios(lam_st: Sequence[float], lam_d: Sequence[float], speeds: Seq
     for v in speeds:
         for s in seeds:
             out.append(Scenario(mode="baseline", v_ref=v, seed=s, plant=plant, settle_s=settle,
-                                window_s=window, tag="sweep"))
+                                window_s=window, body=shipped_body(), tag="sweep"))
             for a in lam_st:
                 for d in lam_d:
                     out.append(Scenario(mode="mpc", v_ref=v, seed=s, plant=plant, settle_s=settle,
                                         window_s=window, mpc=MpcConfig(lam_st=a, lam_d=d, formulation=formulation),
-                                        tag="sweep"))
+                                        body=shipped_body(), tag="sweep"))
     for sc in out:
         sc.check()
     return out

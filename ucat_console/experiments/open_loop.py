@@ -27,7 +27,7 @@ from ucat_console.backend.loop.planners import BaselineFinPlanner, MpcFinPlanner
 from ucat_console.bench import mpc as bench
 from ucat_console.control.allocation import allocate
 from ucat_console.control.baseline import wrap_angle
-from ucat_console.control.params import BaselineConfig, MpcConfig
+from ucat_console.control.params import PAPER_BASELINE, BaselineConfig, MpcConfig
 from ucat_console.experiments import paper
 
 SPEEDS = (0.2, 0.3, 0.4)
@@ -144,7 +144,7 @@ def run_e2(quick: bool, seed: int, progress: bool = True) -> tuple[dict[str, Any
                     fins = allocate(fx, fy, 0.0).per_fin()
                     plans = []
                     for i, tgt in enumerate(fins):
-                        planner = (BaselineFinPlanner(cfg, BaselineConfig()) if ctrl == "baseline"
+                        planner = (BaselineFinPlanner(cfg, PAPER_BASELINE) if ctrl == "baseline"
                                    else MpcFinPlanner(cfg, seed * 100003 + k * 4 + i))
                         seq = _sequence(planner, tgt, v, CYCLES, bench.U_PREV0)[1:]
                         bar.update(CYCLES)

@@ -119,11 +119,13 @@ class Scenario:
     current: tuple[float, float, float] = (0.0, 0.0, 0.0)
     mpc: MpcConfig = field(default_factory=MpcConfig)
     body: BodyConfig = field(default_factory=BodyConfig)
+    baseline: BaselineConfig = field(default_factory=BaselineConfig)
     trace_rate: float = 0.0  # Hz of the returned trace; 0: none
     tag: str = ""
 
     def loop_config(self) -> LoopConfig:
-        return LoopConfig(mode=self.mode, planner_seed=self.seed, mpc=self.mpc, body=self.body)
+        return LoopConfig(mode=self.mode, planner_seed=self.seed, mpc=self.mpc, body=self.body,
+                          baseline=self.baseline)
 
     def check(self) -> None:
         """Refuse setpoints outside the loop's envelope before anything runs."""
@@ -287,6 +289,7 @@ def _scenario_dict(sc: Scenario) -> dict[str, Any]:
     d = asdict(sc)
     d["mpc"] = {k: d["mpc"][k] for k in ("formulation", "lam_f", "lam_st", "lam_a", "lam_d", "lam_c", "lam_e",
                                          "n_samples", "c_d", "c_l")}
-    d["body"] = {"velocity": d["body"]["velocity"]}
+    d["body"] = {"layer": sc.body.layer, "thrust_gain": sc.body.thrust_gain, "velocity": d["body"]["velocity"]}
+    d["baseline"] = {"inverse_model": sc.baseline.inverse_model}
     d["current"] = list(sc.current)
     return d

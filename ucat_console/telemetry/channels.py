@@ -13,6 +13,7 @@ from ucat_console.telemetry.messages import (
     BodyAllocation,
     BodyCommand,
     BodyState,
+    BodyTracking,
     FinCycle,
     FinPlan,
     FinState,
@@ -27,6 +28,7 @@ BODY_STATE = "body/state"
 SETPOINTS = "body/setpoints"
 BODY_COMMAND = "body/command"
 BODY_ALLOCATION = "body/allocation"
+BODY_TRACKING = "body/tracking"
 POWER = "power"
 STATUS = "status"
 EVENTS = "events"
@@ -57,6 +59,7 @@ CHANNELS: dict[str, type] = {
     SETPOINTS: Setpoints,
     BODY_COMMAND: BodyCommand,
     BODY_ALLOCATION: BodyAllocation,
+    BODY_TRACKING: BodyTracking,
     POWER: Power,
     STATUS: Status,
     EVENTS: Event,

@@ -77,6 +77,23 @@ class BodyAllocation:
 
 
 @dataclass(frozen=True)
+class BodyTracking:
+    """What the body layer holds the robot to now, and how far the robot is from it: the
+    designed layer's references (which close on the setpoints at limited rates), the paper
+    layer's setpoints. Errors are measured minus reference; NaN where there is none."""
+
+    t: Time
+    driving: Annotated[bool, Doc("the fins are driven (armed)")]
+    speed_ref: Annotated[float, Doc("forward speed reference", "m/s")]
+    depth_ref: Annotated[float, Doc("depth reference (positive down)", "m")]
+    heading_ref: Annotated[float, Doc("heading reference (designed layer; NaN: none)", "rad", "NED")]
+    yaw_rate_ref: Annotated[float, Doc("yaw rate reference, positive clockwise seen from above", "rad/s")]
+    speed_error: Annotated[float, Doc("filtered forward speed minus its reference", "m/s")]
+    depth_error: Annotated[float, Doc("filtered depth minus its reference", "m")]
+    heading_error: Annotated[float, Doc("heading minus its reference, wrapped to (-pi, pi]", "rad")]
+
+
+@dataclass(frozen=True)
 class FinState:
     """One fin's measured and commanded motion."""
 

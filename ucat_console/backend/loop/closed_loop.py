@@ -109,6 +109,7 @@ from ucat_console.telemetry.messages import (
     BodyAllocation,
     BodyCommand,
     BodyState,
+    BodyTracking,
     FinCycle,
     FinPlan,
     FinState,
@@ -131,7 +132,7 @@ PID_LOOPS = ("velocity", "depth", "yaw_rate")
 _FIN_STATE = tuple(ch.fin_state(pf) for pf in range(N_FINS))
 _FIN_CYCLE = tuple(ch.fin_cycle(pf) for pf in range(N_FINS))
 #: the telemetry a flag of the core asks for
-_WANTED = ((lc.F_BODY_COMMAND, (ch.BODY_COMMAND, ch.BODY_ALLOCATION)), (lc.F_STATE, (ch.BODY_STATE, *_FIN_STATE)),
+_WANTED = ((lc.F_BODY_COMMAND, (ch.BODY_COMMAND, ch.BODY_ALLOCATION, ch.BODY_TRACKING)), (lc.F_STATE, (ch.BODY_STATE, *_FIN_STATE)),
            (lc.F_POWER, (ch.POWER,)), (lc.F_IMU, (ch.IMU,)), (lc.F_DEPTH, (ch.DEPTH,)), (lc.F_DVL, (ch.DVL,)))
 
 
@@ -887,7 +888,8 @@ class ClosedLoop:
                                        v[f + 2 * N_FINS + pf], v[f + 3 * N_FINS + pf])))
 
     def _body_messages(self, v: list[float], add: Callable[[tuple[str, Any]], None]) -> None:
-        """The body command and the allocation of a body-command row, those a subscriber takes."""
+        """The body command, the allocation and the tracking of a body-command row, those a
+        subscriber takes."""
         t, b = v[lc.O_T], lc.O_V
         wants = self.stream.wants
         if wants(ch.BODY_COMMAND):
@@ -895,6 +897,8 @@ class ClosedLoop:
         if wants(ch.BODY_ALLOCATION):
             add((ch.BODY_ALLOCATION, BodyAllocation(t, v[b + 3], v[b + 4], v[b + 5], v[b + 6], v[b + 7], v[b + 8],
                                                     cut_names(int(v[b + 9])))))
+        if wants(ch.BODY_TRACKING):
+            add((ch.BODY_TRACKING, BodyTracking(t, v[b + 10] != 0.0, *v[b + 11:b + 18])))
 
     def _publish_stroke(self, t: float, fin: int, stroke: float, rate: float) -> None:
         if not self.stream.wants(ch.fin_strouhal(fin)):
