@@ -12,10 +12,11 @@ simulated seconds per second. The loop's paced clock anchors the mapping
 skipped; without one, the first :meth:`DeviceRobotIO.advance_to` call does. Later calls
 wait until the device clock reaches ``t`` (so a loop without a paced clock is paced by the
 devices), and the mapping is re-anchored when the device clock runs ahead of the loop by
-more than ``resync_s`` (the loop was paused). Readings leave :meth:`advance_to` in loop time and in time order (a reading may
-carry a stamp a little after ``t``: the devices do not wait for the loop), each sensor's
-stamps strictly increasing; what queued up before the loop started (or while it was
-paused) is reduced to the latest reading of each kind, stamped ``t``.
+more than ``resync_s`` (the loop was paused). Readings leave :meth:`advance_to` in loop
+time and in time order (a reading may carry a stamp a little after ``t``: the devices do
+not wait for the loop), each sensor's stamps strictly increasing; what queued up before the
+loop started (or while it was paused, or stalled) is reduced to the latest reading of each
+kind, stamped ``t``.
 
 Events. Every driver fault is an :class:`Event` (source ``epos2.<node>``, ``imu``, ``dvl``,
 ``pressure``) stamped in loop time and handed to each sink added with
@@ -133,6 +134,7 @@ class DeviceRobotIO(RobotIO):
         #: from the console; this class never uses it
         self.rig: object | None = None
         self._dvl_events = EventReporter("dvl", self._on_event, wall_clock)
+
         def time_of(name: str) -> Callable[[], float] | None:
             return None if device_time is None else (lambda: device_time(name))
 
