@@ -820,6 +820,9 @@ def start_emulated_nodes(
     calls :meth:`EmulatedNodes.tick`.
     """
     cfg = config or Epos2EmulatorConfig()
+    # the compiled servo step is loaded here, not by the first tick: loading it takes seconds
+    # on a busy machine, and a tick holds its node's lock while the node must answer NMT
+    servo_step(0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1e-3, 1.0)
     emulators: dict[int, Epos2Emulator] = {}
     try:
         for node_id in node_ids:
