@@ -2,7 +2,8 @@
 
 :class:`AppConfig` composes the blocks defined beside the code that uses them (the
 controller's ``mpc``, ``body``, ``baseline``, ``executor``, ``power``; the closed loop's
-``loop``; the simulated robot's ``plant``; the ``recorder``; the drivers' ``devices``) with the console's own
+``loop``; the simulated robot's ``plant``; the ``recorder``; the limits on reading session
+files, ``review``; the drivers' ``devices``) with the console's own
 blocks defined here: ``console`` (web server, plots, supervision), ``access`` (pilot
 token) and ``failsafe`` (one rule per failsafe). ``robot`` picks the robot the
 supervisor drives: ``"sim"`` (the in-process simulator) or ``"rig"`` (the device drivers).
@@ -40,6 +41,7 @@ import tomli_w
 
 from ucat_console.backend.devices.config import DevicesConfig
 from ucat_console.backend.loop.config import LoopConfig
+from ucat_console.backend.sessions.limits import ReviewConfig
 from ucat_console.backend.sessions.recorder import RecorderConfig
 from ucat_console.backend.sim.params import PlantConfig
 from ucat_console.typedconf import Config, coerce, from_dict, param, to_dict
@@ -206,6 +208,8 @@ class FailsafeConfig(Config):
         10, lo=1, hi=100_000, doc="late plans within planner_late.timeout that trigger planner_late"
     )
     tracking: FailsafeRule = FailsafeRule("warn", 10.0)
+    #: the recorder failed to write (a full disk): warn, or hold until the operator acts
+    recording: FailsafeRule = FailsafeRule("warn", 0.0)
     tracking_depth: float = param(
         0.2, lo=0.01, hi=100.0, unit="m", doc="tracking: depth further than this from its reference"
     )
@@ -225,6 +229,7 @@ class AppConfig(Config):
     loop: LoopConfig = LoopConfig()
     plant: PlantConfig = PlantConfig()
     recorder: RecorderConfig = RecorderConfig()
+    review: ReviewConfig = ReviewConfig()
     console: ConsoleConfig = ConsoleConfig()
     access: AccessConfig = AccessConfig()
     failsafe: FailsafeConfig = FailsafeConfig()

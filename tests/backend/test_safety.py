@@ -250,8 +250,8 @@ def test_tracking_warns_when_an_axis_stays_off_its_band_and_clears_when_back() -
         m.on_message(ch.BODY_TRACKING, tracking(t, depth_err=0.3 if t >= 2.0 else 0.0))
         seen += [(round(tr.t, 1), tr.name, tr.active) for tr in m.check(t) if tr.name == "tracking"]
     assert seen == [(7.0, "tracking", True)]  # 5 s after it left the band
-    assert "depth +0.30 m off its reference" in m.states()[-1].cause
-    assert m.states()[-1].action == "warn"
+    assert "depth +0.30 m off its reference" in next(s for s in m.states() if s.name == "tracking").cause
+    assert next(s for s in m.states() if s.name == "tracking").action == "warn"
     m.on_message(ch.BODY_TRACKING, tracking(10.1))
     assert names(m.check(10.1)) == [("tracking", False)]
 

@@ -33,6 +33,10 @@ Failsafes (``FailsafeConfig`` has one rule, action and timeout, for each):
   ``tracking_speed``, ``tracking_heading``) from what the body layer holds it to for
   ``timeout`` s; clears when every axis is back within its band. Warns by default: the
   robot does not go where it is sent.
+* ``recording``: the session recorder failed to write (an Event ``recorder``/``write_failed``:
+  a full disk, a removed drive) and has not been started again or acknowledged since (an
+  Event ``recorder``/``failure_cleared``). Warns by default (``hold`` keeps the robot where
+  it is until the operator acts): what the robot does from then on is not recorded.
 
 Times are the supervisor's clock (the loop's time). A valid sensor reading counts at its
 own time ``t`` (the robot stamps readings with the loop's time; one more than a minute away
@@ -58,7 +62,7 @@ from ucat_console.telemetry.events import Event
 log = logging.getLogger(__name__)
 
 #: every failsafe, in display order
-FAILSAFES = ("pilot_gone", "imu", "dvl", "depth", "motor", "planner_late", "tracking")
+FAILSAFES = ("pilot_gone", "imu", "dvl", "depth", "motor", "planner_late", "tracking", "recording")
 SENSORS = ("imu", "dvl", "depth")
 #: motor controller event codes that start a fault (a ``quick_stop`` event is the other
 #: drives' safe-state reaction to one of these, which the failsafe already counts)
@@ -169,6 +173,7 @@ class SafetyMonitor:
         self._late: collections.deque[float] = collections.deque()
         self._off_track: dict[str, tuple[float, float]] = {}  # axis -> (since, the last error)
         self._allocation: Any = None  # the last BodyAllocation
+        self._recorder_failed: tuple[float, str] | None = None  # (since, why)
         self._active: dict[str, float] = {}  # name -> since
         self._escalated: set[str] = set()  # active failsafes whose escalation acted
         self._cause: dict[str, str] = {n: "" for n in FAILSAFES}
@@ -244,6 +249,11 @@ class SafetyMonitor:
                     faults.pop(ev.data["fault"], None)
             elif ev.source == "loop" and ev.code == "late_plan":
                 self._late.append(self._now)
+            elif ev.source == "recorder" and ev.code == "write_failed":
+                why = ev.data.get("error")
+                self._recorder_failed = (self._now, why if isinstance(why, str) else ev.message)
+            elif ev.source == "recorder" and ev.code == "failure_cleared":
+                self._recorder_failed = None
 
     def note_invalid(self, sensor: str, what: str = "") -> None:
         """A reading of ``sensor`` was refused before it reached the stream (non-finite)."""
@@ -331,6 +341,9 @@ class SafetyMonitor:
                for since, err in (self._off_track[axis],) if now - since >= cfg.tracking.timeout]
         if off:
             causes["tracking"] = "not tracking: " + ", ".join(off)
+        failed = self._recorder_failed
+        if failed is not None and now - failed[0] >= cfg.recording.timeout:
+            causes["recording"] = f"the recording stopped: {failed[1]}"
         return causes
 
     # ------------------------------------------------------------------ reading

@@ -11,6 +11,15 @@ sampler contract and one cost definition:
   ``maxiter=max_iter`` from the best sample.
 
 Both keep each stroke's sign from its warm start and never return a plan worse than it.
+
+Beyond the paper, two things make a plan the one that runs. Given the fin drives' timing
+(``FinMpc(..., drive=ExecutorConfig)``), the cost caps each stroke's rate at what the drive
+can make of it (``control.stroke_timing``), so the solver searches the plans the drive runs,
+and the plan's rates are capped the same way. With ``MpcConfig.centre_rate`` > 0 the
+solved cycle is laid about the oscillation centre the target's direction asks for
+(:func:`centred_cycle`): the solver decides the cycle's amplitude and rates (its trade-off of
+force, Strouhal number, amplitude and smoothness), the centre its direction. The plan
+returned is the cycle as it runs, with its cost.
 The compiled solver also solves the closed-stroke formulation (``formulation =
 "closed_stroke"``, see :mod:`ucat_console.control.cost`), with its own compiled entry points.
 
@@ -225,7 +234,7 @@ class FinMpc:
             raise FloatingPointError(f"planner produced a non-finite plan {u}")
         cost = _breakdown(self._terms)
         if self._drive is not None or cfg.centre_rate > 0.0:
-            u, cost = self._executable(u, f, v, th, up, cost)
+            u, cost = self._executable(u, f, v, th, up)
         return self._make_plan(
             tuple(u), cost, th, t_sample, t_refine,
             tuple(self._best_u[0].tolist()), float(self._best_j[0]),
@@ -239,31 +248,15 @@ class FinMpc:
         return [u[0], u[1], min(u[2], max(self.config.w_min, mean_rate_limit(u[0], a, w_max))),
                 min(u[3], max(self.config.w_min, mean_rate_limit(u[1], a, w_max)))]
 
-    def _executable(self, u: list[float], f: tuple, v: float, th: float, up: tuple,
-                    cost: CostBreakdown) -> tuple[list[float], CostBreakdown]:
+    def _executable(self, u: list[float], f: tuple, v: float, th: float, up: tuple) -> tuple[list[float], CostBreakdown]:
         """The solved plan as it will run (beyond the paper; module docstring): centred on
         the oscillation centre the target's direction asks for, and its rates timed by the
         drive. Returns the plan and its cost."""
-        cfg = self.config
         out = u
-        if cfg.centre_rate > 0.0 and math.hypot(*f) >= 1e-3:
-            out = centred_cycle(u, f, th, up, cfg)
+        if self.config.centre_rate > 0.0 and math.hypot(*f) >= 1e-3:
+            out = centred_cycle(u, f, th, up, self.config)
         out = self._timed(out)
         return out, self.score(tuple(out), f, v, th, up)
-        want = math.atan2(f[1], f[0])
-        turn = 0.0
-        for _ in range(3):
-            if math.hypot(*cost.mean_force) < 1e-6:
-                break
-            lim = cfg.centre_rate * (abs(out[0]) / out[2] + abs(out[1]) / out[3])
-            step = math.remainder(want - math.atan2(cost.mean_force[1], cost.mean_force[0]), 2.0 * math.pi)
-            new_turn = min(lim, max(-lim, turn + step))
-            if new_turn == turn:
-                break
-            turn = new_turn
-            out = self._timed([u[0] + turn, u[1], u[2], u[3]])
-            cost = self.score(tuple(out), f, v, th, up)
-        return out, cost
 
     def _plan_scipy(self, f, v, th, up, seed, refine) -> Plan:
         import scipy.optimize  # here only: nothing else of the console imports scipy.optimize

@@ -398,8 +398,11 @@ def run_e6(client: Any, quick: bool, seed: int, progress: bool = True) -> dict[s
 
 # ---------------------------------------------------------------------------- E5
 def e5_scenarios(quick: bool, seed: int, depth: float = 3.0) -> list[Scenario]:
+    """E5 under the console's settings (``config/sim-tuned.toml``'s MPC weights and body
+    layer): under the paper's weights the MPC does not swim on this plant (E4R)."""
     half = 15.0 if quick else 150.0
-    out = [Scenario(mode="mpc_sync", v_ref=0.2, depth=depth, yaw_rate=0.1, seed=seed, plant=w, body=shipped_body(),
+    mpc, body = e4r_settings()["sim_tuned"]
+    out = [Scenario(mode="mpc_sync", v_ref=0.2, depth=depth, yaw_rate=0.1, seed=seed, plant=w, mpc=mpc, body=body,
                     settle_s=half, window_s=half, start_depth=E5_START_DEPTH, start_velocity=0.2,
                     current=E5_CURRENT, trace_rate=2.0, tag="E5") for w in E5_WAKES]
     for sc in out:

@@ -184,7 +184,9 @@ def _run_one(name: str, tmp: Path, quick: bool, seed: int, client: Any,
         res["figures"] = [figures.e5_figure(traces, res, tmp)]
         res["findings"] = ["Yaw rate follows the NED convention (positive: clockwise seen from above); "
                            "the paper's counter-clockwise circle at +0.1 rad/s implies the opposite (z up) "
-                           "sign convention, so only the turn rate and the circle are compared."]
+                           "sign convention, so only the turn rate and the circle are compared.",
+                           "Settings: the console's (config/sim-tuned.toml: its MPC weights, the designed body "
+                           "layer); under the paper's weights the MPC does not swim on this plant (E4R)."]
         return res
     raise ValueError(f"experiment: {name!r} is not one of {', '.join(EXPERIMENTS)}")
 

@@ -80,7 +80,8 @@ class BodyAllocation:
 class BodyTracking:
     """What the body layer holds the robot to now, and how far the robot is from it: the
     designed layer's references (which close on the setpoints at limited rates), the paper
-    layer's setpoints. Errors are measured minus reference; NaN where there is none."""
+    layer's setpoints. Errors are measured minus reference; NaN where there is none (and
+    in the identification manoeuvre, whose fins ignore the loops)."""
 
     t: Time
     driving: Annotated[bool, Doc("the fins are driven (armed)")]

@@ -68,6 +68,10 @@ FOLLOW_STEP = 0.02
 
 _EVENTS_KEPT = 200
 _QUIET_EVENTS = frozenset({"stroke_timeout"})
+#: events every page is notified of (source, code): what the operators must see at once
+ALARMS = frozenset({("recorder", "write_failed")})
+#: events that end an alarm's notification (source, code)
+ALARM_ENDS = frozenset({("recorder", "failure_cleared")})
 #: the docked panels' widths (px): plots on the left, controls on the right
 PLOTS_WIDTH = 400
 CONTROLS_WIDTH = 360
@@ -111,6 +115,7 @@ class ConsoleApp:
         self._lock = threading.Lock()
         self._plans: list[FinPlan | None] = [None] * N_FINS
         self._events: collections.deque[Event] = collections.deque(maxlen=_EVENTS_KEPT)
+        self._alarms: collections.deque[Event] = collections.deque(maxlen=10)  # to notify every page of
         self.events_seen = 0  # events kept so far: the pages' lists change with it
         self._dirty = threading.Event()
         self.panels: dict[int, panels.ControlPanel] = {}
@@ -222,6 +227,8 @@ class ConsoleApp:
         elif tp is Event and msg.code not in _QUIET_EVENTS:
             self._events.append(msg)
             self.events_seen += 1
+            if (msg.source, msg.code) in ALARMS or (msg.source, msg.code) in ALARM_ENDS:
+                self._alarms.append(msg)
 
     def recent_events(self) -> list[Event]:
         return list(self._events)
@@ -361,7 +368,24 @@ class ConsoleApp:
             self._next_follow = now + FOLLOW_PERIOD
             self._follow()
 
+    def _notify_pages(self) -> None:
+        """Every page gets a notification of each alarm (it stays until closed), and of its end."""
+        while self._alarms:
+            ev = self._alarms.popleft()
+            alarm = (ev.source, ev.code) in ALARMS
+            with self._lock:
+                pages = list(self.pages.values())
+            for page in pages:
+                try:
+                    page.client.add_notification(
+                        f"ALARM: {ev.source} {ev.code}" if alarm else f"{ev.source}: cleared", ev.message,
+                        color="red" if alarm else "green", with_close_button=True,
+                        auto_close_seconds=None if alarm else 10.0)
+                except Exception:
+                    log.debug("client %s was not notified", page.client.client_id, exc_info=True)
+
     def _tick_slow(self) -> None:
+        self._notify_pages()
         sup = self.sup
         h = sup.health()
         _set(self.introspection, markdown.introspection_markdown(list(self._plans), h.late_plans,

@@ -61,6 +61,7 @@ INSTALL = r"""
       overflow: hidden; text-overflow: ellipsis; }
     #ucat-bar .armed.stale { background: #6b7280; }
     #ucat-bar .rec { color: #ff5c5c; font-weight: 700; }
+    #ucat-bar .rec-failed { color: #fff; background: #b91c1c; padding: 2px 8px; border-radius: 3px; cursor: help; }
     #ucat-bar .fs { color: #fff; background: #b45309; padding: 2px 8px; border-radius: 3px; font-weight: 700; }
     #ucat-bar .light-dot { display: inline-flex; align-items: center; gap: 4px; margin-right: 6px; cursor: help; }
     #ucat-bar .dot { width: 11px; height: 11px; border-radius: 50%%; display: inline-block; }
@@ -132,7 +133,8 @@ INSTALL = r"""
     armed.className = "armed " + (s.armed ? "on" : "off");
     armed.title = "";
     info.textContent = `mode ${s.mode}  ·  pilot: ${s.pilot}  ·  link ok`;
-    rec.textContent = s.recording ? `● REC ${s.recording}` : "";
+    rec.textContent = s.recording_failed ? "● REC FAILED" : (s.recording ? `● REC ${s.recording}` : "");
+    rec.className = "rec" + (s.recording_failed ? " rec-failed" : ""); rec.title = s.recording_failed || "";
     fs.style.display = s.failsafes.length ? "inline" : "none";
     fs.textContent = s.failsafes.length ? "FAILSAFE " + s.failsafes.join(", ") : "";
     lights.textContent = "";

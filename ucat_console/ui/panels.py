@@ -408,10 +408,13 @@ class ControlPanel:
         for h in (self.apply_sp, self.apply_tuning, self.revert, self.save, self.history, self.note, self.marker,
                   self.marker_key, self.stop_key, self.disarm_key, *self.key_commands.values()):
             self._set_prop(h, "disabled", not pilot)
+        failed = sup.recorder.failed
         self._set_prop(self.rec_start, "disabled", not pilot or recording)
-        self._set_prop(self.rec_stop, "disabled", not pilot or not recording)
+        self._set_prop(self.rec_stop, "disabled", not pilot or not (recording or failed))
         self._push("history", self.history, float(self.app.history), force)
-        _set(self.rec_status, f"Recording **{esc(sup.recorder.session_id)}**" if recording else "Not recording")
+        _set(self.rec_status, f"**Recording FAILED:** {esc(failed)}. Start recording again once there is space "
+                              "(a new session), or Stop recording to acknowledge." if failed
+             else f"Recording **{esc(sup.recorder.session_id)}**" if recording else "Not recording")
         if self.reset_drives is not None:
             self._set_prop(self.reset_drives, "disabled", not pilot or armed)
             self._set_prop(self.zero_depth, "disabled", not pilot or armed)

@@ -53,7 +53,7 @@ from typing import Any, Callable
 
 from viser._messages import GuiSliderMark
 
-from ucat_console.backend.sessions import files, index, repair
+from ucat_console.backend.sessions import files, index, repair, shared
 from ucat_console.backend.sessions.markers import MAX_NOTE_BYTES, Marker, check_note
 from ucat_console.backend.sessions.player import MAX_SPEED, MIN_SPEED, Player, check_speed
 from ucat_console.backend.sessions.reader import SessionParts, part_paths
@@ -289,11 +289,12 @@ class PlaybackPanel:
         """Open a session for review at its start (paused): every part of the session named
         by its id or by any one of its part files."""
         target: str | Path = self._path(name) if self._name(name).endswith(files.SUFFIX) else name
-        reader = SessionParts(target, self.directory)  # a truncated part: TruncatedSessionError
+        reader = shared.acquire(target, self.directory)  # a truncated part: TruncatedSessionError
         try:
-            player = Player(reader, self.stream, speed=self._speed, loop=bool(self.loop.value))
+            player = Player(reader, self.stream, speed=self._speed, loop=bool(self.loop.value),
+                            on_error=self._play_failed)
         except BaseException:
-            reader.close()
+            shared.release(reader)
             raise
         self.close_session(quiet=True)
         with self._lock:
@@ -323,8 +324,15 @@ class PlaybackPanel:
         if player is not None:
             player.close()
         if reader is not None:
-            reader.close()
+            shared.release(reader)
         return player is not None
+
+    def _play_failed(self, text: str) -> None:
+        """The player stopped on a failure (its thread): the page shows why."""
+        try:
+            self.show(f"playback stopped: {text}", error=True)
+        except Exception:
+            log.debug("a playback failure was not shown", exc_info=True)
 
     def close_session(self, quiet: bool = False) -> None:
         was_open = self._let_go()
@@ -531,8 +539,9 @@ class PlaybackPanel:
 
     def _mark_events(self, reader: Any) -> None:
         """Ticks on the timeline at the session's warnings and errors (and markers)."""
-        start = reader.start
-        times = sorted({round(e.t - start, 2) for e in reader.events() if e.level in ("warning", "error", "fatal")})
+        start = reader.start_ns
+        times = sorted({round((ns - start) * 1e-9, 2)
+                        for ns in reader.event_index().at_levels(("warning", "error", "fatal"))})
         if len(times) > MAX_TIMELINE_MARKS:  # keep the slider readable
             step = len(times) / MAX_TIMELINE_MARKS
             times = [times[int(i * step)] for i in range(MAX_TIMELINE_MARKS)]
@@ -565,7 +574,7 @@ class PlaybackPanel:
         if self.loop.value != p.loop:
             self.loop.value = p.loop
         r = self.reader
-        state = "playing" if p.playing else "paused"
+        state = "playing" if p.playing else "**stopped on an error** (below)" if p.error else "paused"
         name = ""
         if r is not None:
             name = r.session_id

@@ -16,7 +16,7 @@ from ucat_console.backend.safety import SENSORS
 
 #: the lights, in the bar's order: sensor or part -> label
 LIGHTS = {"imu": "IMU", "dvl": "DVL", "depth": "Depth", "drives": "Drives", "planner": "Planner",
-          "control": "Control"}
+          "control": "Control", "recording": "Recording"}
 MODE_LABELS = {"mpc": "MPC", "mpc_sync": "MPC sync", "baseline": "baseline"}
 ACTIONS = {"hold": "stops and holds its depth", "surface": "stops and rises to the surface",
            "disarm": "turns its motors off", "warn": "goes on (warn only)"}
@@ -71,7 +71,18 @@ def lights(sup: Any, loading: str = "") -> list[Light]:
             f" ({overruns} plans since the start were ready after their hand-over deadline; "
             "a fin then starts its stroke a little later)" if overruns else "")))
     out.append(control_light(safety, active))
+    out.append(recording_light(sup))
     return out
+
+
+def recording_light(sup: Any) -> Light:
+    """Whether what the robot does is recorded: red when the recorder failed to write."""
+    failed = sup.recording.failed
+    if failed:
+        return Light(LIGHTS["recording"], "bad", f"recording FAILED: {failed}; Start recording again once "
+                     "there is space, or Stop recording to acknowledge")
+    sid = sup.recording.session_id
+    return Light(LIGHTS["recording"], "ok" if sid else "off", f"recording {sid}" if sid else "not recording")
 
 
 def control_light(safety: Any, active: dict[str, Any]) -> Light:
@@ -114,6 +125,7 @@ def bar_state(sup: Any, client: int | None, *, dark: bool, uuids: dict[str, str]
         "pilot": pilot_label(sup, client),
         "you_pilot": client is not None and sup.access.is_pilot(client),
         "recording": sup.recording.session_id,
+        "recording_failed": sup.recording.failed,
         "failsafes": list(sup.safety.active()) + ([f"loop stopped: {sup.fault}"] if sup.fault else []),
         "lights": [x.as_dict() for x in lights(sup, loading)],
         "battery": "no battery sensor",

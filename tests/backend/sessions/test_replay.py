@@ -162,3 +162,28 @@ def test_refused_plans_are_summarised_in_one_log_line(sessions, caplog):
     assert res.skipped == 5 and len(res.rows) == 5
     lines = [rec for rec in caplog.records if "not replayed" in rec.getMessage()]
     assert len(lines) == 1 and "5 of 10" in lines[0].getMessage()
+
+
+def test_plans_timed_by_the_drive_replay_exactly_with_the_recorded_drive(sessions):
+    """A session whose planners timed strokes by the drives (its recorded [executor] has the
+    drives' acceleration, as every session of this version does) replays with that timing."""
+    from ucat_console.control.params import ExecutorConfig
+
+    drive = ExecutorConfig(acceleration=40.0)
+    cfg = CFG.replace(centre_rate=2.0)
+    planner = FinMpc(cfg, drive=drive)
+    items, u_prev, theta = [], (0.5, -0.5, 2.0, 2.0), 0.0
+    for k in range(6):
+        target = (-0.3, 0.2 * (k % 2))
+        plan = planner.plan(target, 0.2, theta, u_prev, seed=SEED)
+        c = plan.cost
+        items.append((C.fin_plan(0), FinPlan(
+            t=0.5 * k, fin=0, mode="mpc", target=target, v_body=0.2, theta0=theta, u_prev=u_prev, u=plan.u,
+            commands=plan.commands, cost_total=c.total, cost_force=c.force, cost_strouhal=c.strouhal_penalty,
+            cost_amplitude=c.amplitude, cost_smoothness=c.smoothness, st=c.st, mean_force=c.mean_force,
+            solve_time=0.0, late=False)))
+        u_prev, theta = plan.u, plan.commands[2]
+    [path] = record(sessions, items, config_toml="[mpc]\n" + cfg.to_toml() + "\n[executor]\n" + drive.to_toml())
+    with SessionReader(path, sessions) as r:
+        res = counterfactual(r, {}, seed=SEED)
+    assert [row.u for row in sorted(res.rows, key=lambda x: x.t)] == [m.u for _, m in items]

@@ -132,8 +132,9 @@ PID_LOOPS = ("velocity", "depth", "yaw_rate")
 _FIN_STATE = tuple(ch.fin_state(pf) for pf in range(N_FINS))
 _FIN_CYCLE = tuple(ch.fin_cycle(pf) for pf in range(N_FINS))
 #: the telemetry a flag of the core asks for
-_WANTED = ((lc.F_BODY_COMMAND, (ch.BODY_COMMAND, ch.BODY_ALLOCATION, ch.BODY_TRACKING)), (lc.F_STATE, (ch.BODY_STATE, *_FIN_STATE)),
-           (lc.F_POWER, (ch.POWER,)), (lc.F_IMU, (ch.IMU,)), (lc.F_DEPTH, (ch.DEPTH,)), (lc.F_DVL, (ch.DVL,)))
+_WANTED = ((lc.F_BODY_COMMAND, (ch.BODY_COMMAND, ch.BODY_ALLOCATION, ch.BODY_TRACKING)),
+           (lc.F_STATE, (ch.BODY_STATE, *_FIN_STATE)), (lc.F_POWER, (ch.POWER,)), (lc.F_IMU, (ch.IMU,)),
+           (lc.F_DEPTH, (ch.DEPTH,)), (lc.F_DVL, (ch.DVL,)))
 
 
 def kept_waiting(done: float, arrived: float, deadline: float) -> float:
@@ -898,7 +899,10 @@ class ClosedLoop:
             add((ch.BODY_ALLOCATION, BodyAllocation(t, v[b + 3], v[b + 4], v[b + 5], v[b + 6], v[b + 7], v[b + 8],
                                                     cut_names(int(v[b + 9])))))
         if wants(ch.BODY_TRACKING):
-            add((ch.BODY_TRACKING, BodyTracking(t, v[b + 10] != 0.0, *v[b + 11:b + 18])))
+            refs, errors = v[b + 11:b + 15], v[b + 15:b + 18]
+            if self._mode == "identify":  # the manoeuvre's fins ignore the loops: no tracking to judge
+                errors = [math.nan] * 3
+            add((ch.BODY_TRACKING, BodyTracking(t, v[b + 10] != 0.0, *refs, *errors)))
 
     def _publish_stroke(self, t: float, fin: int, stroke: float, rate: float) -> None:
         if not self.stream.wants(ch.fin_strouhal(fin)):

@@ -66,6 +66,14 @@ def markers_path(directory: Path, session_id: str) -> Path:
     return directory / f"{session_id}{MARKERS_SUFFIX}"
 
 
+def printable(text: str) -> str:
+    """``text`` with each character that is not printable escaped (a file name shown on a
+    terminal or a page: no control characters; undecodable bytes as ``\\udcXX``)."""
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text)
+
+
 def sessions_dir(directory: str | Path | None = None) -> Path:
     """The sessions directory (default: ``sessions/`` at the project root), resolved."""
     return Path(DEFAULT_SESSIONS_DIR if directory is None else directory).expanduser().resolve()

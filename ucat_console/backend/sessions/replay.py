@@ -5,7 +5,8 @@ Each recorded :class:`~ucat_console.telemetry.messages.FinPlan` holds every inpu
 planner (target force, measured forward speed, start angle, previous plan). For each one,
 ``FinMpc(config).plan(target, v_body, theta0, u_prev, seed=seed)`` is run with the
 session's MPC configuration (the ``[mpc]`` table of its recorded configuration, then its
-recorded weights) changed by the requested weights. The recorded start angle is the fin's
+recorded weights) changed by the requested weights, and the drives' timing the session's
+planners used (:func:`recorded_drive`). The recorded start angle is the fin's
 measured angle, which winds up over whole turns in a long session; like the live planner
 (:class:`~ucat_console.backend.loop.planners.MpcFinPlanner`), the replay plans from it
 wrapped to (-pi, pi], so a plan is made from the same inputs as it was live.
@@ -32,6 +33,7 @@ import numpy as np
 
 from ucat_console.backend.sessions.reader import SessionSource
 from ucat_console.control import FinMpc, MpcConfig
+from ucat_console.control.params import ExecutorConfig
 from ucat_console.control.baseline import wrap_angle
 from ucat_console.control.power import drag_power
 from ucat_console.telemetry.channels import N_FINS, fin_plan
@@ -74,23 +76,39 @@ def parse_weights(text: str) -> dict[str, float]:
     return out
 
 
+def _recorded_doc(reader: SessionSource) -> dict:
+    text = reader.config_toml
+    if not text.strip():
+        return {}
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise ValueError(f"{reader.path}: recorded configuration is not valid TOML: {e}") from None
+
+
+def recorded_drive(reader: SessionSource) -> ExecutorConfig | None:
+    """The fin drives' timing the session's planners made their plans with: the recorded
+    ``[executor]`` table when it has the drives' ``acceleration`` (written by the versions
+    whose planners time strokes by the drive), else None (plans as solved)."""
+    ex = _recorded_doc(reader).get("executor")
+    if not isinstance(ex, dict) or "acceleration" not in ex:
+        return None
+    try:
+        return ExecutorConfig.from_dict(ex)
+    except ValueError as e:
+        raise ValueError(f"{reader.path}: recorded configuration: executor.{e}") from None
+
+
 def recorded_config(reader: SessionSource) -> MpcConfig:
     """The MPC configuration in force when the session was recorded (defaults for what
     the file does not say; of a split session, its first part's)."""
     cfg = MpcConfig()
-    text = reader.config_toml
-    if text.strip():
+    doc = _recorded_doc(reader)
+    if isinstance(doc.get("mpc"), dict):
         try:
-            doc = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as e:
-            raise ValueError(
-                f"{reader.path}: recorded configuration is not valid TOML: {e}"
-            ) from None
-        if isinstance(doc.get("mpc"), dict):
-            try:
-                cfg = MpcConfig.from_dict(doc["mpc"])
-            except ValueError as e:
-                raise ValueError(f"{reader.path}: recorded configuration: mpc.{e}") from None
+            cfg = MpcConfig.from_dict(doc["mpc"])
+        except ValueError as e:
+            raise ValueError(f"{reader.path}: recorded configuration: mpc.{e}") from None
     recorded = {k: v for k, v in reader.weights.items() if k in WEIGHT_NAMES}
     return cfg.replace(**recorded) if recorded else cfg
 
@@ -191,7 +209,8 @@ def counterfactual(
     for f in fin_set:
         if not 0 <= f < N_FINS:
             raise ValueError(f"fins: {f} is not a fin index (0-{N_FINS - 1})")
-    planners = {f: FinMpc(cfg) for f in fin_set}
+    drive = recorded_drive(reader)
+    planners = {f: FinMpc(cfg, drive=drive) for f in fin_set}
     channels = [fin_plan(f) for f in sorted(fin_set)]
     rows: list[ReplayRow] = []
     skipped = 0

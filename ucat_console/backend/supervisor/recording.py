@@ -50,6 +50,12 @@ class SessionRecording:
     def session_id(self) -> str:
         return self.recorder.session_id if self.recorder.recording else ""
 
+    @property
+    def failed(self) -> str:
+        """Why the recording stopped on its own ("" when it did not; until it is started
+        again or stopped)."""
+        return self.recorder.failed
+
     def _start(self, label: str = "", notes: str = "") -> str:
         return self.recorder.start(label=label, notes=notes, config_toml=self._config_toml(),
                                    weights=self._weights())
@@ -65,7 +71,8 @@ class SessionRecording:
         return sid
 
     def stop(self) -> list[Path]:
-        if not self.recorder.recording:
+        """Stop recording, or acknowledge a failed recording."""
+        if not self.recorder.recording and not self.recorder.failed:
             raise CommandRefused("record: not recording")
         paths = self.recorder.stop()
         self._auto = False

@@ -58,6 +58,7 @@ from ucat_console.backend.loop.config import MODES
 from ucat_console.backend.loop.planners import warm_up
 from ucat_console.backend.safety import CHANNELS as SAFETY_CHANNELS
 from ucat_console.backend.safety import SafetyMonitor, Transition
+from ucat_console.backend.sessions import limits
 from ucat_console.backend.sessions.foxglove import robot_geometry
 from ucat_console.backend.sessions.recorder import Recorder
 from ucat_console.backend.supervisor.arm_requests import ArmRequests
@@ -147,6 +148,7 @@ class Supervisor:
         self._lag = 0.0
         self.fault = ""
         self.wall0 = time.time()
+        limits.configure(cfg.review)  # what reading session files may cost, in this process
         self.recorder = Recorder(
             self.stream, cfg.recorder,
             directory=sessions_dir if sessions_dir is not None else (cfg.console.sessions_dir or None),
@@ -413,7 +415,8 @@ class Supervisor:
             lag_max=max(lag_max, self._lag), late_plans=self.loop.late_plans,
             plan_overruns=self.loop.plan_overruns, failsafes=self.safety.active(),
             clients=len(self.access.clients), pilot="" if pilot is None else actor_name(pilot),
-            recording=self.recording.session_id, fault=self.fault, stalls=self.loop.stalls,
+            recording=self.recording.session_id, fault=self.fault,
+            recording_failed=self.recording.failed, stalls=self.loop.stalls,
         )
 
     def current_config(self) -> AppConfig:
@@ -673,7 +676,13 @@ class Supervisor:
         return sid
 
     def stop_recording(self, who: Actor) -> list[Path]:
+        """Stop recording; after a failed write, acknowledge the failure (the recorder's
+        failure_cleared event clears the recording failsafe)."""
         self.access.require_pilot(who, "record")
+        if self.recording.failed:
+            paths = self.recording.stop()
+            self._notify()
+            return paths
         if not self.recording.recording:
             raise CommandRefused("record: not recording")
         self._publish_event("operator", "recording", f"{actor_name(who)} stopped recording "
