@@ -16,8 +16,10 @@ One TOML file configures a run; every table is optional::
     [loop]
     mode = "mpc_sync"
     [failsafe.pilot_gone]
-    action = "surface"
+    action = "hold"
     timeout = 3.0
+    escalate = "surface"
+    escalate_after = 20.0
 
 One tree, each value held once: the controller blocks (``mpc``, ``body``, ``baseline``,
 ``executor``, ``power``) live in the closed loop's :class:`LoopConfig` (``app.loop``, what
@@ -48,6 +50,10 @@ from ucat_console.typedconf import Config, coerce, from_dict, param, to_dict
 ROBOTS = ("sim", "rig")
 #: what a failsafe does when it triggers
 FAILSAFE_ACTIONS = ("hold", "surface", "disarm", "warn")
+#: how strongly each action acts: an escalation acts more strongly than the action before it
+ACTION_STRENGTH = {"warn": 0, "hold": 1, "surface": 2, "disarm": 3}
+#: what a failsafe may do when its cause lasts on (``none``: nothing more)
+ESCALATIONS = ("none", "hold", "surface", "disarm")
 #: the controller blocks: held by the loop's configuration, top-level tables in a file
 LOOP_BLOCKS = ("mpc", "baseline", "body", "executor", "power")
 
@@ -89,11 +95,23 @@ class ConsoleConfig(Config):
         0.05, lo=0.005, hi=0.5, unit="s",
         doc="the loop runs in chunks of this length; arming, failsafes and status act between chunks",
     )
+    max_lag: float = param(
+        0.25, lo=0.02, hi=10.0, unit="s",
+        doc="a real-time loop held back further than this behind the wall clock (a busy computer) "
+        "skips ahead to the present and records the stall (Event loop/stall) instead of replaying "
+        "the missed time; a shorter lag is caught up",
+    )
     health_period: float = param(5.0, lo=0.5, hi=3600.0, unit="s", doc="terminal health line period")
     record_on_arm: bool = param(True, doc="start recording when the motors are armed")
     record_tail: float = param(
         5.0, lo=0.0, hi=3600.0, unit="s",
-        doc="a recording started by arming stops this long after disarming",
+        doc="a recording started by arming stops this long after disarming, and after the last "
+        "fault (a failsafe, a drive fault) cleared, so that its clearing is recorded",
+    )
+    record_tail_max: float = param(
+        120.0, lo=0.0, hi=86400.0, unit="s",
+        doc="a recording started by arming stops this long after disarming at the latest, "
+        "whether or not the faults have cleared",
     )
     sessions_dir: str = param("", doc="where recordings go; empty: sessions/ at the project root")
     sim_depth: float = param(0.5, lo=0.0, hi=100.0, unit="m", doc="depth the simulated robot starts at")
@@ -108,6 +126,11 @@ class ConsoleConfig(Config):
     drive_depth_step: float = param(0.1, lo=0.01, hi=5.0, unit="m", doc="R/F key: depth step")
     drive_depth_rate: float = param(0.2, lo=0.01, hi=2.0, unit="m/s",
                                     doc="gamepad: depth change at full stick")
+
+    def _check(self) -> None:
+        if self.record_tail_max < self.record_tail:
+            raise ValueError(f"record_tail_max: {self.record_tail_max:g} s is shorter than record_tail "
+                             f"{self.record_tail:g} s; allowed: at least record_tail")
 
 
 @dataclass(frozen=True)
@@ -132,9 +155,15 @@ class AccessConfig(Config):
             raise ValueError(f"token: a fixed token needs at least 8 characters, got {len(self.token)}")
 
 
+_ESCALATE_DOC = ("what the failsafe does when its cause lasts escalate_after s after it triggered: "
+                 "none (nothing more), hold, surface or disarm")
+_ESCALATE_AFTER_DOC = "how long the failsafe acts before it escalates"
+
+
 @dataclass(frozen=True)
 class FailsafeRule(Config):
-    """What one failsafe does, and after how long its cause triggers it."""
+    """What one failsafe does, after how long its cause triggers it, and what it does when the
+    cause lasts on (``escalate``, ``escalate_after`` s after it triggered)."""
 
     action: str = param(
         "hold", choices=FAILSAFE_ACTIONS,
@@ -142,13 +171,34 @@ class FailsafeRule(Config):
         "disarm: motors off; warn: show and record only",
     )
     timeout: float = param(2.0, lo=0.0, hi=3600.0, unit="s", doc="how long the cause lasts before it triggers")
+    escalate: str = param("none", choices=ESCALATIONS, doc=_ESCALATE_DOC)
+    escalate_after: float = param(30.0, lo=0.0, hi=3600.0, unit="s", doc=_ESCALATE_AFTER_DOC)
+
+    def _check(self) -> None:
+        if self.escalate != "none" and ACTION_STRENGTH[self.escalate] < ACTION_STRENGTH[self.action]:
+            stronger = [a for a in ESCALATIONS[1:] if ACTION_STRENGTH[a] >= ACTION_STRENGTH[self.action]]
+            raise ValueError(f"escalate: {self.escalate!r} would act less strongly than action "
+                             f"{self.action!r}; allowed: none, {', '.join(stronger)}")
+
+    @property
+    def escalates(self) -> bool:
+        """Whether the escalation acts more strongly than the action (otherwise it is none)."""
+        return self.escalate != "none" and ACTION_STRENGTH[self.escalate] > ACTION_STRENGTH[self.action]
+
+
+@dataclass(frozen=True)
+class PilotGoneRule(FailsafeRule):
+    """The pilot-gone failsafe: hold where the robot is, then, if no pilot has come back
+    after 30 s, disarm (ArduSub's default GCS failsafe disarms after 5 s)."""
+
+    escalate: str = param("disarm", choices=ESCALATIONS, doc=_ESCALATE_DOC)
 
 
 @dataclass(frozen=True)
 class FailsafeConfig(Config):
     """Every failsafe; each is shown, recorded, and latched until its cause clears."""
 
-    pilot_gone: FailsafeRule = FailsafeRule("hold", 2.0)
+    pilot_gone: PilotGoneRule = PilotGoneRule()
     imu: FailsafeRule = FailsafeRule("disarm", 1.0)
     dvl: FailsafeRule = FailsafeRule("hold", 2.0)
     depth: FailsafeRule = FailsafeRule("disarm", 1.0)

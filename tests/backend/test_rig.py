@@ -89,6 +89,30 @@ def test_device_time_maps_the_wall_clock_to_loop_time_at_the_pace() -> None:
         DeviceTime(pace=0.0)
 
 
+def test_a_resync_anchors_the_device_clock_and_drops_the_readings_of_the_stall() -> None:
+    """The loop skipped a stall: its time t is now. The drivers' readings queued meanwhile
+    are stale; the next batch holds the latest of each kind, at the loop's time, and later
+    readings map to loop time from the new anchor."""
+    wall = [500.0]
+    io = DeviceRobotIO(DevicesConfig(), wall_clock=lambda: wall[0])
+    io.resync(0.0)
+    io.advance_to(0.0)
+    for k in range(5):  # a second of readings queued while the loop was held back
+        io._on_reading(DepthReading(t=500.2 + 0.2 * k, depth_m=1.0 + k, pressure_pa=0.0))
+        io._on_reading(ImuReading(t=500.2 + 0.2 * k, accel_g=(0.0, 0.0, -1.0), gyro=(0.0, 0.0, float(k))))
+    wall[0] = 501.5
+    io.resync(0.5)  # the loop skipped ahead: its 0.5 s is due now, at 501.5
+    batch = io.advance_to(0.5)
+    assert sorted(type(r).__name__ for r in batch) == ["DepthReading", "ImuReading"]
+    assert all(r.t == 0.5 for r in batch)
+    assert {r.depth_m for r in batch if isinstance(r, DepthReading)} == {5.0}  # the latest
+    io._on_reading(DepthReading(t=501.6, depth_m=2.0, pressure_pa=0.0))
+    wall[0] = 501.7
+    [r] = io.advance_to(0.7)
+    assert r.t == pytest.approx(0.6)  # 0.1 s after the new anchor
+    io.close()
+
+
 # ---------------------------------------------------------------------- robot = sim
 
 

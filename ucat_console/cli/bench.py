@@ -37,6 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     q.add_argument("--json", type=Path, default=None, help="write the results as JSON")
     q.set_defaults(func=run_sim)
 
+    from ucat_console.bench import load as bench_load
     from ucat_console.bench import safety as bench_safety
     from ucat_console.bench import sessions as bench_sessions
     from ucat_console.bench import tracking as bench_tracking
@@ -46,6 +47,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     bench_ui.register_bench(kinds)
     bench_safety.register_bench(kinds)
     bench_tracking.register_bench(kinds)
+    bench_load.register_bench(kinds)
     c = kinds.add_parser("compile", help="cold compile of every preparation step, serial and in parallel")
     c.add_argument("--config", type=Path, default=None, metavar="FILE", help="the configuration to compile for")
     c.add_argument("--workers", type=int, nargs="+", default=[1, 2], help="process counts to measure")

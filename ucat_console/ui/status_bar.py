@@ -40,11 +40,11 @@ def lights(sup: Any, loading: str = "") -> list[Light]:
     out: list[Light] = []
     for sensor in SENSORS:
         rule = safety.rule(sensor)
-        quiet, invalid = safety.sensor_silence(sensor, now)
+        quiet, what = safety.sensor_silence(sensor, now)
         if sensor in active:
             out.append(Light(LIGHTS[sensor], "bad", f"failsafe {sensor}: {active[sensor].cause}"))
-        elif quiet > 0.5 * rule.timeout or invalid:
-            what = f"{invalid} invalid readings" if invalid else "no reading"
+        elif quiet > 0.5 * rule.timeout or what:
+            what = what or "no reading"
             out.append(Light(LIGHTS[sensor], "warn", f"{what} for {quiet:.1f} s (failsafe after {rule.timeout:g} s)"))
         else:
             out.append(Light(LIGHTS[sensor], "ok", f"valid reading {quiet:.2f} s ago"))
@@ -100,8 +100,10 @@ def control_light(safety: Any, active: dict[str, Any]) -> Light:
 def link_policy(sup: Any) -> str:
     """What the robot does when the pilot's page is lost, as the banner says it."""
     rule = sup.cfg.failsafe.pilot_gone
+    then = (f", and {ACTIONS.get(rule.escalate, rule.escalate)} {rule.escalate_after:g} s later if no pilot "
+            f"has taken control (then: {rule.escalate})" if rule.escalates else "")
     return (f"If this page was the pilot's, the robot {ACTIONS.get(rule.action, rule.action)} "
-            f"{rule.timeout:g} s after the page's last answer (failsafe pilot_gone: {rule.action}). "
+            f"{rule.timeout:g} s after the page's last answer (failsafe pilot_gone: {rule.action}){then}. "
             "Reload the page when the link is back; the token is needed again.")
 
 
