@@ -40,6 +40,7 @@ from ucat_console.backend.devices.config import DevicesConfig
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.backend.sessions.recorder import RecorderConfig
 from ucat_console.backend.sim.params import PlantConfig
+from ucat_console import shipped
 from ucat_console.typedconf import Config, coerce, from_dict, param, to_dict
 
 #: robots the supervisor can drive
@@ -93,7 +94,10 @@ class ConsoleConfig(Config):
         5.0, lo=0.0, hi=3600.0, unit="s",
         doc="a recording started by arming stops this long after disarming",
     )
-    sessions_dir: str = param("", doc="where recordings go; empty: sessions/ at the project root")
+    sessions_dir: str = param(
+        "", doc="where recordings go; empty: $UCAT_CONSOLE_SESSIONS, else the user's data folder "
+        "(ucat-console paths prints it)",
+    )
     sim_depth: float = param(0.5, lo=0.0, hi=100.0, unit="m", doc="depth the simulated robot starts at")
     sim_early: float = param(
         0.01, lo=0.0, hi=0.02, unit="s",
@@ -220,5 +224,6 @@ class AppConfig(Config):
 
 
 def load_config(path: str | Path | None) -> AppConfig:
-    """The configuration in ``path`` (defaults everywhere when None)."""
-    return AppConfig() if path is None else AppConfig.from_toml(path)
+    """The configuration in ``path``, a file or the name of a shipped configuration
+    (``sim-tuned``: :mod:`ucat_console.shipped`); defaults everywhere when None."""
+    return AppConfig() if path is None else AppConfig.from_toml(shipped.config_path(path))

@@ -39,14 +39,11 @@ TOKEN = "safety-bench-token"
 
 def _console(tmp: str, pilot_gone: float) -> tuple[Any, Any, list]:
     from ucat_console.backend.supervisor import Supervisor
-    from ucat_console.config import AccessConfig, AppConfig, ConsoleConfig, FailsafeConfig, FailsafeRule, load_config
+    from ucat_console.config import AccessConfig, ConsoleConfig, FailsafeConfig, FailsafeRule, load_config
     from ucat_console.telemetry import channels as ch
     from ucat_console.ui.app import ConsoleApp
 
-    root = Path(__file__).resolve().parents[2]
-    tuned = root / "config" / "sim-tuned.toml"
-    base = load_config(tuned) if tuned.exists() else AppConfig()
-    cfg = base.replace(
+    cfg = load_config("sim-tuned").replace(
         access=AccessConfig(token=TOKEN),
         console=ConsoleConfig(port=0, record_on_arm=False),
         failsafe=FailsafeConfig(pilot_gone=FailsafeRule("hold", pilot_gone)),
@@ -300,6 +297,9 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"--{name.replace('_', '-')}: must be at least 1")
     if not args.pilot_gone > 0:
         raise ValueError("--pilot-gone: must be a positive number of seconds")
+    from ucat_console.cli.compiled import prepare_all
+
+    prepare_all("sim-tuned")
     r = measure(args.trials, args.spam_trials, args.rounds, args.pages, args.pilot_gone, args.link_trials)
     print(format_result(r))
     if args.json is not None:

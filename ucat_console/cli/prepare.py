@@ -11,12 +11,12 @@ from __future__ import annotations
 import argparse
 import tempfile
 import time
-from pathlib import Path
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("prepare", help="compile (or load) the planners, the loop and the plant before a run")
-    p.add_argument("--config", type=Path, default=None, metavar="FILE", help="the configuration to prepare for")
+    p.add_argument("--config", default=None, metavar="NAME|FILE",
+                   help="the configuration to prepare for (a shipped one's name or a TOML file)")
     p.add_argument("--workers", type=int, default=None, help="child processes (default: cores, at most 2)")
     p.set_defaults(func=run)
 

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -185,17 +184,16 @@ def _e4_claims(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
 # ---------------------------------------------------------------------------- E4R
 #: E4R's controllers: E4's three and the closed-stroke formulation (four MPC fins)
 E4R_CONTROLLERS = ("baseline", "mpc", "mpc_sync", "mpc_closed")
-#: the file whose settings E4R runs beside the paper's (the console's simulated default)
-SIM_TUNED = Path(__file__).resolve().parents[2] / "config" / "sim-tuned.toml"
+#: the shipped configuration whose settings E4R runs beside the paper's (what the console's
+#: scripts/run.sh starts the simulated robot with)
+SIM_TUNED = "sim-tuned"
 
 
 def e4r_settings() -> dict[str, tuple[MpcConfig, BodyConfig]]:
-    """E4R's settings: the paper's (the defaults) and ``config/sim-tuned.toml``'s."""
-    from ucat_console.config import AppConfig
+    """E4R's settings: the paper's (the defaults) and the shipped ``sim-tuned``'s."""
+    from ucat_console.config import load_config
 
-    if not SIM_TUNED.is_file():
-        raise ValueError(f"E4R: {SIM_TUNED} not found (E4R runs from the project's source tree)")
-    tuned = AppConfig.from_toml(SIM_TUNED)
+    tuned = load_config(SIM_TUNED)
     return {"paper": (MpcConfig(), BodyConfig()), "sim_tuned": (tuned.mpc, tuned.body)}
 
 

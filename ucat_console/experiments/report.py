@@ -15,7 +15,7 @@ TITLES = {
     "E2": "E2: Strouhal corridor, baseline vs MPC (paper Fig. 6)",
     "E3": "E3: cost-term ablation (paper Table III)",
     "E4": "E4: closed loop, power and tracking (paper Table V, Fig. 7)",
-    "E4R": "E4R: E4 from rest, the paper's settings and config/sim-tuned.toml",
+    "E4R": "E4R: E4 from rest, the paper's settings and the shipped sim-tuned",
     "E6": "E6: where St-awareness pays: a family of plants, each with its identified model",
     "E5": "E5: field-style circle at 3 m with a current (paper Fig. 8)",
     "sweep": "Weight sweep over the E4 protocol",
@@ -207,7 +207,7 @@ def _e4r(res: dict[str, Any]) -> str:
            f"{', '.join(p['controllers'])} (mpc_closed: the closed-stroke formulation with the same "
            f"model and weights), seeds {', '.join(str(s) for s in p['seeds'])}; settle {p['settle_s']:g} s, "
            f"measured over {p['window_s']:g} s. Settings: `paper` (the defaults: Table I) and `sim_tuned` "
-           f"(config/sim-tuned.toml: lam_f {t['lam_f']:g}, lam_st {t['lam_st']:g}, lam_d {t['lam_d']:g}, "
+           f"(the shipped sim-tuned: lam_f {t['lam_f']:g}, lam_st {t['lam_st']:g}, lam_d {t['lam_d']:g}, "
            f"velocity PID kp {t['velocity_kp']:g} ki {t['velocity_ki']:g} limit {t['velocity_limit']:g} N). "
            f"Power is the estimate (control.md section 9), true power the plant's shaft power, J/m the true "
            f"energy per metre; savings where both track (velocity MAE <= {p['tracking_mae']:g} m/s).\n\n"]
@@ -237,7 +237,7 @@ def _e6(res: dict[str, Any]) -> str:
            f"({', '.join(p['plants'])}). Each plant's model is identified first from its own recorded "
            f"identification manoeuvre (`ucat-console identify`'s path). Runs from rest at "
            f"{', '.join(str(v) for v in p['speeds'])} m/s, seeds {', '.join(str(s) for s in p['seeds'])}, "
-           f"settle {p['settle_s']:g} s, measured {p['window_s']:g} s, config/sim-tuned.toml's weights and "
+           f"settle {p['settle_s']:g} s, measured {p['window_s']:g} s, the shipped sim-tuned's weights and "
            f"PIDs (lam_f {t['lam_f']:g}, lam_st {t['lam_st']:g}, lam_d {t['lam_d']:g}; velocity ki "
            f"{t['velocity_ki']:g}, limit {t['velocity_limit']:g} N), closed-stroke lam_c "
            f"{p['closed_stroke']['lam_c']:g} /rad, lam_e {p['closed_stroke']['lam_e']:g} /W. Controllers: "

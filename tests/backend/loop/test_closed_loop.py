@@ -60,7 +60,7 @@ def make_loop(mode: str = "mpc", v: float = 0.2, depth: float = 1.0, clock=None,
 # Tracking. The loop machinery is tested with gains / weights under which this plant is
 # controllable (the paper's defaults and what they do are the experiments' subject):
 # the MPC with lam_st 2, lam_f 3, lam_d 0.3, and a velocity PID limit of 10 N and ki 5
-# (config/sim-tuned.toml); with the paper's 2.5 N limit the MPC's hold of 0.2 m/s depends
+# (the shipped sim-tuned); with the paper's 2.5 N limit the MPC's hold of 0.2 m/s depends
 # on the random samples, and at ki 1 the baseline needs minutes to reach 0.1 m/s here.
 TUNED_MPC = MpcConfig(lam_st=2.0, lam_f=3.0, lam_d=0.3)
 STRONG_BODY = BodyConfig(velocity=PidGains(kp=40.0, ki=5.0, kd=0.1, limit=10.0))

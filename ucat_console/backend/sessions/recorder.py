@@ -322,6 +322,17 @@ class Recorder:
             )
             return list(self._paths)
 
+    def discard(self) -> list[Path]:
+        """Stop recording and delete the session's files (what a run that never began
+        recorded); returns the paths deleted."""
+        paths = self.stop()
+        for path in paths:
+            path.unlink(missing_ok=True)
+        if paths:
+            log.info("session %s discarded: %s", self._session_id, ", ".join(p.name for p in paths))
+        self._paths = []
+        return paths
+
     def __enter__(self) -> Recorder:
         return self
 
