@@ -268,6 +268,6 @@ class Preparation:
 
 
 def start(cfg: AppConfig, on_progress: Callable[[Progress], None] = lambda p: None,
-          steps: list[Step] | None = None) -> Preparation:
+          steps: list[Step] | None = None, workers: int | None = None) -> Preparation:
     """Start preparing what ``cfg`` needs (or ``steps``), in child processes."""
-    return Preparation(cfg, on_progress, steps=steps)
+    return Preparation(cfg, on_progress, workers=workers, steps=steps)

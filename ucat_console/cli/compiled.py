@@ -49,24 +49,27 @@ def prepare_all(config: Any = None) -> Any:
 
 
 def prepare(cfg: Any, steps: list[Any] | None = None,
-            on_progress: Callable[[Any], None] | None = None) -> Any:
+            on_progress: Callable[[Any], None] | None = None, workers: int | None = None) -> Any:
     """Compile (or load) ``steps`` (default: the console's, ``backend.prepare.steps_for``)
     in child processes, printing the progress, and return the preparation once the needed
     ones are done (the others go on in the background). RuntimeError when a step fails;
-    Ctrl-C stops the child processes."""
+    Ctrl-C stops the child processes. ``workers``: child processes (default: cores, at most 2)."""
     from ucat_console.backend import prepare as backend_prepare
 
     print("preparing the compiled code (the first run on a machine compiles it, minutes; "
           "`ucat-console prepare` does it ahead)", flush=True)
     t0 = time.monotonic()
+    shown: set[str] = set()
 
     def progress(p: Any) -> None:
         if on_progress is not None:
             on_progress(p)
-        if p.step:
-            print(f"  {p.text()} ({time.monotonic() - t0:.0f} s)", flush=True)
+        if p.step and p.step not in shown:  # each step once, as it starts
+            shown.add(p.step)
+            print(f"  preparing {p.step} ({p.done} of {p.total} done, {time.monotonic() - t0:.0f} s)",
+                  flush=True)
 
-    prep = backend_prepare.start(cfg, progress, steps)
+    prep = backend_prepare.start(cfg, progress, steps, workers)
     try:
         while not prep.wait(STILL_EVERY):  # a compile gives no progress of its own: the time it takes
             print(f"  still {prep.progress.text()} ({time.monotonic() - t0:.0f} s)", flush=True)

@@ -22,12 +22,18 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ucat_console.backend.prepare import Preparation
+    from ucat_console.cli import compiled
     from ucat_console.config import load_config
 
+    if args.workers is not None and args.workers < 1:
+        raise ValueError(f"--workers: {args.workers} must be >= 1")
     cfg = load_config(args.config)
-    prep = Preparation(cfg, workers=args.workers)
-    prep.wait_all()
+    try:  # the steps the console needs first, each shown as it starts
+        prep = compiled.prepare(cfg, workers=args.workers)
+    except RuntimeError as e:
+        print(e)
+        return 1
+    prep.wait_all()  # the others: logged as each is done
     for s in prep.steps:
         if s.key in prep.seconds:
             print(f"  {s.text}: {prep.seconds[s.key]:.1f} s{'' if s.needed else ' (may wait: compiled after the start)'}")
