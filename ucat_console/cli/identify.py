@@ -34,7 +34,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="fit C_D and C_L, or one scale of the configured pair")
     p.add_argument("--window", type=float, default=None, metavar="S", help="force-balance window (s)")
     p.add_argument("--dir", type=Path, default=None,
-                   help="sessions directory (default: sessions/ at the project root)")
+                   help="sessions directory (default: $UCAT_CONSOLE_SESSIONS, else the user's "
+                        "data folder: ucat-console paths)")
     p.add_argument("--out", type=Path, default=Path("identify-out"), help="output directory")
     p.set_defaults(func=run)
 

@@ -24,7 +24,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="fins to replay (default: all)")
     p.add_argument("--out", type=Path, default=None, metavar="CSV", help="write every row as CSV")
     p.add_argument("--dir", type=Path, default=None,
-                   help="sessions directory (default: sessions/ at the project root)")
+                   help="sessions directory (default: $UCAT_CONSOLE_SESSIONS, else the user's "
+                        "data folder: ucat-console paths)")
     p.set_defaults(func=run)
 
 
