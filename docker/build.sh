@@ -119,11 +119,16 @@ if [ -f "$host_ca" ]; then
   build_args+=(-v "$host_ca:/etc/ssl/certs/build-host-ca.crt:ro" -v "$pipconf:/etc/pip.conf:ro")
 fi
 log "building $tag from docker/Dockerfile"
+old_id="$(buildah images -q "$tag" 2>/dev/null || true)"
 t_build=$(date +%s)
 buildah bud --isolation chroot --arch "$arch" "${from_args[@]}" "${build_args[@]}" \
   -f "$ROOT/docker/Dockerfile" --ignorefile "$ROOT/docker/Dockerfile.dockerignore" \
   -t "$tag" "$ROOT"
 [ -z "${pipconf:-}" ] || rm -f "$pipconf"
+# the image this build replaces under the same name is removed, not left dangling
+if [ -n "$old_id" ] && [ "$old_id" != "$(buildah images -q "$tag")" ]; then
+  buildah rmi "$old_id" >/dev/null 2>&1 || true
+fi
 log "built $tag in $(( $(date +%s) - t_build )) s"
 
 # ------------------------------------------------------------------ the smoke test

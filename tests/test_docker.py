@@ -91,9 +91,12 @@ def test_the_image_builds_and_a_recorded_headless_run_works_in_it(tmp_path: Path
     if shutil.which("buildah") is None and shutil.which("apt-get") is None:
         pytest.fail("buildah is not installed and cannot be (no apt-get)")
     sessions = tmp_path / "sessions"
-    proc = subprocess.run(["bash", str(DOCKER / "build.sh"), "--tag", "ucat-console:test",
-                           "--sessions", str(sessions)],
-                          capture_output=True, text=True, timeout=3500)
+    try:
+        proc = subprocess.run(["bash", str(DOCKER / "build.sh"), "--tag", "ucat-console:test",
+                               "--sessions", str(sessions)],
+                              capture_output=True, text=True, timeout=3500)
+    finally:  # the image is not kept (900 MB): the next run builds afresh anyway
+        subprocess.run(["buildah", "rmi", "ucat-console:test"], capture_output=True, timeout=300)
     assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-4000:]
     (recording,) = sessions.glob("*.mcap")  # the smoke run's, on this machine
     with SessionReader(recording, sessions) as r:

@@ -96,6 +96,12 @@ def test_the_wheel_installs_in_a_fresh_venv_and_runs_from_another_folder(tmp_pat
     assert not list(venv.rglob("*.mcap")) and not (site / "sessions").exists()
     assert not list(elsewhere.iterdir()) and not xdg.exists()
 
+    # E4R's second setting is the shipped sim-tuned, found in the installed package
+    proc = subprocess.run([py, "-c", "from ucat_console.experiments.closed_loop_runs import e4r_settings; "
+                           "print(e4r_settings()['sim_tuned'][0].lam_f)"],
+                          cwd=elsewhere, env=env, capture_output=True, text=True, timeout=120)
+    assert proc.stdout.split() == ["3.0"], proc.stderr  # sim-tuned's lam_f (the paper's: 1.5)
+
     # the experiments say what to install rather than failing on an import
     proc = subprocess.run([venv / "bin" / "ucat-console", "experiment", "E1", "--quick", "--out",
                            str(tmp_path / "out")], capture_output=True, text=True, timeout=120,
