@@ -190,6 +190,12 @@ class Preparation:
             return key in self._done
 
     @property
+    def running(self) -> list[str]:
+        """What the child processes are compiling now (for people)."""
+        with self._lock:
+            return [self._text(k) for k in self._running]
+
+    @property
     def complete(self) -> bool:
         return self._complete.is_set()
 

@@ -72,7 +72,9 @@ def prepare(cfg: Any, steps: list[Any] | None = None,
     prep = backend_prepare.start(cfg, progress, steps, workers)
     try:
         while not prep.wait(STILL_EVERY):  # a compile gives no progress of its own: the time it takes
-            print(f"  still {prep.progress.text()} ({time.monotonic() - t0:.0f} s)", flush=True)
+            p = prep.progress
+            print(f"  still preparing {'; '.join(prep.running) or p.step} ({p.done} of {p.total} done, "
+                  f"{time.monotonic() - t0:.0f} s)", flush=True)
     except BaseException:
         prep.cancel()
         raise
