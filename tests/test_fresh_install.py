@@ -11,6 +11,7 @@ import re
 import shutil
 import subprocess
 import sys
+import tomllib
 import zipfile
 from pathlib import Path
 
@@ -100,7 +101,9 @@ def test_the_wheel_installs_in_a_fresh_venv_and_runs_from_another_folder(tmp_pat
     proc = subprocess.run([py, "-c", "from ucat_console.experiments.closed_loop_runs import e4r_settings; "
                            "print(e4r_settings()['sim_tuned'][0].lam_f)"],
                           cwd=elsewhere, env=env, capture_output=True, text=True, timeout=120)
-    assert proc.stdout.split() == ["3.0"], proc.stderr  # sim-tuned's lam_f (the paper's: 1.5)
+    with open(ROOT / "ucat_console" / "configs" / "sim-tuned.toml", "rb") as fh:
+        lam_f = tomllib.load(fh)["mpc"]["lam_f"]
+    assert proc.stdout.split() == [repr(float(lam_f))], proc.stderr
 
     # the experiments say what to install rather than failing on an import
     proc = subprocess.run([venv / "bin" / "ucat-console", "experiment", "E1", "--quick", "--out",

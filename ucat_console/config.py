@@ -159,6 +159,16 @@ class FailsafeConfig(Config):
     late_plans: int = param(
         10, lo=1, hi=100_000, doc="late plans within planner_late.timeout that trigger planner_late"
     )
+    tracking: FailsafeRule = FailsafeRule("warn", 10.0)
+    tracking_depth: float = param(
+        0.2, lo=0.01, hi=100.0, unit="m", doc="tracking: depth further than this from its reference"
+    )
+    tracking_speed: float = param(
+        0.05, lo=0.005, hi=5.0, unit="m/s", doc="tracking: forward speed further than this from its reference"
+    )
+    tracking_heading: float = param(
+        0.35, lo=0.01, hi=3.15, unit="rad", doc="tracking: heading further than this from its reference"
+    )
 
 
 @dataclass(frozen=True)

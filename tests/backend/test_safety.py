@@ -171,3 +171,54 @@ def test_planner_late_counts_late_plans_in_its_window() -> None:
 def test_unknown_failsafe_name_is_an_error() -> None:
     with pytest.raises(ValueError, match="failsafe"):
         SafetyMonitor().rule("gremlins")
+
+
+def tracking(t: float, *, driving: bool = True, depth_err: float = 0.0, speed_err: float = 0.0,
+             heading_err: float = 0.0):
+    from ucat_console.telemetry.messages import BodyTracking
+
+    return BodyTracking(t, driving, 0.2, 1.0, 0.0, 0.0, speed_err, depth_err, heading_err)
+
+
+def test_tracking_warns_when_an_axis_stays_off_its_band_and_clears_when_back() -> None:
+    cfg = FailsafeConfig(tracking=FailsafeRule("warn", 5.0), tracking_depth=0.2)
+    m = SafetyMonitor(cfg)
+    seen = []
+    for k in range(101):  # 10 s: depth 0.3 m off its reference from t = 2 s on
+        t = 0.1 * k
+        feed_all(m, t)
+        m.on_message(ch.BODY_TRACKING, tracking(t, depth_err=0.3 if t >= 2.0 else 0.0))
+        seen += [(round(tr.t, 1), tr.name, tr.active) for tr in m.check(t) if tr.name == "tracking"]
+    assert seen == [(7.0, "tracking", True)]  # 5 s after it left the band
+    assert "depth +0.30 m off its reference" in m.states()[-1].cause
+    assert m.states()[-1].action == "warn"
+    m.on_message(ch.BODY_TRACKING, tracking(10.1))
+    assert names(m.check(10.1)) == [("tracking", False)]
+
+
+def test_tracking_counts_only_while_driving_and_restarts_its_time_when_back_in_band() -> None:
+    m = SafetyMonitor(FailsafeConfig(tracking=FailsafeRule("warn", 3.0)))
+    for k in range(60):  # disarmed, drifting: no alarm
+        t = 0.1 * k
+        feed_all(m, t)
+        m.on_message(ch.BODY_TRACKING, tracking(t, driving=False, speed_err=0.3))
+        assert not [tr for tr in m.check(t) if tr.name == "tracking"]
+    for k in range(60, 110):  # driving: off for 2 s, back once, off again for 2.8 s
+        t = 0.1 * k
+        feed_all(m, t)
+        m.on_message(ch.BODY_TRACKING, tracking(t, heading_err=0.0 if k == 80 else 0.5))
+        assert not [tr for tr in m.check(t) if tr.name == "tracking"]
+    cut, off = m.control()
+    assert off == ["heading +0.50 rad for 3 s"] and cut == []
+
+
+def test_the_control_light_names_what_the_allocation_cuts() -> None:
+    from ucat_console.telemetry.messages import BodyAllocation
+    from ucat_console.ui.status_bar import control_light
+
+    m = SafetyMonitor(FailsafeConfig())
+    assert control_light(m, {}).state == "ok"
+    m.on_message(ch.BODY_ALLOCATION, BodyAllocation(0.0, 3.0, 6.0, 0.1, 0.0, 4.7, 0.1, ("heave", "surge")))
+    light = control_light(m, {})
+    assert light.state == "warn"
+    assert "heave: 4.70 of 6.00 N" in light.why and "surge: 0.00 of 3.00 N" in light.why

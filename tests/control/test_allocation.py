@@ -1,4 +1,5 @@
-"""Fin force allocation, sync mode, and the body-frame controller's signs and data handling."""
+"""Fin force allocation: the paper's (sums, yaw differential, sync mode) and the designed
+layer's (sums, saturation, priority, coasting, the cut reported) on hand-computed cases."""
 
 from __future__ import annotations
 
@@ -6,12 +7,11 @@ import math
 
 import pytest
 
-from ucat_console.control.allocation import BodyController, BodySetpoints, allocate
-from ucat_console.control.params import BodyConfig, PidGains
+from ucat_console.control.allocation import allocate, allocate_body_wrench, wrench_params
 from ucat_console.robot.fins import PAPER_SIDES as FIN_SIDES
-from ucat_console.robot.readings import DepthReading, DvlVelocity, ImuReading
 
 B = 0.2981  # lateral fin distance used to turn differentials into moments (m)
+COS30 = math.cos(math.radians(30.0))
 
 
 def yaw_moment(per_fin) -> float:
@@ -60,151 +60,97 @@ def test_allocate_rejects_nan():
         allocate(0.0, 0.0, math.nan)
 
 
-def dvl(t, vx, valid=True):
-    return DvlVelocity(t=t, vx=vx, vy=0.0, vz=0.0, valid=valid, altitude=1.0, fom=0.01)
+# ------------------------------------------------------------------ the designed allocation
+def params(fmax=1.0, gain=2.0, rear=0.5, yaw_on_rear=True):
+    return wrench_params(fmax, gain, 30.0, B, rear, yaw_on_rear)
 
 
-def body_cfg(**kw) -> BodyConfig:
-    base = dict(
-        velocity=PidGains(kp=2.0, limit=2.5),
-        depth=PidGains(kp=5.0, limit=0.5),
-        yaw_rate=PidGains(kp=3.0, limit=0.5),
-        median_window=3,
-    )
-    base.update(kw)
-    return BodyConfig(**base)
+def physical(per_fin, gain):
+    """The fins' physical x-forces: forward (negative) ones ``gain`` times the model's."""
+    return [(fx * gain if fx < 0.0 else fx, fy) for fx, fy in per_fin]
 
 
-def test_velocity_error_gives_forward_thrust_negative_fx():
-    ctl = BodyController(body_cfg())
-    ctl.on_dvl(dvl(0.0, 0.1))
-    cmd = ctl.update(0.0, BodySetpoints(velocity=0.3))
-    # F_x* = -kp (0.3 - 0.1) = -0.4
-    assert cmd.fx == pytest.approx(-0.4)
-    assert cmd.velocity_updated
-    assert all(fx == pytest.approx(-0.1) for fx, _ in cmd.allocation.per_fin())
+def wrench(per_fin, gain):
+    """(surge N forward, heave N down, yaw N m) the fins' model targets make, by hand."""
+    ph = physical(per_fin, gain)
+    x = sum(-fx * COS30 for fx, _ in ph)
+    z = sum(-fy for _, fy in ph)
+    n = sum(side * B * fx for side, (fx, _) in zip(FIN_SIDES, ph))
+    return x, z, n
 
 
-def test_missing_dvl_holds_output_and_is_not_zero_velocity():
-    ctl = BodyController(body_cfg())
-    ctl.on_dvl(dvl(0.0, 0.1))
-    first = ctl.update(0.0, BodySetpoints(velocity=0.3))
-    for k in range(1, 6):
-        ctl.on_dvl(dvl(0.1 * k, 0.0, valid=False))
-        cmd = ctl.update(0.1 * k, BodySetpoints(velocity=0.3))
-        assert cmd.fx == first.fx  # held; zero velocity would give -0.6
-        assert not cmd.velocity_updated
-        assert cmd.velocity == pytest.approx(0.1)
-    assert ctl.dvl_missing == 5
+def test_within_the_limits_every_axis_is_given_and_the_fins_sum_to_it():
+    r = allocate_body_wrench(1.0, 0.8, 0.1, params())
+    assert r.cut == ()
+    assert r.applied == pytest.approx((1.0, 0.8, 0.1))
+    fins = r.allocation.per_fin()
+    # heave: -Z/4 on each fin (f_y > 0 lifts, Z > 0 is down)
+    assert [fy for _, fy in fins] == pytest.approx([-0.2] * 4)
+    # yaw: y = N / (4 B) = 0.08386 N on each fin, starboard backwards; surge a = -X / (4 cos 30) = -0.28868
+    y, a = 0.1 / (4 * B), -1.0 / (4 * COS30)
+    assert [fx for fx, _ in physical(fins, 2.0)] == pytest.approx([a + y, a - y, a + y, a - y])
+    assert wrench(fins, 2.0) == pytest.approx((1.0, 0.8, 0.1))
 
 
-def test_no_dvl_yet_gives_no_thrust_and_no_velocity():
-    ctl = BodyController(body_cfg())
-    cmd = ctl.update(0.0, BodySetpoints(velocity=0.3))
-    assert cmd.velocity is None
-    assert cmd.fx == 0.0
+def test_heave_beyond_the_fins_is_cut_to_what_they_make():
+    r = allocate_body_wrench(0.0, 10.0, 0.0, params(fmax=1.0))
+    assert r.cut == ("heave",)
+    assert r.applied[1] == pytest.approx(4.0)  # four fins of 1 N
+    assert [fy for _, fy in r.allocation.per_fin()] == pytest.approx([-1.0] * 4)
 
 
-def test_median_filter_removes_dvl_spike():
-    ctl = BodyController(body_cfg())
-    for t, v in ((0.0, 0.2), (0.1, 0.2), (0.2, 3.0)):
-        ctl.on_dvl(dvl(t, v))
-    cmd = ctl.update(0.2, BodySetpoints(velocity=0.2))
-    assert cmd.velocity == pytest.approx(0.2)
-    assert cmd.fx == pytest.approx(0.0)
+def test_front_pair_heave_share():
+    r = allocate_body_wrench(0.0, 1.0, 0.0, params(rear=0.0))
+    assert [fy for _, fy in r.allocation.per_fin()] == pytest.approx([-0.5, -0.5, 0.0, 0.0])
+    cut = allocate_body_wrench(0.0, 3.0, 0.0, params(fmax=1.0, rear=0.0))
+    assert cut.applied[1] == pytest.approx(2.0) and cut.cut == ("heave",)
 
 
-def test_depth_sign_and_front_lift():
-    ctl = BodyController(body_cfg())
-    ctl.on_depth(DepthReading(t=0.0, depth_m=1.95, pressure_pa=0.0))
-    cmd = ctl.update(0.0, BodySetpoints(depth=2.0))
-    # too shallow by 0.05 m: the default asks for a downward force (f_y > 0 lifts):
-    # F_y* = -5 * 0.05 = -0.25, half on each front fin
-    assert cmd.fy == pytest.approx(-0.25)
-    fins = cmd.allocation.per_fin()
-    assert fins[0][1] == fins[1][1] == pytest.approx(-0.125)
-    flipped = BodyController(body_cfg(depth_sign=1.0))
-    flipped.on_depth(DepthReading(t=0.0, depth_m=1.95, pressure_pa=0.0))
-    assert flipped.update(0.0, BodySetpoints(depth=2.0)).fy == pytest.approx(0.25)
+def test_yaw_comes_before_surge_and_is_cut_to_what_heave_leaves():
+    # heave 3.2 N: f_y = -0.8 on each fin, leaving c = 0.6 N of x-force; forward counts
+    # twice (gain 2): the largest y with a common surge share is (c + 2 c) / 2 = 0.9 N
+    r = allocate_body_wrench(2.0, 3.2, 2.0, params(fmax=1.0, gain=2.0))
+    assert set(r.cut) == {"yaw", "surge"}
+    assert r.applied[1] == pytest.approx(3.2)
+    assert r.applied[2] == pytest.approx(0.9 * 4 * B)
+    # with y at its largest the surge share is forced to (c - 2 c) / 2 = -0.3 N
+    assert r.applied[0] == pytest.approx(0.3 * 4 * COS30)
+    for fx, fy in r.allocation.per_fin():
+        phys = fx * 2.0 if fx < 0.0 else fx
+        assert math.hypot(fx, fy) <= 1.0 + 1e-9  # every fin within its deliverable force
+        assert abs(phys) == pytest.approx(0.6 * (2.0 if phys < 0 else 1.0))
+    assert wrench(r.allocation.per_fin(), 2.0) == pytest.approx(r.applied)
 
 
-def test_yaw_rate_command_turns_to_starboard():
-    ctl = BodyController(body_cfg())
-    ctl.on_imu(ImuReading(t=0.0, accel_g=(0.0, 0.0, 1.0), gyro=(0.0, 0.0, 0.0)))
-    ctl.on_dvl(dvl(0.0, 0.2))
-    cmd = ctl.update(0.0, BodySetpoints(velocity=0.2, yaw_rate=0.1))
-    assert cmd.yaw == pytest.approx(0.3)  # 3 * 0.1
-    fins = cmd.allocation.per_fin()
-    assert fins[1][0] < fins[0][0]  # port front fin pushes forward harder (more negative f_x)
-    assert yaw_moment(fins) > 0.0
+def test_surge_is_clipped_to_what_yaw_and_heave_leave():
+    r = allocate_body_wrench(50.0, 0.0, 0.0, params(fmax=1.0, gain=2.0))
+    assert r.cut == ("surge",)
+    assert r.applied[0] == pytest.approx(4 * COS30 * 2.0)  # every fin forward at 1 N, times the gain
+    assert all(fx == pytest.approx(-1.0) for fx, _ in r.allocation.per_fin())
 
 
-def test_bad_readings_and_setpoints():
-    ctl = BodyController(body_cfg())
-    with pytest.raises(ValueError, match="dvl.vx"):
-        ctl.on_dvl(dvl(0.0, math.nan))
-    with pytest.raises(ValueError, match="depth"):
-        BodySetpoints(depth=-1.0)
-    with pytest.raises(ValueError, match="velocity"):
-        BodySetpoints(velocity=math.inf)
+def test_the_fins_coast_rather_than_push_against_the_travel():
+    r = allocate_body_wrench(-1.0, 0.0, 0.0, params())
+    assert r.cut == ("coast",)
+    assert r.applied[0] == 0.0
+    assert all(fx == 0.0 for fx, _ in r.allocation.per_fin())
+    # a reverse setpoint mirrors it: backward force is given, forward is not
+    back = allocate_body_wrench(-1.0, 0.0, 0.0, params(), reverse=True)
+    assert back.cut == () and back.applied[0] == pytest.approx(-1.0)
+    assert allocate_body_wrench(1.0, 0.0, 0.0, params(), reverse=True).cut == ("coast",)
 
 
-def test_the_compiled_body_layer_is_the_reference_on_random_readings():
-    """The body-frame layer's functions compiled (as the loop's core runs them) against the
-    Python controller the loop ran before: random DVL (with dropouts), depth and gyro
-    readings in random order between control steps, three setpoints; the same outputs and
-    filtered values at every step, bit for bit."""
-    import numpy as np
-    from numba import njit
-
-    from control.reference_kernels import ReferenceBody
-    from ucat_console.control import allocation as al
-
-    on_dvl = njit(lambda b, valid, v, t: al.body_on_dvl(b, valid, v, t))
-    on_depth = njit(lambda b, z, t: al.body_on_depth(b, z, t))
-    on_imu = njit(lambda b, r, t: al.body_on_imu(b, r, t))
-    update = njit(lambda b, t, v, z, r: al.body_update(b, t, v, z, r))
-    rng = np.random.default_rng(11)
-    for window in (1, 4, 5):
-        cfg = BodyConfig(median_window=window)
-        b = BodyController(cfg).state
-        ref = ReferenceBody(cfg)
-        t = 0.0
-        sp = (0.2, 1.0, 0.05)
-        for _ in range(400):
-            t += 0.005
-            kind = rng.integers(0, 5)
-            if kind == 0:
-                valid = bool(rng.random() > 0.1)
-                v = float(rng.normal(0.2, 0.05))
-                assert on_dvl(b, valid, v, t) == al.BODY_OK
-                ref.on_dvl(valid, v)
-            elif kind == 1:
-                z = float(rng.normal(1.0, 0.1))
-                assert on_depth(b, z, t) == al.BODY_OK
-                ref.on_depth(z)
-            elif kind == 2:
-                r = float(rng.normal(0.0, 0.1))
-                assert on_imu(b, r, t) == al.BODY_OK
-                ref.on_imu(r)
-            else:
-                status, v, z = update(b, t, *sp)
-                rv, rz = ref.update(t, sp)
-                assert status == al.BODY_OK
-                assert (math.isnan(v) and rv is None) or v == rv
-                assert (math.isnan(z) and rz is None) or z == rz
-                assert (b[al.B_FX], b[al.B_FY], b[al.B_YAW]) == (ref.fx, ref.fy, ref.yaw)
-        assert b[al.B_DVL_MISSING] == ref.dvl_missing
+def test_sync_mode_puts_yaw_on_the_front_pair_and_the_rear_fins_alike():
+    r = allocate_body_wrench(1.0, 0.4, 0.1, params(), sync=True)
+    assert r.allocation.fins == ((0,), (1,), (2, 3))
+    fins = r.allocation.per_fin()
+    assert fins[2] == fins[3]
+    y = 0.1 / (2 * B)
+    a = -1.0 / (4 * COS30)
+    assert [fx for fx, _ in physical(fins, 2.0)] == pytest.approx([a + y, a - y, a, a])
+    assert wrench(fins, 2.0) == pytest.approx((1.0, 0.4, 0.1))
 
 
-def test_the_compiled_body_layer_names_a_bad_reading():
-    import numpy as np
-    from numba import njit
-
-    from ucat_console.control import allocation as al
-
-    b = BodyController(BodyConfig()).state
-    on_depth = njit(lambda b, z, t: al.body_on_depth(b, z, t))
-    assert al.BODY_FIELDS[on_depth(b, math.nan, 0.0)] == "depth.depth_m"
-    assert al.BODY_FIELDS[on_depth(b, 1.0, math.inf)] == "depth.t"
-    assert np.isnan(b[al.B_LAST_DEPTH_T])  # nothing was taken
+def test_bad_wrench_is_refused_naming_it():
+    with pytest.raises(ValueError, match="n"):
+        allocate_body_wrench(0.0, 0.0, math.nan, params())

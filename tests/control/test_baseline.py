@@ -110,10 +110,11 @@ def test_mean_force_points_along_request(target):
 
 
 def test_plan_rate_and_format():
-    planner = BaselinePlanner(CFG, BCFG)
+    eq19 = BCFG.replace(inverse_model="eq19")
+    planner = BaselinePlanner(CFG, eq19)
     plan = planner.plan(-0.5, 0.5, theta_now=0.0)
     a = plan.amplitude
-    assert a == pytest.approx(baseline_amplitude(math.hypot(0.5, 0.5), CFG, BCFG))
+    assert a == pytest.approx(baseline_amplitude(math.hypot(0.5, 0.5), CFG, eq19))
     # a full stroke of 2A in half a period of 2 Hz: w = 2A / 0.25 s = 8A
     assert plan.u[2] == plan.u[3] == pytest.approx(8.0 * a)
     assert plan.commands[1] == plan.commands[3] == plan.u[2]
@@ -122,6 +123,45 @@ def test_plan_rate_and_format():
     assert plan.commands[0] + plan.u[1] == pytest.approx(plan.commands[2])
     assert {plan.commands[0], plan.commands[2]} == {plan.centre + a, plan.centre - a}
     assert plan.frequency == 2.0
+
+
+@pytest.mark.parametrize("force", [0.05, 0.3, 0.7, 1.1])
+def test_the_fin_model_inverse_makes_the_requested_force(force):
+    """The default inverse: the plan's strokes, through the fin model written out here, make
+    the requested mean force in the requested direction."""
+    planner = BaselinePlanner(CFG, BCFG)
+    target = (-force * 0.6, force * 0.8)
+    first = planner.plan(*target, theta_now=0.0)
+    steady = planner.plan(*target, theta_now=first.commands[2])
+    fx, fy = cycle_mean_force(first.commands[2], steady.commands, CFG)
+    assert math.hypot(fx, fy) == pytest.approx(force, rel=1e-6)
+    assert abs(wrap_angle(math.atan2(fy, fx) - math.atan2(*target[::-1]))) < 1e-9
+    # the drive can make the strokes: a stroke of 2A from rest to rest at 64 rad/s2 has a mean
+    # rate of at most sqrt(64 * 2A) / 2
+    a = steady.amplitude
+    assert steady.u[2] <= math.sqrt(64.0 * 2.0 * a) / 2.0 + 1e-9
+
+
+def test_eq19_asks_for_about_a_fifth_of_the_force_the_fin_model_gives():
+    """Eq 19 expects pi^2 C_D / (2 sqrt(C_L^2 + C_D^2)) = 4.65 times the fin model's force
+    of a small beat: its amplitude for 0.2 N makes 0.2 / 4.65 N by the model."""
+    eq19 = BaselinePlanner(CFG, BCFG.replace(inverse_model="eq19"))
+    ratio = math.pi ** 2 * CFG.c_d / (2.0 * math.hypot(CFG.c_l, CFG.c_d))
+    assert ratio == pytest.approx(4.648, abs=1e-3)
+    first = eq19.plan(-0.2, 0.0, theta_now=0.0)
+    steady = eq19.plan(-0.2, 0.0, theta_now=first.commands[2])
+    assert steady.u[2] > CFG.w_min  # not floored
+    fx, fy = cycle_mean_force(first.commands[2], steady.commands, CFG)
+    assert math.hypot(fx, fy) == pytest.approx(0.2 / ratio, rel=5e-3)
+
+
+def test_a_force_beyond_the_fin_gets_the_largest_beat():
+    planner = BaselinePlanner(CFG, BCFG)
+    big = planner.plan(-50.0, 0.0, theta_now=0.0)
+    bigger = planner.plan(-500.0, 0.0, theta_now=0.0)
+    assert big.amplitude == pytest.approx(bigger.amplitude)
+    slightly_less = planner.plan(-1.0, 0.0, theta_now=0.0)
+    assert slightly_less.amplitude < big.amplitude
 
 
 def test_first_stroke_goes_to_the_far_extreme():

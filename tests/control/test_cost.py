@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from ucat_console.control import FinMpc, MpcConfig
-from ucat_console.control.cost import cost_terms, eta_hat, strouhal, strouhal_penalty
+from ucat_console.control.cost import cost_terms, eta_hat, strouhal, strouhal_penalty, timed_rates
+from ucat_console.control.params import ExecutorConfig
 
 CFG = MpcConfig()
 U_PREV = np.array([0.5, -0.5, 2.0, 2.0])
@@ -115,3 +116,66 @@ def test_analytic_gradient_matches_finite_differences():
         if np.allclose(g, fd, atol=1e-5):
             checked += 1
     assert checked >= 190
+
+
+# ------------------------------------------------------------------ the drive's timing
+DRIVE = ExecutorConfig()  # 64 rad/s2, 10 rad/s
+
+
+def test_timed_rates_cap_each_rate_at_the_triangle_a_stroke_allows():
+    u = np.array([1.0, -0.25, 7.0, 1.0])
+    capped = timed_rates(u, CFG, (64.0, 10.0))
+    # a stroke of 1 rad from rest to rest at 64 rad/s2: at best sqrt(64 * 1) / 2 = 4 rad/s
+    assert capped[2] == pytest.approx(4.0)
+    assert capped[3] == 1.0  # 0.25 rad allows 2 rad/s: 1 rad/s stays
+    assert list(capped[:2]) == [1.0, -0.25]
+
+
+@pytest.mark.parametrize("formulation", ["paper", "closed_stroke"])
+def test_compiled_cost_with_the_drive_agrees_with_reference(formulation):
+    cfg = CFG.replace(formulation=formulation)
+    mpc = FinMpc(cfg, drive=DRIVE)
+    rng = np.random.default_rng(12)
+    capped = 0
+    for _ in range(300):
+        s = rng.choice([-1.0, 1.0])
+        u = np.array([
+            s * rng.uniform(cfg.d_eps, cfg.d_max), -s * rng.uniform(cfg.d_eps, cfg.d_max),
+            rng.uniform(cfg.w_min, cfg.w_max), rng.uniform(cfg.w_min, cfg.w_max),
+        ])
+        f = rng.uniform([-1.0, 0.0], [0.0, 1.0])
+        v = rng.uniform(0.0, 0.6)
+        th = rng.uniform(-math.pi, math.pi)
+        up = np.array([0.3, -0.7, 1.0, 5.0])
+        got = mpc.cost(u, f, v, th, up)
+        ref = cost_terms(u, f, v, th, up, cfg, None, (DRIVE.acceleration, DRIVE.max_rate))
+        capped += not np.array_equal(timed_rates(u, cfg, (64.0, 10.0)), u)
+        assert got.total == pytest.approx(float(ref["total"]), abs=1e-9)
+        assert got.st == pytest.approx(float(ref["st"]), abs=1e-12)
+        assert got.mean_force == pytest.approx((float(ref["fbx"]), float(ref["fby"])), abs=1e-12)
+    assert capped > 100  # most of the box asks for more than the drive makes
+
+
+def test_the_gradient_with_the_drive_matches_finite_differences():
+    """Where a rate is capped, the cost moves with the stroke (the cap grows with it) and
+    not with the rate: the analytic gradient says so."""
+    mpc = FinMpc(CFG, drive=DRIVE)
+    drive = (DRIVE.acceleration, DRIVE.max_rate)
+    rng = np.random.default_rng(6)
+    checked = flat = 0
+    for _ in range(200):
+        u = np.array([rng.uniform(0.1, 1.1), -rng.uniform(0.1, 1.1), rng.uniform(1, 7), rng.uniform(1, 7)])
+        args = (np.array([-0.4, 0.3]), 0.3, 0.4, U_PREV)
+        g = mpc.cost_gradient(u, *args)
+        h = 1e-7
+        fd = np.zeros(4)
+        for i in range(4):
+            e = np.zeros(4)
+            e[i] = h
+            fd[i] = (cost_terms(u + e, *args, CFG, None, drive)["total"]
+                     - cost_terms(u - e, *args, CFG, None, drive)["total"]) / (2 * h)
+        if np.allclose(g, fd, atol=1e-5):
+            checked += 1
+            flat += g[2] == 0.0 or g[3] == 0.0
+    assert checked >= 185
+    assert flat > 50  # capped rates seen, with their zero partial derivative

@@ -19,6 +19,11 @@ Failsafes (``FailsafeConfig`` has one rule, action and timeout, for each):
   has been reported cleared (:data:`MOTOR_CLEARS`).
 * ``planner_late``: at least ``late_plans`` late plans (loop Events ``late_plan``) within
   the last ``timeout`` s; clears when fewer remain in that window.
+* ``tracking``: while the fins are driven, the depth, the forward speed or the heading
+  (``body/tracking``) has been further than its band (``tracking_depth``,
+  ``tracking_speed``, ``tracking_heading``) from what the body layer holds it to for
+  ``timeout`` s; clears when every axis is back within its band. Warns by default: the
+  robot does not go where it is sent.
 
 Times are the supervisor's clock (the loop's time). A valid sensor reading counts at its
 own time ``t`` (the robot stamps readings with the loop's time; one more than a minute away
@@ -43,7 +48,7 @@ from ucat_console.telemetry.events import Event
 log = logging.getLogger(__name__)
 
 #: every failsafe, in display order
-FAILSAFES = ("pilot_gone", "imu", "dvl", "depth", "motor", "planner_late")
+FAILSAFES = ("pilot_gone", "imu", "dvl", "depth", "motor", "planner_late", "tracking")
 SENSORS = ("imu", "dvl", "depth")
 #: motor controller event codes that start a fault (a ``quick_stop`` event is the other
 #: drives' safe-state reaction to one of these, which the failsafe already counts)
@@ -55,7 +60,10 @@ MOTOR_CLEARS: dict[str, frozenset[str]] = {
     "heartbeat_restored": frozenset({"heartbeat_lost"}),
 }
 #: the channels the monitor subscribes to
-CHANNELS = (ch.IMU, ch.DVL, ch.DEPTH, ch.EVENTS)
+CHANNELS = (ch.IMU, ch.DVL, ch.DEPTH, ch.EVENTS, ch.BODY_TRACKING, ch.BODY_ALLOCATION)
+#: the tracked axes: (name, the message's error field, the band's config field, unit)
+TRACKED = (("depth", "depth_error", "tracking_depth", "m"), ("speed", "speed_error", "tracking_speed", "m/s"),
+           ("heading", "heading_error", "tracking_heading", "rad"))
 
 
 @dataclass(frozen=True)
@@ -117,6 +125,8 @@ class SafetyMonitor:
         self._pilot_left: float | None = None
         self._motor: dict[str, dict[str, float]] = {}  # source -> fault code -> since
         self._late: collections.deque[float] = collections.deque()
+        self._off_track: dict[str, tuple[float, float]] = {}  # axis -> (since, the last error)
+        self._allocation: Any = None  # the last BodyAllocation
         self._active: dict[str, float] = {}  # name -> since
         self._cause: dict[str, str] = {n: "" for n in FAILSAFES}
 
@@ -140,6 +150,10 @@ class SafetyMonitor:
                 if sensor is None:
                     if channel == ch.EVENTS and isinstance(msg, Event):
                         events.append(msg)
+                    elif channel == ch.BODY_TRACKING:
+                        self._track(msg)
+                    elif channel == ch.BODY_ALLOCATION:
+                        self._allocation = msg
                 elif reading_valid(msg):
                     t = msg.t
                     # readings carry the loop's time; one off by more than a minute does not
@@ -152,6 +166,17 @@ class SafetyMonitor:
                     invalid[sensor] += 1
         for ev in events:
             self.on_event(ev)
+
+    def _track(self, msg: Any) -> None:
+        """A tracking message: each axis out of its band since when (the lock is held)."""
+        off = self._off_track
+        for axis, field, band, _unit in TRACKED:
+            err = getattr(msg, field, math.nan)
+            if msg.driving and _finite(err) and abs(err) > getattr(self.cfg, band):
+                since = off[axis][0] if axis in off else msg.t
+                off[axis] = (since, err)
+            else:
+                off.pop(axis, None)
 
     def on_event(self, ev: Event) -> None:
         with self._lock:
@@ -242,6 +267,11 @@ class SafetyMonitor:
             late.popleft()
         if len(late) >= cfg.late_plans:
             causes["planner_late"] = f"{len(late)} late plans in the last {window:g} s"
+        off = [f"{axis} {err:+.2f} {unit} off its reference for {now - since:.0f} s"
+               for axis, _f, _b, unit in TRACKED if axis in self._off_track
+               for since, err in (self._off_track[axis],) if now - since >= cfg.tracking.timeout]
+        if off:
+            causes["tracking"] = "not tracking: " + ", ".join(off)
         return causes
 
     # ------------------------------------------------------------------ reading
@@ -256,6 +286,26 @@ class SafetyMonitor:
         """Late plans within the planner_late window (at the last check)."""
         with self._lock:
             return len(self._late)
+
+    def control(self) -> tuple[list[str], list[str]]:
+        """(the axes the allocation cuts now, each as "axis: given of asked"; the tracked axes
+        off their band now, each as "axis error unit for s")."""
+        with self._lock:
+            a, now = self._allocation, self._now
+            cut = []
+            if a is not None:
+                units = {"surge": (a.surge, a.surge_applied, "N"), "heave": (a.heave, a.heave_applied, "N"),
+                         "yaw": (a.yaw, a.yaw_applied, "N m")}
+                for axis in a.cut:
+                    if axis == "coast":
+                        cut.append("coasting: the hull's drag slows the robot")
+                    elif axis in units:
+                        asked, given, unit = units[axis]
+                        cut.append(f"{axis}: {given:.2f} of {asked:.2f} {unit}")
+            off = [f"{axis} {err:+.2f} {unit} for {max(0.0, now - since):.0f} s"
+                   for axis, _f, _b, unit in TRACKED if axis in self._off_track
+                   for since, err in (self._off_track[axis],)]
+            return cut, off
 
     def motor_faults(self) -> list[str]:
         """The motor controller faults reported and not cleared ("source code")."""

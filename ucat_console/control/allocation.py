@@ -1,6 +1,12 @@
-"""Body-frame layer: PIDs on velocity, depth and yaw rate, and the fin force allocation.
+"""Fin force allocation: the body demand split into each fin's force target.
 
-Control.md section 7, paper section IV.B/IV.D.
+Two allocations, one per body layer (``BodyConfig.layer``, control.md section 7):
+
+* the paper's (section IV.B): F_x*, F_y* and a yaw thrust differential, in the fin model's
+  terms, heave and yaw on the front pair, no limits (:func:`fin_targets`, :func:`allocate`);
+* the designed layer's (:func:`allocate_wrench`): a physical body wrench (surge force X,
+  heave force Z, yaw moment N) onto the four fins, each fin's deliverable force as its
+  limit, a priority between the axes, and what was cut reported.
 
 Fin indexing is the paper's: fins 0 and 1 are the front pair, 2 and 3 the rear pair;
 0 and 2 are on the starboard side, 1 and 3 on the port side (``robot.fins.PAPER_SIDES``). The plant
@@ -8,22 +14,42 @@ and the drivers use the robot's order (``robot.fins``, which holds the one map b
 
 Sign conventions. Forces are those of the fin model (control.md section 1): forward thrust
 is ``f_x < 0``; ``f_y`` is the force in the fin's working plane perpendicular to x (vertical
-on U-CAT), its sign towards depth set by ``BodyConfig.depth_sign``. Body frame x forward,
-y starboard, z down, so a positive yaw rate is clockwise seen from above (a turn to
-starboard); the gyro's z component is that rate.
+on U-CAT), ``f_y > 0`` lifts. Body frame x forward, y starboard, z down, so a positive yaw
+rate is clockwise seen from above (a turn to starboard). A fin's model force ``(f_x, f_y)``
+acts on the hull as ``(-f_x cos(alpha), s_y f_x sin(alpha), -f_y)`` with a yaw moment
+``s_lat arm_yaw f_x`` (``robot.geometry``).
 
-* Velocity: ``F_x* = -PID_v(v_ref - v)`` (a positive velocity error asks for more forward
-  thrust, i.e. a more negative f_x).
-* Depth: ``F_y* = depth_sign * PID_z(z_ref - z)`` (depth positive down), realised on the
-  front pair: ``f_y,0 = f_y,1 = F_y*/2``, rear ``f_y = 0``.
-* Yaw: ``m = PID_r(r_ref - r)`` is a thrust differential in newtons (the paper's yaw limit
-  is 0.5 N). It is applied to the front pair as ``f_x,0 += m/2`` (starboard) and
-  ``f_x,1 -= m/2`` (port): for m > 0 the port fin pushes forward harder, the starboard fin
-  less, giving a clockwise (starboard) yaw moment ``N = b m`` for fins at lateral distance
-  ``b``, with no change of the total f_x.
-* Axial: every fin gets ``F_x*/4``.
+The paper's allocation. ``f_x,i = F_x*/4`` for every fin, plus the yaw differential ``m``
+on the front pair: ``f_x,0 += m/2`` (starboard), ``f_x,1 -= m/2`` (port), a clockwise yaw
+moment ``arm m`` for m > 0; ``f_y,0 = f_y,1 = F_y*/2``, rear ``f_y = 0``.
 
-Sync mode: the rear pair is one logical actuator; :func:`allocate` then returns three
+The designed allocation. The body wrench is physical; so are the fins' forces until the
+last step:
+
+1. heave: ``f_y,i = -Z h_i``, the share ``h`` of the front fins ``(1 - r)/2`` and of the rear
+   ``r/2`` (``BodyConfig.heave_rear_share`` r; 0.5: all alike, no pitch moment). When a fin
+   would need more than its deliverable force F, Z is cut to fit (*heave cut*);
+2. yaw: each yaw fin adds ``s_lat sgn(N) y`` to its forward force, ``y = |N| / (n arm)``
+   over the n yaw fins (all four, no sway force; the front pair in sync mode, where the rear
+   fins run one plan, or when ``yaw_on_rear`` is off). A fin's force must stay within F:
+   with its heave share taken, its x-force lies in ``[-g c_i, c_i]``, ``c_i = sqrt(F^2 -
+   f_y,i^2)``, where forward force counts ``g`` times (``BodyConfig.thrust_gain``: the fins
+   push forward g times harder than the model says). y is cut to the largest for which a
+   common surge force exists (*yaw cut*);
+3. surge: every fin adds ``a = -X / (4 cos(alpha))``, clipped to what the fins have left
+   (*surge cut*). Braking: the fins never push against the direction of travel the
+   velocity setpoint asks for: to slow down, the thrust drops and the hull's drag brakes
+   (*coasting*; turning the fins round to push backwards means swinging the stroke centres
+   through about 3 rad at the force the model gives backwards, 1/g of the forward one, while
+   the hull's drag brakes with 6.5 N per m/s). A negative setpoint (reverse) mirrors this.
+4. The fins' physical x-forces become the fin model's: forward ones divided by g.
+
+Priority: heave, then yaw, then surge: depth is safety (the surface, the bottom), heading
+keeps the robot on its line, and speed is the cheapest to give up. What was cut is a bit
+set (``CUT_*``) the body layer feeds back to its loops (anti-windup) and onto the
+telemetry.
+
+Sync mode: the rear pair is one logical actuator; the allocation then returns three
 logical targets (front starboard, front port, rear pair) and the logical -> physical map.
 A logical target is the force *each* of its physical fins must produce.
 """
@@ -38,11 +64,7 @@ import numpy as np
 from numba.extending import register_jitable
 
 from ucat_console.control.argcheck import finite, in_range
-from ucat_console.control.filters import MedianFilter, median_clear, median_push, median_size, median_value
-from ucat_console.control.params import BodyConfig
-from ucat_console.control.pid import EARLIER, NPID, Pid, pid_reset, pid_step
-from ucat_console.robot.readings import DepthReading, DvlVelocity, ImuReading
-from ucat_console.robot.fins import N_FINS
+from ucat_console.robot.fins import N_FINS, PAPER_SIDES
 
 FRONT_STARBOARD, FRONT_PORT, REAR_STARBOARD, REAR_PORT = 0, 1, 2, 3
 
@@ -53,6 +75,25 @@ SYNC_FINS: tuple[tuple[int, ...], ...] = (
     (FRONT_PORT,),
     (REAR_STARBOARD, REAR_PORT),
 )
+
+#: what the designed allocation cut (bits)
+CUT_HEAVE, CUT_YAW, CUT_SURGE, CUT_COAST = 1, 2, 4, 8
+#: the names of the cut bits, as the telemetry lists them
+CUT_NAMES = ((CUT_HEAVE, "heave"), (CUT_YAW, "yaw"), (CUT_SURGE, "surge"), (CUT_COAST, "coast"))
+
+# the designed allocation's parameters (one array; layout A_*)
+A_FMAX = 0  # a fin's deliverable force by the fin model (N)
+A_GAIN = 1  # thrust gain g
+A_COS = 2  # cos of the fins' mounting angle
+A_ARM = 3  # yaw moment arm (m)
+A_REAR = 4  # the rear pair's share of the heave
+A_YAW_REAR = 5  # 1.0: the rear pair makes yaw moment too
+NA = 6
+# what it writes (one array; layout W_*): each paper fin's model target (f_x, f_y), then
+# the applied wrench
+W_TARGETS = 0
+W_X, W_Z, W_N = 8, 9, 10
+NW = 11
 
 
 @dataclass(frozen=True)
@@ -77,8 +118,8 @@ class Allocation:
 
 @register_jitable
 def fin_targets(fx: float, fy: float, m: float) -> tuple[float, float, float, float, float, float]:
-    """The allocation's arithmetic (paper section IV.B): (f_x, f_y) of the front starboard
-    fin, the front port fin and each rear fin, for F_x* ``fx``, F_y* ``fy`` and the yaw
+    """The paper's allocation (section IV.B): (f_x, f_y) of the front starboard fin, the
+    front port fin and each rear fin, for F_x* ``fx``, F_y* ``fy`` and the yaw
     differential ``m`` (see the module docstring). The one definition: :func:`allocate`
     runs it as Python, the closed loop's compiled core compiled."""
     axial = 0.25 * fx
@@ -86,7 +127,7 @@ def fin_targets(fx: float, fy: float, m: float) -> tuple[float, float, float, fl
 
 
 def allocate(fx_body: float, fy_body: float, yaw: float, *, sync: bool = False) -> Allocation:
-    """Split the body demand into fin targets (paper eqs in section IV.B).
+    """Split the body demand into fin targets by the paper's allocation.
 
     ``fx_body`` is F_x* (N, forward < 0), ``fy_body`` is F_y* (N), ``yaw`` the front-pair
     thrust differential (N, > 0 turns to starboard). See the module docstring for signs.
@@ -97,10 +138,115 @@ def allocate(fx_body: float, fy_body: float, yaw: float, *, sync: bool = False) 
         finite("fy_body", fy)
         finite("yaw", m)
     sx, sy, px, py, rx, ry = fin_targets(fx, fy, m)
-    front_s, front_p, rear = (sx, sy), (px, py), (rx, ry)
+    return _logical(((sx, sy), (px, py), (rx, ry), (rx, ry)), sync)
+
+
+def _logical(per_fin: tuple[tuple[float, float], ...], sync: bool) -> Allocation:
     if sync:
-        return Allocation(targets=(front_s, front_p, rear), fins=SYNC_FINS)
-    return Allocation(targets=(front_s, front_p, rear, rear), fins=INDEPENDENT_FINS)
+        return Allocation(targets=per_fin[:3], fins=SYNC_FINS)
+    return Allocation(targets=per_fin, fins=INDEPENDENT_FINS)
+
+
+@register_jitable
+def allocate_wrench(x: float, z: float, n: float, reverse: bool, sync: bool, a: np.ndarray,
+                    out: np.ndarray) -> int:
+    """The designed allocation (module docstring) of surge force ``x`` (N, forward > 0),
+    heave force ``z`` (N, down > 0) and yaw moment ``n`` (N m, clockwise from above > 0):
+    each paper fin's model target and the wrench applied into ``out`` (layout ``W_*``), the
+    cut bits returned. ``reverse``: the velocity setpoint is negative; ``a``: the parameters
+    (layout ``A_*``)."""
+    fmax, g, cos_a, arm = a[A_FMAX], a[A_GAIN], a[A_COS], a[A_ARM]
+    rear = a[A_REAR]
+    cut = 0
+    # 1. heave
+    h_front, h_rear = 0.5 * (1.0 - rear), 0.5 * rear
+    h_max = max(h_front, h_rear)
+    if abs(z) * h_max > fmax:
+        z = math.copysign(fmax / h_max, z)
+        cut |= CUT_HEAVE
+    fy_front, fy_rear = -z * h_front, -z * h_rear
+    c_front = math.sqrt(max(0.0, fmax * fmax - fy_front * fy_front))
+    c_rear = math.sqrt(max(0.0, fmax * fmax - fy_rear * fy_rear))
+    # 2. yaw: sigma_i in {-1, 0, 1} per fin, y >= 0 the per-fin share
+    yaw_rear = a[A_YAW_REAR] > 0.5 and not sync
+    n_yaw = 4 if yaw_rear else 2
+    sign_n = 1.0 if n >= 0.0 else -1.0
+    y = abs(n) / (n_yaw * arm)
+    sig0 = PAPER_SIDES[0] * sign_n
+    sig1 = PAPER_SIDES[1] * sign_n
+    sig2 = PAPER_SIDES[2] * sign_n if yaw_rear else 0.0
+    sig3 = PAPER_SIDES[3] * sign_n if yaw_rear else 0.0
+    sig = (sig0, sig1, sig2, sig3)
+    cap = (c_front, c_front, c_rear, c_rear)
+    y_max = math.inf
+    for i in range(4):
+        for j in range(4):
+            ds = sig[j] - sig[i]
+            if ds > 0.0:
+                y_max = min(y_max, (cap[j] + g * cap[i]) / ds)
+    if y > y_max:
+        y = y_max
+        cut |= CUT_YAW
+    # 3. surge: the common per-fin share, within what every fin has left
+    lo, hi = -math.inf, math.inf
+    for i in range(4):
+        lo = max(lo, -g * cap[i] - sig[i] * y)
+        hi = min(hi, cap[i] - sig[i] * y)
+    share = -x / (4.0 * cos_a)
+    if (not reverse and share > 0.0) or (reverse and share < 0.0):
+        share = 0.0
+        cut |= CUT_COAST
+    clipped = min(hi, max(lo, share))
+    if clipped != share:
+        cut |= CUT_SURGE
+    # 4. the fin model's targets
+    for i in range(4):
+        fx = clipped + sig[i] * y
+        if fx < 0.0:
+            fx /= g
+        out[W_TARGETS + 2 * i] = fx
+        out[W_TARGETS + 2 * i + 1] = fy_front if i < 2 else fy_rear
+    out[W_X] = -4.0 * cos_a * clipped
+    out[W_Z] = z
+    out[W_N] = sign_n * y * n_yaw * arm
+    return cut
+
+
+def wrench_params(fmax: float, thrust_gain: float, mounting_angle_deg: float, arm_yaw: float,
+                  heave_rear_share: float, yaw_on_rear: bool) -> np.ndarray:
+    """The designed allocation's parameter array (layout ``A_*``)."""
+    a = np.zeros(NA)
+    a[A_FMAX], a[A_GAIN] = fmax, thrust_gain
+    a[A_COS], a[A_ARM] = math.cos(math.radians(mounting_angle_deg)), arm_yaw
+    a[A_REAR], a[A_YAW_REAR] = heave_rear_share, 1.0 if yaw_on_rear else 0.0
+    return a
+
+
+@dataclass(frozen=True)
+class WrenchAllocation:
+    """What :func:`allocate_wrench` made of a body wrench: the fins' targets, the wrench
+    applied (surge N, heave N, yaw N m) and the axes cut (names of ``CUT_NAMES``)."""
+
+    allocation: Allocation
+    applied: tuple[float, float, float]
+    cut: tuple[str, ...]
+
+
+def cut_names(bits: int) -> tuple[str, ...]:
+    return tuple(name for bit, name in CUT_NAMES if bits & bit)
+
+
+def allocate_body_wrench(x: float, z: float, n: float, params: np.ndarray, *, reverse: bool = False,
+                         sync: bool = False) -> WrenchAllocation:
+    """:func:`allocate_wrench` as Python: surge ``x`` (N), heave ``z`` (N, down > 0) and yaw
+    moment ``n`` (N m) into the fins' targets."""
+    for name, v in (("x", x), ("z", z), ("n", n)):
+        finite(name, v)
+    out = np.zeros(NW)
+    bits = allocate_wrench(float(x), float(z), float(n), bool(reverse), bool(sync), params, out)
+    per_fin = tuple((float(out[2 * i]), float(out[2 * i + 1])) for i in range(N_FINS))
+    return WrenchAllocation(_logical(per_fin, sync), (float(out[W_X]), float(out[W_Z]), float(out[W_N])),
+                            cut_names(bits))
 
 
 #: the widest envelope: no configuration allows setpoints beyond these (m/s, m, rad/s)
@@ -129,254 +275,3 @@ class BodySetpoints:
         in_range("depth", self.depth, 0.0, max_depth, unit="m")
         in_range("yaw_rate", self.yaw_rate, -max_yaw_rate, max_yaw_rate, unit="rad/s")
         return self
-
-
-@dataclass(frozen=True)
-class BodyStep:
-    """Output of one body-frame step (published as ``telemetry.messages.BodyCommand``).
-
-    ``fx``, ``fy``, ``yaw`` are F_x*, F_y* and the yaw differential (N); ``velocity``,
-    ``depth`` are the median-filtered measurements and ``yaw_rate`` the last gyro rate (None
-    before the first sample); ``*_updated`` tell whether that loop ran on a new sample in
-    this step (False: its output is held).
-    """
-
-    t: float
-    fx: float
-    fy: float
-    yaw: float
-    allocation: Allocation
-    velocity: float | None
-    depth: float | None
-    yaw_rate: float | None
-    velocity_updated: bool
-    depth_updated: bool
-    yaw_updated: bool
-
-
-# layout of the body-frame layer's numbers (one float array): what the readings left, the
-# loops' outputs, then the three PIDs (``pid.PID_*`` rows) and the two median filters
-B_DVL_MISSING = 0  # DVL reports without bottom lock since the reset
-B_LAST_DVL_T = 1  # time of the last valid DVL report (NaN: none)
-B_LAST_DEPTH_T = 2
-B_LAST_IMU_T = 3
-B_YAW_RATE = 4  # the last gyro rate (NaN: none)
-B_NEW_V = 5  # 1.0: a sample the loop has not run on yet
-B_NEW_Z = 6
-B_NEW_R = 7
-B_FX = 8  # the loops' last outputs (held while a loop has no new sample)
-B_FY = 9
-B_YAW = 10
-B_DEPTH_SIGN = 11
-B_WINDOW = 12  # the median filters' length
-B_PIDS = 16  # velocity, depth, yaw rate: NPID numbers each
-B_FILTERS = B_PIDS + 3 * NPID  # velocity filter, then depth filter
-#: what the body functions return: all is well, or which input was not a finite number
-BODY_OK, BAD_DVL_VX, BAD_DVL_T, BAD_DEPTH, BAD_DEPTH_T, BAD_GYRO, BAD_IMU_T, BAD_T, EARLIER_T = range(9)
-#: the field each bad input is named by
-BODY_FIELDS = {BAD_DVL_VX: "dvl.vx", BAD_DVL_T: "dvl.t", BAD_DEPTH: "depth.depth_m", BAD_DEPTH_T: "depth.t",
-               BAD_GYRO: "imu.gyro[2]", BAD_IMU_T: "imu.t", BAD_T: "t"}
-
-
-def body_size(window: int) -> int:
-    return B_FILTERS + 2 * median_size(window)
-
-
-@register_jitable
-def body_reset(b: np.ndarray) -> None:
-    """Forget every reading and output (the gains stay)."""
-    for k in range(3):
-        pid_reset(b[B_PIDS + k * NPID:B_PIDS + (k + 1) * NPID])
-    median_clear(b, B_FILTERS)
-    median_clear(b, B_FILTERS + median_size(int(b[B_WINDOW])))
-    b[B_DVL_MISSING] = 0.0
-    b[B_LAST_DVL_T] = math.nan
-    b[B_LAST_DEPTH_T] = math.nan
-    b[B_LAST_IMU_T] = math.nan
-    b[B_YAW_RATE] = math.nan
-    b[B_NEW_V] = 0.0
-    b[B_NEW_Z] = 0.0
-    b[B_NEW_R] = 0.0
-    b[B_FX] = 0.0
-    b[B_FY] = 0.0
-    b[B_YAW] = 0.0
-
-
-@register_jitable
-def body_on_dvl(b: np.ndarray, valid: bool, v: float, t: float) -> int:
-    """A DVL report (forward velocity ``v``): missing data when not ``valid`` (counted,
-    never a zero velocity)."""
-    if not valid:
-        b[B_DVL_MISSING] += 1.0
-        return BODY_OK
-    if not math.isfinite(v):
-        return BAD_DVL_VX
-    if not math.isfinite(t):
-        return BAD_DVL_T
-    w = int(b[B_WINDOW])
-    median_push(b, B_FILTERS, w, v)
-    b[B_LAST_DVL_T] = t
-    b[B_NEW_V] = 1.0
-    return BODY_OK
-
-
-@register_jitable
-def body_on_depth(b: np.ndarray, z: float, t: float) -> int:
-    if not math.isfinite(z):
-        return BAD_DEPTH
-    if not math.isfinite(t):
-        return BAD_DEPTH_T
-    w = int(b[B_WINDOW])
-    median_push(b, B_FILTERS + median_size(w), w, z)
-    b[B_LAST_DEPTH_T] = t
-    b[B_NEW_Z] = 1.0
-    return BODY_OK
-
-
-@register_jitable
-def body_on_imu(b: np.ndarray, r: float, t: float) -> int:
-    """An IMU sample: its yaw rate (gyro z) ``r``."""
-    if not math.isfinite(r):
-        return BAD_GYRO
-    if not math.isfinite(t):
-        return BAD_IMU_T
-    b[B_YAW_RATE] = r
-    b[B_LAST_IMU_T] = t
-    b[B_NEW_R] = 1.0
-    return BODY_OK
-
-
-@register_jitable
-def body_sensors_reported(b: np.ndarray) -> bool:
-    return not math.isnan(b[B_LAST_DEPTH_T]) and (not math.isnan(b[B_LAST_DVL_T]) or b[B_DVL_MISSING] > 0.0)
-
-
-@register_jitable
-def body_update(b: np.ndarray, t: float, sp_v: float, sp_z: float, sp_r: float) -> tuple[int, float, float]:
-    """One control step at ``t``: each loop that has a new sample runs (else its output is
-    held). Returns (BODY_OK or what was wrong, the filtered velocity, the filtered depth:
-    NaN before a sample); the outputs are ``b[B_FX]``, ``b[B_FY]``, ``b[B_YAW]``."""
-    if not math.isfinite(t):
-        return BAD_T, math.nan, math.nan
-    w = int(b[B_WINDOW])
-    v = median_value(b, B_FILTERS, w)
-    z = median_value(b, B_FILTERS + median_size(w), w)
-    r = b[B_YAW_RATE]
-    status = BODY_OK
-    if b[B_NEW_V] != 0.0 and not math.isnan(v):
-        out = pid_step(b[B_PIDS:B_PIDS + NPID], sp_v - v, v, t)
-        if out == EARLIER:
-            status = EARLIER_T
-        else:
-            b[B_FX] = -out
-    if b[B_NEW_Z] != 0.0 and not math.isnan(z):
-        out = pid_step(b[B_PIDS + NPID:B_PIDS + 2 * NPID], sp_z - z, z, t)
-        if out == EARLIER:
-            status = EARLIER_T
-        else:
-            b[B_FY] = b[B_DEPTH_SIGN] * out
-    if b[B_NEW_R] != 0.0 and not math.isnan(r):
-        out = pid_step(b[B_PIDS + 2 * NPID:B_PIDS + 3 * NPID], sp_r - r, r, t)
-        if out == EARLIER:
-            status = EARLIER_T
-        else:
-            b[B_YAW] = out
-    b[B_NEW_V] = 0.0
-    b[B_NEW_Z] = 0.0
-    b[B_NEW_R] = 0.0
-    return status, v, z
-
-
-def _none(x: float) -> float | None:
-    return None if math.isnan(x) else float(x)
-
-
-class BodyController:
-    """The three body-frame PIDs with their input filters; readings in, fin targets out.
-
-    Feed readings with :meth:`on_dvl`, :meth:`on_depth`, :meth:`on_imu` as they arrive and
-    call :meth:`update` at the control rate. A loop runs only on a new sample; otherwise its
-    last output is held. A DVL report with ``valid=False`` is missing data: it is counted
-    and never enters the filter as a zero velocity.
-
-    Its numbers are one array, :attr:`state` (layout ``B_*``), that the ``body_*`` functions
-    work on: this class runs them as Python, the closed loop's compiled core runs the same
-    functions compiled on the loop's controller's array.
-    """
-
-    def __init__(self, cfg: BodyConfig) -> None:
-        self.cfg = cfg
-        w = cfg.median_window
-        self.state = np.zeros(body_size(w))
-        self.state[B_WINDOW] = w
-        self.state[B_DEPTH_SIGN] = cfg.depth_sign
-        self.velocity_pid = Pid(cfg.velocity, self.state[B_PIDS:B_PIDS + NPID])
-        self.depth_pid = Pid(cfg.depth, self.state[B_PIDS + NPID:B_PIDS + 2 * NPID])
-        self.yaw_pid = Pid(cfg.yaw_rate, self.state[B_PIDS + 2 * NPID:B_PIDS + 3 * NPID])
-        self.velocity_filter = MedianFilter(w, self.state, B_FILTERS)
-        self.depth_filter = MedianFilter(w, self.state, B_FILTERS + median_size(w))
-        self.reset()
-
-    def reset(self) -> None:
-        body_reset(self.state)
-
-    @property
-    def dvl_missing(self) -> int:
-        return int(self.state[B_DVL_MISSING])
-
-    @property
-    def last_dvl_t(self) -> float | None:
-        return _none(self.state[B_LAST_DVL_T])
-
-    @property
-    def last_depth_t(self) -> float | None:
-        return _none(self.state[B_LAST_DEPTH_T])
-
-    @property
-    def last_imu_t(self) -> float | None:
-        return _none(self.state[B_LAST_IMU_T])
-
-    @property
-    def sensors_reported(self) -> bool:
-        """A depth and a DVL report (with or without bottom lock) have arrived since the
-        reset: the loops have seen what the robot can measure, and a speed still missing is
-        the DVL's reported fault, not the start-up's."""
-        return bool(body_sensors_reported(self.state))
-
-    def _check(self, status: int, value: float, t: float) -> None:
-        if status != BODY_OK:
-            name = BODY_FIELDS[status]
-            finite(name, t if name.endswith(".t") or name == "t" else value)
-
-    def on_dvl(self, reading: DvlVelocity) -> None:
-        self._check(body_on_dvl(self.state, bool(reading.valid), reading.vx, reading.t), reading.vx, reading.t)
-
-    def on_depth(self, reading: DepthReading) -> None:
-        self._check(body_on_depth(self.state, reading.depth_m, reading.t), reading.depth_m, reading.t)
-
-    def on_imu(self, reading: ImuReading) -> None:
-        r = reading.gyro[2]
-        self._check(body_on_imu(self.state, r, reading.t), r, reading.t)
-
-    def update(self, t: float, setpoints: BodySetpoints, *, sync: bool = False) -> BodyStep:
-        """One control step at time ``t`` (s): run the loops that have new data, allocate."""
-        t = finite("t", t)
-        b = self.state
-        new_v, new_z, new_r = bool(b[B_NEW_V]), bool(b[B_NEW_Z]), bool(b[B_NEW_R])
-        status, v, z = body_update(b, t, setpoints.velocity, setpoints.depth, setpoints.yaw_rate)
-        if status == EARLIER_T:
-            raise ValueError(f"t: {t!r} is earlier than the last update of a body-frame loop")
-        fx, fy, yaw = float(b[B_FX]), float(b[B_FY]), float(b[B_YAW])
-        return BodyStep(
-            t=t,
-            fx=fx,
-            fy=fy,
-            yaw=yaw,
-            allocation=allocate(fx, fy, yaw, sync=sync),
-            velocity=_none(v),
-            depth=_none(z),
-            yaw_rate=_none(b[B_YAW_RATE]),
-            velocity_updated=new_v,
-            depth_updated=new_z,
-            yaw_updated=new_r,
-        )

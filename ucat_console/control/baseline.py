@@ -1,13 +1,27 @@
 """Baseline controller: the fixed-frequency inverse model of Remmas et al. (control.md section 6).
 
 Each fin beats at the fixed frequency ``f`` (:class:`BaselineConfig`); the requested mean
-force magnitude ``F`` sets the amplitude through the paper's eq 19::
+force magnitude ``F`` sets the amplitude ``A`` (the half stroke), and the force direction
+is set by moving the oscillation centre. The plan is written in the command format the
+MPC uses, so the same execution module runs both controllers.
 
-    theta_max = arccos(1 - F / (8 C_D rho A_f (r_c pi f)^2))
+The amplitude (``BaselineConfig.inverse_model``):
 
-(the arccos argument clipped to [-1, 1], the amplitude clipped to ``d_max``), and the force
-direction is set by moving the oscillation centre. The plan is written in the command
-format the MPC uses, so the same execution module runs both controllers.
+* ``fin_model`` (the default): the controller's fin model inverted, with the strokes timed
+  as the drives run them. A sinusoid of amplitude A at f sweeps 2A in half a period, a mean
+  rate ``w = 4 A f``; a drive that accelerates at ``a`` cannot make a stroke of 2A faster
+  than ``mean_rate_limit(2A)`` (``control.stroke_timing``), so ``w(A) = min(4 A f,
+  mean_rate_limit(2A))`` (the beat slows below f where the drive cannot keep up). A
+  symmetric stroke pair then makes (below) ``F(A) = q sqrt(C_L^2 + C_D^2) w(A)^2 cos(A)``,
+  ``q = rho A_f r_c^2 / 2``, increasing up to its largest value; A is found by bisection,
+  and a force beyond the largest gets the amplitude of the largest;
+* ``eq19``: the paper's eq 19, ``theta_max = arccos(1 - F / (8 C_D rho A_f (r_c pi f)^2))``
+  (argument clipped to [-1, 1], amplitude to ``d_max``). For small amplitudes eq 19's force
+  is ``4 C_D rho A_f r_c^2 pi^2 f^2 A^2`` where the fin model's is ``8 rho A_f r_c^2 f^2 A^2
+  sqrt(C_L^2 + C_D^2)``: eq 19 expects ``pi^2 C_D / (2 sqrt(C_L^2 + C_D^2))`` = 4.65 times
+  the force (the paper's coefficients), so it asks for a stroke that makes 1/4.65 of the
+  force the fin model says, in every direction (the plant's thrust gain of 4.6 makes up for
+  it forwards only). It is kept for the experiments that reproduce the paper.
 
 Angle convention (the fin model of control.md section 1, where forward thrust is f_x < 0).
 A stroke pair about a centre ``c`` (strokes ``+2A`` and ``-2A`` at the same rate ``w``) has
@@ -27,11 +41,11 @@ coefficients a pure forward request (-1, 0) N gives c = -1.228 rad, a pure f_y r
 (0, 1) N gives c = -2.798 rad; the benchmark's targets (f_x <= 0, f_y >= 0) map to centres
 in [-2.80, -1.23] rad with no wrap in between.
 
-Rate: a sinusoid of amplitude A at frequency f sweeps 2A in half a period, so both strokes
-run at the mean rate ``w = 4 A f`` (floored at ``MpcConfig.w_min`` so that a zero or tiny
-amplitude never commands a zero profile velocity). The baseline does not clip ``w`` to
-``w_max``: its fixed frequency is what defines it, and its thrust saturates through
-``d_max`` (which is why it cannot reach 0.4 m/s in the paper).
+Rate: both strokes run at the mean rate ``w(A)`` above (``4 A f`` with eq 19), floored at
+``MpcConfig.w_min`` so that a zero or tiny amplitude never commands a zero profile
+velocity. The baseline does not clip ``w`` to ``w_max``: its fixed frequency is what
+defines it, and its thrust saturates through the amplitude (which is why it cannot reach
+0.4 m/s in the paper).
 """
 
 from __future__ import annotations
@@ -40,7 +54,8 @@ import math
 from dataclasses import dataclass
 
 from ucat_console.control.argcheck import finite, in_range
-from ucat_console.control.params import BaselineConfig, MpcConfig
+from ucat_console.control.params import BaselineConfig, ExecutorConfig, MpcConfig
+from ucat_console.control.stroke_timing import mean_rate_limit
 
 
 def wrap_angle(angle: float) -> float:
@@ -69,6 +84,50 @@ def baseline_amplitude(force_magnitude: float, cfg: MpcConfig, bcfg: BaselineCon
     return min(math.acos(arg), cfg.d_max)
 
 
+def model_rate(amplitude: float, frequency: float, acceleration: float, max_rate: float) -> float:
+    """Mean rate (rad/s) of a beat of ``amplitude`` at ``frequency`` as the drive can make it:
+    ``min(4 A f, mean_rate_limit(2 A))``."""
+    return min(4.0 * amplitude * frequency, mean_rate_limit(2.0 * amplitude, acceleration, max_rate))
+
+
+def model_force(amplitude: float, cfg: MpcConfig, bcfg: BaselineConfig, acceleration: float,
+                max_rate: float) -> float:
+    """The fin model's mean force (N) of a symmetric beat of ``amplitude`` (module docstring)."""
+    w = model_rate(amplitude, bcfg.frequency, acceleration, max_rate)
+    return 0.5 * cfg.rho * cfg.fin_area * cfg.r_c ** 2 * math.hypot(cfg.c_l, cfg.c_d) * w * w * math.cos(amplitude)
+
+
+def model_amplitude(force_magnitude: float, cfg: MpcConfig, bcfg: BaselineConfig, acceleration: float,
+                    max_rate: float) -> float:
+    """The smallest amplitude (rad, at most ``cfg.d_max``) whose beat makes ``force_magnitude``
+    (N) by the fin model, or the amplitude of the largest force when none does."""
+    f = in_range("force_magnitude", force_magnitude, 0.0, unit="N")
+    if f == 0.0:
+        return 0.0
+
+    def force(a: float) -> float:
+        return model_force(a, cfg, bcfg, acceleration, max_rate)
+
+    lo, hi = 0.0, min(cfg.d_max, 0.5 * math.pi)
+    for _ in range(60):  # the force rises to one peak and falls: find the peak
+        m1, m2 = lo + (hi - lo) / 3.0, hi - (hi - lo) / 3.0
+        if force(m1) < force(m2):
+            lo = m1
+        else:
+            hi = m2
+    peak = 0.5 * (lo + hi)
+    if force(peak) <= f:
+        return peak
+    lo, hi = 0.0, peak
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if force(mid) < f:
+            lo = mid
+        else:
+            hi = mid
+    return hi
+
+
 def zero_direction(cfg: MpcConfig) -> float:
     """Direction (rad, body frame) of a symmetric stroke pair's mean force about centre 0."""
     return math.atan2(-cfg.c_d, -cfg.c_l)
@@ -92,17 +151,31 @@ class BaselinePlan:
 
 
 class BaselinePlanner:
-    """Per-fin plans of the inverse-model baseline (stateless apart from its configuration)."""
+    """Per-fin plans of the inverse-model baseline (stateless apart from its configuration).
+    ``executor`` gives the drives' timing the fin-model inverse uses."""
 
-    def __init__(self, cfg: MpcConfig, bcfg: BaselineConfig) -> None:
+    def __init__(self, cfg: MpcConfig, bcfg: BaselineConfig, executor: ExecutorConfig | None = None) -> None:
         baseline_gain(cfg, bcfg)  # rejects C_D = 0 here rather than at the first plan
         self.cfg = cfg
         self.bcfg = bcfg
+        ex = executor or ExecutorConfig()
+        self._drive = (ex.acceleration, ex.max_rate)
+
+    def amplitude(self, force_magnitude: float) -> float:
+        """The beat's amplitude (rad) for a mean force (N), by the configured inverse model."""
+        if self.bcfg.inverse_model == "eq19":
+            return baseline_amplitude(force_magnitude, self.cfg, self.bcfg)
+        return model_amplitude(force_magnitude, self.cfg, self.bcfg, *self._drive)
 
     def rate(self, amplitude: float) -> float:
-        """Mean stroke rate (rad/s) of a sinusoid of ``amplitude`` at the fixed frequency."""
+        """Mean stroke rate (rad/s) of a beat of ``amplitude`` at the fixed frequency (as the
+        drive can make it, with the fin-model inverse)."""
         a = in_range("amplitude", amplitude, 0.0, unit="rad")
-        return max(4.0 * a * self.bcfg.frequency, self.cfg.w_min)
+        if self.bcfg.inverse_model == "eq19":
+            w = 4.0 * a * self.bcfg.frequency
+        else:
+            w = model_rate(a, self.bcfg.frequency, *self._drive)
+        return max(w, self.cfg.w_min)
 
     def centre(self, fx: float, fy: float, amplitude: float) -> float:
         """Oscillation centre (rad, (-pi, pi]) whose mean force points along (fx, fy)."""
@@ -122,7 +195,7 @@ class BaselinePlanner:
         fy = finite("fy", fy)
         theta_now = finite("theta_now", theta_now)
         magnitude = math.hypot(fx, fy)
-        amplitude = baseline_amplitude(magnitude, self.cfg, self.bcfg)
+        amplitude = self.amplitude(magnitude)
         w = self.rate(amplitude)
         if magnitude == 0.0:
             centre = wrap_angle(theta_now)

@@ -124,6 +124,20 @@ def mean_force(
     return (weights * fx).sum(axis=-1), (weights * fy).sum(axis=-1)
 
 
+def timed_rates(u: ArrayLike, cfg: MpcConfig, drive: tuple[float, float]) -> NDArray:
+    """Plans ``u`` with each rate at most what a drive of (acceleration, largest rate) makes
+    of its stroke (``control.stroke_timing.mean_rate_limit``, at least w_min)."""
+    u = np.array(u, dtype=float)
+    acc, v_max = drive
+    a = np.abs(u[..., :H])
+    peak = np.sqrt(acc * a)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        trapezoid = a / (a / v_max + v_max / acc)
+    cap = np.maximum(np.where(peak <= v_max, 0.5 * peak, trapezoid), cfg.w_min)
+    u[..., H:] = np.minimum(u[..., H:], cap)
+    return u
+
+
 def cost_terms(
     u: ArrayLike,
     f_target: ArrayLike,
@@ -132,10 +146,12 @@ def cost_terms(
     u_prev: ArrayLike,
     cfg: MpcConfig,
     table: ForceTable | None = None,
+    drive: tuple[float, float] | None = None,
 ) -> dict[str, NDArray]:
     """Every term of J for plans ``u`` of shape (..., 4) in the configured formulation
-    (module docstring; eqs 13-17 for the paper's)."""
-    u = np.asarray(u, dtype=float)
+    (module docstring; eqs 13-17 for the paper's); with ``drive`` (acceleration, largest
+    rate) each rate is first capped at what the drive makes of its stroke (:func:`timed_rates`)."""
+    u = np.asarray(u, dtype=float) if drive is None else timed_rates(u, cfg, drive)
     u_prev = np.asarray(u_prev, dtype=float)
     fbx, fby = mean_force(u, theta0, cfg, table)
     c_force = np.abs(fbx - f_target[0]) + np.abs(fby - f_target[1])

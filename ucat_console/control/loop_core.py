@@ -38,16 +38,24 @@ import math
 import numpy as np
 from numba import njit
 
-from ucat_console.control.allocation import (
-    B_FX,
-    B_FY,
-    B_YAW,
+from ucat_console.control.body import (
+    B_APPLIED,
+    B_CUT,
+    B_HEADING,
+    B_LAYER,
+    B_N,
+    B_X,
+    B_Z,
     BODY_OK,
+    body_allocate,
     body_on_depth,
     body_on_dvl,
     body_on_imu,
+    body_references,
+    body_set_heading,
+    body_targets,
     body_update,
-    fin_targets,
+    body_wrench,
 )
 from ucat_console.control.estimation import MAX_DEAD_RECKONING_GAP, dead_reckon_into
 from ucat_console.control.power import (
@@ -60,7 +68,7 @@ from ucat_console.control.power import (
 )
 from ucat_console.control.stroke_watch import BACKWARDS, feedback_kernel
 from ucat_console.robot import reading_rows as rr
-from ucat_console.robot.fins import N_FINS, ROBOT_TO_PAPER
+from ucat_console.robot.fins import N_FINS, PAPER_SIDES, ROBOT_TO_PAPER
 
 #: events closer than this (s) are simultaneous
 EPS = 1e-7
@@ -176,7 +184,8 @@ O_T = 1
 OUT_ROW = 40
 OUT_ROWS = 64
 # kinds besides the readings' (rr.IMU ... rr.FIN)
-O_BODY_COMMAND = 10.0  # fx, fy, yaw
+O_BODY_COMMAND = 10.0  # sums of the fins' f_x, f_y, s_lat f_x; the wrench asked (3), applied (3); cut
+#                         bits; driving; references (speed, depth, heading, yaw rate) and errors (3)
 O_STATE = 11.0  # position (3), q (4), velocity (3), rates (3), depth, then the fins' angle,
 #                 rate, set-point angle and rate (4 each)
 O_POWER = 12.0  # per fin: power (4), energy (4), mean power (4, NaN: none yet); distance
@@ -322,32 +331,71 @@ def _take_readings(s, body, watch, members, found, power, rows, out, t, fin_rows
 
 
 @njit(cache=True)
-def set_targets(s: np.ndarray, fx: float, fy: float, yaw: float, sync: bool) -> None:
-    """The allocation of (F_x*, F_y*, yaw) into the targets of the mode's logical fins."""
-    sx, sy, px, py, rx, ry = fin_targets(fx, fy, yaw)
-    s[C_TARGETS], s[C_TARGETS + 1] = sx, sy
-    s[C_TARGETS + 2], s[C_TARGETS + 3] = px, py
-    s[C_TARGETS + 4], s[C_TARGETS + 5] = rx, ry
+def set_targets(s: np.ndarray, body: np.ndarray, sync: bool) -> None:
+    """The body layer's last allocation into the targets of the mode's logical fins."""
+    for k in range(4):
+        fx, fy = body_targets(body, k)
+        s[C_TARGETS + 2 * k], s[C_TARGETS + 2 * k + 1] = fx, fy
     if sync:
         s[C_TARGETS + 6] = math.nan
         s[C_TARGETS + 7] = math.nan
-    else:
-        s[C_TARGETS + 6], s[C_TARGETS + 7] = rx, ry
+
+
+@njit(cache=True)
+def retarget(s: np.ndarray, body: np.ndarray, sync: bool) -> None:
+    """A mode switch (sync or not): the body layer's demand allocated again for the new
+    mode's fins, into their targets."""
+    if body[B_LAYER] != 0.0:
+        body_allocate(body, s[C_SP_V], sync)
+    set_targets(s, body, sync)
 
 
 @njit(cache=True)
 def _control(s: np.ndarray, body: np.ndarray, t: float) -> int:
     """The control tick: the body-frame loops and the allocation (the mode's targets); -1
     when all is well."""
-    status, v, z = body_update(body, t, s[C_SP_V], s[C_SP_Z], s[C_SP_R])
+    body_set_heading(body, s[C_Q], s[C_Q + 1], s[C_Q + 2], s[C_Q + 3])
+    sync = (int(s[C_FLAGS]) & F_SYNC) != 0
+    status, v, z = body_update(body, t, s[C_SP_V], s[C_SP_Z], s[C_SP_R], sync)
     if status != BODY_OK:
         return _error(s, ERR_BODY, status)
     if not math.isnan(v):
         s[C_V_BODY] = v
     if not math.isnan(z):
         s[C_DEPTH] = z
-    set_targets(s, body[B_FX], body[B_FY], body[B_YAW], (int(s[C_FLAGS]) & F_SYNC) != 0)
+    set_targets(s, body, sync)
     return -1
+
+
+@njit(cache=True)
+def _keep_body_command(s: np.ndarray, body: np.ndarray, out: np.ndarray, t: float) -> None:
+    o = _next_out(s, out)
+    o[O_KIND] = O_BODY_COMMAND
+    o[O_T] = t
+    fx_sum = fy_sum = yaw = 0.0
+    for k in range(4):
+        fx, fy = body_targets(body, k)
+        fx_sum += fx
+        fy_sum += fy
+        yaw += PAPER_SIDES[k] * fx
+    o[O_V], o[O_V + 1], o[O_V + 2] = fx_sum, fy_sum, yaw
+    if body[B_LAYER] == 0.0:
+        x, z, n = body_wrench(body)
+        o[O_V + 3], o[O_V + 4], o[O_V + 5] = x, z, n
+        o[O_V + 6], o[O_V + 7], o[O_V + 8] = x, z, n
+        o[O_V + 9] = 0.0
+    else:
+        o[O_V + 3], o[O_V + 4], o[O_V + 5] = body[B_X], body[B_Z], body[B_N]
+        for k in range(3):
+            o[O_V + 6 + k] = body[B_APPLIED + k]
+        o[O_V + 9] = body[B_CUT]
+    o[O_V + 10] = 1.0 if (int(s[C_FLAGS]) & F_DRIVING) != 0 else 0.0
+    v_ref, z_ref, psi_ref, r_ref = body_references(body, s[C_SP_V], s[C_SP_Z], s[C_SP_R])
+    o[O_V + 11], o[O_V + 12], o[O_V + 13], o[O_V + 14] = v_ref, z_ref, psi_ref, r_ref
+    o[O_V + 15] = s[C_V_BODY] - v_ref
+    o[O_V + 16] = s[C_DEPTH] - z_ref
+    psi = body[B_HEADING]
+    o[O_V + 17] = (psi - psi_ref + math.pi) % (2.0 * math.pi) - math.pi
 
 
 @njit(cache=True)
@@ -470,12 +518,7 @@ def core_step(s: np.ndarray, body: np.ndarray, watch: np.ndarray, members: np.nd
                 if r >= 0:
                     return r
                 if keep:
-                    o = _next_out(s, out)
-                    o[O_KIND] = O_BODY_COMMAND
-                    o[O_T] = t
-                    o[O_V] = body[B_FX]
-                    o[O_V + 1] = body[B_FY]
-                    o[O_V + 2] = body[B_YAW]
+                    _keep_body_command(s, body, out, t)
                 if (flags & F_REQUESTS) != 0:
                     return CONTROL
             s[C_PHASE] = PH_CONTROL

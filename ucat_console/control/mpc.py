@@ -32,7 +32,8 @@ import numpy as np
 from ucat_console.control import mpc_kernels as K
 from ucat_console.control.cost import H, CostBreakdown, breakdown_from_terms, cost_terms
 from ucat_console.control.fin_model import ForceTable
-from ucat_console.control.params import MpcConfig
+from ucat_console.control.params import ExecutorConfig, MpcConfig
+from ucat_console.control.stroke_timing import mean_rate_limit
 
 #: allowed ranges of the planner's inputs (besides finiteness)
 MAX_TARGET_N = 100.0
@@ -85,11 +86,14 @@ class FinMpc:
 
     def __init__(
         self, config: MpcConfig | None = None, seed: int | None = None,
-        clock: Callable[[], float] | None = None,
+        clock: Callable[[], float] | None = None, drive: ExecutorConfig | None = None,
     ) -> None:
-        """``clock`` (seconds, e.g. ``time.perf_counter``): time the two stages with it."""
+        """``clock`` (seconds, e.g. ``time.perf_counter``): time the two stages with it.
+        ``drive``: the fin drives' timing; a plan's rates are then at most what the drive
+        can make of its strokes (:meth:`plan`)."""
         self.config = config or MpcConfig()
         self._clock = clock
+        self._drive = None if drive is None else (float(drive.acceleration), float(drive.max_rate))
         cfg = self.config
         if cfg.force_model == "table":
             table = (
@@ -104,11 +108,11 @@ class FinMpc:
             self.table: ForceTable | None = table
             self._gx, self._gy = table.stroke_frame()
             axes = (table.d[0], table.d[1] - table.d[0], table.w[0], table.w[1] - table.w[0])
-            self._params = K.pack_params(cfg, axes)
+            self._params = K.pack_params(cfg, axes, self._drive)
         else:
             self.table = None
             self._gx = self._gy = np.zeros((2, 2))
-            self._params = K.pack_params(cfg, None)
+            self._params = K.pack_params(cfg, None, self._drive)
         (self._plan_kernel, self._sample_kernel, self._finish_kernel,
          self._cost_kernel) = K.KERNELS[(cfg.formulation, cfg.force_model)]
         self._rng = np.zeros(1, dtype=np.uint64)
@@ -219,10 +223,47 @@ class FinMpc:
         u = self._u.tolist()
         if not all(map(math.isfinite, u)) or not math.isfinite(self._terms[K.T_TOTAL]):
             raise FloatingPointError(f"planner produced a non-finite plan {u}")
+        cost = _breakdown(self._terms)
+        if self._drive is not None or cfg.centre_rate > 0.0:
+            u, cost = self._executable(u, f, v, th, up, cost)
         return self._make_plan(
-            tuple(u), _breakdown(self._terms), th, t_sample, t_refine,
+            tuple(u), cost, th, t_sample, t_refine,
             tuple(self._best_u[0].tolist()), float(self._best_j[0]),
         )
+
+    def _timed(self, u: Sequence[float]) -> list[float]:
+        """``u`` with each rate at most what the drive makes of its stroke."""
+        if self._drive is None:
+            return u
+        a, w_max = self._drive
+        return [u[0], u[1], min(u[2], max(self.config.w_min, mean_rate_limit(u[0], a, w_max))),
+                min(u[3], max(self.config.w_min, mean_rate_limit(u[1], a, w_max)))]
+
+    def _executable(self, u: list[float], f: tuple, v: float, th: float, up: tuple,
+                    cost: CostBreakdown) -> tuple[list[float], CostBreakdown]:
+        """The solved plan as it will run (beyond the paper; module docstring): centred on
+        the oscillation centre the target's direction asks for, and its rates timed by the
+        drive. Returns the plan and its cost."""
+        cfg = self.config
+        out = u
+        if cfg.centre_rate > 0.0 and math.hypot(*f) >= 1e-3:
+            out = centred_cycle(u, f, th, up, cfg)
+        out = self._timed(out)
+        return out, self.score(tuple(out), f, v, th, up)
+        want = math.atan2(f[1], f[0])
+        turn = 0.0
+        for _ in range(3):
+            if math.hypot(*cost.mean_force) < 1e-6:
+                break
+            lim = cfg.centre_rate * (abs(out[0]) / out[2] + abs(out[1]) / out[3])
+            step = math.remainder(want - math.atan2(cost.mean_force[1], cost.mean_force[0]), 2.0 * math.pi)
+            new_turn = min(lim, max(-lim, turn + step))
+            if new_turn == turn:
+                break
+            turn = new_turn
+            out = self._timed([u[0] + turn, u[1], u[2], u[3]])
+            cost = self.score(tuple(out), f, v, th, up)
+        return out, cost
 
     def _plan_scipy(self, f, v, th, up, seed, refine) -> Plan:
         import scipy.optimize  # here only: nothing else of the console imports scipy.optimize
@@ -278,6 +319,29 @@ class FinMpc:
             warm_start=warm,
             warm_start_cost=warm_cost,
         )
+
+
+def centred_cycle(u: Sequence[float], f_target: Sequence[float], theta0: float, u_prev: Sequence[float],
+                  cfg: MpcConfig) -> list[float]:
+    """The plan ``u`` made a cycle about the oscillation centre the target asks for.
+
+    A symmetric stroke pair about a centre ``c`` makes its mean force point at ``c +
+    atan2(-C_D, -C_L)`` (``control.baseline``), so the target's direction asks for the
+    centre ``c*``. The centre moves there from the last cycle's (the middle of its last
+    stroke, ``theta0 - u_prev[1] / 2``) by at most ``centre_rate`` times the plan's duration.
+    The cycle keeps the solver's amplitude ``A`` (the mean of its half strokes) and rates:
+    its first stroke takes the fin from ``theta0`` across the centre to ``c -+ A``, its second
+    sweeps to ``c +- A``; in steady state (the fin at one end of the last cycle) the two
+    strokes are the same sweep back and forth about ``c``."""
+    want = math.atan2(f_target[1], f_target[0]) - math.atan2(-cfg.c_d, -cfg.c_l)
+    prev = theta0 - 0.5 * u_prev[1]
+    duration = abs(u[0]) / u[2] + abs(u[1]) / u[3]
+    limit = cfg.centre_rate * duration
+    centre = prev + min(limit, max(-limit, math.remainder(want - prev, 2.0 * math.pi)))
+    rel = math.remainder(theta0 - centre, 2.0 * math.pi)  # where the fin is, from the centre
+    side = 1.0 if rel >= 0.0 else -1.0
+    amplitude = 0.25 * (abs(u[0]) + abs(u[1]))
+    return [-rel - side * amplitude, 2.0 * side * amplitude, u[2], u[3]]
 
 
 def _breakdown(terms: np.ndarray) -> CostBreakdown:

@@ -50,7 +50,8 @@ P_DEPS, P_DMAX, P_WMIN, P_WMAX = 12, 13, 14, 15
 P_TD0, P_THD, P_TW0, P_THW, P_MODE = 16, 17, 18, 19, 20
 P_LAM_C, P_LAM_E, P_KD, P_INERTIA = 21, 22, 23, 24  # the closed-stroke formulation's
 P_SCREEN, P_KEEP = 25, 26  # the refinement: iterations every kept sample gets, and how many go on
-N_PARAMS = 27
+P_ACC, P_VMAX = 27, 28  # the drives' acceleration (0: rates as planned) and largest rate
+N_PARAMS = 29
 MODE_ANALYTIC, MODE_TABLE = 0.0, 1.0
 
 # --- layout of the per-solve problem vector ---------------------------------------------
@@ -63,8 +64,10 @@ T_TOTAL, T_FORCE, T_ST_PEN, T_AMP, T_DIFF, T_ST, T_FBX, T_FBY, T_CLOSE, T_ENERGY
 N_TERMS = 10
 
 
-def pack_params(cfg: MpcConfig, table_axes: tuple[float, float, float, float] | None) -> tuple:
-    """The constant parameter vector of one MPC configuration.
+def pack_params(cfg: MpcConfig, table_axes: tuple[float, float, float, float] | None,
+                drive: tuple[float, float] | None = None) -> tuple:
+    """The constant parameter vector of one MPC configuration; ``drive`` (acceleration,
+    largest rate) caps each stroke's rate at what the drive makes of it (None: no cap).
 
     Parameters travel as tuples, not arrays: compiled code then knows no store can
     change them, which lets the sampler's loop be vectorised."""
@@ -77,6 +80,8 @@ def pack_params(cfg: MpcConfig, table_axes: tuple[float, float, float, float] | 
     p[P_LAM_C], p[P_LAM_E] = cfg.lam_c, cfg.lam_e
     p[P_KD], p[P_INERTIA] = drag_coefficient(cfg), cfg.fin_inertia
     p[P_SCREEN], p[P_KEEP] = cfg.refine_screen, cfg.refine_keep
+    if drive is not None:
+        p[P_ACC], p[P_VMAX] = drive
     if table_axes is None:
         p[P_MODE] = MODE_ANALYTIC
     else:
@@ -154,6 +159,25 @@ def _sgn(x):
     if x < 0.0:
         return -1.0
     return 0.0
+
+
+@_inline
+def rate_cap(p, a):
+    """The fastest mean rate of a stroke of ``a`` = |d| rad (``control.stroke_timing``'s
+    mean_rate_limit, at least w_min) and its derivative in ``a`` (0 where the floor holds)."""
+    acc = p[P_ACC]
+    v = p[P_VMAX]
+    peak = math.sqrt(acc * a)
+    if peak <= v:
+        cap = 0.5 * peak
+        slope = 0.25 * acc / peak if peak > 0.0 else 0.0
+    else:
+        t = a / v + v / acc
+        cap = a / t
+        slope = (v / acc) / (t * t)
+    if cap < p[P_WMIN]:
+        return p[P_WMIN], 0.0
+    return cap, slope
 
 
 @_inline
@@ -254,6 +278,18 @@ def cost_eval(p, q, gx_tab, gy_tab, d1, d2, w1, w2, want_grad, table, closed):
     a2 = abs(d2)
     s1 = _sgn(d1)
     s2 = _sgn(d2)
+    # the drive's timing: a rate above what it makes of the stroke is that rate
+    capped1 = capped2 = False
+    slope1 = slope2 = 0.0
+    if p[P_ACC] > 0.0:
+        cap1, slope1 = rate_cap(p, a1)
+        cap2, slope2 = rate_cap(p, a2)
+        if w1 > cap1:
+            w1 = cap1
+            capped1 = True
+        if w2 > cap2:
+            w2 = cap2
+            capped2 = True
     sn1, c1 = sincos(d1)
     sn2, c2 = sincos(d2)
     g1x, g1y, g1x_d, g1y_d, g1x_w, g1y_w = stroke_force(p, gx_tab, gy_tab, d1, w1, c1, sn1, table)
@@ -372,13 +408,17 @@ def cost_eval(p, q, gx_tab, gy_tab, d1, d2, w1, w2, want_grad, table, closed):
     if m2 > 0.0:
         g_d2 -= lam_a * half_l * s2
     hd = 0.5 * lam_d
-    return (
-        total, c_force, c_st, c_amp, c_diff, st, fbx, fby, c_close, c_energy,
-        g_d1 + hd * _sgn(e_d1),
-        g_d2 + hd * _sgn(e_d2),
-        g_w1 + hd * _sgn(e_w1),
-        g_w2 + hd * _sgn(e_w2),
-    )
+    g_d1 += hd * _sgn(e_d1)
+    g_d2 += hd * _sgn(e_d2)
+    g_w1 += hd * _sgn(e_w1)
+    g_w2 += hd * _sgn(e_w2)
+    if capped1:  # the rate follows the stroke: dJ/dd1 gains dJ/dw1 dcap/dd1
+        g_d1 += g_w1 * slope1 * s1
+        g_w1 = 0.0
+    if capped2:
+        g_d2 += g_w2 * slope2 * s2
+        g_w2 = 0.0
+    return total, c_force, c_st, c_amp, c_diff, st, fbx, fby, c_close, c_energy, g_d1, g_d2, g_w1, g_w2
 
 
 @_inline
@@ -467,8 +507,12 @@ def sample_stage(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, table, clo
             if closed:
                 if (coins >> np.uint64(62)) & np.uint64(1):
                     a2 = a1
-            bw1[i] = w_lo + w_span * r3
-            bw2[i] = w_lo + w_span * r4
+            if p[P_ACC] > 0.0:  # rates the drive can make of the strokes
+                bw1[i] = w_lo + max(0.0, min(p[P_WMAX], rate_cap(p, a1)[0]) - w_lo) * r3
+                bw2[i] = w_lo + max(0.0, min(p[P_WMAX], rate_cap(p, a2)[0]) - w_lo) * r4
+            else:
+                bw1[i] = w_lo + w_span * r3
+                bw2[i] = w_lo + w_span * r4
             if coins >> np.uint64(63):
                 bd1[i] = a1
                 bd2[i] = -a2

@@ -8,7 +8,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from ucat_console.control.body_design import HullModel, designed_gains
+from ucat_console.robot.servo import FIN_ACCELERATION, FIN_MAX_RATE
 from ucat_console.typedconf import Config, param, require_below
+
+#: the actuation delay (s) and bandwidth factor the designed body layer's default gains are
+#: designed for (control.body_design)
+DESIGN_DELAY, DESIGN_FACTOR = 1.25, 4.0
 
 #: the MPC's cost formulations: the paper's eq 17, and the closed-stroke cost
 #: (``control.cost``: strokes that close, the Strouhal penalty per stroke, an energy term)
@@ -76,6 +82,12 @@ class MpcConfig(Config):
     w_min: float = param(0.5, lo=0.0, hi=100.0, lo_open=True, unit="rad/s", doc="slowest mean rate")
     w_max: float = param(8.0, lo=0.0, hi=100.0, lo_open=True, unit="rad/s", doc="fastest mean rate")
     a_min: float = param(0.03, lo=0.0, hi=1.0, unit="m", doc="amplitude penalty threshold A_min")
+    # beyond the paper: the cycle's orientation
+    centre_rate: float = param(
+        0.0, lo=0.0, hi=100.0, unit="rad/s",
+        doc="turn each planned cycle (its oscillation centre) so its mean force points along the "
+        "target, at most this fast (0: the paper's MPC, the cycle as solved)",
+    )
 
     def _check(self) -> None:
         require_below(self, "d_eps", "d_max")
@@ -92,11 +104,20 @@ class MpcConfig(Config):
         return (self.lam_f, self.lam_st, self.lam_a, self.lam_d)
 
 
+#: the baseline's inverse models: the controller's fin model, or the paper's eq 19
+BASELINE_INVERSES = ("fin_model", "eq19")
+
+
 @dataclass(frozen=True)
 class BaselineConfig(Config):
     """The fixed-frequency inverse model of Remmas et al. (control.md section 6)."""
 
     frequency: float = param(2.0, lo=0.05, hi=10.0, unit="Hz", doc="fixed fin-beat frequency")
+    inverse_model: str = param(
+        "fin_model", choices=BASELINE_INVERSES,
+        doc="amplitude for a force: the controller's fin model with the drives' stroke timing, or the "
+        "paper's eq 19 (4.65 times the fin model's force at the paper's coefficients)",
+    )
 
 
 @dataclass(frozen=True)
@@ -104,21 +125,112 @@ class PidGains(Config):
     kp: float = param(0.0, lo=0.0, hi=1000.0, doc="proportional gain")
     ki: float = param(0.0, lo=0.0, hi=1000.0, doc="integral gain")
     kd: float = param(0.0, lo=0.0, hi=1000.0, doc="derivative gain")
-    limit: float = param(1.0, lo=0.0, hi=100.0, lo_open=True, unit="N", doc="output limit")
+    limit: float = param(
+        1.0, lo=0.0, hi=1000.0, lo_open=True, unit="N",
+        doc="output limit (N; N m for the designed layer's heading loop, which also never asks "
+        "for more than the fins can deliver)",
+    )
+
+
+#: the body layers: the designed one (the default) and the paper's (section IV.B)
+BODY_LAYERS = ("designed", "paper")
+#: the designed layer's gains, from the default hull model (control.body_design)
+_DESIGN = designed_gains(HullModel(), DESIGN_DELAY, DESIGN_FACTOR)
+#: the designed loops' own output limits: none (the fins' deliverable force limits them)
+_NO_LIMIT = 1000.0
+
+
+def _designed(loop: str) -> PidGains:
+    g = _DESIGN[loop]
+    return PidGains(kp=round(g.kp, 4), ki=round(g.ki, 4), kd=round(g.kd, 4), limit=_NO_LIMIT)
 
 
 @dataclass(frozen=True)
 class BodyConfig(Config):
-    """Body-frame layer (control.md section 7, paper Table I)."""
+    """The body-frame layer: the loops on speed, depth and heading, and the allocation.
 
-    velocity: PidGains = PidGains(kp=40.0, ki=1.0, kd=0.1, limit=2.5)
-    depth: PidGains = PidGains(kp=5.0, ki=0.1, kd=0.005, limit=0.5)
-    yaw_rate: PidGains = PidGains(kp=3.0, ki=0.2, kd=0.0, limit=0.5)
+    ``layer = "designed"`` (the default, ``control.body``, ``control.body_design`` and
+    ``docs/control.md``): physical forces and moments from loops designed on the hull's
+    model, each tracking a reference that closes on its setpoint at a limited rate with the
+    hull's model as feed-forward (a velocity PI, a depth PI, a heading PD with integral that
+    holds the heading a zero yaw-rate setpoint leaves), allocated to the four fins with each
+    fin's deliverable force as its limit and the priority heave, yaw, surge; what is cut goes
+    back to the loops (anti-windup) and onto the telemetry.
+    ``layer = "paper"``: the paper's section IV.B (``PAPER_BODY``), the loops' outputs in the
+    fin model's terms, heave and yaw on the front pair, no limits but the loops' own.
+
+    The three gain blocks are the same three loops in both layers: ``velocity`` (designed:
+    surge force, N per m/s), ``depth`` (heave force, N per m) and ``yaw_rate`` (designed:
+    the heading loop, N m per rad with ``kd`` on the yaw rate's error; paper: the yaw-rate
+    loop, a thrust differential in N).
+    """
+
+    layer: str = param("designed", choices=BODY_LAYERS, doc="the designed body layer or the paper's")
+    velocity: PidGains = _designed("velocity")
+    depth: PidGains = _designed("depth")
+    yaw_rate: PidGains = _designed("heading")
     median_window: int = param(5, lo=1, hi=101, doc="median filter length for DVL and depth")
     depth_sign: float = param(
         -1.0, choices=(1.0, -1.0),
-        doc="F_y* = depth_sign * PID(depth error); -1 because a positive f_y lifts the hull",
+        doc="paper layer: F_y* = depth_sign * PID(depth error); -1 because a positive f_y lifts the hull",
     )
+    hull: HullModel = HullModel()
+    thrust_gain: float = param(
+        1.0, lo=0.1, hi=20.0,
+        doc="designed layer: forward fin force delivered per unit of the fin model's (soft fins "
+        "make more thrust than the quasi-steady model; `ucat-console identify --fit scale` measures it)",
+    )
+    heave_trim: float = param(
+        0.0, lo=-50.0, hi=50.0, unit="N",
+        doc="designed layer: heave force (down > 0) that holds the robot at rest (buoyancy and trim; "
+        "the depth loop's integral after a hover)",
+    )
+    heave_rear_share: float = param(
+        0.5, lo=0.0, hi=1.0,
+        doc="designed layer: share of the heave force on the rear pair (0.5: all four fins alike, "
+        "no pitch moment; 0: the front pair, as the paper)",
+    )
+    yaw_on_rear: bool = param(
+        True, doc="designed layer: the rear pair makes yaw moment too (not in sync mode, where its fins "
+        "run one plan)",
+    )
+    max_heading_lead: float = param(
+        0.5, lo=0.01, hi=3.0, unit="rad",
+        doc="designed layer: how far the commanded heading may run ahead of the robot's (a turn "
+        "faster than the fins can make)",
+    )
+    reference_rate: float = param(
+        round(1.0 / (DESIGN_FACTOR * DESIGN_DELAY), 4), lo=0.01, hi=10.0, unit="1/s",
+        doc="designed layer: how fast the loops' references close on a new setpoint (the loops' bandwidth)",
+    )
+    max_dive_rate: float = param(
+        0.06, lo=0.001, hi=2.0, unit="m/s", doc="designed layer: the depth reference's fastest climb or dive",
+    )
+    max_acceleration: float = param(
+        0.02, lo=0.001, hi=2.0, unit="m/s2", doc="designed layer: the speed reference's largest change per second",
+    )
+    max_yaw_acceleration: float = param(
+        0.02, lo=0.001, hi=2.0, unit="rad/s2",
+        doc="designed layer: the yaw-rate reference's largest change per second",
+    )
+
+    def _check(self) -> None:
+        if self.layer == "designed":
+            for loop in ("velocity", "depth", "yaw_rate"):
+                if getattr(self, loop).kp <= 0.0:
+                    raise ValueError(
+                        f"{loop}.kp: {getattr(self, loop).kp!r} leaves the designed layer's {loop} "
+                        "loop without a proportional gain; allowed: > 0"
+                    )
+
+
+#: the paper's body layer (Table I's PIDs, section IV.B's allocation)
+PAPER_BODY = BodyConfig(
+    layer="paper",
+    velocity=PidGains(kp=40.0, ki=1.0, kd=0.1, limit=2.5),
+    depth=PidGains(kp=5.0, ki=0.1, kd=0.005, limit=0.5),
+    yaw_rate=PidGains(kp=3.0, ki=0.2, kd=0.0, limit=0.5),
+)
 
 
 @dataclass(frozen=True)
@@ -137,6 +249,13 @@ class ExecutorConfig(Config):
     stroke_timeout_min: float = param(
         0.1, lo=0.0, hi=10.0, unit="s", doc="a stroke never times out earlier than this"
     )
+    acceleration: float = param(
+        FIN_ACCELERATION, lo=0.0, hi=100_000.0, lo_open=True, unit="rad/s2",
+        doc="the fin drives' profile acceleration: a stroke's profile velocity is chosen so that it "
+        "takes the planned time (0x6083 on the EPOS2s)",
+    )
+    max_rate: float = param(FIN_MAX_RATE, lo=0.0, hi=200.0, lo_open=True, unit="rad/s",
+                            doc="the fin drives' largest rate")
 
 
 @dataclass(frozen=True)

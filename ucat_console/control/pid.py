@@ -36,7 +36,8 @@ PID_Y = 4  # the last measurement, or -error (NaN: none yet)
 PID_P = 5  # the last proportional term
 PID_D = 6  # the last derivative term
 PID_KP, PID_KI, PID_KD, PID_LIMIT = 7, 8, 9, 10
-NPID = 11
+PID_I_PREV = 11  # the integral before the last step's increment (pid_unwind)
+NPID = 12
 #: what :func:`pid_step` returns for a time earlier than the last update (nothing changed)
 EARLIER = math.inf
 
@@ -51,6 +52,7 @@ def pid_reset(s: np.ndarray) -> None:
     s[PID_Y] = math.nan
     s[PID_P] = 0.0
     s[PID_D] = 0.0
+    s[PID_I_PREV] = 0.0
 
 
 @register_jitable
@@ -59,19 +61,46 @@ def pid_step(s: np.ndarray, e: float, y: float, t: float) -> float:
     (``-e`` without one); the limited output, or :data:`EARLIER` when ``t`` is before the
     last update. The one definition of the step (module docstring): :class:`Pid` runs it
     as Python, the closed loop's compiled core compiled."""
-    kp = s[PID_KP]
-    limit = s[PID_LIMIT]
-    p = kp * e
-    d = s[PID_D]
-    dt = 0.0
     t_last = s[PID_T]
-    if not math.isnan(t_last):
-        if t < t_last:
-            return EARLIER
-        dt = t - t_last
+    if not math.isnan(t_last) and t < t_last:
+        return EARLIER
+    dt = 0.0 if math.isnan(t_last) else t - t_last
+    d = s[PID_D]
     if dt > 0.0 and not math.isnan(s[PID_Y]):
         d = -s[PID_KD] * (y - s[PID_Y]) / dt
+    return _pid_finish(s, e, d, y, t, dt)
+
+
+@register_jitable
+def pid_step_rate(s: np.ndarray, e: float, de: float, t: float) -> float:
+    """:func:`pid_step` with the error's rate ``de`` measured (a gyro's, for a heading):
+    the derivative term is ``kd de``."""
+    t_last = s[PID_T]
+    if not math.isnan(t_last) and t < t_last:
+        return EARLIER
+    dt = 0.0 if math.isnan(t_last) else t - t_last
+    return _pid_finish(s, e, s[PID_KD] * de, -e, t, dt)
+
+
+@register_jitable
+def pid_unwind(s: np.ndarray, direction: float) -> None:
+    """Something after the PID cut its output in ``direction`` (> 0: it gave less than the
+    PID asked, < 0: more negative than asked): undo the last step's integration if it pushed
+    that way, so the integral does not wind up against a limit the PID does not see."""
+    if (s[PID_INTEGRAL] - s[PID_I_PREV]) * direction > 0.0:
+        s[PID_INTEGRAL] = s[PID_I_PREV]
+    if direction != 0.0:
+        s[PID_SATURATED] = 1.0
+
+
+@register_jitable
+def _pid_finish(s: np.ndarray, e: float, d: float, y: float, t: float, dt: float) -> float:
+    """The step's integral, output and state, with the derivative term ``d`` worked out."""
+    p = s[PID_KP] * e
+    limit = s[PID_LIMIT]
+    t_last = s[PID_T]
     integral = s[PID_INTEGRAL]
+    s[PID_I_PREV] = integral
     if dt > 0.0:
         candidate = integral + s[PID_KI] * e * dt
         unsat = p + candidate + d
@@ -91,10 +120,12 @@ def pid_step(s: np.ndarray, e: float, y: float, t: float) -> float:
     return out
 
 
-def set_pid_gains(s: np.ndarray, gains: PidGains) -> None:
-    """New gains in the PID ``s``, keeping the integral (clipped to the new limit)."""
-    s[PID_KP], s[PID_KI], s[PID_KD], s[PID_LIMIT] = gains.kp, gains.ki, gains.kd, gains.limit
-    s[PID_INTEGRAL] = min(gains.limit, max(-gains.limit, float(s[PID_INTEGRAL])))
+def set_pid_gains(s: np.ndarray, gains: PidGains, cap: float = math.inf) -> None:
+    """New gains in the PID ``s``, keeping the integral (clipped to the new limit); the
+    limit is the gains' or ``cap``, whichever is smaller."""
+    limit = min(gains.limit, cap)
+    s[PID_KP], s[PID_KI], s[PID_KD], s[PID_LIMIT] = gains.kp, gains.ki, gains.kd, limit
+    s[PID_INTEGRAL] = min(limit, max(-limit, float(s[PID_INTEGRAL])))
 
 
 class Pid:
@@ -102,12 +133,17 @@ class Pid:
     ``state`` (layout ``PID_*``): its own, or a row of a table another owner shares (the
     closed loop's compiled core runs the same rows)."""
 
-    def __init__(self, gains: PidGains, state: np.ndarray | None = None) -> None:
+    def __init__(self, gains: PidGains, state: np.ndarray | None = None, cap: float = math.inf) -> None:
         self.state = np.zeros(NPID) if state is None else state
         self.gains = gains
-        self.state[PID_KP], self.state[PID_KI], self.state[PID_KD], self.state[PID_LIMIT] = (
-            gains.kp, gains.ki, gains.kd, gains.limit)
+        self.cap = cap  # the output never exceeds this either (what the actuators can do)
+        set_pid_gains(self.state, gains, cap)
         self.reset()
+
+    @property
+    def limit(self) -> float:
+        """The output limit in force: the gains' or the cap, whichever is smaller."""
+        return float(self.state[PID_LIMIT])
 
     def reset(self) -> None:
         """Forget the integral, the last sample and the last output."""
@@ -128,12 +164,12 @@ class Pid:
     def set_gains(self, gains: PidGains) -> None:
         """New gains, keeping the integral (clipped to the new limit)."""
         self.gains = gains
-        set_pid_gains(self.state, gains)
+        set_pid_gains(self.state, gains, self.cap)
 
     def preset(self, output: float) -> None:
         """Make the next output equal ``output`` for the same inputs (bumpless transfer)."""
         out = finite("output", output)
-        lim = self.gains.limit
+        lim = self.limit
         out = min(lim, max(-lim, out))
         s = self.state
         s[PID_INTEGRAL] = min(lim, max(-lim, out - float(s[PID_P]) - float(s[PID_D])))

@@ -31,6 +31,12 @@ from numba import njit
 
 from ucat_console.robot.units import DriveUnits
 
+#: the fin drives' profile acceleration and deceleration at the fin (rad/s2) and their
+#: largest rate (rad/s): the defaults of the plant's servos, the EPOS2s' configuration and
+#: the controller's timing of a stroke
+FIN_ACCELERATION = 64.0
+FIN_MAX_RATE = 10.0
+
 
 @njit(cache=True)
 def servo_step(

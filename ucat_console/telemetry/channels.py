@@ -10,8 +10,10 @@ from ucat_console.robot.fins import N_FINS  # ch.N_FINS: how many fin channels
 from ucat_console.robot.readings import DepthReading, DvlVelocity, ImuReading
 from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.messages import (
+    BodyAllocation,
     BodyCommand,
     BodyState,
+    BodyTracking,
     FinCycle,
     FinPlan,
     FinState,
@@ -25,6 +27,8 @@ from ucat_console.telemetry.messages import (
 BODY_STATE = "body/state"
 SETPOINTS = "body/setpoints"
 BODY_COMMAND = "body/command"
+BODY_ALLOCATION = "body/allocation"
+BODY_TRACKING = "body/tracking"
 POWER = "power"
 STATUS = "status"
 EVENTS = "events"
@@ -54,6 +58,8 @@ CHANNELS: dict[str, type] = {
     BODY_STATE: BodyState,
     SETPOINTS: Setpoints,
     BODY_COMMAND: BodyCommand,
+    BODY_ALLOCATION: BodyAllocation,
+    BODY_TRACKING: BodyTracking,
     POWER: Power,
     STATUS: Status,
     EVENTS: Event,

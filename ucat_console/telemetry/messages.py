@@ -50,12 +50,47 @@ class Setpoints:
 
 @dataclass(frozen=True)
 class BodyCommand:
-    """Outputs of the body-frame PIDs before allocation."""
+    """The body layer's demand in the fin model's terms: the sums over the four fins' force
+    targets (the paper's F_x*, F_y* and front-pair yaw differential when its layer runs)."""
 
     t: Time
-    force_x: Annotated[float, Doc("F_x*, fin-model convention (forward thrust < 0)", "N")]
-    force_y: Annotated[float, Doc("F_y* (> 0 lifts)", "N")]
-    yaw: Annotated[float, Doc("yaw thrust differential", "N")]
+    force_x: Annotated[float, Doc("sum of the fins' f_x targets, fin-model convention (forward thrust < 0)", "N")]
+    force_y: Annotated[float, Doc("sum of the fins' f_y targets (> 0 lifts)", "N")]
+    yaw: Annotated[float, Doc("sum of the fins' f_x targets, starboard minus port (> 0 turns to starboard)",
+                              "N")]
+
+
+@dataclass(frozen=True)
+class BodyAllocation:
+    """The body wrench the loops asked for and what the allocation gave them: an axis whose
+    demand the fins cannot meet is cut, in the priority heave, yaw, surge; "coast" means the
+    fins do not push against the direction of travel (the hull's drag brakes)."""
+
+    t: Time
+    surge: Annotated[float, Doc("surge force asked (forward > 0)", "N")]
+    heave: Annotated[float, Doc("heave force asked (down > 0)", "N")]
+    yaw: Annotated[float, Doc("yaw moment asked (clockwise seen from above > 0)", "N m")]
+    surge_applied: Annotated[float, Doc("surge force the fins were given", "N")]
+    heave_applied: Annotated[float, Doc("heave force the fins were given", "N")]
+    yaw_applied: Annotated[float, Doc("yaw moment the fins were given", "N m")]
+    cut: Annotated[tuple[str, ...], Doc('axes cut: "heave", "yaw", "surge", "coast"')]
+
+
+@dataclass(frozen=True)
+class BodyTracking:
+    """What the body layer holds the robot to now, and how far the robot is from it: the
+    designed layer's references (which close on the setpoints at limited rates), the paper
+    layer's setpoints. Errors are measured minus reference; NaN where there is none."""
+
+    t: Time
+    driving: Annotated[bool, Doc("the fins are driven (armed)")]
+    speed_ref: Annotated[float, Doc("forward speed reference", "m/s")]
+    depth_ref: Annotated[float, Doc("depth reference (positive down)", "m")]
+    heading_ref: Annotated[float, Doc("heading reference (designed layer; NaN: none)", "rad", "NED")]
+    yaw_rate_ref: Annotated[float, Doc("yaw rate reference, positive clockwise seen from above", "rad/s")]
+    speed_error: Annotated[float, Doc("filtered forward speed minus its reference", "m/s")]
+    depth_error: Annotated[float, Doc("filtered depth minus its reference", "m")]
+    heading_error: Annotated[float, Doc("heading minus its reference, wrapped to (-pi, pi]", "rad")]
 
 
 @dataclass(frozen=True)
@@ -67,7 +102,7 @@ class FinState:
     angle: Annotated[float, Doc("measured fin angle (0 neutral, > 0 tip up)", "rad")]
     rate: Annotated[float, Doc("measured fin rate", "rad/s")]
     angle_cmd: Annotated[float, Doc("target angle of the stroke being executed", "rad")]
-    rate_cmd: Annotated[float, Doc("profile velocity of that stroke", "rad/s")]
+    rate_cmd: Annotated[float, Doc("profile velocity of that stroke (timed so the stroke takes its planned duration)", "rad/s")]
 
 
 @dataclass(frozen=True)
@@ -85,7 +120,7 @@ class FinStrouhal:
     st_opt: Annotated[float, Doc("the optimal Strouhal number the MPC aims at", "1")]
     v_body: Annotated[float, Doc("measured forward speed used", "m/s")]
     stroke: Annotated[float, Doc("stroke angle d (target minus start)", "rad")]
-    rate: Annotated[float, Doc("stroke rate w (profile velocity)", "rad/s")]
+    rate: Annotated[float, Doc("stroke rate w (the planned mean rate)", "rad/s")]
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,8 @@ from typing import Any
 from ucat_console.backend.safety import SENSORS
 
 #: the lights, in the bar's order: sensor or part -> label
-LIGHTS = {"imu": "IMU", "dvl": "DVL", "depth": "Depth", "drives": "Drives", "planner": "Planner"}
+LIGHTS = {"imu": "IMU", "dvl": "DVL", "depth": "Depth", "drives": "Drives", "planner": "Planner",
+          "control": "Control"}
 MODE_LABELS = {"mpc": "MPC", "mpc_sync": "MPC sync", "baseline": "baseline"}
 ACTIONS = {"hold": "stops and holds its depth", "surface": "stops and rises to the surface",
            "disarm": "turns its motors off", "warn": "goes on (warn only)"}
@@ -69,7 +70,20 @@ def lights(sup: Any, loading: str = "") -> list[Light]:
         out.append(Light(LIGHTS["planner"], "ok", "plans in time" + (
             f" ({overruns} plans since the start were ready after their hand-over deadline; "
             "a fin then starts its stroke a little later)" if overruns else "")))
+    out.append(control_light(safety, active))
     return out
+
+
+def control_light(safety: Any, active: dict[str, Any]) -> Light:
+    """Whether the robot goes where it is sent: the tracking failsafe, the axes off their
+    band, what the allocation cuts (the fins cannot give an axis what its loop asks)."""
+    cut, off = safety.control()
+    if "tracking" in active:
+        return Light(LIGHTS["control"], "bad", active["tracking"].cause + ("; cut: " + "; ".join(cut) if cut else ""))
+    if off or cut:
+        return Light(LIGHTS["control"], "warn", "; ".join(
+            ([f"off its reference: {', '.join(off)}"] if off else []) + ([f"cut: {'; '.join(cut)}"] if cut else [])))
+    return Light(LIGHTS["control"], "ok", "on its references; the fins give every axis what it asks")
 
 
 def link_policy(sup: Any) -> str:

@@ -9,11 +9,12 @@ import numpy as np
 import pytest
 
 from ucat_console.robot.readings import DvlVelocity
-from ucat_console.backend.loop.clock import PacedClock
+from ucat_console.backend.loop.clock import Clock, PacedClock
 from ucat_console.backend.loop.closed_loop import ClosedLoop
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.backend.loop.planners import BaselineFinPlanner, PlanInputs
 from ucat_console.backend.sim_robot_io import SimRobotIO
+from ucat_console.config import load_config
 from ucat_console.robot.fins import PAPER_TO_ROBOT as PAPER_TO_PLANT_FIN
 from ucat_console.robot.fins import ROBOT_TO_PAPER as PLANT_TO_PAPER
 from ucat_console.control.allocation import BodySetpoints
@@ -57,13 +58,12 @@ def make_loop(mode: str = "mpc", v: float = 0.2, depth: float = 1.0, clock=None,
     return loop, io, log
 
 
-# Tracking. The loop machinery is tested with gains / weights under which this plant is
-# controllable (the paper's defaults and what they do are the experiments' subject):
-# the MPC with lam_st 2, lam_f 3, lam_d 0.3, and a velocity PID limit of 10 N and ki 5
-# (the shipped sim-tuned); with the paper's 2.5 N limit the MPC's hold of 0.2 m/s depends
-# on the random samples, and at ki 1 the baseline needs minutes to reach 0.1 m/s here.
-TUNED_MPC = MpcConfig(lam_st=2.0, lam_f=3.0, lam_d=0.3)
-STRONG_BODY = BodyConfig(velocity=PidGains(kp=40.0, ki=5.0, kd=0.1, limit=10.0))
+# Tracking. The loop machinery is tested with the weights and body layer under which this
+# plant is controllable, the shipped sim-tuned's (the paper's defaults and what they do are
+# the experiments' subject).
+_TUNED = load_config("sim-tuned")
+TUNED_MPC = _TUNED.mpc
+STRONG_BODY = _TUNED.body
 
 
 @pytest.mark.parametrize("mode,v,changes", [
@@ -103,12 +103,35 @@ def test_headless_and_paced_threaded_clocks_give_the_same_trajectory() -> None:
     assert np.array_equal(xa, xb) and np.array_equal(fa[:, :4], fb[:, :4])
 
 
+class SteppingClock(Clock):
+    """A paced clock whose wall time is what the loop waited for: every event waits, whatever
+    the machine's speed (a paced clock on a busy machine may run behind and wait for none)."""
+
+    threaded = True
+    paced = True
+
+    def __init__(self) -> None:
+        self.now = 0.0
+
+    def start(self, t0: float) -> None:
+        self.now = t0
+
+    def wait_until(self, t: float) -> None:
+        self.now = max(self.now, t)
+
+    def wall_deadline(self, t: float) -> float:
+        return math.inf  # no plan is late by this clock
+
+    def horizon(self, t_done: float) -> float:
+        return self.now
+
+
 def test_a_paced_loop_does_its_callers_work_where_it_waits_and_runs_on_to_the_end_it_is_given() -> None:
     """``between`` runs at each wait of a paced loop and moves the end; the loop does not
     return until the end given last, and runs as a loop run to that end at once does."""
     a, io_a, log_a = make_loop("mpc")
     a.run_until(1.5)
-    b, io_b, log_b = make_loop("mpc", clock=PacedClock(pace=10.0))
+    b, io_b, log_b = make_loop("mpc", clock=SteppingClock())
     seen: list[float] = []
 
     def between(t: float) -> float:
@@ -191,10 +214,11 @@ def test_tuning_changes_apply_from_the_next_plan_and_are_events() -> None:
     loop, _, log = make_loop("mpc")
     loop.run_until(1.0)
     loop.set_mpc_config(loop.mpc_config.replace(lam_st=2.0))
-    loop.set_pid_gains("depth", PidGains(kp=6.0, ki=0.1, kd=0.005, limit=0.5))
+    depth = loop.pid_gains("depth")
+    loop.set_pid_gains("depth", depth.replace(kp=6.0))
     loop.run_until(3.0)
     ev = log.events("tuning")
-    assert [e.data["changes"] for e in ev] == [{"lam_st": [5.0, 2.0]}, {"kp": [5.0, 6.0]}]
+    assert [e.data["changes"] for e in ev] == [{"lam_st": [5.0, 2.0]}, {"kp": [depth.kp, 6.0]}]
     after = [p for p in log.plans() if p.t > 1.0 + 0.03]
     assert after
     for p in after:  # J = lam_f c_force + lam_St c_St + lam_a c_amp + lam_d c_diff with the new lam_St

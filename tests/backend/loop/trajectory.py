@@ -8,7 +8,11 @@ per-sample path was compiled (the kernels, then the whole per-sample core), whic
 trajectory as it was, and written again when the MPC's refinement changed (its line search
 and the refinement of the best samples only), which changes the plans by design: then the
 baseline scenario's first six seconds, before it switches to the MPC, stayed the same to
-1e-12.
+1e-12. They were written again when the designed body layer became the default (its loops,
+references and allocation; each stroke's profile velocity timed to its planned duration;
+the baseline's fin-model inverse; the MPC's drive timing and centred cycles in
+the shipped ``sim-tuned``), which changes every trajectory by design, and adds the
+channels ``body/allocation`` and ``fin/N/cycle``.
 
 Each scenario starts the simulated U-CAT at 1 m depth surging at 0.2 m/s with the
 configuration of the shipped ``sim-tuned``, runs one mode with a velocity, depth and yaw

@@ -74,6 +74,7 @@ from ucat_console.backend.devices import cia402
 from ucat_console.backend.devices.canbus import BITRATES, INTERFACES
 from ucat_console.robot.readings import FinFeedback
 from ucat_console.backend.devices.reporting import EventReporter
+from ucat_console.robot.servo import FIN_ACCELERATION
 from ucat_console.robot.units import DriveUnits
 from ucat_console.telemetry.events import EventSink
 from ucat_console.typedconf import Config, param
@@ -119,11 +120,11 @@ class Epos2Config(Config):
     )
     units: DriveUnits = DriveUnits()
     profile_acceleration: float = param(
-        64.0, lo=0.0, hi=100_000.0, lo_open=True, unit="rad/s2",
+        FIN_ACCELERATION, lo=0.0, hi=100_000.0, lo_open=True, unit="rad/s2",
         doc="profile acceleration at the fin (0x6083)",
     )
     profile_deceleration: float = param(
-        64.0, lo=0.0, hi=100_000.0, lo_open=True, unit="rad/s2",
+        FIN_ACCELERATION, lo=0.0, hi=100_000.0, lo_open=True, unit="rad/s2",
         doc="profile deceleration at the fin (0x6084)",
     )
     quick_stop_deceleration: float = param(

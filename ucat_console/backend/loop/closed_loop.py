@@ -80,17 +80,8 @@ from ucat_console.backend.loop.planners import (
     ThreadedPlanning,
 )
 from ucat_console.control import loop_core as lc
-from ucat_console.control.allocation import (
-    B_FX,
-    B_FY,
-    B_YAW,
-    BODY_FIELDS,
-    EARLIER_T,
-    INDEPENDENT_FINS,
-    SYNC_FINS,
-    BodyController,
-    BodySetpoints,
-)
+from ucat_console.control.allocation import INDEPENDENT_FINS, SYNC_FINS, BodySetpoints, cut_names
+from ucat_console.control.body import BODY_FIELDS, EARLIER_T, BodyController
 from ucat_console.control.estimation import AttitudeEstimator
 from ucat_console.control.executor import (
     CycleComplete,
@@ -103,14 +94,17 @@ from ucat_console.control.executor import (
 from ucat_console.control.argcheck import finite
 from ucat_console.control.cost import stroke_strouhal
 from ucat_console.control.fin_cycle import CycleForce, executed_force, planned_duration
+from ucat_console.control.stroke_timing import profile_velocity
 from ucat_console.control.params import BaselineConfig, MpcConfig, PidGains
 from ucat_console.control.power import P_T, PowerBank, drag_coefficient
 from ucat_console.control.stroke_watch import W_T_FB, StrokeWatches
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.messages import (
+    BodyAllocation,
     BodyCommand,
     BodyState,
+    BodyTracking,
     FinCycle,
     FinPlan,
     FinState,
@@ -133,7 +127,7 @@ PID_LOOPS = ("velocity", "depth", "yaw_rate")
 _FIN_STATE = tuple(ch.fin_state(pf) for pf in range(N_FINS))
 _FIN_CYCLE = tuple(ch.fin_cycle(pf) for pf in range(N_FINS))
 #: the telemetry a flag of the core asks for
-_WANTED = ((lc.F_BODY_COMMAND, (ch.BODY_COMMAND,)), (lc.F_STATE, (ch.BODY_STATE, *_FIN_STATE)),
+_WANTED = ((lc.F_BODY_COMMAND, (ch.BODY_COMMAND, ch.BODY_ALLOCATION, ch.BODY_TRACKING)), (lc.F_STATE, (ch.BODY_STATE, *_FIN_STATE)),
            (lc.F_POWER, (ch.POWER,)), (lc.F_IMU, (ch.IMU,)), (lc.F_DEPTH, (ch.DEPTH,)), (lc.F_DVL, (ch.DVL,)))
 
 
@@ -205,7 +199,7 @@ class ClosedLoop:
         self.clock = clock if clock is not None else SimulatedClock()
         self._planning: PlanningService = ThreadedPlanning() if self.clock.threaded else PlanningService()
         self._source = source
-        self.body = BodyController(cfg.body)
+        self.body = BodyController(cfg.body, cfg.mpc, cfg.executor)
         # in force (the loop's thread), and as commanded (any thread; in force from the next event)
         self._mpc_cfg = cfg.mpc
         self._baseline_cfg = cfg.baseline
@@ -238,7 +232,7 @@ class ClosedLoop:
         self._fed: list[Reading] = []  # the event's readings as objects (a robot running the core gives rows)
         self._wanted_key: frozenset[str] | None = None
         self._wanted_flags = 0
-        lc.set_targets(self._s, 0.0, 0.0, 0.0, self._sync)
+        lc.set_targets(self._s, self.body.state, self._sync)
         # counters
         self.late_plans = 0
         self.plan_overruns = 0
@@ -634,10 +628,15 @@ class ClosedLoop:
             if tp is SendToServo:
                 pf = PAPER_TO_ROBOT[a.fin]
                 self._stroke_begins(act, a.fin, a.stroke, t)
-                self.io.command_fin(pf, a.theta_ref, a.w_ref)
+                angle = float(self._s[lc.C_FB_ANGLE + pf])
+                if angle != angle:  # no feedback yet: from the last command
+                    angle = float(self._s[lc.C_CMD_ANGLE + pf])
+                ex = self.cfg.executor
+                v = profile_velocity(a.theta_ref - angle, a.w_ref, ex.acceleration, ex.max_rate)
+                self.io.command_fin(pf, a.theta_ref, v)
                 self._publish_stroke(t, pf, a.theta_ref - float(self._s[lc.C_CMD_ANGLE + pf]), a.w_ref)
                 self._s[lc.C_CMD_ANGLE + pf] = a.theta_ref
-                self._s[lc.C_CMD_RATE + pf] = a.w_ref
+                self._s[lc.C_CMD_RATE + pf] = v
             elif tp is PlanRequest:
                 if not act.retiring:
                     self._request(act, t, a.theta_start)
@@ -727,19 +726,18 @@ class ClosedLoop:
 
     def _make_planner(self, mode: str, index: int) -> Planner:
         if mode == "baseline":
-            return BaselineFinPlanner(self._mpc_cfg, self._baseline_cfg)
+            return BaselineFinPlanner(self._mpc_cfg, self._baseline_cfg, self.cfg.executor)
         if mode == "identify":
             return ManoeuvreFinPlanner(self.cfg.manoeuvre, self._mpc_cfg)
         seed = int(np.random.SeedSequence([self.cfg.planner_seed, self._generation, index]).generate_state(1)[0])
-        return MpcFinPlanner(self._mpc_cfg, seed)
+        return MpcFinPlanner(self._mpc_cfg, seed, self.cfg.executor)
 
     def _apply_mode(self, mode: str, t: float, who: str = "") -> None:
         if mode == self._mode:
             return
         old = self._mode
         self._mode = mode
-        b = self.body.state
-        lc.set_targets(self._s, float(b[B_FX]), float(b[B_FY]), float(b[B_YAW]), self._sync)
+        lc.retarget(self._s, self.body.state, self._sync)
         for act in self._actuators:  # no more plans for the old controller
             act.retiring = True
             act.job = None
@@ -785,6 +783,7 @@ class ClosedLoop:
 
     def _apply_mpc(self, cfg: MpcConfig, t: float, who: str) -> None:
         old, self._mpc_cfg = self._mpc_cfg, cfg
+        self.body.set_fin_model(cfg)
         self._generation += 1
         for act in self._actuators:
             act.planner = self._make_planner(act.mode, act.index)
@@ -798,8 +797,7 @@ class ClosedLoop:
         self._tuning_event(t, "baseline", old, cfg, who)
 
     def _apply_gains(self, loop: str, gains: PidGains, t: float, who: str) -> None:
-        pid = {"velocity": self.body.velocity_pid, "depth": self.body.depth_pid,
-               "yaw_rate": self.body.yaw_pid}[loop]
+        pid = self.body.pid(loop)
         old = pid.gains
         pid.set_gains(gains)
         self._tuning_event(t, f"pid.{loop}", old, gains, who)
@@ -838,7 +836,7 @@ class ClosedLoop:
             elif kind == lc.O_POWER:
                 add((ch.POWER, self._power_message(v)))
             elif kind == lc.O_BODY_COMMAND:
-                add((ch.BODY_COMMAND, BodyCommand(v[lc.O_T], v[lc.O_V], v[lc.O_V + 1], v[lc.O_V + 2])))
+                self._body_messages(v, add)
             else:
                 r = rr.reading_of(v)
                 add((_READING_CHANNEL[type(r)], r))
@@ -859,6 +857,19 @@ class ClosedLoop:
                 a = v[f + pf]
                 add((channel, FinState(t, pf, 0.0 if a != a else a, v[f + N_FINS + pf],
                                        v[f + 2 * N_FINS + pf], v[f + 3 * N_FINS + pf])))
+
+    def _body_messages(self, v: list[float], add: Callable[[tuple[str, Any]], None]) -> None:
+        """The body command, the allocation and the tracking of a body-command row, those a
+        subscriber takes."""
+        t, b = v[lc.O_T], lc.O_V
+        wants = self.stream.wants
+        if wants(ch.BODY_COMMAND):
+            add((ch.BODY_COMMAND, BodyCommand(t, v[b], v[b + 1], v[b + 2])))
+        if wants(ch.BODY_ALLOCATION):
+            add((ch.BODY_ALLOCATION, BodyAllocation(t, v[b + 3], v[b + 4], v[b + 5], v[b + 6], v[b + 7], v[b + 8],
+                                                    cut_names(int(v[b + 9])))))
+        if wants(ch.BODY_TRACKING):
+            add((ch.BODY_TRACKING, BodyTracking(t, v[b + 10] != 0.0, *v[b + 11:b + 18])))
 
     def _publish_stroke(self, t: float, fin: int, stroke: float, rate: float) -> None:
         if not self.stream.wants(ch.fin_strouhal(fin)):

@@ -33,7 +33,7 @@ from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.control.baseline import BaselinePlanner, wrap_angle
 from ucat_console.control.manoeuvre import ManoeuvrePlanner
 from ucat_console.control.mpc import FinMpc
-from ucat_console.control.params import FORMULATIONS, BaselineConfig, ManoeuvreConfig, MpcConfig
+from ucat_console.control.params import FORMULATIONS, BaselineConfig, ExecutorConfig, ManoeuvreConfig, MpcConfig
 from ucat_console.telemetry.messages import FinPlan
 
 Vec4 = tuple[float, float, float, float]
@@ -76,9 +76,9 @@ class MpcFinPlanner:
     makes an extra revolution. The baseline does the same.
     """
 
-    def __init__(self, cfg: MpcConfig, seed: int) -> None:
+    def __init__(self, cfg: MpcConfig, seed: int, drive: ExecutorConfig | None = None) -> None:
         self.cfg = cfg
-        self._mpc = FinMpc(cfg)
+        self._mpc = FinMpc(cfg, drive=drive)
         self._seed_base = seed << 32
         self._count = 0
 
@@ -101,9 +101,9 @@ class MpcFinPlanner:
 class BaselineFinPlanner:
     """The inverse-model baseline; its plan is scored with the MPC cost of ``cfg``."""
 
-    def __init__(self, cfg: MpcConfig, bcfg: BaselineConfig) -> None:
+    def __init__(self, cfg: MpcConfig, bcfg: BaselineConfig, executor: ExecutorConfig | None = None) -> None:
         self.cfg = cfg
-        self._planner = BaselinePlanner(cfg, bcfg)
+        self._planner = BaselinePlanner(cfg, bcfg, executor)
         self._scorer = FinMpc(cfg)
 
     def __call__(self, x: PlanInputs) -> FinPlan:
@@ -166,7 +166,7 @@ def warm_up(cfg: LoopConfig | None = None, formulations: tuple[str, ...] | None 
     for formulation in formulations:
         m = cfg.mpc.replace(formulation=formulation)
         MpcFinPlanner(m, 0)(x)
-        BaselineFinPlanner(m, cfg.baseline)(x)
+        BaselineFinPlanner(m, cfg.baseline, cfg.executor)(x)
     return time.perf_counter() - t0
 
 

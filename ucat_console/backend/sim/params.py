@@ -1,7 +1,8 @@
 """Parameters of the simulated U-CAT (plant.md): the plant's own, never read by the controller.
 
 One frozen dataclass per block, nested under :class:`PlantConfig`. Defaults come from the
-TalTech eeUVsim U-CAT model (plant.md table) unless a field's doc says otherwise.
+TalTech eeUVsim U-CAT model (plant.md table; the numbers in ``robot/hull.py``) unless a field's
+doc says otherwise.
 
 Frames, fin order and fin planes are the robot's (``ucat_console.robot``: ``fins`` for the
 order and signs, ``geometry`` for the fin planes, ``rotations`` for the attitude
@@ -17,7 +18,9 @@ import math
 from dataclasses import dataclass
 
 from ucat_console.robot import geometry as G
+from ucat_console.robot import hull as H
 from ucat_console.robot.geometry import Geometry
+from ucat_console.robot.servo import FIN_ACCELERATION, FIN_MAX_RATE
 from ucat_console.robot.units import RHO_FRESH, DriveUnits
 from ucat_console.typedconf import Config, param, require_below
 
@@ -45,28 +48,28 @@ class VehicleConfig(Config):
     (0, 0, +0.1).
     """
 
-    mass: float = param(22.0, lo=0.0, hi=500.0, lo_open=True, unit="kg", doc="dry mass (paper Table II)")
-    ixx: float = param(0.1574, lo=0.0, hi=100.0, lo_open=True, unit="kg m2", doc="roll inertia about the CG")
-    iyy: float = param(0.66, lo=0.0, hi=100.0, lo_open=True, unit="kg m2", doc="pitch inertia about the CG")
-    izz: float = param(0.70, lo=0.0, hi=100.0, lo_open=True, unit="kg m2", doc="yaw inertia about the CG")
-    x_udot: float = param(-40.0, lo=-1000.0, hi=0.0, unit="kg", doc="added mass X_u'")
-    y_vdot: float = param(-21.0, lo=-1000.0, hi=0.0, unit="kg", doc="added mass Y_v'")
-    z_wdot: float = param(-2.0, lo=-1000.0, hi=0.0, unit="kg", doc="added mass Z_w'")
-    k_pdot: float = param(-0.1269, lo=-100.0, hi=0.0, unit="kg m2", doc="added inertia K_p'")
-    m_qdot: float = param(-1.2052, lo=-100.0, hi=0.0, unit="kg m2", doc="added inertia M_q'")
-    n_rdot: float = param(-2.3064, lo=-100.0, hi=0.0, unit="kg m2", doc="added inertia N_r'")
-    x_u: float = param(-6.542, lo=-1000.0, hi=0.0, unit="N s/m", doc="linear surge damping X_u")
-    y_v: float = param(-100.7, lo=-1000.0, hi=0.0, unit="N s/m", doc="linear sway damping Y_v")
-    z_w: float = param(-30.61, lo=-1000.0, hi=0.0, unit="N s/m", doc="linear heave damping Z_w")
+    mass: float = param(H.MASS, lo=0.0, hi=500.0, lo_open=True, unit="kg", doc="dry mass (paper Table II)")
+    ixx: float = param(H.IXX, lo=0.0, hi=100.0, lo_open=True, unit="kg m2", doc="roll inertia about the CG")
+    iyy: float = param(H.IYY, lo=0.0, hi=100.0, lo_open=True, unit="kg m2", doc="pitch inertia about the CG")
+    izz: float = param(H.IZZ, lo=0.0, hi=100.0, lo_open=True, unit="kg m2", doc="yaw inertia about the CG")
+    x_udot: float = param(H.X_UDOT, lo=-1000.0, hi=0.0, unit="kg", doc="added mass X_u'")
+    y_vdot: float = param(H.Y_VDOT, lo=-1000.0, hi=0.0, unit="kg", doc="added mass Y_v'")
+    z_wdot: float = param(H.Z_WDOT, lo=-1000.0, hi=0.0, unit="kg", doc="added mass Z_w'")
+    k_pdot: float = param(H.K_PDOT, lo=-100.0, hi=0.0, unit="kg m2", doc="added inertia K_p'")
+    m_qdot: float = param(H.M_QDOT, lo=-100.0, hi=0.0, unit="kg m2", doc="added inertia M_q'")
+    n_rdot: float = param(H.N_RDOT, lo=-100.0, hi=0.0, unit="kg m2", doc="added inertia N_r'")
+    x_u: float = param(H.X_U, lo=-1000.0, hi=0.0, unit="N s/m", doc="linear surge damping X_u")
+    y_v: float = param(H.Y_V, lo=-1000.0, hi=0.0, unit="N s/m", doc="linear sway damping Y_v")
+    z_w: float = param(H.Z_W, lo=-1000.0, hi=0.0, unit="N s/m", doc="linear heave damping Z_w")
     k_p: float = param(0.0, lo=-100.0, hi=0.0, unit="N m s", doc="linear roll damping K_p")
     m_q: float = param(0.0, lo=-100.0, hi=0.0, unit="N m s", doc="linear pitch damping M_q")
-    n_r: float = param(-0.313, lo=-100.0, hi=0.0, unit="N m s", doc="linear yaw damping N_r")
-    x_uu: float = param(-2.98, lo=-1000.0, hi=0.0, unit="N s2/m2", doc="quadratic surge damping X_uu")
-    y_vv: float = param(-260.0, lo=-1000.0, hi=0.0, unit="N s2/m2", doc="quadratic sway damping Y_vv")
-    z_ww: float = param(-161.0, lo=-1000.0, hi=0.0, unit="N s2/m2", doc="quadratic heave damping Z_ww")
-    k_pp: float = param(-3.4244, lo=-100.0, hi=0.0, unit="N m s2", doc="quadratic roll damping K_pp")
-    m_qq: float = param(-2.1014, lo=-100.0, hi=0.0, unit="N m s2", doc="quadratic pitch damping M_qq")
-    n_rr: float = param(-0.7226, lo=-100.0, hi=0.0, unit="N m s2", doc="quadratic yaw damping N_rr")
+    n_r: float = param(H.N_R, lo=-100.0, hi=0.0, unit="N m s", doc="linear yaw damping N_r")
+    x_uu: float = param(H.X_UU, lo=-1000.0, hi=0.0, unit="N s2/m2", doc="quadratic surge damping X_uu")
+    y_vv: float = param(H.Y_VV, lo=-1000.0, hi=0.0, unit="N s2/m2", doc="quadratic sway damping Y_vv")
+    z_ww: float = param(H.Z_WW, lo=-1000.0, hi=0.0, unit="N s2/m2", doc="quadratic heave damping Z_ww")
+    k_pp: float = param(H.K_PP, lo=-100.0, hi=0.0, unit="N m s2", doc="quadratic roll damping K_pp")
+    m_qq: float = param(H.M_QQ, lo=-100.0, hi=0.0, unit="N m s2", doc="quadratic pitch damping M_qq")
+    n_rr: float = param(H.N_RR, lo=-100.0, hi=0.0, unit="N m s2", doc="quadratic yaw damping N_rr")
     cg: tuple[float, float, float] = param((0.0, 0.0, 0.1), unit="m", doc="centre of gravity, body FRD")
     cb: tuple[float, float, float] = param((0.0, 0.0, 0.0), unit="m", doc="centre of buoyancy, body FRD")
     buoyancy_ratio: float = param(
@@ -175,9 +178,9 @@ class ServoConfig(Config):
     """Fin servos in profile-position mode, as an EPOS2 runs them."""
 
     acceleration: float = param(
-        64.0, lo=0.0, hi=10000.0, lo_open=True, unit="rad/s2", doc="profile acceleration = deceleration"
+        FIN_ACCELERATION, lo=0.0, hi=10000.0, lo_open=True, unit="rad/s2", doc="profile acceleration = deceleration"
     )
-    max_rate: float = param(10.0, lo=0.0, hi=200.0, lo_open=True, unit="rad/s", doc="maximum fin rate")
+    max_rate: float = param(FIN_MAX_RATE, lo=0.0, hi=200.0, lo_open=True, unit="rad/s", doc="maximum fin rate")
     units: DriveUnits = DriveUnits()  # encoder and gearhead (robot.units: the one default)
     feedback_rate: float = param(100.0, lo=1.0, hi=1000.0, unit="Hz", doc="encoder feedback (PDO) rate")
 

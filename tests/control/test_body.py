@@ -1,0 +1,324 @@
+"""The body-frame layer: the paper's loops (signs, data handling, the compiled functions
+against the reference), the designed loops (references, feed-forward, heading hold, the
+allocation's cut fed back), and the gains' design."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from ucat_console.control import body as bd
+from ucat_console.control.allocation import BodySetpoints
+from ucat_console.control.body import BodyController
+from ucat_console.control.body_design import HullModel, designed_gains, position_gains, velocity_gains
+from ucat_console.control.params import PAPER_BODY, BodyConfig, MpcConfig, PidGains
+from ucat_console.robot.fins import PAPER_SIDES as FIN_SIDES
+from ucat_console.robot.readings import DepthReading, DvlVelocity, ImuReading
+
+B = 0.2981
+
+
+def yaw_moment(per_fin) -> float:
+    return sum(-(side * B) * (-fx) for side, (fx, _fy) in zip(FIN_SIDES, per_fin))
+
+
+def dvl(t, vx, valid=True):
+    return DvlVelocity(t=t, vx=vx, vy=0.0, vz=0.0, valid=valid, altitude=1.0, fom=0.01)
+
+
+def imu(t, r, yaw=None):
+    q = None if yaw is None else (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
+    return ImuReading(t=t, accel_g=(0.0, 0.0, 1.0), gyro=(0.0, 0.0, r), quaternion=q)
+
+
+def paper_cfg(**kw) -> BodyConfig:
+    base = dict(
+        velocity=PidGains(kp=2.0, limit=2.5),
+        depth=PidGains(kp=5.0, limit=0.5),
+        yaw_rate=PidGains(kp=3.0, limit=0.5),
+        median_window=3,
+    )
+    base.update(kw)
+    return PAPER_BODY.replace(**base)
+
+
+# ------------------------------------------------------------------ the paper's layer
+def test_velocity_error_gives_forward_thrust_negative_fx():
+    ctl = BodyController(paper_cfg())
+    ctl.on_dvl(dvl(0.0, 0.1))
+    cmd = ctl.update(0.0, BodySetpoints(velocity=0.3))
+    # F_x* = -kp (0.3 - 0.1) = -0.4
+    assert cmd.outputs[0] == pytest.approx(-0.4)
+    assert cmd.velocity_updated
+    assert all(fx == pytest.approx(-0.1) for fx, _ in cmd.allocation.per_fin())
+
+
+def test_missing_dvl_holds_output_and_is_not_zero_velocity():
+    ctl = BodyController(paper_cfg())
+    ctl.on_dvl(dvl(0.0, 0.1))
+    first = ctl.update(0.0, BodySetpoints(velocity=0.3))
+    for k in range(1, 6):
+        ctl.on_dvl(dvl(0.1 * k, 0.0, valid=False))
+        cmd = ctl.update(0.1 * k, BodySetpoints(velocity=0.3))
+        assert cmd.outputs[0] == first.outputs[0]  # held; zero velocity would give -0.6
+        assert not cmd.velocity_updated
+        assert cmd.velocity == pytest.approx(0.1)
+    assert ctl.dvl_missing == 5
+
+
+def test_no_dvl_yet_gives_no_thrust_and_no_velocity():
+    for cfg in (paper_cfg(), BodyConfig()):
+        ctl = BodyController(cfg)
+        cmd = ctl.update(0.0, BodySetpoints(velocity=0.3))
+        assert cmd.velocity is None
+        assert cmd.outputs[0] == 0.0
+        assert all(fx == 0.0 for fx, _ in cmd.allocation.per_fin())
+
+
+def test_median_filter_removes_dvl_spike():
+    ctl = BodyController(paper_cfg())
+    for t, v in ((0.0, 0.2), (0.1, 0.2), (0.2, 3.0)):
+        ctl.on_dvl(dvl(t, v))
+    cmd = ctl.update(0.2, BodySetpoints(velocity=0.2))
+    assert cmd.velocity == pytest.approx(0.2)
+    assert cmd.outputs[0] == pytest.approx(0.0)
+
+
+def test_depth_sign_and_front_lift():
+    ctl = BodyController(paper_cfg())
+    ctl.on_depth(DepthReading(t=0.0, depth_m=1.95, pressure_pa=0.0))
+    cmd = ctl.update(0.0, BodySetpoints(depth=2.0))
+    # too shallow by 0.05 m: the default asks for a downward force (f_y > 0 lifts):
+    # F_y* = -5 * 0.05 = -0.25, half on each front fin
+    assert cmd.outputs[1] == pytest.approx(-0.25)
+    fins = cmd.allocation.per_fin()
+    assert fins[0][1] == fins[1][1] == pytest.approx(-0.125)
+    flipped = BodyController(paper_cfg(depth_sign=1.0))
+    flipped.on_depth(DepthReading(t=0.0, depth_m=1.95, pressure_pa=0.0))
+    assert flipped.update(0.0, BodySetpoints(depth=2.0)).outputs[1] == pytest.approx(0.25)
+
+
+def test_yaw_rate_command_turns_to_starboard():
+    ctl = BodyController(paper_cfg())
+    ctl.on_imu(imu(0.0, 0.0))
+    ctl.on_dvl(dvl(0.0, 0.2))
+    cmd = ctl.update(0.0, BodySetpoints(velocity=0.2, yaw_rate=0.1))
+    assert cmd.outputs[2] == pytest.approx(0.3)  # 3 * 0.1
+    fins = cmd.allocation.per_fin()
+    assert fins[1][0] < fins[0][0]  # port front fin pushes forward harder (more negative f_x)
+    assert yaw_moment(fins) > 0.0
+
+
+def test_bad_readings_and_setpoints():
+    ctl = BodyController(paper_cfg())
+    with pytest.raises(ValueError, match="dvl.vx"):
+        ctl.on_dvl(dvl(0.0, math.nan))
+    with pytest.raises(ValueError, match="depth"):
+        BodySetpoints(depth=-1.0)
+    with pytest.raises(ValueError, match="velocity"):
+        BodySetpoints(velocity=math.inf)
+
+
+def test_the_compiled_body_layer_is_the_reference_on_random_readings():
+    """The paper layer's functions compiled (as the loop's core runs them) against the
+    Python controller the loop ran before: random DVL (with dropouts), depth and gyro
+    readings in random order between control steps, three setpoints; the same outputs and
+    filtered values at every step, bit for bit."""
+    from numba import njit
+
+    from control.reference_kernels import ReferenceBody
+
+    on_dvl = njit(lambda b, valid, v, t: bd.body_on_dvl(b, valid, v, t))
+    on_depth = njit(lambda b, z, t: bd.body_on_depth(b, z, t))
+    on_imu = njit(lambda b, r, t: bd.body_on_imu(b, r, t))
+    update = njit(lambda b, t, v, z, r: bd.body_update(b, t, v, z, r, False))
+    rng = np.random.default_rng(11)
+    for window in (1, 4, 5):
+        cfg = PAPER_BODY.replace(median_window=window)
+        b = BodyController(cfg).state
+        ref = ReferenceBody(cfg)
+        t = 0.0
+        sp = (0.2, 1.0, 0.05)
+        for _ in range(400):
+            t += 0.005
+            kind = rng.integers(0, 5)
+            if kind == 0:
+                valid = bool(rng.random() > 0.1)
+                v = float(rng.normal(0.2, 0.05))
+                assert on_dvl(b, valid, v, t) == bd.BODY_OK
+                ref.on_dvl(valid, v)
+            elif kind == 1:
+                z = float(rng.normal(1.0, 0.1))
+                assert on_depth(b, z, t) == bd.BODY_OK
+                ref.on_depth(z)
+            elif kind == 2:
+                r = float(rng.normal(0.0, 0.1))
+                assert on_imu(b, r, t) == bd.BODY_OK
+                ref.on_imu(r)
+            else:
+                status, v, z = update(b, t, *sp)
+                rv, rz = ref.update(t, sp)
+                assert status == bd.BODY_OK
+                assert (math.isnan(v) and rv is None) or v == rv
+                assert (math.isnan(z) and rz is None) or z == rz
+                assert (b[bd.B_FX], b[bd.B_FY], b[bd.B_YAW]) == (ref.fx, ref.fy, ref.yaw)
+        assert b[bd.B_DVL_MISSING] == ref.dvl_missing
+
+
+def test_the_compiled_body_layer_names_a_bad_reading():
+    from numba import njit
+
+    b = BodyController(BodyConfig()).state
+    on_depth = njit(lambda b, z, t: bd.body_on_depth(b, z, t))
+    assert bd.BODY_FIELDS[on_depth(b, math.nan, 0.0)] == "depth.depth_m"
+    assert bd.BODY_FIELDS[on_depth(b, 1.0, math.inf)] == "depth.t"
+    assert np.isnan(b[bd.B_LAST_DEPTH_T])  # nothing was taken
+
+
+# ------------------------------------------------------------------ the designed layer
+def designed(**kw) -> BodyController:
+    return BodyController(BodyConfig(**kw), MpcConfig())
+
+
+def test_the_depth_reference_ramps_at_the_dive_rate_with_the_hull_drag_as_feed_forward():
+    ctl = designed(median_window=1)
+    cfg = ctl.cfg
+    hull = cfg.hull
+    ctl.on_depth(DepthReading(t=0.0, depth_m=0.5, pressure_pa=0.0))
+    first = ctl.update(0.0, BodySetpoints(depth=1.5))
+    # the reference starts where the robot is (no error) and sets off at the largest dive
+    # rate: the heave is the hull's drag at that rate
+    assert first.demand[1] == pytest.approx(hull.heave_drag(cfg.max_dive_rate))
+    t = 0.0
+    for _ in range(50):
+        t += 0.02
+        ctl.on_depth(DepthReading(t=t, depth_m=0.5, pressure_pa=0.0))
+        step = ctl.update(t, BodySetpoints(depth=1.5))
+    ref = ctl.state[bd.B_Z_REF]
+    assert ref == pytest.approx(0.5 + cfg.max_dive_rate * 1.0)  # 1 s at the largest dive rate
+    # Z = D_z(w_ref) + kp (z_ref - z) + integral: the robot still at 0.5 m
+    w = cfg.max_dive_rate
+    p = cfg.depth.kp * (ref - 0.5)
+    assert step.demand[1] == pytest.approx(hull.heave_drag(w) + p + ctl.depth_pid.integral, rel=1e-9)
+    assert step.demand[1] > hull.heave_drag(w) + p > 0.0  # downwards
+
+
+def test_a_zero_yaw_rate_setpoint_holds_the_heading_it_started_with():
+    ctl = designed()
+    ctl.on_imu(imu(0.0, 0.0, yaw=0.3))
+    ctl.update(0.0, BodySetpoints())
+    assert ctl.heading_ref == pytest.approx(0.3)
+    # turned off course to starboard (0.4 rad), not turning: a moment to port, N < 0
+    ctl.on_imu(imu(0.02, 0.0, yaw=0.4))
+    step = ctl.update(0.02, BodySetpoints())
+    kp = ctl.cfg.yaw_rate.kp
+    assert step.demand[2] == pytest.approx(-kp * 0.1 + ctl.yaw_pid.integral, rel=1e-9)
+    assert step.demand[2] < 0.0
+    assert ctl.heading_ref == pytest.approx(0.3)
+    # and across the wrap at pi: held heading pi - 0.05, robot at -pi + 0.05 (0.1 rad to starboard)
+    ctl = designed()
+    ctl.on_imu(imu(0.0, 0.0, yaw=math.pi - 0.05))
+    ctl.update(0.0, BodySetpoints())
+    ctl.on_imu(imu(0.02, 0.0, yaw=-math.pi + 0.05))
+    assert ctl.update(0.02, BodySetpoints()).demand[2] < 0.0
+
+
+def test_a_yaw_rate_setpoint_turns_the_held_heading_and_never_leads_too_far():
+    ctl = designed(max_heading_lead=0.2)
+    ctl.on_imu(imu(0.0, 0.0, yaw=0.0))
+    ctl.update(0.0, BodySetpoints(yaw_rate=0.1))
+    t = 0.0
+    for _ in range(500):  # 10 s, the robot not turning at all
+        t += 0.02
+        ctl.on_imu(imu(t, 0.0, yaw=0.0))
+        step = ctl.update(t, BodySetpoints(yaw_rate=0.1))
+    assert ctl.heading_ref == pytest.approx(0.2)  # clamped at the lead
+    k = ctl.cfg.reference_rate  # the rate reference closes on 0.1 rad/s at k per second
+    assert ctl.state[bd.B_R_REF] == pytest.approx(0.1 * (1.0 - math.exp(-10.0 * k)), rel=1e-2)
+    assert step.demand[2] > 0.0  # clockwise, to starboard
+
+
+def test_overspeed_coasts_and_the_integral_does_not_wind_against_the_cut():
+    ctl = designed(median_window=1)
+    t = 0.0
+    ctl.on_dvl(dvl(t, 0.3))
+    ctl.update(t, BodySetpoints(velocity=0.3))
+    held = None
+    for _ in range(1000):  # the speed setpoint drops to 0.1 while the robot keeps 0.3 m/s
+        t += 0.02
+        ctl.on_dvl(dvl(t, 0.3))
+        step = ctl.update(t, BodySetpoints(velocity=0.1))
+        if held is None and "coast" in step.cut:
+            held = ctl.velocity_pid.integral
+    assert "coast" in step.cut
+    assert step.applied[0] == 0.0
+    assert all(fx == 0.0 for fx, _ in step.allocation.per_fin())
+    # from the first coasting step on, every step's integration was undone
+    assert held is not None and ctl.velocity_pid.integral == pytest.approx(held, abs=1e-12)
+
+
+def test_heave_beyond_the_fins_is_cut_and_reported_to_the_depth_loop():
+    ctl = designed(median_window=1, max_dive_rate=2.0)
+    t = 0.0
+    for _ in range(300):
+        ctl.on_depth(DepthReading(t=t, depth_m=0.5, pressure_pa=0.0))
+        step = ctl.update(t, BodySetpoints(depth=20.0))
+        t += 0.02
+    assert "heave" in step.cut or ctl.depth_pid.saturated
+    assert step.applied[1] <= 4 * ctl.fin_force + 1e-9
+    # the integral stays within what the loop may give: it does not run away
+    assert ctl.depth_pid.integral <= ctl.depth_pid.limit + 1e-9
+
+
+def test_the_loops_limits_are_what_the_fins_deliver():
+    ctl = designed(thrust_gain=2.0)
+    f = ctl.fin_force
+    assert f == pytest.approx(1.177, abs=2e-3)  # q |C| (64 * 1.2 / 4) cos 0.6
+    assert ctl.depth_pid.limit == pytest.approx(4 * f)
+    assert ctl.velocity_pid.limit == pytest.approx(4 * math.cos(math.radians(30)) * 2.0 * f)
+    assert ctl.yaw_pid.limit == pytest.approx(4 * B * 1.5 * f)
+
+
+def test_bad_gains_are_refused_naming_the_key():
+    with pytest.raises(ValueError, match="depth.kp"):
+        BodyConfig(depth=PidGains(kp=0.0, limit=5.0))
+    with pytest.raises(ValueError, match="ki"):
+        BodyConfig(depth=PidGains(kp=1.0, ki=-1.0))
+    with pytest.raises(ValueError, match="thrust_gain"):
+        BodyConfig(thrust_gain=0.0)
+    from ucat_console.config import AppConfig
+    with pytest.raises(ValueError, match=r"body\.yaw_rate\.kp"):
+        AppConfig.from_dict({"body": {"yaw_rate": {"kp": 0.0}}})
+    with pytest.raises(ValueError, match=r"body\.max_dive_rate"):
+        AppConfig.from_dict({"body": {"max_dive_rate": -0.1}})
+
+
+# ------------------------------------------------------------------ the design
+def test_the_designed_position_loops_put_their_poles_where_the_design_says():
+    hull = HullModel()
+    w = 0.2
+    heave = position_gains(hull.heave_mass, hull.heave_damping, w)
+    # the hull damps heave by itself: a P loop, its slower pole at the bandwidth
+    assert heave.kd == 0.0
+    poles = np.roots([hull.heave_mass, hull.heave_damping + heave.kd, heave.kp])
+    assert max(poles.real) == pytest.approx(-w)
+    assert np.all(np.abs(poles.imag) < 1e-12)
+    yaw = position_gains(hull.yaw_inertia, hull.yaw_damping, w)
+    poles = np.roots([hull.yaw_inertia, hull.yaw_damping + yaw.kd, yaw.kp])
+    assert poles == pytest.approx([-w, -w], abs=1e-6)  # critically damped at the bandwidth
+    surge = velocity_gains(hull.surge_mass, hull.surge_damping, w)
+    poles = np.roots([hull.surge_mass, hull.surge_damping + surge.kp, surge.ki])
+    assert poles == pytest.approx([-w, -w], abs=1e-6)
+
+
+def test_the_shipped_gains_are_the_designed_ones():
+    from ucat_console.control.params import DESIGN_DELAY, DESIGN_FACTOR
+
+    g = designed_gains(HullModel(), DESIGN_DELAY, DESIGN_FACTOR)
+    cfg = BodyConfig()
+    assert cfg.depth.kp == pytest.approx(g["depth"].kp, abs=1e-4)
+    assert cfg.yaw_rate.kd == pytest.approx(g["heading"].kd, abs=1e-4)
+    assert cfg.velocity.ki == pytest.approx(g["velocity"].ki, abs=1e-4)
+    assert cfg.reference_rate == pytest.approx(1.0 / (DESIGN_DELAY * DESIGN_FACTOR), abs=1e-4)

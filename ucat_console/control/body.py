@@ -1,0 +1,584 @@
+"""The body-frame layer: the loops on speed, depth and heading, and their allocation.
+
+Control.md section 7; ``BodyConfig.layer`` picks one of two layers over the same readings:
+
+* ``designed`` (``control.body_design`` for the gains, ``docs/control.md``): physical
+  demands, each loop tracking a reference with the hull's model as feed-forward. The
+  references close on their setpoints at ``reference_rate`` per second, their rates limited
+  (``max_acceleration``, ``max_dive_rate``, ``max_yaw_acceleration``), starting from what is
+  measured: a setpoint step becomes a ramp the loops can follow, with no kick and no
+  windup. Velocity: ``X = M_x u_ref' + D_x(u_ref) + PI(u_ref - u)``. Depth: ``Z = Z_trim +
+  D_z(z_ref') + PI(z_ref - z)`` (down > 0). Heading: ``N = J r_ref' + N_r(r_ref) + kp e +
+  ki int e + kd (r_ref - r)`` with ``e = psi_ref - psi`` (wrapped), ``psi_ref`` integrating
+  the yaw-rate reference from the heading measured when the loop started (a zero setpoint
+  holds the heading; ``psi_ref`` never runs more than ``max_heading_lead`` ahead of the
+  robot). The wrench goes to :func:`~ucat_console.control.allocation.allocate_wrench`; an
+  axis it cut has its loop's last integration undone (anti-windup fed by the allocation),
+  and each loop's output limit is what the fins can deliver on its axis.
+* ``paper`` (section IV.B): ``F_x* = -PID_v(v_ref - v)``, ``F_y* = depth_sign *
+  PID_z(z_ref - z)``, a yaw thrust differential ``m = PID_r(r_ref - r)``, allocated by
+  :func:`~ucat_console.control.allocation.fin_targets`.
+
+Readings: DVL velocity and depth are median filtered (``median_window``); the yaw rate is
+the gyro's z; the heading is the attitude estimate's yaw, set by the caller at each control
+step (:func:`body_set_heading`). A loop runs only on a new sample; otherwise its output is
+held. A DVL report with ``valid=False`` is missing data: it is counted and never enters the
+filter as a zero velocity.
+
+All numbers are one array (layout ``B_*``) that the ``body_*`` functions work on:
+:class:`BodyController` runs them as Python, the closed loop's compiled core runs the same
+functions compiled on the loop's controller's array.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba.extending import register_jitable
+
+from ucat_console.control.allocation import (
+    A_ARM,
+    A_COS,
+    A_GAIN,
+    NA,
+    NW,
+    W_N,
+    W_TARGETS,
+    W_X,
+    W_Z,
+    Allocation,
+    BodySetpoints,
+    CUT_HEAVE,
+    CUT_SURGE,
+    CUT_COAST,
+    CUT_YAW,
+    allocate,
+    allocate_wrench,
+    cut_names,
+    fin_targets,
+    wrench_params,
+    _logical,
+)
+from ucat_console.control.argcheck import finite
+from ucat_console.control.filters import MedianFilter, median_clear, median_push, median_size, median_value
+from ucat_console.control.params import BodyConfig, ExecutorConfig, MpcConfig
+from ucat_console.control.pid import EARLIER, NPID, Pid, pid_reset, pid_step, pid_step_rate, pid_unwind
+from ucat_console.control.stroke_timing import deliverable_force
+from ucat_console.robot.fins import PAPER_SIDES
+from ucat_console.robot.geometry import ARM_YAW, MOUNTING_ANGLE_DEG
+from ucat_console.robot.readings import DepthReading, DvlVelocity, ImuReading
+
+# layout of the body-frame layer's numbers (one float array): what the readings left, the
+# loops' outputs, the designed layer's parameters and state, the allocation's parameters
+# and output, then the three PIDs (``pid.PID_*`` rows) and the two median filters
+B_DVL_MISSING = 0  # DVL reports without bottom lock since the reset
+B_LAST_DVL_T = 1  # time of the last valid DVL report (NaN: none)
+B_LAST_DEPTH_T = 2
+B_LAST_IMU_T = 3
+B_YAW_RATE = 4  # the last gyro rate (NaN: none)
+B_NEW_V = 5  # 1.0: a sample the loop has not run on yet
+B_NEW_Z = 6
+B_NEW_R = 7
+B_FX = 8  # paper layer: the loops' last outputs F_x*, F_y*, m (held while a loop has no new sample)
+B_FY = 9
+B_YAW = 10
+B_DEPTH_SIGN = 11
+B_WINDOW = 12  # the median filters' length
+B_LAYER = 13  # 0.0 paper, 1.0 designed
+B_HEADING = 14  # the attitude estimate's heading (rad; NaN: none)
+B_HEADING_REF = 15  # the heading reference (NaN: take the present heading)
+B_T_REF = 16  # when the references last moved (NaN: not yet)
+B_TRIM = 17  # heave trim (N)
+B_HULL = 18  # the hull model (H_* offsets, NH numbers)
+H_SURGE_D, H_SURGE_DQ, H_HEAVE_D, H_HEAVE_DQ, H_YAW_D, H_YAW_DQ, H_SURGE_M, H_HEAVE_M, H_YAW_J = range(9)
+NH = 9
+B_LEAD = B_HULL + NH  # the largest heading lead (rad)
+B_REF_RATE = B_LEAD + 1  # how fast the references close on their setpoints (1/s)
+B_MAX_DIVE = B_LEAD + 2  # the references' rate limits: depth rate, acceleration, yaw acceleration
+B_MAX_ACC = B_LEAD + 3
+B_MAX_YAW_ACC = B_LEAD + 4
+B_V_REF = B_LEAD + 5  # the references: speed, its rate of change; depth, its rate; yaw rate, its rate
+B_V_REF_RATE = B_LEAD + 6
+B_Z_REF = B_LEAD + 7
+B_Z_REF_RATE = B_LEAD + 8
+B_R_REF = B_LEAD + 9
+B_R_REF_RATE = B_LEAD + 10
+B_X = B_LEAD + 11  # designed: the loops' demand: surge (N), heave (N, down > 0), yaw moment (N m)
+B_Z = B_X + 1
+B_N = B_X + 2
+B_APPLIED = B_X + 3  # what the allocation applied (3, the order of B_X..B_N)
+B_CUT = B_X + 6  # its cut bits (allocation.CUT_*)
+B_ALLOC = B_X + 7  # the allocation's parameters (allocation.A_*, NA numbers)
+B_OUT = B_ALLOC + NA  # its output (allocation.W_*, NW numbers)
+B_PIDS = B_OUT + NW  # velocity, depth, yaw rate or heading: NPID numbers each
+B_FILTERS = B_PIDS + 3 * NPID  # velocity filter, then depth filter
+#: what the body functions return: all is well, or which input was not a finite number
+BODY_OK, BAD_DVL_VX, BAD_DVL_T, BAD_DEPTH, BAD_DEPTH_T, BAD_GYRO, BAD_IMU_T, BAD_T, EARLIER_T = range(9)
+#: the field each bad input is named by
+BODY_FIELDS = {BAD_DVL_VX: "dvl.vx", BAD_DVL_T: "dvl.t", BAD_DEPTH: "depth.depth_m", BAD_DEPTH_T: "depth.t",
+               BAD_GYRO: "imu.gyro[2]", BAD_IMU_T: "imu.t", BAD_T: "t"}
+LAYERS = {"paper": 0.0, "designed": 1.0}
+
+
+def body_size(window: int) -> int:
+    return B_FILTERS + 2 * median_size(window)
+
+
+@register_jitable
+def body_reset(b: np.ndarray) -> None:
+    """Forget every reading, output and held heading (the gains and parameters stay)."""
+    for k in range(3):
+        pid_reset(b[B_PIDS + k * NPID:B_PIDS + (k + 1) * NPID])
+    median_clear(b, B_FILTERS)
+    median_clear(b, B_FILTERS + median_size(int(b[B_WINDOW])))
+    b[B_DVL_MISSING] = 0.0
+    b[B_LAST_DVL_T] = math.nan
+    b[B_LAST_DEPTH_T] = math.nan
+    b[B_LAST_IMU_T] = math.nan
+    b[B_YAW_RATE] = math.nan
+    b[B_NEW_V] = 0.0
+    b[B_NEW_Z] = 0.0
+    b[B_NEW_R] = 0.0
+    b[B_FX] = 0.0
+    b[B_FY] = 0.0
+    b[B_YAW] = 0.0
+    b[B_HEADING] = math.nan
+    b[B_HEADING_REF] = math.nan
+    b[B_T_REF] = math.nan
+    for k in range(B_V_REF, B_R_REF_RATE + 1):
+        b[k] = math.nan
+    b[B_X] = 0.0
+    b[B_Z] = b[B_TRIM]
+    b[B_N] = 0.0
+    for k in range(3):
+        b[B_APPLIED + k] = 0.0
+    b[B_CUT] = 0.0
+    for k in range(NW):
+        b[B_OUT + k] = 0.0
+
+
+@register_jitable
+def body_on_dvl(b: np.ndarray, valid: bool, v: float, t: float) -> int:
+    """A DVL report (forward velocity ``v``): missing data when not ``valid`` (counted,
+    never a zero velocity)."""
+    if not valid:
+        b[B_DVL_MISSING] += 1.0
+        return BODY_OK
+    if not math.isfinite(v):
+        return BAD_DVL_VX
+    if not math.isfinite(t):
+        return BAD_DVL_T
+    w = int(b[B_WINDOW])
+    median_push(b, B_FILTERS, w, v)
+    b[B_LAST_DVL_T] = t
+    b[B_NEW_V] = 1.0
+    return BODY_OK
+
+
+@register_jitable
+def body_on_depth(b: np.ndarray, z: float, t: float) -> int:
+    if not math.isfinite(z):
+        return BAD_DEPTH
+    if not math.isfinite(t):
+        return BAD_DEPTH_T
+    w = int(b[B_WINDOW])
+    median_push(b, B_FILTERS + median_size(w), w, z)
+    b[B_LAST_DEPTH_T] = t
+    b[B_NEW_Z] = 1.0
+    return BODY_OK
+
+
+@register_jitable
+def body_on_imu(b: np.ndarray, r: float, t: float) -> int:
+    """An IMU sample: its yaw rate (gyro z) ``r``."""
+    if not math.isfinite(r):
+        return BAD_GYRO
+    if not math.isfinite(t):
+        return BAD_IMU_T
+    b[B_YAW_RATE] = r
+    b[B_LAST_IMU_T] = t
+    b[B_NEW_R] = 1.0
+    return BODY_OK
+
+
+@register_jitable
+def body_set_heading(b: np.ndarray, qw: float, qx: float, qy: float, qz: float) -> None:
+    """The attitude estimate (body -> NED quaternion) at this control step: its heading."""
+    if math.isfinite(qw + qx + qy + qz):
+        b[B_HEADING] = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+
+
+@register_jitable
+def body_sensors_reported(b: np.ndarray) -> bool:
+    return not math.isnan(b[B_LAST_DEPTH_T]) and (not math.isnan(b[B_LAST_DVL_T]) or b[B_DVL_MISSING] > 0.0)
+
+
+@register_jitable
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+@register_jitable
+def _paper_loops(b: np.ndarray, t: float, sp_v: float, sp_z: float, sp_r: float, v: float, z: float,
+                 r: float) -> int:
+    status = BODY_OK
+    if b[B_NEW_V] != 0.0 and not math.isnan(v):
+        out = pid_step(b[B_PIDS:B_PIDS + NPID], sp_v - v, v, t)
+        if out == EARLIER:
+            status = EARLIER_T
+        else:
+            b[B_FX] = -out
+    if b[B_NEW_Z] != 0.0 and not math.isnan(z):
+        out = pid_step(b[B_PIDS + NPID:B_PIDS + 2 * NPID], sp_z - z, z, t)
+        if out == EARLIER:
+            status = EARLIER_T
+        else:
+            b[B_FY] = b[B_DEPTH_SIGN] * out
+    if b[B_NEW_R] != 0.0 and not math.isnan(r):
+        out = pid_step(b[B_PIDS + 2 * NPID:B_PIDS + 3 * NPID], sp_r - r, r, t)
+        if out == EARLIER:
+            status = EARLIER_T
+        else:
+            b[B_YAW] = out
+    return status
+
+
+@register_jitable
+def _approach(ref: float, rate_of: float, target: float, k: float, limit: float, dt: float) -> tuple[float, float]:
+    """A reference closing on ``target`` at ``k`` per second, its rate at most ``limit``:
+    (the reference after ``dt``, its rate). NaN stays NaN until ``rate_of`` starts it."""
+    if math.isnan(ref):
+        if math.isnan(rate_of):
+            return math.nan, math.nan
+        ref = rate_of
+    rate = min(limit, max(-limit, k * (target - ref)))
+    return ref + rate * dt, rate
+
+
+@register_jitable
+def _move_references(b: np.ndarray, t: float, sp_v: float, sp_z: float, sp_r: float, v: float, z: float,
+                     r: float) -> None:
+    """The designed layer's references move on to ``t``: speed and depth close on their
+    setpoints from the first measurement, the yaw rate from the first gyro rate, the heading
+    integrates the yaw-rate reference from the first heading."""
+    dt = 0.0 if math.isnan(b[B_T_REF]) else max(0.0, t - b[B_T_REF])
+    k = b[B_REF_RATE]
+    b[B_V_REF], b[B_V_REF_RATE] = _approach(b[B_V_REF], v, sp_v, k, b[B_MAX_ACC], dt)
+    b[B_Z_REF], b[B_Z_REF_RATE] = _approach(b[B_Z_REF], z, sp_z, k, b[B_MAX_DIVE], dt)
+    r_before = b[B_R_REF]
+    b[B_R_REF], b[B_R_REF_RATE] = _approach(r_before, r, sp_r, k, b[B_MAX_YAW_ACC], dt)
+    if math.isnan(b[B_HEADING_REF]):
+        b[B_HEADING_REF] = b[B_HEADING]
+    elif not math.isnan(r_before):
+        b[B_HEADING_REF] = _wrap(b[B_HEADING_REF] + 0.5 * (r_before + b[B_R_REF]) * dt)
+    b[B_T_REF] = t
+
+
+@register_jitable
+def _designed_loops(b: np.ndarray, t: float, sp_v: float, sp_z: float, sp_r: float, v: float, z: float,
+                    r: float) -> int:
+    _move_references(b, t, sp_v, sp_z, sp_r, v, z, r)
+    h = B_HULL
+    status = BODY_OK
+    v_ref = b[B_V_REF]
+    if b[B_NEW_V] != 0.0 and not math.isnan(v) and not math.isnan(v_ref):
+        out = pid_step(b[B_PIDS:B_PIDS + NPID], v_ref - v, v, t)
+        if out == EARLIER:
+            status = EARLIER_T
+        else:
+            b[B_X] = (b[h + H_SURGE_M] * b[B_V_REF_RATE] + b[h + H_SURGE_D] * v_ref
+                      + b[h + H_SURGE_DQ] * v_ref * abs(v_ref) + out)
+    z_ref = b[B_Z_REF]
+    if b[B_NEW_Z] != 0.0 and not math.isnan(z) and not math.isnan(z_ref):
+        out = pid_step(b[B_PIDS + NPID:B_PIDS + 2 * NPID], z_ref - z, z, t)
+        if out == EARLIER:
+            status = EARLIER_T
+        else:
+            w = b[B_Z_REF_RATE]
+            b[B_Z] = b[B_TRIM] + b[h + H_HEAVE_D] * w + b[h + H_HEAVE_DQ] * w * abs(w) + out
+    psi, psi_ref, r_ref = b[B_HEADING], b[B_HEADING_REF], b[B_R_REF]
+    if b[B_NEW_R] != 0.0 and not math.isnan(r) and not math.isnan(psi) and not math.isnan(psi_ref) \
+            and not math.isnan(r_ref):
+        lead = b[B_LEAD]
+        e = min(lead, max(-lead, _wrap(psi_ref - psi)))
+        out = pid_step_rate(b[B_PIDS + 2 * NPID:B_PIDS + 3 * NPID], e, r_ref - r, t)
+        if out == EARLIER:
+            status = EARLIER_T
+        else:
+            b[B_HEADING_REF] = _wrap(psi + e)
+            b[B_N] = (b[h + H_YAW_J] * b[B_R_REF_RATE] + b[h + H_YAW_D] * r_ref
+                      + b[h + H_YAW_DQ] * r_ref * abs(r_ref) + out)
+    return status
+
+
+@register_jitable
+def body_allocate(b: np.ndarray, sp_v: float, sync: bool) -> int:
+    """The designed layer's allocation of its loops' demand (in ``b[B_OUT:]``), and the cut
+    fed back to the loops; the cut bits."""
+    x, z, n = b[B_X], b[B_Z], b[B_N]
+    cut = allocate_wrench(x, z, n, sp_v < 0.0, sync, b[B_ALLOC:B_ALLOC + NA], b[B_OUT:B_OUT + NW])
+    b[B_APPLIED] = b[B_OUT + W_X]
+    b[B_APPLIED + 1] = b[B_OUT + W_Z]
+    b[B_APPLIED + 2] = b[B_OUT + W_N]
+    b[B_CUT] = cut
+    if cut & (CUT_SURGE | CUT_COAST):
+        pid_unwind(b[B_PIDS:B_PIDS + NPID], x - b[B_APPLIED])
+    if cut & CUT_HEAVE:
+        pid_unwind(b[B_PIDS + NPID:B_PIDS + 2 * NPID], z - b[B_APPLIED + 1])
+    if cut & CUT_YAW:
+        pid_unwind(b[B_PIDS + 2 * NPID:B_PIDS + 3 * NPID], n - b[B_APPLIED + 2])
+    return cut
+
+
+@register_jitable
+def body_update(b: np.ndarray, t: float, sp_v: float, sp_z: float, sp_r: float,
+                sync: bool) -> tuple[int, float, float]:
+    """One control step at ``t``: each loop that has a new sample runs (else its output is
+    held), then the designed layer allocates. Returns (BODY_OK or what was wrong, the
+    filtered velocity, the filtered depth: NaN before a sample). The paper layer's outputs
+    are ``b[B_FX]``, ``b[B_FY]``, ``b[B_YAW]``; the designed layer's are in ``b[B_OUT:]``
+    (:func:`body_targets` reads either)."""
+    if not math.isfinite(t):
+        return BAD_T, math.nan, math.nan
+    w = int(b[B_WINDOW])
+    v = median_value(b, B_FILTERS, w)
+    z = median_value(b, B_FILTERS + median_size(w), w)
+    r = b[B_YAW_RATE]
+    if b[B_LAYER] == 0.0:
+        status = _paper_loops(b, t, sp_v, sp_z, sp_r, v, z, r)
+    else:
+        status = _designed_loops(b, t, sp_v, sp_z, sp_r, v, z, r)
+        body_allocate(b, sp_v, sync)
+    b[B_NEW_V] = 0.0
+    b[B_NEW_Z] = 0.0
+    b[B_NEW_R] = 0.0
+    return status, v, z
+
+
+@register_jitable
+def body_targets(b: np.ndarray, k: int) -> tuple[float, float]:
+    """Paper fin ``k``'s force target (f_x, f_y) from the last step (either layer)."""
+    if b[B_LAYER] == 0.0:
+        sx, sy, px, py, rx, ry = fin_targets(b[B_FX], b[B_FY], b[B_YAW])
+        if k == 0:
+            return sx, sy
+        if k == 1:
+            return px, py
+        return rx, ry
+    return b[B_OUT + W_TARGETS + 2 * k], b[B_OUT + W_TARGETS + 2 * k + 1]
+
+
+@register_jitable
+def body_wrench(b: np.ndarray) -> tuple[float, float, float]:
+    """The physical wrench (surge N, heave N down > 0, yaw N m) the last step's fin targets
+    make (forward forces ``thrust_gain`` times the model's): the paper layer's, in the
+    designed layer's terms."""
+    g, cos_a, arm = b[B_ALLOC + A_GAIN], b[B_ALLOC + A_COS], b[B_ALLOC + A_ARM]
+    x = z = n = 0.0
+    for k in range(4):
+        fx, fy = body_targets(b, k)
+        if fx < 0.0:
+            fx *= g
+        x -= cos_a * fx
+        z -= fy
+        n += PAPER_SIDES[k] * arm * fx
+    return x, z, n
+
+
+@register_jitable
+def body_references(b: np.ndarray, sp_v: float, sp_z: float, sp_r: float) -> tuple[float, float, float, float]:
+    """(speed, depth, heading, yaw rate) the layer holds the robot to now: the designed
+    layer's references, the paper layer's setpoints (no heading: NaN); a reference not
+    started yet is its setpoint."""
+    if b[B_LAYER] == 0.0:
+        return sp_v, sp_z, math.nan, sp_r
+    v, z, r = b[B_V_REF], b[B_Z_REF], b[B_R_REF]
+    return (sp_v if math.isnan(v) else v, sp_z if math.isnan(z) else z, b[B_HEADING_REF],
+            sp_r if math.isnan(r) else r)
+
+
+def _none(x: float) -> float | None:
+    return None if math.isnan(x) else float(x)
+
+
+@dataclass(frozen=True)
+class BodyStep:
+    """Output of one body-frame step.
+
+    ``allocation`` holds the fins' targets; ``outputs`` the loops' outputs in the layer's
+    terms (paper: F_x*, F_y*, the yaw differential; designed: the wrench asked);
+    ``demand`` and ``applied`` the wrench (surge N, heave N down > 0, yaw N m) before and
+    after the allocation, ``cut`` the axes it cut (the paper layer: the wrench its targets
+    make, twice, nothing cut);
+    ``velocity``, ``depth`` are the median-filtered measurements and ``yaw_rate`` the last
+    gyro rate (None before the first sample); ``*_updated`` tell whether that loop ran on a
+    new sample in this step (False: its output is held).
+    """
+
+    t: float
+    allocation: Allocation
+    outputs: tuple[float, float, float]
+    demand: tuple[float, float, float]
+    applied: tuple[float, float, float]
+    cut: tuple[str, ...]
+    velocity: float | None
+    depth: float | None
+    yaw_rate: float | None
+    velocity_updated: bool
+    depth_updated: bool
+    yaw_updated: bool
+
+
+@dataclass(frozen=True)
+class AxisLimits:
+    """The most the fins deliver on each axis (surge N forward, heave N, yaw N m)."""
+
+    surge: float
+    heave: float
+    yaw: float
+
+
+def axis_limits(cfg: BodyConfig, fmax: float) -> AxisLimits:
+    """What the designed allocation can give each axis alone (independent fins), each fin
+    at most ``fmax`` by the fin model."""
+    rear = cfg.heave_rear_share
+    h = max(0.5 * (1.0 - rear), 0.5 * rear)
+    g = cfg.thrust_gain
+    n_yaw = 4 if cfg.yaw_on_rear else 2
+    return AxisLimits(
+        surge=4.0 * math.cos(math.radians(MOUNTING_ANGLE_DEG)) * g * fmax,
+        heave=fmax / h,
+        yaw=n_yaw * ARM_YAW * 0.5 * (1.0 + g) * fmax,
+    )
+
+
+class BodyController:
+    """The body-frame layer (module docstring): readings in, fin targets out.
+
+    Feed readings with :meth:`on_dvl`, :meth:`on_depth`, :meth:`on_imu` (and the heading
+    with :meth:`set_heading`) as they arrive and call :meth:`update` at the control rate.
+    ``mpc`` and ``executor`` give the fin model and the drives' timing the designed layer's
+    deliverable force comes from.
+    """
+
+    def __init__(self, cfg: BodyConfig, mpc: MpcConfig | None = None, executor: ExecutorConfig | None = None) -> None:
+        self.cfg = cfg
+        w = cfg.median_window
+        self.state = np.zeros(body_size(w))
+        b = self.state
+        b[B_WINDOW] = w
+        b[B_DEPTH_SIGN] = cfg.depth_sign
+        b[B_LAYER] = LAYERS[cfg.layer]
+        b[B_TRIM] = cfg.heave_trim
+        hull = cfg.hull
+        b[B_HULL:B_HULL + NH] = (hull.surge_damping, hull.surge_damping_quad, hull.heave_damping,
+                                 hull.heave_damping_quad, hull.yaw_damping, hull.yaw_damping_quad,
+                                 hull.surge_mass, hull.heave_mass, hull.yaw_inertia)
+        b[B_LEAD] = cfg.max_heading_lead
+        b[B_REF_RATE] = cfg.reference_rate
+        b[B_MAX_DIVE], b[B_MAX_ACC], b[B_MAX_YAW_ACC] = cfg.max_dive_rate, cfg.max_acceleration, cfg.max_yaw_acceleration
+        self._executor = executor or ExecutorConfig()
+        self.velocity_pid = Pid(cfg.velocity, b[B_PIDS:B_PIDS + NPID])
+        self.depth_pid = Pid(cfg.depth, b[B_PIDS + NPID:B_PIDS + 2 * NPID])
+        self.yaw_pid = Pid(cfg.yaw_rate, b[B_PIDS + 2 * NPID:B_PIDS + 3 * NPID])
+        self.set_fin_model(mpc or MpcConfig())
+        self.velocity_filter = MedianFilter(w, b, B_FILTERS)
+        self.depth_filter = MedianFilter(w, b, B_FILTERS + median_size(w))
+        self.reset()
+
+    def set_fin_model(self, mpc: MpcConfig) -> None:
+        """The fin model the designed layer's limits come from (the MPC's configuration)."""
+        cfg = self.cfg
+        ex = self._executor
+        self.fin_force = deliverable_force(mpc, ex.acceleration, ex.max_rate)
+        self.state[B_ALLOC:B_ALLOC + NA] = wrench_params(
+            self.fin_force, cfg.thrust_gain, MOUNTING_ANGLE_DEG, ARM_YAW, cfg.heave_rear_share, cfg.yaw_on_rear)
+        if cfg.layer == "designed":
+            lim = axis_limits(cfg, self.fin_force)
+            for pid, cap in ((self.velocity_pid, lim.surge), (self.depth_pid, lim.heave), (self.yaw_pid, lim.yaw)):
+                pid.cap = cap
+                pid.set_gains(pid.gains)
+
+    def pid(self, loop: str) -> Pid:
+        """The PID of ``loop``: "velocity", "depth" or "yaw_rate"."""
+        return {"velocity": self.velocity_pid, "depth": self.depth_pid, "yaw_rate": self.yaw_pid}[loop]
+
+    def reset(self) -> None:
+        body_reset(self.state)
+
+    @property
+    def dvl_missing(self) -> int:
+        return int(self.state[B_DVL_MISSING])
+
+    @property
+    def last_dvl_t(self) -> float | None:
+        return _none(self.state[B_LAST_DVL_T])
+
+    @property
+    def last_depth_t(self) -> float | None:
+        return _none(self.state[B_LAST_DEPTH_T])
+
+    @property
+    def last_imu_t(self) -> float | None:
+        return _none(self.state[B_LAST_IMU_T])
+
+    @property
+    def heading_ref(self) -> float | None:
+        """The heading the designed layer holds or turns to (rad; None before it has one)."""
+        return _none(self.state[B_HEADING_REF])
+
+    @property
+    def sensors_reported(self) -> bool:
+        """A depth and a DVL report (with or without bottom lock) have arrived since the
+        reset: the loops have seen what the robot can measure, and a speed still missing is
+        the DVL's reported fault, not the start-up's."""
+        return bool(body_sensors_reported(self.state))
+
+    def _check(self, status: int, value: float, t: float) -> None:
+        if status != BODY_OK:
+            name = BODY_FIELDS[status]
+            finite(name, t if name.endswith(".t") or name == "t" else value)
+
+    def on_dvl(self, reading: DvlVelocity) -> None:
+        self._check(body_on_dvl(self.state, bool(reading.valid), reading.vx, reading.t), reading.vx, reading.t)
+
+    def on_depth(self, reading: DepthReading) -> None:
+        self._check(body_on_depth(self.state, reading.depth_m, reading.t), reading.depth_m, reading.t)
+
+    def on_imu(self, reading: ImuReading) -> None:
+        r = reading.gyro[2]
+        self._check(body_on_imu(self.state, r, reading.t), r, reading.t)
+        if reading.quaternion is not None:
+            self.set_heading(reading.quaternion)
+
+    def set_heading(self, q: tuple[float, float, float, float]) -> None:
+        """The attitude estimate (w, x, y, z; body -> NED): the heading the loop holds to."""
+        body_set_heading(self.state, float(q[0]), float(q[1]), float(q[2]), float(q[3]))
+
+    def update(self, t: float, setpoints: BodySetpoints, *, sync: bool = False) -> BodyStep:
+        """One control step at time ``t`` (s): run the loops that have new data, allocate."""
+        t = finite("t", t)
+        b = self.state
+        new_v, new_z, new_r = bool(b[B_NEW_V]), bool(b[B_NEW_Z]), bool(b[B_NEW_R])
+        status, v, z = body_update(b, t, setpoints.velocity, setpoints.depth, setpoints.yaw_rate, sync)
+        if status == EARLIER_T:
+            raise ValueError(f"t: {t!r} is earlier than the last update of a body-frame loop")
+        if b[B_LAYER] == 0.0:
+            fx, fy, m = float(b[B_FX]), float(b[B_FY]), float(b[B_YAW])
+            allocation = allocate(fx, fy, m, sync=sync)
+            outputs = (fx, fy, m)
+            demand = applied = tuple(float(x) for x in body_wrench(b))  # type: ignore[assignment]
+            cut: tuple[str, ...] = ()
+        else:
+            per_fin = tuple(body_targets(b, k) for k in range(4))
+            allocation = _logical(tuple((float(x), float(y)) for x, y in per_fin), sync)
+            demand = outputs = (float(b[B_X]), float(b[B_Z]), float(b[B_N]))
+            applied = (float(b[B_APPLIED]), float(b[B_APPLIED + 1]), float(b[B_APPLIED + 2]))
+            cut = cut_names(int(b[B_CUT]))
+        return BodyStep(
+            t=t, allocation=allocation, outputs=outputs, demand=demand, applied=applied, cut=cut,
+            velocity=_none(v), depth=_none(z), yaw_rate=_none(b[B_YAW_RATE]),
+            velocity_updated=new_v, depth_updated=new_z, yaw_updated=new_r,
+        )

@@ -1,0 +1,120 @@
+"""The designed body layer's gains: from the hull's linearised dynamics and the fins' delay.
+
+Each axis the body layer holds is, linearised about rest, a mass on a damper driven by the
+fins' force through a delay::
+
+    heave:    M_z  z''   + D_z z'   = Z          (M_z = m - Z_wdot, D_z = -Z_w)
+    yaw:      J_z  psi'' + D_r psi' = N          (J_z = I_zz - N_rdot, D_r = -N_r)
+    surge:    M_x  u'    + D_x u    = X          (M_x = m - X_udot, D_x = -X_u - 2 X_uu u0)
+
+The delay ``tau`` is the fins': a new force target enters at the next cycle a planner
+makes, and that cycle's force acts over its duration, so a change reaches the hull about
+one cycle later (``BodyConfig.actuation_delay``, 0.75 s by default: the MPC's cycles run
+1-1.3 s, the baseline's 0.5 s, plus the sensors' median filters).
+
+Each loop is designed for the closed-loop bandwidth ``w_b = 1 / (k tau)`` (``k =
+BodyConfig.bandwidth_factor``, 4 by default): at ``w_b`` the delay costs ``1/k`` rad (14
+degrees) of phase, so the delay does not make the loop ring or limit-cycle.
+
+* Position loops (depth, heading), ``u = kp e - kd x' + ki int e``: when the hull damps the
+  axis enough by itself (``D >= 2 M w_b``: heave) the loop is proportional, with the slower
+  closed-loop pole at ``w_b``: ``kp = D w_b - M w_b^2`` (no overshoot, the faster pole
+  beyond it); otherwise (yaw) it is a critically damped PD with both poles at ``w_b``:
+  ``kp = M w_b^2``, ``kd = 2 M w_b - D``. The heading loop's damping is on the gyro's rate
+  (``kd (r_ref - r)``), not on a differentiated heading.
+* The velocity loop, ``X = X_ff(u_ref) + kp e + ki int e``, is a PI whose closed loop with the
+  first-order surge has a double pole at ``w_b``: ``kp = 2 M w_b - D``, ``ki = M w_b^2``;
+  the feed-forward ``X_ff`` is the hull's drag at the setpoint, so the integral only takes
+  the model's error.
+* The position loops' integrals (buoyancy, trim, a steady moment) have their zero at
+  ``w_b / 3``: ``ki = kp w_b / 3``.
+
+With the defaults (eeUVsim's hull, 0.75 s, k = 4: ``w_b`` = 0.333 rad/s) the depth loop is
+kp 7.5 N/m, ki 0.83 N/(m s); the heading loop kp 0.33 N m/rad, kd 1.69 N m s/rad,
+ki 0.037 N m/(rad s); the velocity loop kp 33.6 N s/m, ki 6.9 N/m
+(:func:`designed_gains`; ``docs/control.md`` works them through).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ucat_console.robot import hull as H
+from ucat_console.typedconf import Config, param
+
+
+@dataclass(frozen=True)
+class HullModel(Config):
+    """The controller's model of the hull (positive masses and damping; from the robot's
+    description, ``robot/hull.py``, unless identified or configured otherwise)."""
+
+    surge_mass: float = param(H.MASS - H.X_UDOT, lo=0.0, hi=1000.0, lo_open=True, unit="kg",
+                              doc="mass with added mass in surge, m - X_udot")
+    heave_mass: float = param(H.MASS - H.Z_WDOT, lo=0.0, hi=1000.0, lo_open=True, unit="kg",
+                              doc="mass with added mass in heave, m - Z_wdot")
+    yaw_inertia: float = param(H.IZZ - H.N_RDOT, lo=0.0, hi=100.0, lo_open=True, unit="kg m2",
+                               doc="yaw inertia with added inertia, I_zz - N_rdot")
+    surge_damping: float = param(-H.X_U, lo=0.0, hi=1000.0, unit="N s/m", doc="linear surge damping -X_u")
+    surge_damping_quad: float = param(-H.X_UU, lo=0.0, hi=1000.0, unit="N s2/m2",
+                                      doc="quadratic surge damping -X_uu")
+    heave_damping: float = param(-H.Z_W, lo=0.0, hi=1000.0, unit="N s/m", doc="linear heave damping -Z_w")
+    heave_damping_quad: float = param(-H.Z_WW, lo=0.0, hi=1000.0, unit="N s2/m2",
+                                      doc="quadratic heave damping -Z_ww")
+    yaw_damping: float = param(-H.N_R, lo=0.0, hi=100.0, unit="N m s", doc="linear yaw damping -N_r")
+    yaw_damping_quad: float = param(-H.N_RR, lo=0.0, hi=100.0, unit="N m s2", doc="quadratic yaw damping -N_rr")
+
+    def surge_drag(self, u: float) -> float:
+        """The hull's drag at forward speed ``u`` (N, against the motion)."""
+        return self.surge_damping * u + self.surge_damping_quad * u * abs(u)
+
+    def heave_drag(self, w: float) -> float:
+        """The hull's drag at heave rate ``w`` (N, against the motion)."""
+        return self.heave_damping * w + self.heave_damping_quad * w * abs(w)
+
+    def yaw_drag(self, r: float) -> float:
+        """The hull's yaw damping moment at yaw rate ``r`` (N m, against the turn)."""
+        return self.yaw_damping * r + self.yaw_damping_quad * r * abs(r)
+
+
+#: the speed the surge is linearised about (m/s): the middle of the paper's 0.1-0.4 m/s
+DESIGN_SPEED = 0.2
+#: the position loops' integral zero, as a fraction of the bandwidth
+INTEGRAL_ZERO = 1.0 / 3.0
+
+
+@dataclass(frozen=True)
+class AxisGains:
+    kp: float
+    ki: float
+    kd: float
+
+
+def position_gains(mass: float, damping: float, bandwidth: float) -> AxisGains:
+    """Gains of a position loop on ``mass x'' + damping x' = u`` (module docstring)."""
+    w = bandwidth
+    if damping >= 2.0 * mass * w:
+        kp, kd = damping * w - mass * w * w, 0.0
+    else:
+        kp, kd = mass * w * w, 2.0 * mass * w - damping
+    return AxisGains(kp=kp, ki=kp * w * INTEGRAL_ZERO, kd=kd)
+
+
+def velocity_gains(mass: float, damping: float, bandwidth: float) -> AxisGains:
+    """PI gains of a velocity loop on ``mass u' + damping u = X``: a double pole at the
+    bandwidth (module docstring)."""
+    w = bandwidth
+    return AxisGains(kp=max(0.0, 2.0 * mass * w - damping), ki=mass * w * w, kd=0.0)
+
+
+def designed_gains(hull: HullModel, delay: float, factor: float) -> dict[str, AxisGains]:
+    """The three loops' gains ("velocity", "depth", "heading") for an actuation ``delay``
+    (s) and bandwidth ``factor`` k (module docstring)."""
+    if not delay > 0.0 or not factor > 0.0:
+        raise ValueError(f"delay, factor: expected > 0, got {delay!r}, {factor!r}")
+    w = 1.0 / (factor * delay)
+    surge_d = hull.surge_damping + 2.0 * hull.surge_damping_quad * DESIGN_SPEED
+    return {
+        "velocity": velocity_gains(hull.surge_mass, surge_d, w),
+        "depth": position_gains(hull.heave_mass, hull.heave_damping, w),
+        "heading": position_gains(hull.yaw_inertia, hull.yaw_damping, w),
+    }
