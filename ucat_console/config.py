@@ -36,11 +36,11 @@ from typing import Any, Self
 
 import tomli_w
 
+from ucat_console import shipped
 from ucat_console.backend.devices.config import DevicesConfig
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.backend.sessions.recorder import RecorderConfig
 from ucat_console.backend.sim.params import PlantConfig
-from ucat_console import shipped
 from ucat_console.typedconf import Config, coerce, from_dict, param, to_dict
 
 #: robots the supervisor can drive
