@@ -39,6 +39,7 @@ from typing import Any, Self
 
 import tomli_w
 
+from ucat_console import shipped
 from ucat_console.backend.devices.config import DevicesConfig
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.backend.sessions.limits import ReviewConfig
@@ -113,7 +114,10 @@ class ConsoleConfig(Config):
         doc="a recording started by arming stops this long after disarming at the latest, "
         "whether or not the faults have cleared",
     )
-    sessions_dir: str = param("", doc="where recordings go; empty: sessions/ at the project root")
+    sessions_dir: str = param(
+        "", doc="where recordings go; empty: $UCAT_CONSOLE_SESSIONS, else the user's data folder "
+        "(ucat-console paths prints it)",
+    )
     sim_depth: float = param(0.5, lo=0.0, hi=100.0, unit="m", doc="depth the simulated robot starts at")
     sim_early: float = param(
         0.01, lo=0.0, hi=0.02, unit="s",
@@ -285,5 +289,6 @@ class AppConfig(Config):
 
 
 def load_config(path: str | Path | None) -> AppConfig:
-    """The configuration in ``path`` (defaults everywhere when None)."""
-    return AppConfig() if path is None else AppConfig.from_toml(path)
+    """The configuration in ``path``, a file or the name of a shipped configuration
+    (``sim-tuned``: :mod:`ucat_console.shipped`); defaults everywhere when None."""
+    return AppConfig() if path is None else AppConfig.from_toml(shipped.config_path(path))

@@ -7,13 +7,13 @@ import math
 import threading
 import tomllib
 import uuid
-from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
 
 import pytest
 from support import Collector, wait_for
 
+from ucat_console import shipped
 from ucat_console.backend.devices.config import DevicesConfig, SimStartConfig
 from ucat_console.backend.devices.device_robot_io import DeviceRobotIO, DeviceTime
 from ucat_console.backend.devices.dvl import DvlConfig
@@ -37,7 +37,6 @@ from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.stream import TelemetryStream
 
-ROOT = Path(__file__).resolve().parents[2]
 # the plant's encoder: 512 lines, gear 35 -> 71680 qc per fin turn
 UNITS = DriveUnits(encoder_lines=512, gear_ratio=35.0)
 START_DEPTH = 1.0
@@ -394,9 +393,9 @@ def test_start_up_errors_name_the_key_and_leave_nothing_running(stand_ins: Devic
 # ---------------------------------------------------------------------- configuration files
 
 
-@pytest.mark.parametrize("name, robot", [("robot.toml", "hardware"), ("sim-devices.toml", "sim-devices")])
+@pytest.mark.parametrize("name, robot", [("robot", "hardware"), ("sim-devices", "sim-devices")])
 def test_shipped_configuration_files_hold_valid_device_blocks(name: str, robot: str) -> None:
-    with open(ROOT / "config" / name, "rb") as fh:
+    with open(shipped.config_path(name), "rb") as fh:
         data = tomllib.load(fh)
     assert data["robot"] == "rig"  # the application's device rig
     devices = DevicesConfig.from_dict(data["devices"])

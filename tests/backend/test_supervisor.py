@@ -28,7 +28,6 @@ from ucat_console.control.params import MpcConfig
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event
 
-ROOT = Path(__file__).resolve().parents[2]
 TOKEN = "pool-side-token"
 PILOT, VIEWER = 1, 2
 
@@ -537,7 +536,7 @@ def test_arming_after_a_wait_swims_as_arming_at_once_and_power_counts_only_armed
         tmp_path: Path) -> None:
     """At the pool the robot waits disarmed before the pilot arms: the strokes the loop ran
     meanwhile were never executed, and must not hold the fins once armed."""
-    cfg = load_config(ROOT / "config" / "sim-tuned.toml")  # swims from rest (README "Findings")
+    cfg = load_config("sim-tuned")  # swims from rest (README "Findings")
     cfg = cfg.replace(loop=cfg.loop.replace(mode="baseline"))
 
     def swim(wait: float) -> float:
@@ -595,7 +594,7 @@ def test_the_planners_are_compiled_before_the_robot_starts(tmp_path: Path, monke
 
 def robot_like_rig(tmp_path: Path, **failsafes: FailsafeRule) -> Supervisor:
     """The device rig configured as the robot is: the drives are powered only while armed."""
-    cfg = load_config(ROOT / "config" / "sim-devices.toml")
+    cfg = load_config("sim-devices")
     cfg = cfg.replace(access=AccessConfig(token=TOKEN), devices=cfg.devices.replace(enable_at_start=False),
                       failsafe=cfg.failsafe.replace(**failsafes))
     return Supervisor(cfg, sessions_dir=tmp_path)
@@ -727,7 +726,7 @@ def test_faults_are_injected_only_on_the_simulated_rig(sup: Supervisor) -> None:
 
 
 def test_the_pilot_rehearses_a_silent_pressure_sensor_on_the_simulated_rig(tmp_path: Path) -> None:
-    cfg = load_config(ROOT / "config" / "sim-devices.toml")
+    cfg = load_config("sim-devices")
     cfg = cfg.replace(access=AccessConfig(token=TOKEN),
                       failsafe=cfg.failsafe.replace(depth=FailsafeRule("hold", 1.0)))
     sup = Supervisor(cfg, sessions_dir=tmp_path)

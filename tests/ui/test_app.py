@@ -20,7 +20,6 @@ from ucat_console.ui.identify_inputs import NO_SESSION
 from ucat_console.ui.panels import ControlPanel, esc
 from ucat_console.ui.tuning_inputs import param_specs, step_for
 
-ROOT = Path(__file__).resolve().parents[2]
 TOKEN = "pool-side-token"
 
 
@@ -147,7 +146,7 @@ def test_rig_fault_inputs_only_where_the_robot_is_the_simulated_rig(app: Console
 
 
 def test_the_pilot_injects_rig_faults_from_the_page_and_bad_entries_are_refused(tmp_path: Path) -> None:
-    cfg = load_config(ROOT / "config" / "sim-devices.toml").replace(access=AccessConfig(token=TOKEN))
+    cfg = load_config("sim-devices").replace(access=AccessConfig(token=TOKEN))
     sup = Supervisor(cfg, sessions_dir=tmp_path)
     a = ConsoleApp(sup, port=0)
     sup.start()

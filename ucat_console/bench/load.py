@@ -1,5 +1,5 @@
 """``ucat-console bench load``: the simulated robot behind its device emulators (real drivers,
-``config/sim-devices.toml``) swimming under CPU load, and its recovery when the load ends.
+the shipped ``sim-devices``) swimming under CPU load, and its recovery when the load ends.
 
 Child processes that spin (:class:`CpuLoad`) keep the machine's load average up for
 ``--minutes``; the robot is armed and swims at 0.2 m/s throughout (armed again if anything

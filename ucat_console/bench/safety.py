@@ -51,14 +51,11 @@ TOKEN = "safety-bench-token"
 
 def _console(tmp: str, pilot_gone: float) -> tuple[Any, Any, list]:
     from ucat_console.backend.supervisor import Supervisor
-    from ucat_console.config import AccessConfig, AppConfig, ConsoleConfig, FailsafeConfig, FailsafeRule, load_config
+    from ucat_console.config import AccessConfig, ConsoleConfig, FailsafeConfig, FailsafeRule, load_config
     from ucat_console.telemetry import channels as ch
     from ucat_console.ui.app import ConsoleApp
 
-    root = Path(__file__).resolve().parents[2]
-    tuned = root / "config" / "sim-tuned.toml"
-    base = load_config(tuned) if tuned.exists() else AppConfig()
-    cfg = base.replace(
+    cfg = load_config("sim-tuned").replace(
         access=AccessConfig(token=TOKEN),
         console=ConsoleConfig(port=0, record_on_arm=False),
         failsafe=FailsafeConfig(pilot_gone=FailsafeRule("hold", pilot_gone)),
@@ -521,6 +518,9 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--spam-rate: at most 100 clicks a second (the page guard allows 120 messages)")
     if args.spam_before < 0:
         raise ValueError("--spam-before: must not be negative")
+    from ucat_console.cli.compiled import prepare_all
+
+    prepare_all("sim-tuned")
     r = measure(args.trials, args.spam_trials, args.rounds, args.pages, args.pilot_gone, args.link_trials,
                 tuple(args.parts), args.disarm_trials, args.sessions, args.session_seconds, args.spammers,
                 args.spam_rate, args.spam_before, args.slow_rate, args.slow_seconds)

@@ -12,7 +12,8 @@ import logging
 import sys
 
 #: sub-command modules under ucat_console.cli
-COMMANDS = ["bench", "devices", "sessions", "replay", "identify", "experiment", "sweep", "run", "prepare"]
+COMMANDS = ["bench", "devices", "sessions", "replay", "identify", "experiment", "sweep", "run", "prepare",
+            "paths"]
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -3,7 +3,8 @@
 SESSION is a session id or any one of its part files (a path, or a file name inside the
 sessions directory): ``info`` and ``export`` cover every part of the session, in order, as
 one recording; ``repair`` takes one file. ``--dir`` names the sessions directory (default:
-``sessions/`` at the project root); files outside it are refused.
+``$UCAT_CONSOLE_SESSIONS``, else the user's data folder: ``ucat-console paths``); files
+outside it are refused.
 """
 
 from __future__ import annotations
@@ -15,7 +16,8 @@ from pathlib import Path
 
 def _add_dir(p: argparse.ArgumentParser) -> None:
     p.add_argument("--dir", type=Path, default=None,
-                   help="sessions directory (default: sessions/ at the project root)")
+                   help="sessions directory (default: $UCAT_CONSOLE_SESSIONS, else the user's "
+                        "data folder: ucat-console paths)")
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,7 +14,7 @@ from ucat_console.backend.loop.closed_loop import ClosedLoop
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.backend.loop.planners import BaselineFinPlanner, PlanInputs
 from ucat_console.backend.sim_robot_io import SimRobotIO
-from ucat_console.config import AppConfig
+from ucat_console.config import load_config
 from ucat_console.robot.fins import PAPER_TO_ROBOT as PAPER_TO_PLANT_FIN
 from ucat_console.robot.fins import ROBOT_TO_PAPER as PLANT_TO_PAPER
 from ucat_console.control.allocation import BodySetpoints
@@ -60,9 +59,9 @@ def make_loop(mode: str = "mpc", v: float = 0.2, depth: float = 1.0, clock=None,
 
 
 # Tracking. The loop machinery is tested with the weights and body layer under which this
-# plant is controllable, config/sim-tuned.toml's (the paper's defaults and what they do are
+# plant is controllable, the shipped sim-tuned's (the paper's defaults and what they do are
 # the experiments' subject).
-_TUNED = AppConfig.from_toml(Path(__file__).resolve().parents[3] / "config" / "sim-tuned.toml")
+_TUNED = load_config("sim-tuned")
 TUNED_MPC = _TUNED.mpc
 STRONG_BODY = _TUNED.body
 

@@ -1,5 +1,5 @@
 """The robot goes where it is sent: closed-loop manoeuvres on the simulated robot under the
-shipped configuration (config/sim-tuned.toml), in simulated time with fixed seeds."""
+shipped configuration (``sim-tuned``), in simulated time with fixed seeds."""
 
 from __future__ import annotations
 

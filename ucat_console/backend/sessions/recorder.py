@@ -371,6 +371,17 @@ class Recorder:
         self._report(Event(t=self._last_t, source="recorder", code="failure_cleared", message=message,
                            level="info", data={"session": self._session_id}))
 
+    def discard(self) -> list[Path]:
+        """Stop recording and delete the session's files (what a run that never began
+        recorded); returns the paths deleted."""
+        paths = self.stop()
+        for path in paths:
+            path.unlink(missing_ok=True)
+        if paths:
+            log.info("session %s discarded: %s", self._session_id, ", ".join(p.name for p in paths))
+        self._paths = []
+        return paths
+
     def __enter__(self) -> Recorder:
         return self
 
