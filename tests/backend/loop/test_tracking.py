@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from ucat_console.bench import tracking as T
-from ucat_console.config import AppConfig
+from ucat_console.config import load_config
 
-TUNED = AppConfig.from_toml(Path(__file__).resolve().parents[3] / "config" / "sim-tuned.toml")
+TUNED = load_config("sim-tuned")
 
 
 @pytest.mark.parametrize("label,mode,formulation", T.MODES)
