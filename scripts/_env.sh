@@ -1,25 +1,28 @@
 # Shared by scripts/run.sh and scripts/test.sh: make a virtual environment in .venv
 # and install the project into it (with extras given as $1, e.g. "test"), every package at
 # the version constraints.txt pins, so that every install is the same.
+# PYTHON picks the interpreter (default python3) and VENV the folder (default .venv), e.g.
+#   PYTHON=python3.12 VENV=.venv-3.12 scripts/test.sh
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
 PY="${PYTHON:-python3}"
+VENV="${VENV:-.venv}"
 
 as_root() { if [ "$(id -u)" = 0 ]; then "$@"; elif command -v sudo >/dev/null; then sudo "$@"; else
   echo "need root to run: $*" >&2; return 1; fi; }
 
-if [ ! -x .venv/bin/python ]; then
-  if ! "$PY" -m venv .venv 2>/dev/null; then
-    echo "python3 -m venv failed; installing Debian's python3-venv" >&2
+if [ ! -x "$VENV/bin/python" ]; then
+  if ! "$PY" -m venv "$VENV" 2>/dev/null; then
+    echo "$PY -m venv failed; installing Debian's python3-venv" >&2
     as_root apt-get update -qq && as_root apt-get install -y -qq python3-venv
-    "$PY" -m venv .venv
+    "$PY" -m venv "$VENV"
   fi
 fi
 extras="${1:-}"
-stamp=".venv/.installed${extras:+-$extras}"
+stamp="$VENV/.installed${extras:+-$extras}"
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] || [ constraints.txt -nt "$stamp" ]; then
-  .venv/bin/python -m pip install -q --upgrade pip
-  .venv/bin/python -m pip install -q -c constraints.txt -e ".${extras:+[$extras]}"
+  "$VENV/bin/python" -m pip install -q --upgrade pip
+  "$VENV/bin/python" -m pip install -q -c constraints.txt -e ".${extras:+[$extras]}"
   touch "$stamp"
 fi

@@ -10,5 +10,5 @@ if ! command -v npm >/dev/null; then
   as_root apt-get update -qq && as_root apt-get install -y -qq nodejs npm
 fi
 # the compiled code first, in two processes (seconds when numba's cache has it already)
-.venv/bin/ucat-console prepare
-exec .venv/bin/python -m pytest "$@"
+"$VENV/bin/ucat-console" prepare
+exec "$VENV/bin/python" -m pytest "$@"

@@ -78,10 +78,11 @@ def wait_for(predicate: Callable[[], Any], timeout: float = 10.0, what: str = "c
 
 
 def sim_config(directory: Path) -> Path:
-    """config/sim-tuned.toml recording into ``directory`` (a headless run records from
+    """The shipped sim-tuned recording into ``directory`` (a headless run records from
     arming), for runs of the command in a child process."""
-    root = Path(__file__).resolve().parents[1]
+    from ucat_console import shipped
+
     cfg = directory / "sim.toml"
-    cfg.write_text((root / "config" / "sim-tuned.toml").read_text()
+    cfg.write_text(shipped.config_path("sim-tuned").read_text()
                    + f"\n[console]\nsessions_dir = {json.dumps(str(directory))}\n")
     return cfg

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from ucat_console.config import AppConfig, FailsafeRule, load_config
+from ucat_console.config import AppConfig, FailsafeRule, PilotGoneRule, load_config
 
 
 def test_defaults_are_the_blocks_defaults() -> None:
@@ -14,7 +14,9 @@ def test_defaults_are_the_blocks_defaults() -> None:
     assert app.robot == "sim"
     assert app.console.host == "127.0.0.1"
     assert app.console.port == 8080
-    assert app.failsafe.pilot_gone == FailsafeRule("hold", 2.0)
+    # a gone pilot: hold, then disarm 30 s later
+    assert app.failsafe.pilot_gone == PilotGoneRule("hold", 2.0, "disarm", 30.0)
+    assert app.failsafe.imu == FailsafeRule("disarm", 1.0, "none")
 
 
 def test_loop_always_runs_the_top_level_controller_blocks() -> None:
@@ -40,7 +42,8 @@ def test_partial_file_keeps_defaults_elsewhere(tmp_path: Path) -> None:
     path = tmp_path / "pool.toml"
     path.write_text('[failsafe.pilot_gone]\naction = "surface"\ntimeout = 3.5\n[loop]\nmode = "baseline"\n')
     app = load_config(path)
-    assert app.failsafe.pilot_gone == FailsafeRule("surface", 3.5)
+    # the pilot-gone rule's escalation stays when its table sets the action only
+    assert app.failsafe.pilot_gone == PilotGoneRule("surface", 3.5, "disarm", 30.0)
     assert app.failsafe.dvl == AppConfig().failsafe.dvl
     assert app.loop.mode == "baseline"
 
@@ -49,6 +52,9 @@ def test_partial_file_keeps_defaults_elsewhere(tmp_path: Path) -> None:
     "text, key",
     [
         ('[failsafe.motor]\naction = "explode"\n', "failsafe.motor.action"),
+        ('[failsafe.pilot_gone]\nescalate = "warn"\n', "failsafe.pilot_gone.escalate"),
+        ('[failsafe.pilot_gone]\naction = "surface"\nescalate = "hold"\n', "failsafe.pilot_gone.escalate"),
+        ("[failsafe.pilot_gone]\nescalate_after = -1.0\n", "failsafe.pilot_gone.escalate_after"),
         ("[console]\nport = 70000\n", "console.port"),
         ("[console]\nsupervise_period = 0.0\n", "console.supervise_period"),
         ('[console]\nplot_rate = "fast"\n', "console.plot_rate"),

@@ -2,7 +2,8 @@
 
 :class:`AppConfig` composes the blocks defined beside the code that uses them (the
 controller's ``mpc``, ``body``, ``baseline``, ``executor``, ``power``; the closed loop's
-``loop``; the simulated robot's ``plant``; the ``recorder``; the drivers' ``devices``) with the console's own
+``loop``; the simulated robot's ``plant``; the ``recorder``; the limits on reading session
+files, ``review``; the drivers' ``devices``) with the console's own
 blocks defined here: ``console`` (web server, plots, supervision), ``access`` (pilot
 token) and ``failsafe`` (one rule per failsafe). ``robot`` picks the robot the
 supervisor drives: ``"sim"`` (the in-process simulator) or ``"rig"`` (the device drivers).
@@ -15,8 +16,10 @@ One TOML file configures a run; every table is optional::
     [loop]
     mode = "mpc_sync"
     [failsafe.pilot_gone]
-    action = "surface"
+    action = "hold"
     timeout = 3.0
+    escalate = "surface"
+    escalate_after = 20.0
 
 One tree, each value held once: the controller blocks (``mpc``, ``body``, ``baseline``,
 ``executor``, ``power``) live in the closed loop's :class:`LoopConfig` (``app.loop``, what
@@ -36,8 +39,10 @@ from typing import Any, Self
 
 import tomli_w
 
+from ucat_console import shipped
 from ucat_console.backend.devices.config import DevicesConfig
 from ucat_console.backend.loop.config import LoopConfig
+from ucat_console.backend.sessions.limits import ReviewConfig
 from ucat_console.backend.sessions.recorder import RecorderConfig
 from ucat_console.backend.sim.params import PlantConfig
 from ucat_console.typedconf import Config, coerce, from_dict, param, to_dict
@@ -46,6 +51,10 @@ from ucat_console.typedconf import Config, coerce, from_dict, param, to_dict
 ROBOTS = ("sim", "rig")
 #: what a failsafe does when it triggers
 FAILSAFE_ACTIONS = ("hold", "surface", "disarm", "warn")
+#: how strongly each action acts: an escalation acts more strongly than the action before it
+ACTION_STRENGTH = {"warn": 0, "hold": 1, "surface": 2, "disarm": 3}
+#: what a failsafe may do when its cause lasts on (``none``: nothing more)
+ESCALATIONS = ("none", "hold", "surface", "disarm")
 #: the controller blocks: held by the loop's configuration, top-level tables in a file
 LOOP_BLOCKS = ("mpc", "baseline", "body", "executor", "power")
 
@@ -87,13 +96,28 @@ class ConsoleConfig(Config):
         0.05, lo=0.005, hi=0.5, unit="s",
         doc="the loop runs in chunks of this length; arming, failsafes and status act between chunks",
     )
+    max_lag: float = param(
+        0.25, lo=0.02, hi=10.0, unit="s",
+        doc="a real-time loop held back further than this behind the wall clock (a busy computer) "
+        "skips ahead to the present and records the stall (Event loop/stall) instead of replaying "
+        "the missed time; a shorter lag is caught up",
+    )
     health_period: float = param(5.0, lo=0.5, hi=3600.0, unit="s", doc="terminal health line period")
     record_on_arm: bool = param(True, doc="start recording when the motors are armed")
     record_tail: float = param(
         5.0, lo=0.0, hi=3600.0, unit="s",
-        doc="a recording started by arming stops this long after disarming",
+        doc="a recording started by arming stops this long after disarming, and after the last "
+        "fault (a failsafe, a drive fault) cleared, so that its clearing is recorded",
     )
-    sessions_dir: str = param("", doc="where recordings go; empty: sessions/ at the project root")
+    record_tail_max: float = param(
+        120.0, lo=0.0, hi=86400.0, unit="s",
+        doc="a recording started by arming stops this long after disarming at the latest, "
+        "whether or not the faults have cleared",
+    )
+    sessions_dir: str = param(
+        "", doc="where recordings go; empty: $UCAT_CONSOLE_SESSIONS, else the user's data folder "
+        "(ucat-console paths prints it)",
+    )
     sim_depth: float = param(0.5, lo=0.0, hi=100.0, unit="m", doc="depth the simulated robot starts at")
     sim_early: float = param(
         0.01, lo=0.0, hi=0.02, unit="s",
@@ -106,6 +130,11 @@ class ConsoleConfig(Config):
     drive_depth_step: float = param(0.1, lo=0.01, hi=5.0, unit="m", doc="R/F key: depth step")
     drive_depth_rate: float = param(0.2, lo=0.01, hi=2.0, unit="m/s",
                                     doc="gamepad: depth change at full stick")
+
+    def _check(self) -> None:
+        if self.record_tail_max < self.record_tail:
+            raise ValueError(f"record_tail_max: {self.record_tail_max:g} s is shorter than record_tail "
+                             f"{self.record_tail:g} s; allowed: at least record_tail")
 
 
 @dataclass(frozen=True)
@@ -130,9 +159,15 @@ class AccessConfig(Config):
             raise ValueError(f"token: a fixed token needs at least 8 characters, got {len(self.token)}")
 
 
+_ESCALATE_DOC = ("what the failsafe does when its cause lasts escalate_after s after it triggered: "
+                 "none (nothing more), hold, surface or disarm")
+_ESCALATE_AFTER_DOC = "how long the failsafe acts before it escalates"
+
+
 @dataclass(frozen=True)
 class FailsafeRule(Config):
-    """What one failsafe does, and after how long its cause triggers it."""
+    """What one failsafe does, after how long its cause triggers it, and what it does when the
+    cause lasts on (``escalate``, ``escalate_after`` s after it triggered)."""
 
     action: str = param(
         "hold", choices=FAILSAFE_ACTIONS,
@@ -140,13 +175,34 @@ class FailsafeRule(Config):
         "disarm: motors off; warn: show and record only",
     )
     timeout: float = param(2.0, lo=0.0, hi=3600.0, unit="s", doc="how long the cause lasts before it triggers")
+    escalate: str = param("none", choices=ESCALATIONS, doc=_ESCALATE_DOC)
+    escalate_after: float = param(30.0, lo=0.0, hi=3600.0, unit="s", doc=_ESCALATE_AFTER_DOC)
+
+    def _check(self) -> None:
+        if self.escalate != "none" and ACTION_STRENGTH[self.escalate] < ACTION_STRENGTH[self.action]:
+            stronger = [a for a in ESCALATIONS[1:] if ACTION_STRENGTH[a] >= ACTION_STRENGTH[self.action]]
+            raise ValueError(f"escalate: {self.escalate!r} would act less strongly than action "
+                             f"{self.action!r}; allowed: none, {', '.join(stronger)}")
+
+    @property
+    def escalates(self) -> bool:
+        """Whether the escalation acts more strongly than the action (otherwise it is none)."""
+        return self.escalate != "none" and ACTION_STRENGTH[self.escalate] > ACTION_STRENGTH[self.action]
+
+
+@dataclass(frozen=True)
+class PilotGoneRule(FailsafeRule):
+    """The pilot-gone failsafe: hold where the robot is, then, if no pilot has come back
+    after 30 s, disarm (ArduSub's default GCS failsafe disarms after 5 s)."""
+
+    escalate: str = param("disarm", choices=ESCALATIONS, doc=_ESCALATE_DOC)
 
 
 @dataclass(frozen=True)
 class FailsafeConfig(Config):
     """Every failsafe; each is shown, recorded, and latched until its cause clears."""
 
-    pilot_gone: FailsafeRule = FailsafeRule("hold", 2.0)
+    pilot_gone: PilotGoneRule = PilotGoneRule()
     imu: FailsafeRule = FailsafeRule("disarm", 1.0)
     dvl: FailsafeRule = FailsafeRule("hold", 2.0)
     depth: FailsafeRule = FailsafeRule("disarm", 1.0)
@@ -156,6 +212,8 @@ class FailsafeConfig(Config):
         10, lo=1, hi=100_000, doc="late plans within planner_late.timeout that trigger planner_late"
     )
     tracking: FailsafeRule = FailsafeRule("warn", 10.0)
+    #: the recorder failed to write (a full disk): warn, or hold until the operator acts
+    recording: FailsafeRule = FailsafeRule("warn", 0.0)
     tracking_depth: float = param(
         0.2, lo=0.01, hi=100.0, unit="m", doc="tracking: depth further than this from its reference"
     )
@@ -175,6 +233,7 @@ class AppConfig(Config):
     loop: LoopConfig = LoopConfig()
     plant: PlantConfig = PlantConfig()
     recorder: RecorderConfig = RecorderConfig()
+    review: ReviewConfig = ReviewConfig()
     console: ConsoleConfig = ConsoleConfig()
     access: AccessConfig = AccessConfig()
     failsafe: FailsafeConfig = FailsafeConfig()
@@ -230,5 +289,6 @@ class AppConfig(Config):
 
 
 def load_config(path: str | Path | None) -> AppConfig:
-    """The configuration in ``path`` (defaults everywhere when None)."""
-    return AppConfig() if path is None else AppConfig.from_toml(path)
+    """The configuration in ``path``, a file or the name of a shipped configuration
+    (``sim-tuned``: :mod:`ucat_console.shipped`); defaults everywhere when None."""
+    return AppConfig() if path is None else AppConfig.from_toml(shipped.config_path(path))

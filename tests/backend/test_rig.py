@@ -7,13 +7,13 @@ import math
 import threading
 import tomllib
 import uuid
-from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
 
 import pytest
 from support import Collector, wait_for
 
+from ucat_console import shipped
 from ucat_console.backend.devices.config import DevicesConfig, SimStartConfig
 from ucat_console.backend.devices.device_robot_io import DeviceRobotIO, DeviceTime
 from ucat_console.backend.devices.dvl import DvlConfig
@@ -37,7 +37,6 @@ from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.stream import TelemetryStream
 
-ROOT = Path(__file__).resolve().parents[2]
 # the plant's encoder: 512 lines, gear 35 -> 71680 qc per fin turn
 UNITS = DriveUnits(encoder_lines=512, gear_ratio=35.0)
 START_DEPTH = 1.0
@@ -87,6 +86,30 @@ def test_device_time_maps_the_wall_clock_to_loop_time_at_the_pace() -> None:
     assert clock.to_wall(clock.to_loop(123.456)) == pytest.approx(123.456)
     with pytest.raises(ValueError, match="pace"):
         DeviceTime(pace=0.0)
+
+
+def test_a_resync_anchors_the_device_clock_and_drops_the_readings_of_the_stall() -> None:
+    """The loop skipped a stall: its time t is now. The drivers' readings queued meanwhile
+    are stale; the next batch holds the latest of each kind, at the loop's time, and later
+    readings map to loop time from the new anchor."""
+    wall = [500.0]
+    io = DeviceRobotIO(DevicesConfig(), wall_clock=lambda: wall[0])
+    io.resync(0.0)
+    io.advance_to(0.0)
+    for k in range(5):  # a second of readings queued while the loop was held back
+        io._on_reading(DepthReading(t=500.2 + 0.2 * k, depth_m=1.0 + k, pressure_pa=0.0))
+        io._on_reading(ImuReading(t=500.2 + 0.2 * k, accel_g=(0.0, 0.0, -1.0), gyro=(0.0, 0.0, float(k))))
+    wall[0] = 501.5
+    io.resync(0.5)  # the loop skipped ahead: its 0.5 s is due now, at 501.5
+    batch = io.advance_to(0.5)
+    assert sorted(type(r).__name__ for r in batch) == ["DepthReading", "ImuReading"]
+    assert all(r.t == 0.5 for r in batch)
+    assert {r.depth_m for r in batch if isinstance(r, DepthReading)} == {5.0}  # the latest
+    io._on_reading(DepthReading(t=501.6, depth_m=2.0, pressure_pa=0.0))
+    wall[0] = 501.7
+    [r] = io.advance_to(0.7)
+    assert r.t == pytest.approx(0.6)  # 0.1 s after the new anchor
+    io.close()
 
 
 # ---------------------------------------------------------------------- robot = sim
@@ -370,9 +393,9 @@ def test_start_up_errors_name_the_key_and_leave_nothing_running(stand_ins: Devic
 # ---------------------------------------------------------------------- configuration files
 
 
-@pytest.mark.parametrize("name, robot", [("robot.toml", "hardware"), ("sim-devices.toml", "sim-devices")])
+@pytest.mark.parametrize("name, robot", [("robot", "hardware"), ("sim-devices", "sim-devices")])
 def test_shipped_configuration_files_hold_valid_device_blocks(name: str, robot: str) -> None:
-    with open(ROOT / "config" / name, "rb") as fh:
+    with open(shipped.config_path(name), "rb") as fh:
         data = tomllib.load(fh)
     assert data["robot"] == "rig"  # the application's device rig
     devices = DevicesConfig.from_dict(data["devices"])

@@ -56,6 +56,35 @@ def test_pilot_gone_triggers_after_its_timeout_and_latches_until_a_pilot_returns
     assert m.active() == ()
 
 
+def test_a_failsafe_escalates_once_when_its_cause_lasts_and_clears_with_it() -> None:
+    cfg = FailsafeConfig(pilot_gone=FailsafeRule("hold", 2.0, "disarm", 30.0))
+    m = SafetyMonitor(cfg)
+    m.pilot_present()
+    feed_all(m, 0.0)
+    m.check(0.0)
+    m.pilot_left(1.0)
+    seen = []
+    for k in range(1, 400):  # 0.1 s checks up to 39.9 s, the sensors talking
+        t = 0.1 * k
+        feed_all(m, t)
+        seen += [(round(tr.t, 1), tr.action, tr.escalated) for tr in m.check(t)]
+    # hold 2 s after the pilot left, disarm 30 s after that, each once
+    assert seen == [(3.0, "hold", False), (33.0, "disarm", True)]
+    assert next(st for st in m.states() if st.name == "pilot_gone").action == "disarm"
+    m.pilot_present()
+    (tr,) = m.check(40.0)
+    assert (tr.name, tr.active, tr.action) == ("pilot_gone", False, "disarm")
+    assert next(st for st in m.states() if st.name == "pilot_gone").action == "hold"  # afresh
+
+
+def test_an_escalation_no_stronger_than_the_action_does_nothing() -> None:
+    m = SafetyMonitor(FailsafeConfig(pilot_gone=FailsafeRule("disarm", 2.0, "disarm", 1.0)))
+    m.pilot_present()
+    m.pilot_left(0.0)
+    seen = [tr.action for k in range(100) for tr in m.check(0.1 * k) if tr.name == "pilot_gone"]
+    assert seen == ["disarm"]
+
+
 def test_no_pilot_ever_means_no_pilot_gone() -> None:
     m = SafetyMonitor()
     m.pilot_left(0.0)
@@ -112,6 +141,37 @@ def test_a_silent_sensor_triggers_its_own_failsafe_only() -> None:
     assert "silent" in state.cause and state.action == "disarm"
 
 
+def test_a_sensor_fault_is_labelled_with_what_its_driver_reported_since_the_last_valid_reading() -> None:
+    """Garbled: the driver dropped corrupt messages (its events, with the ones it held back
+    counted); the driver's silence event does not make a garbled line "silent". A valid
+    reading taken before the fault, published after its first event, does not end it."""
+    m = SafetyMonitor(FailsafeConfig(imu=FailsafeRule("hold", 0.5)))
+    feed_all(m, 0.0)
+    m.check(0.0)
+    m.on_message(ch.EVENTS, Event(0.2, "imu", "checksum", "bad checksum", data={"suppressed": 4}))
+    m.on_message(ch.IMU, imu(0.1))  # taken before the fault, through the loop after its event
+    m.on_message(ch.EVENTS, Event(0.4, "imu", "silence", "no packet", "error"))
+    for t in (0.3, 0.5, 0.7):
+        m.on_message(ch.DVL, dvl(t))
+        m.on_message(ch.DEPTH, depth(t))
+    (tr,) = m.check(0.7)
+    assert tr.name == "imu" and tr.cause.endswith("(garbled: 5 corrupt messages dropped)")
+    assert m.sensor_silence("imu", 0.7) == (pytest.approx(0.6), "garbled: 5 corrupt messages dropped")
+    m.on_message(ch.IMU, imu(0.8))  # a valid reading after it: over
+    assert names(m.check(0.8)) == [("imu", False)] and m.sensor_silence("imu", 0.8)[1] == ""
+    # invalid readings and a silent sensor say so; a pressure driver's events label the depth
+    m.on_message(ch.EVENTS, Event(0.9, "pressure", "broken_loop", "loop current 0 mA", "error"))
+    m.on_message(ch.IMU, imu(0.9, gyro_z=math.nan))
+    assert m.sensor_silence("depth", 0.9)[1] == "invalid: 1 invalid readings"
+    assert m.sensor_silence("imu", 0.9)[1] == "invalid: 1 invalid readings"
+    assert m.sensor_silence("dvl", 0.9)[1] == ""
+    for t in (1.0, 2.0, 3.0):  # nothing from the DVL since 0.7 s, its timeout 2 s
+        m.on_message(ch.IMU, imu(t))
+        m.on_message(ch.DEPTH, depth(t))
+        m.check(t)
+    assert "(silent)" in next(st.cause for st in m.states() if st.name == "dvl")
+
+
 def test_non_finite_imu_values_are_invalid() -> None:
     m = SafetyMonitor(FailsafeConfig(imu=FailsafeRule("disarm", 0.5)))
     for k in range(10):
@@ -134,7 +194,7 @@ def test_motor_fault_from_a_motor_controller_disarms_at_once_and_clears_when_rep
     m.on_message(ch.EVENTS, Event(123.0, "epos2.3", "heartbeat_lost", "no heartbeat"))
     (tr,) = m.check(0.1)
     assert (tr.name, tr.active, tr.action) == ("motor", True, "disarm")
-    assert "epos2.3 heartbeat_lost" in tr.cause
+    assert "epos2.3: no heartbeat" in tr.cause  # the drive and what it reported
     m.on_message(ch.EVENTS, Event(124.0, "epos2.3", "fault_cleared", "not this one", "info"))
     feed_all(m, 0.2)
     assert m.check(0.2) == [] and m.active() == ("motor",)
@@ -190,8 +250,8 @@ def test_tracking_warns_when_an_axis_stays_off_its_band_and_clears_when_back() -
         m.on_message(ch.BODY_TRACKING, tracking(t, depth_err=0.3 if t >= 2.0 else 0.0))
         seen += [(round(tr.t, 1), tr.name, tr.active) for tr in m.check(t) if tr.name == "tracking"]
     assert seen == [(7.0, "tracking", True)]  # 5 s after it left the band
-    assert "depth +0.30 m off its reference" in m.states()[-1].cause
-    assert m.states()[-1].action == "warn"
+    assert "depth +0.30 m off its reference" in next(s for s in m.states() if s.name == "tracking").cause
+    assert next(s for s in m.states() if s.name == "tracking").action == "warn"
     m.on_message(ch.BODY_TRACKING, tracking(10.1))
     assert names(m.check(10.1)) == [("tracking", False)]
 

@@ -28,7 +28,6 @@ from ucat_console.control.params import MpcConfig
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event
 
-ROOT = Path(__file__).resolve().parents[2]
 TOKEN = "pool-side-token"
 PILOT, VIEWER = 1, 2
 
@@ -288,6 +287,83 @@ def test_pilot_page_gone_holds_depth_and_stops_after_its_timeout(tmp_path: Path)
         sup.stop()
 
 
+@pytest.mark.parametrize("then", ["disarm", "surface"])
+def test_a_gone_pilots_hold_escalates_after_its_time_unless_a_pilot_comes_back(tmp_path: Path, then: str) -> None:
+    """ArduSub's GCS failsafe disarms a robot whose pilot is gone; here the hold comes first,
+    and after ``escalate_after`` of it the robot disarms (or surfaces, as configured)."""
+    sup = Supervisor(make_config(pilot_gone=FailsafeRule("hold", 2.0, then, 10.0)), clock=SimulatedClock(),
+                     sessions_dir=tmp_path)
+    try:
+        ev = Events(sup)
+        for c in (PILOT, VIEWER):
+            sup.client_connected(c)
+        sup.take_control(PILOT, TOKEN)
+        sup.set_setpoints(PILOT, velocity=0.3, depth=0.8)
+        sup.arm(PILOT)
+        sup.step(1.0)
+        t_gone = sup.loop.time
+        sup.client_disconnected(PILOT)
+        sup.step(2.2)  # held
+        assert sup.safety.active() == ("pilot_gone",) and sup.armed and sup.setpoints.velocity == 0.0
+        held_depth = sup.setpoints.depth
+        sup.step(9.5)  # 9.7 s of hold: not yet
+        assert sup.armed and sup.setpoints.depth == held_depth
+        sup.step(0.6)
+        [trig, esc] = [e for e in ev.events if e.source == "failsafe" and e.code == "pilot_gone"]
+        assert trig.data["action"] == "hold" and esc.data["action"] == then and esc.data["escalated"]
+        assert esc.t - t_gone >= 2.0 + 10.0 - 1e-9
+        assert f"escalated after 10 s of hold: {then}" in esc.message
+        if then == "disarm":
+            assert not sup.armed and "disarmed" in ev.codes("supervisor")
+        else:
+            assert sup.armed and sup.setpoints.depth == 0.0 and sup.setpoints.velocity == 0.0
+        # a pilot comes back: cleared; gone again later, it holds first again
+        sup.take_control(VIEWER, TOKEN)
+        sup.step(0.1)
+        assert sup.safety.active() == ()
+        sup.step(0.5)
+        sup.client_disconnected(VIEWER)
+        sup.step(2.2)
+        assert [e.data["action"] for e in ev.events if e.source == "failsafe" and e.code == "pilot_gone"][-1] == "hold"
+    finally:
+        sup.stop()
+
+
+def test_a_pilot_back_before_the_escalation_stops_it(tmp_path: Path) -> None:
+    sup = Supervisor(make_config(pilot_gone=FailsafeRule("hold", 2.0, "disarm", 10.0)), clock=SimulatedClock(),
+                     sessions_dir=tmp_path)
+    try:
+        for c in (PILOT, VIEWER):
+            sup.client_connected(c)
+        sup.take_control(PILOT, TOKEN)
+        sup.arm(PILOT)
+        sup.step(1.0)
+        sup.client_disconnected(PILOT)
+        sup.step(8.0)
+        assert sup.safety.active() == ("pilot_gone",)
+        sup.take_control(VIEWER, TOKEN)
+        sup.step(20.0)
+        assert sup.armed and sup.safety.active() == ()
+    finally:
+        sup.stop()
+
+
+def test_the_default_pilot_gone_rule_holds_then_disarms_after_30_s(tmp_path: Path) -> None:
+    sup = Supervisor(AppConfig(access=AccessConfig(token=TOKEN)), clock=SimulatedClock(), sessions_dir=tmp_path)
+    try:
+        sup.client_connected(PILOT)
+        sup.take_control(PILOT, TOKEN)
+        sup.arm(PILOT)
+        sup.step(0.5)
+        sup.client_disconnected(PILOT)
+        sup.step(2.0 + 29.5)
+        assert sup.armed and sup.safety.active() == ("pilot_gone",)
+        sup.step(1.0)
+        assert not sup.armed
+    finally:
+        sup.stop()
+
+
 def test_motor_fault_disarms_and_blocks_arming_until_cleared(sup: Supervisor) -> None:
     ev = Events(sup)
     sup.arm(PILOT)
@@ -383,6 +459,60 @@ def test_automatic_recording_stops_after_the_tail(sup: Supervisor) -> None:
     assert sup.recorder.paths[0].stat().st_size > 0
 
 
+def _stopped(sup: Supervisor) -> bool:
+    deadline = time.monotonic() + 10.0  # the recorder closes in its own thread
+    while sup.recorder.recording and time.monotonic() < deadline:
+        time.sleep(0.02)
+    return not sup.recorder.recording
+
+
+def test_an_automatic_recording_runs_on_until_the_fault_has_cleared(tmp_path: Path) -> None:
+    """A drive fault disarms the robot; the recording goes on while it lasts and for the
+    tail after it cleared, so the file holds the clearing."""
+    sup = Supervisor(make_config(), clock=SimulatedClock(), sessions_dir=tmp_path)  # record_tail 1 s
+    try:
+        sup.client_connected(PILOT)
+        sup.take_control(PILOT, TOKEN)
+        sup.arm(PILOT)
+        sup.step(0.5)
+        sup.report_event(Event(0.0, "epos2.2", "fault", "node in fault state", "error"))
+        sup.step(0.1)
+        assert not sup.armed and sup.safety.active() == ("motor",)
+        sup.step(5.0)  # far past the tail: the fault lasts
+        assert sup.recorder.recording
+        sup.report_event(Event(0.0, "epos2.2", "fault_cleared", "fault cleared", "info"))
+        sup.step(0.5)
+        assert sup.safety.active() == () and sup.recorder.recording  # the tail after the clearing
+        paths = sup.recorder.paths
+        sup.step(1.0)
+        assert _stopped(sup)
+    finally:
+        sup.stop()
+    with SessionReader(paths[0], tmp_path) as r:
+        events = [(e.source, e.code) for e in r.events()]
+    assert ("epos2.2", "fault") in events and ("supervisor", "disarmed") in events
+    assert ("epos2.2", "fault_cleared") in events and ("failsafe", "cleared") in events
+
+
+def test_a_fault_that_never_clears_records_no_longer_than_the_tail_max(tmp_path: Path) -> None:
+    cfg = make_config().replace(console=ConsoleConfig(supervise_period=0.05, record_tail=1.0, record_tail_max=4.0))
+    sup = Supervisor(cfg, clock=SimulatedClock(), sessions_dir=tmp_path)
+    try:
+        sup.client_connected(PILOT)
+        sup.take_control(PILOT, TOKEN)
+        sup.arm(PILOT)
+        sup.step(0.5)
+        sup.report_event(Event(0.0, "epos2.2", "fault", "node in fault state", "error"))
+        sup.step(3.5)
+        assert not sup.armed and sup.recorder.recording
+        sup.step(0.6)  # 4 s after the disarm
+        assert _stopped(sup) and sup.safety.active() == ("motor",)
+    finally:
+        sup.stop()
+    with pytest.raises(ValueError, match="record_tail_max"):
+        ConsoleConfig(record_tail=10.0, record_tail_max=5.0)
+
+
 def test_the_loop_runs_in_its_own_thread_and_commands_cross_over(tmp_path: Path) -> None:
     sup = Supervisor(make_config(), clock=SteadyPacedClock(pace=10.0), sessions_dir=tmp_path)
     sup.client_connected(PILOT)
@@ -406,7 +536,7 @@ def test_arming_after_a_wait_swims_as_arming_at_once_and_power_counts_only_armed
         tmp_path: Path) -> None:
     """At the pool the robot waits disarmed before the pilot arms: the strokes the loop ran
     meanwhile were never executed, and must not hold the fins once armed."""
-    cfg = load_config(ROOT / "config" / "sim-tuned.toml")  # swims from rest (README "Findings")
+    cfg = load_config("sim-tuned")  # swims from rest (README "Findings")
     cfg = cfg.replace(loop=cfg.loop.replace(mode="baseline"))
 
     def swim(wait: float) -> float:
@@ -464,7 +594,7 @@ def test_the_planners_are_compiled_before_the_robot_starts(tmp_path: Path, monke
 
 def robot_like_rig(tmp_path: Path, **failsafes: FailsafeRule) -> Supervisor:
     """The device rig configured as the robot is: the drives are powered only while armed."""
-    cfg = load_config(ROOT / "config" / "sim-devices.toml")
+    cfg = load_config("sim-devices")
     cfg = cfg.replace(access=AccessConfig(token=TOKEN), devices=cfg.devices.replace(enable_at_start=False),
                       failsafe=cfg.failsafe.replace(**failsafes))
     return Supervisor(cfg, sessions_dir=tmp_path)
@@ -596,7 +726,7 @@ def test_faults_are_injected_only_on_the_simulated_rig(sup: Supervisor) -> None:
 
 
 def test_the_pilot_rehearses_a_silent_pressure_sensor_on_the_simulated_rig(tmp_path: Path) -> None:
-    cfg = load_config(ROOT / "config" / "sim-devices.toml")
+    cfg = load_config("sim-devices")
     cfg = cfg.replace(access=AccessConfig(token=TOKEN),
                       failsafe=cfg.failsafe.replace(depth=FailsafeRule("hold", 1.0)))
     sup = Supervisor(cfg, sessions_dir=tmp_path)

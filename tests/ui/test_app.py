@@ -16,10 +16,10 @@ from ucat_console.backend.supervisor import CommandRefused, Supervisor
 from ucat_console.config import AccessConfig, AppConfig, ConsoleConfig, load_config
 from ucat_console.telemetry import channels as ch
 from ucat_console.ui.app import ConsoleApp, is_loopback
+from ucat_console.ui.identify_inputs import NO_SESSION
 from ucat_console.ui.panels import ControlPanel, esc
 from ucat_console.ui.tuning_inputs import param_specs, step_for
 
-ROOT = Path(__file__).resolve().parents[2]
 TOKEN = "pool-side-token"
 
 
@@ -146,7 +146,7 @@ def test_rig_fault_inputs_only_where_the_robot_is_the_simulated_rig(app: Console
 
 
 def test_the_pilot_injects_rig_faults_from_the_page_and_bad_entries_are_refused(tmp_path: Path) -> None:
-    cfg = load_config(ROOT / "config" / "sim-devices.toml").replace(access=AccessConfig(token=TOKEN))
+    cfg = load_config("sim-devices").replace(access=AccessConfig(token=TOKEN))
     sup = Supervisor(cfg, sessions_dir=tmp_path)
     a = ConsoleApp(sup, port=0)
     sup.start()
@@ -345,8 +345,9 @@ def test_the_pilot_identifies_the_fin_model_from_the_session_tab(tmp_path: Path)
         assert ident.progress.visible and ident.stop.visible
         sup.step(sup.manoeuvre.duration + 0.5)
         assert sup.manoeuvre.finished and sup.mode == "mpc" and not sup.recorder.recording
-        pilot.refresh()
-        assert ident.session.value == sup.manoeuvre.session  # the manoeuvre's recording, chosen
+        pilot.refresh()  # the sessions are listed by the console's page jobs
+        wait_for(lambda: ident.session.value == sup.manoeuvre.session,
+                 what="the manoeuvre's recording chosen")
         assert viewer.act(viewer.identify.start_fit) is False  # the pilot's
         assert pilot.act(ident.start_fit)
         ident._fitting.join(120.0)
@@ -370,6 +371,7 @@ def test_a_recording_the_fit_refuses_is_shown_with_the_reason(app: ConsoleApp) -
     app.sup.step(0.5)  # disarmed: no steady window where the fins beat
     app.sup.stop_recording(1)
     pilot.refresh(force=True)
+    wait_for(lambda: pilot.identify.session.value != NO_SESSION, what="the recording listed")
     assert pilot.act(pilot.identify.start_fit)
     pilot.identify._fitting.join(60.0)
     pilot.refresh()

@@ -1,6 +1,7 @@
-"""``ucat-console bench safety``'s link-loss measure in headless Chromium: the page's own
-record of its banner is found after the console stops, and the figure it reports hangs
-together (how fast is the benchmark's to report, not a test's to judge)."""
+"""``ucat-console bench safety``: the link-loss measure in headless Chromium (the page's own
+record of its banner is found after the console stops), the disarm under a viewer's spam
+and the pilot on a slow link, each on a small scale: the figures they report hang together
+(how fast is the benchmark's to report, not a test's to judge)."""
 
 from __future__ import annotations
 
@@ -9,15 +10,37 @@ from pathlib import Path
 
 import pytest
 
-pytest.importorskip("playwright.sync_api")
+from ucat_console.bench.safety import disarm_under_spam, format_result, slow_link
 
-from ucat_console.bench.safety import format_result, link_loss  # noqa: E402
-from ucat_console.bench.ui import CHROMIUM  # noqa: E402
-
-pytestmark = [pytest.mark.browser, pytest.mark.slow]
+pytestmark = [pytest.mark.slow]
 
 
+def test_the_disarm_under_spam_measure_disarms_each_trial_while_the_spam_is_rationed() -> None:
+    r = disarm_under_spam(2, copies=3, session_seconds=1.0, spammers=1, rate=20.0, before=1.0)
+    assert r["trials"] == 2 and len(r["delays_s"]) == 2
+    assert all(math.isfinite(t) and t >= 0 for t in r["delays_s"])
+    assert r["delay_max_s"] == max(r["delays_s"])
+    assert r["folder"]["copies"] == 3 and r["folder"]["file_bytes"] > 0
+    assert r["jobs_run"] >= 1 and r["jobs_refused"] >= 1  # the viewer's clicks went to the page jobs
+    text = format_result({"disarm_under_spam": r, "load_before": 1.0, "load_after": 1.0})
+    assert f"median {r['delay_median_s'] * 1e3:.0f} ms" in text
+
+
+def test_the_slow_link_measure_watches_a_pilot_reading_50_kb_s() -> None:
+    r = slow_link(50_000.0, 3.0)
+    assert r["stayed_pilot"] and r["pilot_for_s"] >= 3.0 and not r["gone_events"]
+    assert 0 < r["read_bytes_s"] < 2 * 50_000.0
+    assert r["rtt_max_s"] is not None and r["rtt_median_s"] <= r["rtt_max_s"]
+    text = format_result({"slow_link": r, "load_before": 1.0, "load_after": 1.0})
+    assert "stayed the pilot" in text
+
+
+@pytest.mark.browser
 def test_the_link_loss_measure_sees_the_pages_banner_after_the_console_stops() -> None:
+    pytest.importorskip("playwright.sync_api")
+    from ucat_console.bench.safety import link_loss
+    from ucat_console.bench.ui import CHROMIUM
+
     if not Path(CHROMIUM).exists():
         pytest.skip(f"no Chromium at {CHROMIUM}")
     r = link_loss(2)

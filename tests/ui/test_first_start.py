@@ -43,7 +43,8 @@ class SlowPreparation:
 
 def test_the_page_is_served_while_compiling_and_the_console_takes_over(tmp_path: Path, monkeypatch, capsys) -> None:
     slow: list[SlowPreparation] = []
-    monkeypatch.setattr(prepare, "start", lambda cfg, cb: slow.append(SlowPreparation(cfg, cb)) or slow[-1])
+    monkeypatch.setattr(prepare, "start",
+                        lambda cfg, cb, steps=None, workers=None: slow.append(SlowPreparation(cfg, cb)) or slow[-1])
     cfg = AppConfig(console=ConsoleConfig(port=0, record_on_arm=False, heartbeat_period=0.1))
     out: dict = {}
     t = threading.Thread(target=lambda: out.setdefault("cfg", run_cli._prepare_with_page(cfg)[0]), daemon=True)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from pathlib import Path
 from typing import Iterator
 
@@ -29,12 +30,14 @@ PILOT_GONE = 1.0
 
 
 class Console:
-    def __init__(self, tmp: Path, **console: object) -> None:
+    def __init__(self, tmp: Path, pilot_gone: float = PILOT_GONE, **console: object) -> None:
+        settings: dict[str, object] = {"port": 0, "record_on_arm": False, "scene_rate": 10.0, "plot_rate": 2.0,
+                                       "heartbeat_period": 0.1}
+        settings.update(console)
         cfg = AppConfig(
             access=AccessConfig(token=TOKEN),
-            console=ConsoleConfig(port=0, record_on_arm=False, scene_rate=10.0, plot_rate=2.0,
-                                  heartbeat_period=0.1, **console),
-            failsafe=FailsafeConfig(pilot_gone=FailsafeRule("hold", PILOT_GONE)),
+            console=ConsoleConfig(**settings),
+            failsafe=FailsafeConfig(pilot_gone=FailsafeRule("hold", pilot_gone)),
         )
         self.sup = Supervisor(cfg, sessions_dir=tmp)
         self.events: list = []
@@ -344,3 +347,207 @@ def test_raw_gamepad_messages_drive_only_the_pilot_and_only_within_the_envelope(
     assert all(text.startswith("gamepad:") for text in panel.messages[m:])
     assert sup.setpoints.velocity == pytest.approx(0.5 * envelope)  # nothing applied
     assert not pilot.closed  # a bad value is refused, not a reason to drop the page
+
+
+# ------------------------------------------------------------------ the pilot's safety commands first
+def _burn(seconds: float) -> None:
+    """Hold the interpreter for ``seconds`` (as listing a folder of big sessions does)."""
+    end = time.perf_counter() + seconds
+    while time.perf_counter() < end:
+        pass
+
+
+def test_a_viewer_spamming_the_review_does_not_hold_up_the_pilots_disarm(console: Console, monkeypatch) -> None:
+    """A viewer clicks Refresh list 20 times a second (within the guard's rate) where a
+    listing holds the interpreter 0.3 s, and presses the pilot's controls of its own page;
+    the pilot's DISARM is applied while the spam goes on, and nothing of the spam reaches
+    the loop."""
+    app, sup = console.app, console.sup
+    real = app.session_list.sessions
+    listings = [0]
+
+    def slow_listing() -> list:
+        listings[0] += 1
+        _burn(0.3)
+        return real()
+
+    monkeypatch.setattr(app.session_list, "sessions", slow_listing)
+    pilot, pilot_id = pilot_page(console)
+    spammer = console.page()
+    s_id = console.cid_of(spammer)
+    refresh = spammer.wait_for("Refresh list", "GuiButtonMessage")
+    own = [spammer.wait_for("Arm motors", "GuiButtonMessage"), spammer.wait_for("DISARM", "GuiButtonMessage"),
+           spammer.wait_for("Apply setpoints", "GuiButtonMessage")]
+    velocity = spammer.wait_for("Velocity m/s")
+    arm_and_move(console)
+    journal = len(sup.journal())
+    n_events = len(console.events)
+    stop, done = threading.Event(), threading.Event()
+
+    def spam() -> None:
+        try:
+            for k in range(160):  # 8 s at 20 a second
+                if stop.is_set():
+                    return
+                spammer.update(refresh, value=True)
+                if k % 4 == 0:  # the pilot's controls, on the viewer's own page
+                    spammer.update(velocity, value=0.9)
+                    for uuid in own:
+                        spammer.update(uuid, value=True)
+                time.sleep(0.05)
+        finally:
+            done.set()
+
+    t = threading.Thread(target=spam, daemon=True)
+    t.start()
+    try:
+        wait_for(lambda: listings[0] >= 2 and app.jobs.refused >= 3, what="the spam rationed")
+        pilot.update(pilot.wait_for("DISARM", "GuiButtonMessage"), value=True)
+        wait_for(lambda: not sup.armed, timeout=60.0, what="the pilot's disarm")
+        assert not done.is_set(), "the disarm waited for the spam to end"
+    finally:
+        stop.set()
+        t.join(timeout=30.0)
+    assert app.guard.urgent_runs >= 1  # by the guard's safety thread, not viser's pool
+    disarmed = console.event("supervisor", "disarmed", n_events)
+    assert disarmed is not None and disarmed.data["who"] == str(pilot_id)
+    # the spam: rationed, each refusal shown on the spammer's page with its reason
+    review = app.reviews[s_id]
+    assert any(m.startswith("Refresh list: the last one is still") for m in review.messages)
+    assert listings[0] < 40  # not 20 a second
+    # and nothing of it reached the loop: the guard refused the pilot's controls of its page
+    assert sup.setpoints.velocity == pytest.approx(0.2)
+    assert all(e.who != f"client {s_id}" for e in sup.journal()[journal:])
+    assert any(c == s_id and "only the pilot's page may use it" in why for c, why in app.guard.refusals)
+
+
+def test_the_pilots_safety_commands_go_through_the_guard_and_only_the_pilots(console: Console) -> None:
+    pilot, pilot_id = pilot_page(console)
+    viewer = console.page()
+    sup, guard = console.sup, console.app.guard
+    arm_and_move(console)
+    runs = guard.urgent_runs
+    viewer.update(viewer.wait_for("DISARM", "GuiButtonMessage"), value=True)  # its own page's: pilot-only
+    viewer.update(pilot.wait_for("DISARM", "GuiButtonMessage"), value=True)  # the pilot's page's
+    wait_for(lambda: sum(1 for c, _ in guard.refusals if c == console.cid_of(viewer)) >= 2,
+             what="the viewer's presses refused")
+    assert sup.armed and guard.urgent_runs == runs
+    pilot.update(pilot.wait_for("DISARM", "GuiButtonMessage"), value=True)
+    wait_for(lambda: not sup.armed, what="the pilot's disarm")
+    wait_for(lambda: guard.urgent_runs == runs + 1, what="the disarm run by the guard")
+
+
+# ------------------------------------------------------------------ slow links
+@pytest.mark.slow
+def test_a_pilot_whose_link_slows_to_50_kb_s_stays_the_pilot_until_it_stops_answering(tmp_path: Path) -> None:
+    """The live view at its full rates (40 poses and 12 plot refreshes a second); the pilot's
+    page then reads 50 kB/s: it stays the pilot for 300 kB of traffic, its bar says the link
+    is slow, its DISARM goes through; when it stops answering, the failsafe fires."""
+    c = Console(tmp_path, pilot_gone=2.0, scene_rate=40.0, plot_rate=12.0)
+    try:
+        pilot, cid = pilot_page(c)
+        arm_and_move(c)
+        n = len(c.events)
+        pilot.read_rate = 50_000.0
+        start = pilot.bytes_read
+        wait_for(lambda: pilot.bar.get("link_slow"), timeout=60.0, what="the page told its link is slow")
+        wait_for(lambda: pilot.bytes_read - start >= 300_000 or c.sup.access.pilot != cid, timeout=120.0,
+                 what="300 kB of armed traffic at 50 kB/s")
+        assert c.sup.access.pilot == cid
+        assert c.event("failsafe", "pilot_gone", n) is None and c.event("access", "pilot_left", n) is None
+        pilot.update(pilot.wait_for("DISARM", "GuiButtonMessage"), value=True)
+        wait_for(lambda: not c.sup.armed, what="the slow pilot's disarm")
+        c.sup.arm(LOCAL)
+        pilot.answer_heartbeats = False
+        fired = wait_for(lambda: c.event("failsafe", "pilot_gone", n), timeout=30.0, what="the pilot_gone failsafe")
+        assert fired.data["action"] == "hold"
+        pilot.close()
+    finally:
+        c.stop()
+
+
+# ------------------------------------------------------------------ pages that close under a callback
+def _gone(console: Console, page: RawPage, cid: int) -> None:
+    """Close ``page`` and wait until the console has let go of it (its elements removed)."""
+    page.close()
+    deadline = time.monotonic() + 30.0
+    while cid in console.app.server.get_clients() or cid in console.app.guard.clients:
+        if time.monotonic() > deadline:
+            raise TimeoutError("the page never went")
+        time.sleep(0.01)
+
+
+def _no_tracebacks(caplog, capfd) -> None:
+    err = capfd.readouterr().err
+    assert "Traceback" not in err and "Task failed" not in err, err
+    bad = [r for r in caplog.records if r.name.startswith("ucat_console") and r.levelno >= logging.ERROR]
+    assert not bad, [r.getMessage() for r in bad]
+
+
+def test_a_page_closing_while_its_review_lists_the_sessions_leaves_no_error(console: Console, monkeypatch,
+                                                                              caplog, capfd) -> None:
+    caplog.set_level(logging.DEBUG, logger="ucat_console")
+    app = console.app
+    viewer = console.page()
+    cid = console.cid_of(viewer)
+    real = app.session_list.sessions
+    closed = threading.Event()
+
+    def listing_while_the_page_closes() -> list:
+        if threading.current_thread().name == "page-jobs" and not closed.is_set():
+            _gone(console, viewer, cid)
+            closed.set()
+        return real()
+
+    wait_for(lambda: not app.jobs.busy(cid), what="the page's first listing done")
+    monkeypatch.setattr(app.session_list, "sessions", listing_while_the_page_closes)
+    done = app.jobs.done
+    viewer.click("Refresh list")
+    wait_for(lambda: closed.is_set() and app.jobs.done > done, what="the listing done after the page went")
+    _no_tracebacks(caplog, capfd)
+
+
+def test_a_page_closing_during_its_command_leaves_no_error(console: Console, monkeypatch, caplog, capfd) -> None:
+    caplog.set_level(logging.DEBUG, logger="ucat_console")
+    viewer = console.page()
+    cid = console.cid_of(viewer)
+    ran = threading.Event()
+
+    def set_name(who: object, name: object) -> None:
+        _gone(console, viewer, cid)
+        ran.set()
+        raise ValueError("name: refused after the page went")  # shown on a page that has gone
+
+    monkeypatch.setattr(console.sup.access, "set_name", set_name)
+    viewer.set_value("Your name", "late")
+    wait_for(ran.is_set, what="the command run")
+    wait_for(lambda: cid not in console.app.panels, what="the page's panel dropped")
+    _no_tracebacks(caplog, capfd)
+
+
+def test_a_page_closing_while_its_review_plays_leaves_no_error(console: Console, monkeypatch, caplog, capfd) -> None:
+    caplog.set_level(logging.DEBUG, logger="ucat_console")
+    app, sup = console.app, console.sup
+    sup.start_recording(LOCAL)
+    t0 = sup.loop.time
+    wait_for(lambda: sup.loop.time > t0 + 0.5, what="half a second recorded")
+    [path] = sup.stop_recording(LOCAL)
+    viewer = console.page()
+    cid = console.cid_of(viewer)
+    wait_for(lambda: cid in app.reviews, what="the page's review")
+    review = app.reviews[cid]
+    assert review.act(lambda: review.open(path.name))
+    real = review._sync_inputs
+    closed = threading.Event()
+
+    def sync_while_the_page_closes() -> None:
+        if threading.current_thread().name == "ui-review" and not closed.is_set():
+            _gone(console, viewer, cid)
+            closed.set()
+        real()
+
+    monkeypatch.setattr(review, "_sync_inputs", sync_while_the_page_closes)
+    wait_for(closed.is_set, what="the page closed under the review's update")
+    wait_for(lambda: not review.view.running, what="the review stopped")
+    assert review.view.tick_errors == 0
+    _no_tracebacks(caplog, capfd)

@@ -7,6 +7,7 @@ from __future__ import annotations
 from typing import Any, Iterator
 
 import asyncio
+import threading
 import warnings
 
 import msgspec.msgpack
@@ -189,6 +190,55 @@ def test_the_window_delay_is_one_turn_of_the_loop_and_reports_what_is_done() -> 
         assert done == {waiting} and not pending
 
     asyncio.run(scenario())
+
+
+def test_a_buffer_s_message_event_is_set_only_in_its_loop_s_thread() -> None:
+    """viser sets a message buffer's event directly from the thread that queues a message;
+    asyncio's Event walks its waiters there, racing the loop's thread ("deque mutated during
+    iteration" in the live view). With the console's event a set() from another thread
+    changes nothing, and the set() viser schedules in the loop's thread wakes the waiter: a
+    message queued from another thread is still sent at once."""
+    from viser.infra._async_message_buffer import AsyncMessageBuffer
+
+    viser_hooks.install()
+    loop = asyncio.new_event_loop()
+    thread = threading.Thread(target=loop.run_forever, name="loop", daemon=True)
+    thread.start()
+    try:
+        async def make() -> AsyncMessageBuffer:
+            return AsyncMessageBuffer(loop, persistent_messages=False)
+
+        buffer = asyncio.run_coroutine_threadsafe(make(), loop).result(10.0)
+        event = buffer.message_event
+        assert isinstance(event, viser_hooks._LoopEvent)
+        woke = threading.Event()
+
+        async def waiter() -> None:
+            await event.wait()
+            woke.set()
+
+        asyncio.run_coroutine_threadsafe(waiter(), loop)
+        event.set()  # from this thread: nothing happens here
+        assert not event.is_set()
+        loop.call_soon_threadsafe(event.set)  # in the loop's thread: asyncio's own
+        wait_for(woke.is_set, what="the waiter woken from the loop's thread")
+        # and end to end: a window generator waiting for messages gets one queued from here
+        got: list[Any] = []
+
+        async def consume() -> None:
+            gen = buffer.window_generator(0)
+            got.extend(await gen.__anext__())
+            await gen.aclose()
+
+        event.clear()
+        future = asyncio.run_coroutine_threadsafe(consume(), loop)
+        buffer.push(vm.RunJavascriptMessage(source="1"))
+        future.result(10.0)
+        assert [m.source for m in got] == ["1"]
+    finally:
+        loop.call_soon_threadsafe(loop.stop)
+        thread.join(timeout=5.0)
+        loop.close()
 
 
 def test_pages_in_step_are_sent_one_encoding_of_a_broadcast_batch(server: viser.ViserServer, monkeypatch) -> None:

@@ -155,6 +155,9 @@ class ArmingGate(RobotIO):
     def next_reading_time(self) -> float:
         return self.inner.next_reading_time()
 
+    def resync(self, t: float) -> None:
+        self.inner.resync(t)
+
     def advance_to(self, t: float) -> list[Reading]:
         if self._stop_pending:
             self.flush()

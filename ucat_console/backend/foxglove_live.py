@@ -4,7 +4,7 @@
 publishes it over the Foxglove WebSocket protocol with the channels, schemas and encoding
 of a session file (:mod:`ucat_console.backend.sessions`): every telemetry channel as JSON
 with its JSON Schema, and the derived Foxglove channels (transforms, the robot's scene,
-the log), so a layout made for recordings (docs/foxglove-layout.json) shows the live robot
+the log), so a layout made for recordings (ucat_console/foxglove-layout.json) shows the live robot
 unchanged. Message times are the file times a recording would give them (nanoseconds since
 the UNIX epoch).
 

@@ -139,8 +139,12 @@ class Preparation:
     """Compiles running in child processes (:func:`start`)."""
 
     def __init__(self, cfg: AppConfig, on_progress: Callable[[Progress], None] = lambda p: None,
-                 workers: int | None = None, env: dict[str, str] | None = None) -> None:
-        self.steps = steps_for(cfg)
+                 workers: int | None = None, env: dict[str, str] | None = None,
+                 steps: list[Step] | None = None) -> None:
+        """``steps``: what to prepare (default :func:`steps_for` ``cfg``)."""
+        self.steps = steps_for(cfg) if steps is None else list(steps)
+        if not any(s.needed for s in self.steps):
+            raise ValueError("prepare: no step is needed before serving")
         self.needed = [s for s in self.steps if s.needed]
         self.total = len(self.needed)
         self.on_progress = on_progress
@@ -184,6 +188,12 @@ class Preparation:
         """Whether step ``key`` is compiled (loaded from the cache from now on)."""
         with self._lock:
             return key in self._done
+
+    @property
+    def running(self) -> list[str]:
+        """What the child processes are compiling now (for people)."""
+        with self._lock:
+            return [self._text(k) for k in self._running]
 
     @property
     def complete(self) -> bool:
@@ -263,6 +273,7 @@ class Preparation:
                 p.join(timeout=5.0)
 
 
-def start(cfg: AppConfig, on_progress: Callable[[Progress], None] = lambda p: None) -> Preparation:
-    """Start preparing what ``cfg`` needs, in child processes."""
-    return Preparation(cfg, on_progress)
+def start(cfg: AppConfig, on_progress: Callable[[Progress], None] = lambda p: None,
+          steps: list[Step] | None = None, workers: int | None = None) -> Preparation:
+    """Start preparing what ``cfg`` needs (or ``steps``), in child processes."""
+    return Preparation(cfg, on_progress, workers=workers, steps=steps)

@@ -88,7 +88,8 @@ def build_robot_io(
         rig = SimRig(cfg, plant_cfg)
         driver_cfg = rig.start()
         try:
-            dev = DeviceRobotIO(driver_cfg, pace=cfg.rig.pace, truth=rig.truth, on_event=event_sink)
+            dev = DeviceRobotIO(driver_cfg, pace=cfg.rig.pace, truth=rig.truth, on_event=event_sink,
+                                device_time=rig.device_time)
             dev.rig = rig
             rig.on_event = dev.publish_event
             dev.start()

@@ -3,20 +3,29 @@
 The :class:`SafetyMonitor` is a telemetry subscriber (sensor channels and events) plus two
 inputs from the supervisor (the pilot's presence, :meth:`SafetyMonitor.pilot_left` and
 :meth:`SafetyMonitor.pilot_present`). :meth:`SafetyMonitor.check` is called with the
-present time; it returns the failsafes that triggered or cleared since the last call. The
-supervisor carries out the configured action (hold, surface, disarm, warn) and records an
-Event for each change.
+present time; it returns the failsafes that triggered, escalated or cleared since the last
+call. The supervisor carries out the action each carries (hold, surface, disarm, warn) and
+records an Event for each change.
+
+Escalation: a rule with ``escalate`` (hold, surface, disarm: acting more strongly than its
+``action``) escalates when its failsafe has been active for ``escalate_after`` s: a second
+Transition, active, with the escalated action (``escalated`` True). By default only
+``pilot_gone`` escalates: hold, then disarm after 30 s.
 
 Failsafes (``FailsafeConfig`` has one rule, action and timeout, for each):
 
 * ``pilot_gone``: a pilot was in control and no pilot page has been connected for
   ``timeout`` s; clears when a pilot takes control again.
-* ``imu`` / ``dvl`` / ``depth``: no valid reading for ``timeout`` s (silent, or only
-  invalid readings: a DVL report with ``valid`` False, a non-finite value); clears with the
-  next valid reading.
+* ``imu`` / ``dvl`` / ``depth``: no valid reading for ``timeout`` s; clears with the next
+  valid reading. The cause says what happened since the last valid reading: ``silent``
+  (nothing came), ``garbled`` (messages dropped as corrupt), ``invalid`` (readings that
+  came without valid data: a DVL report with ``valid`` False, a non-finite value, a
+  broken current loop), ``port error``, ``unreachable``, from the readings and from the
+  sensor's driver events (``devices.reporting.READING_FAULTS``).
 * ``motor``: a motor controller reported a fault (an Event from a source ``epos2.*`` with a
   code of :data:`MOTOR_FAULTS`) that has lasted ``timeout`` s; clears when every such fault
-  has been reported cleared (:data:`MOTOR_CLEARS`).
+  has been reported cleared (:data:`MOTOR_CLEARS`). The cause names each drive and what
+  it reported (the event's message: the EMCY code and its name, how long no heartbeat came).
 * ``planner_late``: at least ``late_plans`` late plans (loop Events ``late_plan``) within
   the last ``timeout`` s; clears when fewer remain in that window.
 * ``tracking``: while the fins are driven, the depth, the forward speed or the heading
@@ -24,6 +33,10 @@ Failsafes (``FailsafeConfig`` has one rule, action and timeout, for each):
   ``tracking_speed``, ``tracking_heading``) from what the body layer holds it to for
   ``timeout`` s; clears when every axis is back within its band. Warns by default: the
   robot does not go where it is sent.
+* ``recording``: the session recorder failed to write (an Event ``recorder``/``write_failed``:
+  a full disk, a removed drive) and has not been started again or acknowledged since (an
+  Event ``recorder``/``failure_cleared``). Warns by default (``hold`` keeps the robot where
+  it is until the operator acts): what the robot does from then on is not recorded.
 
 Times are the supervisor's clock (the loop's time). A valid sensor reading counts at its
 own time ``t`` (the robot stamps readings with the loop's time; one more than a minute away
@@ -40,6 +53,7 @@ import threading
 from dataclasses import dataclass
 from typing import Any
 
+from ucat_console.backend.devices.reporting import READING_FAULTS
 from ucat_console.robot.readings import DepthReading, DvlVelocity, ImuReading
 from ucat_console.config import FailsafeConfig, FailsafeRule
 from ucat_console.telemetry import channels as ch
@@ -48,7 +62,7 @@ from ucat_console.telemetry.events import Event
 log = logging.getLogger(__name__)
 
 #: every failsafe, in display order
-FAILSAFES = ("pilot_gone", "imu", "dvl", "depth", "motor", "planner_late", "tracking")
+FAILSAFES = ("pilot_gone", "imu", "dvl", "depth", "motor", "planner_late", "tracking", "recording")
 SENSORS = ("imu", "dvl", "depth")
 #: motor controller event codes that start a fault (a ``quick_stop`` event is the other
 #: drives' safe-state reaction to one of these, which the failsafe already counts)
@@ -71,7 +85,7 @@ class FailsafeState:
     """One failsafe as shown: its rule, whether it is active, and why."""
 
     name: str
-    action: str
+    action: str  # the action in force: the escalated one once the failsafe escalated
     timeout: float
     active: bool
     since: float | None  # time it triggered
@@ -80,13 +94,16 @@ class FailsafeState:
 
 @dataclass(frozen=True)
 class Transition:
-    """A failsafe that triggered (``active``) or cleared at time ``t``."""
+    """A failsafe that triggered (``active``), escalated (``active`` and ``escalated``: its
+    cause lasted the rule's ``escalate_after``; ``action`` is the escalated one) or cleared
+    at time ``t``."""
 
     name: str
     active: bool
     t: float
     action: str
     cause: str
+    escalated: bool = False
 
 
 def _finite(*values: float) -> bool:
@@ -110,6 +127,34 @@ def reading_valid(reading: Any) -> bool:
 
 _CLOCK_SLACK = 60.0  # s
 _SENSOR_OF = {ch.IMU: "imu", ch.DVL: "dvl", ch.DEPTH: "depth"}
+#: the failsafe sensor of each sensor driver's event source
+_SENSOR_OF_SOURCE = {"imu": "imu", "dvl": "dvl", "pressure": "depth"}
+#: how a label reads with its count (messages or readings since the last valid one)
+_COUNTED = {"garbled": "corrupt messages dropped", "invalid": "invalid readings"}
+
+
+def fault_label(kinds: dict[str, Any]) -> str:
+    """What happened to a sensor since its last valid reading, from the kinds seen with
+    their counts (``{"garbled": [12, t]}`` -> ``"garbled: 12 corrupt messages dropped"``):
+    ``silent`` only when nothing else was seen (a garbled line is not a silent one)."""
+    parts = [f"{kind}: {int(n[0])} {_COUNTED[kind]}" if kind in _COUNTED else kind
+             for kind, n in kinds.items() if kind != "silent"]
+    return ", ".join(parts) or "silent"
+
+
+def _note(kinds: dict[str, list[float]], kind: str, n: int, t: float) -> None:
+    """``n`` more of ``kind`` at time ``t``."""
+    seen = kinds.get(kind)
+    if seen is None:
+        kinds[kind] = [float(n), t]
+    else:
+        seen[0] += n
+        seen[1] = max(seen[1], t)
+
+
+def _stamp(t: Any, now: float) -> float:
+    """A message's time, or ``now`` when it carries none near the loop's time."""
+    return float(t) if isinstance(t, (int, float)) and abs(t - now) <= _CLOCK_SLACK else now
 
 
 class SafetyMonitor:
@@ -120,14 +165,17 @@ class SafetyMonitor:
         self._lock = threading.Lock()
         self._now = float(t0)
         self._last_valid: dict[str, float] = {s: float(t0) for s in SENSORS}
-        self._invalid: dict[str, int] = {s: 0 for s in SENSORS}  # invalid readings since the last valid one
+        # what happened to each sensor since its last valid reading: kind -> [count, last time]
+        self._kinds: dict[str, dict[str, list[float]]] = {s: {} for s in SENSORS}
         self._had_pilot = False
         self._pilot_left: float | None = None
-        self._motor: dict[str, dict[str, float]] = {}  # source -> fault code -> since
+        self._motor: dict[str, dict[str, tuple[float, str]]] = {}  # source -> fault code -> (since, message)
         self._late: collections.deque[float] = collections.deque()
         self._off_track: dict[str, tuple[float, float]] = {}  # axis -> (since, the last error)
         self._allocation: Any = None  # the last BodyAllocation
+        self._recorder_failed: tuple[float, str] | None = None  # (since, why)
         self._active: dict[str, float] = {}  # name -> since
+        self._escalated: set[str] = set()  # active failsafes whose escalation acted
         self._cause: dict[str, str] = {n: "" for n in FAILSAFES}
 
     def rule(self, name: str) -> FailsafeRule:
@@ -144,7 +192,7 @@ class SafetyMonitor:
         """Telemetry subscriber of (channel, message) lists (``subscribe_batches``)."""
         events = []
         with self._lock:
-            last_valid, invalid, now = self._last_valid, self._invalid, self._now
+            last_valid, kinds, now = self._last_valid, self._kinds, self._now
             for channel, msg in items:
                 sensor = _SENSOR_OF.get(channel)
                 if sensor is None:
@@ -161,9 +209,12 @@ class SafetyMonitor:
                         t = now
                     if t > last_valid[sensor]:
                         last_valid[sensor] = t
-                    invalid[sensor] = 0
+                    k = kinds[sensor]
+                    if k:  # what happened before this reading is over (a fault reported after it is not)
+                        for kind in [kind for kind, (_, seen) in k.items() if seen <= t]:
+                            del k[kind]
                 else:
-                    invalid[sensor] += 1
+                    _note(kinds[sensor], "invalid", 1, _stamp(msg.t, now))
         for ev in events:
             self.on_event(ev)
 
@@ -180,10 +231,17 @@ class SafetyMonitor:
 
     def on_event(self, ev: Event) -> None:
         with self._lock:
-            if ev.source.startswith("epos2"):
+            sensor = _SENSOR_OF_SOURCE.get(ev.source)
+            if sensor is not None:
+                kind = READING_FAULTS.get(ev.code)
+                if kind is not None:
+                    suppressed = ev.data.get("suppressed", 0) if isinstance(ev.data, dict) else 0
+                    n = 1 + (suppressed if isinstance(suppressed, int) else 0)
+                    _note(self._kinds[sensor], kind, n, _stamp(ev.t, self._now))
+            elif ev.source.startswith("epos2"):
                 faults = self._motor.setdefault(ev.source, {})
                 if ev.code in MOTOR_FAULTS:
-                    faults.setdefault(ev.code, self._now)
+                    faults.setdefault(ev.code, (self._now, ev.message or ev.code))
                 elif ev.code in MOTOR_CLEARS:
                     for code in MOTOR_CLEARS[ev.code]:
                         faults.pop(code, None)
@@ -191,13 +249,18 @@ class SafetyMonitor:
                     faults.pop(ev.data["fault"], None)
             elif ev.source == "loop" and ev.code == "late_plan":
                 self._late.append(self._now)
+            elif ev.source == "recorder" and ev.code == "write_failed":
+                why = ev.data.get("error")
+                self._recorder_failed = (self._now, why if isinstance(why, str) else ev.message)
+            elif ev.source == "recorder" and ev.code == "failure_cleared":
+                self._recorder_failed = None
 
     def note_invalid(self, sensor: str, what: str = "") -> None:
         """A reading of ``sensor`` was refused before it reached the stream (non-finite)."""
         if sensor not in SENSORS:
             raise ValueError(f"sensor: {sensor!r} is not one of {', '.join(SENSORS)}")
         with self._lock:
-            self._invalid[sensor] += 1
+            _note(self._kinds[sensor], "invalid", 1, self._now)
 
     def pilot_present(self, now: float | None = None) -> None:
         with self._lock:
@@ -234,10 +297,18 @@ class SafetyMonitor:
                     out.append(Transition(name, True, now, rule.action, cause))
                 elif cause is None and was:
                     del self._active[name]
-                    out.append(Transition(name, False, now, rule.action, self._cause[name]))
+                    action = rule.escalate if name in self._escalated else rule.action
+                    self._escalated.discard(name)
+                    out.append(Transition(name, False, now, action, self._cause[name]))
+                elif (cause is not None and rule.escalates and name not in self._escalated
+                      and now - self._active[name] >= rule.escalate_after):
+                    self._escalated.add(name)
+                    out.append(Transition(name, True, now, rule.escalate,
+                                          f"{cause}, {now - self._active[name]:.1f} s after it triggered",
+                                          escalated=True))
         for tr in out:
-            log.log(logging.ERROR if tr.active else logging.INFO, "failsafe %s %s: %s",
-                    tr.name, "triggered" if tr.active else "cleared", tr.cause)
+            how = "escalated" if tr.escalated else "triggered" if tr.active else "cleared"
+            log.log(logging.ERROR if tr.active else logging.INFO, "failsafe %s %s: %s", tr.name, how, tr.cause)
         return out
 
     def _causes(self, now: float) -> dict[str, str]:
@@ -251,16 +322,14 @@ class SafetyMonitor:
             rule = getattr(cfg, s)
             quiet = now - self._last_valid[s]
             if quiet > rule.timeout:
-                n = self._invalid[s]
-                what = f"{n} invalid readings" if n else "silent"
-                causes[s] = f"{s.upper()} without a valid reading for {quiet:.1f} s ({what})"
+                causes[s] = f"{s.upper()} without a valid reading for {quiet:.1f} s ({fault_label(self._kinds[s])})"
         faults = []
         for source, codes in sorted(self._motor.items()):
-            for code, since in sorted(codes.items()):
+            for code, (since, message) in sorted(codes.items()):
                 if now - since >= cfg.motor.timeout:
-                    faults.append(f"{source} {code}")
+                    faults.append(f"{source}: {message}")
         if faults:
-            causes["motor"] = "motor controller fault: " + ", ".join(faults)
+            causes["motor"] = "motor controller fault: " + "; ".join(faults)
         window = cfg.planner_late.timeout
         late = self._late
         while late and now - late[0] > window:
@@ -272,15 +341,20 @@ class SafetyMonitor:
                for since, err in (self._off_track[axis],) if now - since >= cfg.tracking.timeout]
         if off:
             causes["tracking"] = "not tracking: " + ", ".join(off)
+        failed = self._recorder_failed
+        if failed is not None and now - failed[0] >= cfg.recording.timeout:
+            causes["recording"] = f"the recording stopped: {failed[1]}"
         return causes
 
     # ------------------------------------------------------------------ reading
-    def sensor_silence(self, sensor: str, now: float) -> tuple[float, int]:
-        """(seconds since ``sensor``'s last valid reading at ``now``, invalid readings since)."""
+    def sensor_silence(self, sensor: str, now: float) -> tuple[float, str]:
+        """(seconds since ``sensor``'s last valid reading at ``now``, what happened since:
+        :func:`fault_label`, "" when nothing was reported)."""
         if sensor not in SENSORS:
             raise ValueError(f"sensor: {sensor!r} is not one of {', '.join(SENSORS)}")
         with self._lock:
-            return max(0.0, now - self._last_valid[sensor]), self._invalid[sensor]
+            kinds = self._kinds[sensor]
+            return max(0.0, now - self._last_valid[sensor]), fault_label(kinds) if kinds else ""
 
     def recent_late_plans(self) -> int:
         """Late plans within the planner_late window (at the last check)."""
@@ -308,9 +382,9 @@ class SafetyMonitor:
             return cut, off
 
     def motor_faults(self) -> list[str]:
-        """The motor controller faults reported and not cleared ("source code")."""
+        """The motor controller faults reported and not cleared ("source: what it reported")."""
         with self._lock:
-            return [f"{src} {code}" for src, codes in sorted(self._motor.items()) for code in sorted(codes)]
+            return [f"{src}: {codes[code][1]}" for src, codes in sorted(self._motor.items()) for code in sorted(codes)]
 
     def active(self) -> tuple[str, ...]:
         with self._lock:
@@ -326,7 +400,8 @@ class SafetyMonitor:
             for name in FAILSAFES:
                 rule: FailsafeRule = getattr(self.cfg, name)
                 out.append(FailsafeState(
-                    name=name, action=rule.action, timeout=rule.timeout,
+                    name=name, action=rule.escalate if name in self._escalated else rule.action,
+                    timeout=rule.timeout,
                     active=name in self._active, since=self._active.get(name),
                     cause=self._cause[name],
                 ))

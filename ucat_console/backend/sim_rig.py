@@ -198,6 +198,16 @@ class SimRig:
         with self.plant_lock:
             return self.plant.time
 
+    def device_time(self, device: str) -> float:
+        """The time (on the rig's clock) emulator ``device`` (``"epos2"``: the drives, or
+        ``"imu"``, ``"dvl"``, ``"pressure"``) has run to: everything it was due to send by
+        then has been sent. The drivers judge the emulators' silence against it: an
+        emulator held back by a busy machine is late, not silent."""
+        if device not in EMULATOR_FAULTS:
+            raise ValueError(f"device: {device!r} is not one of {', '.join(EMULATOR_FAULTS)}")
+        emulator = self.nodes if device == "epos2" else getattr(self, device)
+        return emulator.time if emulator is not None else -math.inf
+
     def truth(self) -> RobotTruth:
         """The plant's true state now (``t``: plant time)."""
         with self.plant_lock:

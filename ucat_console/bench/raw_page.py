@@ -6,13 +6,15 @@ in), keeps the GUI elements the server creates for it (uuid -> type and properti
 can click buttons, set values, and send anything at all: what a hostile page or a broken
 network would do. By default it answers the console's heartbeats as the real page does;
 ``answer_heartbeats=False`` makes it a frozen page, :meth:`RawPage.stop_reading` one that
-stops reading its socket without closing it.
+stops reading its socket without closing it, ``read_rate`` (bytes a second, settable at
+any time) one on a slow link. It keeps the status bar's last state (:attr:`RawPage.bar`).
 
 The safety benchmark and the tests use it; it is not part of the console.
 """
 
 from __future__ import annotations
 
+import json
 import socket
 import threading
 import time
@@ -63,16 +65,47 @@ def with_arrays(v: Any, buffers: list[bytes]) -> Any:
     return v
 
 
+class ThrottledSocket(socket.socket):
+    """A TCP socket whose ``recv`` hands over at most ``rate`` bytes a second (None: no
+    limit), with a small receive buffer: the page's end of a slow link."""
+
+    def __init__(self, family: int, rate: float | None) -> None:
+        super().__init__(family, socket.SOCK_STREAM)
+        self.rate = rate
+        self.received = 0
+        self.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 16 * 1024)
+
+    def recv(self, n: int, flags: int = 0) -> bytes:
+        rate = self.rate
+        if rate is None:
+            data = super().recv(n, flags)
+        else:  # 20 ms of the link's bytes at a time, then the time they take
+            data = super().recv(max(1, min(n, int(rate * 0.02))), flags)
+            time.sleep(len(data) / rate)
+        self.received += len(data)
+        return data
+
+
+_BAR = "window.__ucat && window.__ucat.render("  # the status bar's update (ui.page_script)
+
+
 class RawPage:
     """One page on ``url`` (``http://host:port``); ``origin``: the Origin header to send
-    (None: none); ``local_host``: the loopback address to connect from."""
+    (None: none); ``local_host``: the loopback address to connect from; ``read_rate``: the
+    bytes a second it reads (None: as fast as it can)."""
 
     def __init__(self, url: str, *, origin: str | None = None, local_host: str | None = None,
-                 answer_heartbeats: bool = True, open_timeout: float = 20.0) -> None:
+                 answer_heartbeats: bool = True, open_timeout: float = 20.0,
+                 read_rate: float | None = None) -> None:
         ws_url = url.replace("http://", "ws://", 1)
         host, port = ws_url.split("//", 1)[1].split("/", 1)[0].rsplit(":", 1)
-        sock = socket.create_connection((host, int(port)), timeout=open_timeout,
-                                        source_address=(local_host, 0) if local_host else None)
+        addr = socket.getaddrinfo(host, int(port), type=socket.SOCK_STREAM)[0]
+        sock = ThrottledSocket(addr[0], read_rate)
+        sock.settimeout(open_timeout)
+        if local_host:
+            sock.bind((local_host, 0))
+        sock.connect(addr[4])
+        self.socket = sock
         headers = {"Origin": origin} if origin is not None else None
         self.ws = websockets.sync.client.connect(
             ws_url, sock=sock, subprotocols=[f"viser-v{viser.__version__}"], additional_headers=headers,
@@ -84,6 +117,7 @@ class RawPage:
         self.notifications: list[str] = []
         self.nodes: dict[str, dict[str, Any]] = {}  # scene node name -> its last pose and properties
         self.heartbeats = 0
+        self.bar: dict[str, Any] = {}  # the status bar's last state
         self.frames = 0  # server frames (batches) received
         self.last_frame = b""  # the frame being applied, as received
         self.closed = False
@@ -139,9 +173,24 @@ class RawPage:
                 self.nodes.setdefault(m["name"], {}).update(m["updates"])
             elif tp == "NotificationShowMessage":
                 self.notifications.append(str(m.get("props", {}).get("body", "")))
+            elif tp == "RunJavascriptMessage" and str(m.get("source", "")).startswith(_BAR):
+                self.bar = json.loads(m["source"][len(_BAR):].rsplit(");", 1)[0])
             elif tp.startswith("Gui") and "uuid" in m and isinstance(m.get("props"), dict):
                 self.elements[m["uuid"]] = {"type": tp, **m["props"],
                                             **({"value": m["value"]} if "value" in m else {})}
+
+    @property
+    def read_rate(self) -> float | None:
+        return self.socket.rate
+
+    @read_rate.setter
+    def read_rate(self, rate: float | None) -> None:
+        self.socket.rate = rate
+
+    @property
+    def bytes_read(self) -> int:
+        """Bytes read from the socket so far."""
+        return self.socket.received
 
     def stop_reading(self) -> None:
         """Stop reading the socket without closing it (the server's sends back up)."""

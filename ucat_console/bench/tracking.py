@@ -1,7 +1,7 @@
 """``ucat-console bench tracking``: does the robot go where it is sent, in every mode?
 
 Manoeuvres on the simulated U-CAT (the ``strouhal_wake`` plant, the configuration given,
-``config/sim-tuned.toml`` by default: what ``scripts/run.sh`` starts the console with), each
+the shipped ``sim-tuned`` by default: what ``scripts/run.sh`` starts the console with), each
 run headless in every fin controller (:data:`MODES`: the baseline, the MPC, the MPC with the
 rear pair synchronised, and the MPC's closed-stroke formulation):
 
@@ -315,8 +315,8 @@ def plot(logs: dict[str, dict[str, _Log]], out: Path) -> list[Path]:
 
 def register_bench(kinds: argparse._SubParsersAction) -> None:
     p = kinds.add_parser("tracking", help="depth, heading and speed tracking in every mode (the simulated robot)")
-    p.add_argument("--config", type=Path, default=None, metavar="FILE",
-                   help="configuration (default: config/sim-tuned.toml, what the console ships)")
+    p.add_argument("--config", default="sim-tuned", metavar="NAME|FILE",
+                   help="configuration: a shipped one's name or a file (default: sim-tuned)")
     p.add_argument("--modes", nargs="+", choices=[m[0] for m in MODES], default=[m[0] for m in MODES])
     p.add_argument("--quick", action="store_true", help="half-length manoeuvres (a smoke run)")
     p.add_argument("--seed", type=int, default=0, help="plant and planner seed")
@@ -325,16 +325,13 @@ def register_bench(kinds: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run_bench)
 
 
-def default_config() -> Path:
-    return Path(__file__).resolve().parents[2] / "config" / "sim-tuned.toml"
-
-
 def run_bench(args: argparse.Namespace) -> int:
-    from ucat_console.config import AppConfig
+    from ucat_console.cli.compiled import prepare_all
+    from ucat_console.config import load_config
 
-    path = args.config or default_config()
-    app = AppConfig.from_toml(path)
-    results: dict[str, Any] = {"config": str(path), "seed": args.seed, "quick": args.quick, "modes": {}}
+    app = load_config(args.config)
+    prepare_all(args.config)
+    results: dict[str, Any] = {"config": str(args.config), "seed": args.seed, "quick": args.quick, "modes": {}}
     logs: dict[str, dict[str, _Log]] = {}
     for label, mode, formulation in MODES:
         if label not in args.modes:

@@ -12,7 +12,8 @@ import logging
 import sys
 
 #: sub-command modules under ucat_console.cli
-COMMANDS = ["bench", "devices", "sessions", "replay", "identify", "experiment", "sweep", "run", "prepare"]
+COMMANDS = ["bench", "devices", "sessions", "replay", "identify", "experiment", "sweep", "run", "prepare",
+            "paths"]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -38,14 +39,14 @@ def main(argv: list[str] | None = None) -> int:
         logging.getLogger("canopen").setLevel(logging.WARNING)
     try:
         return int(args.func(args) or 0)
-    except ValueError as e:
+    except BrokenPipeError:  # output piped into e.g. `head`
+        sys.stderr.close()
+        return 0
+    except (ValueError, OSError) as e:  # bad input, a file that cannot be read or written
         print(f"ucat-console: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130
-    except BrokenPipeError:  # output piped into e.g. `head`
-        sys.stderr.close()
-        return 0
 
 
 if __name__ == "__main__":

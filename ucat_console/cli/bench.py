@@ -37,6 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     q.add_argument("--json", type=Path, default=None, help="write the results as JSON")
     q.set_defaults(func=run_sim)
 
+    from ucat_console.bench import load as bench_load
     from ucat_console.bench import safety as bench_safety
     from ucat_console.bench import sessions as bench_sessions
     from ucat_console.bench import tracking as bench_tracking
@@ -46,8 +47,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     bench_ui.register_bench(kinds)
     bench_safety.register_bench(kinds)
     bench_tracking.register_bench(kinds)
+    bench_load.register_bench(kinds)
     c = kinds.add_parser("compile", help="cold compile of every preparation step, serial and in parallel")
-    c.add_argument("--config", type=Path, default=None, metavar="FILE", help="the configuration to compile for")
+    c.add_argument("--config", default=None, metavar="NAME|FILE", help="the configuration to compile for")
     c.add_argument("--workers", type=int, nargs="+", default=[1, 2], help="process counts to measure")
     c.add_argument("--json", type=Path, default=None, help="write the results as JSON")
     c.set_defaults(func=run_compile)
@@ -84,6 +86,7 @@ def run_mpc(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from ucat_console.bench import mpc as B
+    from ucat_console.cli.compiled import prepare_all
     from ucat_console.bench.machine import machine_info, pin_to_one_core, speed_line
     from ucat_console.control import FinMpc, MpcConfig
 
@@ -95,6 +98,7 @@ def run_mpc(args: argparse.Namespace) -> int:
         raise ValueError(f"--gap-cases: {args.gap_cases} must be >= 0")
     if args.json is not None and not args.json.parent.exists():
         raise ValueError(f"--json: directory {args.json.parent} does not exist")
+    prepare_all()  # before pinning: the child processes would inherit the one core
     cpu = pin_to_one_core(args.cpu)
     base = MpcConfig()
     # the scipy reference solves the paper's formulation only
@@ -151,11 +155,13 @@ def run_mpc(args: argparse.Namespace) -> int:
 def run_sim(args: argparse.Namespace) -> int:
     from ucat_console.bench.sim import TELEMETRY, measure_realtime_factor
     from ucat_console.bench.machine import machine_info, pin_to_one_core, speed_line
+    from ucat_console.cli.compiled import prepare_all
 
     if not 0.0 < args.seconds <= 3600.0:
         raise ValueError(f"--seconds: {args.seconds} must be in (0, 3600]")
     if args.json is not None and not args.json.parent.exists():
         raise ValueError(f"--json: directory {args.json.parent} does not exist")
+    prepare_all()  # before pinning: the child processes would inherit the one core
     cpu = pin_to_one_core(args.cpu)
     factors: dict[str, dict[str, float]] = {t: {} for t in TELEMETRY}
     chunks: dict[str, dict[str, list[float]]] = {t: {} for t in TELEMETRY}

@@ -29,8 +29,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     require_extra()
+    from ucat_console.cli.compiled import prepare_all
     from ucat_console.experiments.runner import run_experiments
 
+    prepare_all()
     command = "ucat-console experiment " + " ".join(sys.argv[2:] if len(sys.argv) > 2 else args.names)
     doc = run_experiments(
         args.names, args.out, quick=args.quick, seed=args.seed, scheduler=args.scheduler,

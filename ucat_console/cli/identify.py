@@ -33,13 +33,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("sessions", nargs="*", metavar="SESSION", help="session ids or part files")
     p.add_argument("--run", action="store_true", help="first run and record the identification manoeuvre")
     p.add_argument("--realtime", action="store_true", help="with --run on the simulated robot: real time")
-    p.add_argument("--config", type=Path, default=None, metavar="FILE",
-                   help="configuration (TOML): the hull, the model to start from, the robot for --run")
+    p.add_argument("--config", default=None, metavar="NAME|FILE",
+                   help="configuration (a shipped one's name or a TOML file): the hull, the model to start from, the robot for --run")
     p.add_argument("--fit", choices=("coefficients", "scale"), default="coefficients",
                    help="fit C_D and C_L, or one scale of the configured pair")
     p.add_argument("--window", type=float, default=None, metavar="S", help="force-balance window (s)")
     p.add_argument("--dir", type=Path, default=None,
-                   help="sessions directory (default: sessions/ at the project root)")
+                   help="sessions directory (default: $UCAT_CONSOLE_SESSIONS, else the user's "
+                        "data folder: ucat-console paths)")
     p.add_argument("--out", type=Path, default=Path("identify-out"), help="output directory")
     p.add_argument("--trim", action="store_true",
                    help="identify the body layer's heave trim from a recorded hover instead")
@@ -96,6 +97,9 @@ def run(args: argparse.Namespace) -> int:
     cfg = load_config(args.config) if args.config is not None else None
     sessions = list(args.sessions)
     if args.run:
+        from ucat_console.cli.compiled import prepare_all
+
+        prepare_all(args.config)
         sessions.append(str(_record_manoeuvre(cfg or load_config(None), args.dir, args.realtime)))
     rep = identify_sessions(sessions, args.dir, cfg, icfg)
     r = rep.result

@@ -11,23 +11,29 @@ from __future__ import annotations
 import argparse
 import tempfile
 import time
-from pathlib import Path
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("prepare", help="compile (or load) the planners, the loop and the plant before a run")
-    p.add_argument("--config", type=Path, default=None, metavar="FILE", help="the configuration to prepare for")
+    p.add_argument("--config", default=None, metavar="NAME|FILE",
+                   help="the configuration to prepare for (a shipped one's name or a TOML file)")
     p.add_argument("--workers", type=int, default=None, help="child processes (default: cores, at most 2)")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from ucat_console.backend.prepare import Preparation
+    from ucat_console.cli import compiled
     from ucat_console.config import load_config
 
+    if args.workers is not None and args.workers < 1:
+        raise ValueError(f"--workers: {args.workers} must be >= 1")
     cfg = load_config(args.config)
-    prep = Preparation(cfg, workers=args.workers)
-    prep.wait_all()
+    try:  # the steps the console needs first, each shown as it starts
+        prep = compiled.prepare(cfg, workers=args.workers)
+    except RuntimeError as e:
+        print(e)
+        return 1
+    prep.wait_all()  # the others: logged as each is done
     for s in prep.steps:
         if s.key in prep.seconds:
             print(f"  {s.text}: {prep.seconds[s.key]:.1f} s{'' if s.needed else ' (may wait: compiled after the start)'}")

@@ -24,7 +24,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="fins to replay (default: all)")
     p.add_argument("--out", type=Path, default=None, metavar="CSV", help="write every row as CSV")
     p.add_argument("--dir", type=Path, default=None,
-                   help="sessions directory (default: sessions/ at the project root)")
+                   help="sessions directory (default: $UCAT_CONSOLE_SESSIONS, else the user's "
+                        "data folder: ucat-console paths)")
     p.set_defaults(func=run)
 
 
@@ -51,10 +52,12 @@ def format_summary(summary: list[dict]) -> str:
 def run(args: argparse.Namespace) -> int:
     from ucat_console.backend.sessions.reader import SessionParts
     from ucat_console.backend.sessions.replay import counterfactual, parse_weights, recorded_seed
+    from ucat_console.cli.compiled import prepare_all
 
     weights = parse_weights(args.weights)
     if args.out is not None and not args.out.parent.exists():
         raise ValueError(f"--out: directory {args.out.parent} does not exist")
+    prepare_all()
     with SessionParts(args.file, args.dir) as s:
         result = counterfactual(s, weights, seed=recorded_seed if args.seed is None else args.seed,
                                 fins=args.fins)

@@ -1,6 +1,7 @@
 """``ucat-console run``: the console (supervisor, robot, web page), or a headless run.
 
     ucat-console run                         # simulated robot, page on http://127.0.0.1:8080
+    ucat-console run --config sim-tuned      # a shipped configuration, by name
     ucat-console run --config pool.toml --port 0
     ucat-console run --headless --duration 60 --mode mpc_sync --velocity 0.2 --depth 1 --record
     ucat-console run --foxglove-port 8765     # and the live robot in Foxglove / Lichtblick
@@ -9,6 +10,10 @@ With the page, the motors stay disarmed until the pilot (the page that entered t
 printed below) arms them. ``--headless`` runs without a page and arms at once with the
 given setpoints, for ``--duration`` seconds of robot time from arming (real time; ``--fast``
 runs the simulator as fast as it goes). Ctrl-C disarms, stops the motors and closes the files.
+
+The compiled code is prepared first in child processes (``cli.compiled``: the first run on a
+machine compiles it, with its progress on the terminal and on the loading page). A start
+that fails (or is stopped) before the run begins leaves no session file behind.
 """
 
 from __future__ import annotations
@@ -22,11 +27,13 @@ from pathlib import Path
 from typing import Any
 
 from ucat_console.backend.loop.config import MODES
+from ucat_console.cli import compiled
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="run the console: supervisor, robot (simulated by default), web page")
-    p.add_argument("--config", type=Path, default=None, metavar="FILE", help="configuration (TOML)")
+    p.add_argument("--config", default=None, metavar="NAME|FILE",
+                   help="configuration: a shipped one's name (sim-tuned, sim-devices, robot) or a TOML file")
     p.add_argument("--host", default=None, help="address to bind (default 127.0.0.1; others are warned about)")
     p.add_argument("--port", type=int, default=None, help="port (default 8080; 0: any free port)")
     p.add_argument("--headless", action="store_true", help="no web page: arm at once and run --duration s")
@@ -38,6 +45,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--depth", type=float, default=None, help="depth setpoint, m")
     p.add_argument("--yaw-rate", type=float, default=None, help="yaw rate setpoint, rad/s")
     p.add_argument("--record", action="store_true", help="record the whole run")
+    p.add_argument("--sessions-dir", type=Path, default=None, metavar="DIR",
+                   help="where recordings go (default: the configuration's console.sessions_dir, "
+                        "else $UCAT_CONSOLE_SESSIONS, else the user's data folder)")
     p.add_argument("--playback", default=None, metavar="FILE",
                    help="open this session file (in the sessions directory) in the Review tab")
     p.add_argument("--foxglove-port", type=int, default=None, metavar="P",
@@ -84,32 +94,26 @@ def _prepare_with_page(cfg: Any) -> tuple[Any, Any]:
     """Serve the loading page at once and compile in child processes; (the configuration
     with the port the page got (the console takes it over), the preparation, which goes on
     with what may wait)."""
-    from ucat_console.backend import prepare
     from ucat_console.ui.loading import LoadingPage
 
     page = LoadingPage(cfg, cfg.console.host, cfg.console.port)
     url_host = cfg.console.host if cfg.console.host not in ("0.0.0.0", "::") else "127.0.0.1"
     print(f"U-CAT console on http://{url_host}:{page.port}  (starting: the page shows the progress)", flush=True)
-    t0 = time.monotonic()
-
-    def progress(p: Any) -> None:
-        page.set_progress(p)
-        print(f"  {p.text()} ({time.monotonic() - t0:.0f} s)", flush=True)
-
-    prep = prepare.start(cfg, progress)
     try:
-        while not prep.wait(15.0):  # a compile gives no progress of its own: the time it has taken
-            print(f"  still {prep.progress.text()} ({time.monotonic() - t0:.0f} s)", flush=True)
-    except BaseException:
-        prep.cancel()
+        prep = compiled.prepare(cfg, on_progress=page.set_progress)
+    finally:
+        port = page.port
         page.stop()
-        raise
-    port = page.port
-    page.stop()
-    if prep.error:
-        raise RuntimeError(f"preparing the compiled code failed: {prep.error}")
-    print(f"ready in {time.monotonic() - t0:.1f} s", flush=True)
     return cfg.replace(console=cfg.console.replace(port=port)), prep
+
+
+def _wait_first_step(sup: Any) -> None:
+    """Until the loop has run its first event: its first steps load the compiled code from
+    numba's cache, and a command sent meanwhile (the headless run's arming) would wait
+    longer than a command waits on a busy machine. Ends early when the loop stops."""
+    deadline = time.monotonic() + 600.0
+    while sup.running and sup.loop.time <= 0.0 and time.monotonic() < deadline:
+        time.sleep(0.02)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -136,27 +140,32 @@ def run(args: argparse.Namespace) -> int:
         raise KeyboardInterrupt
 
     previous = signal.signal(signal.SIGTERM, on_term)
-    prep = None
-    if args.headless:
-        print("loading the planners (the first start on a machine compiles them: "
-              "`ucat-console prepare` shows how long each part takes)", flush=True)
-    else:
-        try:
+    try:
+        if args.headless:  # no formulation switch without a page: only what the run needs
+            prep = compiled.prepare(cfg, compiled.needed_steps(cfg))
+        else:
             cfg, prep = _prepare_with_page(cfg)
-        except KeyboardInterrupt:
-            print("\nstopped while starting", file=sys.stderr)
-            signal.signal(signal.SIGTERM, previous)
-            return 1
-    planner_ready = None
-    if prep is not None:
-        from ucat_console.backend.prepare import planner_step
+    except KeyboardInterrupt:
+        print("\nstopped while starting", file=sys.stderr)
+        signal.signal(signal.SIGTERM, previous)
+        return 1
+    except BaseException:
+        signal.signal(signal.SIGTERM, previous)
+        raise
+    from ucat_console.backend.prepare import planner_step
 
-        planner_ready = lambda f: prep.done(planner_step(f))  # noqa: E731
-        background = [s for s in prep.steps if not s.needed]
-        if background and not prep.complete:
-            print("compiling in the background: " + ", ".join(s.text for s in background)
-                  + " (switching to it waits for this)", flush=True)
-    sup = Supervisor(cfg, clock=SimulatedClock() if args.fast else None, planner_ready=planner_ready)
+    background = [s for s in prep.steps if not s.needed]
+    if background and not prep.complete:
+        print("compiling in the background: " + ", ".join(s.text for s in background)
+              + " (switching to it waits for this)", flush=True)
+    try:
+        sup = Supervisor(cfg, clock=SimulatedClock() if args.fast else None,
+                         planner_ready=lambda f: prep.done(planner_step(f)), sessions_dir=args.sessions_dir)
+    except BaseException:
+        prep.cancel()
+        signal.signal(signal.SIGTERM, previous)
+        raise
+    started = False  # the run has begun: from here on its recording is kept
     app = None
     fox = None
     last_power: list[Any] = [None]
@@ -187,17 +196,19 @@ def run(args: argparse.Namespace) -> int:
             print(f"pilot token: {sup.access.token}")
         t_stop = args.duration
         if app is None:
+            _wait_first_step(sup)
             sup.arm(LOCAL)
             print(f"headless run: mode {sup.mode}, setpoints {sup.setpoints}, motors armed")
             if args.duration is not None:
                 # counted from arming: a fast loop runs on while the command reaches it
                 t_stop = sup.loop.time + args.duration
+        started = True
         period = cfg.console.health_period
         next_health = time.monotonic() + period
         next_token = time.monotonic() + TOKEN_REPEAT
         # again and again only where a person reads it: never into a file or a log collector
         repeat_token = sys.stdout.isatty()
-        announced = prep is None or prep.complete
+        announced = prep.complete
         while sup.running:
             if t_stop is not None and sup.loop.time >= t_stop:
                 break
@@ -206,7 +217,7 @@ def run(args: argparse.Namespace) -> int:
             if now >= next_health:
                 next_health += period
                 print(sup.health().line(), flush=True)
-            if prep is not None and prep.complete and not announced:
+            if prep.complete and not announced:
                 announced = True
                 print("compiled in the background: everything is ready" if not prep.error
                       else f"the background compile failed: {prep.error}", flush=True)
@@ -220,13 +231,15 @@ def run(args: argparse.Namespace) -> int:
     finally:
         paths = sup.recorder.paths
         sup.stop()
+        if not started:  # a start that failed or was stopped: no session file
+            sup.recorder.discard()
+            paths = []
         h = sup.health()  # after stopping: disarmed
         if fox is not None:
             fox.stop()
         if app is not None:
             app.stop()
-        if prep is not None:
-            prep.cancel()  # a background compile still running is not waited for
+        prep.cancel()  # a background compile still running is not waited for
         signal.signal(signal.SIGTERM, previous)
     p = last_power[0]
     print(h.line())

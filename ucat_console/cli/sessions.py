@@ -3,7 +3,8 @@
 SESSION is a session id or any one of its part files (a path, or a file name inside the
 sessions directory): ``info`` and ``export`` cover every part of the session, in order, as
 one recording; ``repair`` takes one file. ``--dir`` names the sessions directory (default:
-``sessions/`` at the project root); files outside it are refused.
+``$UCAT_CONSOLE_SESSIONS``, else the user's data folder: ``ucat-console paths``); files
+outside it are refused.
 """
 
 from __future__ import annotations
@@ -15,7 +16,8 @@ from pathlib import Path
 
 def _add_dir(p: argparse.ArgumentParser) -> None:
     p.add_argument("--dir", type=Path, default=None,
-                   help="sessions directory (default: sessions/ at the project root)")
+                   help="sessions directory (default: $UCAT_CONSOLE_SESSIONS, else the user's "
+                        "data folder: ucat-console paths)")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -71,6 +73,13 @@ def _fmt_duration(s: float | None) -> str:
     return f"{h:d}:{m:02d}:{sec:02d}"
 
 
+def _fmt_time(t: float | None) -> str:
+    try:
+        return time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(t)) if t else "?"
+    except (OverflowError, ValueError, OSError):  # a time no calendar holds
+        return "?"
+
+
 def _fmt_size(n: int) -> str:
     for unit in ("B", "kB", "MB", "GB"):
         if n < 1000 or unit == "GB":
@@ -82,39 +91,43 @@ def _fmt_size(n: int) -> str:
 def run_list(args: argparse.Namespace) -> int:
     from ucat_console.backend.sessions import files, index
 
-    sessions = index.list_sessions(args.dir)
+    listing = index.scan(args.dir)
+    sessions = listing.sessions
+    for skipped in listing.skipped:
+        print(f"skipped {skipped.name}: {skipped.why}")
     if not sessions:
         print(f"no sessions in {files.sessions_dir(args.dir)}")
         return 0
     print(f"{'session':<28} {'started (UTC)':<19} {'parts':>5} {'duration':>9} "
           f"{'size':>9} {'events':>6}  notes")
     for s in sessions:
-        start = time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(s.start)) if s.start else "?"
+        start = _fmt_time(s.start)
         events = "?" if s.events is None else str(s.events)
         flag = "  [truncated: run `sessions repair`]" if s.truncated else ""
         errors = [p.error for p in s.parts if p.error]
-        note = s.notes.replace("\n", " ")
+        note = files.printable(s.notes.replace("\n", " "))
         if len(note) > 40:
             note = note[:39] + "…"
-        print(f"{s.session_id:<28} {start:<19} {len(s.parts):>5} {_fmt_duration(s.duration):>9} "
+        print(f"{files.printable(s.session_id):<28} {start:<19} {len(s.parts):>5} {_fmt_duration(s.duration):>9} "
               f"{_fmt_size(s.size):>9} {events:>6}  {note}{flag}")
         for e in errors:
-            print(f"    unreadable: {e}")
+            print(f"    unreadable: {files.printable(e)}")
     return 0
 
 
 def run_info(args: argparse.Namespace) -> int:
+    from ucat_console.backend.sessions import files
     from ucat_console.backend.sessions.reader import SessionParts
 
     with SessionParts(args.file, args.dir) as s:
         print(f"session {s.session_id}: {len(s.parts)} part{'s' if len(s.parts) > 1 else ''} "
-              f"in {s.directory}, software {s.version or '?'}")
+              f"in {s.directory}, software {files.printable(s.version[:40]) or '?'}")
         print(f"  {s.message_count} messages, {s.duration:.1f} s "
               f"(t {s.start:.3f} .. {s.end:.3f}), epoch offset {s.epoch_offset!r}")
         if s.weights:
             print("  weights: " + ", ".join(f"{k}={v:g}" for k, v in s.weights.items()))
         if s.notes:
-            print(f"  notes: {s.notes}")
+            print(f"  notes: {files.printable(s.notes)}")
         for n, r in enumerate(s.parts, 1):
             print(f"  part {n}: {r.path.name}, {r.message_count} messages, "
                   f"{r.duration:.1f} s (t {r.start:.3f} .. {r.end:.3f})")

@@ -32,10 +32,12 @@ def run(args: argparse.Namespace) -> int:
     from ucat_console.experiments import require_extra
 
     require_extra()
+    from ucat_console.cli.compiled import prepare_all
     from ucat_console.experiments.runner import run_sweep_command
 
     if args.seed < 0:
         raise ValueError(f"--seed: {args.seed} must be >= 0")
+    prepare_all()
     doc = run_sweep_command(
         args.out, lam_st=args.lam_st, lam_d=args.lam_d, speeds=args.velocities, seeds=args.seeds,
         quick=args.quick, seed=args.seed, plant=args.plant, scheduler=args.scheduler,

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -185,19 +184,18 @@ def _e4_claims(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
 # ---------------------------------------------------------------------------- E4R
 #: E4R's controllers: E4's three and the closed-stroke formulation (four MPC fins)
 E4R_CONTROLLERS = ("baseline", "mpc", "mpc_sync", "mpc_closed")
-#: the file whose settings E4R runs beside the paper's (the console's simulated default)
-SIM_TUNED = Path(__file__).resolve().parents[2] / "config" / "sim-tuned.toml"
+#: the shipped configuration whose settings E4R runs beside the paper's (what the console's
+#: scripts/run.sh starts the simulated robot with)
+SIM_TUNED = "sim-tuned"
 
 
 def e4r_settings() -> dict[str, tuple[MpcConfig, BodyConfig]]:
     """E4R's settings: the paper's (its MPC weights and its body layer; its baseline, eq 19,
-    :data:`E4R_BASELINES`) and ``config/sim-tuned.toml``'s (the console's: the designed
+    :data:`E4R_BASELINES`) and the shipped ``sim-tuned``'s (the console's: the designed
     body layer, the fin-model baseline)."""
-    from ucat_console.config import AppConfig
+    from ucat_console.config import load_config
 
-    if not SIM_TUNED.is_file():
-        raise ValueError(f"E4R: {SIM_TUNED} not found (E4R runs from the project's source tree)")
-    tuned = AppConfig.from_toml(SIM_TUNED)
+    tuned = load_config(SIM_TUNED)
     return {"paper": (MpcConfig(), PAPER_BODY), "sim_tuned": (tuned.mpc, tuned.body)}
 
 
@@ -206,7 +204,7 @@ E4R_BASELINES = {"paper": PAPER_BASELINE, "sim_tuned": BaselineConfig()}
 
 
 def shipped_body() -> BodyConfig:
-    """The body layer the console ships (``config/sim-tuned.toml``'s, the designed layer),
+    """The body layer the console ships (the shipped ``sim-tuned``'s, the designed layer),
     which E4, E5 and E6 run under."""
     return e4r_settings()["sim_tuned"][1]
 
@@ -398,7 +396,7 @@ def run_e6(client: Any, quick: bool, seed: int, progress: bool = True) -> dict[s
 
 # ---------------------------------------------------------------------------- E5
 def e5_scenarios(quick: bool, seed: int, depth: float = 3.0) -> list[Scenario]:
-    """E5 under the console's settings (``config/sim-tuned.toml``'s MPC weights and body
+    """E5 under the console's settings (the shipped ``sim-tuned``'s MPC weights and body
     layer): under the paper's weights the MPC does not swim on this plant (E4R)."""
     half = 15.0 if quick else 150.0
     mpc, body = e4r_settings()["sim_tuned"]

@@ -15,7 +15,7 @@ TITLES = {
     "E2": "E2: Strouhal corridor, baseline vs MPC (paper Fig. 6)",
     "E3": "E3: cost-term ablation (paper Table III)",
     "E4": "E4: closed loop, power and tracking (paper Table V, Fig. 7)",
-    "E4R": "E4R: E4 from rest, the paper's settings and config/sim-tuned.toml",
+    "E4R": "E4R: E4 from rest, the paper's settings and the shipped sim-tuned",
     "E6": "E6: where St-awareness pays: a family of plants, each with its identified model",
     "E5": "E5: field-style circle at 3 m with a current (paper Fig. 8)",
     "sweep": "Weight sweep over the E4 protocol",
@@ -207,7 +207,7 @@ def _e4r(res: dict[str, Any]) -> str:
            f"{', '.join(p['controllers'])} (mpc_closed: the closed-stroke formulation with the same "
            f"model and weights), seeds {', '.join(str(s) for s in p['seeds'])}; settle {p['settle_s']:g} s, "
            f"measured over {p['window_s']:g} s. Settings: `paper` (Table I's weights and PIDs, the paper's "
-           f"body layer and its baseline, eq 19) and `sim_tuned` (config/sim-tuned.toml: lam_f {t['lam_f']:g}, "
+           f"body layer and its baseline, eq 19) and `sim_tuned` (the shipped sim-tuned: lam_f {t['lam_f']:g}, "
            f"lam_st {t['lam_st']:g}, lam_d {t['lam_d']:g}, centre_rate {t.get('centre_rate', 0):g} rad/s; "
            f"the {t.get('body_layer', 'paper')} body layer, thrust gain {t.get('thrust_gain', 1):g}, velocity "
            f"loop kp {t['velocity_kp']:g} ki {t['velocity_ki']:g}; the fin-model baseline). "
@@ -239,7 +239,7 @@ def _e6(res: dict[str, Any]) -> str:
            f"({', '.join(p['plants'])}). Each plant's model is identified first from its own recorded "
            f"identification manoeuvre (`ucat-console identify`'s path). Runs from rest at "
            f"{', '.join(str(v) for v in p['speeds'])} m/s, seeds {', '.join(str(s) for s in p['seeds'])}, "
-           f"settle {p['settle_s']:g} s, measured {p['window_s']:g} s, config/sim-tuned.toml's weights and "
+           f"settle {p['settle_s']:g} s, measured {p['window_s']:g} s, the shipped sim-tuned's weights and "
            f"body layer (lam_f {t['lam_f']:g}, lam_st {t['lam_st']:g}, lam_d {t['lam_d']:g}, centre_rate "
            f"{t.get('centre_rate', 0):g} rad/s; the {t.get('body_layer', 'paper')} body layer, its thrust gain "
            f"each model's: the identified scale with the paper's model, 1 with the identified one), "

@@ -185,7 +185,7 @@ def _run_one(name: str, tmp: Path, quick: bool, seed: int, client: Any,
         res["findings"] = ["Yaw rate follows the NED convention (positive: clockwise seen from above); "
                            "the paper's counter-clockwise circle at +0.1 rad/s implies the opposite (z up) "
                            "sign convention, so only the turn rate and the circle are compared.",
-                           "Settings: the console's (config/sim-tuned.toml: its MPC weights, the designed body "
+                           "Settings: the console's (the shipped sim-tuned: its MPC weights, the designed body "
                            "layer); under the paper's weights the MPC does not swim on this plant (E4R)."]
         return res
     raise ValueError(f"experiment: {name!r} is not one of {', '.join(EXPERIMENTS)}")
@@ -215,7 +215,7 @@ def _e4_findings(res: dict[str, Any]) -> list[str]:
                    "measured speed its Strouhal penalty pins w near 6 V_B, where the model's thrust is a few "
                    "hundredths of a newton, so the force term (lam_f 1.5) cannot win against lam_St 5 and the "
                    "L1 smoothness term (lam_d 1) holds the plan near u_prev.")
-    out.append("Body layer: the console's designed layer (config/sim-tuned.toml's [body]: loops designed on "
+    out.append("Body layer: the console's designed layer (the shipped sim-tuned's [body]: loops designed on "
                "the hull's model, allocation with limits and priorities, thrust gain 2.9); baseline: the "
                "fin-model inverse, not eq 19 (whose 4.65-fold overestimate of the fin's force would bias the "
                "comparison); MPC: the paper's weights (Table I), as Table V.")

@@ -12,7 +12,7 @@ angle about which a symmetric stroke pair pushes straight forward under the cont
 model (the baseline's oscillation centre for a pure thrust demand). The runs measure
 cruising, as the paper does after settling; ``start_velocity = 0`` starts them from rest
 (E4R and E6). ``body`` is the body-frame layer (the paper's PIDs by default,
-``config/sim-tuned.toml``'s in E4R's second setting) and ``plant`` one of
+the shipped ``sim-tuned``'s in E4R's second setting) and ``plant`` one of
 :data:`PLANT_VARIANTS` or a family member ``gain<G>_<wake>`` (:func:`family_hydro`).
 
 Energy per metre: the mechanical energy spent over the window divided by the distance the

@@ -20,6 +20,9 @@ Contract:
 * :meth:`RobotIO.next_reading_time` says when the next reading is due, so the loop can run
   the physics in chunks from event to event. A device-backed robot, whose readings arrive
   on their own, returns the time it next wants to be polled.
+* :meth:`RobotIO.resync` tells the robot that the loop's time ``t`` is due now: the paced
+  loop anchored its clock to the wall clock, at its start or after a stall it skipped. A
+  robot whose readings come on the wall clock maps them to loop time from then on.
 * :meth:`RobotIO.truth` is the simulator's true state (None on a real robot); only
   experiments and the 3-D view's "truth" overlay read it, never the controller.
 * A robot whose readings are computed in-process (the simulator) may say
@@ -85,6 +88,10 @@ class RobotIO(ABC):
         delivering its readings, until the core returns something other than "readings";
         that status. Only for a robot that :attr:`runs_core`."""
         raise NotImplementedError(f"{type(self).__name__} does not run the loop's core")
+
+    def resync(self, t: float) -> None:
+        """The loop's time ``t`` is due now (module docstring); nothing to do for a robot
+        that runs in loop time (the simulator)."""
 
     def enable_drives(self) -> bool:
         """Power the fin drives for set-points (on arming); False when a drive did not come

@@ -25,7 +25,11 @@ threads at once). Each page chooses its theme (dark by default), remembered by i
 Every page passes through a :class:`~ucat_console.ui.guard.PageGuard`: its handshake's
 Origin, every message it sends (only the values of its own inputs, pilot-only inputs only
 while it is the pilot's) and its heartbeat; a page that stops answering is gone, and when
-it was the pilot's the pilot-gone failsafe acts. The server binds to ``console.host``
+it was the pilot's the pilot-gone failsafe acts. The pilot's safety commands run on the
+guard's own thread; the status bar goes to each page ahead of its telemetry, which a page
+on a slow link gets thinned (the bar then says "link slow"). What reads session files runs
+on the console's :class:`~ucat_console.ui.page_jobs.PageJobs`, rationed per page, with one
+listing of the sessions folder shared by every page (:class:`~ucat_console.ui.session_list.SessionList`). The server binds to ``console.host``
 (127.0.0.1 by default) and warns when that is not a loopback address: viser has no
 authentication of its own, and the pilot token guards only the controls, not what the
 page shows.
@@ -57,8 +61,10 @@ from ucat_console.telemetry.messages import FinPlan
 from ucat_console.ui import markdown, page_script, panels
 from ucat_console.ui.fast_props import set_prop
 from ucat_console.ui.guard import PageGuard
+from ucat_console.ui.page_jobs import PageJobs
 from ucat_console.ui.playback import PlaybackPanel
 from ucat_console.ui.scene import add_pool
+from ucat_console.ui.session_list import SessionList
 from ucat_console.ui.status_bar import bar_state
 from ucat_console.ui.view import StreamView
 
@@ -68,6 +74,10 @@ FOLLOW_STEP = 0.02
 
 _EVENTS_KEPT = 200
 _QUIET_EVENTS = frozenset({"stroke_timeout"})
+#: events every page is notified of (source, code): what the operators must see at once
+ALARMS = frozenset({("recorder", "write_failed")})
+#: events that end an alarm's notification (source, code)
+ALARM_ENDS = frozenset({("recorder", "failure_cleared")})
 #: the docked panels' widths (px): plots on the left, controls on the right
 PLOTS_WIDTH = 400
 CONTROLS_WIDTH = 360
@@ -111,6 +121,7 @@ class ConsoleApp:
         self._lock = threading.Lock()
         self._plans: list[FinPlan | None] = [None] * N_FINS
         self._events: collections.deque[Event] = collections.deque(maxlen=_EVENTS_KEPT)
+        self._alarms: collections.deque[Event] = collections.deque(maxlen=10)  # to notify every page of
         self.events_seen = 0  # events kept so far: the pages' lists change with it
         self._dirty = threading.Event()
         self.panels: dict[int, panels.ControlPanel] = {}
@@ -121,6 +132,8 @@ class ConsoleApp:
         #: a session every new page opens in its Review tab (``run --playback``)
         self.initial_session: str | None = None
         self.sessions_dir = supervisor.recorder.directory
+        self.session_list = SessionList(self.sessions_dir)
+        self.jobs = PageJobs()  # what reads session files, for every page
         self.replay_slot = ReplaySlot()
         #: what the planner light says while the planners load ("" when ready)
         self.loading = ""
@@ -208,6 +221,7 @@ class ConsoleApp:
         for unsub in self._unsubs:
             unsub()
         self.guard.stop()
+        self.jobs.stop()
         with self._build_lock:
             reviews, self.reviews = list(self.reviews.values()), {}
         for r in reviews:
@@ -222,6 +236,8 @@ class ConsoleApp:
         elif tp is Event and msg.code not in _QUIET_EVENTS:
             self._events.append(msg)
             self.events_seen += 1
+            if (msg.source, msg.code) in ALARMS or (msg.source, msg.code) in ALARM_ENDS:
+                self._alarms.append(msg)
 
     def recent_events(self) -> list[Event]:
         return list(self._events)
@@ -235,15 +251,21 @@ class ConsoleApp:
         """A page has shown (its first camera report): its script, theme, controls and review."""
         cid = client.client_id
         containers = {"tuning": self.tab_tuning, "session": self.tab_session, "safety": self.tab_safety}
-        client._websock_connection.queue_message(vm.RunJavascriptMessage(source=page_script.INSTALL))
+        self.guard.send_first(cid, [vm.RunJavascriptMessage(source=page_script.INSTALL)])  # the bar first
         with self._build_lock:
             if cid not in self.guard.clients:
                 return  # gone while waiting
             # one atomic batch: the page gets its controls only with the guard's rules for
             # them, so nothing it sends at once is refused as "not an input of this page"
-            with client.atomic():
-                panel = panels.ControlPanel(self, cid, client.gui, client, containers, allow=self._allow(cid))
-                review = self.build_review(client.gui, client.scene, cid)
+            try:
+                with client.atomic():
+                    panel = panels.ControlPanel(self, cid, client.gui, client, containers, allow=self._allow(cid))
+                    review = self.build_review(client.gui, client.scene, cid)
+            except Exception:
+                if self.page_present(cid):
+                    raise
+                log.info("page %s went while its controls were built", cid)
+                return
             with self._lock:
                 self.panels[cid] = panel
                 self.pages[cid] = _Page(client, self.cfg.dark)
@@ -266,10 +288,16 @@ class ConsoleApp:
             log.debug("placing the camera of client %s failed", client.client_id, exc_info=True)
 
     def _allow(self, cid: int) -> Callable[..., None]:
-        def allow(handle: Any, pilot_only: bool, max_len: int = 200) -> None:
+        def allow(handle: Any, pilot_only: bool, max_len: int = 200, urgent: Callable[[], None] | None = None) -> None:
             if handle is not None:
-                self.guard.allow(handle, cid, pilot_only=pilot_only, max_len=max_len)
+                self.guard.allow(handle, cid, pilot_only=pilot_only, max_len=max_len, urgent=urgent)
         return allow
+
+    def page_present(self, cid: int) -> bool:
+        """Whether page ``cid`` is connected (viser forgets a page before it removes the
+        page's elements: a callback that finds its element removed and this False only
+        lost its page)."""
+        return cid in self.server.get_clients()
 
     def build_review(self, gui: Any, scene: Any, cid: int | None = None) -> PlaybackPanel:
         """One page's review of recorded sessions, in the Review tab and the review plots."""
@@ -282,6 +310,10 @@ class ConsoleApp:
             container=self.tab_review, plot_container=self.review_plot_tab,
             allow=self._allow(cid) if cid is not None else None,
             replay_slot=self.replay_slot, may_replay=lambda: self._may_replay(cid), plot_height=PLOT_HEIGHT,
+            jobs=(lambda what, job, coalesce: self.jobs.submit(cid, what, job, coalesce=coalesce))
+            if cid is not None else None,
+            present=(lambda: self.page_present(cid)) if cid is not None else (lambda: True),
+            sessions=lambda: self.session_list.sessions(),
         )
 
     def _may_replay(self, cid: int | None) -> bool:
@@ -300,6 +332,7 @@ class ConsoleApp:
                 self.panels.pop(cid, None)
                 self.pages.pop(cid, None)
             review = self.reviews.pop(cid, None)
+        self.jobs.forget(cid)
         if review is not None:
             review.stop(page_gone=True)
         log.info("page gone: client %s", cid)
@@ -324,12 +357,13 @@ class ConsoleApp:
         gui.configure_theme(control_width="medium", show_share_button=False, dark_mode=dark)
 
     def _remembered_theme(self, cid: int) -> None:
-        """The theme this page's browser chose before (it asks the page; no answer: the default)."""
+        """The theme this page's browser chose before (it asks the page; no answer within 20 s,
+        which a page loading on a slow link or a busy machine may take: the default)."""
         page = self.pages.get(cid)
         if page is None:
             return
         try:
-            stored = page.client.local_storage.get_item(page_script.THEME_KEY, timeout=5.0)
+            stored = page.client.local_storage.get_item(page_script.THEME_KEY, timeout=20.0)
         except Exception:
             stored = None
         if stored in ("dark", "light"):
@@ -361,7 +395,24 @@ class ConsoleApp:
             self._next_follow = now + FOLLOW_PERIOD
             self._follow()
 
+    def _notify_pages(self) -> None:
+        """Every page gets a notification of each alarm (it stays until closed), and of its end."""
+        while self._alarms:
+            ev = self._alarms.popleft()
+            alarm = (ev.source, ev.code) in ALARMS
+            with self._lock:
+                pages = list(self.pages.values())
+            for page in pages:
+                try:
+                    page.client.add_notification(
+                        f"ALARM: {ev.source} {ev.code}" if alarm else f"{ev.source}: cleared", ev.message,
+                        color="red" if alarm else "green", with_close_button=True,
+                        auto_close_seconds=None if alarm else 10.0)
+                except Exception:
+                    log.debug("client %s was not notified", page.client.client_id, exc_info=True)
+
     def _tick_slow(self) -> None:
+        self._notify_pages()
         sup = self.sup
         h = sup.health()
         _set(self.introspection, markdown.introspection_markdown(list(self._plans), h.late_plans,
@@ -376,13 +427,13 @@ class ConsoleApp:
             if panel is None:
                 continue
             try:
-                with page.client.atomic():  # the page's server woken once for the page's updates
-                    panel.show_events()
-                    uuids = {"disarm_uuid": panel.disarm._impl.uuid, "drive_uuid": panel.drive_input._impl.uuid,
-                             "theme_uuid": panel.theme_button._impl.uuid}
-                    state = bar_state(sup, cid, dark=page.dark, uuids=uuids, loading=self.loading)
-                    page.client._websock_connection.queue_message(
-                        vm.RunJavascriptMessage(source=page_script.update_source(state)))
+                panel.show_events()
+                uuids = {"disarm_uuid": panel.disarm._impl.uuid, "drive_uuid": panel.drive_input._impl.uuid,
+                         "theme_uuid": panel.theme_button._impl.uuid}
+                state = bar_state(sup, cid, dark=page.dark, uuids=uuids, loading=self.loading,
+                                  link_slow=self.guard.link_slow(cid))
+                # what the pilot must see first (ahead of the telemetry on a slow link)
+                self.guard.send_first(cid, [vm.RunJavascriptMessage(source=page_script.update_source(state))])
             except Exception:
                 log.debug("the status bar of client %s was not sent", cid, exc_info=True)
 

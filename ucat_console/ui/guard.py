@@ -16,25 +16,39 @@ as its TCP connection is open. :class:`PageGuard` stands between the websocket a
   page is the pilot's; the other message types only where the console uses them (camera,
   commands, heartbeat answers). Everything else, and anything over the page's message
   rate, is refused with one log line (no traceback) and changes nothing.
+* **Safety commands first.** An input or command registered with ``urgent=`` (the pilot's
+  DISARM button and Esc key, the Space key's stop) is not handed to viser: once admitted,
+  its action runs on the guard's own thread (``safety-commands``), so it never waits
+  behind the callbacks of other pages in viser's shared thread pool.
 * **Liveness.** Every ``heartbeat_period`` each page is asked for a value (viser's
   localStorage request, which only the page's running script answers). A page that has
   not answered for its allowed silence (:meth:`PageGuard.silence_limit`: the pilot's
   ``failsafe.pilot_gone.timeout``, everyone else ``console.page_timeout``) is declared
   gone (``on_gone(client, silent_for)``) and its socket is closed at once: a frozen
   browser, a page that stops reading, or a cut Wi-Fi link is noticed in seconds, not at
-  the TCP retransmission timeout. A page that wakes up reconnects as a new page.
+  the TCP retransmission timeout. A page that wakes up reconnects as a new page. Only an
+  answer to a request the guard sent counts.
+* **Slow links.** The heartbeat request (and, while the link is slow, the status bar,
+  :meth:`PageGuard.send_first`) is sent as a frame of its own, ahead of the page's queued
+  telemetry; the telemetry goes
+  only while the page's bytes in flight are under its budget (:mod:`ucat_console.ui.link`),
+  so what a heartbeat waits behind is bounded and a page that reads slowly gets its poses
+  and plots coalesced (viser keeps the newest value of each) instead of a growing backlog.
+  Such a page's status bar says "link slow" (:meth:`PageGuard.link_slow`).
 
-viser does not offer hooks for these, so :mod:`ucat_console.ui.viser_hooks` wraps two names
-in viser's websocket module (the ``websockets`` serve call and the per-connection message
-consumer); servers created without :meth:`PageGuard.serve` are left as viser makes them.
+viser does not offer hooks for these, so :mod:`ucat_console.ui.viser_hooks` wraps names in
+viser's websocket module (the ``websockets`` serve call, the per-connection message consumer
+and sender); servers created without :meth:`PageGuard.serve` are left as viser makes them.
 """
 
 from __future__ import annotations
 
+import asyncio
 import collections
 import ipaddress
 import logging
 import math
+import queue
 import threading
 import time
 from dataclasses import dataclass
@@ -45,6 +59,7 @@ import viser
 import viser._messages as vm
 
 from ucat_console.ui import viser_hooks
+from ucat_console.ui.link import PageLink
 
 log = logging.getLogger(__name__)
 
@@ -104,6 +119,7 @@ class InputRule:
     check: Callable[[Any], str | None]  # None when the value is acceptable, else why not
     name: str
     handle: Any = None  # the input, to show its value again after a refused one
+    urgent: Callable[[], None] | None = None  # run on the guard's safety thread, not by viser
 
 
 def value_check(handle: Any, max_len: int) -> Callable[[Any], str | None]:
@@ -158,6 +174,8 @@ class _Page:
         self.refused = 0
         self.last_log = -math.inf
         self.unlogged = 0
+        self.link = PageLink(now)  # touched in the server's event-loop thread only
+        self.room: asyncio.Event | None = None  # set when the page answers (event-loop thread)
 
 
 class PageGuard:
@@ -202,8 +220,13 @@ class PageGuard:
         self._origin_logged: dict[str, float] = {}
         self.refusals: collections.deque[tuple[int | None, str]] = collections.deque(maxlen=1000)
         self.server: viser.ViserServer | None = None
+        self.loop: asyncio.AbstractEventLoop | None = None  # the pages' event loop (viser's)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        self._urgent: queue.SimpleQueue[tuple[int, str, Callable[[], None]] | None] = queue.SimpleQueue()
+        self._urgent_thread: threading.Thread | None = None
+        self.urgent_runs = 0  # safety commands run
+        self._zstd = viser_hooks.compressor()  # for the frames sent ahead (event-loop thread)
 
     # ------------------------------------------------------------------ server
     def serve(self, **kwargs: Any) -> viser.ViserServer:
@@ -213,14 +236,23 @@ class PageGuard:
         ws = server._websock_server
         ws.on_client_connect(self._opened)
         ws.on_client_disconnect(self._closed)
+        self.start(ws._background_event_loop)
+        return server
+
+    def start(self, loop: asyncio.AbstractEventLoop | None) -> None:
+        """Start the heartbeat and safety-command threads; ``loop``: the pages' event loop."""
+        self.loop = loop
         self._thread = threading.Thread(target=self._run, name="page-guard", daemon=True)
         self._thread.start()
-        return server
+        self._urgent_thread = threading.Thread(target=self._run_urgent, name="safety-commands", daemon=True)
+        self._urgent_thread.start()
 
     def stop(self) -> None:
         self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
+        self._urgent.put(None)
+        for t in (self._thread, self._urgent_thread):
+            if t is not None and t is not threading.current_thread():
+                t.join(timeout=2.0)
 
     def handshake_refusal(self, connection: Any, request: Any) -> Any:
         """None to go on with a websocket upgrade, else the HTTP response that refuses it."""
@@ -240,6 +272,10 @@ class PageGuard:
     def _opened(self, conn: Any) -> None:
         cid = int(conn.client_id)
         ws_conn = self.server._websock_server._live_connections.get(cid) if self.server else None
+        self.page_opened(cid, conn, ws_conn)
+
+    def page_opened(self, cid: int, conn: Any, ws_conn: Any) -> None:
+        """A websocket opened: ``conn`` viser's connection, ``ws_conn`` the websockets one."""
         page = _Page(cid, conn, ws_conn, _address(ws_conn), self.clock())
         with self._lock:
             self._pages[cid] = page
@@ -251,7 +287,9 @@ class PageGuard:
             log.exception("page %s: connect handling failed", cid)
 
     def _closed(self, conn: Any) -> None:
-        cid = int(conn.client_id)
+        self.page_closed(int(conn.client_id))
+
+    def page_closed(self, cid: int) -> None:
         with self._lock:
             page = self._pages.pop(cid, None)
             if page is not None and page.ws is not None:
@@ -286,17 +324,23 @@ class PageGuard:
             return None if p is None else self.clock() - p.last_answer
 
     # ------------------------------------------------------------------ inputs
-    def allow(self, handle: Any, client: int, *, pilot_only: bool, max_len: int = 200, name: str = "") -> None:
+    def allow(self, handle: Any, client: int, *, pilot_only: bool, max_len: int = 200, name: str = "",
+              urgent: Callable[[], None] | None = None) -> None:
         """Let page ``client`` set ``handle``'s value (only while it is the pilot's if
-        ``pilot_only``); text up to ``max_len`` characters."""
+        ``pilot_only``); text up to ``max_len`` characters. With ``urgent`` (a button of a
+        safety command), an admitted press runs ``urgent()`` on the guard's safety thread
+        instead of the handle's viser callbacks."""
         max_len = min(int(max_len), MAX_TEXT)
         rule = InputRule(client, pilot_only, value_check(handle, max_len),
-                         name or getattr(handle, "label", "") or type(handle).__name__, handle)
+                         name or getattr(handle, "label", "") or type(handle).__name__, handle, urgent)
         with self._lock:
             self._inputs[handle._impl.uuid] = rule
 
-    def allow_command(self, handle: Any, client: int, *, pilot_only: bool, name: str = "") -> None:
-        rule = InputRule(client, pilot_only, lambda v: None, name or getattr(handle, "name", "command"))
+    def allow_command(self, handle: Any, client: int, *, pilot_only: bool, name: str = "",
+                      urgent: Callable[[], None] | None = None) -> None:
+        """Let page ``client`` trigger command ``handle`` (``urgent``: as for :meth:`allow`)."""
+        rule = InputRule(client, pilot_only, lambda v: None, name or getattr(handle, "name", "command"),
+                         urgent=urgent)
         with self._lock:
             self._commands[handle._impl.uuid] = rule
 
@@ -323,10 +367,12 @@ class PageGuard:
         now = self.clock()
         tp = type(message)
         if tp is vm.LocalStorageGetItemResponseMessage:
-            uid = message.request_uuid
-            if isinstance(uid, str) and uid.startswith(_HB_PREFIX):  # before the rate limit:
+            seq = _heartbeat_seq(message.request_uuid)
+            if seq is not None and page.link.answered(seq, now):  # before the rate limit:
                 page.last_answer = now  # a busy page never loses its proof of life
                 page.answers += 1
+                if page.room is not None:
+                    page.room.set()  # its telemetry may go on
                 return "heartbeat"  # taken here; viser has nothing to do with it
         page.tokens = min(2 * MESSAGE_RATE, page.tokens + (now - page.refill) * MESSAGE_RATE)
         page.refill = now
@@ -336,6 +382,8 @@ class PageGuard:
         if tp is vm.ViewerCameraMessage:
             return None
         if tp is vm.LocalStorageGetItemResponseMessage:
+            if _heartbeat_seq(message.request_uuid) is not None:
+                return "an answer to no heartbeat request of the console"
             value = message.value
             return None if value is None or (isinstance(value, str) and len(value) <= MAX_TEXT) else \
                 "a stored value over the size limit"
@@ -368,6 +416,33 @@ class PageGuard:
                 return f"{rule.name}: only the pilot's page may use it"
             return None
         return f"a {tp.__name__}, which the console does not take"
+
+    def take_urgent(self, client: int | None, message: Any) -> bool:
+        """For an admitted message: whether it is a safety command (its rule has ``urgent``),
+        now queued for the guard's safety thread; viser is not to see it then."""
+        tp = type(message)
+        table = self._inputs if tp is vm.GuiUpdateMessage else self._commands if tp is vm.CommandTriggerMessage \
+            else None
+        if table is None:
+            return False
+        with self._lock:
+            rule = table.get(message.uuid)
+        if rule is None or rule.urgent is None:
+            return False
+        self._urgent.put((client, rule.name, rule.urgent))
+        return True
+
+    def _run_urgent(self) -> None:
+        while True:
+            item = self._urgent.get()
+            if item is None:
+                return
+            client, name, action = item
+            try:
+                action()
+            except Exception:
+                log.exception("the safety command %s of page %s failed", name, client)
+            self.urgent_runs += 1
 
     def refuse(self, client: int | None, why: str) -> None:
         """Count and log (at most once per page every few seconds) a refused message."""
@@ -415,12 +490,92 @@ class PageGuard:
             if silent >= self.silence_limit(p.client):
                 self.declare_gone(p.client, silent)
                 continue
-            p.seq += 1
-            try:  # (sent at once: viser's senders do not wait for more after a message, viser_hooks)
-                p.conn.queue_message(vm.LocalStorageGetItemRequestMessage(
-                    key=HEARTBEAT_KEY, request_uuid=f"{_HB_PREFIX}{p.seq}"))
-            except Exception:
-                log.debug("heartbeat to page %s not sent", p.client, exc_info=True)
+            self._send_soon(p, None)
+
+    # ------------------------------------------------------------------ frames sent ahead
+    def send_first(self, client: int, messages: Any) -> None:
+        """Send ``messages`` to page ``client`` (any thread): the status bar, what the pilot
+        must see first. While the page's link is slow, as a frame of their own ahead of its
+        queued telemetry; otherwise in the page's next batch, as viser sends (a browser
+        works per frame: no more frames than the link needs)."""
+        with self._lock:
+            page = self._pages.get(client)
+        if page is None:
+            return
+        if page.link.slow or page.conn is None:
+            self._send_soon(page, tuple(messages))
+            return
+        for m in messages:
+            page.conn.queue_message(m)
+
+    def _send_soon(self, page: _Page, messages: tuple[Any, ...] | None) -> None:
+        loop = self.loop
+        if loop is None or page.ws is None:
+            return
+        try:
+            asyncio.run_coroutine_threadsafe(self._send(page, messages), loop)
+        except RuntimeError:
+            pass  # the server's loop has stopped
+
+    async def _send(self, page: _Page, messages: tuple[Any, ...] | None) -> None:
+        """(Event-loop thread.) One frame of ``messages`` (None: a heartbeat request) to
+        ``page``, counted in its link before it is written."""
+        if page.gone or self._pages.get(page.client) is not page:
+            return
+        now = self.clock()
+        seq = None
+        if messages is None:
+            page.seq += 1
+            seq = page.seq
+            messages = (vm.LocalStorageGetItemRequestMessage(key=HEARTBEAT_KEY, request_uuid=f"{_HB_PREFIX}{seq}"),)
+        data = viser_hooks.encode_frame(messages, self._zstd)
+        page.link.sent(len(data), now)
+        if seq is not None:
+            page.link.probe(seq, now)
+        try:
+            await page.ws.send(data)  # written at once; then it waits for the socket to drain
+        except Exception:
+            log.debug("a frame to page %s was not sent", page.client, exc_info=True)
+
+    # ------------------------------------------------------------------ telemetry flow (event loop)
+    def flow(self, client: int) -> _Page | None:
+        """The page whose telemetry :meth:`wait_room` and :meth:`sent` pace (None: not a page)."""
+        with self._lock:
+            return self._pages.get(client)
+
+    async def wait_room(self, page: _Page) -> None:
+        """Return when ``page`` may be sent more telemetry (its bytes in flight under its
+        budget); while it may not, one heartbeat request is out to learn when it may."""
+        link = page.link
+        while not link.room(self.clock()) and not page.gone:
+            if link.outstanding == 0:
+                await self._send(page, None)
+            if page.room is None:
+                page.room = asyncio.Event()
+            page.room.clear()
+            if link.room(self.clock()):
+                return
+            await page.room.wait()
+
+    def sent(self, page: _Page, nbytes: int) -> None:
+        """``nbytes`` of telemetry are being written to ``page`` (event-loop thread)."""
+        page.link.sent(nbytes, self.clock())
+
+    def link_slow(self, client: int) -> bool:
+        """Whether page ``client``'s telemetry is being thinned for its slow link."""
+        with self._lock:
+            page = self._pages.get(client)
+        return page is not None and page.link.slow
+
+    def link_state(self, client: int) -> dict[str, float] | None:
+        """Page ``client``'s link: bytes in flight, budget, last round trip, slow (or None)."""
+        with self._lock:
+            page = self._pages.get(client)
+        if page is None:
+            return None
+        link = page.link
+        return {"in_flight": link.in_flight, "budget": link.budget, "rtt": link.rtt, "slow": link.slow,
+                "sent": link.sent_bytes, "answers": link.answers}
 
     def declare_gone(self, client: int, silent_for: float) -> None:
         """Page ``client`` stopped answering: tell the console, then close its socket."""
@@ -440,13 +595,22 @@ class PageGuard:
         """Drop page ``client``'s TCP connection at once (no closing handshake to wait for)."""
         with self._lock:
             page = self._pages.get(client)
-        if page is None or page.ws is None or self.server is None:
+        loop = self.loop
+        if page is None or page.ws is None or loop is None:
             return
-        loop = self.server._websock_server._background_event_loop
         try:
             loop.call_soon_threadsafe(page.ws.transport.abort)
         except RuntimeError:
             pass  # the server's loop has stopped
+
+
+def _heartbeat_seq(uid: object) -> int | None:
+    """The request number of a heartbeat request's uuid (None: not a heartbeat's)."""
+    if isinstance(uid, str) and uid.startswith(_HB_PREFIX):
+        tail = uid[len(_HB_PREFIX):]
+        if tail.isdigit() and len(tail) < 19:
+            return int(tail)
+    return None
 
 
 def _short(text: object, n: int = 60) -> str:

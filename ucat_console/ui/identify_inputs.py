@@ -26,10 +26,13 @@ class IdentifyInputs:
     """The Session tab's identification folder of one page (module docstring)."""
 
     def __init__(self, gui: Any, sup: Any, cid: int, directory: Any,
-                 show: Callable[..., None], changed: Callable[[], None]) -> None:
+                 show: Callable[..., None], changed: Callable[[], None],
+                 sessions: Callable[[], list[index.SessionInfo]] | None = None) -> None:
+        """``sessions()``: the sessions folder's listing (default: read it each time)."""
         self.sup = sup
         self.cid = cid
         self.directory = directory
+        self._sessions = sessions or (lambda: index.list_sessions(self.directory))
         self._show = show  # a message on the page
         self._changed = changed  # ask the page to refresh
         self.report: IdentifyReport | None = None
@@ -63,7 +66,7 @@ class IdentifyInputs:
         self._show("identification manoeuvre stopped")
 
     def list_sessions(self) -> None:
-        names = tuple(s.session_id for s in index.list_sessions(self.directory) if not s.truncated)
+        names = tuple(s.session_id for s in self._sessions() if not s.truncated)
         current = self.session.value
         self.session.options = names or (NO_SESSION,)
         run = self.sup.manoeuvre

@@ -13,6 +13,8 @@ page does on its own:
   does meanwhile (the configured pilot-gone failsafe, as last told by the server), and the
   bar shows its last state greyed with a question mark (nothing in it is live); both go
   with the next state.
+* **Link slow**: the server says when this page's link is too slow for the telemetry
+  (:mod:`ucat_console.ui.link`); the bar then shows "LINK SLOW: updates thinned" in amber.
 * **Number boxes**: viser sends nothing for a number box left empty or holding text that is
   no number; on leaving such a box the page puts back the number it held.
 * **DISARM** (the bar's button, and the Esc key through the console's command) and the
@@ -61,7 +63,10 @@ INSTALL = r"""
       overflow: hidden; text-overflow: ellipsis; }
     #ucat-bar .armed.stale { background: #6b7280; }
     #ucat-bar .rec { color: #ff5c5c; font-weight: 700; }
+    #ucat-bar .rec-failed { color: #fff; background: #b91c1c; padding: 2px 8px; border-radius: 3px; cursor: help; }
     #ucat-bar .fs { color: #fff; background: #b45309; padding: 2px 8px; border-radius: 3px; font-weight: 700; }
+    #ucat-bar #ucat-link.slow { color: #111; background: #f59e0b; padding: 2px 8px; border-radius: 3px;
+      font-weight: 700; }
     #ucat-bar .light-dot { display: inline-flex; align-items: center; gap: 4px; margin-right: 6px; cursor: help; }
     #ucat-bar .dot { width: 11px; height: 11px; border-radius: 50%%; display: inline-block; }
     #ucat-bar .dot.ok { background: #22c55e; } #ucat-bar .dot.warn { background: #f59e0b; }
@@ -85,6 +90,7 @@ INSTALL = r"""
   const bar = el("div"); bar.id = "ucat-bar";
   const armed = el("span", "armed off", "DISARMED"); armed.id = "ucat-armed";
   const info = el("span", "item"); info.id = "ucat-info";
+  const link = el("span", "item", "link ok"); link.id = "ucat-link";
   const rec = el("span", "rec"); rec.id = "ucat-rec";
   const fs = el("span", "fs"); fs.id = "ucat-failsafes"; fs.style.display = "none";
   const lights = el("span", "item"); lights.id = "ucat-lights";
@@ -93,7 +99,7 @@ INSTALL = r"""
   const theme = el("button", "", "theme"); theme.id = "ucat-theme"; theme.title = "dark / light (this browser)";
   const disarm = el("button", "", "DISARM"); disarm.id = "ucat-disarm"; disarm.disabled = true;
   disarm.title = "motors off now (key: Esc)";
-  bar.append(armed, info, rec, fs, lights, battery, grow, theme, disarm);
+  bar.append(armed, info, link, rec, fs, lights, battery, grow, theme, disarm);
   const banner = el("div"); banner.id = "ucat-banner";
   const install = () => { if (!document.body) return setTimeout(install, 50);
     document.body.append(bar, banner); document.body.classList.add("ucat-has-bar"); };
@@ -122,6 +128,7 @@ INSTALL = r"""
         armed.className = "armed stale";
         armed.title = "last known state: the link is lost";
         info.textContent = `mode ${s.mode}  ·  pilot: ${s.pilot}  ·  LINK LOST`;
+        link.textContent = ""; link.className = "item";
       }
       disarm.disabled = true;
     }
@@ -131,8 +138,13 @@ INSTALL = r"""
     armed.textContent = s.armed ? "ARMED" : "DISARMED";
     armed.className = "armed " + (s.armed ? "on" : "off");
     armed.title = "";
-    info.textContent = `mode ${s.mode}  ·  pilot: ${s.pilot}  ·  link ok`;
-    rec.textContent = s.recording ? `● REC ${s.recording}` : "";
+    info.textContent = `mode ${s.mode}  ·  pilot: ${s.pilot}  ·`;
+    link.textContent = s.link_slow ? "LINK SLOW: updates thinned" : "link ok";
+    link.className = "item" + (s.link_slow ? " slow" : "");
+    link.title = s.link_slow ? "this page reads slower than the console sends: it gets the newest poses "
+      + "and plots, not every one; heartbeats and this bar go first" : "";
+    rec.textContent = s.recording_failed ? "● REC FAILED" : (s.recording ? `● REC ${s.recording}` : "");
+    rec.className = "rec" + (s.recording_failed ? " rec-failed" : ""); rec.title = s.recording_failed || "";
     fs.style.display = s.failsafes.length ? "inline" : "none";
     fs.textContent = s.failsafes.length ? "FAILSAFE " + s.failsafes.join(", ") : "";
     lights.textContent = "";

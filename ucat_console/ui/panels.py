@@ -8,6 +8,12 @@ to a supervisor command, which checks who asks and the value before anything cha
 refused command shows its reason on that page (a message line and a notification) and
 the inputs return to the values in force.
 
+The pilot's safety commands (DISARM, the Esc key, the Space key's stop) are registered with
+the page guard as *urgent*: they run on the guard's own thread, never behind other pages'
+callbacks. Listing the sessions (for the identification) is a job of the console's
+:class:`~ucat_console.ui.page_jobs.PageJobs`. A page that closes while one of its callbacks
+runs is not an error: what the callback would still show goes nowhere, quietly.
+
 Values typed into inputs are drafts until applied ("Apply setpoints", "Apply tuning"),
 so a half-typed number never reaches the robot. The tuning inputs are built from the
 typed configuration: :data:`~ucat_console.backend.supervisor.TUNABLE` names the fields,
@@ -52,10 +58,11 @@ class ControlPanel:
     def __init__(self, app: ConsoleApp, client_id: int, gui: Any, client: Any = None,
                  containers: dict[str, Any] | None = None,
                  allow: Callable[..., None] | None = None) -> None:
-        """``allow(handle, pilot_only, max_len)`` tells the page guard which inputs this page
-        may set (the page's own, pilot-only ones only while it is the pilot's)."""
+        """``allow(handle, pilot_only, max_len, urgent)`` tells the page guard which inputs this
+        page may set (the page's own, pilot-only ones only while it is the pilot's; ``urgent``:
+        a safety command's action, run by the guard)."""
         self.app = app
-        self._allow = allow or (lambda handle, pilot_only, max_len=200: None)
+        self._allow = allow or (lambda handle, pilot_only, max_len=200, urgent=None: None)
         self.sup = app.sup
         self.cid = client_id
         self.gui = gui
@@ -128,9 +135,11 @@ class ControlPanel:
                 self.note = gui.add_text("Marker note", "")
                 self.marker = gui.add_button("Add marker", hint="or press M")
                 self.follow = gui.add_checkbox("Follow the robot", True, hint="the 3-D view keeps the robot in view")
+            listing = getattr(app, "session_list", None)
             self.identify = IdentifyInputs(gui, sup, client_id, getattr(app, "sessions_dir", None) or
                                            sup.recorder.directory, self.show,
-                                           getattr(app, "request_refresh", lambda: None))
+                                           getattr(app, "request_refresh", lambda: None),
+                                           sessions=(lambda: listing.sessions()) if listing is not None else None)
             with gui.add_folder("Events", order=30.0):
                 self.severity = gui.add_dropdown("Show", tuple(SEVERITY_FILTERS), initial_value="warnings and errors",
                                                  hint="which events the list shows")
@@ -171,7 +180,8 @@ class ControlPanel:
         allow = self._allow
         for h in (self.token, self.take):
             allow(h, False)
-        pilot = [self.release, self.handover, self.decline, self.arm, self.disarm, self.mode,
+        allow(self.disarm, True, urgent=self._disarm_now)
+        pilot = [self.release, self.handover, self.decline, self.arm, self.mode,
                  *self.sp_inputs.values(), self.apply_sp, self.apply_tuning, self.revert, self.save,
                  *self.params.values(), self.history, self.rec_start, self.rec_stop, self.marker,
                  self.reset_drives, self.zero_depth, *self.identify.handles()]
@@ -186,8 +196,18 @@ class ControlPanel:
             allow(h, False, MAX_NAME if h is self.name else 200)
         guard = getattr(self.app, "guard", None)
         if guard is not None and self.client is not None:
-            for cmd in (self.marker_key, self.stop_key, self.disarm_key, *self.key_commands.values()):
+            for cmd in (self.marker_key, *self.key_commands.values()):
                 guard.allow_command(cmd, self.cid, pilot_only=True)
+            guard.allow_command(self.disarm_key, self.cid, pilot_only=True, urgent=self._disarm_now)
+            guard.allow_command(self.stop_key, self.cid, pilot_only=True, urgent=self._stop_now)
+
+    def _disarm_now(self) -> None:
+        """DISARM from this page (the page guard's safety thread, or viser's callback)."""
+        self.act(lambda: self.sup.disarm(self.cid, "operator"))
+
+    def _stop_now(self) -> None:
+        """The Space key: velocity and yaw rate 0 (as the page guard's safety command)."""
+        self.act(self.driving.stop)
 
     # ------------------------------------------------------------------ callbacks
     def _wire(self) -> None:
@@ -197,7 +217,7 @@ class ControlPanel:
         self.handover.on_click(self._guard(lambda: sup.hand_over(cid, sup.access.pending)))  # type: ignore[arg-type]
         self.decline.on_click(self._guard(lambda: sup.decline(cid)))
         self.arm.on_click(self._guard(self._request_arm))
-        self.disarm.on_click(self._guard(lambda: sup.disarm(cid, "operator")))
+        self.disarm.on_click(self._guard(self._disarm_now, direct=True))
         self.mode.on_update(self._guard(lambda: sup.set_mode(cid, self.mode.value)))
         self.apply_sp.on_click(self._guard(self._apply_setpoints))
         self.apply_tuning.on_click(self._guard(self._apply_tuning, tuning=True))
@@ -210,11 +230,11 @@ class ControlPanel:
         self.marker_key.on_trigger(self._guard(self._add_marker))
         for key, cmd in self.key_commands.items():
             cmd.on_trigger(self._guard(lambda k=key: self.driving.step(k)))
-        self.stop_key.on_trigger(self._guard(self.driving.stop))
-        self.disarm_key.on_trigger(self._guard(lambda: sup.disarm(cid, "operator")))
+        self.stop_key.on_trigger(self._guard(self._stop_now, direct=True))
+        self.disarm_key.on_trigger(self._guard(self._disarm_now, direct=True))
         self.drive_input.on_update(self._guard(lambda: self.driving.gamepad(self.drive_input.value)))
         self.name.on_update(self._guard(lambda: sup.access.set_name(cid, self.name.value)))
-        self.severity.on_update(lambda _: self.show_events(force=True))
+        self.severity.on_update(self._quiet(lambda _: self.show_events(force=True)))
         self.theme_button.on_click(self._guard(self._toggle_theme))
         if self.reset_drives is not None:
             self.reset_drives.on_click(self._guard(self._reset_drive_faults))
@@ -226,31 +246,62 @@ class ControlPanel:
         ident.use.on_click(self._guard(ident.use_fit, tuning=True))
         if self.faults is not None:
             f = self.faults
-            f.device.on_update(lambda _: f.show_faults_of_device())
+            f.device.on_update(self._quiet(lambda _: f.show_faults_of_device()))
             f.inject.on_click(self._guard(self._inject_fault))
             f.clear.on_click(self._guard(self._clear_faults))
 
-    def _guard(self, fn: Callable[[], Any], tuning: bool = False) -> Callable[[Any], None]:
-        """A viser callback: page events only (not values set from code), refusals shown."""
+    def _guard(self, fn: Callable[[], Any], tuning: bool = False, direct: bool = False) -> Callable[[Any], None]:
+        """A viser callback: page events only (not values set from code), refusals shown;
+        ``direct``: ``fn`` runs the command itself (through :meth:`act`)."""
 
         def cb(event: Any) -> None:
             if getattr(event, "client_id", None) is None and getattr(event, "client", None) is None:
                 return  # a value set from code
-            self.act(fn, tuning)
+            if direct:
+                fn()
+            else:
+                self.act(fn, tuning)
 
         return cb
+
+    def present(self) -> bool:
+        """Whether this page is still connected (viser forgets a page before it removes the
+        page's elements, so a page whose element was removed under a callback is gone here)."""
+        present = getattr(self.app, "page_present", None)
+        return present is None or present(self.cid)
+
+    def _quiet(self, cb: Callable[[Any], None]) -> Callable[[Any], None]:
+        """A viser callback that, when its page closed under it, ends without an error."""
+
+        def run(event: Any) -> None:
+            try:
+                cb(event)
+            except Exception:
+                if self.present():
+                    raise
+                log.debug("client %s left during a callback", self.cid, exc_info=True)
+
+        return run
 
     def act(self, fn: Callable[[], Any], tuning: bool = False) -> bool:
         """Run one command for this page; a refusal is shown and the inputs reverted."""
         try:
-            fn()
-        except REFUSALS as e:
-            self.show(str(e), error=True, tuning=tuning)
-            self.refresh(force=True)
-            return False
-        except Exception as e:  # a bug must not kill the page's callbacks silently
-            log.exception("command from client %s failed", self.cid)
-            self.show(f"internal error: {e}", error=True, tuning=tuning)
+            try:
+                fn()
+            except REFUSALS as e:
+                self.show(str(e), error=True, tuning=tuning)
+                self.refresh(force=True)
+                return False
+            except Exception as e:  # a bug must not kill the page's callbacks silently
+                if not self.present():
+                    raise
+                log.exception("command from client %s failed", self.cid)
+                self.show(f"internal error: {e}", error=True, tuning=tuning)
+                return False
+        except Exception:
+            if self.present():
+                raise
+            log.debug("client %s left during a command", self.cid, exc_info=True)
             return False
         self.app.request_refresh()
         return True
@@ -259,9 +310,14 @@ class ControlPanel:
         self.messages.append(text)
         stamp = time.strftime("%H:%M:%S")
         shown = f"{stamp} " + ("**Refused:** " if error else "") + esc(text)
-        (self.tuning_message if tuning else self.message).content = shown
-        if tuning:
-            self.message.content = shown
+        try:
+            (self.tuning_message if tuning else self.message).content = shown
+            if tuning:
+                self.message.content = shown
+        except RuntimeError:  # the page has gone, and its elements with it
+            if self.present():
+                raise
+            return
         if error and self.client is not None:
             try:
                 self.client.add_notification("Refused", text, color="red", auto_close_seconds=8.0)
@@ -408,10 +464,13 @@ class ControlPanel:
         for h in (self.apply_sp, self.apply_tuning, self.revert, self.save, self.history, self.note, self.marker,
                   self.marker_key, self.stop_key, self.disarm_key, *self.key_commands.values()):
             self._set_prop(h, "disabled", not pilot)
+        failed = sup.recorder.failed
         self._set_prop(self.rec_start, "disabled", not pilot or recording)
-        self._set_prop(self.rec_stop, "disabled", not pilot or not recording)
+        self._set_prop(self.rec_stop, "disabled", not pilot or not (recording or failed))
         self._push("history", self.history, float(self.app.history), force)
-        _set(self.rec_status, f"Recording **{esc(sup.recorder.session_id)}**" if recording else "Not recording")
+        _set(self.rec_status, f"**Recording FAILED:** {esc(failed)}. Start recording again once there is space "
+                              "(a new session), or Stop recording to acknowledge." if failed
+             else f"Recording **{esc(sup.recorder.session_id)}**" if recording else "Not recording")
         if self.reset_drives is not None:
             self._set_prop(self.reset_drives, "disabled", not pilot or armed)
             self._set_prop(self.zero_depth, "disabled", not pilot or armed)
@@ -419,10 +478,17 @@ class ControlPanel:
             self.faults.enable(pilot)
         run = sup.manoeuvre
         listed = (recording, run is not None and run.finished)
-        if force or listed != self._listed:  # a recording ended: it may be fitted
+        if force or listed != self._listed:  # a recording ended: it may be fitted (listed by the page jobs)
             self._listed = listed
-            self.identify.list_sessions()
+            jobs = getattr(self.app, "jobs", None)
+            if jobs is None:
+                self.identify.list_sessions()
+            else:
+                jobs.submit(self.cid, "list sessions to fit", self._list_sessions, coalesce=True)
         self.identify.refresh(pilot)
+
+    def _list_sessions(self) -> None:
+        self._quiet(lambda _: self.identify.list_sessions())(None)
 
     @staticmethod
     def _set_prop(handle: Any, name: str, value: Any) -> None:

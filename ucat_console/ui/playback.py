@@ -31,6 +31,12 @@ thread plays; a small UI thread here pushes the review scene (on each new body s
 most ``scene_rate``), the plots (at ``plot_rate``) and the timeline and status (4 Hz)
 while a session is open.
 
+What reads session files (listing, opening, repairing, seeking, stepping back, jumping to an
+event, starting a replay) does not run in the page's callback: the callback hands it to the
+console's :class:`~ucat_console.ui.page_jobs.PageJobs` (``jobs``), which runs a page's jobs one
+at a time and rations them; one asked for too soon is refused with the reason shown on the
+page. The sessions' listing is the console's shared :class:`~ucat_console.ui.session_list.SessionList`.
+
 A counterfactual replay runs in a child process at a lower CPU priority
 (:class:`~ucat_console.backend.sessions.replay_job.ReplayJob`), one at a time per console
 (the console's :class:`~ucat_console.backend.sessions.replay_job.ReplaySlot`), with its
@@ -53,7 +59,7 @@ from typing import Any, Callable
 
 from viser._messages import GuiSliderMark
 
-from ucat_console.backend.sessions import files, index, repair
+from ucat_console.backend.sessions import files, index, repair, shared
 from ucat_console.backend.sessions.markers import MAX_NOTE_BYTES, Marker, check_note
 from ucat_console.backend.sessions.player import MAX_SPEED, MIN_SPEED, Player, check_speed
 from ucat_console.backend.sessions.reader import SessionParts, part_paths
@@ -116,9 +122,18 @@ class PlaybackPanel:
         replay_slot: ReplaySlot | None = None,
         may_replay: Callable[[], bool | None] = lambda: None,
         plot_height: int = 170,
+        jobs: Callable[[str, Callable[[], Any], bool], str | None] | None = None,
+        present: Callable[[], bool] = lambda: True,
+        sessions: Callable[[], list[index.SessionInfo]] | None = None,
     ) -> None:
+        """``jobs(what, job, coalesce)``: queue an action that reads files (None when queued,
+        else why not; None: run it in the callback); ``present()``: whether the page is
+        still connected; ``sessions()``: the folder's listing (default: read it each time)."""
         self.directory = files.sessions_dir(directory)
         self.gui = gui
+        self.jobs = jobs
+        self.present = present
+        self._sessions = sessions or (lambda: index.list_sessions(self.directory))
         self.replay_slot = replay_slot if replay_slot is not None else ReplaySlot()
         self.may_replay = may_replay
         self.job: ReplayJob | None = None
@@ -140,7 +155,7 @@ class PlaybackPanel:
                 scene, gui, geometry, plot_rate=plot_rate, scene_rate=scene_rate, max_plot_points=max_plot_points,
                 history=history, max_history=max_history, corridor=corridor, trail_points=trail_points,
                 trail_spacing=trail_spacing, root=REVIEW_ROOT, sample_rows=False, on_slow=self._tick_slow,
-                plot_height=plot_height, name="review",
+                plot_height=plot_height, name="review", present=present,
             )
         self.sampler = self.view.sampler
         self.feeder = self.view.feeder
@@ -195,42 +210,68 @@ class PlaybackPanel:
                 allow(h, False)
             allow(self.note, False, MAX_NOTE_BYTES)
             allow(self.weights, False, 500)
-        self.refresh_sessions()
+        if jobs is None:
+            self.refresh_sessions()
+        else:
+            jobs("Refresh list", lambda: self.act(self.refresh_sessions), True)
         self._set_enabled()
 
     # ------------------------------------------------------------------ callbacks
     def _wire(self) -> None:
-        self.refresh_list.on_click(self._page(self.refresh_sessions))
-        self.open_button.on_click(self._page(lambda: self.open(self.choice.value)))
-        self.repair_button.on_click(self._page(lambda: self.repair(self.choice.value)))
+        self.refresh_list.on_click(self._job("Refresh list", self.refresh_sessions))
+        self.open_button.on_click(self._job("Open", lambda: self.open(self.choice.value)))
+        self.repair_button.on_click(self._job("Repair", lambda: self.repair(self.choice.value)))
         self.close_button.on_click(self._page(self.close_session))
-        self.timeline.on_update(self._page(lambda: self.seek(self.timeline.value)))
+        # a dragged timeline: the latest position wins
+        self.timeline.on_update(self._job("Seek", lambda: self.seek(self.timeline.value), coalesce=True))
         self.play_button.on_click(self._page(self.play))
         self.pause_button.on_click(self._page(self.pause))
         self.speed.on_update(self._page(lambda: self.set_speed(self.speed.value)))
         self.loop.on_update(self._page(lambda: self.set_loop(self.loop.value)))
-        self.step_back.on_click(self._page(lambda: self.step(-1)))
+        self.step_back.on_click(self._job("Frame back", lambda: self.step(-1)))
         self.step_fwd.on_click(self._page(lambda: self.step(1)))
-        self.prev_button.on_click(self._page(self.prev_event))
-        self.next_button.on_click(self._page(self.next_event))
+        self.prev_button.on_click(self._job("Previous event", self.prev_event))
+        self.next_button.on_click(self._job("Next event", self.next_event))
         self.marker_button.on_click(self._page(lambda: self.add_marker(self.note.value)))
-        self.replay_button.on_click(self._page(lambda: self.run_counterfactual(self.weights.value)))
+        self.replay_button.on_click(self._job("Replay", lambda: self.run_counterfactual(self.weights.value)))
         self.cancel_button.on_click(self._page(self.cancel_counterfactual))
 
     def _page(self, fn: Callable[[], Any]) -> Callable[[Any], None]:
         return from_page(fn, self.act)
 
+    def _job(self, what: str, fn: Callable[[], Any], coalesce: bool = False) -> Callable[[Any], None]:
+        """A callback handing ``fn`` to the console's page jobs (refused: the reason shown)."""
+        jobs = self.jobs
+        if jobs is None:
+            return self._page(fn)
+
+        def submit(f: Callable[[], Any]) -> None:
+            why = jobs(what, lambda: self.act(f), coalesce)
+            if why is not None:
+                self.act(lambda: self.show(why, error=True))
+
+        return from_page(fn, submit)
+
     def act(self, fn: Callable[[], Any]) -> bool:
-        """Run one command; a refusal (ValueError) is shown and the inputs show the state."""
+        """Run one command; a refusal (ValueError) is shown and the inputs show the state.
+        When the page has gone meanwhile, nothing is shown and nothing is an error."""
         try:
-            fn()
-        except (ValueError, RuntimeError, OSError) as e:
-            self.show(str(e), error=True)
-            self._sync_inputs()
-            return False
-        except Exception as e:
-            log.exception("playback command failed")
-            self.show(f"internal error: {e}", error=True)
+            try:
+                fn()
+            except (ValueError, RuntimeError, OSError) as e:
+                self.show(str(e), error=True)
+                self._sync_inputs()
+                return False
+            except Exception as e:
+                if not self.present():
+                    raise
+                log.exception("playback command failed")
+                self.show(f"internal error: {e}", error=True)
+                return False
+        except Exception:
+            if self.present():
+                raise
+            log.debug("a page left during a review command", exc_info=True)
             return False
         return True
 
@@ -241,7 +282,7 @@ class PlaybackPanel:
     # ------------------------------------------------------------------ browser
     def refresh_sessions(self) -> list[index.SessionInfo]:
         """List the sessions (the table shows every part; the chooser, the sessions)."""
-        sessions = index.list_sessions(self.directory)
+        sessions = self._sessions()
         self.browser.content = sessions_markdown(sessions)
         names = tuple(s.session_id for s in sessions) or ("",)
         current = self.choice.value
@@ -289,11 +330,12 @@ class PlaybackPanel:
         """Open a session for review at its start (paused): every part of the session named
         by its id or by any one of its part files."""
         target: str | Path = self._path(name) if self._name(name).endswith(files.SUFFIX) else name
-        reader = SessionParts(target, self.directory)  # a truncated part: TruncatedSessionError
+        reader = shared.acquire(target, self.directory)  # a truncated part: TruncatedSessionError
         try:
-            player = Player(reader, self.stream, speed=self._speed, loop=bool(self.loop.value))
+            player = Player(reader, self.stream, speed=self._speed, loop=bool(self.loop.value),
+                            on_error=self._play_failed)
         except BaseException:
-            reader.close()
+            shared.release(reader)
             raise
         self.close_session(quiet=True)
         with self._lock:
@@ -323,8 +365,15 @@ class PlaybackPanel:
         if player is not None:
             player.close()
         if reader is not None:
-            reader.close()
+            shared.release(reader)
         return player is not None
+
+    def _play_failed(self, text: str) -> None:
+        """The player stopped on a failure (its thread): the page shows why."""
+        try:
+            self.show(f"playback stopped: {text}", error=True)
+        except Exception:
+            log.debug("a playback failure was not shown", exc_info=True)
 
     def close_session(self, quiet: bool = False) -> None:
         was_open = self._let_go()
@@ -531,8 +580,9 @@ class PlaybackPanel:
 
     def _mark_events(self, reader: Any) -> None:
         """Ticks on the timeline at the session's warnings and errors (and markers)."""
-        start = reader.start
-        times = sorted({round(e.t - start, 2) for e in reader.events() if e.level in ("warning", "error", "fatal")})
+        start = reader.start_ns
+        times = sorted({round((ns - start) * 1e-9, 2)
+                        for ns in reader.event_index().at_levels(("warning", "error", "fatal"))})
         if len(times) > MAX_TIMELINE_MARKS:  # keep the slider readable
             step = len(times) / MAX_TIMELINE_MARKS
             times = [times[int(i * step)] for i in range(MAX_TIMELINE_MARKS)]
@@ -565,7 +615,7 @@ class PlaybackPanel:
         if self.loop.value != p.loop:
             self.loop.value = p.loop
         r = self.reader
-        state = "playing" if p.playing else "paused"
+        state = "playing" if p.playing else "**stopped on an error** (below)" if p.error else "paused"
         name = ""
         if r is not None:
             name = r.session_id

@@ -16,7 +16,7 @@ from ucat_console.backend.safety import SENSORS
 
 #: the lights, in the bar's order: sensor or part -> label
 LIGHTS = {"imu": "IMU", "dvl": "DVL", "depth": "Depth", "drives": "Drives", "planner": "Planner",
-          "control": "Control"}
+          "control": "Control", "recording": "Recording"}
 MODE_LABELS = {"mpc": "MPC", "mpc_sync": "MPC sync", "baseline": "baseline"}
 ACTIONS = {"hold": "stops and holds its depth", "surface": "stops and rises to the surface",
            "disarm": "turns its motors off", "warn": "goes on (warn only)"}
@@ -40,11 +40,11 @@ def lights(sup: Any, loading: str = "") -> list[Light]:
     out: list[Light] = []
     for sensor in SENSORS:
         rule = safety.rule(sensor)
-        quiet, invalid = safety.sensor_silence(sensor, now)
+        quiet, what = safety.sensor_silence(sensor, now)
         if sensor in active:
             out.append(Light(LIGHTS[sensor], "bad", f"failsafe {sensor}: {active[sensor].cause}"))
-        elif quiet > 0.5 * rule.timeout or invalid:
-            what = f"{invalid} invalid readings" if invalid else "no reading"
+        elif quiet > 0.5 * rule.timeout or what:
+            what = what or "no reading"
             out.append(Light(LIGHTS[sensor], "warn", f"{what} for {quiet:.1f} s (failsafe after {rule.timeout:g} s)"))
         else:
             out.append(Light(LIGHTS[sensor], "ok", f"valid reading {quiet:.2f} s ago"))
@@ -71,7 +71,18 @@ def lights(sup: Any, loading: str = "") -> list[Light]:
             f" ({overruns} plans since the start were ready after their hand-over deadline; "
             "a fin then starts its stroke a little later)" if overruns else "")))
     out.append(control_light(safety, active))
+    out.append(recording_light(sup))
     return out
+
+
+def recording_light(sup: Any) -> Light:
+    """Whether what the robot does is recorded: red when the recorder failed to write."""
+    failed = sup.recording.failed
+    if failed:
+        return Light(LIGHTS["recording"], "bad", f"recording FAILED: {failed}; Start recording again once "
+                     "there is space, or Stop recording to acknowledge")
+    sid = sup.recording.session_id
+    return Light(LIGHTS["recording"], "ok" if sid else "off", f"recording {sid}" if sid else "not recording")
 
 
 def control_light(safety: Any, active: dict[str, Any]) -> Light:
@@ -89,8 +100,10 @@ def control_light(safety: Any, active: dict[str, Any]) -> Light:
 def link_policy(sup: Any) -> str:
     """What the robot does when the pilot's page is lost, as the banner says it."""
     rule = sup.cfg.failsafe.pilot_gone
+    then = (f", and {ACTIONS.get(rule.escalate, rule.escalate)} {rule.escalate_after:g} s later if no pilot "
+            f"has taken control (then: {rule.escalate})" if rule.escalates else "")
     return (f"If this page was the pilot's, the robot {ACTIONS.get(rule.action, rule.action)} "
-            f"{rule.timeout:g} s after the page's last answer (failsafe pilot_gone: {rule.action}). "
+            f"{rule.timeout:g} s after the page's last answer (failsafe pilot_gone: {rule.action}){then}. "
             "Reload the page when the link is back; the token is needed again.")
 
 
@@ -104,18 +117,22 @@ def pilot_label(sup: Any, client: int | None) -> str:
     return f"{name} (client {p})" if name else f"client {p}"
 
 
-def bar_state(sup: Any, client: int | None, *, dark: bool, uuids: dict[str, str], loading: str = "") -> dict[str, Any]:
-    """The bar's state for page ``client`` (JSON-ready)."""
+def bar_state(sup: Any, client: int | None, *, dark: bool, uuids: dict[str, str], loading: str = "",
+              link_slow: bool = False) -> dict[str, Any]:
+    """The bar's state for page ``client`` (JSON-ready); ``link_slow``: the page's link is
+    slow and its telemetry thinned (:mod:`ucat_console.ui.link`)."""
     return {
         "armed": bool(sup.armed),
         "mode": MODE_LABELS.get(sup.mode, sup.mode),
         "pilot": pilot_label(sup, client),
         "you_pilot": client is not None and sup.access.is_pilot(client),
         "recording": sup.recording.session_id,
+        "recording_failed": sup.recording.failed,
         "failsafes": list(sup.safety.active()) + ([f"loop stopped: {sup.fault}"] if sup.fault else []),
         "lights": [x.as_dict() for x in lights(sup, loading)],
         "battery": "no battery sensor",
         "link_policy": link_policy(sup),
+        "link_slow": bool(link_slow),
         "dark": bool(dark),
         **uuids,
     }

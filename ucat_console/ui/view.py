@@ -113,7 +113,8 @@ class StreamView:
                  corridor: Callable[[], tuple[float, float]], trail_points: int, trail_spacing: float,
                  root: str = LIVE_ROOT, sample_rows: bool = True, atomic: Callable[[], Any] | None = None,
                  on_slow: Callable[[], None] | None = None, on_tick: Callable[[], None] | None = None,
-                 on_pose: Callable[[], None] | None = None, plot_height: int = 170, name: str = "view") -> None:
+                 on_pose: Callable[[], None] | None = None, plot_height: int = 170, name: str = "view",
+                 present: Callable[[], bool] = lambda: True) -> None:
         self.scene_api = scene
         self.geometry = geometry
         self.plot_rate = float(plot_rate)
@@ -126,6 +127,7 @@ class StreamView:
         self.on_tick = on_tick
         self.on_pose = on_pose
         self.name = name
+        self.present = present  # whether the page it draws on is still there (a review's)
         self.sample_rows = sample_rows
         self.scene: RobotScene | None = None
         self.body: BodyState | None = None
@@ -263,6 +265,10 @@ class StreamView:
                     if self.on_tick is not None:
                         self.on_tick()
             except Exception:
+                if not self.present():  # its page closed under it: nothing to draw on
+                    log.debug("%s: the page has gone", self.name, exc_info=True)
+                    self._stop.wait(_TICK)
+                    continue
                 self.tick_errors += 1
                 log.exception("%s update failed", self.name)
             # wake when something is due, not to poll (each wake-up costs CPU): before the

@@ -1,14 +1,20 @@
-"""The places where the console hooks into viser: the page guard's two, and those that save CPU.
+"""The places where the console hooks into viser: the page guard's, and those that save CPU.
 
-viser has no hook for a websocket handshake check or for its incoming messages, so
-:func:`install` replaces two names in viser's websocket module (once, for the process):
+viser has no hook for a websocket handshake check, for its incoming messages or for pacing
+what a page is sent, so :func:`install` replaces names in viser's websocket module (once,
+for the process):
 
 * the ``websockets`` serve call: for a server made by :func:`guarded_server`, every
   websocket upgrade goes through the guard's handshake check first, and frames are
   limited to :data:`ucat_console.ui.guard.MAX_FRAME` bytes;
 * the per-connection message consumer: for such a server, every message is decoded here
   and handed to viser only when the guard admits it (an undecodable one is refused, not
-  a traceback that closes the connection).
+  a traceback that closes the connection), and not at all when it is one of the pilot's
+  safety commands, which the guard runs on its own thread (``PageGuard.take_urgent``);
+* the per-page sender (below): for such a server, a page is sent telemetry only while its
+  link has room (``PageGuard.wait_room``, :mod:`ucat_console.ui.link`), and a page on a
+  slow link gets its batches in parts, thinned (:func:`_send_thinned`). :func:`encode_frame` makes the
+  frames the guard sends ahead of the telemetry (heartbeat requests, the status bar).
 
 Servers made any other way are left exactly as viser makes them.
 
@@ -46,11 +52,16 @@ The frame's ``timestampSec`` (the page paces its updates by it) is then the firs
 And a frame's messages are put in their wire form by a converter made once per message
 class (:func:`_wire_form`) instead of viser's per-value type dispatch: the same dicts and
 arrays, checked against viser's own for every message a console session sends.
+
+And (thread safety) every message buffer's event is a :class:`_LoopEvent`, set only in the
+event loop's thread: viser set it from whichever thread queued a message, which raced the
+loop ("deque mutated during iteration").
 """
 
 from __future__ import annotations
 
 import asyncio
+import itertools
 import threading
 import time
 import types
@@ -145,7 +156,7 @@ def install() -> None:
             except Exception as e:  # not a viser message
                 guard.refuse(client, f"an undecodable message ({type(e).__name__})")
                 continue
-            if guard.admit(client, message):
+            if guard.admit(client, message) and not guard.take_urgent(client, message):
                 handle_message(message)
 
     server_ns = types.SimpleNamespace(**{k: getattr(real_ws.asyncio.server, k)
@@ -163,13 +174,42 @@ def install() -> None:
 
 
 def _without_window_wait(real_init: Any) -> Any:
-    """``AsyncMessageBuffer.__init__`` with a window duration of 0 (module docstring)."""
+    """``AsyncMessageBuffer.__init__`` with a window duration of 0 (module docstring), and
+    a :class:`_LoopEvent` for its message event."""
 
     def __init__(self: Any, *args: Any, **kwargs: Any) -> None:
         real_init(self, *args, **kwargs)
         self.window_duration_sec = 0.0
+        self.message_event = _LoopEvent(self.event_loop)
 
     return __init__
+
+
+class _LoopEvent(asyncio.Event):
+    """An ``asyncio.Event`` whose ``set()`` from another thread than its loop's does nothing.
+
+    Why (thread safety): viser's ``AsyncMessageBuffer.push``, called from whichever thread
+    updates the page (the live view's, a callback's), sets its ``message_event`` directly,
+    then once more through ``call_soon_threadsafe``. ``asyncio.Event.set`` walks the event's
+    deque of waiters and completes their futures, which is not thread-safe: when the loop's
+    thread added or removed a waiter meanwhile, the pushing thread got "RuntimeError: deque
+    mutated during iteration" (seen in the live view), and a future completed from another
+    thread schedules its callbacks without waking the loop. Every such direct ``set()`` is
+    followed by the loop-thread one (``push``, ``atomic_end``, ``set_done`` all schedule
+    it), so dropping the direct one loses no wake-up; within the loop's thread ``set()`` is
+    asyncio's own."""
+
+    def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
+        super().__init__()
+        self._home = loop
+
+    def set(self) -> None:
+        try:
+            running = asyncio.get_running_loop()
+        except RuntimeError:
+            running = None
+        if running is self._home:
+            super().set()
 
 
 async def _window_delay(fs: Any, *, timeout: float | None = None) -> tuple[set[Any], set[Any]]:
@@ -186,6 +226,16 @@ async def _window_delay(fs: Any, *, timeout: float | None = None) -> tuple[set[A
 
 #: the frames each broadcast buffer keeps for its other pages' senders (the last few windows)
 _KEPT_FRAMES = 4
+
+
+def compressor() -> Any:
+    """A compressor for :func:`encode_frame` (one per thread that encodes)."""
+    return zstandard.ZstdCompressor(level=1)
+
+
+def encode_frame(messages: Sequence[Any], zstd: Any) -> bytes:
+    """``messages`` as one frame of viser's wire format (the page guard's frames sent ahead)."""
+    return _frame(messages, zstd)
 
 
 def _frame(window: Sequence[Any], zstd: Any) -> bytes:
@@ -295,12 +345,23 @@ async def _sharing_producer(websocket: Any, buffer: Any, client_id: int, backlog
     kept: dict[tuple[int, ...], tuple[Sequence[Any], bytes]] | None = None
     if buffer.persistent_messages:
         kept = buffer.__dict__.setdefault("_ucat_frames", {})
+    # a guarded server's page is sent telemetry only while its link has room (the page
+    # guard's "slow links"): the window is taken from the buffer only then, so what waits
+    # meanwhile is coalesced by viser's buffer to the newest value of each property
+    guard = _GUARDS.get(getattr(websocket, "server", None))
+    page = guard.flow(client_id) if guard is not None else None
+    last_sent: dict[str, int] = {}  # a large update's key -> when it last went (_send_thinned)
     try:
         while not buffer.done:
+            if page is not None:
+                await guard.wait_room(page)
             try:
                 window = await window_generator.__anext__()
             except StopAsyncIteration:
                 break
+            if page is not None and page.link.split and len(window) > 1:
+                await _send_thinned(websocket, buffer, guard, page, window, zstd, last_sent)
+                continue
             if kept is None:
                 data = _frame(window, zstd)
             else:
@@ -314,10 +375,66 @@ async def _sharing_producer(websocket: Any, buffer: Any, client_id: int, backlog
                         del kept[next(iter(kept))]
                 else:
                     data = entry[1]
+            if page is not None:
+                guard.sent(page, len(data))
             await websocket.send(data)
     finally:
         # closed at once, as viser's own sender does: its finally releases the GC cursor
         await window_generator.aclose()
+
+
+#: an update whose frame is over this many bytes goes after the small ones in a thinned batch
+_SMALL_FRAME = 2048
+
+
+async def _send_thinned(websocket: Any, buffer: Any, guard: Any, page: Any, window: Sequence[Any], zstd: Any,
+                        last_sent: dict[str, int]) -> None:
+    """A window for a page on a slow link, sent in parts, each only when the link has room,
+    so that a heartbeat waits behind one part at most: the small messages (the robot's pose and fins) together, in
+    their order, then the large updates (a plot's arrays) one by one, the one sent longest
+    ago first, so that every plot gets its turn. An update a newer one has replaced in
+    viser's buffer meanwhile is not sent (the newer one comes with the next window: the
+    page gets the newest value, not every one). An update followed in the window by another
+    message of its element keeps its place among the small ones."""
+    frames = [(m, _frame((m,), zstd)) for m in window]
+    keys = [m.entity_state_key() for m in window]
+    parts: list[list[tuple[Any, bytes]]] = [[]]  # runs of small messages, and what must keep its place
+    large: list[tuple[Any, bytes]] = []
+    for k, (m, data) in enumerate(frames):
+        if len(data) <= _SMALL_FRAME:
+            parts[-1].append((m, data))
+        elif _is_update(m) and (keys[k] is None or keys[k] not in keys[k + 1:]):
+            large.append((m, data))
+        else:
+            parts += [[(m, data)], []]
+    large.sort(key=lambda md: last_sent.get(md[0].redundancy_key(), -1))
+    parts += [[md] for md in large]
+    for part in parts:
+        await guard.wait_room(page)
+        live = [(m, d) for m, d in part if not _superseded(buffer, m)]
+        if not live:
+            continue
+        data = live[0][1] if len(live) == 1 else _frame(tuple(m for m, _ in live), zstd)
+        guard.sent(page, len(data))
+        await websocket.send(data)
+        if len(live) == 1 and len(data) > _SMALL_FRAME:
+            last_sent[live[0][0].redundancy_key()] = next(_SENT_ORDER)
+
+
+_SENT_ORDER = itertools.count()  # (event-loop thread)
+
+
+def _is_update(message: Any) -> bool:
+    return str(message.lifecycle_phase or "").startswith("update")
+
+
+def _superseded(buffer: Any, message: Any) -> bool:
+    """Whether viser's buffer holds a newer message of the same redundancy key (an update
+    that replaced this one: viser's own coalescing, for a message already taken from it)."""
+    if not _is_update(message):
+        return False
+    newest = buffer.id_from_redundancy_key.get(message.redundancy_key())
+    return newest is not None and buffer.message_from_id.get(newest) is not message
 
 
 class _ModuleView:

@@ -332,3 +332,36 @@ def test_canopen_p402_master_reaches_operation_enabled():
     finally:
         m.close()
         group.close()
+
+
+def test_a_late_tick_sends_the_heartbeat_it_owed_once_stamped_when_due_and_before_its_pdos():
+    """A tick held back by a busy machine: the drive would have sent its heartbeat on time,
+    so the emulator sends the latest one it owed (not a burst of them), stamped with the
+    time it was due, and before the frames of the tick's own time: a reader takes frames in
+    that order and never sees a later frame before the heartbeat that came earlier."""
+    channel = _channel("beat")
+    now = [50.0]
+    group = start_emulated_nodes(channel, [NODE], config=Epos2EmulatorConfig(units=UNITS),
+                                 run_thread=False, clock=lambda: now[0])
+    m = _Master(channel)
+    try:
+        m.node.sdo[0x1017].raw = 100  # heartbeat every 100 ms
+        m.node.nmt.state = "OPERATIONAL"
+        m.node.sdo[0x6041].raw  # round trip: the NMT command has been handled
+        group.tick(now[0])  # the first heartbeat, due at once
+        assert [f for f in m.drain() if f.arbitration_id == 0x700 + NODE]
+        now[0] += 0.35  # the next tick comes 3.5 periods later
+        before = time.time()
+        group.tick(now[0])
+        after = time.time()
+        frames = m.drain()
+        beats = [i for i, f in enumerate(frames) if f.arbitration_id == 0x700 + NODE]
+        pdos = [i for i, f in enumerate(frames) if f.arbitration_id in (0x180 + NODE, 0x280 + NODE)]
+        assert len(beats) == 1 and pdos and beats[0] < min(pdos)
+        assert bytes(frames[beats[0]].data) == bytes([0x05])  # operational
+        # due 0.3 s after the first: 0.05 s before the tick that sent it
+        assert before - 0.05 <= frames[beats[0]].timestamp <= after - 0.05
+        assert group.time == now[0]
+    finally:
+        m.close()
+        group.close()

@@ -67,3 +67,31 @@ def test_reporter_survives_a_failing_sink() -> None:
         raise RuntimeError("sink down")
 
     EventReporter("dvl", broken, FakeClock()).emit("silence", "quiet")  # must not raise
+
+
+def test_an_in_process_device_is_silent_only_for_as_long_as_it_has_run() -> None:
+    """An emulator held back by a busy machine has not sent its samples yet: the reader's
+    silence runs up to the device's time at its latest read, not up to the present."""
+    from ucat_console.backend.devices.reporting import SilenceWatch
+
+    clock = FakeClock()
+    device = [100.0]
+    events = []
+    watch = SilenceWatch(EventReporter("imu", events.append, clock), clock, 0.5, "packet", "packets",
+                         device_time=lambda: device[0])
+    watch.reset()
+    clock.now = 101.5  # the reader looks 1.5 s later, but the device ran only 0.4 s of it
+    device[0] = 100.4
+    watch.reading()
+    assert watch.check() == pytest.approx(0.4) and not events
+    device[0] = 100.6  # the device ran on and sent nothing: silent
+    clock.now = 101.6
+    watch.reading()
+    assert watch.check() == pytest.approx(0.6)
+    assert [e.code for e in events] == ["silence"]
+    # without a device time (the robot's own devices), the present counts
+    plain = SilenceWatch(EventReporter("imu", events.append, clock), clock, 0.5, "packet", "packets")
+    plain.reset()
+    clock.now += 0.7
+    plain.reading()
+    assert plain.check() == pytest.approx(0.7)

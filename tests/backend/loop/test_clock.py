@@ -105,3 +105,44 @@ def test_the_horizon_is_the_simulated_time_due_within_early_and_lag_is_kept() ->
     clock.horizon(9.0)  # a loop still at 9 s is half a second of wall time behind (pace 2)
     assert clock.lag_max >= 0.5
     assert SimulatedClock().horizon(3.0) == math.inf
+
+
+class FakeWall:
+    def __init__(self, now: float) -> None:
+        self.now = now
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def test_a_lag_within_max_lag_is_caught_up_and_a_longer_stall_is_skipped_once() -> None:
+    """Up to ``max_lag`` behind, the loop catches up (the events due run at once); further
+    behind, the clock makes the loop's present due now, counts the stall and hands it to
+    the loop once; the time after it is due on the new anchor, nothing is replayed."""
+    wall = FakeWall(1000.0)
+    clock = PacedClock(1.0, max_lag=0.25)
+    clock._now = wall
+    assert clock.start(0.0) is True  # loop time 0 is due at 1000.0
+    wall.now = 1000.1
+    clock.horizon(0.1)
+    assert clock.lag == 0.0 and clock.take_skip() == 0.0
+    wall.now = 1000.35
+    h = clock.horizon(0.2)  # 0.15 s behind: caught up, the events up to the present run now
+    assert clock.lag == pytest.approx(0.15) and h == pytest.approx(0.35) and clock.take_skip() == 0.0
+    wall.now = 1002.0
+    h = clock.horizon(0.25)  # 1.75 s behind: a stall
+    assert clock.take_skip() == pytest.approx(1.75) and clock.take_skip() == 0.0  # handed over once
+    assert clock.skips == 1 and clock.skipped == pytest.approx(1.75) and clock.lag == 0.0
+    assert clock.lag_max == pytest.approx(1.75)
+    assert h == pytest.approx(0.25)  # nothing of the missed time runs at once
+    assert clock.wall_deadline(0.25) == pytest.approx(1002.0)
+    assert clock.wall_deadline(0.5) == pytest.approx(1002.25)  # the next events wait for their time
+
+
+def test_the_steady_clock_anchors_once_until_a_stall_and_max_lag_is_checked() -> None:
+    clock = SteadyPacedClock(1.0, max_lag=0.25)
+    assert clock.start(0.0) is True
+    assert clock.start(5.0) is False  # a chunk of the same run: no new anchor
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(ValueError, match="max_lag"):
+            PacedClock(1.0, max_lag=bad)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,7 +14,7 @@ from ucat_console.backend.loop.closed_loop import ClosedLoop
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.backend.loop.planners import BaselineFinPlanner, PlanInputs
 from ucat_console.backend.sim_robot_io import SimRobotIO
-from ucat_console.config import AppConfig
+from ucat_console.config import load_config
 from ucat_console.robot.fins import PAPER_TO_ROBOT as PAPER_TO_PLANT_FIN
 from ucat_console.robot.fins import ROBOT_TO_PAPER as PLANT_TO_PAPER
 from ucat_console.control.allocation import BodySetpoints
@@ -60,9 +59,9 @@ def make_loop(mode: str = "mpc", v: float = 0.2, depth: float = 1.0, clock=None,
 
 
 # Tracking. The loop machinery is tested with the weights and body layer under which this
-# plant is controllable, config/sim-tuned.toml's (the paper's defaults and what they do are
+# plant is controllable, the shipped sim-tuned's (the paper's defaults and what they do are
 # the experiments' subject).
-_TUNED = AppConfig.from_toml(Path(__file__).resolve().parents[3] / "config" / "sim-tuned.toml")
+_TUNED = load_config("sim-tuned")
 TUNED_MPC = _TUNED.mpc
 STRONG_BODY = _TUNED.body
 
@@ -209,6 +208,71 @@ def test_slow_plans_and_late_hand_overs_are_counted_and_published() -> None:
     late_plans = [p for p in log.plans() if p.late]
     assert len(late_plans) == loop.late_plans  # one physical fin per logical fin in this mode
     assert log.get(ch.STATUS)[-1].late_plans == loop.late_plans
+
+
+def test_a_plan_nobody_waited_for_is_no_overrun() -> None:
+    """A slow plan counts only when the fins needed it: not while the fins are not driven
+    (disarmed), and, in real time, not when the loop came to its hand-over after it was done."""
+    from ucat_console.backend.loop.closed_loop import kept_waiting
+
+    # plan_latency 0: every solve overruns its hand-over, but nobody drives the fins
+    loop, _, log = make_loop("baseline", plan_latency=0.0)
+    loop._driving = lambda: False
+    loop.run_until(2.0)
+    assert loop.plans_made > 0 and loop.plan_overruns == 0 and not log.events("plan_overrun")
+    driven, _, log = make_loop("baseline", plan_latency=0.0)  # the same, driven
+    driven.run_until(2.0)
+    assert driven.plan_overruns == driven.plans_made > 0
+    # real time (wall clock, s): a plan done after its deadline, the loop there before it
+    assert kept_waiting(done=10.5, arrived=10.0, deadline=10.2) == pytest.approx(0.3)
+    assert kept_waiting(done=10.5, arrived=10.3, deadline=10.2) == pytest.approx(0.2)
+    # a loop running late came to a plan long done: it kept nobody waiting
+    assert kept_waiting(done=10.5, arrived=16.0, deadline=10.2) < 0
+    # done before its deadline, whenever the loop came
+    assert kept_waiting(done=10.1, arrived=10.0, deadline=10.2) < 0
+
+
+class _Resyncs(SimRobotIO):
+    """The simulated robot, noting when the loop tells it its time is due now."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.resyncs: list[float] = []
+
+    def resync(self, t: float) -> None:
+        self.resyncs.append(t)
+
+
+def test_a_paced_loop_held_back_beyond_max_lag_skips_ahead_and_records_the_stall() -> None:
+    """Held back 0.5 s (its thread did not run), the loop does not replay the missed time:
+    its clock makes the present loop time due now, the robot is told, and the stall is an
+    event; the loop then runs on in real time to the end it was given."""
+    import time as _time
+
+    io = _Resyncs(depth=1.0, velocity=0.2, seed=0)
+    stream = TelemetryStream()
+    log = Log(stream)
+    clock = PacedClock(pace=1.0, early=0.01, max_lag=0.1)
+    loop = ClosedLoop(LoopConfig(mode="baseline"), io, stream, clock,
+                      setpoints=BodySetpoints(velocity=0.2, depth=1.0))
+    held = []
+
+    def between(t: float) -> float:
+        if t > 0.3 and not held:
+            held.append(t)
+            _time.sleep(0.5)  # the loop's thread held back: 0.5 s of wall time pass
+        return 1.0
+
+    loop.run_until(1.0, between=between)
+    loop.close()
+    assert loop.time == pytest.approx(1.0)
+    assert io.resyncs[0] == 0.0  # anchored at the start
+    stalls = log.events("stall")  # a busy machine may add stalls of its own
+    stall = next(e for e in stalls if e.t >= held[0])
+    assert stall.level == "warning" and stall.data["late"] >= 0.5 - clock.early
+    assert stall.t in io.resyncs  # re-anchored where it skipped
+    assert loop.stalls == clock.skips == len(stalls) and clock.skipped >= 0.5 - clock.early
+    assert clock.lag <= clock.max_lag  # never left further behind
 
 
 def test_tuning_changes_apply_from_the_next_plan_and_are_events() -> None:

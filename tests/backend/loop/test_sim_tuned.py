@@ -1,18 +1,18 @@
-"""config/sim-tuned.toml: the simulated robot swims from rest, which the paper's
+"""The shipped sim-tuned configuration: the simulated robot swims from rest, which the paper's
 defaults do not achieve on this plant (a finding reported in the README)."""
 
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from ucat_console import shipped
 from ucat_console.backend.loop.closed_loop import ClosedLoop
 from ucat_console.backend.sim_robot_io import SimRobotIO
 from ucat_console.config import AppConfig
 from ucat_console.control.allocation import BodySetpoints
 from ucat_console.telemetry import TelemetryStream
 
-TUNED = Path(__file__).resolve().parents[3] / "config" / "sim-tuned.toml"
+TUNED = shipped.config_path("sim-tuned")
 
 
 def mean_speed_from_rest(app: AppConfig, mode: str) -> float:

@@ -1,5 +1,5 @@
 """The robot goes where it is sent: closed-loop manoeuvres on the simulated robot under the
-shipped configuration (config/sim-tuned.toml), in simulated time with fixed seeds."""
+shipped configuration (``sim-tuned``), in simulated time with fixed seeds."""
 
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from ucat_console.bench import tracking as T
-from ucat_console.config import AppConfig
+from ucat_console.config import load_config
 
-TUNED = AppConfig.from_toml(Path(__file__).resolve().parents[3] / "config" / "sim-tuned.toml")
+TUNED = load_config("sim-tuned")
 
 
 @pytest.mark.parametrize("label,mode,formulation", T.MODES)

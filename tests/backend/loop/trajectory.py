@@ -11,11 +11,11 @@ baseline scenario's first six seconds, before it switches to the MPC, stayed the
 1e-12. They were written again when the designed body layer became the default (its loops,
 references and allocation; each stroke's profile velocity timed to its planned duration;
 the baseline's fin-model inverse; the MPC's drive timing and centred cycles in
-``config/sim-tuned.toml``), which changes every trajectory by design, and adds the
+the shipped ``sim-tuned``), which changes every trajectory by design, and adds the
 channels ``body/allocation`` and ``fin/N/cycle``.
 
 Each scenario starts the simulated U-CAT at 1 m depth surging at 0.2 m/s with the
-configuration of ``config/sim-tuned.toml``, runs one mode with a velocity, depth and yaw
+configuration of the shipped ``sim-tuned``, runs one mode with a velocity, depth and yaw
 rate setpoint, switches mode half way (bumpless hand-over), and records every message of
 every channel (numbers only: each message flattened into one row per channel).
 """
@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ucat_console import shipped
 from ucat_console.backend.loop.closed_loop import ClosedLoop
 from ucat_console.backend.sim_robot_io import SimRobotIO
 from ucat_console.config import AppConfig
@@ -36,8 +37,7 @@ from ucat_console.control.allocation import BodySetpoints
 from ucat_console.telemetry import TelemetryStream
 from ucat_console.telemetry.messages import FinPlan
 
-ROOT = Path(__file__).resolve().parents[3]
-TUNED = ROOT / "config" / "sim-tuned.toml"
+TUNED = shipped.config_path("sim-tuned")
 FIXTURES = Path(__file__).resolve().parent / "fixtures"
 
 #: (first mode, mode after the switch)

@@ -1,4 +1,4 @@
-"""The shipped Foxglove / Lichtblick layout (docs/foxglove-layout.json) shows what a session
+"""The shipped Foxglove / Lichtblick layout (ucat_console/foxglove-layout.json) shows what a session
 file holds: every panel it arranges is configured, every plotted path resolves in its
 channel's schema, and the 3-D view follows a frame the transforms place."""
 
@@ -6,13 +6,13 @@ from __future__ import annotations
 
 import json
 import re
-from pathlib import Path
 
+from ucat_console import shipped
 from ucat_console.backend.sessions import foxglove
 from ucat_console.backend.sessions.schema import json_schema
 from ucat_console.telemetry import channels as C
 
-LAYOUT = Path(__file__).resolve().parents[3] / "docs" / "foxglove-layout.json"
+LAYOUT = shipped.foxglove_layout()
 
 
 def _panels(node) -> list[str]:

@@ -293,7 +293,7 @@ def test_events_of_every_part_are_jump_targets(split, sessions):
     with SessionParts(sid, sessions) as s:
         assert s.events() == events
         assert s.events(1.0, 3.0) == [e for e in events if 1.0 <= e.t < 3.0]
-        assert s.event_times_ns() == [ns for _, ns, _ in part_records(paths, sessions,
+        assert list(s.event_index().times_ns) == [ns for _, ns, _ in part_records(paths, sessions,
                                                                       channels=[C.EVENTS])]
         p = Player(s, TelemetryStream())
         p.seek(0.0)
@@ -421,7 +421,7 @@ def test_a_one_part_session_reads_as_its_file(sessions):
         assert list(s.records()) == list(r.records())
         assert list(s.records(reverse=True)) == list(r.records(reverse=True))
         assert list(s.messages([C.EVENTS], 1.0, 3.0)) == list(r.messages([C.EVENTS], 1.0, 3.0))
-        assert s.events() == r.events() and s.event_times_ns() == r.event_times_ns()
+        assert s.events() == r.events() and s.event_index() == r.event_index()
         for t in (-1.0, 0.0, 0.05, 1.0, 2.55, 4.9, 10.0):
             assert s.state_at(t) == r.state_at(t) == brute_state(items, t), t
         assert s.to_ns(1.5) == r.to_ns(1.5) and s.from_ns(s.to_ns(1.5)) == r.from_ns(r.to_ns(1.5))

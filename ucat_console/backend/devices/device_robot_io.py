@@ -7,14 +7,16 @@ simulated rig; the configuration's endpoints decide.
 
 Time. The drivers stamp readings and events on the wall clock (``time.monotonic``); the
 loop runs in its own time, which a paced clock ties to the wall clock at ``pace``
-simulated seconds per second. The first :meth:`DeviceRobotIO.advance_to` call anchors the
-mapping (loop time ``t`` is now), later calls wait until the device clock reaches ``t``
-(so a loop without a paced clock is paced by the devices), and the mapping is re-anchored
-when the device clock runs ahead of the loop by more than ``resync_s`` (the loop was
-paused). Readings leave :meth:`advance_to` in loop time and in time order (a reading may
-carry a stamp a little after ``t``: the devices do not wait for the loop), each sensor's
-stamps strictly increasing; what queued up before the loop started (or while it was
-paused) is reduced to the latest reading of each kind, stamped ``t``.
+simulated seconds per second. The loop's paced clock anchors the mapping
+(:meth:`DeviceRobotIO.resync`: loop time ``t`` is now), at its start and after a stall it
+skipped; without one, the first :meth:`DeviceRobotIO.advance_to` call does. Later calls
+wait until the device clock reaches ``t`` (so a loop without a paced clock is paced by the
+devices), and the mapping is re-anchored when the device clock runs ahead of the loop by
+more than ``resync_s`` (the loop was paused). Readings leave :meth:`advance_to` in loop
+time and in time order (a reading may carry a stamp a little after ``t``: the devices do
+not wait for the loop), each sensor's stamps strictly increasing; what queued up before the
+loop started (or while it was paused, or stalled) is reduced to the latest reading of each
+kind, stamped ``t``.
 
 Events. Every driver fault is an :class:`Event` (source ``epos2.<node>``, ``imu``, ``dvl``,
 ``pressure``) stamped in loop time and handed to each sink added with
@@ -95,7 +97,11 @@ class DeviceRobotIO(RobotIO):
     ``config`` gives every driver's endpoint and settings (``config.robot`` is not read
     here). ``pace`` is the loop's pace (simulated seconds per wall-clock second; 1 on the
     robot). ``truth``, when given, supplies the simulator's true state (the simulated rig
-    passes its plant's); it is None on the robot. Call :meth:`start` before the loop runs.
+    passes its plant's); it is None on the robot. ``device_time(name)``: the time (on
+    ``wall_clock``) the device ``name`` (``"epos2"``, ``"imu"``, ``"dvl"``, ``"pressure"``)
+    has run to, when it runs in this process (the simulated rig's emulators), against which
+    the drivers judge its silence (``canbus.HeardBus``, ``reporting.SilenceWatch``); None on
+    the robot. Call :meth:`start` before the loop runs.
     """
 
     def __init__(
@@ -106,6 +112,7 @@ class DeviceRobotIO(RobotIO):
         truth: Callable[[], RobotTruth | None] | None = None,
         on_event: EventSink | None = None,
         wall_clock: Callable[[], float] = time.monotonic,
+        device_time: Callable[[str], float] | None = None,
     ) -> None:
         self.config = config
         self.time = DeviceTime(pace)
@@ -115,6 +122,7 @@ class DeviceRobotIO(RobotIO):
         self._pending: list[Reading] = []
         self._t = 0.0
         self._started_loop = False
+        self._reset = False  # re-anchored (resync): the next readings are the latest of each kind
         self._last_t: dict[object, float] = {}
         self._closed = False
         self._wake = threading.Event()
@@ -126,12 +134,18 @@ class DeviceRobotIO(RobotIO):
         #: from the console; this class never uses it
         self.rig: object | None = None
         self._dvl_events = EventReporter("dvl", self._on_event, wall_clock)
-        self.drives = FinDrives(config.epos2, self._on_reading, self._on_event, clock=wall_clock)
-        self.imu = ImuDriver(config.imu, self._on_reading, self._on_event, clock=wall_clock)
-        self.dvl = DvlClient(
-            config.dvl, self._on_dvl_velocity, self._on_dvl_position, self._on_event, clock=wall_clock
-        )
-        self.pressure = PressureDriver(config.pressure, self._on_reading, self._on_event, clock=wall_clock)
+
+        def time_of(name: str) -> Callable[[], float] | None:
+            return None if device_time is None else (lambda: device_time(name))
+
+        self.drives = FinDrives(config.epos2, self._on_reading, self._on_event, clock=wall_clock,
+                                bus_time=time_of("epos2"))
+        self.imu = ImuDriver(config.imu, self._on_reading, self._on_event, clock=wall_clock,
+                             device_time=time_of("imu"))
+        self.dvl = DvlClient(config.dvl, self._on_dvl_velocity, self._on_dvl_position, self._on_event,
+                             clock=wall_clock, device_time=time_of("dvl"))
+        self.pressure = PressureDriver(config.pressure, self._on_reading, self._on_event, clock=wall_clock,
+                                       device_time=time_of("pressure"))
         self._running: list[Callable[[], None]] = []
 
     # ------------------------------------------------------------------ start-up
@@ -197,13 +211,24 @@ class DeviceRobotIO(RobotIO):
     def next_reading_time(self) -> float:
         return self._t + self.config.poll_period_s
 
+    def resync(self, t: float) -> None:
+        """Loop time ``t`` is now: the device clock is anchored there, and what the drivers
+        queued before is reduced to the latest reading of each kind, stamped at the next
+        :meth:`advance_to` (a stalled loop does not replay stale readings)."""
+        if not math.isfinite(t):
+            raise ValueError(f"t: expected a finite time, got {t!r}")
+        self.time.anchor(t, self._wall())
+        self._started_loop = True
+        self._reset = True
+
     def advance_to(self, t: float) -> list[Reading]:
         if not math.isfinite(t):
             raise ValueError(f"t: expected a finite time, got {t!r}")
         clock = self.time
         now = self._wall()
-        reset = not self._started_loop
-        if reset:
+        reset = not self._started_loop or self._reset
+        self._reset = False
+        if not self._started_loop:
             clock.anchor(t, now)
             self._started_loop = True
         else:

@@ -207,7 +207,10 @@ class DvlClient:
         on_position: Callable[[DvlPosition], None],
         on_event: EventSink,
         clock: Callable[[], float] = time.monotonic,
+        device_time: Callable[[], float] | None = None,
     ) -> None:
+        """``device_time``: the time an in-process DVL (the simulated rig's emulator) has
+        run to, on ``clock``, against which its silence is judged (``reporting.SilenceWatch``)."""
         self.config = config
         self._on_velocity = on_velocity
         self._on_position = on_position
@@ -222,7 +225,8 @@ class DvlClient:
         self._pending: dict[str, collections.deque[_Pending]] = {}
         self._connected = threading.Event()
         self._ever_connected = False
-        self._silence = SilenceWatch(self.events, clock, config.silence_timeout_s, "message", "messages")
+        self._silence = SilenceWatch(self.events, clock, config.silence_timeout_s, "message", "messages",
+                                     device_time=device_time)
         self.connections = 0
         self.messages = 0
 
@@ -387,6 +391,7 @@ class DvlClient:
 
     def _read_loop(self, sock: socket.socket) -> str:
         while not self._stop.is_set():
+            self._silence.reading()
             try:
                 data = sock.recv(65536)
             except socket.timeout:

@@ -65,6 +65,8 @@ class EmulatorThread(BackgroundThread, FaultInjectable):
     name), implements ``_step`` (one pass of its loop, waiting at most about 50 ms) and
     may override ``_begin`` (before the first step), ``_open`` (in :meth:`start`, before
     the thread) and ``_close`` (in :meth:`stop`, after it). ``_t0`` is the start time.
+    :attr:`time` is the emulated device's present: every output due by then has gone out
+    (a step sends what is due by its own start, or later).
     """
 
     _name = "emulator"
@@ -77,6 +79,7 @@ class EmulatorThread(BackgroundThread, FaultInjectable):
         self._fault_settings = fault_settings
         self.faults = FaultSet(clock)
         self._t0 = 0.0
+        self.time = -math.inf
         self._log = logging.getLogger(type(self).__module__)
 
     def start(self) -> Self:
@@ -111,7 +114,9 @@ class EmulatorThread(BackgroundThread, FaultInjectable):
         self._begin(self._clock())
         while not self._stop.is_set():
             try:
+                t = self._clock()
                 self._step()
+                self.time = t
             except self._io_errors as e:
                 if self._stop.is_set():
                     break

@@ -22,7 +22,9 @@ A stroke (:meth:`Epos2Driver.command`) writes RPDO2, then controlword 0x003F; wh
 statusword shows set-point acknowledge (bit 12) the driver clears bit 4 (0x000F). With
 ``setpoint_transport = "sdo"`` (or when the node refuses the RPDO mapping) the same
 sequence runs by SDO. Heartbeats are supervised (lost after ``heartbeat_timeout_periods``
-periods, checked five times per period, so within three periods), EMCY frames are decoded,
+periods without one, counted from the last one's arrival up to the time the bus's reader has
+heard (``check``'s ``heard_until``: see ``fin_drives``), checked five times per period, so
+within three periods), EMCY frames are decoded,
 and a node entering the fault state puts the other nodes in quick stop. Every fault reaches
 ``on_event`` as an :class:`Event` with ``source = "epos2.<node>"``; nothing raises out of a
 bus callback.
@@ -71,7 +73,7 @@ from canopen.emcy import EmcyError
 from canopen.sdo import SdoAbortedError, SdoCommunicationError
 
 from ucat_console.backend.devices import cia402
-from ucat_console.backend.devices.canbus import BITRATES, INTERFACES
+from ucat_console.backend.devices.canbus import BITRATES, INTERFACES, arrival_time
 from ucat_console.robot.readings import FinFeedback
 from ucat_console.backend.devices.reporting import EventReporter
 from ucat_console.robot.servo import FIN_ACCELERATION
@@ -729,8 +731,8 @@ class Epos2Driver:
 
     def _on_heartbeat(self, nmt_state: int) -> None:
         try:
-            with self._lock:
-                self._last_heartbeat = self._clock()
+            with self._lock:  # when the frame arrived (it may have waited to be read)
+                self._last_heartbeat = arrival_time(self.node.nmt.timestamp, self._clock())
                 lost, self._heartbeat_lost = self._heartbeat_lost, False
                 prev, self._nmt_state = self._nmt_state, nmt_state
             if nmt_state == cia402.NMT_BOOTUP:
@@ -767,19 +769,22 @@ class Epos2Driver:
             logger.exception("%s: EMCY handling failed", self.source)
 
     # ----------------------------------------------------------------------------- supervision
-    def check(self, now: float) -> None:
-        """Heartbeat and set-point supervision at time ``now`` (the driver's clock)."""
+    def check(self, now: float, heard_until: float = math.inf) -> None:
+        """Heartbeat and set-point supervision at time ``now`` (the driver's clock), with
+        every frame that arrived up to ``heard_until`` read (default: all of them): a
+        heartbeat or acknowledge is missing only for as long as it could have been heard."""
         lost_for: float | None = None
         late: float | None = None
+        until = min(now, heard_until)
         with self._lock:
             if self._started and self._last_heartbeat is not None and not self._heartbeat_lost:
-                silent = now - self._last_heartbeat
+                silent = until - self._last_heartbeat
                 if silent > self.config.heartbeat_timeout:
                     self._heartbeat_lost = True
                     lost_for = silent
             last = self._last_heartbeat
             if self._pending_ack_since is not None:
-                waited = now - self._pending_ack_since
+                waited = until - self._pending_ack_since
                 if waited > self.config.setpoint_ack_timeout:
                     self._pending_ack_since = None
                     late = waited

@@ -21,7 +21,9 @@ in-process ``virtual`` interface). It implements what the driver relies on:
 
 Time advances through :meth:`Epos2Emulator.tick` (the headless simulator and tests call it
 with their own clock) or through a thread that calls it (:meth:`EmulatedNodes.start_thread`).
-Heartbeats are canopen's periodic tasks and run on the wall clock.
+The heartbeat is sent by the tick too, when due, and every frame is stamped with the time the
+drive sent it (``_GatedNetwork``): a tick held back by a busy machine looks to the driver like
+a reader held back, not like a drive that went silent.
 
 Over 500 lines: :class:`Epos2Emulator` is one node's object dictionary hooks, NMT, CiA 402
 state machine, profile position, PDOs and fault injection, all on the node's one state;
@@ -38,6 +40,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any, Protocol
 
+import can
 import canopen
 from canopen.sdo import SdoAbortedError
 
@@ -172,27 +175,99 @@ class Epos2EmulatorConfig(Config):
 
 
 class _GatedNetwork(canopen.Network):
-    """A canopen network whose traffic can be cut (``silenced``) or slowed (SDO replies)."""
+    """A canopen network whose traffic can be cut (``silenced``) or slowed (SDO replies),
+    and whose frames are stamped with the emulated device's time.
 
-    def __init__(self, bus: Any, sdo_reply_cob_id: int) -> None:
+    The device's time (:attr:`time`) is the emulator's last tick: a frame it sends carries
+    that time (``can.Message.timestamp``, kept by the ``virtual`` bus), and a periodic frame
+    (the heartbeat, canopen's ``send_periodic``) is sent by the tick when due, stamped with
+    the time it was due (:meth:`send_due`). So a tick held back by a busy machine sends what
+    the drive would have sent, stamped when it would have sent it, in order: the driver
+    sees a device on time and a reader that was late, as on the robot when the console's
+    computer is busy.
+    """
+
+    def __init__(self, bus: Any, sdo_reply_cob_id: int, clock: Callable[[], float]) -> None:
         super().__init__(bus)
         self.silenced = False
         self.reply_delay = 0.0
         self._sdo_reply_cob_id = sdo_reply_cob_id
+        self._clock = clock
+        #: the emulated device's present (its last tick, on ``clock``); None before the first
+        self.time: float | None = None
+        self._periodic: list[_PeriodicFrame] = []
+        self._periodic_lock = threading.Lock()
 
     def notify(self, can_id: int, data: bytearray, timestamp: float) -> None:
         if self.silenced:
             return
         super().notify(can_id, data, timestamp)
 
-    def send_message(self, can_id: int, data: Any, remote: bool = False) -> None:
+    def send_message(self, can_id: int, data: Any, remote: bool = False, at: float | None = None) -> None:
+        """Send a frame stamped ``at`` (default: the device's present) on ``clock``."""
         if self.silenced:
             return
         if can_id == self._sdo_reply_cob_id and self.reply_delay > 0.0:
             time.sleep(self.reply_delay)
             if self.silenced:
                 return
-        super().send_message(can_id, data, remote)
+        if self.bus is None:
+            raise RuntimeError("Not connected to CAN bus")
+        now = self._clock()
+        t = at if at is not None else (self.time if self.time is not None else now)
+        msg = can.Message(is_extended_id=can_id > 0x7FF, arbitration_id=can_id, data=data,
+                          is_remote_frame=remote, timestamp=time.time() - (now - min(t, now)))
+        with self.send_lock:
+            self.bus.send(msg)
+        self.check()
+
+    def send_periodic(self, can_id: int, data: Any, period: float,
+                      remote: bool = False) -> _PeriodicFrame:
+        """A frame sent every ``period`` s by :meth:`send_due` (canopen's heartbeat)."""
+        frame = _PeriodicFrame(self, can_id, data, period, remote)
+        with self._periodic_lock:
+            self._periodic.append(frame)
+        return frame
+
+    def _forget(self, frame: _PeriodicFrame) -> None:
+        with self._periodic_lock:
+            if frame in self._periodic:
+                self._periodic.remove(frame)
+
+    def send_due(self, now: float) -> None:
+        """Send each periodic frame due by ``now``, once, stamped with its latest due time."""
+        with self._periodic_lock:
+            frames = list(self._periodic)
+        for frame in frames:
+            frame.send_due(now)
+
+
+class _PeriodicFrame:
+    """One periodic frame of a :class:`_GatedNetwork` (the interface of canopen's
+    ``PeriodicMessageTask``: ``stop`` and ``update``). Due at once, then every period."""
+
+    def __init__(self, network: _GatedNetwork, can_id: int, data: Any, period: float, remote: bool) -> None:
+        self._network = network
+        self.can_id = can_id
+        self.data = bytes(data or b"")
+        self.period = float(period)
+        self.remote = remote
+        self.due: float | None = None  # None: due at the next tick
+
+    def stop(self) -> None:
+        self._network._forget(self)
+
+    def update(self, data: Any) -> None:
+        self.data = bytes(data)
+
+    def send_due(self, now: float) -> None:
+        due = now if self.due is None else self.due
+        if due > now:
+            return
+        if self.period > 0.0:  # the latest time it fell due: missed ones are not sent twice
+            due += math.floor((now - due) / self.period) * self.period
+        self._network.send_message(self.can_id, self.data, self.remote, at=due)
+        self.due = due + self.period
 
 
 class Epos2Emulator:
@@ -242,8 +317,8 @@ class Epos2Emulator:
         #: controlwords received, oldest first (for tests and logs)
         self.controlword_log: list[int] = []
 
-        bus = open_bus(interface, channel, key="interface")
-        self.network = _GatedNetwork(bus, 0x580 + node_id)
+        bus = open_bus(interface, channel, key="interface", stamped=True)
+        self.network = _GatedNetwork(bus, 0x580 + node_id, clock)
         self.network.NOTIFIER_CYCLE = self.NOTIFIER_CYCLE
         od = canopen.import_od(str(EDS_PATH), node_id)
         self.node: canopen.LocalNode = self.network.create_node(node_id, od)
@@ -544,8 +619,15 @@ class Epos2Emulator:
             self._enter_fault(cia402.EMCY_LIFE_GUARD, None)
 
     # ----------------------------------------------------------------------------- time
+    def beat(self, now: float) -> None:
+        """Send the heartbeat if it is due by ``now`` (stamped with the time it was due)."""
+        self.network.send_due(now)
+
     def tick(self, now: float) -> None:
-        """Advance the servo to ``now`` (seconds) and send the TPDOs that are due."""
+        """Advance the node to ``now`` (seconds): its heartbeat if due, the servo, the TPDOs
+        that are due; frames sent from now on are stamped ``now``."""
+        self.beat(now)
+        self.network.time = now
         with self._lock:
             dt = 0.0 if self._last_tick is None else max(0.0, now - self._last_tick)
             self._last_tick = now
@@ -667,13 +749,21 @@ class EmulatedNodes:
         self._clock = clock
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        #: the time the nodes have been ticked to (on ``clock``): every frame they were due
+        #: to send by then has been sent
+        self.time = -math.inf
 
     def __getitem__(self, node_id: int) -> Epos2Emulator:
         return self.nodes[node_id]
 
     def tick(self, now: float) -> None:
+        """Every node to ``now``: their heartbeats first, so that no frame stamped ``now``
+        goes out before a heartbeat due earlier (a reader takes them in that order)."""
+        for emulator in self.nodes.values():
+            emulator.beat(now)
         for emulator in self.nodes.values():
             emulator.tick(now)
+        self.time = now
 
     def start_thread(self) -> None:
         """Tick every node from a thread on the wall clock (real-time mode)."""
@@ -730,6 +820,9 @@ def start_emulated_nodes(
     calls :meth:`EmulatedNodes.tick`.
     """
     cfg = config or Epos2EmulatorConfig()
+    # the compiled servo step is loaded here, not by the first tick: loading it takes seconds
+    # on a busy machine, and a tick holds its node's lock while the node must answer NMT
+    servo_step(0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1e-3, 1.0)
     emulators: dict[int, Epos2Emulator] = {}
     try:
         for node_id in node_ids:

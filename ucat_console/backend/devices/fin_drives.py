@@ -4,6 +4,11 @@ One ``canopen.Network`` (and with it the one ``can.Notifier``; every driver subs
 through it), one :class:`~ucat_console.backend.devices.epos2.Epos2Driver` per node, and a
 supervision thread that checks heartbeats and runs the safe-state reaction: when a node
 faults, every other node in operation enabled gets a quick stop.
+
+Heartbeats are judged on what the bus's reader has heard (``canbus.HeardBus``): a node's
+heartbeat is missing from its last one's arrival up to ``heard_until``, not up to the
+present. A busy machine that holds the reader (or the supervision thread) back leaves
+frames unread in the queue; a heartbeat among them is not missing, it is not heard yet.
 """
 
 from __future__ import annotations
@@ -18,7 +23,7 @@ from typing import Any
 import canopen
 
 from ucat_console.backend.devices import cia402
-from ucat_console.backend.devices.canbus import open_bus
+from ucat_console.backend.devices.canbus import HeardBus, open_bus
 from ucat_console.telemetry.events import EventSink
 
 from ucat_console.backend.devices.epos2 import (
@@ -52,6 +57,7 @@ class FinDrives:
         fins: Mapping[int, int] | None = None,
         clock: Callable[[], float] = time.monotonic,
         supervise: bool = True,
+        bus_time: Callable[[], float] | None = None,
     ) -> None:
         self.config = config
         if fins is None:
@@ -66,7 +72,9 @@ class FinDrives:
         self._on_feedback = on_feedback
         self._on_event = on_event
         self._clock = clock
+        self._bus_time = bus_time
         self._supervise = supervise
+        self._bus: HeardBus | None = None
         self.network: canopen.Network | None = None
         self.drivers: dict[int, Epos2Driver] = {}
         self._master_heartbeat: Any = None
@@ -78,7 +86,7 @@ class FinDrives:
     def connect(self) -> None:
         """Open the bus and start every node; raise Epos2NoAnswer / Epos2Error on failure."""
         cfg = self.config
-        bus = open_bus(cfg.interface, cfg.channel, cfg.bitrate)
+        bus = self._bus = HeardBus(open_bus(cfg.interface, cfg.channel, cfg.bitrate), self._clock, self._bus_time)
         network = canopen.Network(bus)
         network.NOTIFIER_CYCLE = self.NOTIFIER_CYCLE
         network.connect()
@@ -181,8 +189,10 @@ class FinDrives:
 
     # ----------------------------------------------------------------------------- supervision
     def check(self, now: float) -> None:
+        """Every node's heartbeat and set-point acknowledge at ``now``, as far as heard."""
+        heard = self._bus.heard_until if self._bus is not None else now
         for driver in self.drivers.values():
-            driver.check(now)
+            driver.check(now, heard)
 
     def _on_node_fault(self, faulted: Epos2Driver) -> None:
         """Safe state: quick stop on every other enabled node (run on the supervision thread)."""

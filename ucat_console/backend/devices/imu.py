@@ -97,8 +97,9 @@ class ImuDriver(SerialReader[ImuReading]):
         on_reading: Callable[[ImuReading], None],
         on_event: EventSink,
         clock: Callable[[], float] = time.monotonic,
+        device_time: Callable[[], float] | None = None,
     ) -> None:
-        super().__init__(config, SOURCE, on_reading, on_event, clock, ("packet", "packets"))
+        super().__init__(config, SOURCE, on_reading, on_event, clock, ("packet", "packets"), device_time)
         self._silence.disarm()  # watched once streaming is configured
         self._parser = mip.MipStreamParser()
         self._command_lock = threading.Lock()  # one command in flight

@@ -138,8 +138,9 @@ class PressureDriver(SerialReader[DepthReading]):
         on_reading: Callable[[DepthReading], None],
         on_event: EventSink,
         clock: Callable[[], float] = time.monotonic,
+        device_time: Callable[[], float] | None = None,
     ) -> None:
-        super().__init__(config, SOURCE, on_reading, on_event, clock, ("ADC line", "ADC lines"))
+        super().__init__(config, SOURCE, on_reading, on_event, clock, ("ADC line", "ADC lines"), device_time)
         self._parser = AdcLineParser()
         self._lock = threading.Lock()  # zeroing
         self._surface = config.surface_pressure_pa

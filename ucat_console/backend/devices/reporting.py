@@ -5,18 +5,32 @@ name, limits repeated events of one code (a noisy line must not flood the stream
 event carries how many were suppressed), reports lasting conditions (silence, broken
 loop) once when they start and once when they end, and never lets a failing sink stop the
 reader thread. A :class:`SilenceWatch` turns "nothing arrived for a while" into such a
-condition.
+condition, judged on what the reader could have heard: a reader that was held back reads
+what waited for it before it looks at the silence, and a device that runs in this process
+(an emulator of the simulated rig) is silent only for as long as it has run (its
+``device_time``), not for as long as a busy machine held it back.
 """
 
 from __future__ import annotations
 
 import logging
+import math
 import threading
 from typing import Any, Callable
 
 from ucat_console.telemetry.events import Event, EventSink
 
 log = logging.getLogger(__name__)
+
+#: what a device event says happened to a sensor's readings (the failsafes' labels): the
+#: codes the IMU, DVL and pressure drivers report, each once here
+READING_FAULTS = {
+    "silence": "silent",
+    "checksum": "garbled", "garbage": "garbled", "malformed": "garbled",  # IMU (MIP)
+    "malformed_json": "garbled", "overlong_line": "garbled", "malformed_line": "garbled",  # DVL, ADC
+    "invalid_data": "invalid", "broken_loop": "invalid", "bottom_lock_lost": "invalid",
+    "port_error": "port error", "connect_failed": "unreachable",
+}
 
 _LOG_LEVELS = {
     "debug": logging.DEBUG,
@@ -107,6 +121,11 @@ class SilenceWatch:
     ``received`` marks an arrival (and ends a reported silence with ``recovered``);
     ``check`` reports the start of a silence while the watch is armed. ``noun``/``nouns``
     name what arrives (``"packet"``, ``"packets"``) in the event messages.
+
+    The silence runs from the last arrival up to what the reader has heard: the present,
+    or, with ``device_time`` (the time an in-process device has run to, on ``clock``), the
+    device's time when the reader's latest read began (:meth:`reading`): what the device
+    sent by then was waiting for that read.
     """
 
     def __init__(
@@ -117,8 +136,11 @@ class SilenceWatch:
         noun: str,
         nouns: str,
         armed: bool = True,
+        device_time: Callable[[], float] | None = None,
     ) -> None:
         self._events = events
+        self._device_time = device_time
+        self._heard = math.inf
         self._clock = clock
         self.timeout_s = float(timeout_s)
         self._noun = noun
@@ -138,14 +160,20 @@ class SilenceWatch:
     def disarm(self) -> None:
         self.armed = False
 
+    def reading(self) -> None:
+        """A read of the input begins (call it before each read)."""
+        if self._device_time is not None:
+            self._heard = self._device_time()
+
     def received(self, now: float) -> None:
         self._last = now
         if self._events.is_active("silence"):
             self._events.condition("silence", False, f"{self._nouns} arrive again")
 
     def check(self) -> float:
-        """Report silence when armed and quiet too long; returns the seconds since the last arrival."""
-        quiet = self._clock() - self._last
+        """Report silence when armed and quiet too long; returns the seconds since the last
+        arrival, as far as heard (class docstring)."""
+        quiet = min(self._clock(), self._heard) - self._last
         if self.armed and quiet > self.timeout_s:
             self._events.condition(
                 "silence", True, f"no {self._noun} for more than {self.timeout_s:g} s",

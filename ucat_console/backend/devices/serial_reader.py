@@ -2,7 +2,8 @@
 
 :class:`SerialReader` opens the configured port, runs a reader thread that hands every
 chunk of bytes to the driver's ``_handle``, reports a failed port (``port_error``),
-reopens it every ``reopen_interval_s`` (``reconnected``), watches for ``silence`` and
+reopens it every ``reopen_interval_s`` (``reconnected``), watches for ``silence`` (after
+each read, as far as heard: ``reporting.SilenceWatch``; ``device_time`` for an emulator) and
 delivers readings to the driver's callback without letting a failing callback stop the
 thread. A driver supplies a parser with ``reset()``, ``_handle`` and its own events.
 """
@@ -57,6 +58,7 @@ class SerialReader(BackgroundThread, Generic[R]):
         on_event: EventSink,
         clock: Callable[[], float] = time.monotonic,
         silence_nouns: tuple[str, str] = ("message", "messages"),
+        device_time: Callable[[], float] | None = None,
     ) -> None:
         super().__init__()
         self.config = config
@@ -65,7 +67,8 @@ class SerialReader(BackgroundThread, Generic[R]):
         self._source = source
         self._log = logging.getLogger(type(self).__module__)
         self.events = EventReporter(source, on_event, clock)
-        self._silence = SilenceWatch(self.events, clock, config.silence_timeout_s, *silence_nouns)
+        self._silence = SilenceWatch(self.events, clock, config.silence_timeout_s, *silence_nouns,
+                                     device_time=device_time)
         self._serial: serial.Serial | None = None
         self._serial_lock = threading.Lock()  # writes and open/close
         self.readings = 0
@@ -126,8 +129,10 @@ class SerialReader(BackgroundThread, Generic[R]):
                         self._reopened()
                         continue
                 self._stop.wait(min(0.05, self.config.reopen_interval_s))
+                self._silence.reading()
                 self._silence.check()
                 continue
+            self._silence.reading()
             try:
                 data = ser.read(max(1, ser.in_waiting))
             except SERIAL_ERRORS as e:

@@ -8,6 +8,16 @@
 The loop's trajectory is defined in simulated time alone (a plan requested at ``t`` is
 handed over at ``t + plan_latency``), so both clocks give the same trajectory for the same
 seed; the paced clock only adds waiting, and detects wall-clock deadlines that were missed.
+
+A stall. When the loop is held back (a busy computer: the loop's thread did not get to run)
+it falls behind the wall clock. Up to ``max_lag`` behind, it catches up: the events that
+are due run at once, without waiting. Further behind, the paced clock skips ahead: the
+loop's present time is due now from then on (the clock is anchored afresh), the skip is
+counted (:attr:`PacedClock.skips`, :attr:`PacedClock.skipped`) and handed to the loop
+(:meth:`PacedClock.take_skip`), which records it and tells the robot (``RobotIO.resync``).
+The missed wall time is not replayed: on a robot, control computed for a moment long past
+would act on stale readings, in a burst. Loop time then runs behind the wall clock by
+the time skipped.
 """
 
 from __future__ import annotations
@@ -27,8 +37,10 @@ class Clock(ABC):
     #: :meth:`horizon` at once and waits (:meth:`wait_until`) for a later one
     paced: bool = False
 
-    def start(self, t0: float) -> None:
-        """The loop is at simulated time ``t0`` now."""
+    def start(self, t0: float) -> bool:
+        """The loop is at simulated time ``t0`` now. True when that anchored the clock
+        to the wall clock afresh (the robot is told: ``RobotIO.resync``)."""
+        return False
 
     @abstractmethod
     def wait_until(self, t: float) -> None:
@@ -45,6 +57,10 @@ class Clock(ABC):
 
     def interrupt(self) -> None:
         """Wake a :meth:`wait_until` in progress (the loop is being stopped)."""
+
+    def take_skip(self) -> float:
+        """The wall time the clock skipped since the last call (s; 0: none)."""
+        return 0.0
 
 
 class SimulatedClock(Clock):
@@ -71,32 +87,44 @@ class PacedClock(Clock):
     of being waited for, so that events close together share one wake-up of the loop (each
     wake-up costs CPU, about 0.1 ms of a core on a virtual machine). Only for a robot whose
     readings are computed (the simulator): a device's reading is not there before its time.
-    0 waits for every event. Waits up to :data:`SLEEP_MAX` sleep."""
+    0 waits for every event. Waits up to :data:`SLEEP_MAX` sleep.
+
+    ``max_lag`` (s of wall time): a loop further behind the wall clock than this skips
+    ahead (module docstring); infinite: it always catches up."""
 
     threaded = True
     paced = True
 
-    def __init__(self, pace: float = 1.0, early: float = 0.0) -> None:
+    def __init__(self, pace: float = 1.0, early: float = 0.0, max_lag: float = math.inf) -> None:
         if not math.isfinite(pace) or not 0.0 < pace <= 1000.0:
             raise ValueError(f"pace: {pace!r} is out of range; allowed: (0, 1000]")
         if not math.isfinite(early) or not 0.0 <= early <= 0.1:
             raise ValueError(f"early: {early!r} is out of range; allowed: [0, 0.1] s")
+        if not max_lag > 0.0:  # also refuses NaN
+            raise ValueError(f"max_lag: {max_lag!r} is out of range; allowed: (0, inf] s")
         self.pace = float(pace)
         self.early = float(early)
+        self.max_lag = float(max_lag)
         self._wall0 = time.perf_counter()
         self._wake = threading.Event()
         self._sleep = time.sleep
+        self._now = time.perf_counter
         self.lag_max = 0.0  # s of wall time the loop has been behind, at most
+        self.lag = 0.0  # s of wall time the loop was behind when it last reported its time
+        self.skips = 0  # stalls skipped
+        self.skipped = 0.0  # s of wall time skipped in all
+        self._unreported = 0.0  # skipped since the last take_skip
 
-    def start(self, t0: float) -> None:
-        self._wall0 = time.perf_counter() - t0 / self.pace
+    def start(self, t0: float) -> bool:
+        self._wall0 = self._now() - t0 / self.pace
         self._wake.clear()
+        return True
 
     def wall_deadline(self, t: float) -> float:
         return self._wall0 + t / self.pace
 
     def wait_until(self, t: float) -> None:
-        delay = self.wall_deadline(t) - time.perf_counter()
+        delay = self.wall_deadline(t) - self._now()
         if delay > 0.0:
             if delay >= self.early:
                 if delay <= SLEEP_MAX:
@@ -109,12 +137,23 @@ class PacedClock(Clock):
     def horizon(self, t_done: float) -> float:
         """Events due less than ``early`` of wall time from now run now (see the class
         docstring); the loop's lag behind the wall clock at ``t_done`` counts in
-        :attr:`lag_max`."""
-        now = time.perf_counter()
+        :attr:`lag_max`, and a lag beyond ``max_lag`` makes ``t_done`` due now."""
+        now = self._now()
         lag = now - self.wall_deadline(t_done)
         if lag > self.lag_max:
             self.lag_max = lag
+        if lag > self.max_lag:
+            self._wall0 += lag
+            self.skips += 1
+            self.skipped += lag
+            self._unreported += lag
+            lag = 0.0
+        self.lag = lag
         return (now + self.early - self._wall0) * self.pace
+
+    def take_skip(self) -> float:
+        skipped, self._unreported = self._unreported, 0.0
+        return skipped
 
     def interrupt(self) -> None:
         self._wake.set()

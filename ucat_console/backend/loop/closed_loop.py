@@ -14,7 +14,7 @@ and publishes what it does on a :class:`TelemetryStream` (channels of
 ``state_rate`` / ``control_rate``, Power at ``power_rate``, each plan as it is made
 (``FinPlan`` with every planner input), Setpoints and Status on change and at
 ``status_rate``, and Events (``mode``, ``tuning``, ``late_plan``, ``plan_overrun``,
-``stroke_timeout``).
+``stroke_timeout``, ``stall``).
 
 Per sample, compiled. Everything the loop does on every sample (the readings into the
 estimate and the body-frame loops, the power estimate, the executors' stroke-end watch,
@@ -29,13 +29,17 @@ Time. Everything happens at simulated event times: sensor samples (the robot say
 next is due), control / telemetry ticks, and plan hand-overs. A plan requested at ``t`` is
 handed to its executor at ``t + plan_latency``, whatever the clock, so the headless clock
 (planners inline) and the paced clock (one planner thread per logical fin, waiting for a
-thread that is not done) give the same trajectory for the same seed. A plan whose solve
-took longer than the hand-over allows (headless: solve time > plan_latency; paced: done
-after the wall-clock deadline) is counted in ``plan_overruns``; a plan arriving after its
+thread that is not done) give the same trajectory for the same seed. A plan the fins needed
+(driving, for the fins in control) whose solve took longer than the hand-over allows
+(headless: solve time > plan_latency; paced: the loop reached the hand-over and waited for
+the plan past its wall-clock deadline) is counted in ``plan_overruns``; a plan done before
+a late loop got to its hand-over kept nobody waiting and is not. A plan arriving after its
 fin went idle is counted in ``late_plans`` (the executor's LatePlan). Neither stalls the
-loop in simulated time. The first plans wait until the body controller has had a DVL
-report and a depth: a fin never starts a stroke from a command that assumed either (a DVL
-without bottom lock counts as reported: its fault is then shown and the depth loop runs).
+loop in simulated time. A paced loop held back beyond the clock's ``max_lag`` skips ahead
+(``clock``): counted in ``stalls``, an Event ``stall``. The first plans wait until the body
+controller has had a DVL report and a depth: a fin never starts a stroke from a command that
+assumed either (a DVL without bottom lock counts as reported: its fault is then shown and
+the depth loop runs).
 
 Mode switches are bumpless: a fin's stroke in flight is never interrupted. The old
 executors finish the plans they hold (their plan requests are no longer served) while the
@@ -62,6 +66,7 @@ import logging
 import math
 import queue
 import threading
+import time
 from dataclasses import fields, replace
 from typing import Any, Callable
 
@@ -130,6 +135,14 @@ _FIN_CYCLE = tuple(ch.fin_cycle(pf) for pf in range(N_FINS))
 _WANTED = ((lc.F_BODY_COMMAND, (ch.BODY_COMMAND, ch.BODY_ALLOCATION, ch.BODY_TRACKING)),
            (lc.F_STATE, (ch.BODY_STATE, *_FIN_STATE)), (lc.F_POWER, (ch.POWER,)), (lc.F_IMU, (ch.IMU,)),
            (lc.F_DEPTH, (ch.DEPTH,)), (lc.F_DVL, (ch.DVL,)))
+
+
+def kept_waiting(done: float, arrived: float, deadline: float) -> float:
+    """How long past its hand-over deadline a plan kept the loop waiting (s of wall time;
+    > 0: an overrun): ``done`` when the plan was made, ``arrived`` when the loop reached its
+    hand-over, ``deadline`` when the hand-over was due. A loop that came late to a plan
+    done in time, or a plan done before the loop came, is no overrun."""
+    return done - max(arrived, deadline)
 
 
 def check_setpoints(cfg: LoopConfig, sp: BodySetpoints) -> BodySetpoints:
@@ -238,6 +251,7 @@ class ClosedLoop:
         self.late_plans = 0
         self.plan_overruns = 0
         self.stroke_timeouts = 0
+        self.stalls = 0
         self.plans_made = 0
         self._generation = 0
         self._owner: list[_Actuator] = [None] * N_FINS  # type: ignore[list-item]
@@ -406,7 +420,8 @@ class ClosedLoop:
         if not math.isfinite(t_end):
             raise ValueError(f"t_end: expected a finite time, got {t_end!r}")
         self._stop = False
-        self.clock.start(self._t)
+        if self.clock.start(self._t):
+            self.io.resync(self._t)
         s = self._s
         s[lc.C_T_END] = t_end
         s[lc.C_HORIZON] = math.inf
@@ -476,6 +491,18 @@ class ClosedLoop:
                 raise RuntimeError(f"closed loop: the core returned {st}")
             if paced:
                 s[lc.C_HORIZON] = max(float(s[lc.C_HORIZON]), self.clock.horizon(float(s[lc.C_T])))
+                skipped = self.clock.take_skip()
+                if skipped:
+                    self._skipped(float(s[lc.C_T]), skipped)
+
+    def _skipped(self, t: float, lag: float) -> None:
+        """The paced clock skipped ``lag`` s of wall time at loop time ``t`` (a stall):
+        the robot is told, and the stall is an event."""
+        self.io.resync(t)
+        self.stalls += 1
+        self._event(t, "stall", f"the loop fell {lag:.2f} s behind the wall clock (the computer was busy); "
+                    "it goes on from the present and skips the time it missed instead of replaying it",
+                    "warning", {"late": lag})
 
     def _inputs(self, commands_waiting: bool) -> None:
         """What the core needs of the loop before a step: when plans are due, the flags."""
@@ -584,14 +611,16 @@ class ClosedLoop:
         deadline = act.t_deliver
         act.job = None
         act.t_deliver = math.inf
-        outcome = job.wait()
-        if self._planning.threaded:  # done after the wall-clock hand-over deadline
-            late = job.done_wall - self.clock.wall_deadline(deadline)
+        if self._planning.threaded:  # the loop waited for it, past the wall-clock deadline
+            arrived = time.perf_counter()
+            outcome = job.wait()
+            late = kept_waiting(job.done_wall, arrived, self.clock.wall_deadline(deadline))
         else:  # the solve took longer than the hand-over allows
+            outcome = job.wait()
             late = outcome.solve_time - self.cfg.plan_latency
         act.u_prev = outcome.u
         self.plans_made += 1
-        if late > 0.0:
+        if late > 0.0 and act.active and self._driving():  # a plan the fins were waiting for
             self.plan_overruns += 1
             self._event(t, "plan_overrun", f"plan for fins {list(act.fins)} ready {late * 1e3:.1f} ms after its "
                         f"hand-over deadline ({self.cfg.plan_latency * 1e3:.1f} ms after the request; "

@@ -19,10 +19,12 @@ import functools
 import json
 import math
 import re
+import reprlib
 from typing import Any, Callable
 
 import msgspec
 
+from ucat_console.backend.sessions.limits import MAX_JSON_DEPTH
 from ucat_console.backend.sessions.schema import (
     BOOL,
     FLOAT,
@@ -216,7 +218,7 @@ def encode(msg: Any) -> bytes:
 # ---------------------------------------------------------------------- decoding
 def _number(v: Any, where: str) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)):
-        raise ValueError(f"{where}: expected a number, got {v!r}")
+        raise ValueError(f"{where}: expected a number, got {short(v)}")
     return float(v)
 
 
@@ -237,7 +239,7 @@ class _NonFinite:
             isinstance(v, str) and v in NONFINITE_VALUES for v in listing.values()
         ):
             raise ValueError(f"{where}.{NONFINITE}: expected an object of nan / inf / -inf, "
-                             f"got {listing!r}")
+                             f"got {short(listing)}")
         self.left = dict(listing)
         self.where = where
 
@@ -250,7 +252,7 @@ class _NonFinite:
     def check_used(self) -> None:
         if self.left:
             path = next(iter(self.left))
-            raise ValueError(f"{self.where}.{NONFINITE}: {path!r} names no missing value")
+            raise ValueError(f"{self.where}.{NONFINITE}: {short(path)} names no missing value")
 
 
 def _field_in(s: FieldSpec, v: Any, where: str, nonfinite: _NonFinite) -> Any:
@@ -260,16 +262,16 @@ def _field_in(s: FieldSpec, v: Any, where: str, nonfinite: _NonFinite) -> Any:
     if kind == FLOATS:
         if s.names:
             if not isinstance(v, dict):
-                raise ValueError(f"{where}: expected an object of {', '.join(s.names)}, got {v!r}")
+                raise ValueError(f"{where}: expected an object of {', '.join(s.names)}, got {short(v)}")
             unknown = [k for k in v if k not in s.names]
             if unknown:
-                raise ValueError(f"{where}.{unknown[0]}: unknown field")
+                raise ValueError(f"{where}.{_name(unknown[0])}: unknown field")
             return tuple(
                 _number(v[n], f"{where}.{n}") if n in v else nonfinite.take(f"{s.name}.{n}")
                 for n in s.names
             )
         if not isinstance(v, list) or len(v) != s.length:
-            raise ValueError(f"{where}: expected an array of {s.length} numbers, got {v!r}")
+            raise ValueError(f"{where}: expected an array of {s.length} numbers, got {short(v)}")
         return tuple(
             nonfinite.take(f"{s.name}[{i}]") if x is None else _number(x, f"{where}[{i}]")
             for i, x in enumerate(v)
@@ -277,27 +279,29 @@ def _field_in(s: FieldSpec, v: Any, where: str, nonfinite: _NonFinite) -> Any:
     if kind == INT:
         if s.wide:
             if not isinstance(v, str) or not _WIDE.match(v):
-                raise ValueError(f"{where}: expected an integer as a decimal string, got {v!r}")
+                raise ValueError(f"{where}: expected an integer as a decimal string, got {short(v)}")
             return int(v)
         if isinstance(v, bool) or not isinstance(v, int):
-            raise ValueError(f"{where}: expected an integer, got {v!r}")
+            raise ValueError(f"{where}: expected an integer, got {short(v)}")
         return v
     if kind == BOOL:
         if not isinstance(v, bool):
-            raise ValueError(f"{where}: expected true or false, got {v!r}")
+            raise ValueError(f"{where}: expected true or false, got {short(v)}")
         return v
     if kind == STR:
         if not isinstance(v, str):
-            raise ValueError(f"{where}: expected a string, got {v!r}")
+            raise ValueError(f"{where}: expected a string, got {short(v)}")
         return v
     if kind == SEQ:
         check = _ITEM_CHECK[s.item]
         if not isinstance(v, list) or not all(check(x) for x in v):
-            raise ValueError(f"{where}: expected an array of {s.item}, got {v!r}")
+            raise ValueError(f"{where}: expected an array of {s.item}, got {short(v)}")
         return tuple(v)
     if kind == JSON:
         if not isinstance(v, dict):
-            raise ValueError(f"{where}: expected an object, got {v!r}")
+            raise ValueError(f"{where}: expected an object, got {short(v)}")
+        if json_depth(v) > MAX_JSON_DEPTH:
+            raise ValueError(f"{where}: nested deeper than {MAX_JSON_DEPTH} levels")
         return v
     raise AssertionError(kind)
 
@@ -311,7 +315,7 @@ def from_json_obj(cls: type, obj: Any) -> Any:
     known = {s.name for s in specs}
     unknown = [k for k in obj if k not in known and k != NONFINITE]
     if unknown:
-        raise ValueError(f"{name}.{unknown[0]}: unknown field")
+        raise ValueError(f"{name}.{_name(unknown[0])}: unknown field")
     nonfinite = _NonFinite(obj.get(NONFINITE), name)
     kwargs: dict[str, Any] = {}
     for s in specs:
@@ -332,12 +336,64 @@ def from_json_obj(cls: type, obj: Any) -> Any:
         raise ValueError(f"{name}: {e}") from None
 
 
+def json_depth(obj: Any) -> int:
+    """How deep ``obj``'s objects and arrays nest (0 for a plain value), counted without
+    recursion."""
+    deepest = 0
+    todo = [(obj, 1)]
+    while todo:
+        v, d = todo.pop()
+        if isinstance(v, dict):
+            items: Any = v.values()
+        elif isinstance(v, list):
+            items = v
+        else:
+            continue
+        deepest = max(deepest, d)
+        if deepest > MAX_JSON_DEPTH:
+            break
+        todo.extend((x, d + 1) for x in items if isinstance(x, (dict, list)))
+    return deepest
+
+
+def load_json(data: bytes | str, what: str) -> Any:
+    """The JSON value of ``data`` read from a file (ValueError naming ``what`` when it is not
+    JSON or nests deeper than :data:`~.limits.MAX_JSON_DEPTH`)."""
+    try:
+        obj = json.loads(data)
+    except RecursionError:
+        raise ValueError(f"{what}: JSON nested deeper than {MAX_JSON_DEPTH} levels") from None
+    except (ValueError, UnicodeDecodeError) as e:
+        raise ValueError(f"{what}: not valid JSON ({str(e)[:120]})") from None
+    if json_depth(obj) > MAX_JSON_DEPTH:
+        raise ValueError(f"{what}: JSON nested deeper than {MAX_JSON_DEPTH} levels")
+    return obj
+
+
+_REPR = reprlib.Repr()
+_REPR.maxlevel, _REPR.maxstring, _REPR.maxother, _REPR.maxdict, _REPR.maxlist = 3, 60, 60, 6, 6
+
+
+def short(v: Any, n: int = 80) -> str:
+    """``repr(v)`` within ``n`` characters and three levels of nesting: a file's value in an
+    error message (which a crafted file could otherwise make megabytes long)."""
+    text = _REPR.repr(v)
+    return text if len(text) <= n else text[: n - 3] + "..."
+
+
+def _name(key: str) -> str:
+    """A field name from a file, cut for an error message."""
+    return key if len(key) <= 60 else key[:57] + "..."
+
+
 def loads(cls: type, data: bytes) -> Any:
     """The JSON object of a message's bytes (ValueError when they are not JSON)."""
     try:
         return json.loads(data)
+    except RecursionError:
+        raise ValueError(f"{cls.__name__}: message nests deeper than {MAX_JSON_DEPTH} levels") from None
     except (ValueError, UnicodeDecodeError) as e:
-        raise ValueError(f"{cls.__name__}: message is not valid JSON ({e})") from None
+        raise ValueError(f"{cls.__name__}: message is not valid JSON ({str(e)[:120]})") from None
 
 
 def decode(cls: type, data: bytes) -> Any:

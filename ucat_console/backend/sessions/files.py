@@ -1,5 +1,10 @@
 """Where session files live, what they are called, and the metadata records they hold.
 
+The sessions directory is the one a run is given (``run --sessions-dir``, a command's
+``--dir``, ``console.sessions_dir`` in the configuration), else the folder the environment
+variable ``UCAT_CONSOLE_SESSIONS`` names, else ``sessions/`` in the user's data folder
+(``~/.local/share/ucat-console/sessions`` on Linux: platformdirs), never the installed package.
+
 One session is one or more MCAP files (parts) in the sessions directory, named
 ``<session id>_<part>.mcap`` with a three-digit part number from 001; the session id is
 ``YYYYmmdd-HHMMSS`` (UTC, at the start) followed by ``-<label>`` when one is given. Review
@@ -16,15 +21,15 @@ Metadata records (MCAP metadata, string values), written at the start of every p
 
 from __future__ import annotations
 
+import os
 import re
 import time
 from pathlib import Path
 
-import ucat_console
+import platformdirs
 
-#: the project root (the directory holding the package) and its sessions directory
-PROJECT_ROOT = Path(ucat_console.__file__).resolve().parent.parent
-DEFAULT_SESSIONS_DIR = PROJECT_ROOT / "sessions"
+#: the environment variable naming the sessions directory when a run is given none
+SESSIONS_ENV = "UCAT_CONSOLE_SESSIONS"
 
 SUFFIX = ".mcap"
 MARKERS_SUFFIX = ".markers.json"
@@ -66,9 +71,25 @@ def markers_path(directory: Path, session_id: str) -> Path:
     return directory / f"{session_id}{MARKERS_SUFFIX}"
 
 
+def printable(text: str) -> str:
+    """``text`` with each character that is not printable escaped (a file name shown on a
+    terminal or a page: no control characters; undecodable bytes as ``\\udcXX``)."""
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text)
+
+
+def default_sessions_dir() -> Path:
+    """Where recordings go when a run is given no directory (module docstring)."""
+    env = os.environ.get(SESSIONS_ENV, "")
+    if env:
+        return Path(env)
+    return platformdirs.user_data_path("ucat-console") / "sessions"
+
+
 def sessions_dir(directory: str | Path | None = None) -> Path:
-    """The sessions directory (default: ``sessions/`` at the project root), resolved."""
-    return Path(DEFAULT_SESSIONS_DIR if directory is None else directory).expanduser().resolve()
+    """The sessions directory (default: :func:`default_sessions_dir`), resolved."""
+    return Path(default_sessions_dir() if directory is None else directory).expanduser().resolve()
 
 
 def inside_sessions(path: str | Path, directory: str | Path | None = None) -> Path:

@@ -9,6 +9,7 @@ repaired. No message is decoded.
 from __future__ import annotations
 
 import logging
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -21,6 +22,7 @@ from ucat_console.backend.sessions.reader import (
     SessionReader,
     TruncatedSessionError,
     part_paths,
+    record_limit,
 )
 from ucat_console.telemetry.channels import EVENTS
 
@@ -85,7 +87,7 @@ def _leading_metadata(path: Path) -> dict[str, dict[str, str]]:
     out: dict[str, dict[str, str]] = {}
     with open(path, "rb") as fh:
         try:
-            for rec in StreamReader(fh, emit_chunks=True).records:
+            for rec in StreamReader(fh, emit_chunks=True, record_size_limit=record_limit()).records:
                 if isinstance(rec, Metadata):
                     out[rec.name] = dict(rec.metadata)
                 elif isinstance(rec, Chunk):
@@ -123,25 +125,72 @@ def part_info(path: str | Path, directory: str | Path | None = None) -> PartInfo
             duration=None, messages=None, events=None,
             notes=meta.get(files.META_NOTES, {}).get("text", ""),
         )
-    except ValueError as e:
+    except (ValueError, OSError) as e:
         return PartInfo(p, parsed[0], parsed[1], size, False, None, None, None, None, "", str(e))
 
 
-def list_sessions(directory: str | Path | None = None) -> list[SessionInfo]:
-    """Every session in the directory, oldest first, parts in order."""
+@dataclass(frozen=True)
+class Skipped:
+    """An entry of the sessions directory that is not read, and why."""
+
+    name: str  # printable: characters that are not are escaped
+    why: str
+
+
+@dataclass(frozen=True)
+class Listing:
+    sessions: list[SessionInfo]
+    skipped: list[Skipped]
+
+
+def _why_skipped(entry: os.DirEntry, root: Path) -> str:
+    """Why a ``*.mcap`` entry of the directory is not read ("" when it is)."""
+    if not entry.name.isprintable():
+        return "its name holds characters that are not printable (rename it to read it)"
+    try:
+        if entry.is_symlink():
+            target = Path(entry.path).resolve()
+            if not target.is_relative_to(root):
+                return f"a symbolic link out of the sessions directory (to {files.printable(str(target))}): not followed"
+            if not target.is_file():
+                return "a symbolic link to something that is not a file"
+            return ""
+        if not entry.is_file(follow_symlinks=False):
+            return "not a regular file"
+    except (OSError, RuntimeError) as e:  # a link loop, permissions
+        return f"unreadable ({type(e).__name__}: {e})"
+    return ""
+
+
+def scan(directory: str | Path | None = None) -> Listing:
+    """Every session in the directory (oldest first, parts in order) and the ``*.mcap``
+    entries that are not read: symbolic links out of the directory (never followed), what is
+    not a regular file (a directory, a pipe, a device), names that cannot be shown."""
     root = files.sessions_dir(directory)
     if not root.is_dir():
-        return []
+        return Listing([], [])
     by_id: dict[str, list[PartInfo]] = {}
-    for path in sorted(root.glob("*" + files.SUFFIX)):
-        if not path.is_file():
+    skipped: list[Skipped] = []
+    with os.scandir(root) as it:
+        entries = sorted((e for e in it if e.name.endswith(files.SUFFIX)), key=lambda e: e.name)
+    for entry in entries:
+        why = _why_skipped(entry, root)
+        if why:
+            skipped.append(Skipped(files.printable(entry.name), why))
             continue
-        info = part_info(path, root)
+        info = part_info(root / entry.name, root)
         by_id.setdefault(info.session_id, []).append(info)
     sessions = [
         SessionInfo(sid, tuple(sorted(ps, key=lambda x: x.part))) for sid, ps in by_id.items()
     ]
-    return sorted(sessions, key=lambda s: (s.start is None, s.start or 0.0, s.session_id))
+    sessions.sort(key=lambda s: (s.start is None, s.start or 0.0, s.session_id))
+    return Listing(sessions, skipped)
+
+
+def list_sessions(directory: str | Path | None = None) -> list[SessionInfo]:
+    """Every session in the directory, oldest first, parts in order (:func:`scan` also
+    says what it skipped)."""
+    return scan(directory).sessions
 
 
 def session_parts(session_id: str, directory: str | Path | None = None) -> list[Path]:

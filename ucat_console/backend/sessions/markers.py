@@ -18,18 +18,21 @@ from __future__ import annotations
 import json
 import math
 import os
+import stat
 import threading
 import time
 import weakref
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from ucat_console.backend.sessions import files
+from ucat_console.backend.sessions import codec, files
 
 #: the longest note of a review marker (bytes, UTF-8)
 MAX_NOTE_BYTES = 2048
 #: the most markers a session keeps
 MAX_MARKERS = 10_000
+#: the largest sidecar read (bytes): the most markers with the longest notes, indented
+MAX_FILE_BYTES = MAX_MARKERS * (MAX_NOTE_BYTES + 200)
 
 
 @dataclass(frozen=True)
@@ -94,17 +97,27 @@ class MarkerStore:
         self._markers: list[Marker] = self._load()
 
     def _load(self) -> list[Marker]:
-        if not self.path.exists():
+        p = self.path
+        if not p.exists() and not p.is_symlink():
             return []
+        if not p.resolve().is_relative_to(p.parent.resolve()):
+            raise ValueError(f"{p}: a symbolic link out of the sessions directory: not followed")
         try:
-            doc = json.loads(self.path.read_text())
+            st = os.stat(p)  # before opening: a pipe would block the open
+            if not stat.S_ISREG(st.st_mode):
+                raise ValueError("not a regular file")
+            if st.st_size > MAX_FILE_BYTES:
+                raise ValueError(f"{st.st_size} bytes, more than a markers file holds ({MAX_FILE_BYTES})")
+            with open(p, "rb") as fh:
+                data = fh.read(MAX_FILE_BYTES + 1)
+            doc = codec.load_json(data, "JSON")
         except (OSError, ValueError) as e:
-            raise ValueError(f"{self.path}: not a markers file ({e})") from None
+            raise ValueError(f"{p}: not a markers file ({e})") from None
         if not isinstance(doc, dict) or not isinstance(doc.get("markers"), list):
             raise ValueError(f"{self.path}: not a markers file (no \"markers\" list)")
         if doc.get("session") != self.session_id:
             raise ValueError(
-                f"{self.path}: markers of session {doc.get('session')!r}, not {self.session_id!r}"
+                f"{self.path}: markers of session {codec.short(doc.get('session'))}, not {self.session_id!r}"
             )
         if len(doc["markers"]) > MAX_MARKERS:
             raise ValueError(f"{self.path}: {len(doc['markers'])} markers, more than the limit of {MAX_MARKERS}")

@@ -83,6 +83,11 @@ class ChunkedWriter(Writer):
         self._stats = self._Writer__statistics
         self._counts = self._stats.channel_message_counts
         self._limit = chunk_size
+        self._output = output
+        #: the output's length when it last ended on a complete chunk, handed to the OS, and
+        #: the latest message time in it (what survives a failed write after it)
+        self.complete = 0
+        self.complete_ns = 0
 
     def add_message(self, channel_id: int, log_time: int, data: bytes, publish_time: int,
                     sequence: int = 0) -> None:
@@ -99,3 +104,14 @@ class ChunkedWriter(Writer):
         chunk.append(channel_id, log_time, data, publish_time, sequence)
         if chunk.record_writer._buffer.tell() > self._limit:
             self._Writer__finalize_chunk()
+            self.handed_over()
+
+    def flush(self) -> None:
+        super().flush()
+        self.handed_over()
+
+    def handed_over(self) -> None:
+        """The output ends on a complete record: hand it to the OS and note where."""
+        self._output.flush()
+        self.complete = self._output.tell()
+        self.complete_ns = self._stats.message_end_time

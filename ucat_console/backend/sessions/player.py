@@ -62,7 +62,10 @@ class Player:
         loop: bool = False,
         frame_channel: str = BODY_STATE,
         clock: Callable[[], float] = time.monotonic,
+        on_error: Callable[[str], None] | None = None,
     ) -> None:
+        """``on_error(text)``: playing stopped on a failure (a damaged file, the memory cap),
+        called from the playing thread; ``error`` keeps the text."""
         if frame_channel not in CHANNELS:
             raise ValueError(f"frame_channel: unknown telemetry channel {frame_channel!r}")
         self.reader = reader
@@ -80,9 +83,9 @@ class Player:
         self._pos_ns = self._start_ns - 1  # nothing published yet
         self._iter: Iterator[Record] | None = None
         self._next: Record | None = None
-        self._events: list[tuple[int, Event]] = [
-            (r.log_time_ns, r.message) for r in reader.records([EVENTS])
-        ]
+        self._events = reader.event_index()  # shared with everyone reading this session
+        self._on_error = on_error
+        self.error = ""
         self.markers = MarkerStore.shared(reader.path.parent, reader.session_id)
 
     # ------------------------------------------------------------------ state
@@ -187,6 +190,7 @@ class Player:
             if self.at_end:
                 self._seek_ns(self._start_ns)
             self._playing = True
+            self.error = ""
             self._wake.clear()
             self._thread = threading.Thread(target=self._run, name="player", daemon=True)
             self._thread.start()
@@ -222,9 +226,19 @@ class Player:
                 if wait > 0.0:
                     self._wake.wait(wait)
                     self._wake.clear()
-        except Exception:
-            log.exception("playback of %s failed", self.reader.path)
+        except Exception as e:
             self._playing = False
+            if isinstance(e, ValueError):  # the file or the memory cap: the reason is the message
+                log.warning("playback of %s stopped: %s", self.reader.path, e)
+                self.error = str(e)
+            else:
+                log.exception("playback of %s failed", self.reader.path)
+                self.error = f"playback failed: {type(e).__name__}: {e}"
+            if self._on_error is not None:
+                try:
+                    self._on_error(self.error)
+                except Exception:
+                    log.exception("reporting the playback failure failed")
 
     def _seek_ns(self, ns: int) -> dict[str, Any]:
         ns = min(max(ns, self._start_ns), self._end_ns)
@@ -266,11 +280,22 @@ class Player:
             return True
 
     # ------------------------------------------------------------------ events and markers
-    def _jump_targets(self, levels: Collection[str] | None = None) -> list[tuple[int, Event | Marker]]:
-        targets: list[tuple[int, Event | Marker]] = [
-            (ns, e) for ns, e in self._events if levels is None or e.level in levels]
+    def _jump_targets(self, levels: Collection[str] | None = None) -> list[tuple[int, Marker | None]]:
+        """Recorded events (None: read when jumped to) and markers, in time order."""
+        targets: list[tuple[int, Marker | None]] = [(ns, None) for ns in self._events.at_levels(levels)]
         targets += [(self.reader.to_ns(m.t), m) for m in self.markers.markers]
         return sorted(targets, key=lambda x: x[0])
+
+    def _jump(self, target: tuple[int, Marker | None], levels: Collection[str] | None) -> Event | Marker:
+        """Seek to a jump target; the marker, or the event recorded there."""
+        ns, what = target
+        self._seek_ns(ns)
+        if what is not None:
+            return what
+        for r in self.reader.records([EVENTS], start_ns=ns, end_ns=ns + 1):
+            if levels is None or r.message.level in levels:
+                return r.message
+        raise ValueError(f"{self.reader.path}: no event at {ns} ns, where its index has one")
 
     def next_event(self, levels: Collection[str] | None = None) -> Event | Marker | None:
         """Seek to the next recorded event (of one of ``levels``; default any) or marker
@@ -280,8 +305,7 @@ class Player:
             i = bisect.bisect_right([ns for ns, _ in targets], self._pos_ns)
             if i >= len(targets):
                 return None
-            ns, what = targets[i]
-            self._seek_ns(ns)
+            what = self._jump(targets[i], levels)
         self._wake.set()
         return what
 
@@ -292,8 +316,7 @@ class Player:
             i = bisect.bisect_left([ns for ns, _ in targets], self._pos_ns) - 1
             if i < 0:
                 return None
-            ns, what = targets[i]
-            self._seek_ns(ns)
+            what = self._jump(targets[i], levels)
         self._wake.set()
         return what
 

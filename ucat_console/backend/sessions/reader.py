@@ -24,18 +24,37 @@ from __future__ import annotations
 
 import bisect
 import heapq
-import json
+import io
 import logging
 import math
+import os
+import struct
+import threading
+import zlib
+from array import array
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any, Iterable, Iterator, Self, Sequence
 
-from mcap.reader import SeekingReader
-from mcap.records import Channel, ChunkIndex, Message, Schema
+from mcap.data_stream import ReadDataStream
+from mcap.exceptions import McapError
+from mcap.opcode import Opcode
+from mcap.records import (
+    AttachmentIndex,
+    Channel,
+    Chunk,
+    ChunkIndex,
+    Footer,
+    Message,
+    Metadata,
+    MetadataIndex,
+    Schema,
+    Statistics,
+)
+from mcap.stream_reader import StreamReader
 from mcap.summary import Summary
 
-from ucat_console.backend.sessions import codec, files, foxglove, legacy
+from ucat_console.backend.sessions import codec, files, foxglove, legacy, limits
 from ucat_console.backend.sessions.schema import (
     MESSAGE_ENCODING,
     NONFINITE,
@@ -48,11 +67,69 @@ from ucat_console.backend.sessions.schema import (
 #: the message decoder of each schema encoding (schema.schema_encoding)
 _DECODERS = {1: legacy.decode, 2: codec.decode}
 from ucat_console.telemetry.channels import CHANNELS, EVENTS
-from ucat_console.telemetry.events import Event
+from ucat_console.telemetry.events import LEVELS, Event
 
 log = logging.getLogger(__name__)
 
 MAGIC = b"\x89MCAP0\r\n"
+FOOTER_SIZE = 1 + 8 + 8 + 8 + 4  # opcode, length, summary start, summary offset start, CRC
+_RECORD_HEAD = struct.Struct("<BQ")  # opcode, length
+_MESSAGE_FIELDS = struct.Struct("<HIQQ")  # channel, sequence, log time, publish time
+#: bytes of the memory budget per byte of a summary section (its records as Python objects,
+#: measured with tracemalloc: about 6 on a recorded session)
+SUMMARY_COST = 8
+#: bytes of the memory budget per message held besides its data (the record object, its
+#: place in the ordering heap; measured with tracemalloc: about 200)
+MESSAGE_COST = 400
+
+
+def record_limit() -> int:
+    """The largest record read whole: a chunk within the limit, compressed (zstd and lz4
+    add a little to data that does not compress), with its header."""
+    cap = limits.limits().max_chunk
+    return cap + cap // 64 + 4096
+
+
+def _error(e: BaseException) -> str:
+    text = str(e)
+    return f"{type(e).__name__}: {text if len(text) <= 200 else text[:197] + '...'}"
+
+
+def _by_offset(ci: ChunkIndex) -> int:
+    return ci.chunk_start_offset
+
+
+def _chunk_data(body: bytes, ci: ChunkIndex) -> bytes:
+    """The decompressed records of the chunk record ``body`` (read where ``ci`` puts it);
+    ValueError unless it is the chunk ``ci`` describes and decompresses as it declares."""
+    if len(body) != ci.chunk_length:
+        raise ValueError("the file ends inside it")
+    opcode, length = _RECORD_HEAD.unpack_from(body)
+    if opcode != Opcode.CHUNK or _RECORD_HEAD.size + length != len(body):
+        raise ValueError(f"there is no chunk record of {ci.chunk_length} bytes there")
+    try:
+        chunk = Chunk.read(ReadDataStream(io.BytesIO(body[_RECORD_HEAD.size:])))
+    except Exception as e:
+        raise ValueError(f"unreadable chunk header ({_error(e)})") from None
+    if (chunk.uncompressed_size, chunk.compression, len(chunk.data)) != (
+            ci.uncompressed_size, ci.compression, ci.compressed_size):
+        raise ValueError(
+            f"it is not the chunk its index describes ({codec.short(chunk.compression, 12)}, {len(chunk.data)} -> "
+            f"{chunk.uncompressed_size} bytes; the index: {codec.short(ci.compression, 12)}, {ci.compressed_size} -> "
+            f"{ci.uncompressed_size} bytes)")
+    return decompressed(chunk)
+
+
+def decompressed(chunk: Chunk) -> bytes:
+    """A chunk's records, decompressed within the chunk limit, CRC checked (ValueError)."""
+    cap = limits.limits().max_chunk
+    if chunk.uncompressed_size > cap:
+        raise ValueError(f"it decompresses to {chunk.uncompressed_size} bytes, over the limit of "
+                         f"{cap} (review.max_chunk)")
+    data = limits.decompress(chunk.compression, chunk.data, chunk.uncompressed_size)
+    if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
+        raise ValueError("its CRC does not match its data")
+    return data
 
 
 class TruncatedSessionError(ValueError):
@@ -75,35 +152,55 @@ def _check_schema(topic: str, schema: Schema | None, channel: Channel, path: Pat
         cls = CHANNELS[topic]
         want = schema_name(cls)
         if schema is None or schema.name != want or schema.encoding != SCHEMA_ENCODING:
-            got = "no schema" if schema is None else f"schema {schema.name!r} ({schema.encoding})"
-            raise ValueError(f"{path}: not a session file: channel {topic!r} has {got}, "
+            got = "no schema" if schema is None else f"schema {codec.short(schema.name)} ({codec.short(schema.encoding)})"
+            raise ValueError(f"{path}: not a session file: channel {codec.short(topic)} has {got}, "
                              f"expected {want!r} (jsonschema)")
         if channel.message_encoding != MESSAGE_ENCODING:
-            raise ValueError(f"{path}: not a session file: channel {topic!r} is encoded "
-                             f"{channel.message_encoding!r}, expected 'json'")
+            raise ValueError(f"{path}: not a session file: channel {codec.short(topic)} is encoded "
+                             f"{codec.short(channel.message_encoding)}, expected 'json'")
         try:
-            doc = json.loads(schema.data)
+            doc = codec.load_json(schema.data, "schema")
             props = set(doc["properties"])
         except (ValueError, KeyError, TypeError):
             raise ValueError(
-                f"{path}: channel {topic!r}: schema is not a JSON Schema object"
+                f"{path}: channel {codec.short(topic)}: schema is not a JSON Schema object"
             ) from None
         try:
             encoding = schema_encoding(doc)
         except ValueError as e:
-            raise ValueError(f"{path}: channel {topic!r}: {e}") from None
+            raise ValueError(f"{path}: channel {codec.short(topic)}: {e}") from None
         fields = {s.name for s in field_specs(cls)} | {NONFINITE}
         if not props <= fields:
-            raise ValueError(f"{path}: channel {topic!r}: schema fields "
-                             f"{sorted(props - fields)} are not fields of {cls.__name__}")
+            raise ValueError(f"{path}: channel {codec.short(topic)}: schema fields "
+                             f"{codec.short(sorted(props - fields))} are not fields of {cls.__name__}")
         return encoding
     for ftopic, name in foxglove.DERIVED_TOPICS.items():
         if topic == ftopic:
             if schema is None or schema.name != name:
-                raise ValueError(f"{path}: not a session file: channel {topic!r} is not {name}")
+                raise ValueError(f"{path}: not a session file: channel {codec.short(topic)} is not {name}")
             return 0
-    raise ValueError(f"{path}: not a session file: foreign channel {topic!r}"
-                     + (f" (schema {schema.name!r})" if schema is not None else ""))
+    raise ValueError(f"{path}: not a session file: foreign channel {codec.short(topic)}"
+                     + (f" (schema {codec.short(schema.name)})" if schema is not None else ""))
+
+
+@dataclass(frozen=True)
+class EventIndex:
+    """The events of a recording as two compact columns: file time (ns) and level (an index
+    into :data:`~ucat_console.telemetry.events.LEVELS`)."""
+
+    COST = 9  # bytes per event
+    times_ns: array[int]
+    levels: bytes
+
+    def at_levels(self, levels: Iterable[str] | None) -> list[int]:
+        """The times of the events of ``levels`` (None: every event)."""
+        if levels is None:
+            return list(self.times_ns)
+        want = {LEVELS.index(x) for x in levels if x in LEVELS}
+        return [t for t, lv in zip(self.times_ns, self.levels) if lv in want]
+
+
+_INDEX_LOCK = threading.Lock()
 
 
 class _Recording:
@@ -117,9 +214,19 @@ class _Recording:
     message_count: int
     start_ns: int
     end_ns: int
+    _held = 0  # bytes of the memory budget held while open (summary, metadata, event index)
+    _event_index: EventIndex | None = None
 
     def close(self) -> None:
         raise NotImplementedError
+
+    def _hold(self, n: int, what: str) -> None:
+        limits.budget().reserve(n, f"{self.path}: {what}")
+        self._held += n
+
+    def _let_go(self) -> None:
+        held, self._held = self._held, 0
+        limits.budget().release(held)
 
     def records(
         self,
@@ -184,7 +291,7 @@ class _Recording:
                 out[k] = float(v)
             except ValueError:
                 raise ValueError(
-                    f"{self.path}: weights metadata: {k}={v!r} is not a number"
+                    f"{self.path}: weights metadata: {codec.short(k)}={codec.short(v)} is not a number"
                 ) from None
         return out
 
@@ -217,12 +324,31 @@ class _Recording:
         """The recorded events within ``[start, end)``, in time order."""
         return [m for _, m in self.messages([EVENTS], start, end)]
 
-    def event_times_ns(self) -> list[int]:
-        return [r.log_time_ns for r in self.records([EVENTS])]
+    def event_index(self) -> EventIndex:
+        """The time and level of every recorded event, in time order: read once (each event
+        decoded and let go), then kept while the file is open, within the memory budget."""
+        with _INDEX_LOCK:
+            if self._event_index is None:
+                times: array[int] = array("q")
+                levels = bytearray()
+                for r in self.records([EVENTS]):
+                    if len(times) % 4096 == 0:
+                        self._hold(4096 * EventIndex.COST, "its event index")
+                    times.append(r.log_time_ns)
+                    levels.append(LEVELS.index(r.message.level))
+                self._event_index = EventIndex(times, bytes(levels))
+            return self._event_index
 
 
 class SessionReader(_Recording):
-    """One session file, opened for reading (use as a context manager or ``close()``)."""
+    """One session file, opened for reading (use as a context manager or ``close()``).
+
+    Within the limits of :mod:`~ucat_console.backend.sessions.limits`: the summary, the
+    metadata and each chunk are read with mcap's record reader (``StreamReader``, chunks
+    emitted whole: nothing is decompressed behind the limits' back), each chunk checked
+    against its index and decompressed here no further than it declares. Reads use
+    ``os.pread``: one reader may serve several threads (the pages sharing it, :mod:`.shared`).
+    """
 
     def __init__(self, path: str | Path, directory: str | Path | None = None) -> None:
         self.path = files.inside_sessions(path, directory)
@@ -233,28 +359,16 @@ class SessionReader(_Recording):
         try:
             self._open()
         except BaseException:
-            self._file.close()
+            self.close()
             raise
 
     def _open(self) -> None:
         p = self.path
-        head = self._file.read(len(MAGIC))
-        if head != MAGIC:
+        self._fd = self._file.fileno()
+        self._size = os.fstat(self._fd).st_size
+        if os.pread(self._fd, len(MAGIC), 0) != MAGIC:
             raise ValueError(f"{p}: not an MCAP file (it does not start with the MCAP magic)")
-        self._file.seek(0)
-        self._reader = SeekingReader(self._file, validate_crcs=True)
-        try:
-            summary = self._reader.get_summary()
-        except Exception as e:
-            raise TruncatedSessionError(
-                f"{p}: truncated or corrupted (no readable summary: {e}); "
-                "`ucat-console sessions repair` recovers its complete records"
-            ) from None
-        if summary is None or summary.statistics is None:
-            raise TruncatedSessionError(
-                f"{p}: has no summary section; `ucat-console sessions repair` "
-                "rewrites it fully indexed"
-            )
+        summary = self._read_summary()
         self._summary: Summary = summary
         channels = summary.channels
         if not channels:
@@ -271,33 +385,128 @@ class SessionReader(_Recording):
             raise ValueError(
                 f"{p}: not a session file: none of its channels is a telemetry channel"
             )
-        try:
-            self.metadata: dict[str, dict[str, str]] = {}
-            for m in self._reader.iter_metadata():  # later records replace earlier ones
-                self.metadata[m.name] = dict(m.metadata)
-        except Exception as e:
-            raise ValueError(f"{p}: corrupted metadata ({e})") from None
+        self._check_chunk_indexes(summary)
+        self.metadata: dict[str, dict[str, str]] = self._read_metadata(summary)
         session = self.metadata.get(files.META_SESSION, {})
         try:
             self.epoch_offset = float(session.get("epoch_offset", "0.0"))
             self.part = int(session.get("part", "1"))
         except ValueError:
-            raise ValueError(f"{p}: bad session metadata {session!r}") from None
+            raise ValueError(f"{p}: bad session metadata {codec.short(session)}") from None
         if not math.isfinite(self.epoch_offset):
             raise ValueError(f"{p}: bad session metadata: epoch_offset {self.epoch_offset!r}")
         parsed = files.parse_part_name(p)
         self.session_id = session.get("id") or (parsed[0] if parsed else p.stem)
+        if len(self.session_id) > 128 or not self.session_id.isprintable():
+            raise ValueError(f"{p}: bad session metadata: id {codec.short(self.session_id)}")
         stats = summary.statistics
+        assert stats is not None
         self.message_count = sum(
             n for cid, n in stats.channel_message_counts.items()
-            if channels[cid].topic in CHANNELS
+            if cid in channels and channels[cid].topic in CHANNELS
         )
         self.start_ns = stats.message_start_time
         self.end_ns = stats.message_end_time
 
+    def _records_at(self, offset: int) -> Iterator[Any]:
+        """mcap's record reader from ``offset`` (chunks emitted whole, records within the
+        limits' largest record)."""
+        self._file.seek(offset)
+        return StreamReader(self._file, skip_magic=True, emit_chunks=True,
+                            record_size_limit=record_limit()).records
+
+    def _read_summary(self) -> Summary:
+        """The summary section (TruncatedSessionError when there is none): its records, read
+        within the memory budget, and nothing but summary records."""
+        p = self.path
+        tail = FOOTER_SIZE + len(MAGIC)
+        end = os.pread(self._fd, tail, self._size - tail) if self._size >= len(MAGIC) + tail else b""
+        if len(end) != tail or end[-len(MAGIC):] != MAGIC or end[0] != Opcode.FOOTER:
+            raise TruncatedSessionError(
+                f"{p}: truncated or corrupted (no footer at its end); "
+                "`ucat-console sessions repair` recovers its complete records"
+            )
+        summary_start = int.from_bytes(end[9:17], "little")
+        if summary_start == 0:
+            raise TruncatedSessionError(
+                f"{p}: has no summary section; `ucat-console sessions repair` "
+                "rewrites it fully indexed"
+            )
+        if not len(MAGIC) <= summary_start <= self._size - tail:
+            raise ValueError(f"{p}: corrupted data: its footer puts the summary at byte {summary_start} "
+                             f"of {self._size}")
+        self._hold(SUMMARY_COST * (self._size - tail - summary_start), "its summary")
+        summary = Summary()
+        try:
+            for rec in self._records_at(summary_start):
+                if isinstance(rec, Footer):
+                    break
+                if isinstance(rec, Statistics):
+                    summary.statistics = rec
+                elif isinstance(rec, Schema):
+                    summary.schemas[rec.id] = rec
+                elif isinstance(rec, Channel):
+                    summary.channels[rec.id] = rec
+                elif isinstance(rec, ChunkIndex):
+                    summary.chunk_indexes.append(rec)
+                elif isinstance(rec, MetadataIndex):
+                    summary.metadata_indexes.append(rec)
+                elif isinstance(rec, AttachmentIndex):
+                    summary.attachment_indexes.append(rec)
+                elif isinstance(rec, (Chunk, Message)):
+                    raise McapError(f"a {type(rec).__name__} record in the summary section")
+        except ValueError:
+            raise
+        except Exception as e:
+            raise TruncatedSessionError(
+                f"{p}: truncated or corrupted (no readable summary: {_error(e)}); "
+                "`ucat-console sessions repair` recovers its complete records"
+            ) from None
+        if summary.statistics is None:
+            raise TruncatedSessionError(
+                f"{p}: has no summary section; `ucat-console sessions repair` "
+                "rewrites it fully indexed"
+            )
+        return summary
+
+    def _check_chunk_indexes(self, summary: Summary) -> None:
+        """Every chunk the index lists lies within the file and within the chunk limit."""
+        p, cap, stats = self.path, limits.limits().max_chunk, summary.statistics
+        assert stats is not None
+        if stats.message_count and not summary.chunk_indexes:
+            raise ValueError(f"{p}: has messages but no chunk index; `ucat-console sessions repair "
+                             "--force` rewrites it indexed")
+        for ci in summary.chunk_indexes:
+            where = f"{p}: the chunk at byte {ci.chunk_start_offset}"
+            if ci.uncompressed_size > cap:
+                raise ValueError(f"{where} decompresses to {ci.uncompressed_size} bytes, over the "
+                                 f"limit of {cap} (review.max_chunk)")
+            if not (len(MAGIC) <= ci.chunk_start_offset
+                    and ci.chunk_start_offset + ci.chunk_length <= self._size
+                    and ci.chunk_length <= record_limit()):
+                raise ValueError(f"{where}: corrupted index: {ci.chunk_length} bytes at byte "
+                                 f"{ci.chunk_start_offset} of a {self._size}-byte file")
+
+    def _read_metadata(self, summary: Summary) -> dict[str, dict[str, str]]:
+        """The metadata records by name (a later record replaces an earlier one)."""
+        out: dict[str, dict[str, str]] = {}
+        self._hold(2 * sum(mi.length for mi in summary.metadata_indexes), "its metadata")
+        try:
+            for mi in summary.metadata_indexes:
+                if not len(MAGIC) <= mi.offset < self._size:
+                    raise McapError(f"a metadata index points to byte {mi.offset} of {self._size}")
+                rec = next(self._records_at(mi.offset))
+                if not isinstance(rec, Metadata):
+                    raise McapError(f"a metadata index points to a {type(rec).__name__} record")
+                out[rec.name] = dict(rec.metadata)
+        except Exception as e:
+            raise ValueError(f"{self.path}: corrupted metadata ({_error(e)})") from None
+        return out
+
     # ------------------------------------------------------------------ properties
     def close(self) -> None:
         self._file.close()
+        self._let_go()
 
     @property
     def channels(self) -> list[str]:
@@ -330,18 +539,127 @@ class SessionReader(_Recording):
         self, topics: list[str], starting_at: int | None, ending_before: int | None,
         reverse: bool = False, ordered: bool = True,
     ) -> Iterator[tuple[Channel, Message]]:
+        """The messages of ``topics`` in ``[starting_at, ending_before)``: in time order
+        (``reverse``: latest first; at equal times in file order, as mcap's reader), or
+        chunk by chunk in file order. A chunk is read when the next message may be in it;
+        while its messages wait to be yielded they count against the memory budget."""
         if not topics:
             return
-        if starting_at is not None and ending_before is not None and starting_at >= ending_before:
+        lo, hi = starting_at, ending_before
+        if lo is not None and hi is not None and lo >= hi:
             return
+        ids = {self._topic_ids[t] for t in topics}
+        chunks = [
+            ci for ci in self._summary.chunk_indexes
+            if (lo is None or ci.message_end_time >= lo) and (hi is None or ci.message_start_time < hi)
+            and (not ci.message_index_offsets or not ids.isdisjoint(ci.message_index_offsets))
+        ]
+        channels = self._summary.channels
+        budget = limits.budget()
+        held: dict[int, list[int]] = {}  # chunk offset -> [messages still queued, bytes held]
         try:
-            for _, channel, message in self._reader.iter_messages(
-                topics=topics, starting_at=starting_at, ending_before=ending_before,
-                reverse=reverse, log_time_order=ordered,
-            ):
-                yield channel, message
-        except Exception as e:  # CRC, decompression, record structure: the file is damaged
-            raise ValueError(f"{self.path}: corrupted data ({type(e).__name__}: {e})") from None
+            if not ordered:
+                for ci in sorted(chunks, key=_by_offset):
+                    messages, n = self._read_chunk(ci, ids, lo, hi)
+                    held[ci.chunk_start_offset] = [0, n]
+                    for m in messages:
+                        yield channels[m.channel_id], m
+                    del held[ci.chunk_start_offset]
+                    budget.release(n)
+                return
+            heap: list[tuple[int, int, int, Any]] = [
+                (-ci.message_end_time, -(ci.chunk_start_offset + ci.chunk_length), 1, ci) if reverse
+                else (ci.message_start_time, ci.chunk_start_offset, -1, ci)
+                for ci in chunks
+            ]
+            heapq.heapify(heap)
+            sign = -1 if reverse else 1
+            while heap:
+                _, off, _, item = heapq.heappop(heap)
+                if type(item) is ChunkIndex:
+                    messages, n = self._read_chunk(item, ids, lo, hi)
+                    if not messages:
+                        budget.release(n)
+                        continue
+                    at = item.chunk_start_offset
+                    held[at] = [len(messages), n]
+                    for i, m in enumerate(messages):
+                        heapq.heappush(heap, (sign * m.log_time, sign * at, sign * i, m))
+                    continue
+                at = sign * off
+                h = held[at]
+                h[0] -= 1
+                if h[0] == 0:
+                    del held[at]
+                    budget.release(h[1])
+                yield channels[item.channel_id], item
+        finally:
+            for _, n in held.values():
+                budget.release(n)
+
+    def _read_chunk(self, ci: ChunkIndex, ids: set[int], lo: int | None,
+                    hi: int | None) -> tuple[list[Message], int]:
+        """The messages of channels ``ids`` in ``[lo, hi)`` of one chunk, in file order, and
+        the bytes of the memory budget they hold (the caller releases them).
+
+        The chunk record is read whole (its length from the index, within the limits) and
+        must be the chunk its index describes; its data is decompressed no further than the
+        size it declares (a chunk that decompresses to another size is refused); the CRC is
+        checked; each record must lie within the chunk; a message larger than the message
+        limit is refused before it is decoded."""
+        where = f"{self.path}: the chunk at byte {ci.chunk_start_offset}"
+        if self._file.closed:  # its descriptor may be another file's by now
+            raise ValueError(f"{self.path}: the reader is closed")
+        budget = limits.budget()
+        need = ci.chunk_length + ci.uncompressed_size
+        budget.reserve(need, f"{where}")
+        try:
+            try:
+                data = _chunk_data(os.pread(self._fd, ci.chunk_length, ci.chunk_start_offset), ci)
+            except ValueError as e:
+                raise ValueError(f"{where}: corrupted data: {e}") from None
+            messages, kept = self._messages_in(data, ids, lo, hi, where)
+            if kept > need:  # many small messages: their objects outweigh the chunk's bytes
+                budget.reserve(kept - need, f"{where}: its {len(messages)} messages")
+        except BaseException:
+            budget.release(need)
+            raise
+        if kept < need:
+            budget.release(need - kept)
+        return messages, kept
+
+    def _messages_in(self, data: bytes, ids: set[int], lo: int | None, hi: int | None,
+                     where: str) -> tuple[list[Message], int]:
+        """The messages in a chunk's records (channels ``ids``, times ``[lo, hi)``) and the
+        bytes they hold."""
+        out: list[Message] = []
+        kept = 0
+        cap = limits.limits().max_message
+        pos, n = 0, len(data)
+        while pos < n:
+            if pos + _RECORD_HEAD.size > n:
+                raise ValueError(f"{where}: corrupted data: a record header is cut at the chunk's end")
+            opcode, length = _RECORD_HEAD.unpack_from(data, pos)
+            pos += _RECORD_HEAD.size
+            end = pos + length
+            if end > n:
+                raise ValueError(f"{where}: corrupted data: a record of {length} bytes runs past the chunk's end")
+            if opcode == Opcode.MESSAGE:
+                if length < _MESSAGE_FIELDS.size:
+                    raise ValueError(f"{where}: corrupted data: a message record of {length} bytes")
+                cid, seq, log_time, publish_time = _MESSAGE_FIELDS.unpack_from(data, pos)
+                if cid in ids and (lo is None or log_time >= lo) and (hi is None or log_time < hi):
+                    size = length - _MESSAGE_FIELDS.size
+                    if size > cap:
+                        topic = self._summary.channels[cid].topic
+                        raise ValueError(
+                            f"{self.path}: channel {codec.short(topic)}, message at {log_time} ns: {size} bytes, "
+                            f"over the limit of {cap} (review.max_message)")
+                    out.append(Message(channel_id=cid, sequence=seq, log_time=log_time,
+                                       publish_time=publish_time, data=data[pos + _MESSAGE_FIELDS.size:end]))
+                    kept += size + MESSAGE_COST
+            pos = end
+        return out, kept
 
     def _decode(self, channel: Channel, message: Message) -> Record:
         cls = CHANNELS[channel.topic]
@@ -490,6 +808,11 @@ def _paths_of(session: str | Path, root: Path) -> tuple[str | None, list[Path]]:
     return parsed[0], _sequence(parsed[0], p.parent)
 
 
+def session_files(session: str | Path, directory: str | Path | None = None) -> list[Path]:
+    """The part files :class:`SessionParts` opens for ``session``, in part order."""
+    return _paths_of(session, files.sessions_dir(directory))[1]
+
+
 def _check_parts(readers: Sequence[SessionReader], session_id: str | None) -> None:
     """ValueError naming the part that does not belong with the first: another session id
     or part number in its metadata than in its name, or another ``epoch_offset``."""
@@ -497,7 +820,7 @@ def _check_parts(readers: Sequence[SessionReader], session_id: str | None) -> No
     for n, r in enumerate(readers, 1):
         meta = r.metadata.get(files.META_SESSION, {})
         if session_id is not None and meta.get("id", session_id) != session_id:
-            raise ValueError(f"{r.path}: its metadata names session {meta['id']!r}, "
+            raise ValueError(f"{r.path}: its metadata names session {codec.short(meta['id'])}, "
                              f"not {session_id!r}")
         if session_id is not None and "part" in meta and r.part != n:
             raise ValueError(f"{r.path}: its metadata names part {r.part}, not {n}")
@@ -562,6 +885,7 @@ class SessionParts(_Recording):
     def close(self) -> None:
         for r in self.parts:
             r.close()
+        self._let_go()
 
     @property
     def directory(self) -> Path:

@@ -10,6 +10,16 @@ Crash safety: chunks hold at most ``chunk_size`` bytes (<= 256 KiB) and the open
 also closed and handed to the OS every ``flush_interval`` (0.5 s), so a killed process
 loses about the last half second (plus what was queued); ``repair`` re-indexes the rest.
 
+A failed write (a full disk, a removed drive, permissions) stops the recording and is an
+alarm: an ``Event`` (source ``"recorder"``, code ``"write_failed"``, level error) on the
+stream, which the ``recording`` failsafe and every page show. The part is cut back to the
+end of its last complete chunk (each is handed to the OS as it is closed), so it ends on a
+whole record and ``repair`` indexes everything up to then (at most ``flush_interval`` or one
+chunk before the fault). The recorder then is
+``failed`` (not ``recording``) until it is started again (a new session, when there is
+space again) or stopped (the failure acknowledged); either publishes an Event with code
+``"failure_cleared"``.
+
 A session is split into parts (new file, same session id, next part number) when a part
 exceeds ``split_size`` bytes or ``split_duration`` seconds of recorded time. Each part is
 self-contained: every channel registered with its schema and every metadata record.
@@ -20,6 +30,7 @@ from __future__ import annotations
 import collections
 import logging
 import math
+import os
 import sys
 import threading
 import time
@@ -93,6 +104,7 @@ class RecorderStats:
     rejected: int  # messages that could not be encoded
     queued: int
     error: str  # the writer's failure, "" when none
+    kept_until: float  # the latest message time in the open part's complete chunks
 
 
 class _Part:
@@ -154,6 +166,15 @@ class _Part:
         finally:
             self.file.close()
 
+    def abandon(self) -> None:
+        """After a failed write: close the file without finishing it and cut it back to the
+        end of its last complete chunk handed to the OS (``repair`` indexes it up to there)."""
+        try:
+            self.file.close()  # what is still buffered may not be written: it is cut off below
+        except OSError:
+            pass
+        os.truncate(self.path, self.writer.complete)
+
 
 class Recorder:
     """Records a telemetry stream to session files; ``start()`` and ``stop()`` on demand.
@@ -212,7 +233,14 @@ class Recorder:
     # ------------------------------------------------------------------ control
     @property
     def recording(self) -> bool:
-        return self._thread is not None
+        """Recording now (False after a failed write: see ``failed``)."""
+        return self._thread is not None and not self._error
+
+    @property
+    def failed(self) -> str:
+        """Why the recording stopped on its own ("" when it did not): it stays so until
+        :meth:`start` or :meth:`stop`."""
+        return self._error
 
     @property
     def session_id(self) -> str:
@@ -232,6 +260,7 @@ class Recorder:
             rejected=self._rejected,
             queued=len(self._queue),
             error=self._error,
+            kept_until=self._kept_until(),
         )
 
     def start(
@@ -249,8 +278,10 @@ class Recorder:
         and ``notes`` are stored as metadata records of every part.
         """
         with self._lock:
-            if self._thread is not None:
+            failed = self._error
+            if self._thread is not None and not failed:
                 raise RuntimeError(f"already recording session {self._session_id}")
+            self._end_failed()
             self._reset()
             self.directory.mkdir(parents=True, exist_ok=True)
             wall = time.time() if wall_time is None else wall_time
@@ -292,6 +323,8 @@ class Recorder:
             )
             self._thread.start()
             log.info("recording session %s to %s", sid, self._paths[-1])
+            if failed:
+                self._cleared(f"recording again: session {sid} (the last one stopped: {failed})")
             return sid
 
     def set_notes(self, notes: str) -> None:
@@ -305,6 +338,12 @@ class Recorder:
     def stop(self, notes: str | None = None) -> list[Path]:
         """Stop recording, write everything queued, close the file; returns its parts."""
         with self._lock:
+            failed = self._error
+            if failed:
+                self._end_failed()
+                self._error = ""
+                self._cleared(f"recording failure acknowledged ({failed}); not recording")
+                return list(self._paths)
             if self._thread is None:
                 return list(self._paths)
             if notes is not None:
@@ -321,6 +360,27 @@ class Recorder:
                 self._session_id, self._written, self._dropped, self._rejected,
             )
             return list(self._paths)
+
+    def _end_failed(self) -> None:
+        """Let go of a writer thread that stopped on a failure (the lock is held)."""
+        thread, self._thread = self._thread, None
+        if thread is not None:
+            thread.join()
+
+    def _cleared(self, message: str) -> None:
+        self._report(Event(t=self._last_t, source="recorder", code="failure_cleared", message=message,
+                           level="info", data={"session": self._session_id}))
+
+    def discard(self) -> list[Path]:
+        """Stop recording and delete the session's files (what a run that never began
+        recorded); returns the paths deleted."""
+        paths = self.stop()
+        for path in paths:
+            path.unlink(missing_ok=True)
+        if paths:
+            log.info("session %s discarded: %s", self._session_id, ", ".join(p.name for p in paths))
+        self._paths = []
+        return paths
 
     def __enter__(self) -> Recorder:
         return self
@@ -344,12 +404,13 @@ class Recorder:
         self._part_no += 1
         path = self.directory / files.part_name(self._session_id, self._part_no)
         part = _Part(path, self.config)
+        self._part = part
+        self._paths.append(path)
         self._meta[files.META_SESSION]["part"] = str(self._part_no)
         for name, data in self._meta.items():
             part.writer.add_metadata(name, dict(data))
         part.register(self.config.foxglove)
-        self._part = part
-        self._paths.append(path)
+        part.writer.handed_over()
 
     def _next_part(self) -> None:
         assert self._part is not None
@@ -389,25 +450,54 @@ class Recorder:
                         self._next_part()
                     last_flush = self._tick(last_flush, force=False)
             self._tick(last_flush, force=True)
-        except Exception as e:  # disk full, permissions ...: report, stop recording
-            self._error = f"{type(e).__name__}: {e}"
-            log.exception("session %s: writing failed", self._session_id)
-            if self._unsubscribe is not None:
-                self._unsubscribe()
-            self._report(Event(
-                t=self._last_t, source="recorder", code="write_failed",
-                message=f"recording stopped: {self._error}", level="error",
-                data={"session": self._session_id, "path": str(self._paths[-1])},
-            ))
+        except Exception as e:  # disk full, permissions ...: an alarm, the recording stops
+            self._fail(e)
         finally:
             if self._part is not None:
                 try:
-                    self._part.close()
+                    if self._error:
+                        self._part.abandon()
+                    else:
+                        self._part.close()
                 except Exception:
                     log.exception(
                         "session %s: closing %s failed", self._session_id, self._part.path
                     )
                 self._part = None
+
+    def _kept_until(self) -> float:
+        """The stream time of the latest message in the open part's complete chunks."""
+        part = self._part
+        ns = part.writer.complete_ns if part is not None else 0
+        return codec.from_ns(ns, self.epoch_offset) if ns else 0.0
+
+    def _fail(self, e: Exception) -> None:
+        """The writer failed: stop taking messages, cut the part back to its last complete
+        flush, and raise the alarm (an Event on the stream)."""
+        if self._unsubscribe is not None:
+            self._unsubscribe()
+            self._unsubscribe = None
+        self._queue.clear()
+        part = self._part
+        path = part.path if part is not None else self._paths[-1]
+        log.error("session %s: writing %s failed", self._session_id, path, exc_info=True)
+        kept = self._kept_until()
+        cut = ""
+        if part is not None:
+            try:
+                part.abandon()
+            except OSError as err:
+                cut = f"; cutting it back failed too ({err})"
+            self._part = None
+        error = f"{type(e).__name__}: {e}"
+        self._report(Event(
+            t=self._last_t, source="recorder", code="write_failed", level="error",
+            message=(f"recording failed: {error}. {path.name} keeps what was recorded up to t={kept:.1f} s"
+                     f"{cut}; `ucat-console sessions repair` (or Repair in Review) indexes it, and recording "
+                     "starts again with Start recording (or on arming) once there is space"),
+            data={"session": self._session_id, "path": str(path), "error": error, "kept_until": kept},
+        ))
+        self._error = error  # last: whoever sees the failure sees its event already published
 
     def _write(self, part: _Part, channel: str, msg: Any) -> int | None:
         try:

@@ -2,8 +2,10 @@
 
 Every complete record (schemas, channels, messages, metadata, attachments) is read
 sequentially with mcap's ``StreamReader`` (the record reader under ``NonSeekingReader``,
-which stops with an error at the cut; chunk CRCs are checked, so a half-written chunk is
-left out) and copied into a new ``Writer``, which writes the chunk,
+which stops with an error at the cut), chunks emitted whole and opened here within the
+limits of :mod:`.limits` (CRCs checked, so a half-written chunk is left out; a chunk or a
+message over its limit, or a chunk that decompresses to another size than it declares,
+ends the copy like a damaged record), and copied into a new ``Writer``, which writes the chunk,
 message and metadata indexes and the summary: the result opens like any finished file.
 The copy goes to a temporary file beside the original and then atomically replaces it;
 the original is kept as ``FILE.orig`` unless told otherwise.
@@ -14,17 +16,24 @@ from __future__ import annotations
 import logging
 import os
 import shutil
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any, Iterator
 
 from mcap.exceptions import McapError
 from mcap.reader import NonSeekingReader
-from mcap.records import Attachment, Channel, DataEnd, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader
+from mcap.records import Attachment, Channel, Chunk, DataEnd, Message, Metadata, Schema
+from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
 
-from ucat_console.backend.sessions import files
-from ucat_console.backend.sessions.reader import MAGIC, SessionReader, TruncatedSessionError
+from ucat_console.backend.sessions import files, limits
+from ucat_console.backend.sessions.reader import (
+    MAGIC,
+    SessionReader,
+    TruncatedSessionError,
+    decompressed,
+    record_limit,
+)
 
 log = logging.getLogger(__name__)
 
@@ -77,7 +86,7 @@ def repair(
 
     with open(p, "rb") as fh:
         try:
-            header = NonSeekingReader(fh).get_header()
+            header = NonSeekingReader(fh, record_size_limit=record_limit()).get_header()
         except Exception as e:
             raise ValueError(f"{p}: not repairable: no complete MCAP header ({e})") from None
 
@@ -88,7 +97,8 @@ def repair(
         with open(p, "rb") as src, open(tmp, "wb") as out:
             w = Writer(out, chunk_size=_CHUNK_SIZE, compression=CompressionType.ZSTD)
             w.start(profile=header.profile, library=header.library)
-            stop = _copy_records(StreamReader(src, validate_crcs=True), w, counts)
+            records = StreamReader(src, validate_crcs=True, emit_chunks=True, record_size_limit=record_limit())
+            stop = _copy_records(_unchunked(records.records), w, counts)
             w.finish()
             out.flush()
             os.fsync(out.fileno())
@@ -102,13 +112,30 @@ def repair(
     return RepairReport(p, True, n, counts["metadata"], stop, original)
 
 
-def _copy_records(reader: StreamReader, w: Writer, counts: dict[str, int]) -> str:
+def _unchunked(records: Iterator[Any]) -> Iterator[Any]:
+    """The records, those of each chunk in its place (opened within the limits)."""
+    cap = limits.limits().max_message
+    for rec in records:
+        if not isinstance(rec, Chunk):
+            yield rec
+            continue
+        try:
+            inner = breakup_chunk(replace(rec, compression="", data=decompressed(rec), uncompressed_crc=0))
+        except ValueError as e:
+            raise McapError(f"a chunk: {e}") from None
+        for r in inner:
+            if isinstance(r, Message) and len(r.data) > cap:
+                raise McapError(f"a message of {len(r.data)} bytes, over the limit of {cap} (review.max_message)")
+            yield r
+
+
+def _copy_records(records: Iterator[Any], w: Writer, counts: dict[str, int]) -> str:
     """Copy schemas, channels, messages, metadata and attachments until the records end
     (a finished file) or break off (the cut); returns why reading stopped."""
     schema_ids: dict[int, int] = {}
     channel_ids: dict[int, int] = {}
     try:
-        for rec in reader.records:
+        for rec in records:
             if isinstance(rec, Schema):
                 if rec.id not in schema_ids:
                     schema_ids[rec.id] = w.register_schema(rec.name, rec.encoding, rec.data)

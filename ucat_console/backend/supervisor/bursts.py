@@ -16,6 +16,11 @@ from typing import Callable, Iterable
 from ucat_console.telemetry.events import Event
 
 
+#: what one event of a folded code says, in a burst's message
+_WHAT = {"plan_overrun": "plan ready after its hand-over deadline",
+         "stall": "loop stall skipped (the loop fell behind the wall clock)"}
+
+
 @dataclass
 class _Burst:
     first: Event
@@ -69,7 +74,7 @@ class BurstFolder:
 
     def _summary(self, b: _Burst) -> Event:
         ev = b.first
-        what = "plan ready after its hand-over deadline" if ev.code == "plan_overrun" else ev.code
+        what = _WHAT.get(ev.code, ev.code)
         if b.count == 1:
             message = ev.message
         else:

@@ -7,6 +7,7 @@ A robot factory is ``(app_config, event_sink) -> (robot_io, close)``: :func:`sim
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING, Callable
 
 from ucat_console.backend.loop.clock import PacedClock
@@ -46,15 +47,16 @@ def simulated_rig(robot_io: RobotIO) -> SimRig | None:
 
 
 class SteadyPacedClock(PacedClock):
-    """A :class:`PacedClock` anchored once: the loop runs in chunks without drifting."""
+    """A :class:`PacedClock` anchored once (and again after a stall it skips): the loop
+    runs in chunks without drifting."""
 
-    def __init__(self, pace: float = 1.0, early: float = 0.0) -> None:
-        super().__init__(pace, early)
+    def __init__(self, pace: float = 1.0, early: float = 0.0, max_lag: float = math.inf) -> None:
+        super().__init__(pace, early, max_lag)
         self._anchored = False
 
-    def start(self, t0: float) -> None:
+    def start(self, t0: float) -> bool:
         if not self._anchored:
-            super().start(t0)
             self._anchored = True
-        else:
-            self._wake.clear()
+            return super().start(t0)
+        self._wake.clear()
+        return False

@@ -58,6 +58,7 @@ from ucat_console.backend.loop.config import MODES
 from ucat_console.backend.loop.planners import warm_up
 from ucat_console.backend.safety import CHANNELS as SAFETY_CHANNELS
 from ucat_console.backend.safety import SafetyMonitor, Transition
+from ucat_console.backend.sessions import limits
 from ucat_console.backend.sessions.foxglove import robot_geometry
 from ucat_console.backend.sessions.recorder import Recorder
 from ucat_console.backend.supervisor.arm_requests import ArmRequests
@@ -124,7 +125,7 @@ class Supervisor:
             sim = cfg.robot == "sim"
             # a computed reading may be taken early, a device's not before its time
             early = cfg.console.sim_early if sim else 0.0
-            self.clock: Clock = clock if clock is not None else SteadyPacedClock(1.0, early)
+            self.clock: Clock = clock if clock is not None else SteadyPacedClock(1.0, early, cfg.console.max_lag)
             start_depth = cfg.console.sim_depth if sim else 0.0
             self.loop = ClosedLoop(
                 cfg.loop, self.gate, self._loop_stream, self.clock,
@@ -147,6 +148,7 @@ class Supervisor:
         self._lag = 0.0
         self.fault = ""
         self.wall0 = time.time()
+        limits.configure(cfg.review)  # what reading session files may cost, in this process
         self.recorder = Recorder(
             self.stream, cfg.recorder,
             directory=sessions_dir if sessions_dir is not None else (cfg.console.sessions_dir or None),
@@ -155,11 +157,11 @@ class Supervisor:
         self.recording = SessionRecording(
             self.recorder, config_toml=lambda: self.current_config().to_toml(redact=True),
             weights=self._weights, on_arm=cfg.console.record_on_arm, tail=cfg.console.record_tail,
-            notify=self._notify,
+            tail_max=cfg.console.record_tail_max, notify=self._notify,
         )
         self.rig_control = RigControl(self)
-        #: plan overruns, one event per burst
-        self.bursts = BurstFolder(lambda ev: self.stream.publish(ch.EVENTS, ev))
+        #: plan overruns and the loop's stalls, one event per burst
+        self.bursts = BurstFolder(lambda ev: self.stream.publish(ch.EVENTS, ev), ("plan_overrun", "stall"))
         self._thread: threading.Thread | None = None
         self._stopping = False
         self._closed = False
@@ -287,7 +289,7 @@ class Supervisor:
         for tr in self.safety.check(now):
             self._on_failsafe(tr)
         self.bursts.check(now)
-        self.recording.check(now, self.gate.armed)
+        self.recording.check(now, self.gate.armed, faulted=bool(self.safety.active() or self.safety.motor_faults()))
         run = self.manoeuvre
         if run is not None and not run.finished:
             try:
@@ -414,6 +416,7 @@ class Supervisor:
             plan_overruns=self.loop.plan_overruns, failsafes=self.safety.active(),
             clients=len(self.access.clients), pilot="" if pilot is None else actor_name(pilot),
             recording=self.recording.session_id, fault=self.fault,
+            recording_failed=self.recording.failed, stalls=self.loop.stalls,
         )
 
     def current_config(self) -> AppConfig:
@@ -558,12 +561,18 @@ class Supervisor:
     def _on_failsafe(self, tr: Transition) -> None:
         rule = self.safety.rule(tr.name)
         if tr.active:
-            self._publish_event("failsafe", tr.name, f"{tr.name}: {tr.cause}; action: {rule.action}", "error",
-                                {"action": rule.action, "timeout": rule.timeout, "cause": tr.cause})
-            if rule.action == "disarm":
+            data = {"action": tr.action, "timeout": rule.timeout, "cause": tr.cause}
+            if tr.escalated:
+                message = (f"{tr.name}: {tr.cause}; escalated after {rule.escalate_after:g} s of "
+                           f"{rule.action}: {tr.action}")
+                data.update(escalated=True, escalate_after=rule.escalate_after, before=rule.action)
+            else:
+                message = f"{tr.name}: {tr.cause}; action: {tr.action}"
+            self._publish_event("failsafe", tr.name, message, "error", data)
+            if tr.action == "disarm":
                 self._disarm("failsafe", f"failsafe {tr.name}")
-            elif rule.action in ("hold", "surface"):
-                if rule.action == "hold":
+            elif tr.action in ("hold", "surface"):
+                if tr.action == "hold":
                     body = self._last_body
                     depth = body.depth if body is not None and math.isfinite(body.depth) else self.loop.setpoints.depth
                     depth = round(min(max(depth, 0.0), self.cfg.loop.max_depth), 3)  # to the mm
@@ -667,7 +676,13 @@ class Supervisor:
         return sid
 
     def stop_recording(self, who: Actor) -> list[Path]:
+        """Stop recording; after a failed write, acknowledge the failure (the recorder's
+        failure_cleared event clears the recording failsafe)."""
         self.access.require_pilot(who, "record")
+        if self.recording.failed:
+            paths = self.recording.stop()
+            self._notify()
+            return paths
         if not self.recording.recording:
             raise CommandRefused("record: not recording")
         self._publish_event("operator", "recording", f"{actor_name(who)} stopped recording "
