@@ -149,12 +149,14 @@ def _e3(res: dict[str, Any]) -> str:
     if "corridor_bounds" in res:
         b = res["table_iv_bound"]
         out.append(f"\nWhat the paper's numbers allow. Table IV's mean two-stage cost {b['mean_cost']:g} at N = 500 "
-                   f"with lam_f = {b['lam_f']:g} bounds its mean force error: every other term is >= 0, so "
-                   f"c_force <= J / lam_f = {num(b['force_error_at_most'], 3)} N. Inside the corridor a stroke "
-                   "pair with equal rates has w <= 2 V St_high / L_f, where the model's largest mean force is "
-                   "F_max; over the grid no such plan can have a mean force error below "
-                   "mean(max(0, |f*| - F_max)):\n\n")
-        out.append(table(["V (m/s)", "w at St 0.35 (rad/s)", "F_max, d_2 = -d_1 (N)", "F_max, any pair (N)",
+                   f"with lam_f = {b['lam_f']:g} bounds its mean force error from above: every other term is >= 0, "
+                   f"so c_force <= J / lam_f = {num(b['force_error_at_most'], 3)} N (an upper bound: Table III's "
+                   "0.156 N lies below it and does not contradict it). Inside the corridor a stroke pair with "
+                   "equal rates has w <= 2 V St_high / L_f, where the model's largest mean force is F_max; over "
+                   "the grid no such plan can have a mean force error below mean(max(0, |f*| - F_max)). The "
+                   "bounds are for equal-rate pairs only: a slow and a fast stroke whose cycle St (eq 10) lies in "
+                   "the corridor make more (docs/experiments/findings.md):\n\n")
+        out.append(table(["V (m/s)", "w at St 0.35 (rad/s)", "F_max, d_2 = -d_1 (N)", "F_max, equal rates, any strokes (N)",
                           "grid mean |f*| (N)", "least mean force error in the corridor (N)"],
                          [[num(r["v"], 1), num(r["w_max_in_corridor"], 2), num(r["f_max_symmetric"], 3),
                            num(r["f_max"], 3),
