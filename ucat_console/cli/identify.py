@@ -1,6 +1,7 @@
 """``ucat-console identify SESSION...``: the fin model identified from recordings.
 
-Fits the controller's C_D and C_L (or ``--fit scale``: one factor on both) to the recorded
+Fits the controller's C_D and C_L (or ``--fit scale``: one factor on both; ``--fit inflow``:
+C_D, C_L and the profile drag C_D0 of the foil model, ``control.inflow_model``) to the recorded
 encoder angles and rates, DVL speed and IMU of the sessions (ids or part files), with the
 hull's damping and added mass from ``--config`` (default: the configuration the first
 session recorded), prints the coefficients with 95 % intervals and writes, into ``--out``,
