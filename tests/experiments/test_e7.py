@@ -78,6 +78,7 @@ def test_matched_tracking() -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(1200)  # two identifications, the oracle's tables and 28 runs: minutes on a busy machine
 def test_quick_e7_writes_its_report_with_the_declared_hash(tmp_path: Path) -> None:
     out = tmp_path / "e7"
     assert main(["experiment", "E7", "--quick", "--out", str(out)]) == 0
