@@ -200,8 +200,11 @@ class ClosedLoop:
         source: str = "sim",
         driving: Callable[[], bool] | None = None,
         status: Callable[[float], Status] | None = None,
+        mpc_planner: Callable[[int], Planner] | None = None,
     ) -> None:
         self.cfg = cfg
+        # an experiment's own planner for the MPC modes (by actuator index), e.g. E7's oracle
+        self._mpc_planner = mpc_planner
         # the Status message at time t: the supervisor's (armed, pilot, failsafes) when one
         # runs this loop, else what the loop knows (driving, no pilot, no failsafes)
         self._status = status or self._own_status
@@ -759,6 +762,8 @@ class ClosedLoop:
             return BaselineFinPlanner(self._mpc_cfg, self._baseline_cfg, self.cfg.executor)
         if mode == "identify":
             return ManoeuvreFinPlanner(self.cfg.manoeuvre, self._mpc_cfg)
+        if self._mpc_planner is not None:
+            return self._mpc_planner(index)
         seed = int(np.random.SeedSequence([self.cfg.planner_seed, self._generation, index]).generate_state(1)[0])
         return MpcFinPlanner(self._mpc_cfg, seed, self.cfg.executor)
 
