@@ -230,6 +230,7 @@ class _Chart:
     def __init__(self) -> None:
         self._impl = types.SimpleNamespace(props=types.SimpleNamespace(data=None))
         self.sent = 0
+        self.order = 0.0
 
     def _queue_update(self, name: str, value: object) -> None:
         self.sent += 1

@@ -61,6 +61,7 @@ from ucat_console.telemetry.messages import FinPlan
 from ucat_console.ui import markdown, page_script, panels
 from ucat_console.ui.fast_props import set_prop
 from ucat_console.ui.guard import PageGuard
+from ucat_console.ui.metrics_panel import MetricsPanel
 from ucat_console.ui.page_jobs import PageJobs
 from ucat_console.ui.playback import PlaybackPanel
 from ucat_console.ui.scene import add_pool
@@ -172,6 +173,7 @@ class ConsoleApp:
 
         self.plot_panel = gui.add_panel(order=50.0)
         with self.plot_panel.add_tab("Live plots"):
+            self.metrics = MetricsPanel(gui, supervisor.cfg.metrics, order=0.0)
             self.view = StreamView(
                 server.scene, gui, supervisor.cfg.plant.geometry, plot_rate=cfg.plot_rate,
                 scene_rate=cfg.scene_rate, max_plot_points=cfg.max_plot_points, history=lambda: self.history,
@@ -188,6 +190,7 @@ class ConsoleApp:
 
         self._unsubs = [
             *self.view.subscribe(supervisor.stream),
+            self.metrics.subscribe(supervisor.stream),
             supervisor.stream.subscribe(self._on_message, [ch.EVENTS, *(ch.fin_plan(i) for i in range(N_FINS))]),
         ]
         supervisor.add_listener(self.request_refresh)
@@ -413,6 +416,7 @@ class ConsoleApp:
 
     def _tick_slow(self) -> None:
         self._notify_pages()
+        self.metrics.refresh()
         sup = self.sup
         h = sup.health()
         _set(self.introspection, markdown.introspection_markdown(list(self._plans), h.late_plans,

@@ -32,6 +32,8 @@ from typing import Any, Callable, Iterator, Sequence
 
 import numpy as np
 
+from ucat_console.robot import look
+from ucat_console.robot.look import hex_colour
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.messages import BodyState, FinPlan, Power, Setpoints, Status
 from ucat_console.ui import plot_series as ps
@@ -65,7 +67,7 @@ CHANNELS = (ch.BODY_STATE, ch.SETPOINTS, ch.POWER, ch.STATUS, *(ch.fin_plan(i) f
 #: the type of the values sent to the pages (the time axis is float64)
 VALUES = np.float32
 _VALUES_MAX = float(np.finfo(VALUES).max)
-FIN_COLOURS = ("#d62728", "#1f77b4", "#2ca02c", "#ff7f0e")
+FIN_COLOURS = tuple(hex_colour(c) for c in look.FIN_COLOURS)  # each fin its 3-D blade's colour
 _PLANS = {ch.fin_plan(i): i for i in range(N_FINS)}
 
 
@@ -249,6 +251,7 @@ class LivePlots:
                   {"scale": "epm", "side": 1, "label": "J/m", "grid": {"show": False}, "size": 40}),
             scales={"x": {"time": False}, "epm": {"auto": True}}, cursor=_CURSOR, height=height,
             legend={"show": True, "live": False},
+            order=self.st.order + 1e-3,  # second, in view at 1280x800 with the efficiency figures above
         )
         self.energy = self.power  # one chart: power and energy per metre
 

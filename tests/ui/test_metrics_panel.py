@@ -1,0 +1,50 @@
+"""The efficiency figures' panel: numbers coloured in or out of the corridor, fin swatches in
+the plot colours, a reset on another session, and (in headless Chromium) the live page at
+1280x800 with the figures and the power chart in view."""
+
+from __future__ import annotations
+
+import re
+import sys
+import types
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).parents[1] / "backend" / "sessions"))
+from synthetic_run import run_items  # noqa: E402
+
+from ucat_console.backend.review.metrics import MetricsConfig  # noqa: E402
+from ucat_console.robot.look import FIN_COLOURS, hex_colour  # noqa: E402
+from ucat_console.telemetry.stream import TelemetryStream  # noqa: E402
+from ucat_console.ui.metrics_panel import IN_COLOUR, OUT_COLOUR, MetricsPanel  # noqa: E402
+
+
+class _Gui:
+    def add_html(self, content: str, order: float | None = None) -> types.SimpleNamespace:
+        return types.SimpleNamespace(content=content)
+
+
+def _panel() -> tuple[MetricsPanel, TelemetryStream]:
+    stream = TelemetryStream()
+    panel = MetricsPanel(_Gui(), MetricsConfig(window=10.0))
+    panel.subscribe(stream)
+    return panel, stream
+
+
+def test_the_panel_shows_each_fins_strokes_coloured_and_the_robots_figures():
+    panel, stream = _panel()
+    assert "no telemetry yet" in panel.html.content
+    for channel, m in run_items():
+        stream.publish(channel, m)
+    panel.refresh()
+    html = panel.html.content
+    for fin in range(4):
+        # the latest two strokes: 0.30 (inside 0.25..0.35) then 0.40 (outside)
+        assert re.search(rf'class="ucat-st in" data-fin="{fin}" data-stroke="0"[^>]*background:{IN_COLOUR}[^>]*>0.30<',
+                         html)
+        assert re.search(rf'class="ucat-st out" data-fin="{fin}" data-stroke="1"[^>]*background:{OUT_COLOUR}[^>]*>0.40<',
+                         html)
+        assert f"background:{hex_colour(FIN_COLOURS[fin])}" in html
+    assert "P 4.00 W" in html and "20.0 J/m" in html and "CoT 0.91 J/(kg m)" in html
+    assert "depth 0.050 m" in html
+    panel.reset()
+    assert "no telemetry yet" in panel.html.content
