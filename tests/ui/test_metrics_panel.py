@@ -48,3 +48,18 @@ def test_the_panel_shows_each_fins_strokes_coloured_and_the_robots_figures():
     assert "depth 0.050 m" in html
     panel.reset()
     assert "no telemetry yet" in panel.html.content
+
+
+def test_the_effects_list_shows_before_and_after_and_what_is_still_pending():
+    from ucat_console.backend.review.effects import Effect
+    from ucat_console.ui.metrics_panel import effects_markdown
+
+    done = Effect(10.0, "tuning", "client 1: mpc.lam_st 5 -> 2", {}, 20.0, {"power": 4.0, "energy_per_metre": 20.0,
+                  "speed_mae": 0.02, "st_in": 50.0}, {"power": 3.0, "energy_per_metre": 15.0, "speed_mae": None,
+                                                      "st_in": 80.0})
+    pending = Effect(30.0, "mode", "controller mpc -> baseline", {}, 40.0, {"power": 3.0})
+    md = effects_markdown([pending, done], now=34.0)
+    assert "4.00 → 3.00 W" in md and "20.0 → 15.0 J/m" in md and "50 → 80 % St in corridor" in md
+    assert "0.020 → – m/s" in md
+    assert "3.00 → … W" in md and "fills in 6 s" in md
+    assert md.index("controller mpc") < md.index("lam")  # newest first

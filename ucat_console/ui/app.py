@@ -61,7 +61,7 @@ from ucat_console.telemetry.messages import FinPlan
 from ucat_console.ui import markdown, page_script, panels
 from ucat_console.ui.fast_props import set_prop
 from ucat_console.ui.guard import PageGuard
-from ucat_console.ui.metrics_panel import MetricsPanel
+from ucat_console.ui.metrics_panel import MetricsPanel, effects_markdown
 from ucat_console.ui.page_jobs import PageJobs
 from ucat_console.ui.playback import PlaybackPanel
 from ucat_console.ui.scene import add_pool
@@ -166,6 +166,7 @@ class ConsoleApp:
         self.tab_review = self.tabs.add_tab("Review")
         with self.tab_tuning:
             self.journal = gui.add_markdown("Journal: no changes yet.", order=100.0)
+            self.effects = gui.add_markdown("", order=101.0)
         with self.tab_mpc:
             self.introspection = gui.add_markdown("No plans yet.")
         with self.tab_safety:
@@ -423,6 +424,7 @@ class ConsoleApp:
                                                               h.plan_overruns, h.mode))
         _set(self.failsafes, markdown.failsafe_markdown(sup.safety.states(), h.t))
         _set(self.journal, markdown.journal_markdown(sup.journal(12)))
+        _set(self.effects, effects_markdown(sup.effects.entries(), sup.loop.time))
         with self._lock:
             pages = list(self.pages.items())
             ps = dict(self.panels)

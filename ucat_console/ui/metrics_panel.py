@@ -16,8 +16,10 @@ import threading
 from dataclasses import replace
 from typing import Any, Callable
 
+from ucat_console.backend.review.effects import Effect, summary
 from ucat_console.backend.review.metrics import CHANNELS, MetricsConfig, RunData, fins_now, robot_now
 from ucat_console.telemetry.stream import TelemetryStream
+from ucat_console.ui.markdown import esc
 from ucat_console.ui.plots import FIN_COLOURS
 
 #: the colours of a stroke's St inside and outside its corridor (text on them: white)
@@ -124,3 +126,15 @@ class MetricsPanel:
 def _with_window(cfg: MetricsConfig, window: float) -> MetricsConfig:
     return replace(cfg, window=window)
 
+
+
+def effects_markdown(entries: list[Effect], now: float) -> str:
+    """The latest changes with their figures before -> after (a pending one: how long until
+    its after-window completes)."""
+    if not entries:
+        return "Measured effects: no tuning, mode or setpoint change yet."
+    out = ["Measured effects (newest first; before → after):", ""]
+    for e in entries[:8]:
+        due = "" if e.after is not None else f" (after-window fills in {max(0.0, e.due - now):.0f} s)"
+        out.append(f"- {e.t:.1f} s {esc(e.message)}: {esc(summary(e))}{due}")
+    return "\n".join(out)

@@ -60,6 +60,10 @@ class MetricsConfig(Config):
                                    doc="runs whose speed MAE differs more than this are not comparable")
     depth_mae_bound: float = param(0.05, lo=0.0, hi=10.0, unit="m",
                                    doc="runs whose depth MAE differs more than this are not comparable")
+    before: float = param(10.0, lo=1.0, hi=600.0, unit="s",
+                          doc="a change's effect: the figures over this long before it")
+    after: float = param(10.0, lo=1.0, hi=600.0, unit="s",
+                         doc="a change's effect: the figures over this long after it (filled in when it has passed)")
 
 
 class _Series:
@@ -288,6 +292,14 @@ def _window_edges(data: RunData, t0: float, t1: float) -> tuple[NDArray[np.float
         if ends.size > best.size:
             best = ends
     return np.concatenate(([t0], best, [t1])), max(best.size - 1, 0)
+
+
+def window_figures(data: RunData, t0: float, t1: float, mass: float, closed: bool = True) -> dict[str, float]:
+    """Every figure of :data:`FIGURES` over ``[t0, t1]`` (no intervals); NaN where none."""
+    if len(data.power) == 0:
+        return {k: math.nan for k in FIGURES}
+    s = _Sums(data, np.array([t0, t1]), mass, closed)
+    return {k: s.value(k) * (100.0 if k in _PERCENT else 1.0) for k in FIGURES}
 
 
 def robot_now(data: RunData, t1: float, cfg: MetricsConfig) -> RobotNow:
