@@ -68,3 +68,30 @@ def test_the_supervisor_records_each_tuning_changes_effect(tmp_path: Path):
         recorded = [m for _, m in r.messages([C.EVENTS]) if m.code == "effect"]
     assert len(recorded) == 1 and recorded[0].data["code"] == "tuning"
     assert recorded[0].data["before"].keys() == recorded[0].data["after"].keys()
+
+
+def test_undo_puts_the_latest_tuning_change_back_in_one_step_and_only_for_the_pilot(tmp_path: Path):
+    from ucat_console.backend.supervisor import CommandRefused
+
+    cfg = AppConfig(console=ConsoleConfig(supervise_period=0.05), access=AccessConfig(token="t" * 12))
+    sup = Supervisor(cfg, clock=SimulatedClock(), sessions_dir=tmp_path)
+    try:
+        sup.client_connected(1)
+        sup.client_connected(2)
+        assert sup.take_control(1, "t" * 12)
+        with pytest.raises(CommandRefused, match="no tuning change"):
+            sup.undo_tuning(1)
+        lam_st, kp = sup.param_value("mpc.lam_st"), sup.param_value("pid.depth.kp")
+        sup.set_params(1, {"mpc.lam_f": 2.5})
+        sup.step(0.1)
+        sup.set_params(1, {"mpc.lam_st": 2.0, "pid.depth.kp": 7.0})
+        sup.step(0.2)
+        with pytest.raises(Exception, match="pilot"):
+            sup.undo_tuning(2)
+        sup.undo_tuning(1)
+        sup.step(0.2)
+        # both parameters of the latest change back, the earlier change kept
+        assert (sup.param_value("mpc.lam_st"), sup.param_value("pid.depth.kp")) == (lam_st, kp)
+        assert sup.param_value("mpc.lam_f") == 2.5
+    finally:
+        sup.stop()

@@ -671,6 +671,16 @@ class Supervisor:
         self.access.require_pilot(who, "revert tuning")
         self._apply_tuning(self.saved_tuning(), actor_name(who))
 
+    def undo_tuning(self, who: Actor) -> None:
+        """The latest tuning change undone in one step: the parameters it changed back to
+        their values before it (journalled like any change, so a second undo redoes it)."""
+        self.access.require_pilot(who, "undo tuning")
+        changes = [e for e in self.journal() if e.key.split(".", 1)[0] in ("mpc", "baseline", "pid")]
+        if not changes:
+            raise CommandRefused("undo: no tuning change to undo")
+        last = changes[-1]
+        self.set_params(who, {e.key: e.old for e in changes if (e.t, e.who) == (last.t, last.who)})
+
     # ================================================================== recording and markers
     def start_recording(self, who: Actor, notes: object = "") -> str:
         self.access.require_pilot(who, "record")
