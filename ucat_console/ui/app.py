@@ -60,6 +60,7 @@ from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.messages import FinPlan
 from ucat_console.ui import markdown, page_script, panels
 from ucat_console.ui.fast_props import set_prop
+from ucat_console.ui.compare_panel import ComparePanel
 from ucat_console.ui.guard import PageGuard
 from ucat_console.ui.metrics_panel import MetricsPanel, effects_markdown
 from ucat_console.ui.page_jobs import PageJobs
@@ -265,6 +266,9 @@ class ConsoleApp:
                 with client.atomic():
                     panel = panels.ControlPanel(self, cid, client.gui, client, containers, allow=self._allow(cid))
                     review = self.build_review(client.gui, client.scene, cid)
+                    ComparePanel(client.gui, self.tab_review, self.sessions_dir, cfg=self.sup.cfg.metrics,
+                                 sessions=self.session_list.sessions, allow=self._allow(cid), client=client,
+                                 jobs=lambda what, job, coalesce: self.jobs.submit(cid, what, job, coalesce=coalesce))
             except Exception:
                 if self.page_present(cid):
                     raise

@@ -52,11 +52,20 @@ class Window:
     zero: float
 
 
-def read_run(session: SessionParts, name: str | None = None) -> Run:
-    """The figures' channels and the events of an open session."""
+#: what a comparison reads: the figures' channels but the fin states (the winding, a live
+#: figure only, is not in the table; they are the most numerous messages)
+READ_CHANNELS = (*(c for c in CHANNELS if not (c.startswith("fin/") and c.endswith("/state"))), EVENTS)
+
+
+def read_run(session: SessionParts, name: str | None = None, max_messages: int | None = None) -> Run:
+    """The figures' channels and the events of an open session; ``max_messages``: refuse a
+    session holding more (ValueError naming it) before reading it."""
+    if max_messages is not None and session.message_count > max_messages:
+        raise ValueError(f"{session.session_id}: {session.message_count} messages; at most {max_messages} "
+                         "are compared here (use `ucat-console sessions compare` from the shell)")
     data = RunData()
     events: list[Event] = []
-    for r in session.records((*CHANNELS, EVENTS)):
+    for r in session.records(READ_CHANNELS):
         if r.channel == EVENTS:
             events.append(r.message)
         else:
@@ -64,11 +73,11 @@ def read_run(session: SessionParts, name: str | None = None) -> Run:
     return Run(name or session.session_id, data, events, session.start, session.start, session.end)
 
 
-def load_run(session: str | Path, directory: str | Path | None = None) -> Run:
+def load_run(session: str | Path, directory: str | Path | None = None, max_messages: int | None = None) -> Run:
     """Open a session (id or any part file; a file that is not a session is refused with a
     ValueError naming it) and read it."""
     with SessionParts(session, directory) as s:
-        return read_run(s)
+        return read_run(s, max_messages=max_messages)
 
 
 def check_codes(codes: Iterable[str], what: str) -> tuple[str, ...]:

@@ -4,9 +4,10 @@ the runs overlaid (matplotlib, Agg: no display needed)."""
 from __future__ import annotations
 
 import csv
+import io
 import math
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -65,23 +66,24 @@ def markdown(rows: Sequence[TableRow], wins: Sequence[Window], cfg: MetricsConfi
     return "\n".join(out) + "\n"
 
 
-def write_csv(rows: Sequence[TableRow], wins: Sequence[Window], path: Path) -> None:
+def csv_text(rows: Sequence[TableRow], wins: Sequence[Window]) -> str:
     """One line per row and figure: label, session, window (session s), figure, unit, value,
     interval, and why the row is not comparable ("" when it is)."""
-    with open(path, "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(["label", "session", "t0", "t1", "cycles", "figure", "unit", "value", "lo", "hi",
-                    "not_comparable"])
-        for r, win in zip(rows, wins):
-            for key, est in r.figures.items():
-                w.writerow([r.label, win.run.name, f"{r.t0 - win.run.origin:.3f}", f"{r.t1 - win.run.origin:.3f}",
-                            r.cycles, key, FIGURES[key][1], repr(est.value), repr(est.lo), repr(est.hi),
-                            r.not_comparable])
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(["label", "session", "t0", "t1", "cycles", "figure", "unit", "value", "lo", "hi",
+                "not_comparable"])
+    for r, win in zip(rows, wins):
+        for key, est in r.figures.items():
+            w.writerow([r.label, win.run.name, f"{r.t0 - win.run.origin:.3f}", f"{r.t1 - win.run.origin:.3f}",
+                        r.cycles, key, FIGURES[key][1], repr(est.value), repr(est.lo), repr(est.hi),
+                        r.not_comparable])
+    return buf.getvalue()
 
 
-def write_png(wins: Sequence[Window], path: Path) -> None:
-    """Speed, depth, total power and each stroke's St over time from each window's zero
-    (its alignment event), one colour per window."""
+def overlay_figure(wins: Sequence[Window]) -> Any:
+    """A matplotlib figure of speed, depth, total power and each stroke's St over time from
+    each window's zero (its alignment event), one colour per window (close it when done)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -115,8 +117,24 @@ def write_png(wins: Sequence[Window], path: Path) -> None:
     axes[3].set_xlabel("time from each window's alignment (s)")
     axes[0].legend(fontsize=7, loc="best")
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    return fig
+
+
+def png_bytes(wins: Sequence[Window], dpi: int = 100) -> bytes:
+    """The overlay as PNG bytes."""
+    import matplotlib.pyplot as plt
+
+    fig = overlay_figure(wins)
+    buf = io.BytesIO()
+    try:
+        fig.savefig(buf, format="png", dpi=dpi)
+    finally:
+        plt.close(fig)
+    return buf.getvalue()
+
+
+def write_png(wins: Sequence[Window], path: Path) -> None:
+    path.write_bytes(png_bytes(wins))
 
 
 def write_all(rows: Sequence[TableRow], wins: Sequence[Window], cfg: MetricsConfig, out: Path) -> dict[str, Path]:
@@ -124,6 +142,7 @@ def write_all(rows: Sequence[TableRow], wins: Sequence[Window], cfg: MetricsConf
     out.mkdir(parents=True, exist_ok=True)
     paths = {"markdown": out / "compare.md", "csv": out / "compare.csv", "png": out / "compare.png"}
     paths["markdown"].write_text(markdown(rows, wins, cfg))
-    write_csv(rows, wins, paths["csv"])
+    with open(paths["csv"], "w", newline="") as fh:
+        fh.write(csv_text(rows, wins))
     write_png(wins, paths["png"])
     return paths
