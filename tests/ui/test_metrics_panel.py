@@ -63,3 +63,17 @@ def test_the_effects_list_shows_before_and_after_and_what_is_still_pending():
     assert "0.020 → – m/s" in md
     assert "3.00 → … W" in md and "fills in 6 s" in md
     assert md.index("controller mpc") < md.index("lam")  # newest first
+
+
+def test_a_seek_back_starts_the_figures_afresh():
+    panel, stream = _panel()
+    for channel, m in run_items():
+        stream.publish(channel, m)
+    panel.refresh()
+    assert "P 4.00 W" in panel.html.content
+    # the review seeks back to 2 s and plays a run of twice the power from there
+    for channel, m in run_items(scale=2.0):
+        if m.t >= 2.0:
+            stream.publish(channel, m)
+    panel.refresh()
+    assert "P 8.00 W" in panel.html.content

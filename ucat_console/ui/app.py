@@ -318,6 +318,7 @@ class ConsoleApp:
             container=self.tab_review, plot_container=self.review_plot_tab,
             allow=self._allow(cid) if cid is not None else None,
             replay_slot=self.replay_slot, may_replay=lambda: self._may_replay(cid), plot_height=PLOT_HEIGHT,
+            metrics=self.sup.cfg.metrics,
             jobs=(lambda what, job, coalesce: self.jobs.submit(cid, what, job, coalesce=coalesce))
             if cid is not None else None,
             present=(lambda: self.page_present(cid)) if cid is not None else (lambda: True),

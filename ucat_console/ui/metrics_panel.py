@@ -28,6 +28,8 @@ OUT_COLOUR = "#c0392b"
 #: the window's largest length (s), and the least the panel keeps in memory
 MAX_WINDOW = 600.0
 KEEP = 60.0
+#: a message this much older than the latest (s) starts the figures afresh (a seek back)
+BACK = 1.0
 
 
 def _num(x: float, fmt: str) -> str:
@@ -92,8 +94,9 @@ class MetricsPanel:
 
     def on_message(self, channel: str, msg: Any) -> None:
         with self._lock:
-            if msg.t < self._t - MAX_WINDOW:  # older than anything shown (a new session's clock)
+            if msg.t < self._t - BACK:  # time went back (a review's seek, another session): afresh
                 self._data = RunData()
+                self._t = -math.inf
             self._data.feed(channel, msg)
             self._t = max(self._t, msg.t)
             self._dirty = True
