@@ -50,6 +50,11 @@ def test_live_figures_are_in_view_and_coloured_by_the_corridor(browser: Browser,
         inside = lo <= value <= hi
         assert ("in" if inside else "out") in s["cls"].split()
         assert s["colour"] == _rgb(IN_COLOUR if inside else OUT_COLOUR), s
+    # a mode change is marked on the charts (their legend names the marks)
+    console.sup.set_mode(LOCAL, "baseline")
+    expect(page.get_by_text("changes", exact=True)).to_be_visible()
+    wait_for(lambda: any(e.code == "mode" for e in console.app.recent_events()), what="the mode event")
+    wait_for(lambda: len(console.app.view.feeder.changes) >= 1, what="the change noted for the plots")
     ARTIFACTS.mkdir(exist_ok=True)
     page.screenshot(path=str(ARTIFACTS / "metrics-1280x800.png"))
     page.close()
