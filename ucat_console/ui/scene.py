@@ -191,7 +191,8 @@ class RobotScene:
 
     def update_label(self, body: BodyState | None) -> None:
         if body is not None:
-            text = f"depth {body.depth:.2f} m"
+            # a reviewed robot says so, beside its depth: it is a recording, not the robot now
+            text = f"{'REVIEW · ' if self.root == REVIEW_ROOT else ''}depth {body.depth:.2f} m"
             if text != self._label_text:  # (viser's assignment costs more than the comparison)
                 self.label.text = self._label_text = text
 
