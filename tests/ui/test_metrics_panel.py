@@ -39,10 +39,9 @@ def test_the_panel_shows_each_fins_strokes_coloured_and_the_robots_figures():
     html = panel.html.content
     for fin in range(4):
         # the latest two strokes: 0.30 (inside 0.25..0.35) then 0.40 (outside)
-        assert re.search(rf'class="ucat-st in" data-fin="{fin}" data-stroke="0"[^>]*background:{IN_COLOUR}[^>]*>0.30<',
-                         html)
-        assert re.search(rf'class="ucat-st out" data-fin="{fin}" data-stroke="1"[^>]*background:{OUT_COLOUR}[^>]*>0.40<',
-                         html)
+        for stroke, (where, colour, value) in enumerate((("in", IN_COLOUR, "0.30"), ("out", OUT_COLOUR, "0.40"))):
+            assert re.search(rf'class="ucat-st {where}" data-fin="{fin}" data-stroke="{stroke}"'
+                             rf'[^>]*background:{colour}[^>]*>{value}<', html)
         assert f"background:{hex_colour(FIN_COLOURS[fin])}" in html
     assert "P 4.00 W" in html and "20.0 J/m" in html and "CoT 0.91 J/(kg m)" in html
     assert "depth 0.050 m" in html

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable, Sequence
 
-from ucat_console.backend.review.metrics import CHANNELS, MetricsConfig, RunData, TableRow, flag_rows, table_row
+from ucat_console.backend.review.metrics import TABLE_CHANNELS, MetricsConfig, RunData, TableRow, flag_rows, table_row
 from ucat_console.backend.sessions.reader import SessionParts
 from ucat_console.telemetry.channels import EVENTS
 from ucat_console.telemetry.events import Event
@@ -52,9 +52,6 @@ class Window:
     zero: float
 
 
-#: what a comparison reads: the figures' channels but the fin states (the winding, a live
-#: figure only, is not in the table; they are the most numerous messages)
-READ_CHANNELS = (*(c for c in CHANNELS if not (c.startswith("fin/") and c.endswith("/state"))), EVENTS)
 
 
 def read_run(session: SessionParts, name: str | None = None, max_messages: int | None = None) -> Run:
@@ -65,7 +62,7 @@ def read_run(session: SessionParts, name: str | None = None, max_messages: int |
                          "are compared here (use `ucat-console sessions compare` from the shell)")
     data = RunData()
     events: list[Event] = []
-    for r in session.records(READ_CHANNELS):
+    for r in session.records((*TABLE_CHANNELS, EVENTS)):
         if r.channel == EVENTS:
             events.append(r.message)
         else:

@@ -18,7 +18,7 @@ import threading
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-from ucat_console.backend.review.metrics import CHANNELS, MetricsConfig, RunData, window_figures
+from ucat_console.backend.review.metrics import TABLE_CHANNELS, MetricsConfig, RunData, window_figures
 from ucat_console.telemetry.channels import EVENTS
 from ucat_console.telemetry.events import Event
 
@@ -61,7 +61,7 @@ class ChangeEffects:
 
     @property
     def channels(self) -> tuple[str, ...]:
-        return (*CHANNELS, EVENTS)
+        return (*TABLE_CHANNELS, EVENTS)
 
     def on_message(self, channel: str, msg: Any) -> None:
         with self._lock:

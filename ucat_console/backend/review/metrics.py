@@ -98,11 +98,14 @@ class _Series:
             self._cache = None
 
 
-#: the channels the figures read
-CHANNELS: tuple[str, ...] = (
+#: the channels the table's figures read (no fin states: the winding, a live figure only,
+#: is not in the table, and they are the most numerous messages)
+TABLE_CHANNELS: tuple[str, ...] = (
     ch.POWER, ch.BODY_TRACKING, ch.BODY_STATE,
-    *(f(i) for f in (ch.fin_strouhal, ch.fin_cycle, ch.fin_plan, ch.fin_state) for i in range(N_FINS)),
+    *(f(i) for f in (ch.fin_strouhal, ch.fin_cycle, ch.fin_plan) for i in range(N_FINS)),
 )
+#: the channels every figure reads
+CHANNELS: tuple[str, ...] = (*TABLE_CHANNELS, *(ch.fin_state(i) for i in range(N_FINS)))
 
 
 @dataclass
