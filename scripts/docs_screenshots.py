@@ -1,7 +1,7 @@
 """Screenshots of the console's page at 1280x800, one per tab, for docs/review.md.
 
 Run: ``.venv/bin/python scripts/docs_screenshots.py [OUT_DIR]`` (default docs/images). It
-starts a simulated console with two recorded sessions of its own (a few seconds of MPC, then
+starts the simulated console (the shipped sim-tuned) with two recorded sessions of its own (a few seconds of MPC, then
 of the baseline), swims at 0.2 m/s with a tuning change, and photographs each tab; the Review
 tab with the two sessions compared.
 """
@@ -18,7 +18,7 @@ from playwright.sync_api import expect, sync_playwright
 from ucat_console.backend.access import LOCAL
 from ucat_console.backend.supervisor import Supervisor
 from ucat_console.bench.ui import CHROMIUM, CHROMIUM_ARGS
-from ucat_console.config import AccessConfig, AppConfig, ConsoleConfig
+from ucat_console.config import AccessConfig, load_config
 from ucat_console.ui.app import ConsoleApp
 
 TABS = ("Tuning", "MPC", "Safety", "Session", "Review")
@@ -27,8 +27,9 @@ TABS = ("Tuning", "MPC", "Safety", "Session", "Review")
 def main(out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
-        cfg = AppConfig(access=AccessConfig(token="docs-screenshots-token"),
-                        console=ConsoleConfig(port=0, record_on_arm=False))
+        shipped = load_config("sim-tuned")  # what scripts/run.sh starts
+        cfg = shipped.replace(access=AccessConfig(token="docs-screenshots-token"),
+                              console=shipped.console.replace(port=0, record_on_arm=False))
         sup = Supervisor(cfg, sessions_dir=tmp)
         app = ConsoleApp(sup)
         app.start()
@@ -36,6 +37,7 @@ def main(out: Path) -> None:
         try:
             sup.arm(LOCAL)
             sup.set_setpoints(LOCAL, velocity=0.2)
+            time.sleep(30.0)  # up to speed before the recordings
             for mode in ("mpc", "baseline"):
                 sup.set_mode(LOCAL, mode)
                 sup.start_recording(LOCAL, notes=f"{mode} at 0.2 m/s")
