@@ -1,8 +1,38 @@
-"""The page's tests; their helpers live beside this file (``plots_reference.py``)."""
+"""The page's tests; their helpers live beside this file (``plots_reference.py``, the browser
+harness ``browser_harness.py``), and the browser fixtures here: ``chromium`` (a headless
+Chromium of our own per module) and ``browser`` (Playwright connected to it)."""
 
 from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import Any, Iterator
 
-sys.path.insert(0, str(Path(__file__).parent))  # for ``import plots_reference``
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))  # for ``import plots_reference``, ``browser_harness``
+
+
+@pytest.fixture(scope="module")
+def chromium() -> Iterator[Any]:
+    """A headless Chromium in a process group of its own (``freeze`` / ``thaw``)."""
+    from ucat_console.bench.chromium import Chromium
+
+    try:
+        c = Chromium()
+    except FileNotFoundError as e:
+        pytest.skip(str(e))
+    yield c
+    if c.stopped:
+        c.thaw()
+    c.close()
+
+
+@pytest.fixture(scope="module")
+def browser(chromium: Any) -> Iterator[Any]:
+    """Playwright's browser on :func:`chromium` (over CDP)."""
+    sync_api = pytest.importorskip("playwright.sync_api")
+    with sync_api.sync_playwright() as p:
+        b = p.chromium.connect_over_cdp(chromium.ws_url)
+        yield b
+        b.close()
