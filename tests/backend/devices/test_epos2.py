@@ -8,6 +8,7 @@ import threading
 import time
 import tomllib
 import uuid
+from typing import Any
 
 import can
 import pytest
@@ -318,45 +319,47 @@ def test_a_stopped_heartbeat_is_lost_after_the_configured_periods_and_restored(r
     assert not rig1.drives.drive(0).heartbeat_lost
 
 
-def test_heartbeat_rule_on_the_drivers_clock():
-    rig = Rig((21,), supervise=False)
-    try:
-        drive = rig.drives.drive(0)
-        rig.emulators[21].stop_heartbeat()
-        heard_past_now(rig)
-        last = drive.last_heartbeat_t
-        period = HEARTBEAT_MS / 1000.0
-        drive.check(last + 1.9 * period)
-        assert not [e for e in rig.rec.events if e.code == "heartbeat_lost"]
-        drive.check(last + 2.1 * period)
-        drive.check(last + 2.5 * period)
-        lost = [e for e in rig.rec.events if e.code == "heartbeat_lost"]
-        assert len(lost) == 1
-        assert lost[0].data["silent_for_s"] == pytest.approx(2.1 * period)
-    finally:
-        rig.close()
+@pytest.fixture
+def unsupervised_rig():
+    r = Rig((21,), supervise=False)
+    yield r
+    r.close()
 
 
-def test_a_heartbeat_is_missing_only_for_as_long_as_the_reader_has_heard():
+def stop_heartbeat(rig: Rig) -> tuple[Any, float, float]:
+    """Node 21's heartbeat stopped and every beat before it heard: (its driver, the last
+    beat's time, the heartbeat period)."""
+    drive = rig.drives.drive(0)
+    rig.emulators[21].stop_heartbeat()
+    heard_past_now(rig)
+    return drive, drive.last_heartbeat_t, HEARTBEAT_MS / 1000.0
+
+
+def test_heartbeat_rule_on_the_drivers_clock(unsupervised_rig):
+    rig = unsupervised_rig
+    drive, last, period = stop_heartbeat(rig)
+    drive.check(last + 1.9 * period)
+    assert not [e for e in rig.rec.events if e.code == "heartbeat_lost"]
+    drive.check(last + 2.1 * period)
+    drive.check(last + 2.5 * period)
+    lost = [e for e in rig.rec.events if e.code == "heartbeat_lost"]
+    assert len(lost) == 1
+    assert lost[0].data["silent_for_s"] == pytest.approx(2.1 * period)
+
+
+def test_a_heartbeat_is_missing_only_for_as_long_as_the_reader_has_heard(unsupervised_rig):
     """A busy machine holds the bus's reader back: frames wait unread, a heartbeat among
     them. The silence counts up to what the reader has heard (``heard_until``), not up to
     the present, so however late the check runs, an unheard beat is not a lost one."""
-    rig = Rig((21,), supervise=False)
-    try:
-        drive = rig.drives.drive(0)
-        rig.emulators[21].stop_heartbeat()
-        heard_past_now(rig)
-        last = drive.last_heartbeat_t
-        period = HEARTBEAT_MS / 1000.0
-        # ten periods late by the clock, but heard only 1.9 periods past the last beat
-        drive.check(last + 10 * period, heard_until=last + 1.9 * period)
-        assert not [e for e in rig.rec.events if e.code == "heartbeat_lost"]
-        assert not drive.heartbeat_lost
-        drive.check(last + 10 * period, heard_until=last + 2.2 * period)
-        lost = [e for e in rig.rec.events if e.code == "heartbeat_lost"]
-        assert len(lost) == 1 and lost[0].data["silent_for_s"] == pytest.approx(2.2 * period)
-    finally:
-        rig.close()
+    rig = unsupervised_rig
+    drive, last, period = stop_heartbeat(rig)
+    # ten periods late by the clock, but heard only 1.9 periods past the last beat
+    drive.check(last + 10 * period, heard_until=last + 1.9 * period)
+    assert not [e for e in rig.rec.events if e.code == "heartbeat_lost"]
+    assert not drive.heartbeat_lost
+    drive.check(last + 10 * period, heard_until=last + 2.2 * period)
+    lost = [e for e in rig.rec.events if e.code == "heartbeat_lost"]
+    assert len(lost) == 1 and lost[0].data["silent_for_s"] == pytest.approx(2.2 * period)
 
 
 def test_silent_node_is_reported(rig1):
@@ -372,16 +375,27 @@ def test_silent_node_is_reported(rig1):
 
 def test_slow_replies_surface_as_events():
     rig = Rig((21,), sdo_timeout=0.1)
+    listener = can.Bus(interface="virtual", channel=rig.channel, ignore_config=True)
     try:
         emu = rig.emulators[21]
         assert rig.drives.drive(0).read_current() == 0.0
+        while listener.recv(timeout=0.0) is not None:  # the replies so far
+            pass
         emu.slow_replies(0.3)
         assert rig.drives.drive(0).read_current() is None
         ev = rig.rec.wait_event("sdo_timeout", "epos2.21")
         assert ev.level == "warning"
         emu.slow_replies(0.0)
-        time.sleep(0.4)  # the late reply passes
+
+        def late_reply() -> bool:  # it passes before the rig closes
+            while (msg := listener.recv(timeout=0.0)) is not None:
+                if msg.arbitration_id == 0x580 + 21:
+                    return True
+            return False
+
+        wait_for(late_reply, what="the late SDO reply")
     finally:
+        listener.shutdown()
         rig.close()
 
 
