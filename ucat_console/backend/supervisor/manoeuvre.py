@@ -15,6 +15,7 @@ and readings it needs (the supervisor's, checked as any operator's), not the sup
 from __future__ import annotations
 
 import math
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -58,6 +59,7 @@ class ManoeuvreRun:
         self._previous = ""
         self._t0 = math.nan
         self._finished = False
+        self._finishing = threading.Lock()  # the supervisor's thread polls, a waiting caller too
 
     @property
     def duration(self) -> float:
@@ -99,16 +101,20 @@ class ManoeuvreRun:
         return False
 
     def finish(self) -> list[Path]:
-        """The previous mode back, the recording stopped; the session's files."""
-        if self._finished:
+        """The previous mode back, the recording stopped; the session's files (once,
+        whichever thread comes first)."""
+        with self._finishing:
+            if self._finished:
+                return self.paths
+            try:
+                host = self.host
+                if host.mode() == "identify":
+                    host.set_mode(LOCAL, self._previous or "mpc")
+                if self.session and host.recording() == self.session:
+                    self.paths = host.stop_recording(LOCAL)
+            finally:  # finished from here on, with its files (a failure is not tried again)
+                self._finished = True
             return self.paths
-        self._finished = True
-        host = self.host
-        if host.mode() == "identify":
-            host.set_mode(LOCAL, self._previous or "mpc")
-        if self.session and host.recording() == self.session:
-            self.paths = host.stop_recording(LOCAL)
-        return self.paths
 
     def wait(self, poll_s: float = 0.2) -> list[Path]:
         """Block until the manoeuvre is over (a supervisor running in its own thread)."""
