@@ -123,15 +123,16 @@ class FakeClock(Clock):
         return self.now
 
 
-def console_config(token: str = TOKEN, pilot_gone: Any = None, **console: Any) -> Any:
-    """The tests' console configuration: the simulated robot, a fixed pilot token, a free
+def console_config(token: str = TOKEN, pilot_gone: Any = None, base: str | None = None, **console: Any) -> Any:
+    """The tests' console configuration: the simulated robot (the defaults, or the shipped
+    configuration ``base``: "sim-tuned" for a robot that swims), a fixed pilot token, a free
     port, no recording at arming (unless given), ``console`` settings and, when given, the
     pilot-gone failsafe rule (a FailsafeRule, or its timeout in s: hold)."""
-    from ucat_console.config import AccessConfig, AppConfig, ConsoleConfig, FailsafeRule
+    from ucat_console.config import FailsafeRule, load_config
 
-    settings: dict[str, Any] = {"port": 0, "record_on_arm": False}
-    settings.update(console)
-    cfg = AppConfig(access=AccessConfig(token=token), console=ConsoleConfig(**settings))
+    cfg = load_config(base)
+    cfg = cfg.replace(access=cfg.access.replace(token=token),
+                      console=cfg.console.replace(**{"port": 0, "record_on_arm": False, **console}))
     if pilot_gone is not None:
         rule = pilot_gone if isinstance(pilot_gone, FailsafeRule) else FailsafeRule("hold", float(pilot_gone))
         cfg = cfg.replace(failsafe=cfg.failsafe.replace(pilot_gone=rule))

@@ -22,7 +22,8 @@ PILOT_GONE = 2.0
 
 def test_a_frozen_pilot_browser_trips_pilot_gone_and_wakes_up_a_viewer(
         chromium: Any, browser: Any, make_console: Callable[..., Console]) -> None:
-    console = make_console(console_config(TOKEN, PILOT_GONE, scene_rate=15.0, plot_rate=5.0), serve=True)
+    console = make_console(console_config(TOKEN, PILOT_GONE, "sim-tuned", scene_rate=15.0, plot_rate=5.0),
+                           serve=True)  # a robot that swims
     sup, app, events = console.sup, console.app, console.events
     page = open_page(browser, console.url, 1400, 900, browser.contexts[0] if browser.contexts else None)
     page.set_viewport_size({"width": 1400, "height": 900})
