@@ -1,7 +1,6 @@
-"""The browser tests' harness, one for every ``test_browser*`` module: a headless Chromium of
-our own (``bench.chromium.Chromium``: its processes known, so a test can freeze them)
-driven by Playwright over CDP (the ``chromium`` and ``browser`` fixtures of this folder's
-``conftest.py``, one browser per module), and the page helpers. Screenshots go to
+"""The browser tests' harness, one for every ``test_browser*`` module: the browser fixtures
+of this folder's ``conftest.py`` (``browser``; ``chromium`` and ``frozen_browser`` for a
+test that freezes the browser) and the page helpers here. Screenshots go to
 :data:`ARTIFACTS`."""
 
 from __future__ import annotations

@@ -1,6 +1,8 @@
 """The page's tests; their helpers live beside this file (``plots_reference.py``, the browser
-harness ``browser_harness.py``), and the browser fixtures here: ``chromium`` (a headless
-Chromium of our own per module) and ``browser`` (Playwright connected to it)."""
+harness ``browser_harness.py``), and the browser fixtures here, one headless Chromium per
+module: ``browser`` (launched by Playwright), or, for a test that freezes the browser's
+processes, ``chromium`` (a Chromium in a process group of our own) with ``frozen_browser``
+(Playwright connected to it over CDP)."""
 
 from __future__ import annotations
 
@@ -14,8 +16,23 @@ sys.path.insert(0, str(Path(__file__).parent))  # for ``import plots_reference``
 
 
 @pytest.fixture(scope="module")
+def browser() -> Iterator[Any]:
+    """Playwright's headless Chromium (the machine's ``bench.ui.CHROMIUM``)."""
+    sync_api = pytest.importorskip("playwright.sync_api")
+    from ucat_console.bench.ui import CHROMIUM, CHROMIUM_ARGS
+
+    if not Path(CHROMIUM).exists():
+        pytest.skip(f"no Chromium at {CHROMIUM}")
+    with sync_api.sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        yield b
+        b.close()
+
+
+@pytest.fixture(scope="module")
 def chromium() -> Iterator[Any]:
-    """A headless Chromium in a process group of its own (``freeze`` / ``thaw``)."""
+    """A headless Chromium in a process group of its own (``freeze`` / ``thaw``: SIGSTOP and
+    SIGCONT on every process of it, which Playwright's own launch does not expose)."""
     from ucat_console.bench.chromium import Chromium
 
     try:
@@ -29,8 +46,8 @@ def chromium() -> Iterator[Any]:
 
 
 @pytest.fixture(scope="module")
-def browser(chromium: Any) -> Iterator[Any]:
-    """Playwright's browser on :func:`chromium` (over CDP)."""
+def frozen_browser(chromium: Any) -> Iterator[Any]:
+    """Playwright connected to :func:`chromium` over CDP."""
     sync_api = pytest.importorskip("playwright.sync_api")
     with sync_api.sync_playwright() as p:
         b = p.chromium.connect_over_cdp(chromium.ws_url)

@@ -7,42 +7,77 @@ whichever plot tab was chosen first. Screenshots go to ``test-artifacts/``."""
 from __future__ import annotations
 
 import re
-from typing import Callable
+from pathlib import Path
+from typing import Iterator
 
 import pytest
-from support import Console, console_config, wait_for
+from support import wait_for
 
 pytest.importorskip("playwright.sync_api")
-from browser_harness import ARTIFACTS, gui_input  # noqa: E402
-from browser_harness import open_page as open_browser_page  # noqa: E402
-from browser_harness import take_control as present_token  # noqa: E402
-from playwright.sync_api import Browser, Page, expect  # noqa: E402
+from playwright.sync_api import Browser, Page, expect, sync_playwright  # noqa: E402
 
 from ucat_console.backend.access import LOCAL  # noqa: E402
+from ucat_console.backend.supervisor import Supervisor  # noqa: E402
+from ucat_console.bench.ui import CHROMIUM, CHROMIUM_ARGS  # noqa: E402
+from ucat_console.config import AccessConfig, AppConfig, ConsoleConfig  # noqa: E402
 from ucat_console.telemetry.events import Event  # noqa: E402
+from ucat_console.ui.app import ConsoleApp  # noqa: E402
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 TOKEN = "pool-side-browser-token"
+ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
 TABS = ("Tuning", "MPC", "Safety", "Session", "Review")
+expect.set_options(timeout=15_000)
 
 
-def served(make_console: Callable[..., Console], port: int = 0) -> Console:
-    return make_console(console_config(TOKEN, port=port, scene_rate=15.0, plot_rate=5.0), serve=True)
+class Console:
+    def __init__(self, tmp: Path, port: int = 0) -> None:
+        cfg = AppConfig(access=AccessConfig(token=TOKEN),
+                        console=ConsoleConfig(port=port, record_on_arm=False, scene_rate=15.0, plot_rate=5.0))
+        self.sup = Supervisor(cfg, sessions_dir=tmp)
+        self.app = ConsoleApp(self.sup)
+        self.app.start()
+        self.sup.start()
+
+    def stop(self) -> None:
+        self.sup.stop()
+        self.app.stop()
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[Browser]:
+    if not Path(CHROMIUM).exists():
+        pytest.skip(f"no Chromium at {CHROMIUM}")
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        yield b
+        b.close()
 
 
 @pytest.fixture
-def console(make_console: Callable[..., Console]) -> Console:
-    return served(make_console)
+def console(tmp_path: Path) -> Iterator[Console]:
+    c = Console(tmp_path)
+    yield c
+    c.stop()
 
 
 def open_page(browser: Browser, console: Console, width: int = 1280, height: int = 800, context=None) -> Page:
-    page = open_browser_page(browser, console.url, width, height, context)
+    page = context.new_page() if context is not None else browser.new_page(viewport={"width": width, "height": height})
+    page.goto(console.app.url)
+    page.wait_for_function("() => !document.body.innerText.includes('Connecting...')", timeout=30_000)
     expect(page.locator("#ucat-armed")).to_be_visible()
     return page
 
 
+def gui_input(page: Page, label: str):
+    label_el = page.locator("label", has_text=re.compile("^" + re.escape(label))).first
+    return label_el.locator("xpath=ancestor::div[contains(@class, 'Flex-root')][1]").locator(
+        "input:not([type='hidden'])").first
+
+
 def take_control(page: Page) -> None:
-    present_token(page, TOKEN)
+    gui_input(page, "Pilot token").fill(TOKEN)
+    page.get_by_role("button", name="Take control").click()
     expect(page.get_by_text("You are the pilot")).to_be_visible()
 
 
@@ -223,8 +258,8 @@ def test_the_theme_switch_is_remembered_across_reloads(browser: Browser, console
 
 
 def test_the_link_loss_banner_shows_when_the_console_stops_and_goes_when_it_returns(
-        browser: Browser, make_console: Callable[..., Console]) -> None:
-    c = served(make_console)
+        browser: Browser, tmp_path: Path) -> None:
+    c = Console(tmp_path)
     page = open_page(browser, c)
     port = c.app.port
     banner = page.locator("#ucat-banner")
@@ -236,7 +271,7 @@ def test_the_link_loss_banner_shows_when_the_console_stops_and_goes_when_it_retu
     expect(page.locator("#ucat-info")).to_contain_text("LINK LOST")  # the bar is not live either
     expect(page.locator("#ucat-armed")).to_have_text(re.compile(r"ARMED\?$"))
     page.screenshot(path=str(ARTIFACTS / "console-link-lost.png"))
-    back = served(make_console, port)
+    back = Console(tmp_path, port=port)
     try:
         expect(banner).to_be_hidden(timeout=30_000)
     finally:

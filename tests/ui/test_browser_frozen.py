@@ -21,7 +21,8 @@ PILOT_GONE = 2.0
 
 
 def test_a_frozen_pilot_browser_trips_pilot_gone_and_wakes_up_a_viewer(
-        chromium: Any, browser: Any, make_console: Callable[..., Console]) -> None:
+        chromium: Any, frozen_browser: Any, make_console: Callable[..., Console]) -> None:
+    browser = frozen_browser
     console = make_console(console_config(TOKEN, PILOT_GONE, "sim-tuned", scene_rate=15.0, plot_rate=5.0),
                            serve=True)  # a robot that swims
     sup, app, events = console.sup, console.app, console.events
