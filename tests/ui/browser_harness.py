@@ -1,7 +1,6 @@
-"""The browser tests' harness, one for every ``test_browser*`` module: the browser fixtures
-of this folder's ``conftest.py`` (``browser``; ``chromium`` and ``frozen_browser`` for a
-test that freezes the browser) and the page helpers here. Screenshots go to
-:data:`ARTIFACTS`."""
+"""The browser tests' harness: the page helpers here and the fixtures of this folder's
+``conftest.py`` (``chromium`` and ``frozen_browser``, for a test that freezes the browser).
+Screenshots go to :data:`ARTIFACTS`."""
 
 from __future__ import annotations
 
