@@ -27,7 +27,7 @@ def test_loop_always_runs_the_top_level_controller_blocks() -> None:
 
 
 def test_toml_round_trip_keeps_every_value(tmp_path: Path) -> None:
-    app = AppConfig().replace(robot="rig")
+    app = AppConfig().replace(robot="hardware")
     app = app.replace(mpc=app.mpc.replace(lam_f=3.0), console=app.console.replace(port=0))
     path = tmp_path / "run.toml"
     path.write_text(app.to_toml())
@@ -101,3 +101,26 @@ def test_the_emulated_rig_ships_the_simulated_robots_controller() -> None:
 
     tuned, rig = load_config("sim-tuned"), load_config("sim-devices")
     assert rig.mpc == tuned.mpc and rig.body == tuned.body and rig.baseline == tuned.baseline
+
+
+@pytest.mark.parametrize("text, robot, keys", [
+    ('robot = "rig"\n[devices]\nrobot = "hardware"\n', "hardware", "robot = 'rig' and devices.robot = 'hardware'"),
+    ('robot = "rig"\n', "sim-devices", "robot = 'rig'"),  # the old default behind the drivers
+    ('robot = "sim"\n[devices]\nrobot = "hardware"\nenable_at_start = true\n', "sim", "devices.robot = 'hardware'"),
+])
+def test_an_older_files_two_robot_keys_load_as_the_one_selector_with_a_warning(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture, text: str, robot: str, keys: str) -> None:
+    path = tmp_path / "old.toml"
+    path.write_text(text)
+    with caplog.at_level("WARNING", logger="ucat_console.config"):
+        app = load_config(path)
+    assert app.robot == robot
+    assert f"{keys}: the robot is one key now; loaded as robot = '{robot}'" in caplog.text
+    assert "robot" not in app.to_dict()["devices"]  # written back in the present form
+
+
+def test_an_older_files_robot_keys_that_meant_nothing_are_refused(tmp_path: Path) -> None:
+    path = tmp_path / "old.toml"
+    path.write_text('robot = "rig"\n[devices]\nrobot = "sim"\n')
+    with pytest.raises(ValueError, match="^.*devices.robot: 'sim' is the in-process simulator"):
+        load_config(path)

@@ -57,7 +57,7 @@ def test_the_container_command_is_the_console_on_the_robot_configuration() -> No
     args = build_parser().parse_args(cmd)
     assert args.command == "run" and args.host == "0.0.0.0"
     app = load_config(args.config)  # the image's own copy, by name
-    assert app.robot == "rig" and app.devices.robot == "hardware"
+    assert app.robot == "hardware"
     # compose runs the same command on the repository's copy, mounted (edits apply at a start)
     service = compose_service()
     composed = build_parser().parse_args(service["command"])

@@ -39,3 +39,16 @@ def test_a_broken_contract_fails(tmp_path: Path) -> None:
     assert "ucat_console.robot.leak -> ucat_console.control.params" in run.stdout
     assert "ucat_console.ui.leak -> ucat_console.backend.devices.pressure" in run.stdout
     assert "2 broken" in run.stdout
+
+
+def test_the_backend_reaching_into_the_page_fails(tmp_path: Path) -> None:
+    """What compiles the page's code is named by the command line (``cli.compiled``), never
+    imported by the backend."""
+    shutil.copy(ROOT / "pyproject.toml", tmp_path / "pyproject.toml")
+    shutil.copytree(ROOT / "ucat_console", tmp_path / "ucat_console",
+                    ignore=shutil.ignore_patterns("__pycache__", "*.npz", "*.eds"))
+    (tmp_path / "ucat_console" / "backend" / "leak.py").write_text("from ucat_console.ui import plots\n")
+    run = lint_imports(tmp_path)
+    assert run.returncode != 0
+    assert "ucat_console.backend.leak -> ucat_console.ui.plots" in run.stdout
+    assert "1 broken" in run.stdout

@@ -5,8 +5,14 @@ controller's ``mpc``, ``body``, ``baseline``, ``executor``, ``power``; the close
 ``loop``; the simulated robot's ``plant``; the ``recorder``; the limits on reading session
 files, ``review``; the efficiency figures and their comparison, ``metrics``; the drivers' ``devices``) with the console's own
 blocks defined here: ``console`` (web server, plots, supervision), ``access`` (pilot
-token) and ``failsafe`` (one rule per failsafe). ``robot`` picks the robot the
-supervisor drives: ``"sim"`` (the in-process simulator) or ``"rig"`` (the device drivers).
+token) and ``failsafe`` (one rule per failsafe). ``robot``, the one robot selector, picks
+the robot the supervisor drives: ``"sim"`` (the in-process simulator), ``"sim-devices"`` (the
+simulator behind the device emulators, through the drivers) or ``"hardware"`` (the drivers
+on the robot's devices, ``[devices]``).
+
+A file of an older version (and the configuration an older recording holds) named the
+robot with two keys, ``robot = "sim" | "rig"`` and ``devices.robot``; it loads as the one
+selector they meant, with a warning naming the keys to replace (:func:`migrate_robot`).
 
 One TOML file configures a run; every table is optional::
 
@@ -32,6 +38,7 @@ name the dotted key and the allowed range.
 from __future__ import annotations
 
 import dataclasses
+import logging
 import typing
 from dataclasses import dataclass
 from pathlib import Path
@@ -40,7 +47,7 @@ from typing import Any, Self
 import tomli_w
 
 from ucat_console import shipped
-from ucat_console.backend.devices.config import DevicesConfig
+from ucat_console.backend.devices.config import ROBOTS, DevicesConfig
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.backend.review.metrics import MetricsConfig
 from ucat_console.backend.sessions.limits import ReviewConfig
@@ -48,8 +55,8 @@ from ucat_console.backend.sessions.recorder import RecorderConfig
 from ucat_console.backend.sim.params import PlantConfig
 from ucat_console.typedconf import Config, coerce, from_dict, param, to_dict
 
-#: robots the supervisor can drive
-ROBOTS = ("sim", "rig")
+log = logging.getLogger(__name__)
+
 #: what a failsafe does when it triggers
 FAILSAFE_ACTIONS = ("hold", "surface", "disarm", "warn")
 #: how strongly each action acts: an escalation acts more strongly than the action before it
@@ -230,7 +237,11 @@ class FailsafeConfig(Config):
 class AppConfig(Config):
     """Everything one run of the console needs (module docstring)."""
 
-    robot: str = param("sim", choices=ROBOTS, doc="the robot to drive: the simulator or the device rig")
+    robot: str = param(
+        "sim", choices=ROBOTS,
+        doc="the robot to drive: sim: in-process simulator; sim-devices: simulator behind the device "
+        "emulators, through the drivers; hardware: the drivers on the robot's devices ([devices])",
+    )
     loop: LoopConfig = LoopConfig()
     plant: PlantConfig = PlantConfig()
     recorder: RecorderConfig = RecorderConfig()
@@ -269,6 +280,7 @@ class AppConfig(Config):
     def from_dict(cls, data: dict[str, Any]) -> Self:
         if not isinstance(data, dict):
             return from_dict(cls, data)
+        data = migrate_robot(data)
         loop = data.get("loop")
         if isinstance(loop, dict):
             for name in LOOP_BLOCKS:
@@ -288,6 +300,37 @@ class AppConfig(Config):
 
     def to_toml(self, redact: bool = False) -> str:
         return tomli_w.dumps(self.to_dict(redact))
+
+    @property
+    def simulated(self) -> bool:
+        """Whether the robot is (or is behind the emulators of) the simulated plant."""
+        return self.robot in ("sim", "sim-devices")
+
+
+def migrate_robot(data: dict[str, Any]) -> dict[str, Any]:
+    """``data`` with an older version's two robot keys (``robot = "sim" | "rig"`` and
+    ``devices.robot``) made the one selector they meant, with a warning naming the keys to
+    replace; ValueError for a pair that meant nothing (``"rig"`` with ``devices.robot = "sim"``)."""
+    devices = data.get("devices")
+    old = devices.get("robot") if isinstance(devices, dict) else None
+    top = data.get("robot")
+    if old is None and top != "rig":
+        return data
+    if top == "rig":
+        new = "sim-devices" if old is None else old
+        if new == "sim":
+            raise ValueError("devices.robot: 'sim' is the in-process simulator, robot = 'rig' the drivers; "
+                             "the robot is one key now: robot = 'sim', 'sim-devices' or 'hardware'")
+    else:
+        new = "sim" if top is None else top  # the simulator ignored devices.robot
+    data = {**data, "robot": new}
+    if isinstance(devices, dict):
+        data["devices"] = {k: v for k, v in devices.items() if k != "robot"}
+    keys = " and ".join(k for k, given in (("robot = 'rig'", top == "rig"),
+                                            (f"devices.robot = {old!r}", old is not None)) if given)
+    log.warning("configuration: %s: the robot is one key now; loaded as robot = %r (write that instead)",
+                keys, new)
+    return data
 
 
 def load_config(path: str | Path | None) -> AppConfig:

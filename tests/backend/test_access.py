@@ -4,6 +4,7 @@ address (never for everyone), a gone pilot's waiting successor."""
 from __future__ import annotations
 
 import pytest
+from support import FakeClock
 
 from ucat_console.backend.access import LOCAL, AccessControl, AccessDenied
 from ucat_console.config import AccessConfig
@@ -11,17 +12,9 @@ from ucat_console.config import AccessConfig
 TOKEN = "correct-horse-battery"
 
 
-class FakeClock:
-    def __init__(self) -> None:
-        self.t = 100.0
-
-    def __call__(self) -> float:
-        return self.t
-
-
 @pytest.fixture
 def clock() -> FakeClock:
-    return FakeClock()
+    return FakeClock(100.0)
 
 
 @pytest.fixture
@@ -104,7 +97,7 @@ def test_wrong_tokens_lock_only_the_page_that_sent_them(access: AccessControl, c
     with pytest.raises(AccessDenied, match="locked"):
         access.request_control(2, TOKEN)  # this page: locked, even with the right token
     assert access.request_control(3, TOKEN) is True  # another page gets in at once
-    clock.t += 31.0
+    clock.advance(31.0)
     access.release(3)
     assert access.request_control(2, TOKEN) is True  # the lock ends
 
@@ -120,7 +113,7 @@ def test_a_page_spamming_wrong_tokens_never_locks_out_the_pilot_on_the_same_addr
             with pytest.raises(AccessDenied, match="wrong|locked"):
                 a.request_control(page, "guess")
         a.disconnect(page)
-        clock.t += 0.1
+        clock.advance(0.1)
     a.connect(7, "127.0.0.1")  # the pilot's page, freshly loaded on the same machine
     assert a.request_control(7, TOKEN) is True
 
@@ -160,7 +153,7 @@ def test_failures_spread_beyond_the_window_do_not_lock(access: AccessControl, cl
     for _ in range(4):
         with pytest.raises(AccessDenied, match="wrong"):
             access.request_control(2, "guess")
-        clock.t += 20.0  # only two failures ever fall within 30 s
+        clock.advance(20.0)  # only two failures ever fall within 30 s
     assert access.request_control(2, TOKEN) is True
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 
 import pytest
-from support import wait_for
+from support import Console, wait_for
 
 from ucat_console.backend.access import LOCAL
 from ucat_console.backend.supervisor import Supervisor
@@ -35,7 +35,7 @@ def sup(tmp_path_factory: pytest.TempPathFactory):
     cfg = cfg.replace(access=AccessConfig(token=TOKEN),
                       console=cfg.console.replace(record_on_arm=False),
                       failsafe=cfg.failsafe.replace(imu=warn, dvl=warn, depth=warn, motor=FailsafeRule("warn", 0.0)))
-    s = Supervisor(cfg, sessions_dir=tmp_path_factory.mktemp("sessions"))
+    s = Console(cfg, tmp_path_factory.mktemp("sessions"), clock=None).sup
     s.start()
     s.client_connected(PILOT)
     assert s.take_control(PILOT, TOKEN)

@@ -10,13 +10,14 @@ import math
 from pathlib import Path
 
 import pytest
+from support import Console
 
 from ucat_console.backend.access import AccessDenied
-from ucat_console.backend.identification import ManoeuvreRun, identify_sessions
-from ucat_console.backend.loop.clock import SimulatedClock
+from ucat_console.backend.identification import identify_sessions
 from ucat_console.backend.sessions.recorder import Recorder
 from ucat_console.backend.sim.params import FinCoefficients, FinHydroConfig, PlantConfig
-from ucat_console.backend.supervisor import CommandRefused, Supervisor
+from ucat_console.backend.supervisor import CommandRefused
+from ucat_console.backend.supervisor.manoeuvre import ManoeuvreRun
 from ucat_console.cli import main
 from ucat_console.config import AccessConfig, AppConfig, ConsoleConfig
 from ucat_console.control.params import ManoeuvreConfig
@@ -35,16 +36,15 @@ def app_config(hydro: FinHydroConfig, manoeuvre: ManoeuvreConfig | None = None) 
 
 
 def record_manoeuvre(cfg: AppConfig, directory: Path) -> Path:
-    sup = Supervisor(cfg, clock=SimulatedClock(), sessions_dir=directory)
+    sup = Console(cfg, directory).sup
     try:
         sup.client_connected(PILOT)
         assert sup.take_control(PILOT, TOKEN)
-        run = ManoeuvreRun(sup, PILOT)
         with pytest.raises(CommandRefused, match="arm"):
-            run.start()
+            sup.start_manoeuvre(PILOT)
         sup.arm(PILOT)
         sup.step(1.0)
-        run.start()
+        run = sup.start_manoeuvre(PILOT)
         assert sup.mode == "identify"
         sup.step(run.duration + 0.2)
         assert run.poll() and sup.mode == "mpc"  # the previous mode is back
@@ -105,15 +105,15 @@ def test_file_without_fin_channels_is_refused_naming_them(tmp_path: Path, capsys
 
 
 def test_manoeuvre_is_the_pilots_command(tmp_path: Path) -> None:
-    sup = Supervisor(app_config(FinHydroConfig()), clock=SimulatedClock(), sessions_dir=tmp_path)
+    sup = Console(app_config(FinHydroConfig()), tmp_path).sup
     try:
         sup.client_connected(2)
         with pytest.raises(AccessDenied):
-            ManoeuvreRun(sup, 2).start()
+            sup.start_manoeuvre(2)
         assert sup.mode == "mpc" and not sup.recorder.recording
     finally:
         sup.stop()
-    assert math.isclose(ManoeuvreRun(sup, 2).duration, ManoeuvreConfig().duration + ManoeuvreRun.TAIL_S)
+    assert math.isclose(ManoeuvreRun(sup.manoeuvre_host, 2).duration, ManoeuvreConfig().duration + ManoeuvreRun.TAIL_S)
 
 
 def test_the_heave_trim_is_identified_from_a_recorded_hover(tmp_path: Path, capsys) -> None:
@@ -124,7 +124,7 @@ def test_the_heave_trim_is_identified_from_a_recorded_hover(tmp_path: Path, caps
     cfg = AppConfig(plant=PlantConfig(vehicle=VehicleConfig(buoyancy_ratio=1.005)),
                     console=ConsoleConfig(sim_depth=2.0), access=AccessConfig(token=TOKEN))
     cfg = cfg.replace(loop=cfg.loop.replace(mode="baseline"))
-    sup = Supervisor(cfg, clock=SimulatedClock(), sessions_dir=tmp_path)
+    sup = Console(cfg, tmp_path).sup
     try:
         sup.client_connected(PILOT)
         assert sup.take_control(PILOT, TOKEN)

@@ -50,7 +50,7 @@ def sim_devices_config(**changes: Any) -> DevicesConfig:
         epos2=Epos2Config(units=UNITS, heartbeat_ms=200, heartbeat_timeout_periods=2.5),
         start=SimStartConfig(depth=START_DEPTH, seed=7),
     )
-    return DevicesConfig(robot="sim-devices", enable_at_start=True, **{**blocks, **changes})
+    return DevicesConfig(enable_at_start=True, **{**blocks, **changes})
 
 
 class LoopThread:
@@ -116,7 +116,7 @@ def test_a_resync_anchors_the_device_clock_and_drops_the_readings_of_the_stall()
 
 
 def test_sim_robot_is_the_in_process_simulator_at_the_configured_start() -> None:
-    io, close = build_robot_io(DevicesConfig(robot="sim", start=SimStartConfig(depth=2.5, yaw=0.5)))
+    io, close = build_robot_io("sim", DevicesConfig(start=SimStartConfig(depth=2.5, yaw=0.5)))
     try:
         assert isinstance(io, SimRobotIO)
         truth = io.truth()
@@ -134,7 +134,7 @@ def test_sim_robot_is_the_in_process_simulator_at_the_configured_start() -> None
 @pytest.mark.parametrize("configured, expected", [(0.3, 1.0), (2.0, 2.0)])
 def test_drivers_give_the_emulated_drives_the_rigs_sdo_timeout(configured: float, expected: float) -> None:
     epos2 = Epos2Config(units=UNITS, sdo_timeout=configured)
-    io, close = build_robot_io(sim_devices_config(epos2=epos2))
+    io, close = build_robot_io("sim-devices", sim_devices_config(epos2=epos2))
     try:
         assert io.config.epos2.sdo_timeout == expected  # the rig's 1 s at least, a longer one kept
         for driver in io.drives.drivers.values():
@@ -153,7 +153,7 @@ def test_simulated_robot_runs_closed_loop_through_drivers_and_emulators() -> Non
     ref_dive, ref_speed = ref_truth.depth - START_DEPTH, ref_truth.velocity[0]
 
     sink = Collector()
-    io, close = build_robot_io(sim_devices_config(), event_sink=sink)
+    io, close = build_robot_io("sim-devices", sim_devices_config(), event_sink=sink)
     stream = TelemetryStream()
     got: dict[str, list[Any]] = {ch.IMU: [], ch.DVL: [], ch.DEPTH: [], ch.EVENTS: [], ch.fin_state(0): []}
     stream.subscribe(lambda c, m: got[c].append(m), channels=list(got))
@@ -222,7 +222,7 @@ FAULTS = [
 def test_injected_fault_surfaces_as_an_event_and_the_loop_keeps_running(
     device: str, fault: str, kw: dict, source: str, codes: tuple[str, ...], end: str | None
 ) -> None:
-    io, close = build_robot_io(sim_devices_config())
+    io, close = build_robot_io("sim-devices", sim_devices_config())
     sink = Collector()
     connect_events(io, sink)
     loop = ClosedLoop(LoopConfig(mode="baseline"), io, clock=PacedClock(1.0), setpoints=SETPOINTS)
@@ -263,7 +263,7 @@ def test_injected_fault_surfaces_as_an_event_and_the_loop_keeps_running(
 
 
 def test_fault_injection_refuses_unknown_devices_faults_and_arguments() -> None:
-    io, close = build_robot_io(sim_devices_config())
+    io, close = build_robot_io("sim-devices", sim_devices_config())
     try:
         rig = rig_of(io)
         with pytest.raises(ValueError, match="device: 'sonar'"):
@@ -292,7 +292,6 @@ def stand_ins():
     dvl = DvlEmulator(synthetic_dvl).start()
     pressure = PressureEmulator(synthetic_depth).start()
     config = DevicesConfig(
-        robot="hardware",
         # margins for drives emulated in this process on a busy machine (a real EPOS2: 0.3 s)
         epos2=Epos2Config(interface="virtual", channel=channel, units=UNITS, boot_timeout=1.0,
                           sdo_timeout=1.0),
@@ -307,7 +306,7 @@ def stand_ins():
 
 
 def test_hardware_robot_uses_the_configured_endpoints(stand_ins: DevicesConfig) -> None:
-    io, close = build_robot_io(stand_ins)
+    io, close = build_robot_io("hardware", stand_ins)
     try:
         assert isinstance(io, DeviceRobotIO)
         assert io.truth() is None and rig_of(io) is None
@@ -350,7 +349,6 @@ def test_hardware_robot_uses_the_configured_endpoints(stand_ins: DevicesConfig) 
     ({"epos2": {"interface": "carrier-pigeon"}}, "epos2.interface"),
     ({"epos2": {"node_ids": [1, 2, 3, 128]}}, r"epos2.node_ids\[3\]"),
     ({"epos2": {"node_ids": [0, 2, 3, 4]}}, r"epos2.node_ids\[0\]"),
-    ({"robot": "submarine"}, "robot"),
     ({"imu": {"baud": 1234}}, "imu.baud"),
     ({"rig": {"pace": 0.0}}, "rig.pace"),
 ])
@@ -359,11 +357,11 @@ def test_bad_configuration_values_name_the_key(data: dict, key: str) -> None:
         DevicesConfig.from_dict(data)
 
 
-def test_application_config_must_name_a_robot_behind_the_drivers() -> None:
+def test_a_robot_is_built_only_from_a_known_robot_and_a_devices_block() -> None:
+    with pytest.raises(ValueError, match="^robot: 'submarine'"):
+        build_robot_io("submarine", DevicesConfig())
     with pytest.raises(ValueError, match="^devices: expected"):
-        build_robot_io(SimpleNamespace(robot="rig"))
-    with pytest.raises(ValueError, match="^devices.robot: 'sim'"):
-        build_robot_io(SimpleNamespace(robot="rig", devices=DevicesConfig(robot="sim")))
+        build_robot_io("sim-devices", SimpleNamespace())  # type: ignore[arg-type]
 
 
 def _threads() -> set[str]:
@@ -386,7 +384,7 @@ def test_start_up_errors_name_the_key_and_leave_nothing_running(stand_ins: Devic
     ]
     for config, key in cases:
         with pytest.raises(ValueError, match=key):
-            build_robot_io(config)
+            build_robot_io("hardware", config)
         assert not {"dvl-client", "imu-reader", "pressure-reader", "epos2-supervision"} & (_threads() - before)
 
 
@@ -397,9 +395,8 @@ def test_start_up_errors_name_the_key_and_leave_nothing_running(stand_ins: Devic
 def test_shipped_configuration_files_hold_valid_device_blocks(name: str, robot: str) -> None:
     with open(shipped.config_path(name), "rb") as fh:
         data = tomllib.load(fh)
-    assert data["robot"] == "rig"  # the application's device rig
+    assert data["robot"] == robot  # the one robot selector
     devices = DevicesConfig.from_dict(data["devices"])
-    assert devices.robot == robot
     if robot == "hardware":
         assert (devices.epos2.interface, devices.epos2.channel) == ("socketcan", "can0")
         assert devices.epos2.bitrate == 1_000_000

@@ -8,15 +8,14 @@ from __future__ import annotations
 
 import math
 import threading
-import time
 from pathlib import Path
+from typing import Callable
 
 import pytest
-from support import wait_for
+from support import Console, wait_for
 
 from ucat_console.backend.access import LOCAL, AccessDenied
 from ucat_console.robot.readings import DepthReading
-from ucat_console.backend.loop.clock import SimulatedClock
 from ucat_console.backend.sim_robot_io import SimRobotIO
 from ucat_console.backend.sessions.reader import SessionReader
 from ucat_console.backend.supervisor import CommandRefused, SteadyPacedClock, Supervisor
@@ -54,13 +53,12 @@ class Events:
 
 
 @pytest.fixture
-def sup(tmp_path: Path):
-    s = Supervisor(make_config(), clock=SimulatedClock(), sessions_dir=tmp_path)
+def sup(make_console: Callable[..., Console]) -> Supervisor:
+    s = make_console(make_config()).sup
     s.client_connected(PILOT)
     s.client_connected(VIEWER)
     assert s.take_control(PILOT, TOKEN) is True
-    yield s
-    s.stop()
+    return s
 
 
 def fins_moved(sup: Supervisor) -> float:
@@ -245,9 +243,8 @@ def test_status_messages_carry_arming_pilot_and_failsafes(sup: Supervisor) -> No
     assert ev.status[-1].armed is True
 
 
-def test_pilot_page_gone_holds_depth_and_stops_after_its_timeout(tmp_path: Path) -> None:
-    sup = Supervisor(make_config(pilot_gone=FailsafeRule("hold", 2.0)), clock=SimulatedClock(),
-                     sessions_dir=tmp_path)
+def test_pilot_page_gone_holds_depth_and_stops_after_its_timeout(make_console: Callable[..., Console]) -> None:
+    sup = make_console(make_config(pilot_gone=FailsafeRule("hold", 2.0))).sup
     try:
         ev = Events(sup)
         for c in (PILOT, VIEWER):
@@ -288,11 +285,11 @@ def test_pilot_page_gone_holds_depth_and_stops_after_its_timeout(tmp_path: Path)
 
 
 @pytest.mark.parametrize("then", ["disarm", "surface"])
-def test_a_gone_pilots_hold_escalates_after_its_time_unless_a_pilot_comes_back(tmp_path: Path, then: str) -> None:
+def test_a_gone_pilots_hold_escalates_after_its_time_unless_a_pilot_comes_back(
+        make_console: Callable[..., Console], then: str) -> None:
     """ArduSub's GCS failsafe disarms a robot whose pilot is gone; here the hold comes first,
     and after ``escalate_after`` of it the robot disarms (or surfaces, as configured)."""
-    sup = Supervisor(make_config(pilot_gone=FailsafeRule("hold", 2.0, then, 10.0)), clock=SimulatedClock(),
-                     sessions_dir=tmp_path)
+    sup = make_console(make_config(pilot_gone=FailsafeRule("hold", 2.0, then, 10.0))).sup
     try:
         ev = Events(sup)
         for c in (PILOT, VIEWER):
@@ -329,9 +326,8 @@ def test_a_gone_pilots_hold_escalates_after_its_time_unless_a_pilot_comes_back(t
         sup.stop()
 
 
-def test_a_pilot_back_before_the_escalation_stops_it(tmp_path: Path) -> None:
-    sup = Supervisor(make_config(pilot_gone=FailsafeRule("hold", 2.0, "disarm", 10.0)), clock=SimulatedClock(),
-                     sessions_dir=tmp_path)
+def test_a_pilot_back_before_the_escalation_stops_it(make_console: Callable[..., Console]) -> None:
+    sup = make_console(make_config(pilot_gone=FailsafeRule("hold", 2.0, "disarm", 10.0))).sup
     try:
         for c in (PILOT, VIEWER):
             sup.client_connected(c)
@@ -348,8 +344,8 @@ def test_a_pilot_back_before_the_escalation_stops_it(tmp_path: Path) -> None:
         sup.stop()
 
 
-def test_the_default_pilot_gone_rule_holds_then_disarms_after_30_s(tmp_path: Path) -> None:
-    sup = Supervisor(AppConfig(access=AccessConfig(token=TOKEN)), clock=SimulatedClock(), sessions_dir=tmp_path)
+def test_the_default_pilot_gone_rule_holds_then_disarms_after_30_s(make_console: Callable[..., Console]) -> None:
+    sup = make_console(AppConfig(access=AccessConfig(token=TOKEN))).sup
     try:
         sup.client_connected(PILOT)
         sup.take_control(PILOT, TOKEN)
@@ -393,10 +389,11 @@ class NaNDepthRobot(SimRobotIO):
         return out
 
 
-def test_invalid_sensor_values_never_reach_the_loop_and_trigger_the_failsafe(tmp_path: Path) -> None:
+def test_invalid_sensor_values_never_reach_the_loop_and_trigger_the_failsafe(
+        make_console: Callable[..., Console]) -> None:
     cfg = make_config(depth=FailsafeRule("disarm", 0.5))
-    sup = Supervisor(cfg, clock=SimulatedClock(), sessions_dir=tmp_path,
-                     robot_factory=lambda c, ev: (NaNDepthRobot(c.plant, depth=0.5), lambda: None))
+    sup = make_console(cfg,
+                     robot_factory=lambda c, ev: (NaNDepthRobot(c.plant, depth=0.5), lambda: None)).sup
     try:
         sup.arm(LOCAL)
         sup.step(1.3)
@@ -426,8 +423,9 @@ def test_hand_over_and_release(sup: Supervisor) -> None:
     assert sup.access.pilot is None
 
 
-def test_arming_records_and_stop_disarms_and_closes_the_file(tmp_path: Path) -> None:
-    sup = Supervisor(make_config(), clock=SimulatedClock(), sessions_dir=tmp_path)
+def test_arming_records_and_stop_disarms_and_closes_the_file(
+        tmp_path: Path, make_console: Callable[..., Console]) -> None:
+    sup = make_console(make_config()).sup
     sup.client_connected(PILOT)
     sup.take_control(PILOT, TOKEN)
     sup.arm(PILOT)
@@ -452,24 +450,21 @@ def test_automatic_recording_stops_after_the_tail(sup: Supervisor) -> None:
     sup.step(0.5)
     assert sup.recorder.recording
     sup.step(1.0)  # record_tail = 1 s: the recorder is told to stop (it closes in its own thread)
-    deadline = time.monotonic() + 10.0
-    while sup.recorder.recording and time.monotonic() < deadline:
-        time.sleep(0.02)
-    assert not sup.recorder.recording
+    assert _stopped(sup)
     assert sup.recorder.paths[0].stat().st_size > 0
 
 
 def _stopped(sup: Supervisor) -> bool:
-    deadline = time.monotonic() + 10.0  # the recorder closes in its own thread
-    while sup.recorder.recording and time.monotonic() < deadline:
-        time.sleep(0.02)
+    """Whether the recording stopped (the recorder closes in its own thread: waited for)."""
+    wait_for(lambda: not sup.recorder.recording, what="the recording stopped")
     return not sup.recorder.recording
 
 
-def test_an_automatic_recording_runs_on_until_the_fault_has_cleared(tmp_path: Path) -> None:
+def test_an_automatic_recording_runs_on_until_the_fault_has_cleared(
+        tmp_path: Path, make_console: Callable[..., Console]) -> None:
     """A drive fault disarms the robot; the recording goes on while it lasts and for the
     tail after it cleared, so the file holds the clearing."""
-    sup = Supervisor(make_config(), clock=SimulatedClock(), sessions_dir=tmp_path)  # record_tail 1 s
+    sup = make_console(make_config()).sup  # record_tail 1 s
     try:
         sup.client_connected(PILOT)
         sup.take_control(PILOT, TOKEN)
@@ -494,9 +489,9 @@ def test_an_automatic_recording_runs_on_until_the_fault_has_cleared(tmp_path: Pa
     assert ("epos2.2", "fault_cleared") in events and ("failsafe", "cleared") in events
 
 
-def test_a_fault_that_never_clears_records_no_longer_than_the_tail_max(tmp_path: Path) -> None:
+def test_a_fault_that_never_clears_records_no_longer_than_the_tail_max(make_console: Callable[..., Console]) -> None:
     cfg = make_config().replace(console=ConsoleConfig(supervise_period=0.05, record_tail=1.0, record_tail_max=4.0))
-    sup = Supervisor(cfg, clock=SimulatedClock(), sessions_dir=tmp_path)
+    sup = make_console(cfg).sup
     try:
         sup.client_connected(PILOT)
         sup.take_control(PILOT, TOKEN)
@@ -513,8 +508,8 @@ def test_a_fault_that_never_clears_records_no_longer_than_the_tail_max(tmp_path:
         ConsoleConfig(record_tail=10.0, record_tail_max=5.0)
 
 
-def test_the_loop_runs_in_its_own_thread_and_commands_cross_over(tmp_path: Path) -> None:
-    sup = Supervisor(make_config(), clock=SteadyPacedClock(pace=10.0), sessions_dir=tmp_path)
+def test_the_loop_runs_in_its_own_thread_and_commands_cross_over(make_console: Callable[..., Console]) -> None:
+    sup = make_console(make_config(), clock=SteadyPacedClock(pace=10.0)).sup
     sup.client_connected(PILOT)
     sup.take_control(PILOT, TOKEN)
     sup.start()
@@ -522,9 +517,7 @@ def test_the_loop_runs_in_its_own_thread_and_commands_cross_over(tmp_path: Path)
         sup.arm(PILOT)  # applied by the loop's thread between chunks
         assert sup.armed
         sup.set_param(PILOT, "mpc.lam_a", 2.0)
-        deadline = time.monotonic() + 10.0
-        while sup.loop.mpc_config.lam_a != 2.0 and time.monotonic() < deadline:
-            time.sleep(0.02)
+        wait_for(lambda: sup.loop.mpc_config.lam_a == 2.0, what="the tuning applied by the loop's thread")
         assert sup.loop.mpc_config.lam_a == 2.0
         assert sup.loop.planner_threads >= 1
     finally:
@@ -533,14 +526,14 @@ def test_the_loop_runs_in_its_own_thread_and_commands_cross_over(tmp_path: Path)
 
 
 def test_arming_after_a_wait_swims_as_arming_at_once_and_power_counts_only_armed(
-        tmp_path: Path) -> None:
+        tmp_path: Path, make_console: Callable[..., Console]) -> None:
     """At the pool the robot waits disarmed before the pilot arms: the strokes the loop ran
     meanwhile were never executed, and must not hold the fins once armed."""
     cfg = load_config("sim-tuned")  # swims from rest (README "Findings")
     cfg = cfg.replace(loop=cfg.loop.replace(mode="baseline"))
 
     def swim(wait: float) -> float:
-        sup = Supervisor(cfg, clock=SimulatedClock(), sessions_dir=tmp_path / str(wait))
+        sup = make_console(cfg, sessions_dir=tmp_path / str(wait)).sup
         ev = Events(sup)
         power: list = []
         sup.stream.subscribe(lambda c, m: power.append(m), [ch.POWER])
@@ -568,7 +561,7 @@ def test_arming_after_a_wait_swims_as_arming_at_once_and_power_counts_only_armed
     assert after_wait > 0.8 * at_once
 
 
-def test_the_planners_are_compiled_before_the_robot_starts(tmp_path: Path, monkeypatch) -> None:
+def test_the_planners_are_compiled_before_the_robot_starts(make_console: Callable[..., Console], monkeypatch) -> None:
     """A compile holds the interpreter for minutes: the drives' heartbeats must not be
     supervised yet (their loss would be reported as a fault)."""
     from ucat_console.backend.supervisor import supervisor as supervisor_module
@@ -587,17 +580,17 @@ def test_the_planners_are_compiled_before_the_robot_starts(tmp_path: Path, monke
 
     cfg_in = make_config().replace(mpc=MpcConfig(n_samples=200))
     monkeypatch.setattr(supervisor_module, "warm_up", spy)
-    sup = Supervisor(cfg_in, clock=SimulatedClock(), sessions_dir=tmp_path, robot_factory=robot)
+    sup = make_console(cfg_in, robot_factory=robot).sup
     sup.stop()
     assert order == ["planners", "robot"]
 
 
-def robot_like_rig(tmp_path: Path, **failsafes: FailsafeRule) -> Supervisor:
+def robot_like_rig(make_console: Callable[..., Console], **failsafes: FailsafeRule) -> Supervisor:
     """The device rig configured as the robot is: the drives are powered only while armed."""
     cfg = load_config("sim-devices")
     cfg = cfg.replace(access=AccessConfig(token=TOKEN), devices=cfg.devices.replace(enable_at_start=False),
                       failsafe=cfg.failsafe.replace(**failsafes))
-    return Supervisor(cfg, sessions_dir=tmp_path)
+    return make_console(cfg, clock=None).sup
 
 
 def drive_states(sup: Supervisor) -> set[str]:
@@ -605,8 +598,9 @@ def drive_states(sup: Supervisor) -> set[str]:
     return {nodes[n].state for n in sup.cfg.devices.epos2.node_ids}
 
 
-def test_arming_powers_the_drives_and_disarming_stops_them_and_turns_them_off(tmp_path: Path) -> None:
-    sup = robot_like_rig(tmp_path)
+def test_arming_powers_the_drives_and_disarming_stops_them_and_turns_them_off(
+        make_console: Callable[..., Console]) -> None:
+    sup = robot_like_rig(make_console)
     sup.start()
     try:
         wait_for(lambda: sup.loop.time > 1.0, what="the loop running on the rig")
@@ -626,8 +620,9 @@ def test_arming_powers_the_drives_and_disarming_stops_them_and_turns_them_off(tm
         sup.stop()
 
 
-def test_arming_is_refused_when_a_drive_is_in_fault_until_the_fault_is_reset(tmp_path: Path) -> None:
-    sup = robot_like_rig(tmp_path, motor=FailsafeRule("disarm", 60.0))  # the drive, not the failsafe, refuses
+def test_arming_is_refused_when_a_drive_is_in_fault_until_the_fault_is_reset(
+        make_console: Callable[..., Console]) -> None:
+    sup = robot_like_rig(make_console, motor=FailsafeRule("disarm", 60.0))  # the drive, not the failsafe, refuses
     sup.start()
     try:
         sup.client_connected(PILOT)
@@ -669,10 +664,11 @@ class StallingRobot(SimRobotIO):
         return super().advance_to(t)
 
 
-def test_a_command_the_loop_cannot_take_in_time_is_refused_and_never_done(tmp_path: Path, monkeypatch) -> None:
+def test_a_command_the_loop_cannot_take_in_time_is_refused_and_never_done(
+        make_console: Callable[..., Console], monkeypatch) -> None:
     robot = StallingRobot()
-    sup = Supervisor(make_config(), clock=SimulatedClock(), sessions_dir=tmp_path,
-                     robot_factory=lambda c, ev: (robot, lambda: None))
+    sup = make_console(make_config(),
+                     robot_factory=lambda c, ev: (robot, lambda: None)).sup
     sup.commands.wait = 0.3  # how long a command waits for the loop's thread
     sup.start()
     try:
@@ -697,16 +693,14 @@ class FailingRobot(SimRobotIO):
         return super().advance_to(t)
 
 
-def test_a_failing_loop_disarms_and_is_reported(tmp_path: Path) -> None:
-    sup = Supervisor(make_config(), clock=SimulatedClock(), sessions_dir=tmp_path,
-                     robot_factory=lambda c, ev: (FailingRobot(c.plant), lambda: None))
+def test_a_failing_loop_disarms_and_is_reported(make_console: Callable[..., Console]) -> None:
+    sup = make_console(make_config(),
+                     robot_factory=lambda c, ev: (FailingRobot(c.plant), lambda: None)).sup
     ev = Events(sup)
     sup.arm(LOCAL)
     sup.start()  # as fast as it goes: the robot fails at once
     try:
-        deadline = time.monotonic() + 10.0
-        while sup.running and time.monotonic() < deadline:
-            time.sleep(0.01)
+        wait_for(lambda: not sup.running, what="the loop stopping")
         assert not sup.running
         assert "link to the robot lost" in sup.fault
         assert not sup.armed
@@ -725,11 +719,12 @@ def test_faults_are_injected_only_on_the_simulated_rig(sup: Supervisor) -> None:
         sup.clear_fault(PILOT, "pressure")
 
 
-def test_the_pilot_rehearses_a_silent_pressure_sensor_on_the_simulated_rig(tmp_path: Path) -> None:
+def test_the_pilot_rehearses_a_silent_pressure_sensor_on_the_simulated_rig(
+        make_console: Callable[..., Console]) -> None:
     cfg = load_config("sim-devices")
     cfg = cfg.replace(access=AccessConfig(token=TOKEN),
                       failsafe=cfg.failsafe.replace(depth=FailsafeRule("hold", 1.0)))
-    sup = Supervisor(cfg, sessions_dir=tmp_path)
+    sup = make_console(cfg, clock=None).sup
     ev = Events(sup)
     sup.start()
     try:
@@ -766,11 +761,12 @@ def test_the_pilot_rehearses_a_silent_pressure_sensor_on_the_simulated_rig(tmp_p
         sup.stop()
 
 
-def test_a_fixed_token_is_in_neither_the_recording_nor_the_log(tmp_path: Path, caplog) -> None:
+def test_a_fixed_token_is_in_neither_the_recording_nor_the_log(
+        tmp_path: Path, caplog, make_console: Callable[..., Console]) -> None:
     import logging
 
     secret = "fixed-pilot-token-1234"
-    sup = Supervisor(AppConfig(access=AccessConfig(token=secret)), clock=SimulatedClock(), sessions_dir=tmp_path)
+    sup = make_console(AppConfig(access=AccessConfig(token=secret))).sup
     try:
         sup.start_recording(LOCAL, "secret check")
         sup.step(0.5)
@@ -812,23 +808,24 @@ def test_a_single_overrun_keeps_its_own_message(sup: Supervisor) -> None:
     assert o.message == "plan for fins [2] ready 3.0 ms after its deadline" and o.data["count"] == 1
 
 
-def test_only_the_simulated_robot_runs_events_early(tmp_path: Path) -> None:
+def test_only_the_simulated_robot_runs_events_early(make_console: Callable[..., Console]) -> None:
     """A computed reading can run before its time; a device's cannot: a robot other than
     the simulator gets a clock that waits for every event."""
     cfg = make_config().replace(console=ConsoleConfig(supervise_period=0.05, record_tail=1.0, sim_early=0.015))
-    for robot, early in (("sim", 0.015), ("rig", 0.0)):
-        sup = Supervisor(cfg.replace(robot=robot), robot_factory=sim_robot, sessions_dir=tmp_path)
+    for robot, early in (("sim", 0.015), ("sim-devices", 0.0), ("hardware", 0.0)):
+        sup = make_console(cfg.replace(robot=robot), robot_factory=sim_robot, clock=None).sup
         try:
             assert isinstance(sup.clock, SteadyPacedClock) and sup.clock.early == early, robot
         finally:
             sup.stop()
 
 
-def test_a_paced_supervisor_does_a_chunks_work_every_period_where_the_loop_waits(tmp_path: Path) -> None:
+def test_a_paced_supervisor_does_a_chunks_work_every_period_where_the_loop_waits(
+        make_console: Callable[..., Console]) -> None:
     """In real time the loop does the supervisor's work between chunks (failsafes, arming,
     commands) where it waits for the clock anyway, without returning from its run: at most
     two periods of loop time apart, and a command queued from another thread still runs."""
-    sup = Supervisor(make_config(), sessions_dir=tmp_path)
+    sup = make_console(make_config(), clock=None).sup
     checks: list[float] = []
     check = sup.safety.check
     sup.safety.check = lambda now: checks.append(now) or check(now)  # type: ignore[method-assign]

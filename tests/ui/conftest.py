@@ -1,8 +1,40 @@
-"""The page's tests; their helpers live beside this file (``plots_reference.py``)."""
+"""The page's tests; their helpers live beside this file (``plots_reference.py``, the browser
+harness ``browser_harness.py``), and the browser fixtures here: ``chromium`` (a headless
+Chromium in a process group of our own, one per module) with ``frozen_browser``
+(Playwright connected to it over CDP), for a test that freezes the browser's processes."""
 
 from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import Any, Iterator
 
-sys.path.insert(0, str(Path(__file__).parent))  # for ``import plots_reference``
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))  # for ``import plots_reference``, ``browser_harness``
+
+
+@pytest.fixture(scope="module")
+def chromium() -> Iterator[Any]:
+    """A headless Chromium in a process group of its own (``freeze`` / ``thaw``: SIGSTOP and
+    SIGCONT on every process of it, which Playwright's own launch does not expose)."""
+    from ucat_console.bench.chromium import Chromium
+
+    try:
+        c = Chromium()
+    except FileNotFoundError as e:
+        pytest.skip(str(e))
+    yield c
+    if c.stopped:
+        c.thaw()
+    c.close()
+
+
+@pytest.fixture(scope="module")
+def frozen_browser(chromium: Any) -> Iterator[Any]:
+    """Playwright connected to :func:`chromium` over CDP."""
+    sync_api = pytest.importorskip("playwright.sync_api")
+    with sync_api.sync_playwright() as p:
+        b = p.chromium.connect_over_cdp(chromium.ws_url)
+        yield b
+        b.close()

@@ -9,10 +9,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from support import wait_for
+from support import Console, wait_for
 
-from ucat_console.backend.loop.clock import SimulatedClock
-from ucat_console.backend.supervisor import CommandRefused, Supervisor
+from ucat_console.backend.supervisor import CommandRefused
 from ucat_console.config import AccessConfig, AppConfig, ConsoleConfig, load_config
 from ucat_console.telemetry import channels as ch
 from ucat_console.ui.app import ConsoleApp, is_loopback
@@ -25,7 +24,7 @@ TOKEN = "pool-side-token"
 
 @pytest.fixture
 def app(tmp_path: Path):
-    sup = Supervisor(AppConfig(access=AccessConfig(token=TOKEN)), clock=SimulatedClock(), sessions_dir=tmp_path)
+    sup = Console(AppConfig(access=AccessConfig(token=TOKEN)), tmp_path).sup
     a = ConsoleApp(sup, port=0)
     yield a
     a.stop()
@@ -147,7 +146,7 @@ def test_rig_fault_inputs_only_where_the_robot_is_the_simulated_rig(app: Console
 
 def test_the_pilot_injects_rig_faults_from_the_page_and_bad_entries_are_refused(tmp_path: Path) -> None:
     cfg = load_config("sim-devices").replace(access=AccessConfig(token=TOKEN))
-    sup = Supervisor(cfg, sessions_dir=tmp_path)
+    sup = Console(cfg, tmp_path, clock=None).sup
     a = ConsoleApp(sup, port=0)
     sup.start()
     try:
@@ -330,7 +329,7 @@ def test_recording_buttons_follow_the_recording_and_setpoints_show_rounded(app: 
 
 def test_the_pilot_identifies_the_fin_model_from_the_session_tab(tmp_path: Path) -> None:
     cfg = AppConfig(access=AccessConfig(token=TOKEN), console=ConsoleConfig(sim_depth=3.0))
-    sup = Supervisor(cfg, clock=SimulatedClock(), sessions_dir=tmp_path)
+    sup = Console(cfg, tmp_path).sup
     a = ConsoleApp(sup, port=0)
     try:
         viewer = page(a, 2, pilot=False)

@@ -10,71 +10,32 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from pathlib import Path
-from typing import Iterator
+from typing import Callable
 
 import pytest
 import websockets.exceptions
-from support import wait_for
+from support import TOKEN, Console, console_config, wait_for
 
 from ucat_console.backend.access import LOCAL
-from ucat_console.backend.supervisor import Supervisor
 from ucat_console.bench.raw_page import RawPage
-from ucat_console.config import AccessConfig, AppConfig, ConsoleConfig, FailsafeConfig, FailsafeRule
-from ucat_console.telemetry import channels as ch
-from ucat_console.ui.app import ConsoleApp
 from ucat_console.ui.guard import MAX_FRAME, origin_allowed
 
-TOKEN = "guard-test-token"
 PILOT_GONE = 1.0
-
-
-class Console:
-    def __init__(self, tmp: Path, pilot_gone: float = PILOT_GONE, **console: object) -> None:
-        settings: dict[str, object] = {"port": 0, "record_on_arm": False, "scene_rate": 10.0, "plot_rate": 2.0,
-                                       "heartbeat_period": 0.1}
-        settings.update(console)
-        cfg = AppConfig(
-            access=AccessConfig(token=TOKEN),
-            console=ConsoleConfig(**settings),
-            failsafe=FailsafeConfig(pilot_gone=FailsafeRule("hold", pilot_gone)),
-        )
-        self.sup = Supervisor(cfg, sessions_dir=tmp)
-        self.events: list = []
-        self.sup.stream.subscribe(lambda c, m: self.events.append(m), [ch.EVENTS])
-        self.app = ConsoleApp(self.sup)
-        self.app.start()
-        self.sup.start()
-        self.url = self.app.url
-
-    def page(self, **kw: object) -> RawPage:
-        p = RawPage(self.url, **kw)
-        p.wait_for("Take control")
-        return p
-
-    def cid_of(self, page: RawPage) -> int:
-        """The client id the console gave ``page`` (its role line names it)."""
-        def find() -> list[int]:  # a list: client 0 is a valid id
-            for el in list(page.elements.values()):
-                text = str(el.get("_markdown", ""))
-                if "(client " in text and "Read-only" in text:
-                    return [int(text.split("(client ", 1)[1].split(")", 1)[0])]
-            return []
-        return wait_for(find, what="the page's role line")[0]
-
-    def event(self, source: str, code: str, after: int = 0):
-        return next((e for e in self.events[after:] if e.source == source and e.code == code), None)
-
-    def stop(self) -> None:
-        self.sup.stop()
-        self.app.stop()
+GUARD_SETTINGS = {"scene_rate": 10.0, "plot_rate": 2.0, "heartbeat_period": 0.1}
 
 
 @pytest.fixture
-def console(tmp_path: Path) -> Iterator[Console]:
-    c = Console(tmp_path)
-    yield c
-    c.stop()
+def guarded(make_console: Callable[..., Console]) -> Callable[..., Console]:
+    """``guarded(pilot_gone=PILOT_GONE, **console)``: a served console on the simulated robot
+    in real time, the pilot's token TOKEN, the guard's test settings unless changed."""
+    def make(pilot_gone: float = PILOT_GONE, **console: object) -> Console:
+        return make_console(console_config(TOKEN, pilot_gone, **{**GUARD_SETTINGS, **console}), serve=True)
+    return make
+
+
+@pytest.fixture
+def console(guarded: Callable[..., Console]) -> Console:
+    return guarded()
 
 
 def pilot_page(console: Console) -> tuple[RawPage, int]:
@@ -116,8 +77,8 @@ def test_a_cross_origin_handshake_is_refused_and_a_same_origin_one_accepted(cons
     page.close()
 
 
-def test_a_reverse_proxys_origin_can_be_allowed(tmp_path: Path) -> None:
-    c = Console(tmp_path, allowed_origins=("https://console.example.org",))
+def test_a_reverse_proxys_origin_can_be_allowed(guarded: Callable[..., Console]) -> None:
+    c = guarded(allowed_origins=("https://console.example.org",))
     try:
         c.page(origin="https://console.example.org").close()
         with pytest.raises(websockets.exceptions.InvalidStatus):
@@ -174,8 +135,8 @@ def test_after_a_silent_pilot_the_token_gives_control_at_once_and_the_waiting_pa
     c.close()
 
 
-def test_a_viewer_that_stops_answering_is_closed_too(tmp_path: Path) -> None:
-    c = Console(tmp_path, page_timeout=1.0)
+def test_a_viewer_that_stops_answering_is_closed_too(guarded: Callable[..., Console]) -> None:
+    c = guarded(page_timeout=1.0)
     try:
         viewer = c.page()
         cid = c.cid_of(viewer)
@@ -439,11 +400,12 @@ def test_the_pilots_safety_commands_go_through_the_guard_and_only_the_pilots(con
 
 # ------------------------------------------------------------------ slow links
 @pytest.mark.slow
-def test_a_pilot_whose_link_slows_to_50_kb_s_stays_the_pilot_until_it_stops_answering(tmp_path: Path) -> None:
+def test_a_pilot_whose_link_slows_to_50_kb_s_stays_the_pilot_until_it_stops_answering(
+        guarded: Callable[..., Console]) -> None:
     """The live view at its full rates (40 poses and 12 plot refreshes a second); the pilot's
     page then reads 50 kB/s: it stays the pilot for 300 kB of traffic, its bar says the link
     is slow, its DISARM goes through; when it stops answering, the failsafe fires."""
-    c = Console(tmp_path, pilot_gone=2.0, scene_rate=40.0, plot_rate=12.0)
+    c = guarded(pilot_gone=2.0, scene_rate=40.0, plot_rate=12.0)
     try:
         pilot, cid = pilot_page(c)
         arm_and_move(c)
@@ -470,11 +432,8 @@ def test_a_pilot_whose_link_slows_to_50_kb_s_stays_the_pilot_until_it_stops_answ
 def _gone(console: Console, page: RawPage, cid: int) -> None:
     """Close ``page`` and wait until the console has let go of it (its elements removed)."""
     page.close()
-    deadline = time.monotonic() + 30.0
-    while cid in console.app.server.get_clients() or cid in console.app.guard.clients:
-        if time.monotonic() > deadline:
-            raise TimeoutError("the page never went")
-        time.sleep(0.01)
+    wait_for(lambda: cid not in console.app.server.get_clients() and cid not in console.app.guard.clients,
+             timeout=30.0, what="the page gone")
 
 
 def _no_tracebacks(caplog, capfd) -> None:

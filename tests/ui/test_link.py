@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 import pytest
 import viser._messages as vm
+from support import FakeClock
 from viser.infra._async_message_buffer import AsyncMessageBuffer
 
 from ucat_console.bench.raw_page import decode_batch
@@ -116,14 +117,6 @@ def test_a_link_held_back_most_of_the_time_is_slow_and_recovers_with_hysteresis(
 
 
 # ---------------------------------------------------------------------- a pilot on a slow link
-class FakeClock:
-    def __init__(self) -> None:
-        self.t = 0.0
-
-    def __call__(self) -> float:
-        return self.t
-
-
 class FakeSocket:
     """The page's websocket on the server side: what is sent goes into the network pipe."""
 
@@ -230,21 +223,21 @@ class SlowLink:
             elif tp == "LocalStorageGetItemRequestMessage":
                 uid = m["request_uuid"]
                 if uid in self.asked:
-                    self.rtts.append(self.clock.t - self.asked.pop(uid))
+                    self.rtts.append(self.clock.now - self.asked.pop(uid))
                 if self.answering:
                     self.guard.admit(0, vm.LocalStorageGetItemResponseMessage(value=None, error=None, request_uuid=uid))
 
     def _note_requests(self) -> None:
         page = self.guard.flow(0)
         if page is not None:
-            self.asked.setdefault(f"ucat-hb-{page.seq}", self.clock.t)
+            self.asked.setdefault(f"ucat-hb-{page.seq}", self.clock.now)
 
     def run(self, seconds: float, telemetry: bool = True) -> None:
         period = self.guard.heartbeat_period
-        end = self.clock.t + seconds
-        while self.clock.t < end and not self.gone:
-            self.clock.t += self.DT
-            t = self.clock.t
+        end = self.clock.now + seconds
+        while self.clock.now < end and not self.gone:
+            self.clock.advance(self.DT)
+            t = self.clock.now
             if telemetry:
                 self._telemetry(t)
             if t >= self._next["hb"]:
@@ -273,7 +266,7 @@ def test_a_pilot_on_a_50_kb_s_link_stays_the_pilot_for_a_minute_of_traffic(slow_
     sim = slow_link
     sim.run(60.0)
     assert not sim.gone, f"declared gone: {sim.gone}"
-    assert sim.clock.t >= 60.0
+    assert sim.clock.now >= 60.0
     # the page got about what its link carries, not a growing backlog: what waits for it is
     # bounded by its budget and one message, and its heartbeats come back in time
     assert sim.received >= 0.9 * 60.0 * sim.rate
@@ -293,11 +286,11 @@ def test_a_pilot_on_a_slow_link_that_stops_answering_is_still_declared_gone(slow
     sim.run(10.0)
     assert not sim.gone
     sim.answering = False  # frozen: it still reads, it no longer answers
-    t0 = sim.clock.t
+    t0 = sim.clock.now
     sim.run(10.0)
     assert sim.gone and sim.gone[0][0] == 0
     assert 2.0 <= sim.gone[0][1] < 2.5  # its silence when it was declared gone
-    assert sim.clock.t - t0 < 2.5
+    assert sim.clock.now - t0 < 2.5
     sim._drive()
     assert sim.ws.aborted  # and its socket closed
 
@@ -306,9 +299,9 @@ def test_a_pilot_that_stops_reading_is_declared_gone(slow_link: SlowLink) -> Non
     sim = slow_link
     sim.run(5.0)
     sim.reading = False
-    t0 = sim.clock.t
+    t0 = sim.clock.now
     sim.run(10.0)
-    assert sim.gone and sim.clock.t - t0 < 2.5
+    assert sim.gone and sim.clock.now - t0 < 2.5
 
 
 def test_a_pilot_whose_link_drops_to_50_kb_s_stays_the_pilot(slow_link: SlowLink) -> None:

@@ -10,12 +10,10 @@ from pathlib import Path
 from typing import Iterator
 
 import pytest
-from support import wait_for
+from support import Console, wait_for
 
 from ucat_console.backend.access import LOCAL
-from ucat_console.backend.loop.clock import SimulatedClock
 from ucat_console.backend.sessions import index
-from ucat_console.backend.supervisor import Supervisor
 from ucat_console.config import AppConfig
 from ucat_console.ui.page_jobs import PageJobs
 from ucat_console.ui.session_list import SessionList
@@ -136,7 +134,7 @@ def test_a_failing_job_is_logged_and_the_worker_goes_on(jobs: PageJobs, caplog) 
 @pytest.fixture(scope="module")
 def session_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
     d = tmp_path_factory.mktemp("sessions")
-    sup = Supervisor(AppConfig(), clock=SimulatedClock(), sessions_dir=d)
+    sup = Console(AppConfig(), d).sup
     try:
         sup.start_recording(LOCAL, "listed")
         sup.step(0.3)

@@ -12,20 +12,18 @@ from __future__ import annotations
 import hashlib
 import math
 import statistics
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pytest
 import viser
+from support import Console, wait_for
 
 from ucat_console.backend.access import LOCAL
-from ucat_console.backend.loop.clock import SimulatedClock
 from ucat_console.backend.sessions import files
 from ucat_console.backend.sessions.reader import SessionReader
 from ucat_console.backend.sessions.recorder import RecorderConfig
-from ucat_console.backend.supervisor import Supervisor
 from ucat_console.config import AppConfig
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.stream import TelemetryStream
@@ -58,7 +56,7 @@ def live_sampler() -> StreamSampler:
 @pytest.fixture(scope="module")
 def run(tmp_path_factory: pytest.TempPathFactory) -> Run:
     d = tmp_path_factory.mktemp("sessions")
-    sup = Supervisor(AppConfig(), clock=SimulatedClock(), sessions_dir=d)
+    sup = Console(AppConfig(), d).sup
     try:
         sup.set_setpoints(LOCAL, velocity=0.2)
         sampler = live_sampler()
@@ -194,10 +192,7 @@ def test_playing_moves_the_position_and_pauses(panel: PlaybackPanel, run: Run) -
     panel.set_speed(5.0)
     panel.play()
     # wait for the player's thread (no timing asserted: only that it moves and stops)
-    for _ in range(200):
-        if p.position > p.start + 0.5:
-            break
-        time.sleep(0.01)
+    wait_for(lambda: p.position > p.start + 0.5, what="the player moving on")
     panel.pause()
     pos = p.position
     assert pos > p.start + 0.5 and not p.playing
@@ -326,7 +321,7 @@ def test_a_truncated_file_is_listed_and_repaired_from_the_panel(
 def test_the_console_mounts_the_review_tab(run: Run, tmp_path: Path) -> None:
     from ucat_console.ui.app import ConsoleApp
 
-    sup = Supervisor(AppConfig(), clock=SimulatedClock(), sessions_dir=run.directory)
+    sup = Console(AppConfig(), run.directory).sup
     app = ConsoleApp(sup, port=0)
     review = app.build_review(app.server.gui, app.server.scene)  # what each page gets
     try:
@@ -370,7 +365,7 @@ class SplitRun:
 def split_run(tmp_path_factory: pytest.TempPathFactory) -> SplitRun:
     d = tmp_path_factory.mktemp("split_sessions")
     cfg = AppConfig().replace(recorder=RecorderConfig(split_duration=1.0))
-    sup = Supervisor(cfg, clock=SimulatedClock(), sessions_dir=d)
+    sup = Console(cfg, d).sup
     try:
         sup.set_setpoints(LOCAL, velocity=0.2)
         sup.start_recording(LOCAL, "split review run")
@@ -452,10 +447,7 @@ def test_playing_crosses_the_part_boundaries(split_panel: PlaybackPanel, split_r
     from_t = p.position
     panel.set_speed(2.0)
     panel.play()
-    for _ in range(500):
-        if p.position > spans[1][0] + 0.25:
-            break
-        time.sleep(0.01)
+    wait_for(lambda: p.position > spans[1][0] + 0.25, what="the player past the second span")
     panel.pause()
     assert p.position > spans[1][0] + 0.25
     got = sink.take()

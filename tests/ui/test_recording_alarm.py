@@ -15,10 +15,9 @@ import subprocess
 from pathlib import Path
 
 import pytest
-from support import wait_for
+from support import Console, wait_for
 
 from ucat_console.backend.access import LOCAL
-from ucat_console.backend.loop.clock import SimulatedClock
 from ucat_console.backend.sessions import recorder as recorder_module
 from ucat_console.backend.sessions.reader import SessionReader
 from ucat_console.backend.sessions.repair import needs_repair, repair
@@ -74,7 +73,7 @@ def test_a_full_disk_raises_the_alarm_everywhere_and_recording_starts_again(tmp_
     monkeypatch.setattr(recorder_module, "open",
                         lambda path, mode: io.BufferedWriter(FullDisk(path, mode.replace("b", ""))), raising=False)
     cfg = AppConfig(access=AccessConfig(token=TOKEN), failsafe=FailsafeConfig(recording=FailsafeRule("hold", 0.0)))
-    sup = Supervisor(cfg, clock=SimulatedClock(), sessions_dir=tmp_path)
+    sup = Console(cfg, tmp_path).sup
     app = ConsoleApp(sup, port=0)
     app.start()
     pages: list[RawPage] = []
@@ -149,7 +148,7 @@ def test_a_failure_is_acknowledged_by_stopping(tmp_path: Path, monkeypatch) -> N
 
     monkeypatch.setattr(recorder_module, "open",
                         lambda path, mode: io.BufferedWriter(NoRoom(path, mode.replace("b", ""))), raising=False)
-    sup = Supervisor(AppConfig(), clock=SimulatedClock(), sessions_dir=tmp_path)
+    sup = Console(AppConfig(), tmp_path).sup
     try:
         sup.set_setpoints(LOCAL, velocity=0.2)
         sup.arm(LOCAL)  # records from arming
@@ -181,7 +180,7 @@ def test_a_full_tmpfs_sessions_folder_raises_the_alarm_and_leaves_a_readable_fil
     try:
         filler = folder / "filler"
         filler.write_bytes(b"\0" * (2 * 1024 * 1024 - 400 * 1024))  # 400 kB left for the recording
-        sup = Supervisor(AppConfig(), clock=SimulatedClock(), sessions_dir=folder)
+        sup = Console(AppConfig(), folder).sup
         try:
             events = events_of(sup)
             bodies: list = []

@@ -1,4 +1,4 @@
-"""Identification from recordings, and the identification manoeuvre on a running robot.
+"""Identification from recordings.
 
 * :func:`identify_sessions` reads recorded sessions (the fins' encoder angles and rates,
   the DVL, the IMU), takes the hull's surge damping, mass and added mass and the fins'
@@ -8,13 +8,9 @@
   with the coefficients, their 95 % intervals, the windows' residuals and the TOML
   fragment to load; :func:`residual_plots` draws the residuals (matplotlib, the
   ``experiments`` extra).
-* :class:`ManoeuvreRun` runs the identification manoeuvre (mode "identify") on a running
-  :class:`~ucat_console.backend.supervisor.Supervisor`, the pilot's command: it records a
-  session while the fins step through the manoeuvre, then puts the previous mode back and
-  stops the recording (the console's own act: it happens whoever flies by then, and at
-  once when the robot is disarmed before the end). ``start`` / ``poll`` / ``finish`` drive
-  it without blocking (the supervisor polls its run after every chunk of the loop);
-  :meth:`ManoeuvreRun.wait` blocks (the command line).
+
+The identification manoeuvre that records such a session on a running robot is the
+supervisor's (``backend.supervisor.manoeuvre``).
 """
 
 from __future__ import annotations
@@ -23,7 +19,7 @@ import math
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Sequence
+from typing import Sequence
 
 import numpy as np
 
@@ -43,10 +39,6 @@ from ucat_console.control.identification import (
 from ucat_console.robot.readings import ImuReading
 from ucat_console.robot.rotations import euler_from_quaternion
 from ucat_console.telemetry import channels as ch
-
-if TYPE_CHECKING:
-    from ucat_console.backend.access import Actor
-    from ucat_console.backend.supervisor import Supervisor
 
 
 def hull_of(cfg: AppConfig) -> Hull:
@@ -211,85 +203,3 @@ def residual_plots(result: Identification, path: Path) -> Path:
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
-
-
-class ManoeuvreRun:
-    """The identification manoeuvre on a running supervisor (module docstring)."""
-
-    #: seconds recorded after the manoeuvre's last step
-    TAIL_S = 2.0
-
-    def __init__(self, sup: Supervisor, who: Actor) -> None:
-        self.sup = sup
-        self.who = who
-        self.session = ""
-        self.paths: list[Path] = []
-        self._previous = ""
-        self._t0 = math.nan
-        self._finished = False
-
-    @property
-    def duration(self) -> float:
-        return self.sup.cfg.loop.manoeuvre.duration + self.TAIL_S
-
-    def start(self) -> str:
-        """Start recording and the manoeuvre (pilot only, armed); returns the session id."""
-        from ucat_console.backend.supervisor import CommandRefused
-
-        sup = self.sup
-        sup.access.require_pilot(self.who, "identification manoeuvre")
-        if not sup.armed:
-            raise CommandRefused("identification manoeuvre: arm the motors first")
-        if sup.mode == "identify":
-            raise CommandRefused("identification manoeuvre: already running")
-        self._previous = sup.mode
-        if not sup.recorder.recording:
-            self.session = sup.start_recording(self.who, notes="identification manoeuvre")
-        else:
-            self.session = sup.recorder.session_id
-        sup.set_mode(self.who, "identify")
-        sup.add_marker(self.who, "identification manoeuvre starts")
-        self._t0 = sup.loop.time
-        return self.session
-
-    @property
-    def progress(self) -> float:
-        """Share of the manoeuvre done (0-1)."""
-        if math.isnan(self._t0):
-            return 0.0
-        return min(1.0, max(0.0, (self.sup.loop.time - self._t0) / self.duration))
-
-    @property
-    def finished(self) -> bool:
-        return self._finished
-
-    def poll(self) -> bool:
-        """Finish when the manoeuvre is over (or the robot was disarmed); True once finished."""
-        if self._finished:
-            return True
-        if self.progress >= 1.0 or not self.sup.armed:
-            self.finish()
-            return True
-        return False
-
-    def finish(self) -> list[Path]:
-        """The previous mode back, the recording stopped; the session's files."""
-        from ucat_console.backend.access import LOCAL
-
-        if self._finished:
-            return self.paths
-        self._finished = True
-        sup = self.sup
-        if sup.mode == "identify":
-            sup.set_mode(LOCAL, self._previous or "mpc")
-        if sup.recorder.recording and sup.recorder.session_id == self.session:
-            self.paths = sup.stop_recording(LOCAL)
-        return self.paths
-
-    def wait(self, poll_s: float = 0.2) -> list[Path]:
-        """Block until the manoeuvre is over (a supervisor running in its own thread)."""
-        import time
-
-        while not self.poll():
-            time.sleep(poll_s)
-        return self.paths

@@ -4,23 +4,22 @@ numba compiles the planners, the plant and the loop's kernels on their first cal
 them in its on-disk cache (``cache=True``); the first start on a machine compiles for a
 minute or more, later starts load them in a fraction of a second. A compile holds the
 interpreter the whole time, so it never runs in the console's process while the page is
-served or the drivers are supervised: :func:`start` runs the :class:`Step` s a
-configuration needs in child processes (started with ``spawn``, as many as the machine
-has cores, two at most: independent kernels compile side by side, and numba's cache takes
-each from whichever process wrote it).
+served or the drivers are supervised: :func:`start` runs the :class:`Step` s its caller
+gives in child processes (started with ``spawn``, as many as the machine has cores, two at
+most: independent kernels compile side by side, and numba's cache takes each from
+whichever process wrote it). What the steps are, and which a configuration needs, is the
+caller's (``cli.compiled.console_steps``); a step names the function that compiles it.
 
-The steps the console needs before it serves (:attr:`Step.needed`: the configured
-formulation's planner, the closed loop's kernels, the page's plot series, and the
-simulated robot where the robot is simulated) go first; :meth:`Preparation.wait` returns when they are done. The rest (the
-other formulation's planner, which the operator may switch to live) compiles on in the
-background; :meth:`Preparation.done` tells whether a step is done, and the supervisor
-refuses a switch to a formulation whose planner is not compiled yet (a compile in the
-console's process would hold the loop for a minute). ``ucat-console bench compile``
-measures each step cold.
+The steps needed before serving (:attr:`Step.needed`) go first; :meth:`Preparation.wait`
+returns when they are done. The rest compiles on in the background;
+:meth:`Preparation.done` tells whether a step is done (the supervisor refuses a switch to
+a formulation whose planner is not compiled yet: a compile in the console's process would
+hold the loop for a minute). ``ucat-console bench compile`` measures each step cold.
 """
 
 from __future__ import annotations
 
+import importlib
 import logging
 import multiprocessing as mp
 import os
@@ -37,71 +36,31 @@ log = logging.getLogger(__name__)
 @dataclass(frozen=True)
 class Step:
     """One thing to compile: its key, what it is (for people), whether the console needs it
-    before it serves."""
+    before it serves, and what compiles it: ``target`` names a function,
+    ``"package.module:function"``, that the child process imports and calls as
+    ``function(cfg, *args)``."""
 
     key: str
     text: str
     needed: bool
+    target: str
+    args: tuple[Any, ...] = ()
 
 
-def planner_step(formulation: str) -> str:
-    return f"planner:{formulation}"
+def run_step(step: Step, cfg: AppConfig) -> None:
+    """Compile (or load) what ``step`` stands for; ValueError naming a target that is not a
+    function."""
+    module, _, name = step.target.partition(":")
+    try:
+        fn = getattr(importlib.import_module(module), name) if module and name else None
+    except ImportError as e:
+        raise ValueError(f"step {step.key}: target {step.target!r}: {e}") from None
+    if not callable(fn):
+        raise ValueError(f"step {step.key}: target {step.target!r} is not a 'package.module:function'")
+    fn(cfg, *step.args)
 
 
-def _formulation_text(formulation: str) -> str:
-    return "the paper's MPC" if formulation == "paper" else f"the {formulation.replace('_', '-')} MPC"
-
-
-def steps_for(cfg: AppConfig) -> list[Step]:
-    """The steps ``cfg`` needs, the ones needed before serving first."""
-    from ucat_console.control.params import FORMULATIONS
-
-    mine = cfg.mpc.formulation
-    steps = [Step(planner_step(mine), f"{_formulation_text(mine)} and the baseline", True),
-             Step("loop", "the closed loop's per-sample kernels", True)]
-    if simulated(cfg):
-        steps.append(Step("plant", "the simulated robot", True))
-    steps.append(Step("page", "the page's plot series", True))
-    if cfg.mpc.solver == "numba":
-        steps += [Step(planner_step(f), _formulation_text(f), False) for f in FORMULATIONS if f != mine]
-    return steps
-
-
-def simulated(cfg: AppConfig) -> bool:
-    """Whether the robot is (or is behind the emulators of) the simulated plant."""
-    return cfg.robot == "sim" or cfg.devices.robot == "sim-devices"
-
-
-def run_step(key: str, cfg: AppConfig) -> None:
-    """Compile (or load) what step ``key`` stands for."""
-    if key.startswith("planner:"):
-        from ucat_console.backend.loop.planners import warm_up
-
-        warm_up(cfg.loop, formulations=(key.split(":", 1)[1],))
-    elif key == "loop":
-        from ucat_console.backend.loop.kernels_warm_up import warm_up_loop
-
-        warm_up_loop(cfg.loop)
-    elif key == "page":
-        from ucat_console.ui.plots import warm_up
-
-        warm_up()
-    elif key == "plant":
-        from ucat_console.backend.loop.closed_loop import ClosedLoop
-        from ucat_console.backend.sim_robot_io import SimRobotIO
-
-        io = SimRobotIO(cfg.plant, depth=1.0, velocity=0.1)
-        io.advance_to(0.05)  # the plant one event at a time (behind the console's arming gate)
-        io.plant.advance(0.002)
-        io.plant.sample_sensors()
-        # the plant running the loop's core (headless runs), before any plan is due
-        with ClosedLoop(cfg.loop.replace(mode="baseline"), SimRobotIO(cfg.plant, depth=1.0)) as loop:
-            loop.run_until(0.05)
-    else:
-        raise ValueError(f"step: {key!r} is not a preparation step")
-
-
-def _worker(tasks: Any, results: Any, cfg_toml: str) -> None:
+def _worker(tasks: Any, results: Any, cfg_toml: str, steps: list[Step]) -> None:
     import tomllib
 
     try:
@@ -109,6 +68,7 @@ def _worker(tasks: Any, results: Any, cfg_toml: str) -> None:
     except Exception as e:
         results.put(("error", "", f"{type(e).__name__}: {e}"))
         return
+    by_key = {s.key: s for s in steps}
     while True:
         key = tasks.get()
         if key is None:
@@ -116,7 +76,7 @@ def _worker(tasks: Any, results: Any, cfg_toml: str) -> None:
         results.put(("start", key, 0.0))
         t0 = time.perf_counter()
         try:
-            run_step(key, cfg)
+            run_step(by_key[key], cfg)
         except Exception as e:
             results.put(("error", key, f"{type(e).__name__}: {e}"))
             return
@@ -138,13 +98,15 @@ class Progress:
 class Preparation:
     """Compiles running in child processes (:func:`start`)."""
 
-    def __init__(self, cfg: AppConfig, on_progress: Callable[[Progress], None] = lambda p: None,
-                 workers: int | None = None, env: dict[str, str] | None = None,
-                 steps: list[Step] | None = None) -> None:
-        """``steps``: what to prepare (default :func:`steps_for` ``cfg``)."""
-        self.steps = steps_for(cfg) if steps is None else list(steps)
+    def __init__(self, cfg: AppConfig, steps: list[Step], on_progress: Callable[[Progress], None] = lambda p: None,
+                 workers: int | None = None, env: dict[str, str] | None = None) -> None:
+        """``steps``: what to prepare, as the caller says (keys unique, one needed at least)."""
+        self.steps = list(steps)
         if not any(s.needed for s in self.steps):
             raise ValueError("prepare: no step is needed before serving")
+        keys = [s.key for s in self.steps]
+        if len(set(keys)) != len(keys):
+            raise ValueError(f"prepare: a step key given twice in {', '.join(keys)}")
         self.needed = [s for s in self.steps if s.needed]
         self.total = len(self.needed)
         self.on_progress = on_progress
@@ -171,7 +133,7 @@ class Preparation:
             os.environ.update(env or {})
             for i in range(max(1, min(n, len(self.steps)))):
                 self._tasks.put(None)
-                p = ctx.Process(target=_worker, args=(self._tasks, self._results, cfg.to_toml()),
+                p = ctx.Process(target=_worker, args=(self._tasks, self._results, cfg.to_toml(), self.steps),
                                 name=f"ucat-prepare-{i}", daemon=True)
                 p.start()
                 self._procs.append(p)
@@ -273,7 +235,7 @@ class Preparation:
                 p.join(timeout=5.0)
 
 
-def start(cfg: AppConfig, on_progress: Callable[[Progress], None] = lambda p: None,
-          steps: list[Step] | None = None, workers: int | None = None) -> Preparation:
-    """Start preparing what ``cfg`` needs (or ``steps``), in child processes."""
-    return Preparation(cfg, on_progress, workers=workers, steps=steps)
+def start(cfg: AppConfig, steps: list[Step], on_progress: Callable[[Progress], None] = lambda p: None,
+          workers: int | None = None) -> Preparation:
+    """Start preparing ``steps`` for ``cfg``, in child processes."""
+    return Preparation(cfg, steps, on_progress, workers=workers)

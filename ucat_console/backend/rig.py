@@ -1,7 +1,7 @@
 """The robot behind the closed loop, built from configuration: :func:`build_robot_io`.
 
-Three robots share one interface (``robot.interface.RobotIO``), picked by
-``DevicesConfig.robot``::
+Three robots share one interface (``robot.interface.RobotIO``), picked by the
+configuration's ``robot``::
 
     sim          SimRobotIO ------------------------------------> Plant (in process)
     sim-devices  DeviceRobotIO -> drivers -> virtual CAN / pty / 127.0.0.1 -> emulators -> Plant
@@ -15,9 +15,9 @@ fault injection from the developer panel) with :func:`rig_of`.
 from __future__ import annotations
 
 import logging
-from typing import Any, Callable
+from typing import Callable
 
-from ucat_console.backend.devices.config import DevicesConfig
+from ucat_console.backend.devices.config import ROBOTS, DevicesConfig
 from ucat_console.backend.devices.device_robot_io import DeviceRobotIO
 from ucat_console.backend.sim_rig import SimRig
 from ucat_console.backend.sim_robot_io import SimRobotIO
@@ -30,61 +30,36 @@ log = logging.getLogger(__name__)
 Close = Callable[[], None]
 
 
-def devices_config_of(config: Any) -> DevicesConfig:
-    """The :class:`DevicesConfig` itself, or the ``devices`` block of an application config.
-
-    An application config whose ``robot`` is ``"rig"`` (the device rig) must pick a robot
-    behind the drivers: ``devices.robot`` ``"sim-devices"`` or ``"hardware"``.
-    """
-    if isinstance(config, DevicesConfig):
-        return config
-    devices = getattr(config, "devices", None)
-    if not isinstance(devices, DevicesConfig):
-        raise ValueError(
-            f"devices: expected a DevicesConfig or a configuration with a 'devices' block, "
-            f"got {type(config).__name__}"
-        )
-    if getattr(config, "robot", None) == "rig" and devices.robot == "sim":
-        raise ValueError(
-            "devices.robot: 'sim' is the in-process simulator; the device rig (robot = 'rig') "
-            "drives 'sim-devices' or 'hardware'"
-        )
-    return devices
-
-
-def _plant_config_of(config: Any, plant: PlantConfig | None) -> PlantConfig | None:
-    if plant is not None:
-        return plant
-    found = getattr(config, "plant", None)
-    return found if isinstance(found, PlantConfig) else None
-
-
 def build_robot_io(
-    config: Any,
+    robot: str,
+    devices: DevicesConfig,
     *,
     plant: PlantConfig | None = None,
     event_sink: EventSink | None = None,
 ) -> tuple[RobotIO, Close]:
-    """The robot of ``config`` (a DevicesConfig or an application config with ``devices``,
-    and optionally ``plant``), started, and the function that shuts it down.
+    """The robot ``robot`` (one of :data:`ROBOTS`, ``AppConfig.robot``) with the devices
+    ``devices``, started, and the function that shuts it down.
 
     * ``sim``: the in-process :class:`SimRobotIO` (no devices, no events);
     * ``sim-devices``: a :class:`SimRig` (plant + emulators) and a :class:`DeviceRobotIO`
       on the rig's endpoints, at the rig's pace;
     * ``hardware``: a :class:`DeviceRobotIO` on the configured endpoints.
 
-    ``plant`` (or ``config.plant``) configures the simulated plant. ``event_sink`` receives
+    ``plant`` configures the simulated plant. ``event_sink`` receives
     the robot's fault events from the start (more sinks: :func:`connect_events`). Bad configuration fails here with a
     ValueError naming the key (see :meth:`DeviceRobotIO.start`); nothing is left running.
     """
-    cfg = devices_config_of(config)
-    plant_cfg = _plant_config_of(config, plant)
-    if cfg.robot == "sim":
+    if robot not in ROBOTS:
+        raise ValueError(f"robot: {robot!r} is not one of {', '.join(ROBOTS)}")
+    if not isinstance(devices, DevicesConfig):
+        raise ValueError(f"devices: expected a DevicesConfig, got {type(devices).__name__}")
+    cfg, plant_cfg = devices, plant
+    if robot == "sim":
         s = cfg.start
         io = SimRobotIO(plant_cfg, depth=s.depth, yaw=s.yaw, velocity=s.velocity,
                         seed=None if s.seed < 0 else s.seed)
         return io, io.close
-    if cfg.robot == "sim-devices":
+    if robot == "sim-devices":
         rig = SimRig(cfg, plant_cfg)
         driver_cfg = rig.start()
         try:

@@ -23,20 +23,82 @@ from typing import Any, Callable
 STILL_EVERY = 15.0
 
 
+def planner_step(formulation: str) -> str:
+    """The key of the step that compiles ``formulation``'s planner."""
+    return f"planner:{formulation}"
+
+
+def _formulation_text(formulation: str) -> str:
+    return "the paper's MPC" if formulation == "paper" else f"the {formulation.replace('_', '-')} MPC"
+
+
+def console_steps(cfg: Any) -> list[Any]:
+    """The steps ``cfg``'s console runs, the ones it needs before it serves first (the
+    configured formulation's planner, the closed loop's kernels, the simulated robot where
+    the robot is simulated, the page's plot series); the other formulations' planners, which
+    the operator may switch to live, after."""
+    from ucat_console.backend.prepare import Step
+    from ucat_console.control.params import FORMULATIONS
+
+    here = __name__
+    mine = cfg.mpc.formulation
+    steps = [Step(planner_step(mine), f"{_formulation_text(mine)} and the baseline", True,
+                  f"{here}:compile_planner", (mine,)),
+             Step("loop", "the closed loop's per-sample kernels", True, f"{here}:compile_loop")]
+    if cfg.simulated:
+        steps.append(Step("plant", "the simulated robot", True, f"{here}:compile_plant"))
+    steps.append(Step("page", "the page's plot series", True, f"{here}:compile_page"))
+    if cfg.mpc.solver == "numba":
+        steps += [Step(planner_step(f), _formulation_text(f), False, f"{here}:compile_planner", (f,))
+                  for f in FORMULATIONS if f != mine]
+    return steps
+
+
 def every_step(cfg: Any) -> list[Any]:
     """Every step ``cfg`` may run, each waited for (what a command that runs any
     formulation needs)."""
-    from ucat_console.backend.prepare import steps_for
-
-    return [dataclasses.replace(s, needed=True) for s in steps_for(cfg)]
+    return [dataclasses.replace(s, needed=True) for s in console_steps(cfg)]
 
 
 def needed_steps(cfg: Any) -> list[Any]:
     """The steps ``cfg``'s console needs to start, the others left out (a headless run,
     which switches no formulation)."""
-    from ucat_console.backend.prepare import steps_for
+    return [s for s in console_steps(cfg) if s.needed]
 
-    return [s for s in steps_for(cfg) if s.needed]
+
+# ---------------------------------------------------------------- what each step compiles
+# (called in the preparing child processes: ``backend.prepare.run_step``)
+
+
+def compile_planner(cfg: Any, formulation: str) -> None:
+    from ucat_console.backend.loop.planners import warm_up
+
+    warm_up(cfg.loop, formulations=(formulation,))
+
+
+def compile_loop(cfg: Any) -> None:
+    from ucat_console.backend.loop.kernels_warm_up import warm_up_loop
+
+    warm_up_loop(cfg.loop)
+
+
+def compile_page(cfg: Any) -> None:
+    from ucat_console.ui.plots import warm_up
+
+    warm_up()
+
+
+def compile_plant(cfg: Any) -> None:
+    from ucat_console.backend.loop.closed_loop import ClosedLoop
+    from ucat_console.backend.sim_robot_io import SimRobotIO
+
+    io = SimRobotIO(cfg.plant, depth=1.0, velocity=0.1)
+    io.advance_to(0.05)  # the plant one event at a time (behind the console's arming gate)
+    io.plant.advance(0.002)
+    io.plant.sample_sensors()
+    # the plant running the loop's core (headless runs), before any plan is due
+    with ClosedLoop(cfg.loop.replace(mode="baseline"), SimRobotIO(cfg.plant, depth=1.0)) as loop:
+        loop.run_until(0.05)
 
 
 def prepare_all(config: Any = None) -> Any:
@@ -48,10 +110,9 @@ def prepare_all(config: Any = None) -> Any:
     return prepare(cfg, every_step(cfg))
 
 
-def prepare(cfg: Any, steps: list[Any] | None = None,
+def prepare(cfg: Any, steps: list[Any],
             on_progress: Callable[[Any], None] | None = None, workers: int | None = None) -> Any:
-    """Compile (or load) ``steps`` (default: the console's, ``backend.prepare.steps_for``)
-    in child processes, printing the progress, and return the preparation once the needed
+    """Compile (or load) ``steps`` (e.g. :func:`console_steps`) in child processes, printing the progress, and return the preparation once the needed
     ones are done (the others go on in the background). RuntimeError when a step fails;
     Ctrl-C stops the child processes. ``workers``: child processes (default: cores, at most 2)."""
     from ucat_console.backend import prepare as backend_prepare
@@ -69,7 +130,7 @@ def prepare(cfg: Any, steps: list[Any] | None = None,
             print(f"  preparing {p.step} ({p.done} of {p.total} done, {time.monotonic() - t0:.0f} s)",
                   flush=True)
 
-    prep = backend_prepare.start(cfg, progress, steps, workers)
+    prep = backend_prepare.start(cfg, steps, progress, workers)
     try:
         while not prep.wait(STILL_EVERY):  # a compile gives no progress of its own: the time it takes
             p = prep.progress

@@ -51,7 +51,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def _record_manoeuvre(cfg: Any, directory: Path | None, realtime: bool) -> Path:
     from ucat_console.backend.access import LOCAL
-    from ucat_console.backend.identification import ManoeuvreRun
     from ucat_console.backend.loop.clock import SimulatedClock
     from ucat_console.backend.supervisor import Supervisor
 
@@ -60,9 +59,9 @@ def _record_manoeuvre(cfg: Any, directory: Path | None, realtime: bool) -> Path:
     try:
         sup.start()
         sup.arm(LOCAL)
-        man = ManoeuvreRun(sup, LOCAL)
+        man = sup.start_manoeuvre(LOCAL)
         print(f"identification manoeuvre: {len(cfg.loop.manoeuvre.steps)} steps of "
-              f"{cfg.loop.manoeuvre.step_s:g} s, recording session {man.start()}", flush=True)
+              f"{cfg.loop.manoeuvre.step_s:g} s, recording session {man.session}", flush=True)
         paths = man.wait()
     finally:
         sup.stop()

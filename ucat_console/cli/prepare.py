@@ -29,7 +29,7 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--workers: {args.workers} must be >= 1")
     cfg = load_config(args.config)
     try:  # the steps the console needs first, each shown as it starts
-        prep = compiled.prepare(cfg, workers=args.workers)
+        prep = compiled.prepare(cfg, compiled.console_steps(cfg), workers=args.workers)
     except RuntimeError as e:
         print(e)
         return 1
@@ -48,10 +48,11 @@ def measure_cold(cfg, workers: int) -> dict:
     """Every step compiled from nothing (a numba cache of its own, removed afterwards) by
     ``workers`` processes: per-step seconds, and the wall time to ready and to complete."""
     from ucat_console.backend.prepare import Preparation
+    from ucat_console.cli.compiled import console_steps
 
     with tempfile.TemporaryDirectory(prefix="ucat-numba-cache-") as cache:
         t0 = time.perf_counter()
-        prep = Preparation(cfg, workers=workers, env={"NUMBA_CACHE_DIR": cache})
+        prep = Preparation(cfg, console_steps(cfg), workers=workers, env={"NUMBA_CACHE_DIR": cache})
         prep.wait_all()
         wall = time.perf_counter() - t0
     if prep.error:

@@ -100,7 +100,7 @@ def _prepare_with_page(cfg: Any) -> tuple[Any, Any]:
     url_host = cfg.console.host if cfg.console.host not in ("0.0.0.0", "::") else "127.0.0.1"
     print(f"U-CAT console on http://{url_host}:{page.port}  (starting: the page shows the progress)", flush=True)
     try:
-        prep = compiled.prepare(cfg, on_progress=page.set_progress)
+        prep = compiled.prepare(cfg, compiled.console_steps(cfg), on_progress=page.set_progress)
     finally:
         port = page.port
         page.stop()
@@ -152,15 +152,13 @@ def run(args: argparse.Namespace) -> int:
     except BaseException:
         signal.signal(signal.SIGTERM, previous)
         raise
-    from ucat_console.backend.prepare import planner_step
-
     background = [s for s in prep.steps if not s.needed]
     if background and not prep.complete:
         print("compiling in the background: " + ", ".join(s.text for s in background)
               + " (switching to it waits for this)", flush=True)
     try:
         sup = Supervisor(cfg, clock=SimulatedClock() if args.fast else None,
-                         planner_ready=lambda f: prep.done(planner_step(f)), sessions_dir=args.sessions_dir)
+                         planner_ready=lambda f: prep.done(compiled.planner_step(f)), sessions_dir=args.sessions_dir)
     except BaseException:
         prep.cancel()
         signal.signal(signal.SIGTERM, previous)

@@ -301,7 +301,7 @@ def identify_plant(plant: str, seed: int, quick: bool) -> dict[str, Any]:
     import tempfile
 
     from ucat_console.backend.access import LOCAL
-    from ucat_console.backend.identification import ManoeuvreRun, identify_sessions
+    from ucat_console.backend.identification import identify_sessions
     from ucat_console.backend.loop.clock import SimulatedClock
     from ucat_console.backend.supervisor import Supervisor
     from ucat_console.config import AccessConfig, AppConfig, ConsoleConfig
@@ -316,8 +316,7 @@ def identify_plant(plant: str, seed: int, quick: bool) -> dict[str, Any]:
         try:
             sup.arm(LOCAL)
             sup.step(1.0)
-            run = ManoeuvreRun(sup, LOCAL)
-            run.start()
+            run = sup.start_manoeuvre(LOCAL)
             sup.step(run.duration + 0.2)
             run.poll()
         finally:

@@ -8,9 +8,11 @@ import threading
 import time
 import tomllib
 import uuid
+from typing import Any
 
 import can
 import pytest
+from support import wait_for
 
 from ucat_console.backend.devices import cia402
 from ucat_console.backend.devices.canbus import open_bus
@@ -51,28 +53,13 @@ class Recorder:
             self.events.append(ev)
             self._cv.notify_all()
 
-    def wait_event(self, code: str, source: str | None = None, timeout: float = 2.0) -> Event:
-        def find():
-            for ev in self.events:
-                if ev.code == code and (source is None or ev.source == source):
-                    return ev
-            return None
+    def wait_event(self, code: str, source: str | None = None) -> Event:
+        def find() -> Event | None:
+            with self._cv:
+                return next((ev for ev in self.events if ev.code == code and (source is None or ev.source == source)),
+                            None)
 
-        with self._cv:
-            self._cv.wait_for(lambda: find() is not None, timeout=timeout)
-            ev = find()
-        seen = [(e.source, e.code) for e in self.events]
-        assert ev is not None, f"no {code} event from {source}; got {seen}"
-        return ev
-
-
-def _wait(predicate, timeout: float = 2.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.005)
-    return predicate()
+        return wait_for(find, what=f"a {code} event from {source or 'any node'}")
 
 
 class Rig:
@@ -98,6 +85,16 @@ class Rig:
     def close(self) -> None:
         self.drives.close()
         self.emulators.close()
+
+
+def heard_past_now(rig: Rig) -> None:
+    """Until the emulated nodes have sent all they were due to send up to now (a tick in
+    progress may still send a heartbeat) and the drives' reader has handed on every frame
+    sent by then: what the drives know of the nodes is final up to now."""
+    now = time.monotonic()  # the emulators' and the drives' clock
+    wait_for(lambda: rig.emulators.time >= now, what="the emulators ticked past now")
+    sent = time.monotonic()
+    wait_for(lambda: rig.drives.heard_until >= sent, what="the bus read up to now")
 
 
 @pytest.fixture
@@ -227,7 +224,7 @@ def _stroke_reaches_target(rig: Rig) -> None:
     assert rig.drives.command(0, 0.5, 4.0)
     target_qc = round(0.5 * QC_PER_RAD)  # 636.6 -> 637
     assert target_qc == 637
-    assert _wait(lambda: abs(emu.position_quadcounts - target_qc) <= 1 and emu.statusword & 0x0400)
+    assert wait_for(lambda: abs(emu.position_quadcounts - target_qc) <= 1 and emu.statusword & 0x0400)
     assert emu.target_quadcounts == target_qc
     assert emu.value(0x6081) == 153  # 4 rad/s * 4 * 60 / (2 pi) = 152.8 rpm
     # set-point handshake: 0x003F, acknowledge, bit 4 cleared with 0x000F
@@ -241,7 +238,7 @@ def _stroke_reaches_target(rig: Rig) -> None:
         fb = rig.rec.feedback[-1]
         return abs(fb.position_rad - 0.5) <= resolution and fb.velocity_rad_s == 0.0
 
-    assert _wait(at_rest_on_target)
+    assert wait_for(at_rest_on_target)
     last = rig.rec.feedback[-1]
     assert isinstance(last, FinFeedback) and last.fin == 0
     assert last.state == "operation_enabled"
@@ -268,7 +265,7 @@ def test_next_stroke_needs_no_wait(rig1):
     assert rig1.drives.command(0, 0.3, 6.0)
     assert rig1.drives.command(0, -0.3, 6.0)  # replaces the first set-point immediately
     target_qc = round(-0.3 * QC_PER_RAD)
-    assert _wait(lambda: abs(emu.position_quadcounts - target_qc) <= 1 and emu.statusword & 0x0400)
+    assert wait_for(lambda: abs(emu.position_quadcounts - target_qc) <= 1 and emu.statusword & 0x0400)
 
 
 # ------------------------------------------------------------------------------ faults
@@ -285,7 +282,7 @@ def test_emcy_fault_safe_state_and_fault_reset(rig2):
     assert fault.data["statusword"] & 0x4F == 0x08
     # safe state: the healthy node gets a quick stop
     rig2.rec.wait_event("quick_stop", "epos2.22")
-    assert _wait(lambda: b.statusword & 0x6F == 0x07)
+    assert wait_for(lambda: b.statusword & 0x6F == 0x07)
     assert 0x000B in b.controlword_log
     # fault reset from the console: rising edge of bit 7, then operation enabled
     assert rig2.drives.fault_reset(0)
@@ -322,45 +319,47 @@ def test_a_stopped_heartbeat_is_lost_after_the_configured_periods_and_restored(r
     assert not rig1.drives.drive(0).heartbeat_lost
 
 
-def test_heartbeat_rule_on_the_drivers_clock():
-    rig = Rig((21,), supervise=False)
-    try:
-        drive = rig.drives.drive(0)
-        rig.emulators[21].stop_heartbeat()
-        time.sleep(0.08)
-        last = drive.last_heartbeat_t
-        period = HEARTBEAT_MS / 1000.0
-        drive.check(last + 1.9 * period)
-        assert not [e for e in rig.rec.events if e.code == "heartbeat_lost"]
-        drive.check(last + 2.1 * period)
-        drive.check(last + 2.5 * period)
-        lost = [e for e in rig.rec.events if e.code == "heartbeat_lost"]
-        assert len(lost) == 1
-        assert lost[0].data["silent_for_s"] == pytest.approx(2.1 * period)
-    finally:
-        rig.close()
+@pytest.fixture
+def unsupervised_rig():
+    r = Rig((21,), supervise=False)
+    yield r
+    r.close()
 
 
-def test_a_heartbeat_is_missing_only_for_as_long_as_the_reader_has_heard():
+def stop_heartbeat(rig: Rig) -> tuple[Any, float, float]:
+    """Node 21's heartbeat stopped and every beat before it heard: (its driver, the last
+    beat's time, the heartbeat period)."""
+    drive = rig.drives.drive(0)
+    rig.emulators[21].stop_heartbeat()
+    heard_past_now(rig)
+    return drive, drive.last_heartbeat_t, HEARTBEAT_MS / 1000.0
+
+
+def test_heartbeat_rule_on_the_drivers_clock(unsupervised_rig):
+    rig = unsupervised_rig
+    drive, last, period = stop_heartbeat(rig)
+    drive.check(last + 1.9 * period)
+    assert not [e for e in rig.rec.events if e.code == "heartbeat_lost"]
+    drive.check(last + 2.1 * period)
+    drive.check(last + 2.5 * period)
+    lost = [e for e in rig.rec.events if e.code == "heartbeat_lost"]
+    assert len(lost) == 1
+    assert lost[0].data["silent_for_s"] == pytest.approx(2.1 * period)
+
+
+def test_a_heartbeat_is_missing_only_for_as_long_as_the_reader_has_heard(unsupervised_rig):
     """A busy machine holds the bus's reader back: frames wait unread, a heartbeat among
     them. The silence counts up to what the reader has heard (``heard_until``), not up to
     the present, so however late the check runs, an unheard beat is not a lost one."""
-    rig = Rig((21,), supervise=False)
-    try:
-        drive = rig.drives.drive(0)
-        rig.emulators[21].stop_heartbeat()
-        time.sleep(0.08)
-        last = drive.last_heartbeat_t
-        period = HEARTBEAT_MS / 1000.0
-        # ten periods late by the clock, but heard only 1.9 periods past the last beat
-        drive.check(last + 10 * period, heard_until=last + 1.9 * period)
-        assert not [e for e in rig.rec.events if e.code == "heartbeat_lost"]
-        assert not drive.heartbeat_lost
-        drive.check(last + 10 * period, heard_until=last + 2.2 * period)
-        lost = [e for e in rig.rec.events if e.code == "heartbeat_lost"]
-        assert len(lost) == 1 and lost[0].data["silent_for_s"] == pytest.approx(2.2 * period)
-    finally:
-        rig.close()
+    rig = unsupervised_rig
+    drive, last, period = stop_heartbeat(rig)
+    # ten periods late by the clock, but heard only 1.9 periods past the last beat
+    drive.check(last + 10 * period, heard_until=last + 1.9 * period)
+    assert not [e for e in rig.rec.events if e.code == "heartbeat_lost"]
+    assert not drive.heartbeat_lost
+    drive.check(last + 10 * period, heard_until=last + 2.2 * period)
+    lost = [e for e in rig.rec.events if e.code == "heartbeat_lost"]
+    assert len(lost) == 1 and lost[0].data["silent_for_s"] == pytest.approx(2.2 * period)
 
 
 def test_silent_node_is_reported(rig1):
@@ -376,16 +375,27 @@ def test_silent_node_is_reported(rig1):
 
 def test_slow_replies_surface_as_events():
     rig = Rig((21,), sdo_timeout=0.1)
+    listener = can.Bus(interface="virtual", channel=rig.channel, ignore_config=True)
     try:
         emu = rig.emulators[21]
         assert rig.drives.drive(0).read_current() == 0.0
+        while listener.recv(timeout=0.0) is not None:  # the replies so far
+            pass
         emu.slow_replies(0.3)
         assert rig.drives.drive(0).read_current() is None
         ev = rig.rec.wait_event("sdo_timeout", "epos2.21")
         assert ev.level == "warning"
         emu.slow_replies(0.0)
-        time.sleep(0.4)  # the late reply passes
+
+        def late_reply() -> bool:  # it passes before the rig closes
+            while (msg := listener.recv(timeout=0.0)) is not None:
+                if msg.arbitration_id == 0x580 + 21:
+                    return True
+            return False
+
+        wait_for(late_reply, what="the late SDO reply")
     finally:
+        listener.shutdown()
         rig.close()
 
 
@@ -395,7 +405,10 @@ def test_master_heartbeat_sets_the_consumer_time():
         # producer 100, consumer time 2 x 100 ms
         assert rig.emulators[21].value(0x1016, 1) == (100 << 16) | 200
         assert rig.drives.enable_all()
-        time.sleep(0.3)  # the console's heartbeat keeps the node out of fault
+        # the console's heartbeat keeps the node out of fault: judged by the node over 1.5
+        # consumer times of its own (however late its ticks come on a busy machine)
+        enabled = time.monotonic()
+        wait_for(lambda: rig.emulators.time >= enabled + 0.3, what="the node ticked 0.3 s on")
         assert rig.emulators[21].state == "operation_enabled"
     finally:
         rig.close()

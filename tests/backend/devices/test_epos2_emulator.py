@@ -12,6 +12,7 @@ import uuid
 import can
 import canopen
 import pytest
+from support import FakeClock, wait_for
 from canopen.profiles.p402 import BaseNode402
 from canopen.sdo import SdoCommunicationError
 
@@ -282,28 +283,37 @@ def test_reset_communication_restores_defaults_and_sends_bootup(tick_rig):
 
 
 def test_silence_and_slow_replies():
+    """The node ticked by the test on its own clock: what it sends in a stretch of its time
+    is sent when the test ticks, whatever the machine's speed."""
     channel = _channel("silence")
-    group = start_emulated_nodes(channel, [NODE], config=Epos2EmulatorConfig(units=UNITS))
+    clock = FakeClock(100.0)
+    group = start_emulated_nodes(channel, [NODE], config=Epos2EmulatorConfig(units=UNITS),
+                                 run_thread=False, clock=clock)
     m = _Master(channel)
     emu = group[NODE]
+
+    def heartbeats() -> list[can.Message]:
+        return [f for f in m.drain() if f.arbitration_id == 0x700 + NODE]
+
     try:
         m.node.sdo[0x1017].raw = 20
+        group.tick(clock.advance(0.001))
+        assert heartbeats()  # beating
         emu.silence()
-        time.sleep(0.03)
-        m.drain()
         m.node.sdo.RESPONSE_TIMEOUT = 0.1
         with pytest.raises(SdoCommunicationError):
             m.sw()
-        time.sleep(0.06)
-        assert not [f for f in m.drain() if f.arbitration_id == 0x700 + NODE]
+        group.tick(clock.advance(0.06))  # three periods silent
+        assert not heartbeats()
         emu.unsilence()
         assert m.sw() & 0x4F == 0x40
-        time.sleep(0.06)
-        assert [f for f in m.drain() if f.arbitration_id == 0x700 + NODE]
+        group.tick(clock.advance(0.06))
+        assert heartbeats()
         emu.slow_replies(0.25)
         with pytest.raises(SdoCommunicationError):
             m.sw()
-        time.sleep(0.35)  # let the late reply pass before the next request
+        # let the late reply pass before the next request
+        wait_for(lambda: [f for f in m.drain() if f.arbitration_id == 0x580 + NODE], what="the late SDO reply")
         m.node.sdo.RESPONSE_TIMEOUT = 1.0
         assert m.sw() & 0x4F == 0x40
         emu.slow_replies(0.0)
@@ -323,7 +333,7 @@ def test_canopen_p402_master_reaches_operation_enabled():
         assert m.node.nmt.state == "PRE-OPERATIONAL"
         m.node.setup_402_state_machine(read_pdos=True)
         m.node.nmt.state = "OPERATIONAL"
-        time.sleep(0.05)
+        wait_for(lambda: group[NODE].nmt_state == "OPERATIONAL", what="the node operational")
         m.node.op_mode = "PROFILED POSITION"
         assert m.node.op_mode == "PROFILED POSITION"
         m.node.state = "OPERATION ENABLED"

@@ -3,21 +3,14 @@
 from __future__ import annotations
 
 import pytest
+from support import FakeClock
 
 from ucat_console.backend.devices.faults import Fault, FaultSet, FaultSettings, as_fault
 from ucat_console.backend.devices.reporting import EventReporter
 
 
-class FakeClock:
-    def __init__(self) -> None:
-        self.now = 100.0
-
-    def __call__(self) -> float:
-        return self.now
-
-
 def test_fault_expires_after_its_duration() -> None:
-    clock = FakeClock()
+    clock = FakeClock(100.0)
     faults = FaultSet(clock)
     faults.inject("silence", duration=2.0)
     faults.inject(Fault.CORRUPT)
@@ -32,7 +25,7 @@ def test_fault_expires_after_its_duration() -> None:
 
 
 def test_clear_all_and_bad_names() -> None:
-    faults = FaultSet(FakeClock())
+    faults = FaultSet(FakeClock(100.0))
     faults.inject("slow")
     faults.inject("invalid")
     faults.clear()
@@ -46,7 +39,7 @@ def test_clear_all_and_bad_names() -> None:
 
 
 def test_reporter_throttles_and_reports_conditions_on_edges() -> None:
-    clock = FakeClock()
+    clock = FakeClock(100.0)
     events = []
     rep = EventReporter("imu", events.append, clock, min_interval_s=1.0)
     assert rep.throttled("checksum", "bad")
@@ -66,7 +59,7 @@ def test_reporter_survives_a_failing_sink() -> None:
     def broken(event):
         raise RuntimeError("sink down")
 
-    EventReporter("dvl", broken, FakeClock()).emit("silence", "quiet")  # must not raise
+    EventReporter("dvl", broken, FakeClock(100.0)).emit("silence", "quiet")  # must not raise
 
 
 def test_an_in_process_device_is_silent_only_for_as_long_as_it_has_run() -> None:
@@ -74,7 +67,7 @@ def test_an_in_process_device_is_silent_only_for_as_long_as_it_has_run() -> None
     silence runs up to the device's time at its latest read, not up to the present."""
     from ucat_console.backend.devices.reporting import SilenceWatch
 
-    clock = FakeClock()
+    clock = FakeClock(100.0)
     device = [100.0]
     events = []
     watch = SilenceWatch(EventReporter("imu", events.append, clock), clock, 0.5, "packet", "packets",

@@ -7,9 +7,10 @@ import math
 
 import numpy as np
 import pytest
+from support import FakeClock
 
 from ucat_console.robot.readings import DvlVelocity
-from ucat_console.backend.loop.clock import Clock, PacedClock
+from ucat_console.backend.loop.clock import PacedClock
 from ucat_console.backend.loop.closed_loop import ClosedLoop
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.backend.loop.planners import BaselineFinPlanner, PlanInputs
@@ -103,35 +104,12 @@ def test_headless_and_paced_threaded_clocks_give_the_same_trajectory() -> None:
     assert np.array_equal(xa, xb) and np.array_equal(fa[:, :4], fb[:, :4])
 
 
-class SteppingClock(Clock):
-    """A paced clock whose wall time is what the loop waited for: every event waits, whatever
-    the machine's speed (a paced clock on a busy machine may run behind and wait for none)."""
-
-    threaded = True
-    paced = True
-
-    def __init__(self) -> None:
-        self.now = 0.0
-
-    def start(self, t0: float) -> None:
-        self.now = t0
-
-    def wait_until(self, t: float) -> None:
-        self.now = max(self.now, t)
-
-    def wall_deadline(self, t: float) -> float:
-        return math.inf  # no plan is late by this clock
-
-    def horizon(self, t_done: float) -> float:
-        return self.now
-
-
 def test_a_paced_loop_does_its_callers_work_where_it_waits_and_runs_on_to_the_end_it_is_given() -> None:
     """``between`` runs at each wait of a paced loop and moves the end; the loop does not
     return until the end given last, and runs as a loop run to that end at once does."""
     a, io_a, log_a = make_loop("mpc")
     a.run_until(1.5)
-    b, io_b, log_b = make_loop("mpc", clock=SteppingClock())
+    b, io_b, log_b = make_loop("mpc", clock=FakeClock())
     seen: list[float] = []
 
     def between(t: float) -> float:

@@ -8,11 +8,10 @@ from __future__ import annotations
 import hashlib
 import json
 import re
-import time
 from pathlib import Path
 
 import pytest
-from support import StreamSink
+from support import StreamSink, wait_for
 from mcap.records import Attachment, Channel, DataEnd, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 from mcap.writer import Writer
@@ -273,9 +272,7 @@ def test_playing_thread_crosses_the_boundaries(split, sessions):
         p.seek(0.5)
         sink.take()
         p.play()
-        deadline = time.monotonic() + 10.0
-        while p.playing and time.monotonic() < deadline:
-            time.sleep(0.01)
+        wait_for(lambda: not p.playing, what="the player at the end")
         assert not p.playing and p.at_end
         p.close()
     assert sink.take() == [(c, m) for c, m in items if m.t > 0.5 + 1e-9]

@@ -5,10 +5,9 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import time
 
 import pytest
-from support import StreamSink
+from support import StreamSink, wait_for
 from session_helpers import record
 
 from ucat_console.backend.sessions.player import Player
@@ -187,9 +186,7 @@ def test_playing_thread_publishes_everything_in_order_then_stops(player):
     sink.take()
     p.speed = 5.0
     p.play()
-    deadline = time.monotonic() + 10.0
-    while p.playing and time.monotonic() < deadline:
-        time.sleep(0.01)
+    wait_for(lambda: not p.playing, what="the player at the end")
     assert not p.playing
     assert sink.take() == [(c, m) for c, m in items if m.t > 8.0 + 1e-9]
     p.play()  # at the end: starts again from the beginning

@@ -1,6 +1,7 @@
-"""Which robot the console drives and where its devices are: :class:`DevicesConfig`.
+"""Where the robot's devices are: :class:`DevicesConfig`; the robots the console can drive:
+:data:`ROBOTS` (the application configuration's one selector, ``robot``).
 
-``robot`` picks one of three robots behind the same closed loop:
+Three robots behind the same closed loop:
 
 * ``"sim"``: the in-process simulated U-CAT (``backend.sim_robot_io.SimRobotIO``), no devices;
 * ``"sim-devices"``: the simulated U-CAT behind protocol-exact emulators (EPOS2 nodes on a
@@ -29,7 +30,7 @@ from ucat_console.backend.devices.pressure import PressureConfig
 from ucat_console.backend.devices.pressure_emulator import PressureEmulatorConfig
 from ucat_console.typedconf import Config, param
 
-#: the robots the console can drive
+#: the robots the console can drive (``AppConfig.robot``)
 ROBOTS = ("sim", "sim-devices", "hardware")
 
 
@@ -74,13 +75,8 @@ class SimRigConfig(Config):
 
 @dataclass(frozen=True)
 class DevicesConfig(Config):
-    """The robot behind the closed loop and its devices."""
+    """The robot's devices (robot ``sim-devices`` and ``hardware``)."""
 
-    robot: str = param(
-        "sim-devices", choices=ROBOTS,
-        doc="sim: in-process simulator; sim-devices: simulator behind the device emulators, "
-        "through the drivers; hardware: the drivers on the robot's devices",
-    )
     epos2: Epos2Config = Epos2Config()
     imu: ImuConfig = ImuConfig()
     dvl: DvlConfig = DvlConfig()

@@ -14,6 +14,7 @@ frames unread in the queue; a heartbeat among them is not missing, it is not hea
 from __future__ import annotations
 
 import logging
+import math
 import queue
 import threading
 import time
@@ -188,6 +189,12 @@ class FinDrives:
             raise
 
     # ----------------------------------------------------------------------------- supervision
+    @property
+    def heard_until(self) -> float:
+        """Every frame that arrived up to this time (on the drives' clock) has been read and
+        handed on (``canbus.HeardBus``); -inf before the bus is open."""
+        return self._bus.heard_until if self._bus is not None else -math.inf
+
     def check(self, now: float) -> None:
         """Every node's heartbeat and set-point acknowledge at ``now``, as far as heard."""
         heard = self._bus.heard_until if self._bus is not None else now

@@ -1,7 +1,8 @@
 """The supervisor and its parts (one module each): the robot's factory and clock
 (``robots``), the loop's command queue and refusals (``commands``), live tuning and its
 journal (``tuning``), the two-step arming (``arm_requests``), recording (``recording``),
-the device commands (``rig_control``), the health line (``health``), and the
+the device commands (``rig_control``), the identification manoeuvre (``manoeuvre``), the
+loop's stream onto the public one (``forwarding``), the health line (``health``), and the
 :class:`Supervisor` that holds them together (``supervisor``)."""
 
 from ucat_console.backend.supervisor.commands import CommandRefused

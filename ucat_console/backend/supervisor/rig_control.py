@@ -1,9 +1,15 @@
 """The pilot's commands to the robot's devices: fault injection on the simulated rig, drive
-fault resets and depth zeroing on a robot with drives and a pressure sensor."""
+fault resets and depth zeroing on a robot with drives and a pressure sensor.
+
+:class:`RigControl` reaches the console through a :class:`RigHost`, the few things these
+commands need (the pilot check, the arming gate, the loop's thread, the events channel),
+not the supervisor.
+"""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Callable, Protocol
 
 from ucat_console.backend.access import Actor, actor_name
 from ucat_console.backend.supervisor.commands import CommandRefused
@@ -11,22 +17,49 @@ from ucat_console.telemetry.events import Event
 
 if TYPE_CHECKING:
     from ucat_console.backend.sim_rig import SimRig
-    from ucat_console.backend.supervisor.supervisor import Supervisor
+
+
+class DeviceGate(Protocol):
+    """What the commands use of the arming gate (``backend.arming.ArmingGate``)."""
+
+    @property
+    def armed(self) -> bool: ...
+    @property
+    def has_drives(self) -> bool: ...
+    def reset_drive_faults(self) -> bool: ...
+    def zero_depth(self) -> float: ...
+
+
+@dataclass(frozen=True)
+class RigHost:
+    """What the device commands use of the console."""
+
+    #: the configured robot (``AppConfig.robot``), for the refusals
+    robot: str
+    #: the simulated rig behind the drivers (robot ``sim-devices``), else None
+    rig: SimRig | None
+    gate: DeviceGate
+    require_pilot: Callable[[Actor, str], None]
+    #: run a function in the loop's thread, between chunks, and return its result
+    in_loop: Callable[[Callable[[], Any]], Any]
+    #: ``publish_event(source, code, message, level, data)`` onto the events channel
+    publish_event: Callable[..., Event]
+    #: the operator's view changed
+    notify: Callable[[], None]
 
 
 class RigControl:
-    def __init__(self, sup: Supervisor) -> None:
-        self.sup = sup
+    def __init__(self, host: RigHost) -> None:
+        self.host = host
 
     def _rig(self, what: str) -> SimRig:
-        sup = self.sup
-        if sup.rig is None:
+        host = self.host
+        if host.rig is None:
             raise CommandRefused(
                 f"{what}: only the simulated robot behind the device emulators takes faults "
-                f"(robot = 'rig' with devices.robot = 'sim-devices'); this console runs robot "
-                f"{sup.cfg.robot!r}"
+                f"(robot = 'sim-devices'); this console runs robot {host.robot!r}"
             )
-        return sup.rig
+        return host.rig
 
     def fault_tables(self) -> tuple[dict[str, tuple[str, ...]], int]:
         """(the faults each emulated device takes, the default EMCY code) for the page's
@@ -36,61 +69,62 @@ class RigControl:
 
         return EMULATOR_FAULTS, DEFAULT_EMCY
 
+    def _names(self, who: Actor, device: object, fault: object, fault_optional: bool) -> SimRig:
+        self.host.require_pilot(who, "fault injection")
+        rig = self._rig("fault injection")
+        if not isinstance(device, str) or not (isinstance(fault, str) or (fault_optional and fault is None)):
+            raise CommandRefused(f"fault injection: device and fault must be names, got {device!r}, {fault!r}")
+        return rig
+
     def inject_fault(self, who: Actor, device: object, fault: object, **kw: Any) -> Event:
         """Start an emulator fault on the simulated rig (the pilot rehearsing a failsafe).
 
         Arguments as :meth:`SimRig.inject`; its ``fault_injected`` event and every event the
         fault causes reach the events channel (and the recording)."""
-        self.sup.access.require_pilot(who, "fault injection")
-        rig = self._rig("fault injection")
-        if not isinstance(device, str) or not isinstance(fault, str):
-            raise CommandRefused(f"fault injection: device and fault must be names, got {device!r}, {fault!r}")
+        rig = self._names(who, device, fault, False)
         try:
-            event = rig.inject(device, fault, **kw)
+            event = rig.inject(device, fault, **kw)  # type: ignore[arg-type]
         except ValueError as e:
             raise CommandRefused(f"fault injection: {e}") from None
-        self.sup._notify()
+        self.host.notify()
         return event
 
     def clear_fault(self, who: Actor, device: object, fault: object = None) -> None:
         """End one emulator fault of ``device`` on the simulated rig, or all of its faults."""
-        self.sup.access.require_pilot(who, "fault injection")
-        rig = self._rig("fault injection")
-        if not isinstance(device, str) or not (fault is None or isinstance(fault, str)):
-            raise CommandRefused(f"fault injection: device and fault must be names, got {device!r}, {fault!r}")
+        rig = self._names(who, device, fault, True)
         try:
-            rig.clear(device, fault)
+            rig.clear(device, fault)  # type: ignore[arg-type]
         except ValueError as e:
             raise CommandRefused(f"fault injection: {e}") from None
-        self.sup._notify()
+        self.host.notify()
 
     def reset_drive_faults(self, who: Actor) -> None:
         """Reset the drives in fault (after an EMCY), disarmed; they are powered at arming."""
-        sup = self.sup
-        sup.access.require_pilot(who, "drive fault reset")
-        if not sup.has_drives:
-            raise CommandRefused(f"drive fault reset: robot {sup.cfg.robot!r} has no motor drives")
-        if sup.gate.armed:
+        host = self.host
+        host.require_pilot(who, "drive fault reset")
+        if not host.gate.has_drives:
+            raise CommandRefused(f"drive fault reset: robot {host.robot!r} has no motor drives")
+        if host.gate.armed:
             raise CommandRefused("drive fault reset: disarm first")
-        ok = sup.commands.run(sup.gate.reset_drive_faults)
-        sup._publish_event("operator", "drive_fault_reset",
+        ok = host.in_loop(host.gate.reset_drive_faults)
+        host.publish_event("operator", "drive_fault_reset",
                            f"{actor_name(who)} reset the drive faults" + ("" if ok else ": not every drive left its fault"),
                            "info" if ok else "error", {"who": str(who), "ok": ok})
-        sup._notify()
+        host.notify()
         if not ok:
             raise CommandRefused("drive fault reset: not every drive left its fault (see its events)")
 
     def zero_depth(self, who: Actor) -> float:
         """Take the present pressure as the surface's (disarmed, the robot at the surface);
         the surface pressure (Pa)."""
-        sup = self.sup
-        sup.access.require_pilot(who, "depth zeroing")
-        if sup.gate.armed:
+        host = self.host
+        host.require_pilot(who, "depth zeroing")
+        if host.gate.armed:
             raise CommandRefused("depth zeroing: disarm first, with the robot floating at the surface")
         try:  # in the caller's thread: it waits for the sensor's next readings, the loop runs on
-            p = sup.gate.zero_depth()
+            p = host.gate.zero_depth()
         except ValueError as e:
             raise CommandRefused(str(e)) from None
-        sup._publish_event("operator", "depth_zeroed", f"{actor_name(who)} zeroed the depth at "
+        host.publish_event("operator", "depth_zeroed", f"{actor_name(who)} zeroed the depth at "
                            f"{p:.1f} Pa", "info", {"who": str(who), "surface_pressure_pa": p})
         return p

@@ -1,8 +1,8 @@
 """Where the supervisor's robot comes from, and the clock it runs on in real time.
 
 A robot factory is ``(app_config, event_sink) -> (robot_io, close)``: :func:`sim_robot`
-(the default for ``robot = "sim"``) or :func:`rig_robot` (the device rig,
-``ucat_console.backend.rig.build_robot_io``).
+(the default for ``robot = "sim"``) or :func:`rig_robot` (the drivers, for ``"sim-devices"``
+and ``"hardware"``: ``ucat_console.backend.rig.build_robot_io``).
 """
 
 from __future__ import annotations
@@ -31,10 +31,10 @@ def rig_robot(cfg: AppConfig, events: EventSink) -> tuple[RobotIO, Callable[[], 
     """The device rig (drivers on emulators or the robot), from ``backend.rig``."""
     from ucat_console.backend import rig
 
-    return rig.build_robot_io(cfg, event_sink=events)
+    return rig.build_robot_io(cfg.robot, cfg.devices, plant=cfg.plant, event_sink=events)
 
 
-ROBOT_FACTORIES: dict[str, RobotFactory] = {"sim": sim_robot, "rig": rig_robot}
+ROBOT_FACTORIES: dict[str, RobotFactory] = {"sim": sim_robot, "sim-devices": rig_robot, "hardware": rig_robot}
 
 
 def simulated_rig(robot_io: RobotIO) -> SimRig | None:

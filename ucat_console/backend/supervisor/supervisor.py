@@ -22,21 +22,24 @@
 * Arming takes two steps (:class:`~.arm_requests.ArmRequests`): :meth:`Supervisor.request_arm`
   returns a nonce that the same pilot passes to :meth:`Supervisor.confirm_arm` within
   ``access.confirm_timeout``. :meth:`Supervisor.disarm` acts at once.
-* The loop's stream is forwarded to the public one; on the way, Status messages get the
-  supervisor's arming, pilot and failsafe state, and while disarmed the fins' commanded
-  angles are the ones really sent (none) and the executors' stroke timeouts are dropped.
+* The loop's stream is forwarded to the public one (:class:`~.forwarding.LoopOutlet`); on
+  the way, Status messages get the supervisor's arming, pilot and failsafe state, and while
+  disarmed the fins' commanded angles are the ones really sent (none) and the executors'
+  stroke timeouts are dropped.
 * Telemetry time ``t`` is the loop's time, seconds from the start; the recorder's epoch
   offset is the wall-clock time of ``t = 0``.
 
 Who owns what: the supervisor owns the commanded mode and setpoints and the arming state
 of the gate; :class:`~.tuning.Tuning` the commanded tuning and its journal;
 :class:`~.recording.SessionRecording` the recording; :class:`~.rig_control.RigControl` the
-drive and fault commands; the closed loop owns what it has applied. The parts live in the
-modules of this package.
+drive and fault commands; :class:`~.manoeuvre.ManoeuvreRun` an identification manoeuvre;
+the closed loop owns what it has applied. The parts live in the modules of this package
+and get what they use passed in (``RigHost``, ``ManoeuvreHost``: the few commands and
+readings each needs), never the supervisor itself.
 
 The module is over 500 lines because :class:`Supervisor` is the one entry point for
-operator commands: each is a short method that checks who asks and what, then acts through
-its part; the state and logic of the parts are in their own modules.
+operator commands (about forty): each is a short method that checks who asks and what, then
+acts through its part; the state and logic of the parts are in their own modules.
 """
 
 from __future__ import annotations
@@ -51,7 +54,6 @@ from typing import TYPE_CHECKING, Any, Callable, Mapping
 from ucat_console.backend import redaction
 from ucat_console.backend.access import LOCAL, AccessControl, AccessDenied, AccessState, Actor, actor_name
 from ucat_console.backend.arming import ArmingGate
-from ucat_console.backend.identification import ManoeuvreRun
 from ucat_console.backend.loop.clock import Clock, PacedClock
 from ucat_console.backend.loop.closed_loop import PID_LOOPS, ClosedLoop
 from ucat_console.backend.loop.config import MODES
@@ -65,16 +67,18 @@ from ucat_console.backend.sessions.recorder import Recorder
 from ucat_console.backend.supervisor.arm_requests import ArmRequests
 from ucat_console.backend.supervisor.bursts import BurstFolder
 from ucat_console.backend.supervisor.commands import CommandRefused, LoopCommands, number
+from ucat_console.backend.supervisor.forwarding import LoopOutlet
 from ucat_console.backend.supervisor.health import Health
+from ucat_console.backend.supervisor.manoeuvre import ManoeuvreHost, ManoeuvreRun
 from ucat_console.backend.supervisor.recording import SessionRecording
-from ucat_console.backend.supervisor.rig_control import RigControl
+from ucat_console.backend.supervisor.rig_control import RigControl, RigHost
 from ucat_console.backend.supervisor.robots import ROBOT_FACTORIES, RobotFactory, SteadyPacedClock, simulated_rig
 from ucat_console.backend.supervisor.tuning import Journal, JournalEntry, Tuning, fmt
 from ucat_console.config import AppConfig
 from ucat_console.control.allocation import BodySetpoints
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event
-from ucat_console.telemetry.messages import BodyState, FinState, Status
+from ucat_console.telemetry.messages import BodyState, Status
 from ucat_console.telemetry.stream import TelemetryStream
 from ucat_console.typedconf import secret_values
 
@@ -106,7 +110,10 @@ class Supervisor:
         formulation is loaded, or compiled here, before the robot starts."""
         self.cfg = cfg = cfg or AppConfig()
         self.stream = TelemetryStream()
-        self._loop_stream = _LoopOutlet(self.stream, self._forward, self._forward_many)
+        #: plan overruns and the loop's stalls, one event per burst
+        self.bursts = BurstFolder(lambda ev: self.stream.publish(ch.EVENTS, ev), ("plan_overrun", "stall"))
+        self._loop_stream = LoopOutlet(self.stream, self.bursts, armed=lambda: self.gate.armed,
+                                       sent=lambda fin: self.gate.sent[fin])
         self._lock = threading.RLock()
         self._listeners: list[Callable[[], None]] = []
         self.access = AccessControl(cfg.access)
@@ -119,7 +126,7 @@ class Supervisor:
         log.debug("planners warmed up in %.2f s", warm_up(cfg.loop, formulations=mine))
         factory = robot_factory or ROBOT_FACTORIES[cfg.robot]
         inner, self._close_robot = factory(cfg, self.report_event)
-        #: the simulated rig behind the drivers (robot "rig" on "sim-devices"), else None
+        #: the simulated rig behind the drivers (robot "sim-devices"), else None
         self.rig: SimRig | None = simulated_rig(inner)
         try:
             self.gate = ArmingGate(inner, on_invalid=self._on_invalid_reading)
@@ -160,9 +167,17 @@ class Supervisor:
             weights=self._weights, on_arm=cfg.console.record_on_arm, tail=cfg.console.record_tail,
             tail_max=cfg.console.record_tail_max, notify=self._notify,
         )
-        self.rig_control = RigControl(self)
-        #: plan overruns and the loop's stalls, one event per burst
-        self.bursts = BurstFolder(lambda ev: self.stream.publish(ch.EVENTS, ev), ("plan_overrun", "stall"))
+        self.rig_control = RigControl(RigHost(
+            robot=cfg.robot, rig=self.rig, gate=self.gate, require_pilot=self.access.require_pilot,
+            in_loop=self.commands.run, publish_event=self._publish_event, notify=self._notify,
+        ))
+        #: what an identification manoeuvre uses: the operator's commands, checked as any
+        self.manoeuvre_host = ManoeuvreHost(
+            require_pilot=self.access.require_pilot, armed=lambda: self.gate.armed, mode=lambda: self.loop.mode,
+            set_mode=self.set_mode, recording=lambda: self.recording.session_id,
+            start_recording=self.start_recording, stop_recording=self.stop_recording,
+            add_marker=self.add_marker, time=lambda: self.loop.time, duration=cfg.loop.manoeuvre.duration,
+        )
         #: each tuning, mode or setpoint change with the figures before and after it
         self.effects = ChangeEffects(cfg.metrics, lambda ev: self.stream.publish(ch.EVENTS, ev))
         self._thread: threading.Thread | None = None
@@ -303,42 +318,6 @@ class Supervisor:
                 log.exception("finishing the identification manoeuvre failed")
 
     # ================================================================== telemetry
-    def _forward(self, channel: str, msg: Any) -> None:
-        msg = self._forwarded(channel, msg, self.gate.armed)
-        if msg is not None:
-            self.stream.publish(channel, msg)
-
-    def _forward_many(self, items: Any) -> None:
-        armed = self.gate.armed
-        if armed:
-            for _, msg in items:
-                if type(msg) is Event:
-                    break
-            else:  # armed and no event: every message as the loop made it
-                self.stream.publish_many(items)
-                return
-        out = []
-        for channel, msg in items:
-            msg = self._forwarded(channel, msg, armed)
-            if msg is not None:
-                out.append((channel, msg))
-        self.stream.publish_many(out)
-
-    def _forwarded(self, channel: str, msg: Any, armed: bool) -> Any:
-        """The loop's message as the public stream carries it; None when it is held back.
-        While disarmed, a fin state's commanded angle and rate are the ones the arming gate
-        last sent, and the loop's stroke timeouts are held back."""
-        tp = type(msg)
-        if not armed:
-            if tp is FinState:
-                a, r = self.gate.sent[msg.fin]
-                return FinState(msg.t, msg.fin, msg.angle, msg.rate, a, r)
-            if tp is Event and msg.code == "stroke_timeout" and msg.source == "loop":
-                return None
-        if tp is Event and channel == ch.EVENTS and self.bursts.take(msg):
-            return None
-        return msg
-
     def _on_bodies(self, items: Any) -> None:
         self._last_body = items[-1][1]
 
@@ -720,11 +699,12 @@ class Supervisor:
     def start_manoeuvre(self, who: Actor) -> ManoeuvreRun:
         """The identification manoeuvre, recorded (pilot, armed; one at a time); it ends by
         itself (its steps done, or the robot disarmed) and its session is then fitted with
-        ``backend.identification.identify_sessions``."""
+        ``backend.identification.identify_sessions``; :meth:`ManoeuvreRun.wait` waits for
+        its end."""
         with self._lock:
             if self.manoeuvre is not None and not self.manoeuvre.finished:
                 raise CommandRefused("identification manoeuvre: one is running")
-            run = ManoeuvreRun(self, who)
+            run = ManoeuvreRun(self.manoeuvre_host, who)
             run.start()
             self.manoeuvre = run
         self._notify()
@@ -758,22 +738,3 @@ class Supervisor:
     def zero_depth(self, who: Actor) -> float:
         return self.rig_control.zero_depth(who)
 
-
-class _LoopOutlet:
-    """The closed loop's stream: what the loop publishes, a message or a step's messages at
-    once, goes through the supervisor's forwarding (``Supervisor._forward``,
-    ``_forward_many``) onto the public stream, and the loop builds what the public stream's
-    subscribers take (``wants``, ``wanted``)."""
-
-    def __init__(self, public: TelemetryStream, forward: Callable[[str, Any], None],
-                 forward_many: Callable[[Any], None]) -> None:
-        self._public = public
-        self.publish = forward
-        self.publish_many = forward_many
-
-    def wants(self, channel: str) -> bool:
-        return self._public.wants(channel)
-
-    @property
-    def wanted(self) -> frozenset[str]:
-        return self._public.wanted
