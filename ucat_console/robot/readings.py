@@ -80,6 +80,17 @@ class FinFeedback:
     state: str = "operation_enabled"
 
 
+@dataclass(frozen=True)
+class DriveElectrical:
+    """One fin drive's electrical input as its EPOS2 measures it: the motor current averaged
+    by the drive (0x2027) and the supply voltage at its power stage (0x2200 sub 1)."""
+
+    t: Time
+    fin: int
+    current_a: Annotated[float, Doc("motor current averaged by the drive", "A")]
+    voltage_v: Annotated[float, Doc("supply voltage at the power stage", "V")]
+
+
 @dataclass(frozen=True, eq=False)
 class FinFeedbacks:
     """Encoder feedback of every fin sampled at the same time ``t`` (the simulated robot's

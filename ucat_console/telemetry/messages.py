@@ -192,6 +192,20 @@ class Power:
 
 
 @dataclass(frozen=True)
+class ElectricalPower:
+    """The fin drives' electrical input as the EPOS2s measure it (robots with drives only),
+    beside the encoder estimate of :class:`Power`: the motor current each drive averages
+    (0x2027) times the supply voltage at its power stage (0x2200 sub 1). NaN for a drive
+    that did not answer (and in ``total`` then)."""
+
+    t: Time
+    current: Annotated[Vec4, Doc("motor current averaged by each drive, by fin index", "A")]
+    voltage: Annotated[Vec4, Doc("supply voltage at each drive, by fin index", "V")]
+    per_fin: Annotated[Vec4, Doc("|current| x voltage of each drive, by fin index", "W")]
+    total: Annotated[float, Doc("sum over the drives", "W")]
+
+
+@dataclass(frozen=True)
 class Status:
     """The supervisor's state, published at a low rate and on every change."""
 

@@ -170,6 +170,9 @@ class Supervisor:
             self.stream.subscribe_batches(self.safety.on_messages, SAFETY_CHANNELS),
             self.stream.subscribe_batches(self._on_bodies, [ch.BODY_STATE]),
         ]
+        add_telemetry = getattr(inner, "add_telemetry_sink", None)  # the drives' electrical input
+        if add_telemetry is not None:
+            self._unsubs.append(add_telemetry(self.stream.publish))
         self.access.add_listener(self._on_access)
 
     # ================================================================== lifecycle
