@@ -108,14 +108,18 @@ def test_run_serves_the_live_robot_to_a_foxglove_client_read_only(tmp_path):
         assert body["schema"] == json_schema_bytes(BodyState).decode()
         assert client.channels["foxglove/scene"]["schemaName"] == "foxglove.SceneUpdate"
         topics = {C.BODY_STATE, C.fin_state(0), C.fin_plan(0), C.fin_strouhal(0), C.SETPOINTS,
-                  "foxglove/tf", "foxglove/scene", "foxglove/tf_static"}
+                  "foxglove/tf/base_link_frd", "foxglove/tf/fin0", "foxglove/scene",
+                  "foxglove/tf/odom"}
         client.subscribe(*topics)
         got = client.receive(topics)
         states = [codec.decode(BodyState, d) for t, _, d in got if t == C.BODY_STATE]
         assert states and all(isinstance(s, BodyState) for s in states)
         assert all(ns > 1_600_000_000 * 10**9 for _, ns, _ in got)  # UNIX nanoseconds
-        tf = [json.loads(d) for t, _, d in got if t == "foxglove/tf"]
-        assert {x["child_frame_id"] for x in tf} & {"body", "fin0"}
+        tf = [json.loads(d) for t, _, d in got if t.startswith("foxglove/tf/")]
+        assert {x["child_frame_id"] for x in tf} & {"base_link_frd", "fin0"}
+        for topic in topics:  # in log-time order on every channel
+            ns = [n for t, n, _ in got if t == topic]
+            assert ns == sorted(ns), topic
         # a client that tries to command: advertise a channel, publish a setpoint, set a
         # parameter; the server takes none of it and goes on publishing the same setpoints
         client.ws.send(json.dumps({"op": "advertise", "channels": [{

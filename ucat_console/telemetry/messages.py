@@ -24,6 +24,8 @@ Fin = Annotated[int, Doc("fin index (0 front-right, 1 back-right, 2 back-left, 3
 #: a plan u = [d_1, d_2, w_1, w_2] and the stroke commands [theta_1, w_1, theta_2, w_2]
 PLAN_NAMES = ("d_1", "d_2", "w_1", "w_2")
 COMMAND_NAMES = ("theta_1", "w_1", "theta_2", "w_2")
+PLAN_UNITS = ("rad", "rad", "rad/s", "rad/s")
+COMMAND_UNITS = ("rad", "rad/s", "rad", "rad/s")
 
 
 @dataclass(frozen=True)
@@ -134,11 +136,10 @@ class FinPlan:
     target: Annotated[tuple[float, float], Doc("force target (f_x*, f_y*)", "N", "fin model", XY)]
     v_body: Annotated[float, Doc("measured forward speed used", "m/s")]
     theta0: Annotated[float, Doc("fin angle the plan starts from", "rad")]
-    u_prev: Annotated[Vec4, Doc("previous plan [d_1, d_2, w_1, w_2]", "rad, rad/s", "",
-                                PLAN_NAMES)]
-    u: Annotated[Vec4, Doc("plan [d_1, d_2, w_1, w_2]: strokes and mean rates", "rad, rad/s", "",
+    u_prev: Annotated[Vec4, Doc("previous plan [d_1, d_2, w_1, w_2]", PLAN_UNITS, "", PLAN_NAMES)]
+    u: Annotated[Vec4, Doc("plan [d_1, d_2, w_1, w_2]: strokes and mean rates", PLAN_UNITS, "",
                            PLAN_NAMES)]
-    commands: Annotated[Vec4, Doc("stroke commands [theta_1, w_1, theta_2, w_2]", "rad, rad/s",
+    commands: Annotated[Vec4, Doc("stroke commands [theta_1, w_1, theta_2, w_2]", COMMAND_UNITS,
                                   "", COMMAND_NAMES)]
     cost_total: Annotated[float, Doc("cost J", "1")]
     cost_force: Annotated[float, Doc("force term c_force (1-norm)", "N")]
