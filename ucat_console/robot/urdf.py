@@ -101,7 +101,7 @@ def sphere_stl(subdivisions: int = _SUBDIVISIONS) -> bytes:
 
 # ------------------------------------------------------------------ the URDF
 def _f(x: float) -> str:
-    return f"{x:.9g}" if abs(x) > 1e-12 else "0"  # (no -0 or rounding dust)
+    return f"{x:.12g}" if abs(x) > 1e-12 else "0"  # (no -0 or rounding dust)
 
 
 def _v(values: tuple[float, ...] | list[float]) -> str:
