@@ -166,3 +166,44 @@ def test_the_server_publishes_its_stream_and_refuses_a_taken_port():
                 FoxgloveServer(stream, port=server.port)
         finally:
             client.close()
+
+
+FETCH_ASSET_RESPONSE = 0x04  # binary opcode
+
+
+def _fetch(client: Client, uri: str, request_id: int) -> tuple[int, str, bytes]:
+    """(status, error, data) of a fetchAsset request (the assets capability)."""
+    client.ws.send(json.dumps({"op": "fetchAsset", "uri": uri, "requestId": request_id}))
+    while True:
+        frame = client.ws.recv(timeout=30)
+        if isinstance(frame, bytes) and frame[0] == FETCH_ASSET_RESPONSE:
+            rid, status, n = struct.unpack_from("<IBI", frame, 1)
+            if rid == request_id:
+                return status, frame[10:10 + n].decode(), frame[10 + n:]
+
+
+def test_the_server_serves_the_robots_urdf_and_mesh_and_nothing_else():
+    from ucat_console.robot import urdf
+
+    with FoxgloveServer(TelemetryStream(), port=0) as server:
+        client = Client(server.url)
+        try:
+            assert "assets" in client.info["capabilities"]
+            assert _fetch(client, urdf.URDF_URI, 1) == (0, "", urdf.URDF_PATH.read_bytes())
+            assert _fetch(client, urdf.MESH_URI, 2) == (0, "", urdf.MESH_PATH.read_bytes())
+            for k, uri in enumerate(("package://ucat_console/robot/urdf/../urdf.py",
+                                     "file:///etc/passwd", "package://ucat_console/config.py"), 3):
+                status, error, data = _fetch(client, uri, k)
+                assert status == 1 and data == b"", uri
+        finally:
+            client.close()
+
+
+def test_the_old_subprotocol_name_is_refused_as_the_sdk_does():
+    """foxglove-sdk accepts foxglove.sdk.v1 only (docs/sessions.md): if a release accepts the
+    old name, the server should offer it and this test says so."""
+    from websockets.exceptions import InvalidStatus
+
+    with FoxgloveServer(TelemetryStream(), port=0) as server:
+        with pytest.raises(InvalidStatus, match="400"):
+            connect(server.url, subprotocols=["foxglove.websocket.v1"], open_timeout=30)
