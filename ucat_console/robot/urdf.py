@@ -39,6 +39,7 @@ from ucat_console.robot.geometry import (
     BLADE_THICKNESS,
     Geometry,
     fin_mount,
+    nose_cap,
 )
 from ucat_console.robot.look import FIN_COLOUR, HULL_COLOUR, NOSE_COLOUR
 from ucat_console.robot.rotations import euler_from_quaternion
@@ -53,8 +54,6 @@ URDF_URI = f"package://{PACKAGE}/robot/urdf/{URDF_PATH.name}"
 MESH_URI = f"package://{PACKAGE}/robot/urdf/{MESH_PATH.name}"
 ROOT_LINK = "base_link_frd"
 FLU_LINK = "base_link"
-#: the nose cap's half length (m), as the console's view draws it
-NOSE_HALF_LENGTH = 0.035
 _SUBDIVISIONS = 2  # of the icosahedron: 320 faces
 
 
@@ -116,6 +115,7 @@ def urdf_text(geometry: Geometry | None = None) -> str:
     """The URDF of a robot of ``geometry`` (default: the U-CAT's)."""
     g = geometry or Geometry()
     half = tuple(0.5 * float(s) for s in g.hull_size)
+    nose, nose_semi_axes = nose_cap(g.hull_size)
     blade = BLADE_LENGTH_FACTOR * g.fin_length
     lines = [
         '<?xml version="1.0"?>',
@@ -131,9 +131,8 @@ def urdf_text(geometry: Geometry | None = None) -> str:
         '      <material name="hull"/>',
         "    </visual>",
         '    <visual name="nose">',
-        f'      <origin xyz="{_v((half[0] - 0.01, 0.0, 0.0))}" rpy="0 0 0"/>',
-        f'      <geometry><mesh filename="{MESH_URI}" '
-        f'scale="{_v((NOSE_HALF_LENGTH, 0.35 * half[1], 0.35 * half[2]))}"/></geometry>',
+        f'      <origin xyz="{_v(nose)}" rpy="0 0 0"/>',
+        f'      <geometry><mesh filename="{MESH_URI}" scale="{_v(nose_semi_axes)}"/></geometry>',
         '      <material name="nose"/>',
         "    </visual>",
         "  </link>",

@@ -57,7 +57,7 @@ from ucat_console.backend.sessions.codec import compact_json
 from ucat_console.telemetry.channels import BODY_STATE, EVENTS, N_FINS, fin_state
 from ucat_console.telemetry.events import LEVELS, Event
 from ucat_console.telemetry.messages import BodyState, FinState
-from ucat_console.robot.geometry import BLADE_LENGTH_FACTOR, BLADE_SPAN, BLADE_THICKNESS, fin_mount
+from ucat_console.robot.geometry import BLADE_LENGTH_FACTOR, BLADE_SPAN, BLADE_THICKNESS, fin_mount, nose_cap
 from ucat_console.robot.look import FIN_COLOUR, HULL_COLOUR, NOSE_COLOUR
 
 FRAME_TRANSFORM = "foxglove.FrameTransform"
@@ -94,8 +94,6 @@ FRAME_NOTES = {
     **{f"fin{i}": f"fin {i}'s blade: x along the chord, z the axis it turns about; parent {BODY_FRAME}"
        for i in range(N_FINS)},
 }
-
-NOSE_LENGTH = 0.035  # m, the nose cap's half length, as the console's view draws it
 
 Vec3 = tuple[float, float, float]
 Quat = tuple[float, float, float, float]  # (w, x, y, z), as the telemetry holds it
@@ -257,10 +255,10 @@ def scene_update(hull_size: Vec3, fin_mounts: Sequence[tuple[Vec3, Quat]], fin_l
     ``fin_mounts`` are the fins' mount poses in the body frame (position, orientation (w,
     x, y, z) of the axes x_m, y_m, normal), by fin index; they also place the fin frames
     (:func:`fin_transform`)."""
-    half = tuple(0.5 * x for x in hull_size)
+    nose, nose_semi_axes = nose_cap(hull_size)
     entities = [_entity(ns, BODY_FRAME, "hull", spheres=[
         _shape((0.0, 0.0, 0.0), hull_size, HULL_COLOUR),
-        _shape((half[0] - 0.01, 0.0, 0.0), (2 * NOSE_LENGTH, 0.7 * half[1], 0.7 * half[2]), NOSE_COLOUR),
+        _shape(nose, tuple(2 * a for a in nose_semi_axes), NOSE_COLOUR),  # (diameters)
     ])]
     for i in range(len(fin_mounts)):
         entities.append(_entity(ns, fin_frame(i), f"fin{i}", cubes=[
