@@ -108,14 +108,18 @@ def test_run_serves_the_live_robot_to_a_foxglove_client_read_only(tmp_path):
         assert body["schema"] == json_schema_bytes(BodyState).decode()
         assert client.channels["foxglove/scene"]["schemaName"] == "foxglove.SceneUpdate"
         topics = {C.BODY_STATE, C.fin_state(0), C.fin_plan(0), C.fin_strouhal(0), C.SETPOINTS,
-                  "foxglove/tf", "foxglove/scene", "foxglove/tf_static"}
+                  "foxglove/tf/base_link_frd", "foxglove/tf/fin0", "foxglove/scene",
+                  "foxglove/tf/odom"}
         client.subscribe(*topics)
         got = client.receive(topics)
         states = [codec.decode(BodyState, d) for t, _, d in got if t == C.BODY_STATE]
         assert states and all(isinstance(s, BodyState) for s in states)
         assert all(ns > 1_600_000_000 * 10**9 for _, ns, _ in got)  # UNIX nanoseconds
-        tf = [json.loads(d) for t, _, d in got if t == "foxglove/tf"]
-        assert {x["child_frame_id"] for x in tf} & {"body", "fin0"}
+        tf = [json.loads(d) for t, _, d in got if t.startswith("foxglove/tf/")]
+        assert {x["child_frame_id"] for x in tf} & {"base_link_frd", "fin0"}
+        for topic in topics:  # in log-time order on every channel
+            ns = [n for t, n, _ in got if t == topic]
+            assert ns == sorted(ns), topic
         # a client that tries to command: advertise a channel, publish a setpoint, set a
         # parameter; the server takes none of it and goes on publishing the same setpoints
         client.ws.send(json.dumps({"op": "advertise", "channels": [{
@@ -162,3 +166,44 @@ def test_the_server_publishes_its_stream_and_refuses_a_taken_port():
                 FoxgloveServer(stream, port=server.port)
         finally:
             client.close()
+
+
+FETCH_ASSET_RESPONSE = 0x04  # binary opcode
+
+
+def _fetch(client: Client, uri: str, request_id: int) -> tuple[int, str, bytes]:
+    """(status, error, data) of a fetchAsset request (the assets capability)."""
+    client.ws.send(json.dumps({"op": "fetchAsset", "uri": uri, "requestId": request_id}))
+    while True:
+        frame = client.ws.recv(timeout=30)
+        if isinstance(frame, bytes) and frame[0] == FETCH_ASSET_RESPONSE:
+            rid, status, n = struct.unpack_from("<IBI", frame, 1)
+            if rid == request_id:
+                return status, frame[10:10 + n].decode(), frame[10 + n:]
+
+
+def test_the_server_serves_the_robots_urdf_and_mesh_and_nothing_else():
+    from ucat_console.robot import urdf
+
+    with FoxgloveServer(TelemetryStream(), port=0) as server:
+        client = Client(server.url)
+        try:
+            assert "assets" in client.info["capabilities"]
+            assert _fetch(client, urdf.URDF_URI, 1) == (0, "", urdf.URDF_PATH.read_bytes())
+            assert _fetch(client, urdf.MESH_URI, 2) == (0, "", urdf.MESH_PATH.read_bytes())
+            for k, uri in enumerate(("package://ucat_console/robot/urdf/../urdf.py",
+                                     "file:///etc/passwd", "package://ucat_console/config.py"), 3):
+                status, error, data = _fetch(client, uri, k)
+                assert status == 1 and data == b"", uri
+        finally:
+            client.close()
+
+
+def test_the_old_subprotocol_name_is_refused_as_the_sdk_does():
+    """foxglove-sdk accepts foxglove.sdk.v1 only (docs/sessions.md): if a release accepts the
+    old name, the server should offer it and this test says so."""
+    from websockets.exceptions import InvalidStatus
+
+    with FoxgloveServer(TelemetryStream(), port=0) as server:
+        with pytest.raises(InvalidStatus, match="400"):
+            connect(server.url, subprotocols=["foxglove.websocket.v1"], open_timeout=30)

@@ -155,8 +155,10 @@ def test_simulated_robot_runs_closed_loop_through_drivers_and_emulators() -> Non
     sink = Collector()
     io, close = build_robot_io("sim-devices", sim_devices_config(), event_sink=sink)
     stream = TelemetryStream()
-    got: dict[str, list[Any]] = {ch.IMU: [], ch.DVL: [], ch.DEPTH: [], ch.EVENTS: [], ch.fin_state(0): []}
+    got: dict[str, list[Any]] = {ch.IMU: [], ch.DVL: [], ch.DEPTH: [], ch.EVENTS: [], ch.fin_state(0): [],
+                                 ch.POWER_ELECTRICAL: []}
     stream.subscribe(lambda c, m: got[c].append(m), channels=list(got))
+    io.add_telemetry_sink(stream.publish)  # as the supervisor connects it
     loop = ClosedLoop(LoopConfig(mode="baseline"), io, stream, PacedClock(1.0), setpoints=SETPOINTS,
                       source="sim-devices")
     try:
@@ -189,6 +191,18 @@ def test_simulated_robot_runs_closed_loop_through_drivers_and_emulators() -> Non
             target = commands[fin][0]
             wait_for(lambda: emulator.target_quadcounts == UNITS.to_quadcounts(target), what=f"fin {fin} target")
             wait_for(lambda: abs(rig.truth().fin_angles[fin] - target) < 2e-3, what=f"fin {fin} angle")
+
+        # the drives' electrical input: every drive answered, at the emulators' supply
+        # voltage, and draws at least its no-load current while the loop drives it
+        wait_for(lambda: len(got[ch.POWER_ELECTRICAL]) >= 5, what="electrical power messages")
+        electrical = got[ch.POWER_ELECTRICAL]
+        emulated = Epos2EmulatorConfig()
+        for m in electrical:
+            assert m.voltage == (emulated.supply_voltage,) * 4
+            assert m.per_fin == pytest.approx([abs(i) * v for i, v in zip(m.current, m.voltage)])
+            assert m.total == pytest.approx(sum(m.per_fin))
+        assert max(min(m.current) for m in electrical) >= emulated.no_load_current - 1e-9
+        assert all(0.0 <= m.t <= loop.time + io.config.resync_s + 0.05 for m in electrical)
 
         # the sensors reached the loop through their drivers and agree with the plant
         assert got[ch.IMU] and got[ch.DVL] and got[ch.DEPTH]

@@ -8,13 +8,15 @@
 // messages; every message parses as strict JSON, holds no integer beyond 2^53 (JavaScript
 // would round it), and validates against its channel's schema; every Foxglove message also
 // against the official schema of its name; the transforms form one tree with a single
-// root from which every frame is reachable; every scene entity is in a frame of that tree.
+// root from which every frame is reachable; every scene entity is in a frame of that tree;
+// on every channel the messages are in log-time order as the file holds them (read again
+// record by record with @mcap/core's stream reader, the way a streaming player meets them).
 // Prints a JSON summary (and the messages of the --dump topics as this reader parsed them)
 // on stdout; exits 1 with the problems on stderr when a check fails.
-import { open } from "node:fs/promises";
+import { open, readFile } from "node:fs/promises";
 
 import foxgloveSchemas from "@foxglove/schemas/jsonschema.js";
-import { McapIndexedReader } from "@mcap/core";
+import { McapIndexedReader, McapStreamReader } from "@mcap/core";
 import { FileHandleReadable } from "@mcap/nodejs";
 import { loadDecompressHandlers } from "@mcap/support";
 import Ajv2020Module from "ajv/dist/2020.js";
@@ -31,6 +33,7 @@ const problem = (text) => {
 };
 
 const ours = new Ajv2020({ allErrors: true, allowUnionTypes: true });
+ours.addKeyword("unit"); // each number's unit, an annotation keyword of our schemas
 const official = new Ajv({ allErrors: true });
 const validators = new Map();
 const officialValidators = new Map();
@@ -46,10 +49,11 @@ function unsafeIntegers(value, where, out) {
   return out;
 }
 
+const decompressHandlers = await loadDecompressHandlers();
 const handle = await open(path, "r");
 const reader = await McapIndexedReader.Initialize({
   readable: new FileHandleReadable(handle),
-  decompressHandlers: await loadDecompressHandlers(),
+  decompressHandlers,
 });
 
 const channels = [...reader.channelsById.values()];
@@ -148,6 +152,30 @@ for (const frame of entityFrames) {
   if (!frames.has(frame)) problem(`scene entity in frame ${frame}, which no transform places`);
 }
 
+// log-time order per channel, in the file's own order
+const outOfOrder = [];
+try {
+  const stream = new McapStreamReader({ decompressHandlers });
+  stream.append(await readFile(path));
+  const topicOf = new Map();
+  const lastLog = new Map();
+  for (let record = stream.nextRecord(); record !== undefined; record = stream.nextRecord()) {
+    if (record.type === "Channel") {
+      topicOf.set(record.id, record.topic);
+    } else if (record.type === "Message") {
+      const last = lastLog.get(record.channelId);
+      if (last !== undefined && record.logTime < last) {
+        const text = `${topicOf.get(record.channelId)}: a message logged at ${record.logTime} ns after one at ${last} ns`;
+        outOfOrder.push(text);
+        problem(text);
+      }
+      lastLog.set(record.channelId, record.logTime);
+    }
+  }
+} catch (e) {
+  problem(`stream reading: ${e.message}`);
+}
+
 const summary = {
   channels: channels.length,
   messages,
@@ -155,6 +183,7 @@ const summary = {
   root: roots[0] ?? null,
   frames: [...frames].sort(),
   entity_frames: [...entityFrames].sort(),
+  out_of_order: outOfOrder,
   problems,
   dumped,
 };

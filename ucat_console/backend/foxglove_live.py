@@ -10,7 +10,19 @@ the UNIX epoch).
 
 Read-only: the server advertises no capability (no client publishing, parameters or
 services), so Foxglove offers no control, and whatever a client sends is ignored; it never
-touches the supervisor. Like the console, it binds 127.0.0.1 unless told otherwise.
+touches the supervisor. Like the console, it binds 127.0.0.1 unless told otherwise. The one
+thing a client may fetch is the robot's URDF and its mesh (the SDK's asset handler, for
+the layout's URDF layer: ``package://ucat_console/robot/urdf/ucat.urdf``); any other URI
+gets nothing.
+
+Messages go out in log-time order on every channel (:class:`foxglove.LogTimes`), as in a
+session file.
+
+Subprotocol: the SDK's server speaks ``foxglove.sdk.v1`` (the Foxglove WebSocket protocol
+under its new name) and offers no way to also accept the older name
+``foxglove.websocket.v1`` (``start_server`` has no subprotocol option in foxglove-sdk 0.30),
+so a client that asks for ``foxglove.websocket.v1`` only (Lichtblick releases from before
+it learnt the new name) gets HTTP 400; Foxglove and current Lichtblick releases connect.
 
 The stream's callback only appends to a bounded queue; a sender thread encodes and sends
 (only for channels someone subscribed to). A full queue drops the oldest messages and
@@ -38,6 +50,7 @@ from ucat_console.backend.sessions.schema import (
     json_schema_bytes,
     schema_name,
 )
+from ucat_console.robot import urdf
 from ucat_console.telemetry.channels import CHANNELS
 from ucat_console.telemetry.stream import TelemetryStream
 
@@ -56,6 +69,13 @@ def _sdk() -> Any:
             "(pip install 'ucat-console[foxglove]')"
         ) from None
     return sdk
+
+
+def robot_asset(uri: str) -> bytes | None:
+    """The robot's URDF or mesh for a ``package://`` URI naming one; None for anything else
+    (a client's URI is never turned into a path)."""
+    path = urdf.package_file(uri)
+    return path.read_bytes() if path is not None else None
 
 
 class FoxgloveServer:
@@ -87,6 +107,7 @@ class FoxgloveServer:
             self._server = sdk.start_server(
                 name="ucat-console", host=host, port=port, context=self._context,
                 capabilities=[],  # read-only: no publishing, parameters or services
+                asset_handler=robot_asset,
             )
         except Exception as e:  # the address is taken or cannot be bound
             raise ValueError(f"--foxglove-port: cannot listen on {host}:{port} ({e})") from None
@@ -100,14 +121,15 @@ class FoxgloveServer:
                 self._channels[topic] = sdk.Channel(
                     topic, schema=schemas[cls], message_encoding=MESSAGE_ENCODING,
                     context=self._context)
-            for topic, name, schema in foxglove.DERIVED:
+            for topic, name in foxglove.DERIVED:
                 self._channels[topic] = sdk.Channel(
                     topic, schema=sdk.Schema(name=name, encoding=SCHEMA_ENCODING,
-                                             data=foxglove.schema_bytes(schema)),
+                                             data=foxglove.official_schema_bytes(name)),
                     message_encoding=MESSAGE_ENCODING, context=self._context)
         except BaseException:
             self._server.stop()
             raise
+        self._log_time = foxglove.LogTimes()
         self._queue: collections.deque = collections.deque(maxlen=queue_size)
         self.dropped = 0
         self.sent = 0
@@ -164,7 +186,7 @@ class FoxgloveServer:
 
     # ------------------------------------------------------------------ sender thread
     def _send(self, topic: str, data: bytes, ns: int) -> None:
-        self._channels[topic].log(data, log_time=ns)
+        self._channels[topic].log(data, log_time=self._log_time(topic, ns))
         self.sent += 1
 
     def _run(self) -> None:

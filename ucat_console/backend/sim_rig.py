@@ -48,6 +48,7 @@ from ucat_console.robot.readings import DepthReading, DvlVelocity, ImuReading
 from ucat_console.backend.sim_robot_io import SimRobotIO
 from ucat_console.robot.interface import RobotTruth
 from ucat_console.backend.sim.params import PlantConfig
+from ucat_console.backend.sim.plant import F_POWER
 from ucat_console.telemetry.events import Event, EventSink, ignore_events
 
 log = logging.getLogger(__name__)
@@ -88,6 +89,12 @@ class PlantFinServo:
         with self._rig.plant_lock:
             p = self._rig.plant
             return p.fin_angles()[self.fin], p.fin_rates()[self.fin]
+
+    def shaft_power(self) -> float:
+        """The fin's true shaft power (W) in the plant's last step (no regeneration): what
+        the emulated drive's motor current is made from."""
+        with self._rig.plant_lock:
+            return float(self._rig.plant.state_arrays()[1][self.fin, F_POWER])
 
     def step(self, dt: float) -> None:
         """Nothing: the rig's thread steps the whole plant."""

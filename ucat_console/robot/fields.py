@@ -23,21 +23,33 @@ class Doc:
     """Description of one message field.
 
     ``unit``: SI unit symbol ("" for text, flags and counts, "1" for dimensionless
-    numbers); ``frame``: the frame a vector is expressed in; ``names``: a fixed-length
-    tuple is written as an object with these keys (in tuple order), so tools show
-    ``position.x`` rather than ``position[0]``; ``wide``: an integer that may exceed 2^53
-    (JavaScript's exact range), written as a decimal string.
+    numbers), written so that a units library parses it (``m/s``, ``rad/s``, ``N m``,
+    ``g_n`` for the standard acceleration of gravity, 9.80665 m/s^2); a tuple of them for
+    a vector whose parts differ (one per part, in tuple order); ``frame``: the frame a
+    vector is expressed in; ``names``: a fixed-length tuple is written as an object with
+    these keys (in tuple order), so tools show ``position.x`` rather than ``position[0]``;
+    ``wide``: an integer that may exceed 2^53 (JavaScript's exact range), written as a
+    decimal string.
     """
 
     text: str
-    unit: str = ""
+    unit: str | tuple[str, ...] = ""
     frame: str = ""
     names: tuple[str, ...] = ()
     wide: bool = False
 
+    def units(self, n: int = 1) -> tuple[str, ...]:
+        """The unit of each of ``n`` parts (a single unit repeated)."""
+        if isinstance(self.unit, tuple):
+            if len(self.unit) != n:
+                raise TypeError(f"{len(self.unit)} units for {n} values")
+            return self.unit
+        return (self.unit,) * n
+
     def describe(self) -> str:
         """The text with its unit and frame, as a schema description says it."""
-        extra = [x for x in (f"unit {self.unit}" if self.unit else "",
+        unit = ", ".join(self.unit) if isinstance(self.unit, tuple) else self.unit
+        extra = [x for x in (f"unit {unit}" if unit else "",
                              f"frame {self.frame}" if self.frame else "") if x]
         return self.text + (f" ({'; '.join(extra)})" if extra else "")
 

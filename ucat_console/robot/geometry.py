@@ -72,6 +72,13 @@ BLADE_LENGTH_FACTOR = 1.5
 BLADE_SPAN = 0.08
 BLADE_THICKNESS = 0.006
 
+
+def nose_cap(hull_size: Vec3) -> tuple[Vec3, Vec3]:
+    """Centre and semi-axes (m, body frame) of the red cap drawn at the hull's nose: an
+    ellipsoid just inside the hull's front end."""
+    half = tuple(0.5 * s for s in hull_size)
+    return (half[0] - 0.01, 0.0, 0.0), (0.035, 0.35 * half[1], 0.35 * half[2])
+
 Quat = tuple[float, float, float, float]
 
 

@@ -21,10 +21,12 @@ Time = Annotated[float, Doc("time on the receiving clock", unit="s")]
 
 @dataclass(frozen=True)
 class ImuReading:
-    """MIP sensor data set 0x80: accel in g, gyro in rad/s, orientation when streamed."""
+    """MIP sensor data set 0x80: accel in units of the standard acceleration of gravity
+    (g_n = 9.80665 m/s^2, as the sensor reports it), gyro in rad/s, orientation when
+    streamed."""
 
     t: Time
-    accel_g: Annotated[tuple[float, float, float], Doc("acceleration", "g", "IMU", XYZ)]
+    accel_g: Annotated[tuple[float, float, float], Doc("acceleration in standard gravities (x 9.80665 = m/s^2)", "g_n", "IMU", XYZ)]
     gyro: Annotated[tuple[float, float, float], Doc("angular rate", "rad/s", "IMU", XYZ)]
     quaternion: Annotated[tuple[float, float, float, float] | None,
                           Doc("orientation when streamed (held w first)", "1", "IMU to NED",
@@ -78,6 +80,17 @@ class FinFeedback:
     position_rad: float
     velocity_rad_s: float
     state: str = "operation_enabled"
+
+
+@dataclass(frozen=True)
+class DriveElectrical:
+    """One fin drive's electrical input as its EPOS2 measures it: the motor current averaged
+    by the drive (0x2027) and the supply voltage at its power stage (0x2200 sub 1)."""
+
+    t: Time
+    fin: int
+    current_a: Annotated[float, Doc("motor current averaged by the drive", "A")]
+    voltage_v: Annotated[float, Doc("supply voltage at the power stage", "V")]
 
 
 @dataclass(frozen=True, eq=False)

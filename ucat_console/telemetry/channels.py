@@ -14,6 +14,7 @@ from ucat_console.telemetry.messages import (
     BodyCommand,
     BodyState,
     BodyTracking,
+    ElectricalPower,
     FinCycle,
     FinPlan,
     FinState,
@@ -30,6 +31,7 @@ BODY_COMMAND = "body/command"
 BODY_ALLOCATION = "body/allocation"
 BODY_TRACKING = "body/tracking"
 POWER = "power"
+POWER_ELECTRICAL = "power/electrical"
 STATUS = "status"
 EVENTS = "events"
 IMU = "sensors/imu"
@@ -61,6 +63,7 @@ CHANNELS: dict[str, type] = {
     BODY_ALLOCATION: BodyAllocation,
     BODY_TRACKING: BodyTracking,
     POWER: Power,
+    POWER_ELECTRICAL: ElectricalPower,
     STATUS: Status,
     EVENTS: Event,
     IMU: ImuReading,

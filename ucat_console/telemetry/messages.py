@@ -24,6 +24,8 @@ Fin = Annotated[int, Doc("fin index (0 front-right, 1 back-right, 2 back-left, 3
 #: a plan u = [d_1, d_2, w_1, w_2] and the stroke commands [theta_1, w_1, theta_2, w_2]
 PLAN_NAMES = ("d_1", "d_2", "w_1", "w_2")
 COMMAND_NAMES = ("theta_1", "w_1", "theta_2", "w_2")
+PLAN_UNITS = ("rad", "rad", "rad/s", "rad/s")
+COMMAND_UNITS = ("rad", "rad/s", "rad", "rad/s")
 
 
 @dataclass(frozen=True)
@@ -134,11 +136,10 @@ class FinPlan:
     target: Annotated[tuple[float, float], Doc("force target (f_x*, f_y*)", "N", "fin model", XY)]
     v_body: Annotated[float, Doc("measured forward speed used", "m/s")]
     theta0: Annotated[float, Doc("fin angle the plan starts from", "rad")]
-    u_prev: Annotated[Vec4, Doc("previous plan [d_1, d_2, w_1, w_2]", "rad, rad/s", "",
-                                PLAN_NAMES)]
-    u: Annotated[Vec4, Doc("plan [d_1, d_2, w_1, w_2]: strokes and mean rates", "rad, rad/s", "",
+    u_prev: Annotated[Vec4, Doc("previous plan [d_1, d_2, w_1, w_2]", PLAN_UNITS, "", PLAN_NAMES)]
+    u: Annotated[Vec4, Doc("plan [d_1, d_2, w_1, w_2]: strokes and mean rates", PLAN_UNITS, "",
                            PLAN_NAMES)]
-    commands: Annotated[Vec4, Doc("stroke commands [theta_1, w_1, theta_2, w_2]", "rad, rad/s",
+    commands: Annotated[Vec4, Doc("stroke commands [theta_1, w_1, theta_2, w_2]", COMMAND_UNITS,
                                   "", COMMAND_NAMES)]
     cost_total: Annotated[float, Doc("cost J", "1")]
     cost_force: Annotated[float, Doc("force term c_force (1-norm)", "N")]
@@ -189,6 +190,20 @@ class Power:
     distance: Annotated[float, Doc("distance travelled while armed", "m")]
     energy_per_metre: Annotated[float, Doc("energy per metre (NaN until the vehicle has moved)",
                                            "J/m")]
+
+
+@dataclass(frozen=True)
+class ElectricalPower:
+    """The fin drives' electrical input as the EPOS2s measure it (robots with drives only),
+    beside the encoder estimate of :class:`Power`: the motor current each drive averages
+    (0x2027) times the supply voltage at its power stage (0x2200 sub 1). NaN for a drive
+    that did not answer (and in ``total`` then)."""
+
+    t: Time
+    current: Annotated[Vec4, Doc("motor current averaged by each drive, by fin index", "A")]
+    voltage: Annotated[Vec4, Doc("supply voltage at each drive, by fin index", "V")]
+    per_fin: Annotated[Vec4, Doc("|current| x voltage of each drive, by fin index", "W")]
+    total: Annotated[float, Doc("sum over the drives", "W")]
 
 
 @dataclass(frozen=True)

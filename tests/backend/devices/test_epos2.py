@@ -489,3 +489,108 @@ def test_drive_without_event_timer_falls_back_to_on_change_feedback():
     finally:
         drives.close()
         group.close()
+
+
+# ------------------------------------------------------------------------------ electrical input
+class _LoadedServo:
+    """A still servo with a fixed shaft power (W) or motor current (A)."""
+
+    def __init__(self, watts: float = 0.0, amps: float | None = None) -> None:
+        self.watts = watts
+        if amps is not None:
+            self.current = lambda: amps
+
+    def command(self, target_rad: float, profile_velocity_rad_s: float) -> None:
+        pass
+
+    def state(self) -> tuple[float, float]:
+        return 0.0, 0.0
+
+    def step(self, dt: float) -> None:
+        pass
+
+    def shaft_power(self) -> float:
+        return self.watts
+
+
+def _sdo_upload(bus: can.BusABC, node: int, index: int, sub: int) -> bytes:
+    """The raw reply of an expedited SDO upload of ``index:sub`` from ``node``."""
+    while bus.recv(timeout=0.0) is not None:
+        pass  # older frames
+    bus.send(can.Message(arbitration_id=0x600 + node, is_extended_id=False,
+                         data=bytes([0x40, index & 0xFF, index >> 8, sub, 0, 0, 0, 0])))
+    deadline = time.monotonic() + 2.0
+    while time.monotonic() < deadline:
+        msg = bus.recv(timeout=0.1)
+        if msg is not None and msg.arbitration_id == 0x580 + node \
+                and bytes(msg.data[1:4]) == bytes([index & 0xFF, index >> 8, sub]):
+            return bytes(msg.data)  # (the driver's own replies pass by on this bus too)
+    raise AssertionError(f"no SDO reply from node {node} for 0x{index:04X}:{sub}")
+
+
+def test_current_and_voltage_frames_are_the_epos2s_and_the_driver_reads_them():
+    """0x2027 (INT16 mA) and 0x2200 sub 1 (UINT16, 0.1 V), byte for byte, then through the
+    driver: a fixed 1.234 A at 23.7 V. (The polling thread runs in test_rig's closed loop.)"""
+    channel = _channel("elec")
+    emulators = start_emulated_nodes(channel, (21,), lambda node: _LoadedServo(amps=1.234),
+                                     config=Epos2EmulatorConfig(units=UNITS, supply_voltage=23.7))
+    raw = can.Bus(interface="virtual", channel=channel, ignore_config=True)
+    cfg = Epos2Config(interface="virtual", channel=channel, units=UNITS, sdo_timeout=1.0,
+                      heartbeat_ms=HEARTBEAT_MS)
+    rec = Recorder()
+    drives = FinDrives(cfg, rec.on_feedback, rec.on_event, fins={0: 21})
+    try:
+        drives.connect()
+        assert drives.enable_all()
+        emu = emulators[21]
+        # the averaged current settles on the motor current (1234 mA = 0x04D2)
+        assert _wait(lambda: emu.value(0x2027) == 1234)
+        [(fin, reading)] = drives.read_electrical().items()  # one round, by fin
+        assert fin == 0 and reading is not None and reading.fin == 0
+        assert reading.current_a == pytest.approx(1.234, abs=1e-12)
+        assert reading.voltage_v == pytest.approx(23.7, abs=1e-12)
+
+        assert _sdo_upload(raw, 21, 0x2027, 0) == bytes([0x4B, 0x27, 0x20, 0x00, 0xD2, 0x04, 0, 0])
+        # 23.7 V = 237 x 0.1 V = 0x00ED
+        assert _sdo_upload(raw, 21, 0x2200, 1) == bytes([0x4B, 0x00, 0x22, 0x01, 0xED, 0x00, 0, 0])
+    finally:
+        drives.close()
+        raw.shutdown()
+        emulators.close()
+
+
+def test_emulated_current_is_the_shaft_power_through_the_drive_and_none_without_power_stage():
+    """I = I_0 + P / (eta V): 33.6 W at 24 V and 70 % is 2 A above the 0.05 A no-load
+    current; 0 A with the power stage off."""
+    channel = _channel("shaft")
+    group = start_emulated_nodes(channel, (21,), lambda node: _LoadedServo(watts=33.6),
+                                 config=Epos2EmulatorConfig(units=UNITS), run_thread=False)
+    try:
+        emu = group[21]
+        group.tick(0.0)
+        assert emu.motor_current() == 0.0
+        assert emu.value(0x6078) == 0
+        emu._state = cia402.OPERATION_ENABLED  # the state machine itself is tested elsewhere
+        assert emu.motor_current() == pytest.approx(2.05)
+        assert emu.value(0x6078) == 2050
+        for k in range(1, 201):  # 0.2 s of 1 ms ticks: 20 time constants
+            group.tick(k * 1e-3)
+        assert emu.value(0x2027) == 2050
+    finally:
+        group.close()
+
+
+def test_a_node_that_does_not_answer_gives_no_electrical_reading_and_one_event():
+    rig = Rig((21,), sdo_timeout=0.1)
+    try:
+        emu = rig.emulators[21]
+        emu.slow_replies(0.3)
+        assert rig.drives.drive(0).read_electrical() is None
+        assert rig.drives.drive(0).read_electrical() is None
+        ev = rig.rec.wait_event("sdo_timeout", "epos2.21")
+        assert ev.level == "warning" and "current and voltage" in ev.message
+        assert sum(e.code == "sdo_timeout" for e in rig.rec.events) == 1  # throttled
+        emu.slow_replies(0.0)
+        time.sleep(0.4)  # the late replies pass
+    finally:
+        rig.close()

@@ -10,6 +10,7 @@ import re
 from ucat_console import shipped
 from ucat_console.backend.sessions import foxglove
 from ucat_console.backend.sessions.schema import json_schema
+from ucat_console.robot import urdf
 from ucat_console.telemetry import channels as C
 
 LAYOUT = shipped.foxglove_layout()
@@ -49,9 +50,12 @@ def test_every_panel_of_the_layout_is_configured_and_reads_existing_data():
                 assert "number" in schema["type"], series["value"]
                 plotted.append(series["value"])
         elif pid.startswith("3D!"):
-            assert cfg["followTf"] == foxglove.CHILD_FRAME
+            assert cfg["followTf"] == foxglove.BASE_LINK_FRAME
             assert set(cfg["topics"]) <= set(foxglove.DERIVED_TOPICS)
-            assert cfg["layers"]["surface"]["frameId"] == foxglove.WORLD_FRAME
+            assert cfg["layers"]["surface"]["frameId"] == foxglove.MAP_FRAME
+            # the robot's URDF, the shipped file (its links are the transform frames)
+            assert cfg["layers"]["urdf"]["layerId"] == "foxglove.Urdf"
+            assert urdf.package_file(cfg["layers"]["urdf"]["url"]) == urdf.URDF_PATH
         elif pid.startswith("RosOut!"):
             assert cfg["topicToRender"] == foxglove.LOG_TOPIC
     # what the issue asked to see: St per fin with the corridor, depth, velocity, yaw rate,
@@ -59,5 +63,6 @@ def test_every_panel_of_the_layout_is_configured_and_reads_existing_data():
     for i in range(4):
         assert f"fin/{i}/strouhal.st" in plotted
     for path in ("fin/0/strouhal.st_low", "fin/0/strouhal.st_high", "body/state.depth",
-                 "body/state.velocity.x", "body/state.rates.z", "power.total"):
+                 "body/state.velocity.x", "body/state.rates.z", "power.total",
+                 "power/electrical.total"):
         assert path in plotted

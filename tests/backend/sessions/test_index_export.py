@@ -9,14 +9,14 @@ import math
 import pytest
 from session_helpers import BIG_SEED, awkward_items, example_message, record, same
 
-from ucat_console.backend.sessions.export import columns, csv_name, export_csv
+from ucat_console.backend.sessions.export import columns, csv_name, data_resource, export_csv
 from ucat_console.backend.sessions.index import list_sessions, session_parts
 from ucat_console.backend.sessions.reader import SessionReader
 from ucat_console.backend.sessions.schema import field_specs
 from ucat_console.backend.sessions.recorder import RecorderConfig
 from ucat_console.telemetry import channels as C
 from ucat_console.telemetry.events import Event
-from ucat_console.telemetry.messages import BodyState, Power, Setpoints, Status
+from ucat_console.telemetry.messages import BodyState, FinPlan, Power, Setpoints, Status
 
 OFFSET = 1_700_000_000.0
 
@@ -74,21 +74,52 @@ def test_csv_export_matches_the_recorded_values(sessions, tmp_path):
     assert row["message"] == 'a, "quoted" note' and json.loads(row["data"]) == {"x": 1}
     assert (out / "power.csv").read_text().strip() == ",".join(columns(C.CHANNELS[C.POWER]))
     side = json.loads((out / "body_state.columns.json").read_text())
-    by = {c["name"]: c for c in side["columns"]}
-    assert [c["name"] for c in side["columns"]] == columns(BodyState)
+    # a Frictionless Tabular Data Resource: the CSV, its dialect and its Table Schema
+    assert side["$schema"] == "https://datapackage.org/profiles/2.0/dataresource.json"
+    assert (side["type"], side["path"], side["format"], side["channel"]) == (
+        "table", "body_state.csv", "csv", C.BODY_STATE)
+    fields = side["schema"]["fields"]
+    by = {c["name"]: c for c in fields}
+    assert [c["name"] for c in fields] == columns(BodyState)
     assert by["position.z"]["unit"] == "m" and "NED" in by["position.z"]["description"]
-    assert by["rates.z"]["unit"] == "rad/s" and by["depth"]["dtype"] == "float64"
+    assert by["rates.z"]["unit"] == "rad/s" and by["depth"]["type"] == "number"
+    assert by["log_time_ns"] == {**by["log_time_ns"], "type": "integer", "unit": "ns",
+                                 "constraints": {"required": True}}
+    plan = by_name(data_resource(C.fin_plan(0), FinPlan)["schema"]["fields"])
+    assert [plan[f"u.{n}"]["unit"] for n in ("d_1", "d_2", "w_1", "w_2")] == ["rad", "rad", "rad/s", "rad/s"]
 
 
-def _parse(cell: str, column: dict):
-    """A CSV cell read back by its sidecar column alone (independently of the exporter)."""
-    if cell == "":
-        assert column["nullable"] or column["dtype"] == "string", column["name"]
-        return None if column["nullable"] else ""
-    return {
-        "float64": float, "int64": int, "decimal": int, "string": str,
-        "bool": {"true": True, "false": False}.__getitem__, "json": json.loads,
-    }[column["dtype"]](cell)
+def by_name(fields: list[dict]) -> dict[str, dict]:
+    return {f["name"]: f for f in fields}
+
+
+def side_of(directory, channel: str) -> dict:
+    return json.loads((directory / csv_name(channel).replace(".csv", ".columns.json")).read_text())
+
+
+_TABLE_TYPES = {"number", "integer", "boolean", "string", "array", "object"}
+
+
+def _parse(cell: str, field: dict, schema: dict):
+    """A CSV cell read back by its Table Schema field alone, as the Table Schema
+    specification (v2) reads it (independently of the exporter)."""
+    assert field["type"] in _TABLE_TYPES, field
+    if cell in field.get("missingValues", schema["missingValues"]):
+        return None
+    kind = field["type"]
+    if kind == "number":
+        special = {"nan": math.nan, "inf": math.inf, "-inf": -math.inf}
+        return special[cell.lower()] if cell.lower() in special else float(cell)
+    if kind == "integer":
+        return int(cell)
+    if kind == "boolean":
+        assert cell in field["trueValues"] + field["falseValues"], (field["name"], cell)
+        return cell in field["trueValues"]
+    if kind in ("array", "object"):
+        value = json.loads(cell)
+        assert isinstance(value, list if kind == "array" else dict)
+        return value
+    return cell
 
 
 def test_csv_keeps_infinities_large_seeds_empty_text_and_missing_values(sessions, tmp_path):
@@ -97,15 +128,18 @@ def test_csv_keeps_infinities_large_seeds_empty_text_and_missing_values(sessions
     with SessionReader(path, sessions) as r:
         export_csv(r, list(C.CHANNELS), tmp_path)
     for channel, cls in C.CHANNELS.items():
-        side = json.loads((tmp_path / csv_name(channel).replace(".csv", ".columns.json")).read_text())
-        cols = side["columns"]
-        with open(tmp_path / csv_name(channel), newline="") as fh:
+        side = side_of(tmp_path, channel)
+        cols = side["schema"]["fields"]
+        with open(tmp_path / side["path"], newline="") as fh:
             rows = list(csv.reader(fh))
         assert rows[0] == [c["name"] for c in cols]
         want = [m for c, m in items if c == channel]
         assert len(rows) - 1 == len(want)
         for msg, cells in zip(want, rows[1:]):
-            values = dict(zip(rows[0], (_parse(x, c) for x, c in zip(cells, cols))))
+            values = dict(zip(rows[0], (_parse(x, c, side["schema"]) for x, c in zip(cells, cols))))
+            for name, value in values.items():
+                if by_name(cols)[name].get("constraints", {}).get("required"):
+                    assert value is not None, (channel, name)
             for spec in field_specs(cls):
                 v = getattr(msg, spec.name)
                 got = [values[p] for p in spec.paths()]
@@ -117,12 +151,11 @@ def test_csv_keeps_infinities_large_seeds_empty_text_and_missing_values(sessions
                     assert same(got[0], v), (channel, spec.name)
     dtypes = {}  # one dtype per column, the same in every file of a message type
     for channel, cls in C.CHANNELS.items():
-        side = tmp_path / csv_name(channel).replace(".csv", ".columns.json")
-        for c in json.loads(side.read_text())["columns"]:
-            dtypes.setdefault((cls.__name__, c["name"]), set()).add(c["dtype"])
+        for c in side_of(tmp_path, channel)["schema"]["fields"]:
+            dtypes.setdefault((cls.__name__, c["name"]), set()).add((c["type"], c["dtype"]))
     assert all(len(d) == 1 for d in dtypes.values())
-    plan = json.loads((tmp_path / "fin_1_plan.columns.json").read_text())["columns"]
-    assert {c["name"]: c["dtype"] for c in plan}["seed"] == "decimal"
+    plan = side_of(tmp_path, C.fin_plan(1))["schema"]["fields"]
+    assert {c["name"]: (c["type"], c["dtype"]) for c in plan}["seed"] == ("integer", "decimal")
     with open(tmp_path / "fin_1_plan.csv", newline="") as fh:
         assert [r["seed"] for r in csv.DictReader(fh)][-1] == str(BIG_SEED)
     with open(tmp_path / "status.csv", newline="") as fh:

@@ -16,7 +16,7 @@ from session_helpers import BIG_SEED, FIXTURES, awkward_items, record, same
 from ucat_console.backend.loop.closed_loop import ClosedLoop
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.backend.sim_robot_io import SimRobotIO
-from ucat_console.backend.sessions import codec
+from ucat_console.backend.sessions import codec, foxglove
 from ucat_console.backend.sessions.recorder import Recorder
 from ucat_console.backend.sessions.schema import json_schema_bytes
 from ucat_console.control.allocation import BodySetpoints
@@ -26,7 +26,8 @@ from ucat_console.telemetry.stream import TelemetryStream
 
 pytestmark = pytest.mark.slow
 READER = Path(__file__).resolve().parents[2] / "node_reader"
-FOXGLOVE_TOPICS = {"foxglove/tf", "foxglove/tf_static", "foxglove/scene", "foxglove/log"}
+FOXGLOVE_TOPICS = set(foxglove.DERIVED_TOPICS)
+FRAMES = {"map", "odom", "odom_ned", "base_link_frd", "base_link", "fin0", "fin1", "fin2", "fin3"}
 
 
 @pytest.fixture(scope="module")
@@ -56,9 +57,9 @@ def test_every_message_validates_and_the_awkward_values_come_through(node, sessi
     assert code == 0, err
     assert out["problems"] == []
     assert out["channels"] == len(C.CHANNELS) + len(FOXGLOVE_TOPICS)
-    assert out["root"] == "world"
-    assert set(out["frames"]) == {"world", "ned", "body", "fin0", "fin1", "fin2", "fin3"}
-    assert out["entity_frames"] == ["body", "fin0", "fin1", "fin2", "fin3"]
+    assert out["root"] == "map"
+    assert set(out["frames"]) == FRAMES
+    assert out["entity_frames"] == ["base_link_frd", "fin0", "fin1", "fin2", "fin3"]
     # what JavaScript parsed, decoded here: the same messages (infinities, the seed beyond
     # 2^53, the empty pilot and failsafe list, the missing orientation)
     got = [(d["topic"], codec.from_json_obj(C.CHANNELS[d["topic"]], d["message"]))
@@ -82,11 +83,13 @@ def test_a_closed_loop_recording_is_one_transform_tree(node, sessions):
     code, out, err = read(node, path)
     assert code == 0, err
     counts = out["counts"]
-    assert counts["foxglove/tf"] == counts[C.BODY_STATE] + sum(
-        counts[C.fin_state(i)] for i in range(4))
+    assert counts["foxglove/tf/base_link_frd"] == counts[C.BODY_STATE]
+    assert all(counts[f"foxglove/tf/fin{i}"] == counts[C.fin_state(i)] for i in range(4))
     assert all(counts[C.fin_strouhal(i)] > 0 for i in range(4))
-    assert counts["foxglove/scene"] == counts["foxglove/tf_static"] == 1
-    assert out["root"] == "world" and len(out["frames"]) == 7
+    assert counts["foxglove/scene"] == counts["foxglove/tf/odom"] == counts["foxglove/tf/base_link"] == 1
+    assert out["root"] == "map" and set(out["frames"]) == FRAMES
+    # every channel in log-time order, as the reader met the messages in the file
+    assert out["out_of_order"] == []
 
 
 def test_a_message_its_schema_refuses_fails_the_reader(node, sessions):

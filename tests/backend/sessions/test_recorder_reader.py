@@ -70,8 +70,10 @@ def test_file_checked_with_plain_mcap_reader_and_jsonschema(sessions):
         summary = reader.get_summary()
         assert summary is not None and summary.statistics is not None
         topics = {ch.topic: ch for ch in summary.channels.values()}
-        assert set(topics) == set(C.CHANNELS) | {"foxglove/tf", "foxglove/tf_static",
-                                                 "foxglove/scene", "foxglove/log"}
+        assert set(topics) == set(C.CHANNELS) | {
+            "foxglove/scene", "foxglove/log",
+            *(f"foxglove/tf/{f}" for f in ("odom", "odom_ned", "base_link", "base_link_frd",
+                                            "fin0", "fin1", "fin2", "fin3"))}
         for ch in topics.values():  # every channel has a JSON schema
             schema = summary.schemas[ch.schema_id]
             assert schema.encoding == "jsonschema" and ch.message_encoding == "json"
@@ -83,12 +85,16 @@ def test_file_checked_with_plain_mcap_reader_and_jsonschema(sessions):
         assert meta["weights"] == {"lam_st": "5.0", "lam_f": "1.5"}
         assert meta["version"]["ucat_console"] == ucat_console.__version__
         assert meta["session"]["epoch_offset"] == repr(OFFSET)
+        assert set(meta["frames"]) == {"map", "odom", "odom_ned", "base_link_frd", "base_link",
+                                       "fin0", "fin1", "fin2", "fin3"}
+        assert "NED" in meta["frames"]["odom_ned"] and "FRD" in meta["frames"]["base_link_frd"]
         tf, logs, scenes = [], [], []
         for schema, channel, message in reader.iter_messages():
             obj = json.loads(message.data)
             stamp = obj.get("timestamp") if channel.topic.startswith("foxglove/") else None
             expected_ns = None if stamp is None else stamp["sec"] * 10**9 + stamp["nsec"]
-            if channel.topic in ("foxglove/tf", "foxglove/tf_static"):
+            if channel.topic.startswith("foxglove/tf/"):
+                assert channel.topic == "foxglove/tf/" + obj["child_frame_id"]  # one channel each
                 jsonschema.validate(obj, fox_tf)
                 assert set(obj) <= set(fox_tf["properties"])
                 assert message.log_time == expected_ns
@@ -107,21 +113,23 @@ def test_file_checked_with_plain_mcap_reader_and_jsonschema(sessions):
                 # nanoseconds since the UNIX epoch: (t + offset) * 1e9, both times
                 t = obj["t"]
                 assert message.log_time == message.publish_time == round((t + OFFSET) * 1e9)
-    # the static world -> ned first, then one transform per finite body pose (the example
-    # pose has a NaN: no transform) and one per fin state with a finite angle
-    assert (tf[0]["parent_frame_id"], tf[0]["child_frame_id"]) == ("world", "ned")
-    poses = [x for x in tf if x["child_frame_id"] == "body"]
+    # the static map -> odom -> odom_ned and base_link_frd -> base_link first, then one
+    # transform per finite body pose (the example pose has a NaN: no transform) and one per
+    # fin state with a finite angle
+    assert [(x["parent_frame_id"], x["child_frame_id"]) for x in tf[:3]] == [
+        ("map", "odom"), ("odom", "odom_ned"), ("base_link_frd", "base_link")]
+    poses = [x for x in tf if x["child_frame_id"] == "base_link_frd"]
     assert len(poses) == 1
-    assert poses[0]["parent_frame_id"] == "ned"
+    assert poses[0]["parent_frame_id"] == "odom_ned"
     assert poses[0]["translation"] == {"x": 1.5, "y": 2.0, "z": 3.0}
     assert poses[0]["rotation"] == {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}
     assert poses[0]["timestamp"] == {"sec": 1_700_000_020, "nsec": 0}
-    fins = {x["child_frame_id"] for x in tf if x["parent_frame_id"] == "body"}
-    assert fins == {f"fin{m.fin}" for c, m in items
+    fins = {x["child_frame_id"] for x in tf if x["parent_frame_id"] == "base_link_frd"} - {"base_link"}
+    assert fins == {f"fin{c.split('/')[1]}" for c, m in items  # the channel's fin
                     if c.endswith("/state") and c.startswith("fin/") and math.isfinite(m.angle)}
     assert len(fins) >= 2
     [scene] = scenes  # the hull in the body frame, a blade in each fin's frame
-    assert [e["frame_id"] for e in scene["entities"]] == ["body"] + [f"fin{i}" for i in range(4)]
+    assert [e["frame_id"] for e in scene["entities"]] == ["base_link_frd"] + [f"fin{i}" for i in range(4)]
     assert [x["level"] for x in logs] == [
         ("debug", "info", "warning", "error", "fatal").index(e.level) + 1 for e in events
     ]
@@ -368,15 +376,57 @@ def test_fin_transforms_turn_each_mount_by_its_measured_angle_and_skip_a_non_fin
     [path] = record(sessions, items, epoch_offset=OFFSET)
     mounts = robot_geometry().fin_mounts
     with open(path, "rb") as fh:
-        got = [json.loads(m.data) for _, ch, m in make_reader(fh).iter_messages(topics=["foxglove/tf"])]
+        got = [json.loads(m.data) for _, ch, m in make_reader(fh).iter_messages(
+            topics=[f"foxglove/tf/fin{i}" for i in range(4)], log_time_order=True)]
     assert len(got) == len(angles)
     for tf, (fin, angle) in zip(got, angles):
         position, orientation = mounts[fin]
         w, x, y, z = quaternion_multiply(orientation, (math.cos(angle / 2), 0.0, 0.0, math.sin(angle / 2)))
-        assert tf["child_frame_id"] == f"fin{fin}" and tf["parent_frame_id"] == "body"
+        assert tf["child_frame_id"] == f"fin{fin}" and tf["parent_frame_id"] == "base_link_frd"
         assert [tf["rotation"][k] for k in "wxyz"] == pytest.approx([w, x, y, z], abs=1e-12)
         assert [tf["translation"][k] for k in "xyz"] == pytest.approx(list(position), abs=1e-15)
     with SessionReader(path, sessions) as r:
         back = list(r.messages())
     assert len(back) == len(items)  # the two non-finite fin states are recorded, and what follows
     assert math.isinf(back[-3][1].angle) and back[-1][0] == C.SETPOINTS
+
+
+def test_every_channel_is_written_in_log_time_order(sessions):
+    """A closed-loop recording with events reported late (a device's event stamped before
+    messages already written, the way a driver's fault reaches the stream): on every channel,
+    derived ones included, the log times never go back; a late message keeps its own time
+    in the message and as its MCAP publish time."""
+    from collections import defaultdict
+
+    from ucat_console.backend.loop.closed_loop import ClosedLoop
+    from ucat_console.backend.loop.config import LoopConfig
+    from ucat_console.backend.sim_robot_io import SimRobotIO
+    from ucat_console.control.allocation import BodySetpoints
+
+    stream = TelemetryStream()
+    rec = Recorder(stream, directory=sessions, epoch_offset=OFFSET)
+    loop = ClosedLoop(LoopConfig(mode="baseline"), SimRobotIO(depth=1.0, velocity=0.1), stream,
+                      setpoints=BodySetpoints(velocity=0.1, depth=1.0))
+    rec.start()
+    loop.run_until(1.0)
+    late = [Event(t=0.5, source="epos2.1", code="emcy", message="late", level="error"),
+            Event(t=0.2, source="imu", code="silence", message="later still", level="warning")]
+    for event in late:
+        stream.publish(C.EVENTS, event)
+    loop.run_until(1.5)
+    [path] = rec.stop()
+    times: dict[str, list[int]] = defaultdict(list)
+    late_events = []
+    with open(path, "rb") as fh:
+        for _, channel, message in make_reader(fh).iter_messages(log_time_order=False):
+            times[channel.topic].append(message.log_time)
+            if channel.topic == C.EVENTS and json.loads(message.data)["message"] in ("late", "later still"):
+                late_events.append(message)
+    assert {C.EVENTS, "foxglove/log", "foxglove/tf/base_link_frd", "foxglove/tf/fin0"} <= set(times)
+    for topic, ns in times.items():
+        assert ns == sorted(ns), topic
+    assert [m.publish_time for m in late_events] == [round((e.t + OFFSET) * 1e9) for e in late]
+    assert late_events[1].log_time >= late_events[0].log_time > late_events[1].publish_time
+    with SessionReader(path, sessions) as r:  # the reader gives the messages' own times
+        got = [m for ch, m in r.messages([C.EVENTS]) if m.message in ("late", "later still")]
+    assert got == late

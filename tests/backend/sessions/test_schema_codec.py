@@ -9,7 +9,7 @@ import math
 
 import jsonschema
 import pytest
-from session_helpers import example_message, same
+from session_helpers import FIXTURES, example_message, same
 
 from ucat_console.robot.readings import ImuReading
 from ucat_console.backend.sessions import codec, foxglove, legacy
@@ -37,11 +37,11 @@ def test_setpoints_schema_is_the_hand_written_one():
     assert s["type"] == "object" and s["additionalProperties"] is False
     nonfinite = s["properties"].pop("nonfinite")
     assert s["properties"] == {
-        "t": {"type": "number", "description": "time on the stream's clock (unit s)"},
-        "velocity": {"type": "number", "description": "forward velocity setpoint (unit m/s)"},
-        "depth": {"type": "number", "description": "depth setpoint (unit m)"},
-        "yaw_rate": {"type": "number", "description": "yaw rate setpoint, positive clockwise "
-                                                      "seen from above (unit rad/s; frame NED)"},
+        "t": {"type": "number", "unit": "s", "description": "time on the stream's clock (unit s)"},
+        "velocity": {"type": "number", "unit": "m/s", "description": "forward velocity setpoint (unit m/s)"},
+        "depth": {"type": "number", "unit": "m", "description": "depth setpoint (unit m)"},
+        "yaw_rate": {"type": "number", "unit": "rad/s", "description": "yaw rate setpoint, positive clockwise "
+                                                                       "seen from above (unit rad/s; frame NED)"},
     }
     assert nonfinite["type"] == "object" and nonfinite["properties"] == {}
     assert nonfinite["additionalProperties"] == {"type": "string", "enum": ["nan", "inf", "-inf"]}
@@ -50,14 +50,14 @@ def test_setpoints_schema_is_the_hand_written_one():
 
 def test_vectors_are_named_quaternions_x_y_z_w_per_fin_values_stay_arrays():
     body = json_schema(BodyState)["properties"]
-    assert body["position"]["properties"] == {n: {"type": "number"} for n in "xyz"}
+    assert body["position"]["properties"] == {n: {"type": "number", "unit": "m"} for n in "xyz"}
     assert body["position"]["title"] == "foxglove.Vector3"
     assert "NED" in body["position"]["description"] and "unit m" in body["position"]["description"]
     assert list(body["orientation"]["properties"]) == ["x", "y", "z", "w"]
     assert body["orientation"]["title"] == "foxglove.Quaternion"
     per_fin = json_schema(Power)["properties"]["per_fin"]
     assert per_fin["type"] == "array" and per_fin["minItems"] == per_fin["maxItems"] == 4
-    assert per_fin["prefixItems"] == [{"type": ["number", "null"]}] * 4
+    assert per_fin["prefixItems"] == [{"type": ["number", "null"], "unit": "W"}] * 4
     assert per_fin["items"] == {"type": "number"}
     plan = json_schema(FinPlan)["properties"]
     assert list(plan["u"]["properties"]) == ["d_1", "d_2", "w_1", "w_2"]
@@ -110,8 +110,13 @@ def test_schema_is_readable_by_foxglove_and_valid_json_schema(cls):
 
 
 @pytest.mark.parametrize("topic", sorted(foxglove.DERIVED_TOPICS))
-def test_the_foxglove_schemas_are_readable_by_foxglove(topic):
-    [schema] = [s for t, _, s in foxglove.DERIVED if t == topic]
+def test_the_foxglove_schemas_are_the_official_ones_and_readable_by_foxglove(topic):
+    name = foxglove.DERIVED_TOPICS[topic]
+    schema = foxglove.official_schema(name)
+    assert schema["title"] == name
+    official = FIXTURES / "foxglove" / f"{name.removeprefix('foxglove.')}.json"
+    if official.exists():  # the copies Foxglove publishes, kept beside the tests
+        assert schema == json.loads(official.read_text())
     jsonschema.Draft202012Validator.check_schema(schema)
     _foxglove_readable(schema, topic)
 
@@ -327,3 +332,38 @@ def test_the_fast_encoder_gives_what_the_general_one_gives(cls):
     common = example_message(cls, k=3, nan=False)
     assert outcome(fast, common) == outcome(general, common)
     assert outcome(fast, common)[0] == "encoded"
+
+
+def _units(schema: dict, where: str, out: dict[str, str]) -> dict[str, str]:
+    """Every ``unit`` keyword of a schema, by path."""
+    if "unit" in schema:
+        out[where] = schema["unit"]
+    for name, prop in schema.get("properties", {}).items():
+        _units(prop, f"{where}.{name}", out)
+    for i, item in enumerate(schema.get("prefixItems", [])):
+        _units(item, f"{where}[{i}]", out)
+    return out
+
+
+def test_every_unit_of_the_schemas_is_one_pint_parses_and_each_vector_part_has_its_own():
+    pint = pytest.importorskip("pint")
+    ureg = pint.UnitRegistry()
+    seen = {}
+    for cls in TYPES:
+        seen.update(_units(json_schema(cls), cls.__name__, {}))
+    for where, unit in seen.items():
+        ureg.parse_units(unit)  # raises on a unit pint does not know
+        assert unit != "g", where  # grams: never meant here
+    # one unit per part, SI
+    assert seen["FinPlan.u.d_1"] == "rad" and seen["FinPlan.u.w_2"] == "rad/s"
+    assert seen["FinPlan.commands.theta_2"] == "rad" and seen["FinPlan.commands.w_1"] == "rad/s"
+    assert seen["BodyState.position.z"] == "m" and seen["BodyState.rates.x"] == "rad/s"
+    assert seen["Power.per_fin[3]"] == "W" and seen["ElectricalPower.current[0]"] == "A"
+    assert ureg.Quantity(1.0, seen["ImuReading.accel_g.z"]).to("m/s^2").magnitude == pytest.approx(9.80665)
+    assert ureg.Quantity(2.0, seen["BodyAllocation.yaw"]).to("J").magnitude == pytest.approx(2.0)  # N m
+    # every number whose field documents a unit carries it
+    for cls in TYPES:
+        for name, doc in field_docs(cls).items():
+            if doc.unit:
+                assert any(p == f"{cls.__name__}.{name}" or p.startswith(f"{cls.__name__}.{name}.")
+                           or p.startswith(f"{cls.__name__}.{name}[") for p in seen), (cls.__name__, name)

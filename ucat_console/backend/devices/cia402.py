@@ -33,6 +33,15 @@ PROFILE_ACCELERATION = 0x6083
 PROFILE_DECELERATION = 0x6084
 QUICK_STOP_DECELERATION = 0x6085
 SUPPORTED_DRIVE_MODES = 0x6502
+# maxon's own objects (EPOS2 Firmware Specification, rel5466): motor current averaged by the
+# drive (INT16, mA) and the supply voltage at the power stage (0x2200 sub 1, UINT16, 0.1 V)
+CURRENT_ACTUAL_AVERAGED = 0x2027
+POWER_SUPPLY = 0x2200
+POWER_SUPPLY_VOLTAGE_SUB = 1
+#: volts per unit of 0x2200 sub 1
+POWER_SUPPLY_VOLTAGE_UNIT = 0.1
+#: amperes per unit of 0x6078 and 0x2027
+CURRENT_UNIT = 0.001
 
 #: device profile number in the low 16 bits of 0x1000
 PROFILE_402 = 402

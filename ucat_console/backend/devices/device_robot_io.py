@@ -25,6 +25,12 @@ latest events are kept so a sink added after start-up sees them too. Besides the
 drivers' own events, a run of ``dvl_invalid_after`` velocity reports without bottom lock
 is reported as ``bottom_lock_lost`` (and ``recovered``), since a single invalid report is
 normal missing data.
+
+Telemetry. The drives' electrical input (each EPOS2's averaged motor current and supply
+voltage, read every ``epos2.electrical_period_ms``) becomes an
+:class:`~ucat_console.telemetry.messages.ElectricalPower` message stamped in loop time, handed
+to each sink added with :meth:`DeviceRobotIO.add_telemetry_sink` as ``(channel, message)``
+(the supervisor publishes it on its stream, channel ``power/electrical``).
 """
 
 from __future__ import annotations
@@ -35,7 +41,7 @@ import logging
 import math
 import threading
 import time
-from typing import Callable
+from typing import Any, Callable
 
 from ucat_console.backend.devices.canbus import CanBusError
 from ucat_console.backend.devices.config import DevicesConfig
@@ -48,8 +54,13 @@ from ucat_console.robot.readings import DvlPosition, DvlVelocity, FinFeedback
 from ucat_console.backend.devices.reporting import EventReporter
 from ucat_console.backend.devices.serial_link import SERIAL_ERRORS, open_serial
 from ucat_console.robot.interface import RobotIO, RobotTruth
-from ucat_console.robot.readings import Reading
+from ucat_console.robot.fins import N_FINS
+from ucat_console.robot.readings import DriveElectrical, Reading
+from ucat_console.telemetry.channels import POWER_ELECTRICAL
 from ucat_console.telemetry.events import Event, EventSink
+from ucat_console.telemetry.messages import ElectricalPower
+
+TelemetrySink = Callable[[str, Any], None]
 
 log = logging.getLogger(__name__)
 
@@ -127,6 +138,7 @@ class DeviceRobotIO(RobotIO):
         self._closed = False
         self._wake = threading.Event()
         self._sinks: tuple[EventSink, ...] = (on_event,) if on_event is not None else ()
+        self._telemetry_sinks: tuple[TelemetrySink, ...] = ()
         self._backlog: collections.deque[Event] = collections.deque(maxlen=EVENT_BACKLOG)
         self._dvl_invalid_run = 0
         self.last_dvl_position: DvlPosition | None = None
@@ -139,7 +151,7 @@ class DeviceRobotIO(RobotIO):
             return None if device_time is None else (lambda: device_time(name))
 
         self.drives = FinDrives(config.epos2, self._on_reading, self._on_event, clock=wall_clock,
-                                bus_time=time_of("epos2"))
+                                bus_time=time_of("epos2"), on_electrical=self._on_electrical)
         self.imu = ImuDriver(config.imu, self._on_reading, self._on_event, clock=wall_clock,
                              device_time=time_of("imu"))
         self.dvl = DvlClient(config.dvl, self._on_dvl_velocity, self._on_dvl_position, self._on_event,
@@ -320,6 +332,41 @@ class DeviceRobotIO(RobotIO):
                 self._sinks = tuple(s for s in self._sinks if s is not sink)
 
         return remove
+
+    def add_telemetry_sink(self, sink: TelemetrySink) -> Callable[[], None]:
+        """Send every telemetry message of the devices (``(channel, message)``) to ``sink``;
+        returns the function that removes it."""
+        with self._lock:
+            self._telemetry_sinks = self._telemetry_sinks + (sink,)
+
+        def remove() -> None:
+            with self._lock:
+                self._telemetry_sinks = tuple(s for s in self._telemetry_sinks if s is not sink)
+
+        return remove
+
+    def _on_electrical(self, readings: dict[int, DriveElectrical | None]) -> None:
+        nan = math.nan
+        current, voltage = [nan] * N_FINS, [nan] * N_FINS
+        stamps = []
+        for fin, r in readings.items():
+            if r is not None and 0 <= fin < N_FINS:
+                current[fin], voltage[fin] = r.current_a, r.voltage_v
+                stamps.append(r.t)
+        if not stamps:
+            return  # no drive answered: each one's event says so
+        per_fin = [abs(i) * v for i, v in zip(current, voltage)]
+        wall = max(stamps)
+        t = self.time.to_loop(wall) if self.time.anchored else self._t
+        msg = ElectricalPower(t, tuple(current), tuple(voltage), tuple(per_fin),  # type: ignore[arg-type]
+                              math.fsum(per_fin))
+        with self._lock:
+            sinks = self._telemetry_sinks
+        for sink in sinks:
+            try:
+                sink(POWER_ELECTRICAL, msg)
+            except Exception:
+                log.exception("telemetry sink failed on %s", POWER_ELECTRICAL)
 
     def publish_event(self, event: Event) -> None:
         """An event raised beside the drivers (the simulated rig), stamped on the wall clock."""

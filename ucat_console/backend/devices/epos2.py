@@ -74,7 +74,7 @@ from canopen.sdo import SdoAbortedError, SdoCommunicationError
 
 from ucat_console.backend.devices import cia402
 from ucat_console.backend.devices.canbus import BITRATES, INTERFACES, arrival_time
-from ucat_console.robot.readings import FinFeedback
+from ucat_console.robot.readings import DriveElectrical, FinFeedback
 from ucat_console.backend.devices.reporting import EventReporter
 from ucat_console.robot.servo import FIN_ACCELERATION
 from ucat_console.robot.units import DriveUnits
@@ -162,6 +162,11 @@ class Epos2Config(Config):
     )
     setpoint_ack_timeout: float = param(
         0.1, lo=0.005, hi=5.0, unit="s", doc="wait for set-point acknowledge (statusword bit 12)"
+    )
+    electrical_period_ms: int = param(
+        100, lo=0, hi=60_000, unit="ms",
+        doc="read each drive's averaged motor current (0x2027) and supply voltage (0x2200 sub 1) "
+        "by SDO this often (0: never)",
     )
 
     def _check(self) -> None:
@@ -667,7 +672,26 @@ class Epos2Driver:
             self._emit("sdo_abort", f"current not read: {e}", level="warning",
                        abort_code=e.code)
             return None
-        return milliamps / 1000.0
+        return milliamps * cia402.CURRENT_UNIT
+
+    def read_electrical(self) -> DriveElectrical | None:
+        """The drive's electrical input by SDO: the motor current averaged by the drive
+        (0x2027, mA) and the supply voltage (0x2200 sub 1, 0.1 V); None with a (throttled)
+        event when the node does not answer or refuses."""
+        try:
+            with self._sdo_lock:
+                milliamps = self.node.sdo[cia402.CURRENT_ACTUAL_AVERAGED].raw
+                decivolts = self.node.sdo[cia402.POWER_SUPPLY][cia402.POWER_SUPPLY_VOLTAGE_SUB].raw
+        except (SdoCommunicationError, can.CanError) as e:
+            self._report.throttled(_failure_code(e), f"current and voltage not read: {e}", "warning")
+            return None
+        except SdoAbortedError as e:
+            self._report.throttled("sdo_abort", f"current and voltage not read: {e}", "warning",
+                                   abort_code=e.code)
+            return None
+        return DriveElectrical(t=self._clock(), fin=self.fin,
+                               current_a=milliamps * cia402.CURRENT_UNIT,
+                               voltage_v=decivolts * cia402.POWER_SUPPLY_VOLTAGE_UNIT)
 
     # ----------------------------------------------------------------------------- callbacks
     def _set_statusword(self, sw: int) -> None:

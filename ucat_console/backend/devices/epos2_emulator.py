@@ -16,6 +16,13 @@ in-process ``virtual`` interface). It implements what the driver relies on:
   stop, fault and fault reset (rising edge of bit 7).
 * Motion through a pluggable servo (:class:`Servo`); :class:`TrapezoidalServo` is the
   standalone default (acceleration limit, maximum rate, encoder quantisation).
+* The drive's electrical input (maxon's objects): the motor current 0x6078 and its average
+  0x2027 (mA) and the supply voltage 0x2200 sub 1 (0.1 V). The current follows from the
+  servo's shaft power (``shaft_power()``, W, when the servo has it) through the drive's
+  efficiency, plus its no-load current while the power stage is on:
+  ``I = I_0 + max(0, P_shaft) / (eta V)``, so that ``I V`` is the electrical input; a
+  servo with ``current()`` gives the current itself. The average is a first-order filter
+  of the current over the ticks (time constant ``current_average_s``).
 * Fault injection: :meth:`Epos2Emulator.inject_emcy`, ``stop_heartbeat``/``resume_heartbeat``,
   ``silence``/``unsilence`` and ``slow_replies``.
 
@@ -75,7 +82,9 @@ class Servo(Protocol):
     """A fin servo in profile-position mode, in fin units (rad, rad/s).
 
     Optional extras the emulator uses when present: ``set_acceleration(acc, dec)`` (rad/s2,
-    from 0x6083/0x6084/0x6085) and ``current() -> float`` (A, for 0x6078).
+    from 0x6083/0x6084/0x6085), ``shaft_power() -> float`` (W at the fin, from which the
+    emulator makes the motor current) and ``current() -> float`` (A, the motor current
+    itself, for 0x6078 and 0x2027).
     """
 
     def command(self, target_rad: float, profile_velocity_rad_s: float) -> None: ...
@@ -172,6 +181,29 @@ class Epos2EmulatorConfig(Config):
     tick_period: float = param(
         0.002, lo=1e-4, hi=0.1, unit="s", doc="period of the emulator thread (real-time mode)"
     )
+    supply_voltage: float = param(
+        24.0, lo=0.0, hi=70.0, lo_open=True, unit="V",
+        doc="supply voltage at the power stage the node reports (0x2200 sub 1)",
+    )
+    drive_efficiency: float = param(
+        0.7, lo=0.0, hi=1.0, lo_open=True,
+        doc="shaft power over electrical input above no load (motor, gearhead and bridge)",
+    )
+    no_load_current: float = param(
+        0.05, lo=0.0, hi=10.0, unit="A", doc="motor current while the power stage is on and the shaft idle"
+    )
+    current_average_s: float = param(
+        0.01, lo=1e-4, hi=10.0, unit="s", doc="time constant of the averaged current (0x2027)"
+    )
+
+
+#: states with the power stage on (the motor draws current)
+_POWERED = (cia402.OPERATION_ENABLED, cia402.QUICK_STOP_ACTIVE, cia402.FAULT_REACTION_ACTIVE)
+
+
+def _milliamps(amps: float) -> int:
+    """A current as the INT16 mA of 0x6078 and 0x2027 (saturated)."""
+    return max(-32768, min(32767, int(round(amps / cia402.CURRENT_UNIT))))
 
 
 class _GatedNetwork(canopen.Network):
@@ -314,6 +346,7 @@ class Epos2Emulator:
         self._consumer_cob_id: int | None = None
         self._consumer_timeout = 0.0
         self._consumer_last: float | None = None
+        self._current_average = 0.0  # A, 0x2027
         #: controlwords received, oldest first (for tests and logs)
         self.controlword_log: list[int] = []
 
@@ -414,9 +447,11 @@ class Epos2Emulator:
             if index == cia402.VELOCITY_ACTUAL:
                 return self._velocity_rpm()
             if index == cia402.CURRENT_ACTUAL:
-                current = getattr(self.servo, "current", None)
-                amps = float(current()) if callable(current) else 0.0
-                return max(-32768, min(32767, int(round(amps * 1000.0))))
+                return _milliamps(self.motor_current())
+            if index == cia402.CURRENT_ACTUAL_AVERAGED:
+                return _milliamps(self._current_average)
+            if index == cia402.POWER_SUPPLY and subindex == cia402.POWER_SUPPLY_VOLTAGE_SUB:
+                return int(round(self.config.supply_voltage / cia402.POWER_SUPPLY_VOLTAGE_UNIT))
             if index == cia402.ERROR_REGISTER:
                 return self._error_register
             if index == cia402.CONTROLWORD:
@@ -623,6 +658,19 @@ class Epos2Emulator:
         """Send the heartbeat if it is due by ``now`` (stamped with the time it was due)."""
         self.network.send_due(now)
 
+    def motor_current(self) -> float:
+        """The motor current (A) now: the servo's own, or the no-load current plus the shaft
+        power over the drive's efficiency and supply voltage; 0 with the power stage off."""
+        if self._state not in _POWERED:
+            return 0.0
+        current = getattr(self.servo, "current", None)
+        if callable(current):
+            return float(current())
+        power = getattr(self.servo, "shaft_power", None)
+        watts = max(0.0, float(power())) if callable(power) else 0.0
+        cfg = self.config
+        return cfg.no_load_current + watts / (cfg.drive_efficiency * cfg.supply_voltage)
+
     def tick(self, now: float) -> None:
         """Advance the node to ``now`` (seconds): its heartbeat if due, the servo, the TPDOs
         that are due; frames sent from now on are stamped ``now``."""
@@ -633,6 +681,8 @@ class Epos2Emulator:
             self._last_tick = now
             if dt > 0.0:
                 self.servo.step(dt)
+                gain = 1.0 - math.exp(-dt / self.config.current_average_s)
+                self._current_average += gain * (self.motor_current() - self._current_average)
             self._update_target_reached()
             self._check_consumer()
             if not self._operational():
@@ -736,7 +786,8 @@ class Epos2Emulator:
     def value(self, index: int, subindex: int = 0) -> int:
         """An object's current value as the node holds it (what an SDO upload would give)."""
         with self._lock:
-            return self._stored(index, subindex)
+            live = self._on_read(index, subindex, None)
+            return live if live is not None else self._stored(index, subindex)
 
 
 class EmulatedNodes:

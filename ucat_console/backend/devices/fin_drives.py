@@ -9,6 +9,12 @@ Heartbeats are judged on what the bus's reader has heard (``canbus.HeardBus``): 
 heartbeat is missing from its last one's arrival up to ``heard_until``, not up to the
 present. A busy machine that holds the reader (or the supervision thread) back leaves
 frames unread in the queue; a heartbeat among them is not missing, it is not heard yet.
+
+Electrical input: with ``on_electrical`` given and ``electrical_period_ms`` > 0, a thread
+reads every started node's averaged motor current and supply voltage by SDO once per
+period (:meth:`Epos2Driver.read_electrical`) and hands each round to ``on_electrical``: a
+list of :class:`DriveElectrical` by fin, None for a node that did not answer. It runs apart
+from the supervision thread, so a slow SDO reply never delays a heartbeat check.
 """
 
 from __future__ import annotations
@@ -25,6 +31,7 @@ import canopen
 
 from ucat_console.backend.devices import cia402
 from ucat_console.backend.devices.canbus import HeardBus, open_bus
+from ucat_console.robot.readings import DriveElectrical
 from ucat_console.telemetry.events import EventSink
 
 from ucat_console.backend.devices.epos2 import (
@@ -37,6 +44,9 @@ from ucat_console.backend.devices.epos2 import (
 )
 
 logger = logging.getLogger(__name__)
+
+#: one round of electrical readings, by fin (None: the node did not answer)
+ElectricalSink = Callable[[dict[int, DriveElectrical | None]], None]
 
 
 class FinDrives:
@@ -59,6 +69,7 @@ class FinDrives:
         clock: Callable[[], float] = time.monotonic,
         supervise: bool = True,
         bus_time: Callable[[], float] | None = None,
+        on_electrical: ElectricalSink | None = None,
     ) -> None:
         self.config = config
         if fins is None:
@@ -75,6 +86,8 @@ class FinDrives:
         self._clock = clock
         self._bus_time = bus_time
         self._supervise = supervise
+        self._on_electrical = on_electrical
+        self._electrical_thread: threading.Thread | None = None
         self._bus: HeardBus | None = None
         self.network: canopen.Network | None = None
         self.drivers: dict[int, Epos2Driver] = {}
@@ -121,6 +134,11 @@ class FinDrives:
             self._thread = threading.Thread(target=self._run, name="epos2-supervision",
                                             daemon=True)
             self._thread.start()
+        if self._on_electrical is not None and cfg.electrical_period_ms > 0:
+            self._stop.clear()
+            self._electrical_thread = threading.Thread(target=self._run_electrical,
+                                                       name="epos2-electrical", daemon=True)
+            self._electrical_thread.start()
 
     def close(self, disable: bool = True) -> None:
         """Stop supervision, optionally send shutdown to enabled nodes, leave the bus."""
@@ -129,6 +147,10 @@ class FinDrives:
             self._actions.put(None)
             self._thread.join(timeout=2.0)
             self._thread = None
+        if self._electrical_thread is not None:
+            self._stop.set()
+            self._electrical_thread.join(timeout=2.0 + 2 * self.config.sdo_timeout)
+            self._electrical_thread = None
         if disable:
             for driver in self.drivers.values():
                 if driver.started and driver.state in (cia402.OPERATION_ENABLED,
@@ -238,4 +260,19 @@ class FinDrives:
             except Exception:
                 logger.exception("EPOS2 supervision step failed")
 
+    def read_electrical(self) -> dict[int, DriveElectrical | None]:
+        """One round: every started node's electrical input, by fin (None: no answer)."""
+        return {fin: driver.read_electrical() if driver.started else None
+                for fin, driver in sorted(self.drivers.items())}
 
+    def _run_electrical(self) -> None:
+        sink = self._on_electrical
+        assert sink is not None
+        period = self.config.electrical_period_ms / 1000.0
+        next_round = time.monotonic()
+        while not self._stop.wait(max(0.0, next_round - time.monotonic())):
+            next_round = max(next_round + period, time.monotonic())
+            try:
+                sink(self.read_electrical())
+            except Exception:
+                logger.exception("EPOS2 electrical readings failed")

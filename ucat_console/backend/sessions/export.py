@@ -26,8 +26,17 @@ cell in a ``string`` column is the empty string (read text columns with
 ``keep_default_na=False`` in pandas, which otherwise reads an empty cell as NaN), and an
 empty list is ``[]``.
 
-The sidecar (``*.columns.json``) lists each column's ``name``, ``dtype``, ``unit``,
-``nullable`` and ``description``, the field's schema description with its unit and frame.
+The sidecar (``*.columns.json``) is a Frictionless Tabular Data Resource (Data Package
+v2: ``frictionless validate body_state.columns.json`` checks the CSV against it): the CSV's
+``path`` and ``dialect``, and in ``schema`` a Table Schema with one field per column, in
+order: its ``name``, Table Schema ``type`` (``number`` for float64, which takes ``nan``,
+``inf`` and ``-inf``; ``integer``; ``boolean`` with ``true``/``false``; ``string``;
+``array`` and ``object`` for JSON text), ``description`` (the field's schema description
+with its unit and frame), ``unit`` (a symbol a units library parses, as in the session
+schemas), the exporter's ``dtype`` (above; ``decimal``: read it as text), and
+``constraints.required`` unless the column may be missing, in which case its
+``missingValues`` is ``[""]`` (the schema's own is ``[]``: an empty cell elsewhere is the
+empty string).
 """
 
 from __future__ import annotations
@@ -56,6 +65,12 @@ TIME_COLUMN = "log_time_ns"
 SIDECAR_SUFFIX = ".columns.json"
 _DTYPES = {FLOAT: "float64", FLOATS: "float64", INT: "int64", BOOL: "bool", STR: "string",
            SEQ: "json", JSON: "json"}
+#: the Table Schema type of each field kind
+_TABLE_TYPES = {FLOAT: "number", FLOATS: "number", INT: "integer", BOOL: "boolean", STR: "string",
+                SEQ: "array", JSON: "object"}
+DATA_RESOURCE = "https://datapackage.org/profiles/2.0/dataresource.json"
+TABLE_SCHEMA = "https://datapackage.org/profiles/2.0/tableschema.json"
+TABLE_DIALECT = "https://datapackage.org/profiles/2.0/tabledialect.json"
 
 
 def csv_name(channel: str) -> str:
@@ -76,29 +91,60 @@ def _order(s: FieldSpec) -> range | tuple[int, ...]:
     return (1, 2, 3, 0) if s.names == WXYZ else range(s.length)
 
 
+def _field(name: str, kind: str, dtype: str, unit: str, optional: bool, description: str) -> dict[str, Any]:
+    """One Table Schema field."""
+    out: dict[str, Any] = {"name": name, "type": _TABLE_TYPES[kind], "description": description}
+    if unit:
+        out["unit"] = unit
+    out["dtype"] = dtype
+    if kind == BOOL:
+        out.update(trueValues=["true"], falseValues=["false"])
+    if optional:
+        out["missingValues"] = [""]
+    else:
+        out["constraints"] = {"required": True}
+    return out
+
+
 def column_specs(cls: type) -> list[dict[str, Any]]:
-    """The sidecar's description of each column of message type ``cls``."""
-    out: list[dict[str, Any]] = [{
-        "name": TIME_COLUMN, "dtype": "int64", "unit": "ns", "nullable": False,
-        "description": "the message's file time, nanoseconds since the UNIX epoch",
-    }]
+    """The Table Schema field of each column of message type ``cls``."""
+    out = [_field(TIME_COLUMN, INT, "int64", "ns", False,
+                  "the message's file time, nanoseconds since the UNIX epoch")]
     for s in field_specs(cls):
         doc = s.doc
         paths = s.paths()
-        for path in (paths if s.kind != FLOATS else [paths[i] for i in _order(s)]):
-            out.append({
-                "name": path,
-                "dtype": _dtype(s),
-                "unit": doc.unit if doc is not None else "",
-                "nullable": s.optional,
-                "description": doc.describe() if doc is not None else "",
-            })
+        order = list(_order(s)) if s.kind == FLOATS else [0]
+        units = doc.units(s.length or 1) if doc is not None else ("",) * (s.length or 1)
+        for i in order:
+            out.append(_field(paths[i], s.kind, _dtype(s), units[i], s.optional,
+                              doc.describe() if doc is not None else ""))
     return out
 
 
 def columns(cls: type) -> list[str]:
     """The CSV header of message type ``cls``."""
     return [c["name"] for c in column_specs(cls)]
+
+
+def data_resource(channel: str, cls: type) -> dict[str, Any]:
+    """The sidecar of a channel's CSV: a Tabular Data Resource with its Table Schema."""
+    name = csv_name(channel).removesuffix(".csv")
+    return {
+        "$schema": DATA_RESOURCE,
+        "name": name,
+        "type": "table",
+        "path": csv_name(channel),
+        "format": "csv",
+        "mediatype": "text/csv",
+        "encoding": "utf-8",
+        "title": f"session channel {channel}",
+        "description": (cls.__doc__ or cls.__name__).strip().splitlines()[0],
+        "channel": channel,
+        "dialect": {"$schema": TABLE_DIALECT, "header": True, "delimiter": ",", "quoteChar": '"',
+                    "doubleQuote": True},
+        "schema": {"$schema": TABLE_SCHEMA, "fields": column_specs(cls), "missingValues": [],
+                   "fieldsMatch": "exact"},
+    }
 
 
 def _cell(s: FieldSpec, v: Any) -> str:
@@ -155,9 +201,9 @@ def export_csv(
     result: dict[str, tuple[Path, int]] = {}
     for c in chans:
         path = out / csv_name(c)
-        specs = column_specs(types[c])
-        (out / sidecar_name(c)).write_text(json.dumps(
-            {"channel": c, "file": path.name, "columns": specs}, indent=1) + "\n")
+        resource = data_resource(c, types[c])
+        specs = resource["schema"]["fields"]
+        (out / sidecar_name(c)).write_text(json.dumps(resource, indent=1) + "\n")
         n = 0
         with open(path, "w", newline="") as fh:
             w = csv.writer(fh)

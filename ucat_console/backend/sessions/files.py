@@ -40,6 +40,8 @@ META_CONFIG = "config"
 META_WEIGHTS = "weights"
 META_VERSION = "version"
 META_NOTES = "notes"
+#: what each transform frame of the file is (REP 103/105 names; foxglove.FRAME_NOTES)
+META_FRAMES = "frames"
 
 _LABEL = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
 _PART = re.compile(r"^(?P<session>.+)_(?P<part>\d{3,})\.mcap$")

@@ -174,11 +174,11 @@ def _check_schema(topic: str, schema: Schema | None, channel: Channel, path: Pat
             raise ValueError(f"{path}: channel {codec.short(topic)}: schema fields "
                              f"{codec.short(sorted(props - fields))} are not fields of {cls.__name__}")
         return encoding
-    for ftopic, name in foxglove.DERIVED_TOPICS.items():
-        if topic == ftopic:
-            if schema is None or schema.name != name:
-                raise ValueError(f"{path}: not a session file: channel {codec.short(topic)} is not {name}")
-            return 0
+    name = foxglove.DERIVED_TOPICS.get(topic) or foxglove.LEGACY_TOPICS.get(topic)
+    if name is not None:
+        if schema is None or schema.name != name:
+            raise ValueError(f"{path}: not a session file: channel {codec.short(topic)} is not {name}")
+        return 0
     raise ValueError(f"{path}: not a session file: foreign channel {codec.short(topic)}"
                      + (f" (schema {codec.short(schema.name)})" if schema is not None else ""))
 

@@ -122,6 +122,7 @@ class _Part:
         )
         self.channel_ids: dict[str, int] = {}
         self.sequence: dict[int, int] = collections.defaultdict(int)
+        self.log_time = foxglove.LogTimes()
         self.first_ns: int | None = None
         self.dirty = False
 
@@ -136,10 +137,10 @@ class _Part:
             self.channel_ids[topic] = w.register_channel(topic, MESSAGE_ENCODING, schema_ids[cls])
         if foxglove_channels:
             names: dict[str, int] = {}
-            for topic, name, schema in foxglove.DERIVED:
-                if name not in names:  # tf and tf_static share foxglove.FrameTransform
+            for topic, name in foxglove.DERIVED:
+                if name not in names:  # the transform channels share foxglove.FrameTransform
                     names[name] = w.register_schema(
-                        name, SCHEMA_ENCODING, foxglove.schema_bytes(schema)
+                        name, SCHEMA_ENCODING, foxglove.official_schema_bytes(name)
                     )
                 self.channel_ids[topic] = w.register_channel(topic, MESSAGE_ENCODING, names[name])
 
@@ -147,7 +148,8 @@ class _Part:
         cid = self.channel_ids[topic]
         seq = self.sequence[cid]
         self.sequence[cid] = seq + 1
-        self.writer.add_message(cid, log_time=ns, data=data, publish_time=ns, sequence=seq)
+        self.writer.add_message(cid, log_time=self.log_time(cid, ns), data=data, publish_time=ns,
+                                sequence=seq)
         if self.first_ns is None:
             self.first_ns = ns
         self.dirty = True
@@ -316,6 +318,8 @@ class Recorder:
                 },
                 files.META_NOTES: {"text": notes},
             }
+            if self._derived is not None:
+                self._meta[files.META_FRAMES] = dict(foxglove.FRAME_NOTES)
             self._open_part()  # in this thread: a bad directory fails here, loudly
             self._unsubscribe = self.stream.subscribe_batches(self._on_messages)
             self._thread = threading.Thread(

@@ -22,6 +22,14 @@ Type mapping (the only kinds a message field may have), encoding 2:
     dict[str, Any]           {"type": "object"} with any JSON values
     X | None                 X's schema, the key left out when the value is None
 
+Units. Every number with a unit carries it machine-readably in a ``unit`` keyword beside
+its ``type`` (one per vector part: ``position.x``, ``per_fin[2]``, ``u.w_1``): an SI
+symbol a units library parses (``m/s``, ``rad/s``, ``N m``; ``1`` for a dimensionless
+number; ``g_n``, the standard acceleration of gravity, for the IMU's raw acceleration).
+JSON Schema 2020-12 keeps an unknown keyword as an annotation, so validators and Foxglove
+read the schemas as before (a validator in a strict mode, like ajv's default, is told about
+the keyword: ``ajv.addKeyword("unit")``).
+
 Non-finite numbers. JSON has no NaN or infinity, and Foxglove's and Lichtblick's schema
 reader takes one type name per field (a ``"type": ["number", "null"]`` field makes it
 reject the whole channel), so a number field cannot also hold null. A non-finite float is
@@ -168,16 +176,28 @@ def schema_name(cls: type) -> str:
     return SCHEMA_PREFIX + cls.__name__
 
 
+#: the keyword of a number's unit
+UNIT = "unit"
+
+
+def _with_unit(schema: dict[str, Any], unit: str) -> dict[str, Any]:
+    return {**schema, UNIT: unit} if unit else schema
+
+
 def _field_schema(spec: FieldSpec) -> dict[str, Any]:
     out: dict[str, Any]
+    units = spec.doc.units(spec.length or 1) if spec.doc is not None else ("",) * (spec.length or 1)
     if spec.kind == INT and spec.wide:
         out = {"type": "string", "pattern": WIDE_PATTERN}
+    elif spec.kind in (FLOAT, INT):
+        out = _with_unit({"type": _JSON_TYPES[spec.kind]}, units[0])
     elif spec.kind in _JSON_TYPES:
         out = {"type": _JSON_TYPES[spec.kind]}
     elif spec.kind == FLOATS and spec.names:
+        unit_of = dict(zip(spec.names, units))
         out = {
             "type": "object",
-            "properties": {n: {"type": "number"} for n in _object_order(spec.names)},
+            "properties": {n: _with_unit({"type": "number"}, unit_of[n]) for n in _object_order(spec.names)},
             "additionalProperties": False,
         }
         if spec.names == WXYZ:
@@ -190,7 +210,7 @@ def _field_schema(spec: FieldSpec) -> dict[str, Any]:
             "type": "array",
             "minItems": n,
             "maxItems": n,
-            "prefixItems": [{"type": ["number", "null"]} for _ in range(n)],
+            "prefixItems": [_with_unit({"type": ["number", "null"]}, u) for u in units],
             "items": {"type": "number"},
         }
     elif spec.kind == SEQ:

@@ -189,6 +189,9 @@ class Supervisor:
             self.stream.subscribe_batches(self._on_bodies, [ch.BODY_STATE]),
             self.stream.subscribe(self.effects.on_message, self.effects.channels),
         ]
+        add_telemetry = getattr(inner, "add_telemetry_sink", None)  # the drives' electrical input
+        if add_telemetry is not None:
+            self._unsubs.append(add_telemetry(self.stream.publish))
         self.access.add_listener(self._on_access)
 
     # ================================================================== lifecycle
