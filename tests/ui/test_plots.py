@@ -134,7 +134,7 @@ def test_span_pins_keep_a_minimum_axis_span_around_the_data() -> None:
 
 
 def test_a_page_receives_the_plots_and_the_pose_the_view_sends() -> None:
-    """The live view's plots and robot pose, set without viser's casts (``ui.fast_props``),
+    """The live view's plots and robot pose, set without viser's casts (``ui.viser_compat``),
     reach a page (a raw websocket client) as the values the view computed."""
     import viser
 
@@ -225,7 +225,7 @@ def test_a_value_beyond_float32_reaches_the_page_as_the_largest_finite_one() -> 
 
 
 class _Chart:
-    """A uPlot handle as ``ui.fast_props.set_prop`` uses it; keeps the data it was sent."""
+    """A uPlot handle as ``ui.viser_compat.set_prop`` uses it; keeps the data it was sent."""
 
     def __init__(self) -> None:
         self._impl = types.SimpleNamespace(props=types.SimpleNamespace(data=None))

@@ -161,9 +161,14 @@ def _descendant_cpu_seconds() -> dict[str, float]:
 
 
 def measure_ui(duration: float = 20.0, pages: int = 2, warmup: float = 5.0, velocity: float = 0.2,
-               chromium: str = CHROMIUM, viewport: tuple[int, int] = (1400, 900)) -> dict[str, Any]:
-    """Run the console with ``pages`` headless pages and measure (module docstring)."""
+               chromium: str = CHROMIUM, viewport: tuple[int, int] = (1400, 900),
+               public_path: tuple[str, ...] = ()) -> dict[str, Any]:
+    """Run the console with ``pages`` headless pages and measure (module docstring), with the
+    performance patches ``public_path`` off (viser's own code instead: ``viser_compat.PATCHES``;
+    once per process, before the console's first page server)."""
     from playwright.sync_api import sync_playwright
+
+    from ucat_console.ui import viser_compat
 
     from ucat_console.backend.access import LOCAL
     from ucat_console.backend.supervisor import Supervisor
@@ -172,6 +177,7 @@ def measure_ui(duration: float = 20.0, pages: int = 2, warmup: float = 5.0, velo
 
     if duration <= 0 or pages < 1:
         raise ValueError(f"duration must be > 0 and pages >= 1, got {duration}, {pages}")
+    viser_compat.use_public_path(public_path)
     cfg = AppConfig(console=ConsoleConfig(port=0))
     with tempfile.TemporaryDirectory() as tmp:
         sup = Supervisor(cfg, sessions_dir=tmp)
@@ -270,16 +276,17 @@ def measure_ui(duration: float = 20.0, pages: int = 2, warmup: float = 5.0, velo
         "load_average_1min": load0,
         "cpus": os.cpu_count(),
         "page_parts": parts,
+        "public_path": sorted(public_path),
     }
 
 
 def _collect_wire_messages(limit: int) -> tuple[list[Any], Any]:
     """Keep the first ``limit`` messages the pages' frames convert to their wire form (the
-    console's own ``viser_hooks._wire_form`` goes on doing it): (the list they go to, a
+    console's own ``viser_compat._form`` goes on doing it): (the list they go to, a
     function that stops the collecting)."""
-    from ucat_console.ui import viser_hooks
+    from ucat_console.ui import viser_compat
 
-    real = viser_hooks._wire_form
+    real = viser_compat._form
     kept: list[Any] = []
 
     def collect(message: Any, arrays: list[Any]) -> Any:
@@ -287,10 +294,10 @@ def _collect_wire_messages(limit: int) -> tuple[list[Any], Any]:
             kept.append(message)
         return real(message, arrays)
 
-    viser_hooks._wire_form = collect
+    viser_compat._form = collect
 
     def stop() -> None:
-        viser_hooks._wire_form = real
+        viser_compat._form = real
 
     return kept, stop
 
@@ -298,17 +305,17 @@ def _collect_wire_messages(limit: int) -> tuple[list[Any], Any]:
 def page_parts(app: Any, messages: list[Any], rounds: int = 5, refreshes: int = 200) -> dict[str, Any]:
     """Two parts of the pages' work timed in a tight loop (each ``rounds`` times, in turns;
     medians): a message's wire form, by viser's ``as_serializable_dict`` and by the
-    console's converter (``viser_hooks._wire_form``), over ``messages`` (those the pages
+    console's converter (``viser_compat._wire_form``), over ``messages`` (those the pages
     were sent in the run); and the plots' series of one refresh (``plots.series_of``) of
     the live view's window as it is at the end of the run."""
     import math
 
-    from ucat_console.ui import viser_hooks
+    from ucat_console.ui import viser_compat
     from ucat_console.ui.plots import series_of
 
     if not messages:
         raise RuntimeError("no message was sent to the pages: nothing to time")
-    convert = viser_hooks._wire_form
+    convert = viser_compat._wire_form
 
     def viser_s() -> float:
         t0 = time.perf_counter()
@@ -357,9 +364,10 @@ def _threads(percent: dict[str, float]) -> str:
 
 
 def format_result(r: dict[str, Any]) -> str:
+    public = ", ".join(r.get("public_path", ())) or "none"
     lines = [
         f"console page benchmark: {len(r['pages'])} headless pages, {r['duration_s']:.0f} s, "
-        f"{r['cpus']} CPUs, load average {r['load_average_1min']:.1f}",
+        f"{r['cpus']} CPUs, load average {r['load_average_1min']:.1f}; patches off (viser's public path): {public}",
         f"server pushes: scene {r['server_scene_updates_per_s']:.1f}/s (configured {r['configured_scene_rate']:g}), "
         f"plots {r['server_plot_updates_per_s']:.1f}/s (configured {r['configured_plot_rate']:g})",
         "pose updates per second: delivered to the page / displayed in a rendered frame",
@@ -394,6 +402,10 @@ def register_bench(kinds: argparse._SubParsersAction) -> None:
     p.add_argument("--warmup", type=float, default=5.0, help="seconds before measuring")
     p.add_argument("--chromium", default=CHROMIUM, help="Chromium executable")
     p.add_argument("--json", type=Path, default=None, help="write the results as JSON")
+    p.add_argument("--public-path", action="append", default=[], metavar="PATCH",
+                   help="turn a performance patch of ui/viser_compat off (viser's own code instead): "
+                        "one of uvloop, no_window_wait, shared_frames, wire_converter, fast_props, or all; "
+                        "repeatable")
     p.set_defaults(func=run_ui)
 
 
@@ -406,7 +418,11 @@ def run_ui(args: argparse.Namespace) -> int:
     from ucat_console.cli.compiled import prepare_all
 
     prepare_all()
-    r = measure_ui(duration=args.duration, pages=args.pages, warmup=args.warmup, chromium=args.chromium)
+    from ucat_console.ui.viser_compat import PATCHES
+
+    public = tuple(PATCHES) if "all" in args.public_path else tuple(args.public_path)
+    r = measure_ui(duration=args.duration, pages=args.pages, warmup=args.warmup, chromium=args.chromium,
+                   public_path=public)
     r["machine"] = machine_info(None)
     print(format_result(r))
     print(speed_line(r["machine"]))

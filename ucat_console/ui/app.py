@@ -50,7 +50,6 @@ import time
 from typing import Any, Callable
 
 import viser
-import viser._messages as vm
 
 from ucat_console.backend.sessions.replay_job import ReplaySlot
 from ucat_console.backend.supervisor import CommandRefused, Supervisor
@@ -59,7 +58,8 @@ from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.messages import FinPlan
 from ucat_console.ui import markdown, page_script, panels
-from ucat_console.ui.fast_props import set_prop
+from ucat_console.ui import viser_compat
+from ucat_console.ui.viser_compat import set_prop
 from ucat_console.ui.guard import PageGuard
 from ucat_console.ui.page_jobs import PageJobs
 from ucat_console.ui.playback import PlaybackPanel
@@ -251,7 +251,7 @@ class ConsoleApp:
         """A page has shown (its first camera report): its script, theme, controls and review."""
         cid = client.client_id
         containers = {"tuning": self.tab_tuning, "session": self.tab_session, "safety": self.tab_safety}
-        self.guard.send_first(cid, [vm.RunJavascriptMessage(source=page_script.INSTALL)])  # the bar first
+        self.guard.send_first(cid, [viser_compat.run_javascript(page_script.INSTALL)])  # the bar first
         with self._build_lock:
             if cid not in self.guard.clients:
                 return  # gone while waiting
@@ -428,12 +428,12 @@ class ConsoleApp:
                 continue
             try:
                 panel.show_events()
-                uuids = {"disarm_uuid": panel.disarm._impl.uuid, "drive_uuid": panel.drive_input._impl.uuid,
-                         "theme_uuid": panel.theme_button._impl.uuid}
+                uuids = {"disarm_uuid": viser_compat.handle_uuid(panel.disarm), "drive_uuid": viser_compat.handle_uuid(panel.drive_input),
+                         "theme_uuid": viser_compat.handle_uuid(panel.theme_button)}
                 state = bar_state(sup, cid, dark=page.dark, uuids=uuids, loading=self.loading,
                                   link_slow=self.guard.link_slow(cid))
                 # what the pilot must see first (ahead of the telemetry on a slow link)
-                self.guard.send_first(cid, [vm.RunJavascriptMessage(source=page_script.update_source(state))])
+                self.guard.send_first(cid, [viser_compat.run_javascript(page_script.update_source(state))])
             except Exception:
                 log.debug("the status bar of client %s was not sent", cid, exc_info=True)
 

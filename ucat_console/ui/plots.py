@@ -35,7 +35,7 @@ import numpy as np
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.messages import BodyState, FinPlan, Power, Setpoints, Status
 from ucat_console.ui import plot_series as ps
-from ucat_console.ui.fast_props import set_prop
+from ucat_console.ui.viser_compat import set_prop
 from ucat_console.ui.plot_series import window_rows
 
 N_FINS = ch.N_FINS
@@ -258,7 +258,7 @@ class LivePlots:
         got = series_of(self.feeder.buffer, int(math.ceil(window * self.rate)) + 1, self.max_points, self.corridor())
         if got is None:
             return
-        # new arrays each time: set without viser's casts and comparisons (ui.fast_props)
+        # new arrays each time: set without viser's casts and comparisons (ui.viser_compat)
         t, v = got
         set_prop(self.st, "data", (t, *v[ps.ST_HIGH:ps.ST_ABOVE + 1]))
         for k, chart in enumerate((self.depth, self.velocity, self.yaw_rate)):

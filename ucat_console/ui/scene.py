@@ -34,7 +34,7 @@ from ucat_console.robot.fins import N_FINS
 from ucat_console.robot.geometry import BLADE_LENGTH_FACTOR, BLADE_SPAN, BLADE_THICKNESS, Geometry, fin_mount
 from ucat_console.robot.look import FIN_COLOUR, GHOST_COLOUR, HULL_COLOUR, NOSE_COLOUR
 from ucat_console.telemetry.messages import BodyState, FinState
-from ucat_console.ui.fast_props import set_pose, set_prop
+from ucat_console.ui.viser_compat import set_pose, set_prop
 
 WATER_COLOUR = (64, 140, 200)
 FLOOR_COLOUR = (120, 130, 140)
@@ -179,7 +179,7 @@ class RobotScene:
             self.position = body.position
             self._add_trail_point(body.position)
         # only what changed (the commanded angles change a few times a second); set without
-        # viser's casts and comparisons (ui.fast_props)
+        # viser's casts and comparisons (ui.viser_compat)
         shown = self._shown
         now = [(f.angle, f.angle_cmd) if f is not None else s for f, s in zip(fins, shown)]
         if any(_changed(a[0], b[0]) for a, b in zip(now, shown)):

@@ -43,6 +43,7 @@ from mcap.writer import CompressionType
 
 import ucat_console
 from ucat_console.backend.sessions import codec, files, foxglove
+from ucat_console.backend.dependencies import require
 from ucat_console.backend.sessions.mcap_writer import ChunkedWriter
 from ucat_console.backend.sessions.schema import (
     MESSAGE_ENCODING,
@@ -197,6 +198,7 @@ class Recorder:
     ) -> None:
         if not math.isfinite(epoch_offset):
             raise ValueError(f"epoch_offset: {epoch_offset!r} is not finite")
+        require("mcap")  # the session files' writer and reader are checked against its range
         self.stream = stream
         self.config = config or RecorderConfig()
         self.directory = files.sessions_dir(directory)

@@ -1,72 +1,56 @@
-"""The places where the console hooks into viser: the page guard's, and those that save CPU.
+"""Every use of viser's private names in the console, each with the reason viser's public API
+cannot do it (docs/viser-compat.md lists them with their figures and the upstream change
+that would remove each).
 
-viser has no hook for a websocket handshake check, for its incoming messages or for pacing
-what a page is sent, so :func:`install` replaces names in viser's websocket module (once,
-for the process):
+Checked against the viser versions in :data:`ucat_console.backend.dependencies.SUPPORTED`
+(:func:`install` checks the installed one first and refuses any other with a clear error).
+
+Safety (the page guard, :mod:`ucat_console.ui.guard`; docs/pages.md, docs/safety.md):
+viser has no hook for a websocket handshake, for its incoming messages or for pacing
+what a page is sent, so :func:`install` replaces names in viser's websocket module
+(``viser.infra._infra``), once for the process:
 
 * the ``websockets`` serve call: for a server made by :func:`guarded_server`, every
-  websocket upgrade goes through the guard's handshake check first, and frames are
-  limited to :data:`ucat_console.ui.guard.MAX_FRAME` bytes;
+  websocket upgrade goes through the guard's handshake check first (the Origin check),
+  and frames are limited to :data:`ucat_console.ui.guard.MAX_FRAME` bytes. Every serve
+  call viser makes while such a server starts gets the guard, including viser's retries
+  on the next ports when the one asked for is taken (which ``PageGuard.serve`` then
+  refuses);
 * the per-connection message consumer: for such a server, every message is decoded here
-  and handed to viser only when the guard admits it (an undecodable one is refused, not
-  a traceback that closes the connection), and not at all when it is one of the pilot's
-  safety commands, which the guard runs on its own thread (``PageGuard.take_urgent``);
-* the per-page sender (below): for such a server, a page is sent telemetry only while its
-  link has room (``PageGuard.wait_room``, :mod:`ucat_console.ui.link`), and a page on a
-  slow link gets its batches in parts, thinned (:func:`_send_thinned`). :func:`encode_frame` makes the
-  frames the guard sends ahead of the telemetry (heartbeat requests, the status bar).
+  and handed to viser only when the guard admits it (per-input admission; an undecodable
+  one is refused, not a traceback that closes the connection), and not at all when it is
+  one of the pilot's safety commands, which the guard runs on its own thread
+  (``PageGuard.take_urgent``);
+* the per-page sender (:func:`_sending_producer`): for such a server, a page is sent
+  telemetry only while its link has room (``PageGuard.wait_room``,
+  :mod:`ucat_console.ui.link`), and a page on a slow link gets its batches in parts,
+  thinned (:func:`_send_thinned`). :func:`encode_frame` makes the frames the guard sends
+  ahead of the telemetry (heartbeat requests for liveness, the status bar), in viser's
+  wire format, on the guard's own path.
 
-Servers made any other way are left exactly as viser makes them.
+Correctness: every message buffer's event is a :class:`_LoopEvent`, set only in the event
+loop's thread: viser sets it from whichever thread queued a message, which races the loop
+("deque mutated during iteration").
 
-And viser's websocket thread runs on uvloop's event loop (libuv's, in C) instead of
-asyncio's own: viser makes its loop with ``asyncio.new_event_loop()``, which :func:`install`
-makes uvloop's for viser's websocket module only (the rest of the process keeps asyncio's
-loops). With two pages that thread spends a good part of its time in the event loop itself
-(its timers, wake-ups and socket writes, some 100 windows a second); ``ucat-console bench
-ui`` measured the supervisor at 14 % of a core with asyncio's loop and 12 % with uvloop's,
-in the same half hour. Where uvloop is not installed (it has no Windows build) viser keeps
-asyncio's loop.
+Performance (:data:`PATCHES`, each measured against viser's public path with ``ucat-console
+bench ui --public-path NAME``; kept only where it buys >= 25 % of a figure an operator
+sees, docs/viser-compat.md): see :data:`PATCHES`.
 
-And viser's sender does not wait after a batch: after sending a page a batch, viser waits
-1/60 s for more messages before it looks again (``window_duration_sec``, so that messages
-queued one by one go out together). The console queues each pass of the live view and of
-a review as one batch (``server.atomic()``), so for it that wait only costs a timer
-wake-up per page and batch (about 100 a second with two pages) and up to 17 ms of a
-pose's latency. :func:`install` makes every message buffer's window duration 0; with two
-browser pages (``bench ui``) viser's websocket thread went from 5.6-6.1 % to 2.9-4.0 % of a
-core and a pose's p95 latency from 76-104 to 57-73 ms. The window loop still waits for that
-duration after each window and each wake-up (``asyncio.wait`` for a flush, with a timeout
-of 0: a future, a timer and callbacks every time, about 250 times a second with two pages);
-:func:`_window_delay` makes that wait the one turn of the event loop it amounts to.
-
-And pages in step are sent one frame: a broadcast message goes to every page's sender, and
-each used to encode the same window (each message's wire form, msgpack of them all,
-compressed, with the arrays after it) for its own page, which with two pages was the
-largest part of viser's websocket thread's CPU. :func:`install` replaces viser's sender
-(``_message_producer``) with :func:`_sharing_producer`, the same loop that keeps the last
-few frames of the broadcast buffer by the identity of their messages: a page whose window
-holds the same messages as one just sent to another page is sent those bytes. A page that
-lags behind gets a window of its own and encodes it; a page's own buffer is never shared.
-The frame's ``timestampSec`` (the page paces its updates by it) is then the first page's.
-
-And a frame's messages are put in their wire form by a converter made once per message
-class (:func:`_wire_form`) instead of viser's per-value type dispatch: the same dicts and
-arrays, checked against viser's own for every message a console session sends.
-
-And (thread safety) every message buffer's event is a :class:`_LoopEvent`, set only in the
-event loop's thread: viser set it from whichever thread queued a message, which raced the
-loop ("deque mutated during iteration").
+And the handles' and messages' private names the console needs (:func:`handle_uuid`,
+:func:`show_value`, :func:`set_slider_marks`, :func:`run_javascript`, the guard's
+accessors, :data:`PAGE_CLIENT` for the page script), each with its reason below.
 """
 
 from __future__ import annotations
 
 import asyncio
 import itertools
+import logging
 import threading
 import time
 import types
 import typing
-from typing import Any, Sequence
+from typing import Any, Iterable, Sequence
 
 import msgspec
 import numpy as np
@@ -75,6 +59,7 @@ import zstandard
 import viser
 import viser.infra._async_message_buffer as vbuffer
 import viser.infra._infra as vinfra
+import viser._messages as vm
 import viser.infra._messages as vmessages
 from websockets.exceptions import ConnectionClosed
 from websockets.frames import CloseCode
@@ -84,6 +69,27 @@ try:
 except ImportError:  # no build for this platform (Windows): viser keeps asyncio's loop
     uvloop = None
 
+from ucat_console.backend.dependencies import require
+
+log = logging.getLogger(__name__)
+
+#: The performance patches, each on unless :func:`use_public_path` turned it off before
+#: :func:`install` (``ucat-console bench ui --public-path NAME`` measures viser's own path):
+#: name -> what it replaces (docs/viser-compat.md: its measured figure and why it is kept).
+PATCHES: dict[str, str] = {
+    "uvloop": "viser's websocket thread on uvloop's event loop (viser: asyncio.new_event_loop)",
+    "no_window_wait": "no 1/60 s wait for more messages after each batch (AsyncMessageBuffer's window), "
+                      "and that window's wait made one turn of the loop (_window_delay)",
+    "shared_frames": "pages in step are sent the same encoded frame of a broadcast batch "
+                     "(viser encodes it once per page)",
+    "wire_converter": "a message's wire form by a converter made once per message class (_wire_form) "
+                      "instead of viser's as_serializable_dict",
+    "fast_props": "the live view's poses and plot data set without viser's casts and comparisons "
+                  "(set_pose, set_prop)",
+}
+_PUBLIC: set[str] = set()  # the patches turned off
+
+#: the guard of the server being constructed (:func:`guarded_server`; under _PENDING_LOCK)
 _PENDING: list[Any] = []
 _PENDING_LOCK = threading.Lock()
 _GUARDS: dict[Any, Any] = {}  # websockets Server -> its guard
@@ -91,15 +97,16 @@ _INSTALLED = False
 
 
 def guarded_server(guard: Any, **kwargs: Any) -> viser.ViserServer:
-    """A ViserServer (``kwargs`` as for viser) whose handshakes and messages ``guard`` checks."""
+    """A ViserServer (``kwargs`` as for viser) whose handshakes and messages ``guard`` checks.
+    When the port asked for is taken, viser serves on the next free one: that server is
+    guarded too (the caller checks the port it got: ``PageGuard.serve``)."""
     install()
-    with _PENDING_LOCK:  # the serve call happens inside the constructor, in viser's thread
+    with _PENDING_LOCK:  # viser's serve calls happen inside the constructor, in viser's thread
         _PENDING.append(guard)
         try:
             server = viser.ViserServer(**kwargs)
         finally:
-            if guard in _PENDING:
-                _PENDING.remove(guard)
+            _PENDING.remove(guard)
     # named for thread listings (``bench ui``): the thread of the pages' sockets
     thread = getattr(server._websock_server, "_server_thread", None)
     if thread is not None:
@@ -107,17 +114,39 @@ def guarded_server(guard: Any, **kwargs: Any) -> viser.ViserServer:
     return server
 
 
+def use_public_path(names: Iterable[str]) -> None:
+    """Turn the performance patches ``names`` off (viser's own code runs instead), before
+    :func:`install` (``bench ui --public-path``)."""
+    names = set(names)
+    unknown = names - set(PATCHES)
+    if unknown:
+        raise ValueError(f"no performance patch named {', '.join(sorted(unknown))}: "
+                         f"they are {', '.join(PATCHES)}")
+    if _INSTALLED and names != _PUBLIC:
+        raise RuntimeError("viser's patches are installed already: choose the public path before")
+    _PUBLIC.clear()
+    _PUBLIC.update(names)
+
+
+def patched(name: str) -> bool:
+    """Whether the performance patch ``name`` is on."""
+    return name not in _PUBLIC
+
+
 def install() -> None:
-    """Wrap viser's serve call and message consumer once (idempotent)."""
+    """Wrap viser's serve call, message consumer and sender once (idempotent), after
+    checking the installed viser's version."""
     global _INSTALLED
     if _INSTALLED:
         return
+    require("viser")
     real_ws = vinfra.websockets
     real_serve = real_ws.asyncio.server.serve
     real_consumer = vinfra._message_consumer
 
     def guarded_serve(handler: Any, host: Any, port: Any, **kwargs: Any) -> Any:
-        guard = _PENDING.pop() if _PENDING else None
+        # the same guard for each of viser's tries (the next port when one is taken)
+        guard = _PENDING[-1] if _PENDING else None
         if guard is None:
             return real_serve(handler, host, port, **kwargs)
         http = kwargs.get("process_request")
@@ -165,21 +194,24 @@ def install() -> None:
     asyncio_ns = types.SimpleNamespace(server=server_ns)
     vinfra.websockets = _ModuleView(real_ws, asyncio=asyncio_ns)
     vinfra._message_consumer = guarded_consumer
-    if uvloop is not None:
+    if uvloop is not None and patched("uvloop"):
         vinfra.asyncio = _ModuleView(asyncio, new_event_loop=uvloop.new_event_loop)
-    vbuffer.AsyncMessageBuffer.__init__ = _without_window_wait(vbuffer.AsyncMessageBuffer.__init__)
+    vbuffer.AsyncMessageBuffer.__init__ = _with_loop_event(vbuffer.AsyncMessageBuffer.__init__)
     vinfra._message_producer = _sharing_producer
-    vbuffer.asyncio = _ModuleView(asyncio, wait=_window_delay)
+    if patched("no_window_wait"):
+        vbuffer.asyncio = _ModuleView(asyncio, wait=_window_delay)
     _INSTALLED = True
 
 
-def _without_window_wait(real_init: Any) -> Any:
-    """``AsyncMessageBuffer.__init__`` with a window duration of 0 (module docstring), and
-    a :class:`_LoopEvent` for its message event."""
+def _with_loop_event(real_init: Any) -> Any:
+    """``AsyncMessageBuffer.__init__`` with a :class:`_LoopEvent` for its message event, and
+    a window duration of 0 (:data:`PATCHES` ``no_window_wait``)."""
+    no_wait = patched("no_window_wait")
 
     def __init__(self: Any, *args: Any, **kwargs: Any) -> None:
         real_init(self, *args, **kwargs)
-        self.window_duration_sec = 0.0
+        if no_wait:
+            self.window_duration_sec = 0.0
         self.message_event = _LoopEvent(self.event_loop)
 
     return __init__
@@ -242,7 +274,7 @@ def _frame(window: Sequence[Any], zstd: Any) -> bytes:
     """A window of messages as viser's wire frame (``viser.infra._infra._message_producer``):
     zstd-compressed msgpack of the messages' wire forms, then their arrays, 8-byte aligned."""
     arrays: list[memoryview] = []
-    forms = tuple(_wire_form(m, arrays) for m in window)
+    forms = tuple(_form(m, arrays) for m in window)
     inner = msgspec.msgpack.encode({
         "messages": forms,
         "timestampSec": time.perf_counter(),
@@ -253,6 +285,13 @@ def _frame(window: Sequence[Any], zstd: Any) -> bytes:
                                        compressed]
     vinfra._append_aligned_buffers(parts, arrays, 16 + len(compressed))
     return b"".join(parts)
+
+
+def _form(message: Any, arrays: list[memoryview]) -> dict[str, Any]:
+    """A message's wire form: :func:`_wire_form`, or viser's own with ``wire_converter`` off."""
+    if patched("wire_converter"):
+        return _wire_form(message, arrays)
+    return message.as_serializable_dict(arrays)
 
 
 def _wire_form(message: Any, arrays: list[memoryview]) -> dict[str, Any]:
@@ -343,7 +382,7 @@ async def _sharing_producer(websocket: Any, buffer: Any, client_id: int, backlog
     # only the broadcast buffer (the persistent one) has more than one sender; its senders
     # all run in the server's one event-loop thread
     kept: dict[tuple[int, ...], tuple[Sequence[Any], bytes]] | None = None
-    if buffer.persistent_messages:
+    if buffer.persistent_messages and patched("shared_frames"):
         kept = buffer.__dict__.setdefault("_ucat_frames", {})
     # a guarded server's page is sent telemetry only while its link has room (the page
     # guard's "slow links"): the window is taken from the buffer only then, so what waits
@@ -448,3 +487,100 @@ class _ModuleView:
         if name in self._replaced:
             return self._replaced[name]
         return getattr(self._module, name)
+
+
+# ---------------------------------------------------------------------- handles and messages
+#
+# viser's message classes live in its private ``viser._messages``; the console sends or
+# checks these few, which viser's public API does not name:
+#: a page's update of a GUI input (the guard admits it or not)
+GuiUpdateMessage = vm.GuiUpdateMessage
+#: a page's trigger of a registered command (the Esc key's DISARM)
+CommandTriggerMessage = vm.CommandTriggerMessage
+#: a page's camera (allowed through the guard)
+ViewerCameraMessage = vm.ViewerCameraMessage
+#: the heartbeat: a request only the page's running script answers, and its answer
+LocalStorageGetItemRequestMessage = vm.LocalStorageGetItemRequestMessage
+LocalStorageGetItemResponseMessage = vm.LocalStorageGetItemResponseMessage
+
+
+def run_javascript(source: str) -> Any:
+    """The message that runs ``source`` in a page (the status bar's script). viser sends it
+    for its own plotly support but offers no public call to run a script in one page."""
+    return vm.RunJavascriptMessage(source=source)
+
+
+#: The page's own viser client, whose ``sendMessage`` the status bar's DISARM, theme and
+#: gamepad use (:mod:`ucat_console.ui.page_script`): viser's page offers no public way for a
+#: script to send a message. Checked by the browser tests (``tests/ui/test_browser*.py``).
+PAGE_CLIENT = "window.__viserMutable"
+
+
+def handle_uuid(handle: Any) -> str:
+    """The id viser's messages name a GUI handle by (``_impl.uuid``): the guard's table of
+    inputs a page may change, and the status bar's DISARM, are keyed by it; viser has no
+    public name for it."""
+    return handle._impl.uuid
+
+
+def show_value(handle: Any) -> None:
+    """Send an input's value in force to the pages again (``_queue_update``): a page whose
+    update was refused shows what it typed until then, and viser's public ``handle.value =``
+    sends nothing when the value is unchanged."""
+    handle._queue_update("value", handle.value)
+
+
+def set_slider_marks(slider: Any, times: Sequence[float]) -> None:
+    """A slider's marks at ``times`` (unlabelled). viser takes marks only when the slider is
+    made (``add_slider(marks=)``); its props field ``_marks`` takes new ones."""
+    slider._marks = tuple(vm.GuiSliderMark(value=float(t), label=None) for t in times) or None
+
+
+def event_loop(server: viser.ViserServer) -> asyncio.AbstractEventLoop:
+    """The pages' event loop (viser's websocket thread's): the guard sends its frames ahead
+    of the telemetry and paces it there. viser does not expose it."""
+    return server._websock_server._background_event_loop
+
+
+def on_socket_open(server: viser.ViserServer, callback: Any) -> None:
+    """``callback(connection)`` when a page's websocket opens, before viser makes its client
+    handle (so the guard knows every page, including one that never shows: liveness)."""
+    server._websock_server.on_client_connect(callback)
+
+
+def on_socket_close(server: viser.ViserServer, callback: Any) -> None:
+    server._websock_server.on_client_disconnect(callback)
+
+
+def page_socket(server: viser.ViserServer, client_id: int) -> Any:
+    """The websockets connection of a page (its frames ahead of the telemetry, its address,
+    closing a page that has gone silent): viser keeps it private."""
+    return server._websock_server._live_connections.get(client_id)
+
+
+def set_prop(handle: Any, name: str, value: Any) -> None:
+    """``handle.<name> = value`` for a value the page takes as it is (arrays of float64
+    or float32 for a plot's data, float32 for batched orientations), without viser's cast
+    against the property's type hint and comparison with the last value (``fast_props``).
+    The caller must not change ``value`` afterwards (viser serialises it later, in its own
+    thread)."""
+    if patched("fast_props"):
+        setattr(handle._impl.props, name, value)
+        handle._queue_update(name, value)
+    else:
+        setattr(handle, name, value)
+
+
+def set_pose(node: Any, position: tuple[float, float, float], wxyz: tuple[float, float, float, float]) -> None:
+    """``node.position = position; node.wxyz = wxyz`` (tuples of floats), without the
+    casts and the comparisons with the last pose (``fast_props``)."""
+    if not patched("fast_props"):
+        node.position = position
+        node.wxyz = wxyz
+        return
+    impl = node._impl
+    impl.position[:] = position
+    impl.wxyz[:] = wxyz
+    queue = impl.api._queue_scene_message
+    queue(vm.SetPositionMessage(impl.name, position))
+    queue(vm.SetOrientationMessage(impl.name, wxyz))

@@ -1,4 +1,4 @@
-"""viser's senders as :mod:`ucat_console.ui.viser_hooks` makes them: every page still
+"""viser's senders as :mod:`ucat_console.ui.viser_compat` makes them: every page still
 receives exactly the messages and arrays the server sent (pages in step sharing frames, a
 page joining late, a scene file written meanwhile), on uvloop, without a wait after a batch."""
 
@@ -22,7 +22,7 @@ from hypothesis import strategies as st
 from support import wait_for
 
 from ucat_console.bench.raw_page import RawPage, split_buffers, with_arrays
-from ucat_console.ui import viser_hooks
+from ucat_console.ui import viser_compat
 
 
 class _Recorder(RawPage):
@@ -44,7 +44,7 @@ class _Recorder(RawPage):
 
 @pytest.fixture
 def server() -> Iterator[viser.ViserServer]:
-    viser_hooks.install()
+    viser_compat.install()
     s = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     yield s
     s.stop()
@@ -177,16 +177,16 @@ def test_the_window_delay_is_one_turn_of_the_loop_and_reports_what_is_done() -> 
         waiting = loop.create_future()
         loop.call_soon(ran.append, "other task")
         before = len(loop._scheduled) if hasattr(loop, "_scheduled") else None
-        done, pending = await viser_hooks._window_delay([flushed, waiting], timeout=0.0)
+        done, pending = await viser_compat._window_delay([flushed, waiting], timeout=0.0)
         assert ran == ["other task"]  # the other ready work had its turn
         assert done == {flushed} and pending == {waiting}
         if before is not None:
             assert len(loop._scheduled) == before  # no timer was made for it
         # a window other than 0 is asyncio's own wait: it times out, or ends with the flush
-        done, pending = await viser_hooks._window_delay([waiting], timeout=0.05)
+        done, pending = await viser_compat._window_delay([waiting], timeout=0.05)
         assert not done and pending == {waiting}
         loop.call_later(0.01, waiting.set_result, True)
-        done, pending = await viser_hooks._window_delay([waiting], timeout=30.0)
+        done, pending = await viser_compat._window_delay([waiting], timeout=30.0)
         assert done == {waiting} and not pending
 
     asyncio.run(scenario())
@@ -200,7 +200,7 @@ def test_a_buffer_s_message_event_is_set_only_in_its_loop_s_thread() -> None:
     message queued from another thread is still sent at once."""
     from viser.infra._async_message_buffer import AsyncMessageBuffer
 
-    viser_hooks.install()
+    viser_compat.install()
     loop = asyncio.new_event_loop()
     thread = threading.Thread(target=loop.run_forever, name="loop", daemon=True)
     thread.start()
@@ -210,7 +210,7 @@ def test_a_buffer_s_message_event_is_set_only_in_its_loop_s_thread() -> None:
 
         buffer = asyncio.run_coroutine_threadsafe(make(), loop).result(10.0)
         event = buffer.message_event
-        assert isinstance(event, viser_hooks._LoopEvent)
+        assert isinstance(event, viser_compat._LoopEvent)
         woke = threading.Event()
 
         async def waiter() -> None:
@@ -243,13 +243,13 @@ def test_a_buffer_s_message_event_is_set_only_in_its_loop_s_thread() -> None:
 
 def test_pages_in_step_are_sent_one_encoding_of_a_broadcast_batch(server: viser.ViserServer, monkeypatch) -> None:
     encoded: list[tuple[str, ...]] = []
-    real = viser_hooks._frame
+    real = viser_compat._frame
 
     def counted(window: Any, zstd: Any) -> bytes:
         encoded.append(tuple(getattr(m, "name", "") for m in window))
         return real(window, zstd)
 
-    monkeypatch.setattr(viser_hooks, "_frame", counted)
+    monkeypatch.setattr(viser_compat, "_frame", counted)
     url = f"http://127.0.0.1:{server.get_port()}"
     pages = [_Recorder(url), _Recorder(url)]
     try:
@@ -316,7 +316,7 @@ def _encoded(form: dict[str, Any], arrays: list[Any]) -> tuple[bytes, list[bytes
     return msgspec.msgpack.encode(form), [bytes(a) for a in arrays]
 
 
-def _both_forms(message: Any, wire_form: Any = viser_hooks._wire_form) -> tuple[Any, Any]:
+def _both_forms(message: Any, wire_form: Any = viser_compat._wire_form) -> tuple[Any, Any]:
     """(viser's own wire form, the console's), each as :func:`_encoded`, or the exception
     type each raised."""
     out = []
@@ -386,7 +386,7 @@ def test_every_message_of_a_console_session_has_viser_s_wire_form(tmp_path, monk
 
     seen: dict[str, int] = {}
     different: list[str] = []
-    real = viser_hooks._wire_form
+    real = viser_compat._wire_form
 
     def checked(message: Any, arrays: list[Any]) -> dict[str, Any]:
         name = type(message).__name__
@@ -396,7 +396,7 @@ def test_every_message_of_a_console_session_has_viser_s_wire_form(tmp_path, monk
             different.append(name)
         return real(message, arrays)
 
-    monkeypatch.setattr(viser_hooks, "_wire_form", checked)
+    monkeypatch.setattr(viser_compat, "_wire_form", checked)
     sup = Supervisor(AppConfig(console=ConsoleConfig(port=0)), sessions_dir=tmp_path)
     app = ConsoleApp(sup)
     app.start()
