@@ -161,14 +161,9 @@ def _descendant_cpu_seconds() -> dict[str, float]:
 
 
 def measure_ui(duration: float = 20.0, pages: int = 2, warmup: float = 5.0, velocity: float = 0.2,
-               chromium: str = CHROMIUM, viewport: tuple[int, int] = (1400, 900),
-               public_path: tuple[str, ...] = ()) -> dict[str, Any]:
-    """Run the console with ``pages`` headless pages and measure (module docstring), with the
-    performance patches ``public_path`` off (viser's own code instead: ``viser_compat.PATCHES``;
-    once per process, before the console's first page server)."""
+               chromium: str = CHROMIUM, viewport: tuple[int, int] = (1400, 900)) -> dict[str, Any]:
+    """Run the console with ``pages`` headless pages and measure (module docstring)."""
     from playwright.sync_api import sync_playwright
-
-    from ucat_console.ui import viser_compat
 
     from ucat_console.backend.access import LOCAL
     from ucat_console.backend.supervisor import Supervisor
@@ -177,7 +172,6 @@ def measure_ui(duration: float = 20.0, pages: int = 2, warmup: float = 5.0, velo
 
     if duration <= 0 or pages < 1:
         raise ValueError(f"duration must be > 0 and pages >= 1, got {duration}, {pages}")
-    viser_compat.use_public_path(public_path)
     cfg = AppConfig(console=ConsoleConfig(port=0))
     with tempfile.TemporaryDirectory() as tmp:
         sup = Supervisor(cfg, sessions_dir=tmp)
@@ -200,11 +194,7 @@ def measure_ui(duration: float = 20.0, pages: int = 2, warmup: float = 5.0, velo
                 for page in opened:
                     page.wait_for_function("() => document.querySelectorAll('.uplot').length >= 5",
                                            timeout=60_000)
-                wire_messages, stop_collecting = _collect_wire_messages(3000)
-                try:
-                    time.sleep(warmup)
-                finally:
-                    stop_collecting()
+                time.sleep(warmup)
                 for page in opened:
                     page.evaluate(_START_COUNTING)
                 scene0, plots0 = app.scene.updates, app.plots.updates
@@ -235,7 +225,7 @@ def measure_ui(duration: float = 20.0, pages: int = 2, warmup: float = 5.0, velo
                 seen = [page.evaluate("() => window.__ucatBench.lastSeq") for page in opened]
                 app.view.on_pose = probe_cb
                 browser.close()
-            parts = page_parts(app, wire_messages)
+            parts = page_parts(app)
             health = sup.health()
         finally:
             sup.stop()
@@ -276,63 +266,16 @@ def measure_ui(duration: float = 20.0, pages: int = 2, warmup: float = 5.0, velo
         "load_average_1min": load0,
         "cpus": os.cpu_count(),
         "page_parts": parts,
-        "public_path": sorted(public_path),
     }
 
 
-def _collect_wire_messages(limit: int) -> tuple[list[Any], Any]:
-    """Keep the first ``limit`` messages the pages' frames convert to their wire form (the
-    console's own ``viser_compat._form`` goes on doing it): (the list they go to, a
-    function that stops the collecting)."""
-    from ucat_console.ui import viser_compat
-
-    real = viser_compat._form
-    kept: list[Any] = []
-
-    def collect(message: Any, arrays: list[Any]) -> Any:
-        if len(kept) < limit:
-            kept.append(message)
-        return real(message, arrays)
-
-    viser_compat._form = collect
-
-    def stop() -> None:
-        viser_compat._form = real
-
-    return kept, stop
-
-
-def page_parts(app: Any, messages: list[Any], rounds: int = 5, refreshes: int = 200) -> dict[str, Any]:
-    """Two parts of the pages' work timed in a tight loop (each ``rounds`` times, in turns;
-    medians): a message's wire form, by viser's ``as_serializable_dict`` and by the
-    console's converter (``viser_compat._wire_form``), over ``messages`` (those the pages
-    were sent in the run); and the plots' series of one refresh (``plots.series_of``) of
-    the live view's window as it is at the end of the run."""
+def page_parts(app: Any, refreshes: int = 200) -> dict[str, Any]:
+    """The plots' series of one refresh (``plots.series_of``) of the live view's window as
+    it is at the end of the run, timed in a tight loop (median of ``refreshes``)."""
     import math
 
-    from ucat_console.ui import viser_compat
     from ucat_console.ui.plots import series_of
 
-    if not messages:
-        raise RuntimeError("no message was sent to the pages: nothing to time")
-    convert = viser_compat._wire_form
-
-    def viser_s() -> float:
-        t0 = time.perf_counter()
-        for m in messages:
-            m.as_serializable_dict([])
-        return (time.perf_counter() - t0) / len(messages) * 1e6
-
-    def console_s() -> float:
-        t0 = time.perf_counter()
-        for m in messages:
-            convert(m, [])
-        return (time.perf_counter() - t0) / len(messages) * 1e6
-
-    theirs, ours = [], []
-    for _ in range(rounds):
-        theirs.append(viser_s())
-        ours.append(console_s())
     plots, view = app.plots, app.view
     n = int(math.ceil(float(view.history()) * plots.rate)) + 1
     times = []
@@ -342,15 +285,7 @@ def page_parts(app: Any, messages: list[Any], rounds: int = 5, refreshes: int = 
         times.append(time.perf_counter() - t0)
     if got is None:
         raise RuntimeError("the live plots hold no window of rows: nothing to time")
-    wire_viser, wire_console = statistics.median(theirs), statistics.median(ours)
-    return {
-        "wire_messages": len(messages),
-        "wire_form_viser_us": wire_viser,
-        "wire_form_console_us": wire_console,
-        "wire_form_ratio": wire_console / wire_viser,
-        "plot_series_points": int(got[0].shape[0]),
-        "plot_series_us": statistics.median(times) * 1e6,
-    }
+    return {"plot_series_points": int(got[0].shape[0]), "plot_series_us": statistics.median(times) * 1e6}
 
 
 def _thread_percent(before: dict[str, float], after: dict[str, float], elapsed: float) -> dict[str, float]:
@@ -364,10 +299,9 @@ def _threads(percent: dict[str, float]) -> str:
 
 
 def format_result(r: dict[str, Any]) -> str:
-    public = ", ".join(r.get("public_path", ())) or "none"
     lines = [
         f"console page benchmark: {len(r['pages'])} headless pages, {r['duration_s']:.0f} s, "
-        f"{r['cpus']} CPUs, load average {r['load_average_1min']:.1f}; patches off (viser's public path): {public}",
+        f"{r['cpus']} CPUs, load average {r['load_average_1min']:.1f}",
         f"server pushes: scene {r['server_scene_updates_per_s']:.1f}/s (configured {r['configured_scene_rate']:g}), "
         f"plots {r['server_plot_updates_per_s']:.1f}/s (configured {r['configured_plot_rate']:g})",
         "pose updates per second: delivered to the page / displayed in a rendered frame",
@@ -387,10 +321,8 @@ def format_result(r: dict[str, Any]) -> str:
     lines.append(f"supervisor CPU without the benchmark's probe {r['supervisor_cpu_percent_without_probe']:.0f} %"
                  " of one core; by thread: " + _threads(r["supervisor_threads_cpu_percent_without_probe"]))
     p = r["page_parts"]
-    lines.append(f"in a tight loop: a message's wire form {p['wire_form_viser_us']:.1f} us by viser's "
-                 f"as_serializable_dict, {p['wire_form_console_us']:.1f} us by the console's converter "
-                 f"({p['wire_form_ratio']:.2f} times; the {p['wire_messages']} messages of the warm-up); "
-                 f"the plots' series of a refresh {p['plot_series_us']:.0f} us ({p['plot_series_points']} points)")
+    lines.append(f"in a tight loop: the plots' series of a refresh {p['plot_series_us']:.0f} us "
+                 f"({p['plot_series_points']} points)")
     return "\n".join(lines)
 
 
@@ -402,10 +334,6 @@ def register_bench(kinds: argparse._SubParsersAction) -> None:
     p.add_argument("--warmup", type=float, default=5.0, help="seconds before measuring")
     p.add_argument("--chromium", default=CHROMIUM, help="Chromium executable")
     p.add_argument("--json", type=Path, default=None, help="write the results as JSON")
-    p.add_argument("--public-path", action="append", default=[], metavar="PATCH",
-                   help="turn a performance patch of ui/viser_compat off (viser's own code instead): "
-                        "one of uvloop, no_window_wait, shared_frames, wire_converter, fast_props, or all; "
-                        "repeatable")
     p.set_defaults(func=run_ui)
 
 
@@ -418,11 +346,7 @@ def run_ui(args: argparse.Namespace) -> int:
     from ucat_console.cli.compiled import prepare_all
 
     prepare_all()
-    from ucat_console.ui.viser_compat import PATCHES
-
-    public = tuple(PATCHES) if "all" in args.public_path else tuple(args.public_path)
-    r = measure_ui(duration=args.duration, pages=args.pages, warmup=args.warmup, chromium=args.chromium,
-                   public_path=public)
+    r = measure_ui(duration=args.duration, pages=args.pages, warmup=args.warmup, chromium=args.chromium)
     r["machine"] = machine_info(None)
     print(format_result(r))
     print(speed_line(r["machine"]))

@@ -42,12 +42,13 @@ reads it in the page to measure update rates and latency.
 from __future__ import annotations
 
 import collections
+import contextlib
 import ipaddress
 import logging
 import math
 import threading
 import time
-from typing import Any, Callable
+from typing import Any, Callable, Iterator
 
 import viser
 
@@ -59,7 +60,6 @@ from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.messages import FinPlan
 from ucat_console.ui import markdown, page_script, panels
 from ucat_console.ui import viser_compat
-from ucat_console.ui.viser_compat import set_prop
 from ucat_console.ui.guard import PageGuard
 from ucat_console.ui.page_jobs import PageJobs
 from ucat_console.ui.playback import PlaybackPanel
@@ -176,7 +176,7 @@ class ConsoleApp:
                 server.scene, gui, supervisor.cfg.plant.geometry, plot_rate=cfg.plot_rate,
                 scene_rate=cfg.scene_rate, max_plot_points=cfg.max_plot_points, history=lambda: self.history,
                 max_history=cfg.max_history, corridor=self._corridor, trail_points=cfg.trail_points,
-                trail_spacing=cfg.trail_spacing, atomic=server.atomic, on_slow=self._tick_slow,
+                trail_spacing=cfg.trail_spacing, atomic=lambda: _sent_at_once(server), on_slow=self._tick_slow,
                 on_tick=self._tick, on_pose=self._probe if probe else None, plot_height=PLOT_HEIGHT, name="live",
             )
         # each page's review of recorded sessions goes here (its plots in this tab)
@@ -383,8 +383,8 @@ class ConsoleApp:
     def _probe(self) -> None:
         body, probe = self.view.body, self.probe
         if probe is not None and body is not None:
-            set_prop(probe, "content", f'<span id="ucat-probe" data-seq="{self.view.body_seq}" '
-                                       f'data-wall="{self.view.body_wall * 1e3:.1f}" data-t="{body.t:.3f}"></span>')
+            probe.content = (f'<span id="ucat-probe" data-seq="{self.view.body_seq}" '
+                             f'data-wall="{self.view.body_wall * 1e3:.1f}" data-t="{body.t:.3f}"></span>')
 
     def _tick(self) -> None:
         if self._dirty.is_set():
@@ -490,3 +490,13 @@ def _no_share_url(*args: Any, **kwargs: Any) -> None:
 def _set(handle: Any, content: str) -> None:
     if handle.content != content:
         handle.content = content
+
+
+@contextlib.contextmanager
+def _sent_at_once(server: viser.ViserServer) -> Iterator[None]:
+    """``server.atomic()`` (the pages apply the pass's messages together), then the batch
+    sent at once: viser otherwise waits up to 1/60 s for more messages after each batch (its
+    buffer's window), a pose's latency for nothing when the pass is one batch anyway."""
+    with server.atomic():
+        yield
+    server.flush()

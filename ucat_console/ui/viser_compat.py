@@ -21,7 +21,7 @@ what a page is sent, so :func:`install` replaces names in viser's websocket modu
   one is refused, not a traceback that closes the connection), and not at all when it is
   one of the pilot's safety commands, which the guard runs on its own thread
   (``PageGuard.take_urgent``);
-* the per-page sender (:func:`_sending_producer`): for such a server, a page is sent
+* the per-page sender (:func:`_pacing_producer`): for such a server, a page is sent
   telemetry only while its link has room (``PageGuard.wait_room``,
   :mod:`ucat_console.ui.link`), and a page on a slow link gets its batches in parts,
   thinned (:func:`_send_thinned`). :func:`encode_frame` makes the frames the guard sends
@@ -32,9 +32,12 @@ Correctness: every message buffer's event is a :class:`_LoopEvent`, set only in 
 loop's thread: viser sets it from whichever thread queued a message, which races the loop
 ("deque mutated during iteration").
 
-Performance (:data:`PATCHES`, each measured against viser's public path with ``ucat-console
-bench ui --public-path NAME``; kept only where it buys >= 25 % of a figure an operator
-sees, docs/viser-compat.md): see :data:`PATCHES`.
+No patch for speed: each one the console had (uvloop's event loop, no window wait after a
+batch, one encoding of a broadcast batch for all pages, a per-class wire-form converter,
+setting the live view's properties without viser's casts) was measured against viser's
+public path with ``ucat-console bench ui`` and bought no figure an operator sees by 25 %
+(docs/viser-compat.md); the live view flushes viser's buffer after each pass instead
+(public ``ViserServer.flush``).
 
 And the handles' and messages' private names the console needs (:func:`handle_uuid`,
 :func:`show_value`, :func:`set_slider_marks`, :func:`run_javascript`, the guard's
@@ -45,49 +48,22 @@ from __future__ import annotations
 
 import asyncio
 import itertools
-import logging
 import threading
 import time
 import types
-import typing
-from typing import Any, Iterable, Sequence
+from typing import Any, Sequence
 
 import msgspec
-import numpy as np
 import zstandard
 
 import viser
 import viser.infra._async_message_buffer as vbuffer
 import viser.infra._infra as vinfra
 import viser._messages as vm
-import viser.infra._messages as vmessages
 from websockets.exceptions import ConnectionClosed
 from websockets.frames import CloseCode
 
-try:
-    import uvloop
-except ImportError:  # no build for this platform (Windows): viser keeps asyncio's loop
-    uvloop = None
-
 from ucat_console.backend.dependencies import require
-
-log = logging.getLogger(__name__)
-
-#: The performance patches, each on unless :func:`use_public_path` turned it off before
-#: :func:`install` (``ucat-console bench ui --public-path NAME`` measures viser's own path):
-#: name -> what it replaces (docs/viser-compat.md: its measured figure and why it is kept).
-PATCHES: dict[str, str] = {
-    "uvloop": "viser's websocket thread on uvloop's event loop (viser: asyncio.new_event_loop)",
-    "no_window_wait": "no 1/60 s wait for more messages after each batch (AsyncMessageBuffer's window), "
-                      "and that window's wait made one turn of the loop (_window_delay)",
-    "shared_frames": "pages in step are sent the same encoded frame of a broadcast batch "
-                     "(viser encodes it once per page)",
-    "wire_converter": "a message's wire form by a converter made once per message class (_wire_form) "
-                      "instead of viser's as_serializable_dict",
-    "fast_props": "the live view's poses and plot data set without viser's casts and comparisons "
-                  "(set_pose, set_prop)",
-}
-_PUBLIC: set[str] = set()  # the patches turned off
 
 #: the guard of the server being constructed (:func:`guarded_server`; under _PENDING_LOCK)
 _PENDING: list[Any] = []
@@ -112,25 +88,6 @@ def guarded_server(guard: Any, **kwargs: Any) -> viser.ViserServer:
     if thread is not None:
         thread.name = "viser-websocket"
     return server
-
-
-def use_public_path(names: Iterable[str]) -> None:
-    """Turn the performance patches ``names`` off (viser's own code runs instead), before
-    :func:`install` (``bench ui --public-path``)."""
-    names = set(names)
-    unknown = names - set(PATCHES)
-    if unknown:
-        raise ValueError(f"no performance patch named {', '.join(sorted(unknown))}: "
-                         f"they are {', '.join(PATCHES)}")
-    if _INSTALLED and names != _PUBLIC:
-        raise RuntimeError("viser's patches are installed already: choose the public path before")
-    _PUBLIC.clear()
-    _PUBLIC.update(names)
-
-
-def patched(name: str) -> bool:
-    """Whether the performance patch ``name`` is on."""
-    return name not in _PUBLIC
 
 
 def install() -> None:
@@ -194,24 +151,16 @@ def install() -> None:
     asyncio_ns = types.SimpleNamespace(server=server_ns)
     vinfra.websockets = _ModuleView(real_ws, asyncio=asyncio_ns)
     vinfra._message_consumer = guarded_consumer
-    if uvloop is not None and patched("uvloop"):
-        vinfra.asyncio = _ModuleView(asyncio, new_event_loop=uvloop.new_event_loop)
     vbuffer.AsyncMessageBuffer.__init__ = _with_loop_event(vbuffer.AsyncMessageBuffer.__init__)
-    vinfra._message_producer = _sharing_producer
-    if patched("no_window_wait"):
-        vbuffer.asyncio = _ModuleView(asyncio, wait=_window_delay)
+    vinfra._message_producer = _pacing_producer
     _INSTALLED = True
 
 
 def _with_loop_event(real_init: Any) -> Any:
-    """``AsyncMessageBuffer.__init__`` with a :class:`_LoopEvent` for its message event, and
-    a window duration of 0 (:data:`PATCHES` ``no_window_wait``)."""
-    no_wait = patched("no_window_wait")
+    """``AsyncMessageBuffer.__init__`` with a :class:`_LoopEvent` for its message event."""
 
     def __init__(self: Any, *args: Any, **kwargs: Any) -> None:
         real_init(self, *args, **kwargs)
-        if no_wait:
-            self.window_duration_sec = 0.0
         self.message_event = _LoopEvent(self.event_loop)
 
     return __init__
@@ -244,22 +193,6 @@ class _LoopEvent(asyncio.Event):
             super().set()
 
 
-async def _window_delay(fs: Any, *, timeout: float | None = None) -> tuple[set[Any], set[Any]]:
-    """``asyncio.wait`` for viser's window loop, the only caller in its buffer module, which
-    waits there for the window duration or a flush, whichever is first. With a window of
-    0 (:func:`_without_window_wait`) that wait is one turn of the event loop: here a bare
-    yield, without asyncio's timer, future and callbacks for each window (module docstring)."""
-    if timeout != 0:
-        return await asyncio.wait(fs, timeout=timeout)
-    await asyncio.sleep(0)
-    done = {f for f in fs if f.done()}
-    return done, set(fs) - done
-
-
-#: the frames each broadcast buffer keeps for its other pages' senders (the last few windows)
-_KEPT_FRAMES = 4
-
-
 def compressor() -> Any:
     """A compressor for :func:`encode_frame` (one per thread that encodes)."""
     return zstandard.ZstdCompressor(level=1)
@@ -272,9 +205,12 @@ def encode_frame(messages: Sequence[Any], zstd: Any) -> bytes:
 
 def _frame(window: Sequence[Any], zstd: Any) -> bytes:
     """A window of messages as viser's wire frame (``viser.infra._infra._message_producer``):
-    zstd-compressed msgpack of the messages' wire forms, then their arrays, 8-byte aligned."""
-    arrays: list[memoryview] = []
-    forms = tuple(_form(m, arrays) for m in window)
+    zstd-compressed msgpack of the messages' wire forms (viser's ``as_serializable_dict``),
+    then their arrays, 8-byte aligned. viser has no public call that encodes a frame: the
+    guard sends its frames (heartbeat requests, the status bar) ahead of the page's queue,
+    and the sender below paces the page's windows, so both encode them here."""
+    arrays: list[Any] = []
+    forms = tuple(m.as_serializable_dict(arrays) for m in window)
     inner = msgspec.msgpack.encode({
         "messages": forms,
         "timestampSec": time.perf_counter(),
@@ -287,139 +223,38 @@ def _frame(window: Sequence[Any], zstd: Any) -> bytes:
     return b"".join(parts)
 
 
-def _form(message: Any, arrays: list[memoryview]) -> dict[str, Any]:
-    """A message's wire form: :func:`_wire_form`, or viser's own with ``wire_converter`` off."""
-    if patched("wire_converter"):
-        return _wire_form(message, arrays)
-    return message.as_serializable_dict(arrays)
-
-
-def _wire_form(message: Any, arrays: list[memoryview]) -> dict[str, Any]:
-    """``message.as_serializable_dict(arrays)``: the same dict and the same arrays in the same
-    order, by a converter made once per message class (:func:`_wire_converter`)."""
-    convert = _CONVERTERS.get(type(message))
-    if convert is None:
-        convert = _CONVERTERS[type(message)] = _wire_converter(type(message))
-    return convert(message, arrays)
-
-
-_CONVERTERS: dict[type, Any] = {}
-
-
-def _wire_converter(cls: type) -> Any:
-    """A message class's wire form without viser's per-value type dispatch.
-
-    viser's ``as_serializable_dict`` runs ``_prepare_for_serialization`` on every field and,
-    recursively, on every value in it: a cascade of type checks per value, for the 40 poses
-    and 60 plot updates a second the largest part of the frames' encoding. Here each field's
-    conversion is chosen once from its type hint, and values of plain types (str, float,
-    int, bool, None, tuple, list, dict, numpy array) are converted as viser converts them;
-    any other value, or a value that does not fit its hint, goes to viser's own function."""
-    hints = vmessages.get_type_hints_cached(cls)
-    fields = tuple((name, _field_converter(hints[name])) for name in vmessages.wire_field_names(cls))
-    type_name = cls.__name__
-
-    def convert(message: Any, arrays: list[memoryview]) -> dict[str, Any]:
-        out = {name: conv(getattr(message, name), arrays) for name, conv in fields}
-        out["type"] = type_name
-        return out
-
-    return convert
-
-
-def _field_converter(hint: Any) -> Any:
-    prepare = vmessages._prepare_for_serialization
-    args = typing.get_args(hint)
-    if hint is str:
-        def convert_str(v: Any, arrays: list[memoryview]) -> Any:
-            return v if type(v) is str else prepare(v, hint, arrays)
-        return convert_str
-    if typing.get_origin(hint) is tuple and args and Ellipsis not in args and all(a is float for a in args):
-        n = len(args)
-
-        def convert_floats(v: Any, arrays: list[memoryview]) -> Any:
-            if type(v) is tuple and len(v) == n:
-                return tuple([float(x) for x in v])  # viser: float(x) for a float hint
-            return prepare(v, hint, arrays)
-        return convert_floats
-    if typing.get_origin(hint) is dict:
-        def convert_dict(v: Any, arrays: list[memoryview]) -> Any:
-            if type(v) is dict:  # viser: each value as for an Any hint, whatever the dict's hint
-                return {k: _any(x, arrays) for k, x in v.items()}
-            return prepare(v, hint, arrays)
-        return convert_dict
-    if hint is Any:
-        return _any
-    return lambda v, arrays: prepare(v, hint, arrays)
-
-
-_PLAIN = (str, float, int, bool, type(None))
-
-
-def _any(v: Any, arrays: list[memoryview]) -> Any:
-    """viser's ``_prepare_for_serialization(v, Any, arrays)`` for values of plain types."""
-    t = type(v)
-    if t in _PLAIN:
-        return v
-    if t is tuple:
-        return tuple([_any(x, arrays) for x in v])
-    if t is np.ndarray:
-        arrays.append(v.data if v.flags.c_contiguous else v.copy().data)
-        return {"__binary_index": len(arrays) - 1, "dtype": v.dtype.str}
-    if t is list:
-        return [_any(x, arrays) for x in v]
-    if t is dict:
-        return {k: _any(x, arrays) for k, x in v.items()}
-    return vmessages._prepare_for_serialization(v, Any, arrays)
-
-
-async def _sharing_producer(websocket: Any, buffer: Any, client_id: int, backlog_done_message: Any = None) -> None:
-    """viser's per-page sender (``viser.infra._infra._message_producer``, 1.1.1), sending a
-    window of the broadcast buffer that another page's sender has just sent as the same
-    frame bytes (module docstring)."""
+async def _pacing_producer(websocket: Any, buffer: Any, client_id: int, backlog_done_message: Any = None) -> None:
+    """viser's per-page sender (``viser.infra._infra._message_producer``, 1.1.1) for a
+    guarded server's page: a window is taken from viser's buffer only while the page's link
+    has room (the page guard's "slow links"), so what waits meanwhile is coalesced by
+    viser's buffer to the newest value of each property; a page on a slow link gets its
+    windows in parts (:func:`_send_thinned`). A page of any other server gets viser's own."""
+    guard = _GUARDS.get(getattr(websocket, "server", None))
+    if guard is None:
+        return await _VISER_PRODUCER(websocket, buffer, client_id, backlog_done_message)
     window_generator = buffer.window_generator(client_id, backlog_done_message=backlog_done_message)
     zstd = zstandard.ZstdCompressor(level=1)
-    # only the broadcast buffer (the persistent one) has more than one sender; its senders
-    # all run in the server's one event-loop thread
-    kept: dict[tuple[int, ...], tuple[Sequence[Any], bytes]] | None = None
-    if buffer.persistent_messages and patched("shared_frames"):
-        kept = buffer.__dict__.setdefault("_ucat_frames", {})
-    # a guarded server's page is sent telemetry only while its link has room (the page
-    # guard's "slow links"): the window is taken from the buffer only then, so what waits
-    # meanwhile is coalesced by viser's buffer to the newest value of each property
-    guard = _GUARDS.get(getattr(websocket, "server", None))
-    page = guard.flow(client_id) if guard is not None else None
+    page = guard.flow(client_id)
     last_sent: dict[str, int] = {}  # a large update's key -> when it last went (_send_thinned)
     try:
         while not buffer.done:
-            if page is not None:
-                await guard.wait_room(page)
+            await guard.wait_room(page)
             try:
                 window = await window_generator.__anext__()
             except StopAsyncIteration:
                 break
-            if page is not None and page.link.split and len(window) > 1:
+            if page.link.split and len(window) > 1:
                 await _send_thinned(websocket, buffer, guard, page, window, zstd, last_sent)
                 continue
-            if kept is None:
-                data = _frame(window, zstd)
-            else:
-                # the key holds while the entry keeps the window's messages alive
-                key = tuple(map(id, window))
-                entry = kept.get(key)
-                if entry is None:
-                    data = _frame(window, zstd)
-                    kept[key] = (window, data)
-                    if len(kept) > _KEPT_FRAMES:
-                        del kept[next(iter(kept))]
-                else:
-                    data = entry[1]
-            if page is not None:
-                guard.sent(page, len(data))
+            data = _frame(window, zstd)
+            guard.sent(page, len(data))
             await websocket.send(data)
     finally:
         # closed at once, as viser's own sender does: its finally releases the GC cursor
         await window_generator.aclose()
+
+
+_VISER_PRODUCER = vinfra._message_producer
 
 
 #: an update whose frame is over this many bytes goes after the small ones in a thinned batch
@@ -558,29 +393,12 @@ def page_socket(server: viser.ViserServer, client_id: int) -> Any:
     return server._websock_server._live_connections.get(client_id)
 
 
-def set_prop(handle: Any, name: str, value: Any) -> None:
-    """``handle.<name> = value`` for a value the page takes as it is (arrays of float64
-    or float32 for a plot's data, float32 for batched orientations), without viser's cast
-    against the property's type hint and comparison with the last value (``fast_props``).
-    The caller must not change ``value`` afterwards (viser serialises it later, in its own
-    thread)."""
-    if patched("fast_props"):
-        setattr(handle._impl.props, name, value)
-        handle._queue_update(name, value)
-    else:
-        setattr(handle, name, value)
-
-
-def set_pose(node: Any, position: tuple[float, float, float], wxyz: tuple[float, float, float, float]) -> None:
-    """``node.position = position; node.wxyz = wxyz`` (tuples of floats), without the
-    casts and the comparisons with the last pose (``fast_props``)."""
-    if not patched("fast_props"):
-        node.position = position
-        node.wxyz = wxyz
-        return
-    impl = node._impl
-    impl.position[:] = position
-    impl.wxyz[:] = wxyz
-    queue = impl.api._queue_scene_message
-    queue(vm.SetPositionMessage(impl.name, position))
-    queue(vm.SetOrientationMessage(impl.name, wxyz))
+def set_plot_data(chart: Any, data: tuple[Any, ...]) -> None:
+    """``chart.data = data`` for a uPlot chart, with the arrays sent as they are: viser's
+    assignment casts every array to float64 (its props' type hint), which doubles the bytes
+    of the plots' values the console keeps in float32 (the time axis is float64), and the
+    plots are most of what a page on a slow link is sent (docs/pages.md). viser has no public
+    way to set a property without its cast. The caller must not change the arrays afterwards
+    (viser serialises them later, in its own thread)."""
+    chart._impl.props.data = data
+    chart._queue_update("data", data)
