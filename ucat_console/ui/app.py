@@ -428,8 +428,8 @@ class ConsoleApp:
                 continue
             try:
                 panel.show_events()
-                uuids = {"disarm_uuid": viser_compat.handle_uuid(panel.disarm), "drive_uuid": viser_compat.handle_uuid(panel.drive_input),
-                         "theme_uuid": viser_compat.handle_uuid(panel.theme_button)}
+                uuids = {f"{name}_uuid": viser_compat.handle_uuid(handle) for name, handle in
+                         (("disarm", panel.disarm), ("drive", panel.drive_input), ("theme", panel.theme_button))}
                 state = bar_state(sup, cid, dark=page.dark, uuids=uuids, loading=self.loading,
                                   link_slow=self.guard.link_slow(cid))
                 # what the pilot must see first (ahead of the telemetry on a slow link)

@@ -39,8 +39,8 @@ as its TCP connection is open. :class:`PageGuard` stands between the websocket a
 viser does not offer hooks for these, so :mod:`ucat_console.ui.viser_compat` wraps names in
 viser's websocket module (the ``websockets`` serve call, the per-connection message consumer
 and sender) for every server viser starts for :meth:`PageGuard.serve`, including its tries on
-other ports (then refused: :class:`PortTaken`); servers
-created otherwise are left as viser makes them.
+other ports (then refused: :class:`PortTaken`); servers created otherwise are left as viser
+makes them.
 """
 
 from __future__ import annotations
@@ -60,10 +60,17 @@ from urllib.parse import urlsplit
 import viser
 
 from ucat_console.ui import viser_compat
-from ucat_console.ui import viser_compat as vm
+from ucat_console.ui.viser_compat import (
+    CommandTriggerMessage,
+    GuiUpdateMessage,
+    LocalStorageGetItemRequestMessage,
+    LocalStorageGetItemResponseMessage,
+    ViewerCameraMessage,
+)
 from ucat_console.ui.link import PageLink
 
 log = logging.getLogger(__name__)
+
 
 class PortTaken(OSError):
     """The page's server could not have the port it was given (``port``); viser had served
@@ -387,7 +394,7 @@ class PageGuard:
     def _why_refused(self, page: _Page, message: Any) -> str | None:
         now = self.clock()
         tp = type(message)
-        if tp is vm.LocalStorageGetItemResponseMessage:
+        if tp is LocalStorageGetItemResponseMessage:
             seq = _heartbeat_seq(message.request_uuid)
             if seq is not None and page.link.answered(seq, now):  # before the rate limit:
                 page.last_answer = now  # a busy page never loses its proof of life
@@ -400,15 +407,15 @@ class PageGuard:
         if page.tokens < 1.0:
             return f"over the message rate of {MESSAGE_RATE:g}/s"
         page.tokens -= 1.0
-        if tp is vm.ViewerCameraMessage:
+        if tp is ViewerCameraMessage:
             return None
-        if tp is vm.LocalStorageGetItemResponseMessage:
+        if tp is LocalStorageGetItemResponseMessage:
             if _heartbeat_seq(message.request_uuid) is not None:
                 return "an answer to no heartbeat request of the console"
             value = message.value
             return None if value is None or (isinstance(value, str) and len(value) <= MAX_TEXT) else \
                 "a stored value over the size limit"
-        if tp is vm.GuiUpdateMessage:
+        if tp is GuiUpdateMessage:
             rule = self._inputs.get(message.uuid) if isinstance(message.uuid, str) else None
             if rule is None:
                 return f"an update of {_short(message.uuid)}, which is not an input of this page"
@@ -429,7 +436,7 @@ class PageGuard:
                 except Exception:
                     log.debug("restoring %s failed", rule.name, exc_info=True)
             return f"{rule.name}: {bad}"
-        if tp is vm.CommandTriggerMessage:
+        if tp is CommandTriggerMessage:
             rule = self._commands.get(message.uuid) if isinstance(message.uuid, str) else None
             if rule is None or rule.client != page.client:
                 return "a command that is not this page's"
@@ -442,7 +449,7 @@ class PageGuard:
         """For an admitted message: whether it is a safety command (its rule has ``urgent``),
         now queued for the guard's safety thread; viser is not to see it then."""
         tp = type(message)
-        table = self._inputs if tp is vm.GuiUpdateMessage else self._commands if tp is vm.CommandTriggerMessage \
+        table = self._inputs if tp is GuiUpdateMessage else self._commands if tp is CommandTriggerMessage \
             else None
         if table is None:
             return False
@@ -548,7 +555,7 @@ class PageGuard:
         if messages is None:
             page.seq += 1
             seq = page.seq
-            messages = (vm.LocalStorageGetItemRequestMessage(key=HEARTBEAT_KEY, request_uuid=f"{_HB_PREFIX}{seq}"),)
+            messages = (LocalStorageGetItemRequestMessage(key=HEARTBEAT_KEY, request_uuid=f"{_HB_PREFIX}{seq}"),)
         data = viser_compat.encode_frame(messages, self._zstd)
         page.link.sent(len(data), now)
         if seq is not None:

@@ -57,7 +57,6 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
-
 from ucat_console.backend.sessions import files, index, repair, shared
 from ucat_console.backend.sessions.markers import MAX_NOTE_BYTES, Marker, check_note
 from ucat_console.backend.sessions.player import MAX_SPEED, MIN_SPEED, Player, check_speed

@@ -40,7 +40,7 @@ public path with ``ucat-console bench ui`` and bought no figure an operator sees
 (public ``ViserServer.flush``).
 
 And the handles' and messages' private names the console needs (:func:`handle_uuid`,
-:func:`show_value`, :func:`set_slider_marks`, :func:`run_javascript`, the guard's
+:func:`show_value`, :func:`set_slider_marks`, :func:`set_plot_data`, :func:`run_javascript`, the guard's
 accessors, :data:`PAGE_CLIENT` for the page script), each with its reason below.
 """
 
@@ -230,11 +230,11 @@ async def _pacing_producer(websocket: Any, buffer: Any, client_id: int, backlog_
     viser's buffer to the newest value of each property; a page on a slow link gets its
     windows in parts (:func:`_send_thinned`). A page of any other server gets viser's own."""
     guard = _GUARDS.get(getattr(websocket, "server", None))
-    if guard is None:
+    page = guard.flow(client_id) if guard is not None else None
+    if page is None:  # not a guarded server's, or a page its guard does not follow
         return await _VISER_PRODUCER(websocket, buffer, client_id, backlog_done_message)
     window_generator = buffer.window_generator(client_id, backlog_done_message=backlog_done_message)
     zstd = zstandard.ZstdCompressor(level=1)
-    page = guard.flow(client_id)
     last_sent: dict[str, int] = {}  # a large update's key -> when it last went (_send_thinned)
     try:
         while not buffer.done:
