@@ -102,7 +102,8 @@ def install() -> None:
     real_consumer = vinfra._message_consumer
 
     def guarded_serve(handler: Any, host: Any, port: Any, **kwargs: Any) -> Any:
-        # the same guard for each of viser's tries (the next port when one is taken)
+        # the same guard for each of viser's tries (the next port when one is taken); a plain
+        # ViserServer another thread starts meanwhile would be guarded too (the safe side)
         guard = _PENDING[-1] if _PENDING else None
         if guard is None:
             return real_serve(handler, host, port, **kwargs)
