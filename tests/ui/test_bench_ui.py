@@ -42,12 +42,8 @@ def test_bench_counts_pose_updates_delivered_and_displayed_on_every_page() -> No
     # the browser's own processes are found and measured (the pages draw, so both work)
     assert r["browser_cpu_percent"]["gpu"] > 0 and r["browser_cpu_percent"]["renderer"] > 0
 
-    # the pages' two parts timed after the run: over the messages the pages were sent, and
-    # the live plots' window as the run left it
+    # the plots' series timed after the run, over the live plots' window as the run left it
     parts = r["page_parts"]
-    assert parts["wire_messages"] > 0
-    assert parts["wire_form_viser_us"] > 0 and parts["wire_form_console_us"] > 0
-    assert parts["wire_form_ratio"] == parts["wire_form_console_us"] / parts["wire_form_viser_us"]
     assert parts["plot_series_points"] >= 2 and parts["plot_series_us"] > 0
 
     s = summary(r)

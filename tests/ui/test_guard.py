@@ -8,6 +8,8 @@ so they can send what no browser page would, stop answering, or stop reading.
 from __future__ import annotations
 
 import logging
+from pathlib import Path
+import socket
 import threading
 import time
 from typing import Callable
@@ -18,7 +20,9 @@ from support import TOKEN, Console, console_config, wait_for
 
 from ucat_console.backend.access import LOCAL
 from ucat_console.bench.raw_page import RawPage
-from ucat_console.ui.guard import MAX_FRAME, origin_allowed
+from ucat_console.telemetry import channels as ch
+from ucat_console.ui import viser_compat
+from ucat_console.ui.guard import MAX_FRAME, PageGuard, PortTaken, origin_allowed
 
 PILOT_GONE = 1.0
 GUARD_SETTINGS = {"scene_rate": 10.0, "plot_rate": 2.0, "heartbeat_period": 0.1}
@@ -85,6 +89,82 @@ def test_a_reverse_proxys_origin_can_be_allowed(guarded: Callable[..., Console])
             RawPage(c.url, origin="https://other.example.org")
     finally:
         c.stop()
+
+
+# ------------------------------------------------------------------ ports
+def _taken_port() -> socket.socket:
+    """A socket bound and listening on a free port of 127.0.0.1 (another program's)."""
+    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    sock.bind(("127.0.0.1", 0))
+    sock.listen(1)
+    return sock
+
+
+def _bare_guard() -> PageGuard:
+    return PageGuard(is_pilot=lambda cid: False, pilot_timeout=lambda: 1.0, page_timeout=5.0, heartbeat_period=1.0)
+
+
+def test_the_server_viser_starts_on_the_next_port_is_guarded_too() -> None:
+    """When the port asked for is taken, viser serves on the next free one: that server's
+    handshakes and messages go through the guard all the same."""
+    sock = _taken_port()
+    taken = sock.getsockname()[1]
+    guard = _bare_guard()
+    server = viser_compat.guarded_server(guard, host="127.0.0.1", port=taken, verbose=False)
+    try:
+        got = server.get_port()
+        assert got != taken  # viser's retry
+        url = f"http://127.0.0.1:{got}"
+        with pytest.raises(websockets.exceptions.InvalidStatus) as e:
+            RawPage(url, origin="http://evil.example")
+        assert e.value.response.status_code == 403
+        assert any(why == "origin http://evil.example" for _, why in guard.refusals)
+        page = RawPage(url)  # no Origin: let through, and its messages decoded by the guard
+        try:
+            page.send_raw("a text frame")
+            wait_for(lambda: any("a text frame" in why for _, why in guard.refusals), what="the guard's refusal")
+        finally:
+            page.close()
+    finally:
+        server.stop()
+        sock.close()
+
+
+def test_the_console_refuses_a_port_other_than_the_one_it_was_given(tmp_path: Path) -> None:
+    sock = _taken_port()
+    taken = sock.getsockname()[1]
+    try:
+        with pytest.raises(PortTaken, match=f"port {taken} is in use"):
+            _bare_guard().serve(host="127.0.0.1", port=taken, verbose=False)
+        with pytest.raises(PortTaken, match=f"port {taken} is in use"):
+            Console(console_config(TOKEN, port=taken), tmp_path, serve=True)
+        # and the server viser had started on another port is gone
+        guard = _bare_guard()
+        with pytest.raises(PortTaken) as e:
+            guard.serve(host="127.0.0.1", port=taken, verbose=False)
+        assert guard.server is None and e.value.got != taken
+
+        def refused() -> bool:
+            try:
+                socket.create_connection(("127.0.0.1", e.value.got), timeout=1.0).close()
+            except ConnectionRefusedError:
+                return True
+            return False
+        wait_for(refused, what=f"port {e.value.got} closed")
+    finally:
+        sock.close()
+
+
+def test_an_automatic_port_is_reported(tmp_path: Path, caplog) -> None:
+    caplog.set_level(logging.INFO, logger="ucat_console.ui.guard")
+    guard = _bare_guard()
+    server = guard.serve(host="127.0.0.1", port=0, verbose=False)
+    try:
+        assert server.get_port() != 0
+        assert f"on port {server.get_port()} (chosen by the system)" in caplog.text
+    finally:
+        guard.stop()
+        server.stop()
 
 
 # ------------------------------------------------------------------ liveness

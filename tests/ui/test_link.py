@@ -2,7 +2,7 @@
 through the console's real page guard, sender and viser's buffer, on a simulated clock.
 
 The simulation (:class:`SlowLink`) runs the guard's heartbeats (``tick``), its frames sent
-ahead and its pacing of the telemetry (the console's sender, ``viser_hooks._sharing_producer``,
+ahead and its pacing of the telemetry (the console's sender, ``viser_compat._pacing_producer``,
 on viser's broadcast buffer) in an event loop driven step by step; the network is a pipe
 that delivers 50 kB per simulated second to a page that answers every heartbeat request as
 soon as it has read it. The live view's traffic is imitated: the robot's pose 40 times a
@@ -24,7 +24,7 @@ from viser.infra._async_message_buffer import AsyncMessageBuffer
 
 from ucat_console.bench.raw_page import decode_batch
 from ucat_console.ui import link as link_mod
-from ucat_console.ui import viser_hooks
+from ucat_console.ui import viser_compat
 from ucat_console.ui.guard import PageGuard
 from ucat_console.ui.link import MIN_BUDGET, PageLink
 
@@ -144,7 +144,7 @@ class SlowLink:
     DT = 0.01
 
     def __init__(self, rate: float, pilot_timeout: float = 2.0, heartbeat_period: float = 0.25) -> None:
-        viser_hooks.install()
+        viser_compat.install()
         self.rate = rate
         self.clock = FakeClock()
         self.gone: list[tuple[int, float]] = []
@@ -154,10 +154,10 @@ class SlowLink:
         self.loop = asyncio.new_event_loop()
         self.guard.loop = self.loop  # the heartbeat thread is not started: the test ticks
         self.ws = FakeSocket()
-        viser_hooks._GUARDS[self.ws.server] = self.guard
+        viser_compat._GUARDS[self.ws.server] = self.guard
         self.guard.page_opened(0, None, self.ws)
         self.buffer = AsyncMessageBuffer(self.loop, persistent_messages=True)
-        self.producer = self.loop.create_task(viser_hooks._sharing_producer(self.ws, self.buffer, 0))
+        self.producer = self.loop.create_task(viser_compat._pacing_producer(self.ws, self.buffer, 0))
         self.answering = True
         self.reading = True
         self.pose_sent = 0.0  # the newest pose pushed (its x is the time it was pushed)
@@ -176,7 +176,7 @@ class SlowLink:
         self.producer.cancel()
         self._drive()
         self.loop.close()
-        viser_hooks._GUARDS.pop(self.ws.server, None)
+        viser_compat._GUARDS.pop(self.ws.server, None)
 
     def _drive(self) -> None:
         """Let the event loop run until its tasks wait (a few turns)."""
@@ -197,6 +197,7 @@ class SlowLink:
             for k in range(5):  # five plots, three series of 600 points each
                 data = tuple(self._rng.standard_normal(600) for _ in range(3))
                 self.buffer.push(vm.GuiUpdateMessage(uuid=f"plot-{k}", updates={"data": data}))
+        self.buffer.flush()  # as the live view does after each pass (``ui.app._sent_at_once``)
 
     def _read(self, nbytes: float) -> None:
         """The page reads up to ``nbytes``; each frame it completes is applied."""

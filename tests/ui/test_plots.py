@@ -15,6 +15,7 @@ from plots_reference import chart_data, filled, span_pins, st_shown
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.messages import BodyState, Power, Setpoints
 from ucat_console.ui.plots import COL, MIN_SPAN, ST_HIDDEN, LivePlots, PlotFeeder, RingBuffer
+from ucat_console.ui import viser_compat
 
 
 def test_ring_buffer_keeps_the_newest_rows_in_order() -> None:
@@ -134,8 +135,8 @@ def test_span_pins_keep_a_minimum_axis_span_around_the_data() -> None:
 
 
 def test_a_page_receives_the_plots_and_the_pose_the_view_sends() -> None:
-    """The live view's plots and robot pose, set without viser's casts (``ui.fast_props``),
-    reach a page (a raw websocket client) as the values the view computed."""
+    """The live view's plots (their values as float32: ``ui.viser_compat.set_plot_data``) and
+    robot pose reach a page (a raw websocket client) as the values the view computed."""
     import viser
 
     from support import wait_for
@@ -164,7 +165,7 @@ def test_a_page_receives_the_plots_and_the_pose_the_view_sends() -> None:
         view.on_message(ch.BODY_STATE, BodyState(0.4, (0.4, -0.1, 1.04), (0.9, 0.1, 0.0, 0.4243),
                                                  (0.2, 0.0, 0.0), (0.0, 0.0, 0.05), 1.04))
         view.tick_scene()
-        depth_uuid = view.plots.depth._impl.uuid
+        depth_uuid = viser_compat.handle_uuid(view.plots.depth)
         data = wait_for(lambda: (d := page.elements.get(depth_uuid, {}).get("data")) is not None and len(d[0]) == 5
                         and d, what="the depth plot's five rows")
         t, depth, target = (np.asarray(a) for a in data[:3])
@@ -173,7 +174,7 @@ def test_a_page_receives_the_plots_and_the_pose_the_view_sends() -> None:
         np.testing.assert_allclose(target, 1.2)
         assert t.dtype == np.float64  # the time axis keeps its resolution; the values are float32
         assert depth.dtype == target.dtype == np.float32
-        st = wait_for(lambda: (d := page.elements.get(view.plots.st._impl.uuid, {}).get("data")) is not None
+        st = wait_for(lambda: (d := page.elements.get(viser_compat.handle_uuid(view.plots.st), {}).get("data")) is not None
                       and len(d[0]) == 5 and d, what="the St plot's five rows")
         assert len(st) == 1 + 2 + 4 + 1 + 1  # t, the corridor's two edges, four fins, St above 1, changes
         np.testing.assert_allclose(np.asarray(st[1]), 0.35)
@@ -212,7 +213,7 @@ def test_a_value_beyond_float32_reaches_the_page_as_the_largest_finite_one() -> 
                                                             (u, 0.0, 0.0), (0.0, 0.0, 0.0), 1.0))
             view.feeder.sample()
         view.refresh_plots()
-        uuid = view.plots.velocity._impl.uuid
+        uuid = viser_compat.handle_uuid(view.plots.velocity)
         data = wait_for(lambda: (d := page.elements.get(uuid, {}).get("data")) is not None and len(d[0]) == 3
                         and d, what="the velocity plot's three rows")
         u = np.asarray(data[1])
@@ -225,7 +226,7 @@ def test_a_value_beyond_float32_reaches_the_page_as_the_largest_finite_one() -> 
 
 
 class _Chart:
-    """A uPlot handle as ``ui.fast_props.set_prop`` uses it; keeps the data it was sent."""
+    """A uPlot handle as ``ui.viser_compat.set_plot_data`` uses it; keeps the data it was sent."""
 
     def __init__(self) -> None:
         self._impl = types.SimpleNamespace(props=types.SimpleNamespace(data=None))

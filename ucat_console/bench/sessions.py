@@ -136,7 +136,7 @@ def recorder_throughput(n: int = 100_000, directory: Path | None = None) -> dict
 
 def mcap_append(n: int = 50_000, rounds: int = 5) -> dict[str, Any]:
     """us per message of ``add_message`` into an in-memory MCAP file, mcap's ``Writer``
-    against the recorder's ``ChunkedWriter`` (the same bytes: their test), the :data:`MIX`'s
+    against the recorder's ``ChunkedWriter`` (mcap's ``Writer`` with its hand-over points: the same bytes, their test), the :data:`MIX`'s
     first ``n`` messages encoded beforehand; each writer ``rounds`` times, in turns, the
     median of each and their ratio."""
     import io

@@ -194,11 +194,7 @@ def measure_ui(duration: float = 20.0, pages: int = 2, warmup: float = 5.0, velo
                 for page in opened:
                     page.wait_for_function("() => document.querySelectorAll('.uplot').length >= 5",
                                            timeout=60_000)
-                wire_messages, stop_collecting = _collect_wire_messages(3000)
-                try:
-                    time.sleep(warmup)
-                finally:
-                    stop_collecting()
+                time.sleep(warmup)
                 for page in opened:
                     page.evaluate(_START_COUNTING)
                 scene0, plots0 = app.scene.updates, app.plots.updates
@@ -229,7 +225,7 @@ def measure_ui(duration: float = 20.0, pages: int = 2, warmup: float = 5.0, velo
                 seen = [page.evaluate("() => window.__ucatBench.lastSeq") for page in opened]
                 app.view.on_pose = probe_cb
                 browser.close()
-            parts = page_parts(app, wire_messages)
+            parts = page_parts(app)
             health = sup.health()
         finally:
             sup.stop()
@@ -273,59 +269,13 @@ def measure_ui(duration: float = 20.0, pages: int = 2, warmup: float = 5.0, velo
     }
 
 
-def _collect_wire_messages(limit: int) -> tuple[list[Any], Any]:
-    """Keep the first ``limit`` messages the pages' frames convert to their wire form (the
-    console's own ``viser_hooks._wire_form`` goes on doing it): (the list they go to, a
-    function that stops the collecting)."""
-    from ucat_console.ui import viser_hooks
-
-    real = viser_hooks._wire_form
-    kept: list[Any] = []
-
-    def collect(message: Any, arrays: list[Any]) -> Any:
-        if len(kept) < limit:
-            kept.append(message)
-        return real(message, arrays)
-
-    viser_hooks._wire_form = collect
-
-    def stop() -> None:
-        viser_hooks._wire_form = real
-
-    return kept, stop
-
-
-def page_parts(app: Any, messages: list[Any], rounds: int = 5, refreshes: int = 200) -> dict[str, Any]:
-    """Two parts of the pages' work timed in a tight loop (each ``rounds`` times, in turns;
-    medians): a message's wire form, by viser's ``as_serializable_dict`` and by the
-    console's converter (``viser_hooks._wire_form``), over ``messages`` (those the pages
-    were sent in the run); and the plots' series of one refresh (``plots.series_of``) of
-    the live view's window as it is at the end of the run."""
+def page_parts(app: Any, refreshes: int = 200) -> dict[str, Any]:
+    """The plots' series of one refresh (``plots.series_of``) of the live view's window as
+    it is at the end of the run, timed in a tight loop (median of ``refreshes``)."""
     import math
 
-    from ucat_console.ui import viser_hooks
     from ucat_console.ui.plots import series_of
 
-    if not messages:
-        raise RuntimeError("no message was sent to the pages: nothing to time")
-    convert = viser_hooks._wire_form
-
-    def viser_s() -> float:
-        t0 = time.perf_counter()
-        for m in messages:
-            m.as_serializable_dict([])
-        return (time.perf_counter() - t0) / len(messages) * 1e6
-
-    def console_s() -> float:
-        t0 = time.perf_counter()
-        for m in messages:
-            convert(m, [])
-        return (time.perf_counter() - t0) / len(messages) * 1e6
-
-    theirs, ours = [], []
-    for _ in range(rounds):
-        theirs.append(viser_s())
-        ours.append(console_s())
     plots, view = app.plots, app.view
     n = int(math.ceil(float(view.history()) * plots.rate)) + 1
     times = []
@@ -335,15 +285,7 @@ def page_parts(app: Any, messages: list[Any], rounds: int = 5, refreshes: int = 
         times.append(time.perf_counter() - t0)
     if got is None:
         raise RuntimeError("the live plots hold no window of rows: nothing to time")
-    wire_viser, wire_console = statistics.median(theirs), statistics.median(ours)
-    return {
-        "wire_messages": len(messages),
-        "wire_form_viser_us": wire_viser,
-        "wire_form_console_us": wire_console,
-        "wire_form_ratio": wire_console / wire_viser,
-        "plot_series_points": int(got[0].shape[0]),
-        "plot_series_us": statistics.median(times) * 1e6,
-    }
+    return {"plot_series_points": int(got[0].shape[0]), "plot_series_us": statistics.median(times) * 1e6}
 
 
 def _thread_percent(before: dict[str, float], after: dict[str, float], elapsed: float) -> dict[str, float]:
@@ -379,10 +321,8 @@ def format_result(r: dict[str, Any]) -> str:
     lines.append(f"supervisor CPU without the benchmark's probe {r['supervisor_cpu_percent_without_probe']:.0f} %"
                  " of one core; by thread: " + _threads(r["supervisor_threads_cpu_percent_without_probe"]))
     p = r["page_parts"]
-    lines.append(f"in a tight loop: a message's wire form {p['wire_form_viser_us']:.1f} us by viser's "
-                 f"as_serializable_dict, {p['wire_form_console_us']:.1f} us by the console's converter "
-                 f"({p['wire_form_ratio']:.2f} times; the {p['wire_messages']} messages of the warm-up); "
-                 f"the plots' series of a refresh {p['plot_series_us']:.0f} us ({p['plot_series_points']} points)")
+    lines.append(f"in a tight loop: the plots' series of a refresh {p['plot_series_us']:.0f} us "
+                 f"({p['plot_series_points']} points)")
     return "\n".join(lines)
 
 

@@ -11,6 +11,8 @@ import importlib
 import logging
 import sys
 
+from ucat_console.backend.dependencies import UnsupportedVersion
+
 #: sub-command modules under ucat_console.cli
 COMMANDS = ["bench", "devices", "sessions", "replay", "identify", "experiment", "sweep", "run", "prepare",
             "paths"]
@@ -42,7 +44,8 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # output piped into e.g. `head`
         sys.stderr.close()
         return 0
-    except (ValueError, OSError) as e:  # bad input, a file that cannot be read or written
+    except (ValueError, OSError, UnsupportedVersion) as e:  # bad input, a file that cannot be read or
+        # written, a library outside its supported range
         print(f"ucat-console: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

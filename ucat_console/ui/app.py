@@ -42,15 +42,15 @@ reads it in the page to measure update rates and latency.
 from __future__ import annotations
 
 import collections
+import contextlib
 import ipaddress
 import logging
 import math
 import threading
 import time
-from typing import Any, Callable
+from typing import Any, Callable, Iterator
 
 import viser
-import viser._messages as vm
 
 from ucat_console.backend.sessions.replay_job import ReplaySlot
 from ucat_console.backend.supervisor import CommandRefused, Supervisor
@@ -59,7 +59,7 @@ from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.messages import FinPlan
 from ucat_console.ui import markdown, page_script, panels
-from ucat_console.ui.fast_props import set_prop
+from ucat_console.ui import viser_compat
 from ucat_console.ui.compare_panel import ComparePanel
 from ucat_console.ui.guard import PageGuard
 from ucat_console.ui.metrics_panel import MetricsPanel, effects_markdown
@@ -180,7 +180,7 @@ class ConsoleApp:
                 server.scene, gui, supervisor.cfg.plant.geometry, plot_rate=cfg.plot_rate,
                 scene_rate=cfg.scene_rate, max_plot_points=cfg.max_plot_points, history=lambda: self.history,
                 max_history=cfg.max_history, corridor=self._corridor, trail_points=cfg.trail_points,
-                trail_spacing=cfg.trail_spacing, atomic=server.atomic, on_slow=self._tick_slow,
+                trail_spacing=cfg.trail_spacing, atomic=lambda: _sent_at_once(server), on_slow=self._tick_slow,
                 on_tick=self._tick, on_pose=self._probe if probe else None, plot_height=PLOT_HEIGHT, name="live",
             )
         # each page's review of recorded sessions goes here (its plots in this tab)
@@ -256,7 +256,7 @@ class ConsoleApp:
         """A page has shown (its first camera report): its script, theme, controls and review."""
         cid = client.client_id
         containers = {"tuning": self.tab_tuning, "session": self.tab_session, "safety": self.tab_safety}
-        self.guard.send_first(cid, [vm.RunJavascriptMessage(source=page_script.INSTALL)])  # the bar first
+        self.guard.send_first(cid, [viser_compat.run_javascript(page_script.INSTALL)])  # the bar first
         with self._build_lock:
             if cid not in self.guard.clients:
                 return  # gone while waiting
@@ -392,8 +392,8 @@ class ConsoleApp:
     def _probe(self) -> None:
         body, probe = self.view.body, self.probe
         if probe is not None and body is not None:
-            set_prop(probe, "content", f'<span id="ucat-probe" data-seq="{self.view.body_seq}" '
-                                       f'data-wall="{self.view.body_wall * 1e3:.1f}" data-t="{body.t:.3f}"></span>')
+            probe.content = (f'<span id="ucat-probe" data-seq="{self.view.body_seq}" '
+                             f'data-wall="{self.view.body_wall * 1e3:.1f}" data-t="{body.t:.3f}"></span>')
 
     def _tick(self) -> None:
         if self._dirty.is_set():
@@ -439,12 +439,12 @@ class ConsoleApp:
                 continue
             try:
                 panel.show_events()
-                uuids = {"disarm_uuid": panel.disarm._impl.uuid, "drive_uuid": panel.drive_input._impl.uuid,
-                         "theme_uuid": panel.theme_button._impl.uuid}
+                uuids = {f"{name}_uuid": viser_compat.handle_uuid(handle) for name, handle in
+                         (("disarm", panel.disarm), ("drive", panel.drive_input), ("theme", panel.theme_button))}
                 state = bar_state(sup, cid, dark=page.dark, uuids=uuids, loading=self.loading,
                                   link_slow=self.guard.link_slow(cid))
                 # what the pilot must see first (ahead of the telemetry on a slow link)
-                self.guard.send_first(cid, [vm.RunJavascriptMessage(source=page_script.update_source(state))])
+                self.guard.send_first(cid, [viser_compat.run_javascript(page_script.update_source(state))])
             except Exception:
                 log.debug("the status bar of client %s was not sent", cid, exc_info=True)
 
@@ -501,3 +501,13 @@ def _no_share_url(*args: Any, **kwargs: Any) -> None:
 def _set(handle: Any, content: str) -> None:
     if handle.content != content:
         handle.content = content
+
+
+@contextlib.contextmanager
+def _sent_at_once(server: viser.ViserServer) -> Iterator[None]:
+    """``server.atomic()`` (the pages apply the pass's messages together), then the batch
+    sent at once: viser otherwise waits up to 1/60 s for more messages after each batch (its
+    buffer's window), a pose's latency for nothing when the pass is one batch anyway."""
+    with server.atomic():
+        yield
+    server.flush()

@@ -36,9 +36,11 @@ as its TCP connection is open. :class:`PageGuard` stands between the websocket a
   and plots coalesced (viser keeps the newest value of each) instead of a growing backlog.
   Such a page's status bar says "link slow" (:meth:`PageGuard.link_slow`).
 
-viser does not offer hooks for these, so :mod:`ucat_console.ui.viser_hooks` wraps names in
+viser does not offer hooks for these, so :mod:`ucat_console.ui.viser_compat` wraps names in
 viser's websocket module (the ``websockets`` serve call, the per-connection message consumer
-and sender); servers created without :meth:`PageGuard.serve` are left as viser makes them.
+and sender) for every server viser starts for :meth:`PageGuard.serve`, including its tries on
+other ports (then refused: :class:`PortTaken`); servers created otherwise are left as viser
+makes them.
 """
 
 from __future__ import annotations
@@ -56,12 +58,31 @@ from typing import Any, Callable, Iterable
 from urllib.parse import urlsplit
 
 import viser
-import viser._messages as vm
 
-from ucat_console.ui import viser_hooks
+from ucat_console.ui import viser_compat
+from ucat_console.ui.viser_compat import (
+    CommandTriggerMessage,
+    GuiUpdateMessage,
+    LocalStorageGetItemRequestMessage,
+    LocalStorageGetItemResponseMessage,
+    ViewerCameraMessage,
+)
 from ucat_console.ui.link import PageLink
 
 log = logging.getLogger(__name__)
+
+
+class PortTaken(OSError):
+    """The page's server could not have the port it was given (``port``); viser had served
+    on ``got`` instead (stopped)."""
+
+    def __init__(self, port: int, got: int) -> None:
+        super().__init__(f"port {port} is in use by another program: the console serves its page only on the port "
+                         f"it was given (console.port, --port); free port {port} or give another one (0 lets the "
+                         f"system choose)")
+        self.port = port
+        self.got = got
+
 
 #: the largest websocket frame a page may send (bytes); larger ones close its socket
 MAX_FRAME = 256 * 1024
@@ -226,17 +247,24 @@ class PageGuard:
         self._urgent: queue.SimpleQueue[tuple[int, str, Callable[[], None]] | None] = queue.SimpleQueue()
         self._urgent_thread: threading.Thread | None = None
         self.urgent_runs = 0  # safety commands run
-        self._zstd = viser_hooks.compressor()  # for the frames sent ahead (event-loop thread)
+        self._zstd = viser_compat.compressor()  # for the frames sent ahead (event-loop thread)
 
     # ------------------------------------------------------------------ server
-    def serve(self, **kwargs: Any) -> viser.ViserServer:
-        """A ViserServer (``kwargs`` as for viser) whose pages pass through this guard."""
-        server = viser_hooks.guarded_server(self, **kwargs)
+    def serve(self, *, port: int, **kwargs: Any) -> viser.ViserServer:
+        """A ViserServer (``kwargs`` as for viser) whose pages pass through this guard, on
+        ``port`` (0: one the system chooses, logged). :class:`PortTaken` when the port is
+        taken (viser would serve on the next free one: that server, guarded too, is stopped)."""
+        server = viser_compat.guarded_server(self, port=port, **kwargs)
+        got = server.get_port()
+        if port != 0 and got != port:
+            server.stop()
+            raise PortTaken(port, got)
+        if port == 0:
+            log.info("the console's page is on port %d (chosen by the system)", got)
         self.server = server
-        ws = server._websock_server
-        ws.on_client_connect(self._opened)
-        ws.on_client_disconnect(self._closed)
-        self.start(ws._background_event_loop)
+        viser_compat.on_socket_open(server, self._opened)
+        viser_compat.on_socket_close(server, self._closed)
+        self.start(viser_compat.event_loop(server))
         return server
 
     def start(self, loop: asyncio.AbstractEventLoop | None) -> None:
@@ -271,7 +299,7 @@ class PageGuard:
     # ------------------------------------------------------------------ connections (event loop)
     def _opened(self, conn: Any) -> None:
         cid = int(conn.client_id)
-        ws_conn = self.server._websock_server._live_connections.get(cid) if self.server else None
+        ws_conn = viser_compat.page_socket(self.server, cid) if self.server else None
         self.page_opened(cid, conn, ws_conn)
 
     def page_opened(self, cid: int, conn: Any, ws_conn: Any) -> None:
@@ -334,7 +362,7 @@ class PageGuard:
         rule = InputRule(client, pilot_only, value_check(handle, max_len),
                          name or getattr(handle, "label", "") or type(handle).__name__, handle, urgent)
         with self._lock:
-            self._inputs[handle._impl.uuid] = rule
+            self._inputs[viser_compat.handle_uuid(handle)] = rule
 
     def allow_command(self, handle: Any, client: int, *, pilot_only: bool, name: str = "",
                       urgent: Callable[[], None] | None = None) -> None:
@@ -342,12 +370,12 @@ class PageGuard:
         rule = InputRule(client, pilot_only, lambda v: None, name or getattr(handle, "name", "command"),
                          urgent=urgent)
         with self._lock:
-            self._commands[handle._impl.uuid] = rule
+            self._commands[viser_compat.handle_uuid(handle)] = rule
 
     def forget(self, handle: Any) -> None:
         with self._lock:
-            self._inputs.pop(handle._impl.uuid, None)
-            self._commands.pop(handle._impl.uuid, None)
+            self._inputs.pop(viser_compat.handle_uuid(handle), None)
+            self._commands.pop(viser_compat.handle_uuid(handle), None)
 
     # ------------------------------------------------------------------ incoming (event loop)
     def admit(self, client: int | None, message: Any) -> bool:
@@ -366,7 +394,7 @@ class PageGuard:
     def _why_refused(self, page: _Page, message: Any) -> str | None:
         now = self.clock()
         tp = type(message)
-        if tp is vm.LocalStorageGetItemResponseMessage:
+        if tp is LocalStorageGetItemResponseMessage:
             seq = _heartbeat_seq(message.request_uuid)
             if seq is not None and page.link.answered(seq, now):  # before the rate limit:
                 page.last_answer = now  # a busy page never loses its proof of life
@@ -379,15 +407,15 @@ class PageGuard:
         if page.tokens < 1.0:
             return f"over the message rate of {MESSAGE_RATE:g}/s"
         page.tokens -= 1.0
-        if tp is vm.ViewerCameraMessage:
+        if tp is ViewerCameraMessage:
             return None
-        if tp is vm.LocalStorageGetItemResponseMessage:
+        if tp is LocalStorageGetItemResponseMessage:
             if _heartbeat_seq(message.request_uuid) is not None:
                 return "an answer to no heartbeat request of the console"
             value = message.value
             return None if value is None or (isinstance(value, str) and len(value) <= MAX_TEXT) else \
                 "a stored value over the size limit"
-        if tp is vm.GuiUpdateMessage:
+        if tp is GuiUpdateMessage:
             rule = self._inputs.get(message.uuid) if isinstance(message.uuid, str) else None
             if rule is None:
                 return f"an update of {_short(message.uuid)}, which is not an input of this page"
@@ -404,11 +432,11 @@ class PageGuard:
                 return None
             if rule.handle is not None:  # the page shows what it typed: show the value in force
                 try:
-                    rule.handle._queue_update("value", rule.handle.value)
+                    viser_compat.show_value(rule.handle)
                 except Exception:
                     log.debug("restoring %s failed", rule.name, exc_info=True)
             return f"{rule.name}: {bad}"
-        if tp is vm.CommandTriggerMessage:
+        if tp is CommandTriggerMessage:
             rule = self._commands.get(message.uuid) if isinstance(message.uuid, str) else None
             if rule is None or rule.client != page.client:
                 return "a command that is not this page's"
@@ -421,7 +449,7 @@ class PageGuard:
         """For an admitted message: whether it is a safety command (its rule has ``urgent``),
         now queued for the guard's safety thread; viser is not to see it then."""
         tp = type(message)
-        table = self._inputs if tp is vm.GuiUpdateMessage else self._commands if tp is vm.CommandTriggerMessage \
+        table = self._inputs if tp is GuiUpdateMessage else self._commands if tp is CommandTriggerMessage \
             else None
         if table is None:
             return False
@@ -527,8 +555,8 @@ class PageGuard:
         if messages is None:
             page.seq += 1
             seq = page.seq
-            messages = (vm.LocalStorageGetItemRequestMessage(key=HEARTBEAT_KEY, request_uuid=f"{_HB_PREFIX}{seq}"),)
-        data = viser_hooks.encode_frame(messages, self._zstd)
+            messages = (LocalStorageGetItemRequestMessage(key=HEARTBEAT_KEY, request_uuid=f"{_HB_PREFIX}{seq}"),)
+        data = viser_compat.encode_frame(messages, self._zstd)
         page.link.sent(len(data), now)
         if seq is not None:
             page.link.probe(seq, now)

@@ -11,16 +11,16 @@ inputs at all: nothing a page sends changes anything.
 
 from __future__ import annotations
 
+import socket
 import threading
 import time
 from typing import Any
-
-import viser._messages as vm
 
 from ucat_console.backend.prepare import Progress
 from ucat_console.config import AppConfig
 from ucat_console.ui import page_script
 from ucat_console.ui.guard import PageGuard
+from ucat_console.ui.viser_compat import run_javascript
 
 
 class LoadingPage:
@@ -29,6 +29,7 @@ class LoadingPage:
         self.guard = PageGuard(is_pilot=lambda cid: False, pilot_timeout=lambda: cfg.failsafe.pilot_gone.timeout,
                                page_timeout=c.page_timeout, heartbeat_period=c.heartbeat_period,
                                allowed_origins=c.allowed_origins)
+        self.host = host
         self.server = self.guard.serve(host=host, port=port, verbose=False, label="U-CAT console")
         self.server.gui.configure_theme(control_width="medium", show_share_button=False, dark_mode=c.dark)
         self.server.request_share_url = lambda *a, **k: None  # type: ignore[method-assign]
@@ -52,7 +53,7 @@ class LoadingPage:
         return self.server.get_port()
 
     def _on_connect(self, client: Any) -> None:
-        client._websock_connection.queue_message(vm.RunJavascriptMessage(source=page_script.INSTALL))
+        self.guard.send_first(client.client_id, [run_javascript(page_script.INSTALL)])
 
     def set_progress(self, p: Progress) -> None:
         with self._lock:
@@ -83,12 +84,32 @@ class LoadingPage:
             src = page_script.update_source(self._state())
             for client in self.server.get_clients().values():
                 try:
-                    client._websock_connection.queue_message(vm.RunJavascriptMessage(source=src))
+                    self.guard.send_first(client.client_id, [run_javascript(src)])
                 except Exception:
                     pass
 
     def stop(self) -> None:
+        """Stop serving; returns when the port is free for the console (which refuses any other)."""
+        port = self.port
         self._stop.set()
         self._thread.join(timeout=2.0)
         self.guard.stop()
         self.server.stop()
+        _wait_port_free(self.host, port)
+
+
+def _wait_port_free(host: str, port: int, timeout: float = 10.0) -> None:
+    """Until ``port`` on ``host`` can be bound again (as the page's server binds it: address
+    reuse on), or ``timeout`` s (then the console reports the port taken)."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    deadline = time.monotonic() + timeout
+    while True:
+        with socket.socket(family, socket.SOCK_STREAM) as s:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            try:
+                s.bind((host, port))
+                return
+            except OSError:
+                if time.monotonic() > deadline:
+                    return
+        time.sleep(0.05)

@@ -19,8 +19,8 @@ page does on its own:
   no number; on leaving such a box the page puts back the number it held.
 * **DISARM** (the bar's button, and the Esc key through the console's command) and the
   gamepad send their messages through the page's own viser connection
-  (``window.__viserMutable.sendMessage``, viser's client, checked with viser 1.1.1 by the
-  browser tests) to inputs of this page that the server registered; the page guard
+  (``sendMessage`` of viser's client in the page,
+  :data:`ucat_console.ui.viser_compat.PAGE_CLIENT`, checked by the browser tests) to inputs of this page that the server registered; the page guard
   checks them like any other message.
 
 The gamepad (where the browser exposes one, polled 10 times a second while this page is
@@ -33,6 +33,8 @@ from __future__ import annotations
 
 import json
 from typing import Any
+
+from ucat_console.ui.viser_compat import PAGE_CLIENT
 
 #: seconds without a state from the server before the link-loss banner shows
 LINK_LOST_AFTER = 1.5
@@ -105,7 +107,7 @@ INSTALL = r"""
     document.body.append(bar, banner); document.body.classList.add("ucat-has-bar"); };
   install();
   const send = (uuid, value) => {
-    const m = window.__viserMutable;
+    const m = %(viser_client)s;
     if (!uuid || !m || !m.sendMessage) return false;
     m.sendMessage({type: "GuiUpdateMessage", uuid: uuid, updates: {value: value}});
     return true;
@@ -202,7 +204,7 @@ INSTALL = r"""
     if (u.pad.active) padSend(cmd);
   }, 100);
 })();
-""" % {"lost_ms": int(LINK_LOST_AFTER * 1000), "dead": DEAD_ZONE}
+""" % {"lost_ms": int(LINK_LOST_AFTER * 1000), "dead": DEAD_ZONE, "viser_client": PAGE_CLIENT}
 
 
 def update_source(state: dict[str, Any]) -> str:

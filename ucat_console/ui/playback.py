@@ -57,8 +57,6 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
-from viser._messages import GuiSliderMark
-
 from ucat_console.backend.review.metrics import MetricsConfig
 from ucat_console.backend.sessions import files, index, repair, shared
 from ucat_console.backend.sessions.markers import MAX_NOTE_BYTES, Marker, check_note
@@ -74,6 +72,7 @@ from ucat_console.ui.metrics_panel import MetricsPanel
 from ucat_console.ui.plots import CHANNELS as PLOT_CHANNELS
 from ucat_console.ui.scene import LIVE_ROOT, REVIEW_ROOT
 from ucat_console.ui.view import StreamSampler, StreamView, from_page
+from ucat_console.ui.viser_compat import set_slider_marks
 
 __all__ = ["PlaybackPanel", "StreamSampler"]
 
@@ -593,8 +592,8 @@ class PlaybackPanel:
         if len(times) > MAX_TIMELINE_MARKS:  # keep the slider readable
             step = len(times) / MAX_TIMELINE_MARKS
             times = [times[int(i * step)] for i in range(MAX_TIMELINE_MARKS)]
-        try:  # viser's slider takes marks at creation; its props accept new ones
-            self.timeline._marks = tuple(GuiSliderMark(value=float(t), label=None) for t in times) or None
+        try:
+            set_slider_marks(self.timeline, times)
         except Exception:
             log.debug("timeline marks not shown", exc_info=True)
 

@@ -41,8 +41,8 @@ from ucat_console.robot.look import hex_colour
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.messages import BodyState, FinPlan, Power, Setpoints, Status
 from ucat_console.ui import plot_series as ps
-from ucat_console.ui.fast_props import set_prop
 from ucat_console.ui.plot_series import window_rows
+from ucat_console.ui.viser_compat import set_plot_data
 
 N_FINS = ch.N_FINS
 #: below this forward speed (m/s) no Strouhal number is shown
@@ -293,13 +293,13 @@ class LivePlots:
         got = series_of(self.feeder.buffer, int(math.ceil(window * self.rate)) + 1, self.max_points, self.corridor())
         if got is None:
             return
-        # new arrays each time: set without viser's casts and comparisons (ui.fast_props)
+        # new arrays each time, sent as they are (float32 values: ui.viser_compat.set_plot_data)
         t, v = got
         marks = change_marks(t, list(self.feeder.changes))
-        set_prop(self.st, "data", (t, *v[ps.ST_HIGH:ps.ST_ABOVE + 1], marks))
+        set_plot_data(self.st, (t, *v[ps.ST_HIGH:ps.ST_ABOVE + 1], marks))
         for k, chart in enumerate((self.depth, self.velocity, self.yaw_rate)):
-            set_prop(chart, "data", (t, *v[ps.TRACKED + 4 * k:ps.TRACKED + 4 * k + 4], marks))
-        set_prop(self.power, "data", (t, *v[ps.POWER:ps.ROWS], marks))
+            set_plot_data(chart, (t, *v[ps.TRACKED + 4 * k:ps.TRACKED + 4 * k + 4], marks))
+        set_plot_data(self.power, (t, *v[ps.POWER:ps.ROWS], marks))
         self.updates += 1
 
 

@@ -34,7 +34,6 @@ from ucat_console.robot.fins import N_FINS
 from ucat_console.robot.geometry import BLADE_LENGTH_FACTOR, BLADE_SPAN, BLADE_THICKNESS, Geometry, fin_mount
 from ucat_console.robot.look import FIN_COLOURS, GHOST_COLOUR, HULL_COLOUR, NOSE_COLOUR
 from ucat_console.telemetry.messages import BodyState, FinState
-from ucat_console.ui.fast_props import set_pose, set_prop
 
 WATER_COLOUR = (64, 140, 200)
 FLOOR_COLOUR = (120, 130, 140)
@@ -175,17 +174,17 @@ class RobotScene:
     def update_pose(self, body: BodyState | None, fins: Sequence[FinState | None]) -> None:
         """Pose and fins (call inside ``atomic()``)."""
         if body is not None:
-            set_pose(self.body, body.position, body.orientation)
+            self.body.position = body.position
+            self.body.wxyz = body.orientation
             self.position = body.position
             self._add_trail_point(body.position)
-        # only what changed (the commanded angles change a few times a second); set without
-        # viser's casts and comparisons (ui.fast_props)
+        # only what changed (the commanded angles change a few times a second)
         shown = self._shown
         now = [(f.angle, f.angle_cmd) if f is not None else s for f, s in zip(fins, shown)]
         if any(_changed(a[0], b[0]) for a, b in zip(now, shown)):
-            set_prop(self.blades, "batched_wxyzs", blade_wxyzs(self.mount_wxyz, [a for a, _ in now]))
+            self.blades.batched_wxyzs = blade_wxyzs(self.mount_wxyz, [a for a, _ in now])
         if any(_changed(a[1], b[1]) for a, b in zip(now, shown)):
-            set_prop(self.ghosts, "batched_wxyzs", blade_wxyzs(self.mount_wxyz, [c for _, c in now]))
+            self.ghosts.batched_wxyzs = blade_wxyzs(self.mount_wxyz, [c for _, c in now])
         self._shown = now
         self.updates += 1
 

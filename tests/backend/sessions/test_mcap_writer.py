@@ -1,4 +1,5 @@
-"""The recorder's MCAP writer writes the same bytes as mcap's own ``Writer``."""
+"""The recorder's MCAP writer writes the same bytes as mcap's own ``Writer`` and knows where
+the file last ended on a complete chunk."""
 
 from __future__ import annotations
 
@@ -9,6 +10,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from mcap.reader import make_reader
+from mcap.exceptions import EndOfFile
+from mcap.stream_reader import StreamReader
+from mcap.records import Chunk, MessageIndex
 from mcap.writer import CompressionType, Writer
 
 from ucat_console.backend.sessions.mcap_writer import ChunkedWriter
@@ -83,3 +87,43 @@ def test_a_time_out_of_range_is_refused_as_mcaps_writer_refuses_it(bad):
         ch = w.register_channel("t", "json", w.register_schema("s", "jsonschema", b"{}"))
         with pytest.raises(Exception):
             w.add_message(ch, log_time=bad, data=b"{}", publish_time=0, sequence=0)
+
+
+def test_complete_is_the_end_of_the_last_chunk_and_its_indexes():
+    """After every message, ``complete`` is where the output last ended on a whole chunk
+    followed by its message indexes (all of it handed over to the file), and ``complete_ns``
+    the latest message time written up to there: a file cut back to ``complete`` holds
+    exactly the messages up to ``complete_ns``, each in a chunk read whole."""
+    out = io.BytesIO()
+    w = ChunkedWriter(out, chunk_size=2048, compression=CompressionType.ZSTD)
+    w.start(profile="ucat", library="test")
+    ch = w.register_channel("t", "json", w.register_schema("s", "jsonschema", b"{}"))
+    rng = random.Random(3)
+    seen, moves = [], 0
+    for i in range(600):
+        before = w.complete
+        ns = 1_000 + i * 10 + rng.randrange(5)
+        w.add_message(ch, log_time=ns, data=rng.randbytes(rng.randrange(10, 200)), publish_time=ns, sequence=i)
+        seen.append(ns)
+        if w.complete != before:
+            moves += 1
+            assert w.complete == out.tell()  # nothing of an open chunk written after it
+            assert w.complete_ns == max(seen)
+            records = _records_until_cut(out.getvalue()[: w.complete])
+            assert isinstance(records[-1], MessageIndex)
+            chunks = [r for r in records if isinstance(r, Chunk)]
+            assert chunks and chunks[-1].message_end_time == w.complete_ns
+    assert moves > 10
+    w.flush()
+    assert w.complete == out.tell() and w.complete_ns == max(seen)
+
+
+def _records_until_cut(data: bytes) -> list:
+    """The whole records of a file cut off after a record (mcap's reader ends at the cut)."""
+    records = []
+    try:
+        for r in StreamReader(io.BytesIO(data), skip_magic=False, emit_chunks=True).records:
+            records.append(r)
+    except EndOfFile:
+        pass
+    return records

@@ -43,6 +43,7 @@ from mcap.writer import CompressionType
 
 import ucat_console
 from ucat_console.backend.sessions import codec, files, foxglove
+from ucat_console.backend.dependencies import require
 from ucat_console.backend.sessions.mcap_writer import ChunkedWriter
 from ucat_console.backend.sessions.schema import (
     MESSAGE_ENCODING,
@@ -104,7 +105,7 @@ class RecorderStats:
     rejected: int  # messages that could not be encoded
     queued: int
     error: str  # the writer's failure, "" when none
-    kept_until: float  # the latest message time in the open part's complete chunks
+    kept_until: float  # every message of the open part before this time is in its complete chunks
 
 
 class _Part:
@@ -199,6 +200,7 @@ class Recorder:
     ) -> None:
         if not math.isfinite(epoch_offset):
             raise ValueError(f"epoch_offset: {epoch_offset!r} is not finite")
+        require("mcap")  # the session files' writer and reader are checked against its range
         self.stream = stream
         self.config = config or RecorderConfig()
         self.directory = files.sessions_dir(directory)
@@ -470,9 +472,9 @@ class Recorder:
                 self._part = None
 
     def _kept_until(self) -> float:
-        """The stream time of the latest message in the open part's complete chunks."""
+        """The stream time before which every message of the open part is in its complete chunks."""
         part = self._part
-        ns = part.writer.complete_ns if part is not None else 0
+        ns = part.writer.kept_ns if part is not None else 0
         return codec.from_ns(ns, self.epoch_offset) if ns else 0.0
 
     def _fail(self, e: Exception) -> None:
