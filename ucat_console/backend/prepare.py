@@ -75,7 +75,7 @@ def simulated(cfg: AppConfig) -> bool:
 def run_step(key: str, cfg: AppConfig) -> None:
     """Compile (or load) what step ``key`` stands for."""
     if key.startswith("planner:"):
-        from ucat_console.backend.loop.planners import warm_up
+        from ucat_console.backend.loop.kernels_warm_up import warm_up
 
         warm_up(cfg.loop, formulations=(key.split(":", 1)[1],))
     elif key == "loop":
