@@ -48,6 +48,15 @@ FIN_CYCLE = tuple(ch.fin_cycle(pf) for pf in range(N_FINS))
 _WANTED = ((lc.F_BODY_COMMAND, (ch.BODY_COMMAND, ch.BODY_ALLOCATION, ch.BODY_TRACKING)),
            (lc.F_STATE, (ch.BODY_STATE, *FIN_STATE)), (lc.F_POWER, (ch.POWER,)), (lc.F_IMU, (ch.IMU,)),
            (lc.F_DEPTH, (ch.DEPTH,)), (lc.F_DVL, (ch.DVL,)))
+# the columns of the core's rows (their declared layouts, ``loop_core.*_ROW``)
+_BC, _ST, _PW = lc.BODY_COMMAND_ROW, lc.STATE_ROW, lc.POWER_ROW
+_BC_FX, _BC_FY, _BC_YAW, _BC_CUT, _BC_DRIVING = (_BC.at(f) for f in ("force_x", "force_y", "yaw_force", "cut", "driving"))
+_BC_ASKED, _BC_APPLIED, _BC_REFS, _BC_ERRORS = (_BC.span(f) for f in ("asked", "applied", "references", "errors"))
+_S_POS, _S_Q, _S_V, _S_RATES = (_ST.span(f) for f in ("position", "orientation", "velocity", "rates"))
+_S_DEPTH, _S_ANGLE, _S_RATE, _S_SET_ANGLE, _S_SET_RATE = (
+    _ST.at(f) for f in ("depth", "fin_angle", "fin_rate", "fin_set_angle", "fin_set_rate"))
+_P_POWER, _P_ENERGY, _P_MEAN = (_PW.span(f) for f in ("power", "energy", "mean"))
+_P_DISTANCE = _PW.at("distance")
 #: the channel of each kind of reading the loop publishes
 _READING_CHANNEL = {ImuReading: ch.IMU, DepthReading: ch.DEPTH, DvlVelocity: ch.DVL}
 
@@ -95,34 +104,32 @@ class Outbox:
     def _state_messages(self, v: list[float], add: Add) -> None:
         """The body state and the fin states of a state row, those a subscriber takes."""
         wants = self.stream.wants
-        t, b = v[lc.O_T], lc.O_V
+        t = v[lc.O_T]
         if wants(ch.BODY_STATE):
             add((ch.BODY_STATE, BodyState(
-                t=t, position=(v[b], v[b + 1], v[b + 2]), orientation=(v[b + 3], v[b + 4], v[b + 5], v[b + 6]),
-                velocity=(v[b + 7], v[b + 8], v[b + 9]), rates=(v[b + 10], v[b + 11], v[b + 12]), depth=v[b + 13],
+                t=t, position=tuple(v[_S_POS]), orientation=tuple(v[_S_Q]), velocity=tuple(v[_S_V]),
+                rates=tuple(v[_S_RATES]), depth=v[_S_DEPTH],
             )))
-        f = lc.O_STATE_FINS
         for pf, channel in enumerate(FIN_STATE):
             if wants(channel):
-                a = v[f + pf]
-                add((channel, FinState(t, pf, 0.0 if a != a else a, v[f + N_FINS + pf],
-                                       v[f + 2 * N_FINS + pf], v[f + 3 * N_FINS + pf])))
+                a = v[_S_ANGLE + pf]
+                add((channel, FinState(t, pf, 0.0 if a != a else a, v[_S_RATE + pf], v[_S_SET_ANGLE + pf],
+                                       v[_S_SET_RATE + pf])))
 
     def _body_messages(self, v: list[float], add: Add, tracking: bool) -> None:
         """The body command, the allocation and the tracking of a body-command row, those a
         subscriber takes."""
-        t, b = v[lc.O_T], lc.O_V
+        t = v[lc.O_T]
         wants = self.stream.wants
         if wants(ch.BODY_COMMAND):
-            add((ch.BODY_COMMAND, BodyCommand(t, v[b], v[b + 1], v[b + 2])))
+            add((ch.BODY_COMMAND, BodyCommand(t, v[_BC_FX], v[_BC_FY], v[_BC_YAW])))
         if wants(ch.BODY_ALLOCATION):
-            add((ch.BODY_ALLOCATION, BodyAllocation(t, v[b + 3], v[b + 4], v[b + 5], v[b + 6], v[b + 7], v[b + 8],
-                                                    cut_names(int(v[b + 9])))))
+            add((ch.BODY_ALLOCATION, BodyAllocation(t, *v[_BC_ASKED], *v[_BC_APPLIED], cut_names(int(v[_BC_CUT])))))
         if wants(ch.BODY_TRACKING):
-            refs, errors = v[b + 11:b + 15], v[b + 15:b + 18]
+            refs, errors = v[_BC_REFS], v[_BC_ERRORS]
             if not tracking:  # the fins ignore the loops: no tracking to judge
                 errors = [math.nan] * 3
-            add((ch.BODY_TRACKING, BodyTracking(t, v[b + 10] != 0.0, *refs, *errors)))
+            add((ch.BODY_TRACKING, BodyTracking(t, v[_BC_DRIVING] != 0.0, *refs, *errors)))
 
     # ------------------------------------------------------------------ the loop's own
     def event(self, t: float, code: str, message: str, level: str, data: dict) -> None:
@@ -170,14 +177,10 @@ class Outbox:
 
 
 def _power_message(v: list[float]) -> Power:
-    per = [0.0 if x != x else x for x in v[lc.O_V:lc.O_V + N_FINS]]
-    energy = 0.0
-    mean = 0.0
-    for pf in range(N_FINS):
-        energy += v[lc.O_POWER_ENERGY + pf]
-        m = v[lc.O_POWER_MEAN + pf]
-        mean += m if m == m else 0.0
-    d = v[lc.O_POWER_DISTANCE]
+    per = [0.0 if x != x else x for x in v[_P_POWER]]
+    energy = sum(v[_P_ENERGY])
+    mean = sum(m for m in v[_P_MEAN] if m == m)
+    d = v[_P_DISTANCE]
     return Power(
         t=v[lc.O_T], per_fin=(per[0], per[1], per[2], per[3]), total=sum(per), mean_total=mean,
         energy=energy, distance=d, energy_per_metre=energy / d if d > 0.0 else math.nan,
