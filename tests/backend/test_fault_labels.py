@@ -4,7 +4,6 @@ names the drive and what it reported."""
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import pytest
 from support import wait_for
@@ -15,7 +14,6 @@ from ucat_console.config import AccessConfig, FailsafeRule, load_config
 
 pytestmark = pytest.mark.slow
 
-ROOT = Path(__file__).resolve().parents[2]
 TOKEN = "fault-label-token"
 PILOT = 1
 SENSOR_OF = {"imu": "imu", "dvl": "dvl", "pressure": "depth"}
@@ -32,7 +30,7 @@ DRIVE_FAULTS = [("emcy", "epos2.1: EMCY 0x2310 overcurrent"), ("heartbeat_loss",
 
 @pytest.fixture(scope="module")
 def sup(tmp_path_factory: pytest.TempPathFactory):
-    cfg = load_config(ROOT / "config" / "sim-devices.toml")
+    cfg = load_config("sim-devices")
     warn = FailsafeRule("warn", 0.5)  # shown, not acted on: the robot stays as it is
     cfg = cfg.replace(access=AccessConfig(token=TOKEN),
                       console=cfg.console.replace(record_on_arm=False),

@@ -490,17 +490,17 @@ def test_a_page_closing_while_its_review_lists_the_sessions_leaves_no_error(cons
     app = console.app
     viewer = console.page()
     cid = console.cid_of(viewer)
-    real = app.session_list.sessions
+    real = app.session_list.listing
     closed = threading.Event()
 
-    def listing_while_the_page_closes() -> list:
+    def listing_while_the_page_closes() -> object:
         if threading.current_thread().name == "page-jobs" and not closed.is_set():
             _gone(console, viewer, cid)
             closed.set()
         return real()
 
     wait_for(lambda: not app.jobs.busy(cid), what="the page's first listing done")
-    monkeypatch.setattr(app.session_list, "sessions", listing_while_the_page_closes)
+    monkeypatch.setattr(app.session_list, "listing", listing_while_the_page_closes)
     done = app.jobs.done
     viewer.click("Refresh list")
     wait_for(lambda: closed.is_set() and app.jobs.done > done, what="the listing done after the page went")

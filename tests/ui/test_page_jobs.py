@@ -149,16 +149,16 @@ def session_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def test_the_folder_is_listed_again_only_when_it_changed(session_file: Path, tmp_path: Path, monkeypatch) -> None:
     shutil.copy(session_file, tmp_path / session_file.name)
     calls = [0]
-    real = index.list_sessions
+    real = index.scan
 
-    def counted(directory: object = None) -> list:
+    def counted(directory: object = None) -> index.Listing:
         calls[0] += 1
         return real(directory)
 
-    monkeypatch.setattr(index, "list_sessions", counted)
+    monkeypatch.setattr(index, "scan", counted)
     listing = SessionList(tmp_path)
     first = listing.sessions()
-    assert [s.session_id for s in first] == [s.session_id for s in real(tmp_path)]
+    assert [s.session_id for s in first] == [s.session_id for s in real(tmp_path).sessions]
     assert listing.sessions() == first and calls[0] == 1  # unchanged: not read again
     (tmp_path / session_file.name).unlink()
     assert listing.sessions() == [] and calls[0] == 2  # a file went: read again

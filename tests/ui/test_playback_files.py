@@ -92,3 +92,21 @@ def test_a_refused_file_and_a_playback_failure_are_shown_on_the_page(server, rec
         assert "stopped on an error" in p.status.content
     finally:
         p.stop()
+
+
+def test_the_review_list_says_which_entries_it_did_not_read(server, recorded, tmp_path: Path) -> None:
+    d, sid, _ = recorded
+    outside = tmp_path / "elsewhere.mcap"
+    outside.write_bytes(b"not read")
+    (d / "link.mcap").symlink_to(outside)
+    (d / "folder.mcap").mkdir()
+    p = panel(server, d)
+    try:
+        sessions = p.refresh_sessions()
+        assert [s.session_id for s in sessions] == [sid]
+        text = p.browser.content
+        assert sid in text
+        assert "not read: link.mcap: a symbolic link out of the sessions directory" in text
+        assert "not read: folder.mcap: not a regular file" in text
+    finally:
+        p.stop()

@@ -1,1 +1,1 @@
-"""Benchmarks behind ``ucat-console bench`` (figures for the README, never test assertions)."""
+"""Benchmarks behind ``ucat-console bench`` (figures for docs/performance.md, never test assertions)."""

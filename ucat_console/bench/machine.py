@@ -3,7 +3,7 @@
 The speed of this project's development machines (shared virtual machines) varies from
 hour to hour by up to a factor of three, so a benchmark's figures say little on their own.
 :func:`speed_probe` times two fixed workloads, pure Python and compiled, at the time of the
-benchmark; the figures of two benchmark runs compare through it, and the README quotes it
+benchmark; the figures of two benchmark runs compare through it, and docs/performance.md keeps it
 beside them.
 """
 

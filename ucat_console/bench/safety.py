@@ -3,7 +3,7 @@ a crowd of pages, measured against ``ucat-console run`` on the simulated robot.
 
 * **Frozen pilot**: a headless Chromium page takes control, the robot is armed and swims at
   0.2 m/s, then every process of the browser is stopped (SIGSTOP). Detection time: from
-  the stop to the ``pilot_gone`` failsafe event (wall clock). The README states the goal:
+  the stop to the ``pilot_gone`` failsafe event (wall clock). docs/performance.md states the goal:
   within ``failsafe.pilot_gone.timeout`` + 1 s.
 * **Take-over under spam**: a raw page sends a wrong token every 0.1 s; another raw page
   from the same address presents the right one. Take-over time: from sending the token
@@ -27,7 +27,7 @@ a crowd of pages, measured against ``ucat-console run`` on the simulated robot.
   ``--slow-seconds`` s, its heartbeats' round trips (the console's own measure) and whether
   its status bar says "link slow".
 
-Figures depend on the machine and its load (reported with them); they are for the README,
+Figures depend on the machine and its load (reported with them); they are for docs/performance.md,
 never test assertions.
 """
 

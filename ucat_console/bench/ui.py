@@ -28,7 +28,7 @@ pages open on it. After a warm-up, for ``duration`` seconds:
   was saturated.
 
 The figures depend on the machine and its load (reported with them); they are for the
-README, never test assertions.
+docs/performance.md, never test assertions.
 """
 
 from __future__ import annotations
@@ -417,7 +417,7 @@ def run_ui(args: argparse.Namespace) -> int:
 
 
 def summary(r: dict[str, Any]) -> dict[str, float]:
-    """The figures the README quotes (means over the pages)."""
+    """The figures docs/performance.md quotes (means over the pages)."""
     pages = r["pages"]
     return {
         "pose_updates_delivered_per_s": statistics.fmean(p["pose_updates_delivered_per_s"] for p in pages),

@@ -10,7 +10,7 @@ from pathlib import Path
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    bench = sub.add_parser("bench", help="benchmarks (figures for the README)")
+    bench = sub.add_parser("bench", help="benchmarks (figures for docs/performance.md: `bench report`)")
     kinds = bench.add_subparsers(dest="bench", required=True, metavar="BENCH")
     p = kinds.add_parser("mpc", help="MPC solve time and cost, numba vs scipy (Table IV)")
     p.add_argument("--n", type=int, nargs="+", default=None, metavar="N",
@@ -40,6 +40,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     q.set_defaults(func=run_sim)
 
     from ucat_console.bench import load as bench_load
+    from ucat_console.bench import report as bench_report
     from ucat_console.bench import safety as bench_safety
     from ucat_console.bench import sessions as bench_sessions
     from ucat_console.bench import tracking as bench_tracking
@@ -50,6 +51,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     bench_safety.register_bench(kinds)
     bench_tracking.register_bench(kinds)
     bench_load.register_bench(kinds)
+    bench_report.register_bench(kinds)
     c = kinds.add_parser("compile", help="cold compile of every preparation step, serial and in parallel")
     c.add_argument("--config", default=None, metavar="NAME|FILE", help="the configuration to compile for")
     c.add_argument("--workers", type=int, nargs="+", default=[1, 2], help="process counts to measure")

@@ -313,7 +313,7 @@ class ConsoleApp:
             jobs=(lambda what, job, coalesce: self.jobs.submit(cid, what, job, coalesce=coalesce))
             if cid is not None else None,
             present=(lambda: self.page_present(cid)) if cid is not None else (lambda: True),
-            sessions=lambda: self.session_list.sessions(),
+            sessions=lambda: self.session_list.listing(),
         )
 
     def _may_replay(self, cid: int | None) -> bool:

@@ -98,10 +98,11 @@ def _opt(v: float | int | None, fmt: str) -> str:
     return "?" if v is None else format(v, fmt)
 
 
-def sessions_markdown(sessions: list[index.SessionInfo]) -> str:
-    """The session browser's table."""
+def sessions_markdown(sessions: list[index.SessionInfo], skipped: list[index.Skipped] = ()) -> str:
+    """The session browser's table, and the folder's entries that were not read and why."""
+    notes = [f"- not read: {esc(k.name)}: {esc(k.why)}" for k in skipped]
     if not sessions:
-        return "No recorded sessions."
+        return "\n".join(["No recorded sessions.", "", *notes]) if notes else "No recorded sessions."
     lines = ["| session | part | duration | size | events | notes |", "|---|---|---|---|---|---|"]
     for s in sessions:
         for p in s.parts:
@@ -110,7 +111,7 @@ def sessions_markdown(sessions: list[index.SessionInfo]) -> str:
                 dur = "unreadable: " + p.error
             lines.append(f"| {esc(s.session_id)} | {p.part} | {esc(dur)} | {_size(p.size)} | "
                          f"{_opt(p.events, 'd')} | {esc(p.notes)} |")
-    return "\n".join(lines)
+    return "\n".join(lines + ([""] + notes if notes else []))
 
 
 def replay_markdown(result: ReplayResult, weights: dict[str, float]) -> str:

@@ -124,16 +124,17 @@ class PlaybackPanel:
         plot_height: int = 170,
         jobs: Callable[[str, Callable[[], Any], bool], str | None] | None = None,
         present: Callable[[], bool] = lambda: True,
-        sessions: Callable[[], list[index.SessionInfo]] | None = None,
+        sessions: Callable[[], index.Listing] | None = None,
     ) -> None:
         """``jobs(what, job, coalesce)``: queue an action that reads files (None when queued,
         else why not; None: run it in the callback); ``present()``: whether the page is
-        still connected; ``sessions()``: the folder's listing (default: read it each time)."""
+        still connected; ``sessions()``: the folder's listing, with what it skipped (default:
+        read it each time)."""
         self.directory = files.sessions_dir(directory)
         self.gui = gui
         self.jobs = jobs
         self.present = present
-        self._sessions = sessions or (lambda: index.list_sessions(self.directory))
+        self._sessions = sessions or (lambda: index.scan(self.directory))
         self.replay_slot = replay_slot if replay_slot is not None else ReplaySlot()
         self.may_replay = may_replay
         self.job: ReplayJob | None = None
@@ -282,8 +283,9 @@ class PlaybackPanel:
     # ------------------------------------------------------------------ browser
     def refresh_sessions(self) -> list[index.SessionInfo]:
         """List the sessions (the table shows every part; the chooser, the sessions)."""
-        sessions = self._sessions()
-        self.browser.content = sessions_markdown(sessions)
+        listing = self._sessions()
+        sessions = listing.sessions
+        self.browser.content = sessions_markdown(sessions, listing.skipped)
         names = tuple(s.session_id for s in sessions) or ("",)
         current = self.choice.value
         self.choice.options = names

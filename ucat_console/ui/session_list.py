@@ -23,7 +23,7 @@ class SessionList:
         self.directory = Path(directory)
         self._lock = threading.Lock()
         self._key: tuple | None = None
-        self._sessions: list[index.SessionInfo] = []
+        self._listing = index.Listing([], [])
         self.listings = 0  # times the folder was read
 
     def _signature(self) -> tuple:
@@ -40,12 +40,16 @@ class SessionList:
             return ()
         return tuple(sorted(out))
 
-    def sessions(self) -> list[index.SessionInfo]:
-        """Every session in the folder (as :func:`index.list_sessions` gives them)."""
+    def listing(self) -> index.Listing:
+        """Every session in the folder and the entries not read (as :func:`index.scan` gives them)."""
         with self._lock:
             key = self._signature()
             if key != self._key:
-                self._sessions = index.list_sessions(self.directory)
+                self._listing = index.scan(self.directory)
                 self._key = key
                 self.listings += 1
-            return list(self._sessions)
+            return index.Listing(list(self._listing.sessions), list(self._listing.skipped))
+
+    def sessions(self) -> list[index.SessionInfo]:
+        """Every session in the folder (as :func:`index.list_sessions` gives them)."""
+        return self.listing().sessions

@@ -126,3 +126,26 @@ def test_a_split_session_with_a_missing_part_is_refused_by_the_cli(sessions, cap
     assert main(["sessions", "info", "20231114-221320-split", "--dir", str(sessions)]) == 2
     err = capsys.readouterr().err
     assert paths[1].name in err and "missing" in err
+
+
+def test_a_replay_process_reads_under_the_consoles_review_limits(sessions):
+    """The counterfactual replay's child process puts the console's ``[review]`` limits in
+    force, not the defaults: a plan over the configured message size is refused there."""
+    from ucat_console.backend.sessions import limits
+    from ucat_console.backend.sessions.replay_job import ReplayJob
+
+    plan = FinPlan(0.0, 1, "mpc" + " " * 6000, (-0.4, 0.1), 0.3, 0.0, (0.5, -0.5, 2.0, 2.0),
+                   (0.6, -0.6, 3.0, 3.0), (0.6, 3.0, 0.0, 3.0), 1.0, 0.1, 0.1, 0.0, 0.1, 0.3,
+                   (-0.3, 0.1), 0.002, False)
+    [path] = record(sessions, [(C.fin_plan(1), plan)], config_toml="[mpc]\nn_samples = 32\nmax_iter = 5\n")
+    before = limits.limits()
+    limits.configure(limits.ReviewConfig(max_message=4096))
+    try:
+        job = ReplayJob(path.name, sessions, {"lam_st": 2.0}, nice=0)
+        assert job.wait(120.0)
+    finally:
+        limits.configure(before)
+    assert "review.max_message" in job.error and job.result is None
+    job = ReplayJob(path.name, sessions, {"lam_st": 2.0}, nice=0)  # the defaults read it
+    assert job.wait(120.0)
+    assert "review.max_message" not in job.error

@@ -63,7 +63,7 @@ _COMPRESSION = {
 #: s, the writer's longest poll period when the queue is empty (half the flush interval
 #: when that is shorter): messages may wait this long in memory. Every wake-up costs CPU
 #: (about 0.1 ms of a core on a virtual machine), and a message written in a long run of
-#: them costs less than one written in a short one (README, Performance: the console)
+#: them costs less than one written in a short one (docs/performance.md)
 _IDLE_SLEEP = 0.25
 _SIZE_CHECK_EVERY = 256  # messages between part-size checks
 

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
 
+from ucat_console.backend.sessions import limits
 from ucat_console.backend.sessions.replay import ReplayResult
 
 log = logging.getLogger(__name__)
@@ -27,13 +28,16 @@ log = logging.getLogger(__name__)
 NICE = 10
 
 
-def _child(conn: Any, session: str, directory: str, weights: dict[str, float], nice: int) -> None:
+def _child(conn: Any, session: str, directory: str, weights: dict[str, float], nice: int,
+           review: limits.ReviewConfig) -> None:
     try:
         os.nice(nice)
     except OSError:
         pass
     try:
         from ucat_console.backend.sessions.reader import SessionParts
+
+        limits.configure(review)  # the console's [review] limits, not the defaults
         from ucat_console.backend.sessions.replay import counterfactual
         from ucat_console.telemetry.channels import N_FINS, fin_plan
 
@@ -69,7 +73,8 @@ class ReplayJob:
         self.owner = owner
         ctx = mp.get_context("spawn")
         self._conn, child_conn = ctx.Pipe(duplex=False)
-        self._proc = ctx.Process(target=_child, args=(child_conn, self.session, str(directory), self.weights, nice),
+        self._proc = ctx.Process(target=_child, args=(child_conn, self.session, str(directory), self.weights, nice,
+                                       limits.limits()),
                                  name="ucat-replay", daemon=True)
         self._proc.start()
         child_conn.close()

@@ -1,0 +1,54 @@
+"""The performance table made from the benchmarks' JSON files (``ucat-console bench report``)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from ucat_console.bench import report
+
+ROOT = Path(__file__).resolve().parents[2]
+MACHINE = {"cpu_model": "Test CPU 9000", "logical_cpus": 4, "python": "3.11.7", "numba": "0.68.1"}
+
+
+def write(directory: Path, name: str, data: dict) -> None:
+    (directory / f"{name}.json").write_text(json.dumps({**data, "machine": MACHINE}))
+
+
+def test_the_table_holds_the_files_figures_and_names_the_cpu(tmp_path: Path) -> None:
+    write(tmp_path, "sim", {"realtime_factor": {"headless": {"mpc": 1234.4, "baseline": 987.6},
+                                                "subscribed": {"mpc": 500.0, "baseline": 401.2}}})
+    write(tmp_path, "sessions", {"throughput": {"rate_msgs_per_s": 45678.9, "dropped": 0},
+                                 "seek": {"hours": 1.0, "median_ms": 4.44, "p95_ms": 9.96}})
+    text = report.table(tmp_path)
+    assert "Test CPU 9000, 4 logical CPUs" in text
+    assert "| 1,234x, 988x |" in text  # headless, in the file's mode order
+    assert "| 500x, 401x |" in text
+    assert "45,679 messages/s (0)" in text
+    assert "4.4 / 10.0 ms" in text
+    assert "bench mpc" not in text  # no file, no row
+
+
+def test_a_file_of_another_shape_is_refused_naming_it(tmp_path: Path) -> None:
+    write(tmp_path, "ui", {"pages": "not a list"})
+    with pytest.raises(ValueError, match="ui.json"):
+        report.table(tmp_path)
+    with pytest.raises(ValueError, match="no benchmark files"):
+        report.table(tmp_path / "empty")
+
+
+def test_the_block_is_replaced_between_its_markers_only() -> None:
+    text = f"before\n{report.START}\nold\n{report.END}\nafter\n"
+    assert report.replace_block(text, "new", "x") == f"before\n{report.START}\nnew\n{report.END}\nafter\n"
+    with pytest.raises(ValueError, match="README.md: needs exactly one pair"):
+        report.replace_block("no markers", "new", "README.md")
+
+
+@pytest.mark.parametrize("doc", ["README.md", "docs/performance.md"])
+def test_the_docs_table_is_the_committed_benchmark_files(doc: str) -> None:
+    """The table in the docs is what ``bench report`` makes of benchmarks/*.json: a figure
+    changed in one and not the other fails here (run ``bench report --write``)."""
+    text = (ROOT / doc).read_text()
+    assert report.replace_block(text, report.table(ROOT / "benchmarks"), doc) == text
