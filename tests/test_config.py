@@ -92,3 +92,12 @@ def test_secret_fields_are_left_out_of_a_redacted_config_and_its_repr() -> None:
     assert "s3cret-pilot-token" not in cfg.to_toml(redact=True)
     assert "s3cret-pilot-token" not in repr(cfg)
     assert AppConfig.from_dict(cfg.to_dict(redact=True)).access.token == ""
+
+
+def test_the_emulated_rig_ships_the_simulated_robots_controller() -> None:
+    """sim-devices drives the same simulated robot as sim-tuned (behind the emulators): its
+    controller settings are sim-tuned's, so it swims and tracks as that does."""
+    from ucat_console.config import load_config
+
+    tuned, rig = load_config("sim-tuned"), load_config("sim-devices")
+    assert rig.mpc == tuned.mpc and rig.body == tuned.body and rig.baseline == tuned.baseline

@@ -3,7 +3,7 @@
 :class:`AppConfig` composes the blocks defined beside the code that uses them (the
 controller's ``mpc``, ``body``, ``baseline``, ``executor``, ``power``; the closed loop's
 ``loop``; the simulated robot's ``plant``; the ``recorder``; the limits on reading session
-files, ``review``; the drivers' ``devices``) with the console's own
+files, ``review``; the efficiency figures and their comparison, ``metrics``; the drivers' ``devices``) with the console's own
 blocks defined here: ``console`` (web server, plots, supervision), ``access`` (pilot
 token) and ``failsafe`` (one rule per failsafe). ``robot`` picks the robot the
 supervisor drives: ``"sim"`` (the in-process simulator) or ``"rig"`` (the device drivers).
@@ -42,6 +42,7 @@ import tomli_w
 from ucat_console import shipped
 from ucat_console.backend.devices.config import DevicesConfig
 from ucat_console.backend.loop.config import LoopConfig
+from ucat_console.backend.review.metrics import MetricsConfig
 from ucat_console.backend.sessions.limits import ReviewConfig
 from ucat_console.backend.sessions.recorder import RecorderConfig
 from ucat_console.backend.sim.params import PlantConfig
@@ -234,6 +235,7 @@ class AppConfig(Config):
     plant: PlantConfig = PlantConfig()
     recorder: RecorderConfig = RecorderConfig()
     review: ReviewConfig = ReviewConfig()
+    metrics: MetricsConfig = MetricsConfig()
     console: ConsoleConfig = ConsoleConfig()
     access: AccessConfig = AccessConfig()
     failsafe: FailsafeConfig = FailsafeConfig()

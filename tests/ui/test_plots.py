@@ -175,7 +175,7 @@ def test_a_page_receives_the_plots_and_the_pose_the_view_sends() -> None:
         assert depth.dtype == target.dtype == np.float32
         st = wait_for(lambda: (d := page.elements.get(view.plots.st._impl.uuid, {}).get("data")) is not None
                       and len(d[0]) == 5 and d, what="the St plot's five rows")
-        assert len(st) == 1 + 2 + 4 + 1  # t, the corridor's two edges, four fins, the markers
+        assert len(st) == 1 + 2 + 4 + 1 + 1  # t, the corridor's two edges, four fins, St above 1, changes
         np.testing.assert_allclose(np.asarray(st[1]), 0.35)
         np.testing.assert_allclose(np.asarray(st[2]), 0.25)
         for fin, want in enumerate((0.3, 0.4, 0.5, 1.0)):
@@ -230,6 +230,7 @@ class _Chart:
     def __init__(self) -> None:
         self._impl = types.SimpleNamespace(props=types.SimpleNamespace(data=None))
         self.sent = 0
+        self.order = 0.0
 
     def _queue_update(self, name: str, value: object) -> None:
         self.sent += 1
@@ -271,8 +272,32 @@ def test_the_compiled_series_are_the_numpy_ones(capacity, rows, window, max_poin
         return
     assert plots.updates == 1
     for name, chart in charts.items():
-        got = chart._impl.props.data
+        *got, marks = chart._impl.props.data
+        assert (marks == -1.0).all()  # no change to mark
         assert len(got) == len(want[name]), name
         for a, b in zip(got, want[name]):
             assert a.dtype == b.dtype and a.flags.c_contiguous, name
             np.testing.assert_array_equal(a.view(np.uint8), np.ascontiguousarray(b).view(np.uint8), err_msg=name)
+
+
+def test_changes_are_marked_on_every_chart_at_their_rows_and_go_with_a_reset() -> None:
+    from ucat_console.telemetry.events import Event
+    from ucat_console.ui.plots import change_marks
+
+    t = np.array([0.0, 0.5, 1.0, 1.5, 2.0])
+    np.testing.assert_array_equal(change_marks(t, [0.7, 2.0, 3.0, -1.0]), [-1, -1, 1, -1, 1])
+    feeder = PlotFeeder(50)
+    for k in range(20):
+        feeder.on_message(ch.SETPOINTS, Setpoints(0.1 * k, 0.1, 1.0, 0.0))
+        if k == 10:
+            feeder.on_message(ch.EVENTS, Event(1.0, "loop", "mode", "controller mpc -> baseline", "info"))
+            feeder.on_message(ch.EVENTS, Event(1.0, "loop", "plan_overrun", "late", "warning"))  # not a change
+        feeder.sample()
+    assert list(feeder.changes) == [1.0]
+    plots = LivePlots(_Gui(), feeder, rate=10.0, max_points=100, corridor=lambda: (0.25, 0.35))
+    plots.refresh(5.0)
+    for chart in (plots.st, plots.depth, plots.velocity, plots.yaw_rate, plots.power):
+        t, *_, marks = chart._impl.props.data
+        assert t[marks == 1.0].tolist() == [1.0]
+    feeder.reset()
+    assert not feeder.changes

@@ -71,7 +71,7 @@ def rig_config(sessions: str) -> Any:
     automatic recording."""
     from ucat_console.config import load_config
 
-    cfg = load_config(Path(__file__).resolve().parents[2] / "config" / "sim-devices.toml")
+    cfg = load_config("sim-devices")
     return cfg.replace(devices=cfg.devices.replace(enable_at_start=False),
                        console=cfg.console.replace(record_on_arm=False, sessions_dir=sessions))
 
@@ -93,7 +93,10 @@ class EventCount:
         from ucat_console.backend.safety import FAILSAFES
 
         device = ev.source.startswith("epos2") or ev.source in SENSORS
-        return (device and ev.level in FAULT_LEVELS) or (ev.source == "failsafe" and ev.code in FAILSAFES)
+        # the tracking alarm judges the control (a start from rest may lag its reference),
+        # not a device or the timing: counted in ``events``, not as a fault
+        judged = ev.source == "failsafe" and ev.code in FAILSAFES and ev.code != "tracking"
+        return (device and ev.level in FAULT_LEVELS) or judged
 
     def drive_faults(self) -> int:
         return sum(1 for e in self.faults if e.source.startswith("epos2"))

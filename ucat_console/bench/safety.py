@@ -295,10 +295,9 @@ def _sessions_folder(directory: Path, copies: int, seconds: float) -> dict[str, 
 
 
 def _config() -> Any:
-    from ucat_console.config import AppConfig, load_config
+    from ucat_console.config import load_config
 
-    tuned = Path(__file__).resolve().parents[2] / "config" / "sim-tuned.toml"
-    return load_config(tuned) if tuned.exists() else AppConfig()
+    return load_config("sim-tuned")
 
 
 def _pilot(app: Any, sup: Any, **kw: Any) -> Any:

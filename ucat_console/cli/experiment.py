@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from ucat_console.experiments import EXPERIMENTS, require_extra
+from ucat_console.experiments import EXPERIMENTS, NAMED_ONLY, require_extra
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -15,7 +15,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Run experiments of experiments.md headless on the simulated U-CAT and write "
                     "DIR/report.md, DIR/results.json and PNG figures.",
     )
-    p.add_argument("names", nargs="+", metavar="NAME", help=f"{', '.join(EXPERIMENTS)} or all")
+    p.add_argument("names", nargs="+", metavar="NAME", help=f"{', '.join(EXPERIMENTS + NAMED_ONLY)} or all (all: not E7)")
     p.add_argument("--quick", action="store_true", help="reduced runs (short, fewer seeds and targets)")
     p.add_argument("--out", type=Path, default=Path("experiments-out"), help="output directory DIR")
     p.add_argument("--seed", type=int, default=0, help="base seed of planners and sensor noise")
@@ -24,6 +24,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--velocities", type=float, nargs="+", default=None, metavar="V",
                    help="E4 reference velocities (m/s; default 0.1 0.2 0.3 0.4)")
     p.add_argument("--depth", type=float, default=None, help="depth setpoint of E4 / E5 (m)")
+    p.add_argument("--seeds", type=int, default=None, metavar="N",
+                   help="E7 only: its declared reduced design, the first N of its 10 seeds")
     p.set_defaults(func=run)
 
 
@@ -36,7 +38,7 @@ def run(args: argparse.Namespace) -> int:
     command = "ucat-console experiment " + " ".join(sys.argv[2:] if len(sys.argv) > 2 else args.names)
     doc = run_experiments(
         args.names, args.out, quick=args.quick, seed=args.seed, scheduler=args.scheduler,
-        speeds=args.velocities, depth=args.depth, command=command,
+        speeds=args.velocities, depth=args.depth, command=command, e7_seeds=args.seeds,
     )
     for name, res in doc["experiments"].items():
         print(f"{name}: {res['runtime_s']:.1f} s")

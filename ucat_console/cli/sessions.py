@@ -1,8 +1,9 @@
-"""``ucat-console sessions list|info|export|repair``: the recorded sessions.
+"""``ucat-console sessions list|info|export|repair|compare``: the recorded sessions.
 
 SESSION is a session id or any one of its part files (a path, or a file name inside the
 sessions directory): ``info`` and ``export`` cover every part of the session, in order, as
-one recording; ``repair`` takes one file. ``--dir`` names the sessions directory (default:
+one recording; ``repair`` takes one file; ``compare`` writes two to four sessions' (or their
+segments') efficiency figures side by side (docs/review.md). ``--dir`` names the sessions directory (default:
 ``$UCAT_CONSOLE_SESSIONS``, else the user's data folder: ``ucat-console paths``); files
 outside it are refused.
 """
@@ -21,7 +22,7 @@ def _add_dir(p: argparse.ArgumentParser) -> None:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    sessions = sub.add_parser("sessions", help="recorded sessions: list, info, export, repair")
+    sessions = sub.add_parser("sessions", help="recorded sessions: list, info, export, repair, compare")
     kinds = sessions.add_subparsers(dest="sessions", required=True, metavar="ACTION")
 
     p = kinds.add_parser("list", help="every session: start, duration, size, events, notes")
@@ -50,6 +51,20 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--force", action="store_true", help="rewrite even a file that opens")
     _add_dir(p)
     p.set_defaults(func=run_repair)
+
+    from ucat_console.backend.review.compare import SEGMENT_CODES
+
+    p = kinds.add_parser("compare", help="runs side by side: Table V figures (Markdown, CSV) and a PNG")
+    p.add_argument("files", nargs="+", metavar="SESSION", help="one to four sessions (ids or part files)")
+    p.add_argument("--segments", nargs="+", default=[], choices=SEGMENT_CODES, metavar="CODE",
+                   help="cut each run at these events into segments (" + ", ".join(SEGMENT_CODES) + ")")
+    p.add_argument("--align", choices=SEGMENT_CODES, default=None, metavar="CODE",
+                   help="overlay each run or segment from its first event of this code (default: its start)")
+    p.add_argument("--window", type=float, nargs=2, default=None, metavar=("FROM", "TO"),
+                   help="only this stretch of each run (session s)")
+    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory")
+    _add_dir(p)
+    p.set_defaults(func=run_compare)
 
 
 def resolve(arg: str, directory: Path | None) -> list[Path]:
@@ -167,4 +182,30 @@ def run_repair(args: argparse.Namespace) -> int:
         print(f"  reading stopped at: {report.stop_reason}")
     if report.original:
         print(f"  original kept as {report.original}")
+    return 0
+
+
+def run_compare(args: argparse.Namespace) -> int:
+    from ucat_console.backend.review import compare, export
+    from ucat_console.backend.review.metrics import MetricsConfig
+
+    if not 1 <= len(args.files) <= 4:
+        raise ValueError(f"compare: one to four sessions, got {len(args.files)}")
+    if len(args.files) == 1 and not args.segments:
+        raise ValueError("compare: one session needs --segments to compare its segments")
+    cfg = MetricsConfig()
+    wins = []
+    for f in args.files:
+        run = compare.load_run(f, args.dir)
+        if args.window is not None:
+            run.cut(*args.window)
+        wins += compare.windows(run, args.segments, args.align)
+    rows = compare.table(wins, cfg)
+    paths = export.write_all(rows, wins, cfg, args.out)
+    for r in rows:
+        flag = f"  NOT COMPARABLE: {r.not_comparable}" if r.not_comparable else ""
+        print(f"{r.label:<40} power {export.cell(r, 'power'):<26} J/m {export.cell(r, 'energy_per_metre'):<26}"
+              f" CoT {export.cell(r, 'cost_of_transport')}{flag}")
+    for kind, path in paths.items():
+        print(f"{kind:<9} -> {path}")
     return 0

@@ -45,17 +45,19 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ucat_console.control.inflow_model import Plate, stream_regressors
 from ucat_console.control.params import ManoeuvreConfig, MpcConfig
 from ucat_console.typedconf import Config, param
 
-FITS = ("coefficients", "scale")
+FITS = ("coefficients", "scale", "inflow")
 
 
 @dataclass(frozen=True)
 class IdentifyConfig(Config):
     """How a recording is cut into windows and which windows count."""
 
-    fit: str = param("coefficients", choices=FITS, doc="fit C_D and C_L, or one scale of both")
+    fit: str = param("coefficients", choices=FITS,
+                     doc="fit C_D and C_L, one scale of both, or C_D, C_L and the stream's profile drag C_D0 (inflow)")
     window_s: float = param(5.0, lo=0.5, hi=120.0, unit="s", doc="length of a force-balance window")
     steady_share: float = param(
         0.1, lo=0.0, hi=1.0, lo_open=True, doc="a window is steady when M du/dt is at most this share of the drag"
@@ -64,6 +66,9 @@ class IdentifyConfig(Config):
     max_tilt: float = param(10.0, lo=0.0, hi=90.0, lo_open=True, unit="deg", doc="largest roll or pitch")
     max_yaw_rate: float = param(0.1, lo=0.0, hi=10.0, lo_open=True, unit="rad/s", doc="largest mean |yaw rate|")
     min_dvl: int = param(8, lo=3, hi=10_000, doc="valid DVL reports a window needs")
+    plate_cl_max: float = param(1.2, lo=0.0, hi=5.0, doc="inflow: the plate's largest lift C_Lmax (held)")
+    plate_cd90: float = param(2.0, lo=0.0, hi=5.0, doc="inflow: the plate's drag across the flow C_D90 (held)")
+    plate_strips: int = param(8, lo=1, hi=64, doc="inflow: blade-element strips")
 
 
 @dataclass(frozen=True)
@@ -115,6 +120,8 @@ class Window:
     b: float  # of C_D
     steady: bool
     thrust: float = math.nan  # the fitted model's mean thrust
+    c0: float = 0.0  # inflow: mean stream-thrust regressor of C_D0
+    held: float = 0.0  # inflow: mean stream thrust of the held C_D90 and C_Lmax (N)
     residual: float = math.nan  # thrust - (drag + M accel)
 
 
@@ -132,6 +139,8 @@ class Identification:
     windows: tuple[Window, ...]
     rms_residual: float  # N
     mass: float  # the hull's M used, kg
+    c_d0: float = math.nan  # fit "inflow": the stream's profile drag C_D0
+    c_d0_ci: float = math.nan
 
     @property
     def steady_windows(self) -> int:
@@ -143,8 +152,11 @@ class Identification:
                  + (f" from {sources}" if sources else ""),
                  f"# fit {self.fit}: {len(self.windows)} windows ({self.steady_windows} steady), "
                  f"rms residual {self.rms_residual:.4f} N; 95 % intervals:",
-                 f"# c_d {self.c_d:.4f} +- {self.c_d_ci:.4f}, c_l {self.c_l:.4f} +- {self.c_l_ci:.4f}",
-                 "[mpc]", f"c_d = {self.c_d:.6g}", f"c_l = {self.c_l:.6g}", ""]
+                 f"# c_d {self.c_d:.4f} +- {self.c_d_ci:.4f}, c_l {self.c_l:.4f} +- {self.c_l_ci:.4f}"]
+        if self.fit == "inflow":
+            lines.append(f"# inflow: profile drag c_d0 {self.c_d0:.4f} +- {self.c_d0_ci:.4f} (the plate's "
+                         "C_D90 and C_Lmax held)")
+        lines += ["[mpc]", f"c_d = {self.c_d:.6g}", f"c_l = {self.c_l:.6g}", ""]
         return "\n".join(lines)
 
 
@@ -168,6 +180,19 @@ def thrust_regressors(track: FinTrack, mpc: MpcConfig, hull: Hull) -> tuple[NDAr
     return q * np.cos(2.0 * th - th_s), -q * np.sin(th_s)
 
 
+def _stream(track: FinTrack, m: Measurements, mpc: MpcConfig, hull: Hull,
+            cfg: IdentifyConfig) -> tuple[NDArray, NDArray]:
+    """(c_0, held) per sample for the inflow fit (zeros for the others): the stream's thrust
+    regressor of C_D0 and the stream thrust of the held C_D90 and C_Lmax, at the DVL speed."""
+    if cfg.fit != "inflow":
+        z = np.zeros(track.t.size)
+        return z, z
+    speed = np.interp(track.t, m.dvl_t, m.dvl_u)
+    plate = Plate(mpc.rho, mpc.fin_area, mpc.r_c, mpc.c_d, mpc.c_l, cfg.plate_strips)
+    c0, c90, cl = stream_regressors(track.angle, track.rate, speed, plate, hull.mounting_angle)
+    return c0, cfg.plate_cd90 * c90 + cfg.plate_cl_max * cl
+
+
 def _slope(t: NDArray, u: NDArray) -> float:
     tc = t - t.mean()
     return float((tc * (u - u.mean())).sum() / (tc * tc).sum())
@@ -181,7 +206,7 @@ def windows(m: Measurements, mpc: MpcConfig, hull: Hull, cfg: IdentifyConfig) ->
     if m.dvl_t.size < cfg.min_dvl:
         raise ValueError(f"sensors/dvl: {m.dvl_t.size} valid DVL reports; identification needs the "
                          "forward speed (at least one window's worth)")
-    regs = [(f.t, *thrust_regressors(f, mpc, hull)) for f in m.fins]
+    regs = [(f.t, *thrust_regressors(f, mpc, hull), *_stream(f, m, mpc, hull, cfg)) for f in m.fins]
     t_lo = max(f.t[0] for f in m.fins)
     t_hi = min(f.t[-1] for f in m.fins)
     n = int((t_hi - t_lo) // cfg.window_s)
@@ -207,13 +232,15 @@ def windows(m: Measurements, mpc: MpcConfig, hull: Hull, cfg: IdentifyConfig) ->
         u = m.dvl_u[sel]
         accel = _slope(m.dvl_t[sel], u)
         drag = float(hull.drag(u).mean())
-        a = b = 0.0
-        for t, ra, rb in regs:
+        a = b = c0 = held = 0.0
+        for t, ra, rb, r0, rh in regs:
             s = (t >= t0) & (t < t1)
             a += float(ra[s].mean())
             b += float(rb[s].mean())
+            c0 += float(r0[s].mean())
+            held += float(rh[s].mean())
         steady = drag > 0.0 and abs(hull.mass * accel) <= cfg.steady_share * drag
-        out.append(Window(t0, t1, float(u.mean()), accel, drag, a, b, bool(steady)))
+        out.append(Window(t0, t1, float(u.mean()), accel, drag, a, b, bool(steady), c0=c0, held=held))
     return out, why
 
 
@@ -246,10 +273,13 @@ def identify(recordings: Sequence[Measurements], mpc: MpcConfig, hull: Hull,
             f"(the identification manoeuvre holds each for {ManoeuvreConfig().step_s:g} s)")
     a = np.array([w.a for w in ws])
     b = np.array([w.b for w in ws])
-    y = np.array([w.drag + hull.mass * w.accel for w in ws])
+    y = np.array([w.drag + hull.mass * w.accel - w.held for w in ws])
     if cfg.fit == "coefficients":
         basis = np.column_stack([b, a])  # columns: C_D, C_L
         x0 = np.array([mpc.c_d, mpc.c_l])
+    elif cfg.fit == "inflow":
+        basis = np.column_stack([b, a, [w.c0 for w in ws]])  # columns: C_D, C_L, C_D0
+        x0 = np.array([mpc.c_d, mpc.c_l, 0.05])
     else:
         basis = (mpc.c_d * b + mpc.c_l * a)[:, None]
         x0 = np.array([1.0])
@@ -257,7 +287,7 @@ def identify(recordings: Sequence[Measurements], mpc: MpcConfig, hull: Hull,
     if len(ws) <= p:
         raise ValueError(f"{len(ws)} usable windows for {p} coefficients: the recording is too short")
     gram = basis.T @ basis
-    if cfg.fit == "coefficients" and np.linalg.cond(gram) > 1e8:
+    if cfg.fit != "scale" and np.linalg.cond(gram) > 1e8:
         raise ValueError("the recording does not tell C_L from C_D (every window pushes with the same "
                          "combination of the two: strokes about one centre); run the identification "
                          "manoeuvre, or fit one scale of both (fit = 'scale')")
@@ -267,7 +297,10 @@ def identify(recordings: Sequence[Measurements], mpc: MpcConfig, hull: Hull,
     s2 = float(r @ r) / dof
     cov = s2 * np.linalg.inv(res.jac.T @ res.jac)
     half = scipy.stats.t.ppf(0.975, dof) * np.sqrt(np.diag(cov))
-    if cfg.fit == "coefficients":
+    c_d0 = c_d0_ci = math.nan
+    if cfg.fit == "inflow":
+        c_d0, c_d0_ci = float(res.x[2]), float(half[2])
+    if cfg.fit != "scale":
         c_d, c_l = float(res.x[0]), float(res.x[1])
         c_d_ci, c_l_ci = float(half[0]), float(half[1])
         scale = c_d / mpc.c_d if mpc.c_d > 0.0 else math.nan
@@ -276,13 +309,15 @@ def identify(recordings: Sequence[Measurements], mpc: MpcConfig, hull: Hull,
         scale, scale_ci = float(res.x[0]), float(half[0])
         c_d, c_l = scale * mpc.c_d, scale * mpc.c_l
         c_d_ci, c_l_ci = scale_ci * mpc.c_d, scale_ci * mpc.c_l
+    stream = 0.0 if math.isnan(c_d0) else c_d0
     fitted = tuple(
         Window(w.t0, w.t1, w.speed, w.accel, w.drag, w.a, w.b, w.steady,
-               thrust=c_l * w.a + c_d * w.b, residual=c_l * w.a + c_d * w.b - yy)
+               thrust=c_l * w.a + c_d * w.b + stream * w.c0 + w.held,
+               residual=c_l * w.a + c_d * w.b + stream * w.c0 - yy, c0=w.c0, held=w.held)
         for w, yy in zip(ws, y)
     )
     return Identification(cfg.fit, c_d, c_l, c_d_ci, c_l_ci, scale, scale_ci, fitted,
-                          float(np.sqrt(np.mean(r * r))), hull.mass)
+                          float(np.sqrt(np.mean(r * r))), hull.mass, c_d0, c_d0_ci)
 
 
 @dataclass(frozen=True)

@@ -10,6 +10,8 @@ from __future__ import annotations
 import importlib.util
 
 EXPERIMENTS = ("E1", "E2", "E3", "E4", "E4R", "E5", "E6")
+#: experiments run only when named (not by "all"): E7 (docs/experiments/e7-declaration.md)
+NAMED_ONLY = ("E7",)
 #: what the experiments, sweeps and the MPC benchmark import beyond the console
 EXTRA_MODULES = ("matplotlib", "dask", "distributed", "tqdm")
 

@@ -17,6 +17,7 @@ TITLES = {
     "E4": "E4: closed loop, power and tracking (paper Table V, Fig. 7)",
     "E4R": "E4R: E4 from rest, the paper's settings and the shipped sim-tuned",
     "E6": "E6: where St-awareness pays: a family of plants, each with its identified model",
+    "E7": "E7: St-awareness on foil plants whose efficiency depends on the flow (declared)",
     "E5": "E5: field-style circle at 3 m with a current (paper Fig. 8)",
     "sweep": "Weight sweep over the E4 protocol",
 }
@@ -148,12 +149,14 @@ def _e3(res: dict[str, Any]) -> str:
     if "corridor_bounds" in res:
         b = res["table_iv_bound"]
         out.append(f"\nWhat the paper's numbers allow. Table IV's mean two-stage cost {b['mean_cost']:g} at N = 500 "
-                   f"with lam_f = {b['lam_f']:g} bounds its mean force error: every other term is >= 0, so "
-                   f"c_force <= J / lam_f = {num(b['force_error_at_most'], 3)} N. Inside the corridor a stroke "
-                   "pair with equal rates has w <= 2 V St_high / L_f, where the model's largest mean force is "
-                   "F_max; over the grid no such plan can have a mean force error below "
-                   "mean(max(0, |f*| - F_max)):\n\n")
-        out.append(table(["V (m/s)", "w at St 0.35 (rad/s)", "F_max, d_2 = -d_1 (N)", "F_max, any pair (N)",
+                   f"with lam_f = {b['lam_f']:g} bounds its mean force error from above: every other term is >= 0, "
+                   f"so c_force <= J / lam_f = {num(b['force_error_at_most'], 3)} N (an upper bound: Table III's "
+                   "0.156 N lies below it and does not contradict it). Inside the corridor a stroke pair with "
+                   "equal rates has w <= 2 V St_high / L_f, where the model's largest mean force is F_max; over "
+                   "the grid no such plan can have a mean force error below mean(max(0, |f*| - F_max)). The "
+                   "bounds are for equal-rate pairs only: a slow and a fast stroke whose cycle St (eq 10) lies in "
+                   "the corridor make more (docs/experiments/findings.md):\n\n")
+        out.append(table(["V (m/s)", "w at St 0.35 (rad/s)", "F_max, d_2 = -d_1 (N)", "F_max, equal rates, any strokes (N)",
                           "grid mean |f*| (N)", "least mean force error in the corridor (N)"],
                          [[num(r["v"], 1), num(r["w_max_in_corridor"], 2), num(r["f_max_symmetric"], 3),
                            num(r["f_max"], 3),
@@ -303,7 +306,68 @@ def sweep_table(res: dict[str, Any]) -> str:
                   "saving %", "J/m saving %", "vel MAE (m/s)", "St MAE", "depth MAE (m)"], rows)
 
 
-_SECTIONS = {"E1": _e1, "E2": _e2, "E3": _e3, "E4": _e4, "E4R": _e4r, "E5": _e5, "E6": _e6, "sweep": _sweep}
+def _ci(c: dict[str, Any]) -> str:
+    if not c["comparable"]:
+        return f"not comparable ({c['pairs']} pairs)"
+    return f"{c['saving']:.1f} [{c['lo']:.1f}, {c['hi']:.1f}] ({c['pairs']})"
+
+
+def _e7(res: dict[str, Any]) -> str:
+    p = res["protocol"]
+    out = [f"Declared before it was run (docs/experiments/e7-declaration.md); plants hash **{p['plant_hash']}** "
+           f"(declared {p['declared_hash']}). Plants {', '.join(p['plants'])}; from rest at "
+           f"{', '.join(str(v) for v in p['speeds'])} m/s; seeds {', '.join(str(s) for s in p['seeds'])}"
+           f"{' (the declared reduced design)' if p.get('reduced') else ''}; settle {p['settle_s']:g} s, measured "
+           f"{p['window_s']:g} s; the shipped sim-tuned's {p['body_layer']} body layer and weights (lam_f "
+           f"{p['lam_f']:g}, lam_st {p['lam_st']:g}, lam_d {p['lam_d']:g}, lam_c {p['lam_c']:g}, lam_e "
+           f"{p['lam_e']:g}); best fixed frequency tuned on seed {p['held_out']} over "
+           f"{', '.join(f'{f:g}' for f in p['frequencies'])} Hz. Matched tracking: DVL speed MAE <= "
+           f"{p['match_mae']:g} m/s and true mean speed within {p['match_mean']:g} m/s of the reference. "
+           f"Savings of true shaft energy per metre, A against B, over the seeds where both match, "
+           f"with paired bootstrap 95 % intervals ({p['bootstrap']} resamples); (n) = pairs.\n\n",
+           "Open-loop curves (declared):\n\n",
+           table(["plant", "v (m/s)", "peak St", "peak eta", "St that makes the thrust", "thrust per fin (N)"],
+                 [[c["plant"], num(c["v"], 1), num(c["peak_st"], 2), num(c["peak_eta"], 3),
+                   "none" if not c["feasible_st"] else f"{c['feasible_st'][0]:.2f}-{c['feasible_st'][1]:.2f}",
+                   num(c["thrust_needed_per_fin"], 3)] for c in res["curves"]]),
+           "\nIdentified models:\n\n",
+           table(["plant", "C_D", "+-", "C_L", "+-"],
+                 [[d["plant"], num(d["c_d"], 3), num(d["c_d_ci"], 3), num(d["c_l"], 3), num(d["c_l_ci"], 3)]
+                  for d in res["identified"]]),
+           "\nBest fixed frequency (held-out seed):\n\n",
+           table(["plant", "v (m/s)", "frequency (Hz)", "a tracking frequency found"],
+                 [[t["plant"], num(t["v_ref"], 1), num(t["frequency"], 2), yes_no(t["matched"])]
+                  for t in res["tuning"]]),
+           "\nDecision rules, per case (St term: closed-stroke MPC against its no-St ablation):\n\n",
+           table(["plant", "v (m/s)", "peak St", "peak in corridor", "St-term saving % [95 % CI]",
+                  "vs best baseline % [95 % CI]", "pays"],
+                 [[c["plant"], num(c["v_ref"], 1), num(c["peak_st"], 2), yes_no(c["peak_in_corridor"]),
+                   "n/a" if c["st_saving"] is None else f"{c['st_saving']:.1f} [{c['st_lo']:.1f}, {c['st_hi']:.1f}]",
+                   "n/a" if c["vs_best"] is None else f"{c['vs_best']:.1f} [{c['vs_best_lo']:.1f}, {c['vs_best_hi']:.1f}]",
+                   yes_no(c["pays"])] for c in res["decisions"]["cases"]]),
+           "\nEvery comparison (saving % [95 % CI] (pairs)):\n\n",
+           table(["plant", "v (m/s)", "A", "B", "saving of A against B"],
+                 [[c["plant"], num(c["v_ref"], 1), c["a"], c["b"], _ci(c)] for c in res["comparisons"]]),
+           "\nEvery run is in e7_runs.csv; per case (mean over seeds; matched = runs that match):\n\n"]
+    groups: dict[tuple, list[dict[str, Any]]] = {}
+    for r in res["rows"]:
+        groups.setdefault((r["plant"], r["v_ref"], r["controller"]), []).append(r)
+
+    def mean(rs: list[dict[str, Any]], k: str) -> float:
+        vals = [r[k] for r in rs if r[k] is not None]
+        return sum(vals) / len(vals) if vals else float("nan")
+
+    out.append(table(["plant", "v (m/s)", "controller", "matched", "mean v", "vel MAE", "true J/m", "true W",
+                      "St in range", "stroke (rad)", "rate (rad/s)"],
+                     [[k[0], num(k[1], 1), k[2], f"{sum(r['matched'] for r in rs)}/{len(rs)}",
+                       num(mean(rs, "velocity_mean"), 3), num(mean(rs, "velocity_mae"), 3),
+                       num(mean(rs, "energy_per_metre_true"), 3), num(mean(rs, "power_true"), 4),
+                       num(mean(rs, "st_in_range"), 2), num(mean(rs, "stroke"), 2), num(mean(rs, "rate"), 2)]
+                      for k, rs in groups.items()]))
+    return "".join(out)
+
+
+_SECTIONS = {"E1": _e1, "E2": _e2, "E3": _e3, "E4": _e4, "E4R": _e4r, "E5": _e5, "E6": _e6, "E7": _e7, "sweep": _sweep}
 
 
 def render(doc: dict[str, Any]) -> str:

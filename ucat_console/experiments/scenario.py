@@ -76,12 +76,29 @@ def family_hydro(name: str) -> FinHydroConfig | None:
     return FinHydroConfig(coefficients="custom", custom=FinCoefficients(thrust_gain=g), wake=wake)
 
 
+def foil_name(cd0: float) -> str:
+    """The name of a foil plant (E7): ``foil_cd0.1`` (soft-fin coefficients, ``foil_inflow``
+    with the profile drag C_D0)."""
+    return f"foil_cd{cd0:g}"
+
+
+def foil_hydro(name: str) -> FinHydroConfig | None:
+    """The hydrodynamics of a foil plant ``foil_cd<C_D0>``; None if ``name`` is not of that form."""
+    if not name.startswith("foil_cd"):
+        return None
+    try:
+        cd0 = float(name[len("foil_cd"):])
+    except ValueError:
+        return None
+    return FinHydroConfig(coefficients="soft_fin", wake="foil_inflow", foil_cd0=cd0)
+
+
 def hydro_of(variant: str) -> FinHydroConfig:
-    """A named variant's or a family member's hydrodynamics, or ValueError naming it."""
-    h = PLANT_VARIANTS.get(variant) or family_hydro(variant)
+    """A named variant's, a family member's or a foil plant's hydrodynamics, or ValueError naming it."""
+    h = PLANT_VARIANTS.get(variant) or family_hydro(variant) or foil_hydro(variant)
     if h is None:
-        raise ValueError(f"plant: {variant!r} is not one of {', '.join(PLANT_VARIANTS)} "
-                         "or gain<G>_strouhal_wake / gain<G>_quasi_steady")
+        raise ValueError(f"plant: {variant!r} is not one of {', '.join(PLANT_VARIANTS)}, "
+                         "gain<G>_strouhal_wake / gain<G>_quasi_steady or foil_cd<C_D0>")
     return h
 
 
@@ -99,6 +116,8 @@ def plant_assumptions(variant: str) -> dict[str, Any]:
         "c_d": c.c_d, "c_l": c.c_l, "area": c.area, "r_c": c.r_c, "fin_length": c.fin_length,
         "thrust_gain": c.thrust_gain, "st_peak": h.st_peak, "sigma_low": h.sigma_low,
         "sigma_high": h.sigma_high, "wake_floor": h.floor,
+        **({"foil_cd0": h.foil_cd0, "foil_cd90": h.foil_cd90, "foil_cl_max": h.foil_cl_max,
+            "foil_strips": h.foil_strips, "foil_added_mass": h.foil_added_mass} if h.wake == "foil_inflow" else {}),
     }
 
 
@@ -122,6 +141,7 @@ class Scenario:
     baseline: BaselineConfig = field(default_factory=BaselineConfig)
     trace_rate: float = 0.0  # Hz of the returned trace; 0: none
     tag: str = ""
+    planner: str = ""  # "oracle": E7's oracle plans for the MPC modes (experiments.oracle)
 
     def loop_config(self) -> LoopConfig:
         return LoopConfig(mode=self.mode, planner_seed=self.seed, mpc=self.mpc, body=self.body,
@@ -132,6 +152,8 @@ class Scenario:
         sp = BodySetpoints(velocity=self.v_ref, depth=self.depth, yaw_rate=self.yaw_rate)
         check_setpoints(self.loop_config(), sp)
         plant_config(self.plant, self.seed, self.current)
+        if self.planner not in ("", "oracle"):
+            raise ValueError(f"planner: {self.planner!r} is not '' or 'oracle'")
         if self.settle_s < 0.0 or self.window_s <= 0.0:
             raise ValueError(f"window: settle {self.settle_s} s and window {self.window_s} s; need >= 0 and > 0")
 
@@ -221,7 +243,13 @@ def run_scenario(sc: Scenario) -> dict[str, Any]:
         fin_angles=(START_FIN_ANGLE,) * 4, seed=sc.seed,
     )
     stream = TelemetryStream(validate=False)
-    loop = ClosedLoop(cfg, io, stream, setpoints=BodySetpoints(sc.v_ref, sc.depth, sc.yaw_rate))
+    planner = None
+    if sc.planner == "oracle":
+        from ucat_console.experiments.oracle import OraclePlanner
+
+        planner = lambda index: OraclePlanner(sc.plant, sc.mpc)  # noqa: E731
+    loop = ClosedLoop(cfg, io, stream, setpoints=BodySetpoints(sc.v_ref, sc.depth, sc.yaw_rate),
+                      mpc_planner=planner)
     t0, t1 = sc.settle_s, sc.settle_s + sc.window_s
     rec = _Recorder(loop, t0, t1, sc.trace_rate, cfg.mpc.st_opt, (cfg.mpc.st_low, cfg.mpc.st_high))
     stream.subscribe(rec, [ch.POWER, ch.DVL, ch.DEPTH, ch.IMU] + [ch.fin_plan(i) for i in range(4)])
@@ -290,6 +318,6 @@ def _scenario_dict(sc: Scenario) -> dict[str, Any]:
     d["mpc"] = {k: d["mpc"][k] for k in ("formulation", "lam_f", "lam_st", "lam_a", "lam_d", "lam_c", "lam_e",
                                          "n_samples", "c_d", "c_l")}
     d["body"] = {"layer": sc.body.layer, "thrust_gain": sc.body.thrust_gain, "velocity": d["body"]["velocity"]}
-    d["baseline"] = {"inverse_model": sc.baseline.inverse_model}
+    d["baseline"] = {"inverse_model": sc.baseline.inverse_model, "frequency": sc.baseline.frequency}
     d["current"] = list(sc.current)
     return d

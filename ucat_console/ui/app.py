@@ -60,7 +60,9 @@ from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.messages import FinPlan
 from ucat_console.ui import markdown, page_script, panels
 from ucat_console.ui.fast_props import set_prop
+from ucat_console.ui.compare_panel import ComparePanel
 from ucat_console.ui.guard import PageGuard
+from ucat_console.ui.metrics_panel import MetricsPanel, effects_markdown
 from ucat_console.ui.page_jobs import PageJobs
 from ucat_console.ui.playback import PlaybackPanel
 from ucat_console.ui.scene import add_pool
@@ -165,6 +167,7 @@ class ConsoleApp:
         self.tab_review = self.tabs.add_tab("Review")
         with self.tab_tuning:
             self.journal = gui.add_markdown("Journal: no changes yet.", order=100.0)
+            self.effects = gui.add_markdown("", order=101.0)
         with self.tab_mpc:
             self.introspection = gui.add_markdown("No plans yet.")
         with self.tab_safety:
@@ -172,6 +175,7 @@ class ConsoleApp:
 
         self.plot_panel = gui.add_panel(order=50.0)
         with self.plot_panel.add_tab("Live plots"):
+            self.metrics = MetricsPanel(gui, supervisor.cfg.metrics, order=0.0)
             self.view = StreamView(
                 server.scene, gui, supervisor.cfg.plant.geometry, plot_rate=cfg.plot_rate,
                 scene_rate=cfg.scene_rate, max_plot_points=cfg.max_plot_points, history=lambda: self.history,
@@ -188,6 +192,7 @@ class ConsoleApp:
 
         self._unsubs = [
             *self.view.subscribe(supervisor.stream),
+            self.metrics.subscribe(supervisor.stream),
             supervisor.stream.subscribe(self._on_message, [ch.EVENTS, *(ch.fin_plan(i) for i in range(N_FINS))]),
         ]
         supervisor.add_listener(self.request_refresh)
@@ -261,6 +266,9 @@ class ConsoleApp:
                 with client.atomic():
                     panel = panels.ControlPanel(self, cid, client.gui, client, containers, allow=self._allow(cid))
                     review = self.build_review(client.gui, client.scene, cid)
+                    ComparePanel(client.gui, self.tab_review, self.sessions_dir, cfg=self.sup.cfg.metrics,
+                                 sessions=self.session_list.sessions, allow=self._allow(cid), client=client,
+                                 jobs=lambda what, job, coalesce: self.jobs.submit(cid, what, job, coalesce=coalesce))
             except Exception:
                 if self.page_present(cid):
                     raise
@@ -310,6 +318,7 @@ class ConsoleApp:
             container=self.tab_review, plot_container=self.review_plot_tab,
             allow=self._allow(cid) if cid is not None else None,
             replay_slot=self.replay_slot, may_replay=lambda: self._may_replay(cid), plot_height=PLOT_HEIGHT,
+            metrics=self.sup.cfg.metrics,
             jobs=(lambda what, job, coalesce: self.jobs.submit(cid, what, job, coalesce=coalesce))
             if cid is not None else None,
             present=(lambda: self.page_present(cid)) if cid is not None else (lambda: True),
@@ -413,12 +422,14 @@ class ConsoleApp:
 
     def _tick_slow(self) -> None:
         self._notify_pages()
+        self.metrics.refresh()
         sup = self.sup
         h = sup.health()
         _set(self.introspection, markdown.introspection_markdown(list(self._plans), h.late_plans,
                                                               h.plan_overruns, h.mode))
         _set(self.failsafes, markdown.failsafe_markdown(sup.safety.states(), h.t))
         _set(self.journal, markdown.journal_markdown(sup.journal(12)))
+        _set(self.effects, effects_markdown(sup.effects.entries(), sup.loop.time))
         with self._lock:
             pages = list(self.pages.items())
             ps = dict(self.panels)

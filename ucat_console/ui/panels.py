@@ -108,6 +108,7 @@ class ControlPanel:
             with gui.add_folder("Live tuning", order=10.0):
                 self.apply_tuning = gui.add_button("Apply tuning", color="blue")
                 self.revert = gui.add_button("Revert to saved")
+                self.undo = gui.add_button("Undo last change")
                 self.save = gui.add_button("Save as baseline")
                 self.tuning_message = gui.add_markdown("")
                 tuning = sup.tuning()
@@ -180,7 +181,7 @@ class ControlPanel:
             allow(h, False)
         allow(self.disarm, True, urgent=self._disarm_now)
         pilot = [self.release, self.handover, self.decline, self.arm, self.mode,
-                 *self.sp_inputs.values(), self.apply_sp, self.apply_tuning, self.revert, self.save,
+                 *self.sp_inputs.values(), self.apply_sp, self.apply_tuning, self.revert, self.undo, self.save,
                  *self.params.values(), self.history, self.rec_start, self.rec_stop, self.marker,
                  self.reset_drives, self.zero_depth, *self.identify.handles()]
         if self.faults is not None:
@@ -220,6 +221,7 @@ class ControlPanel:
         self.apply_sp.on_click(self._guard(self._apply_setpoints))
         self.apply_tuning.on_click(self._guard(self._apply_tuning, tuning=True))
         self.revert.on_click(self._guard(lambda: sup.revert_tuning(cid), tuning=True))
+        self.undo.on_click(self._guard(lambda: sup.undo_tuning(cid), tuning=True))
         self.save.on_click(self._guard(lambda: sup.save_baseline(cid), tuning=True))
         self.history.on_update(self._guard(self._set_history))
         self.rec_start.on_click(self._guard(lambda: sup.start_recording(cid)))
@@ -459,7 +461,7 @@ class ControlPanel:
             self._set_prop(handle, "disabled", not pilot)
             v = sup.param_value(key)
             self._push(key, handle, v if isinstance(v, str) else float(v), force)
-        for h in (self.apply_sp, self.apply_tuning, self.revert, self.save, self.history, self.note, self.marker,
+        for h in (self.apply_sp, self.apply_tuning, self.revert, self.undo, self.save, self.history, self.note, self.marker,
                   self.marker_key, self.stop_key, self.disarm_key, *self.key_commands.values()):
             self._set_prop(h, "disabled", not pilot)
         failed = sup.recorder.failed

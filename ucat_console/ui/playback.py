@@ -59,6 +59,7 @@ from typing import Any, Callable
 
 from viser._messages import GuiSliderMark
 
+from ucat_console.backend.review.metrics import MetricsConfig
 from ucat_console.backend.sessions import files, index, repair, shared
 from ucat_console.backend.sessions.markers import MAX_NOTE_BYTES, Marker, check_note
 from ucat_console.backend.sessions.player import MAX_SPEED, MIN_SPEED, Player, check_speed
@@ -69,6 +70,7 @@ from ucat_console.robot.geometry import Geometry
 from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.stream import TelemetryStream
 from ucat_console.ui.markdown import _describe, esc, replay_markdown, sessions_markdown, within
+from ucat_console.ui.metrics_panel import MetricsPanel
 from ucat_console.ui.plots import CHANNELS as PLOT_CHANNELS
 from ucat_console.ui.scene import LIVE_ROOT, REVIEW_ROOT
 from ucat_console.ui.view import StreamSampler, StreamView, from_page
@@ -122,6 +124,7 @@ class PlaybackPanel:
         replay_slot: ReplaySlot | None = None,
         may_replay: Callable[[], bool | None] = lambda: None,
         plot_height: int = 170,
+        metrics: MetricsConfig | None = None,
         jobs: Callable[[str, Callable[[], Any], bool], str | None] | None = None,
         present: Callable[[], bool] = lambda: True,
         sessions: Callable[[], index.Listing] | None = None,
@@ -158,10 +161,12 @@ class PlaybackPanel:
                 trail_spacing=trail_spacing, root=REVIEW_ROOT, sample_rows=False, on_slow=self._tick_slow,
                 plot_height=plot_height, name="review", present=present,
             )
+            # the reviewed robot's efficiency figures above its plots, as the live ones
+            self.metrics = MetricsPanel(gui, metrics or MetricsConfig(), order=0.0)
         self.sampler = self.view.sampler
         self.feeder = self.view.feeder
         self.plots = self.view.plots
-        self._unsubs = self.view.subscribe(self.stream)
+        self._unsubs = [*self.view.subscribe(self.stream), self.metrics.subscribe(self.stream)]
 
         with within(container):
             with gui.add_folder("Sessions", order=1.0):
@@ -595,6 +600,7 @@ class PlaybackPanel:
 
     def _tick_slow(self) -> None:
         self._sync_inputs()
+        self.metrics.refresh()
         self._tick_job()
 
     @property

@@ -20,11 +20,15 @@ Charts (one shared time axis labelled in seconds of stream time, synchronised cu
   axis spans at least :data:`MIN_SPAN` (an invisible pair of points keeps it from
   zooming 2 mm of depth noise up to the whole chart);
 * power per fin and in total, with the running mean of the total, and the energy per
-  metre travelled on the right-hand axis of the same chart.
+  metre travelled on the right-hand axis of the same chart (second, so that it is in view
+  at 1280x800);
+* on every chart, each change (mode, tuning and formulation, setpoints, marker: the events
+  of :data:`MARK_CODES`) as a pink spike at its time (:func:`change_marks`).
 """
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import math
 import threading
@@ -32,6 +36,8 @@ from typing import Any, Callable, Iterator, Sequence
 
 import numpy as np
 
+from ucat_console.robot import look
+from ucat_console.robot.look import hex_colour
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.messages import BodyState, FinPlan, Power, Setpoints, Status
 from ucat_console.ui import plot_series as ps
@@ -60,12 +66,17 @@ COLUMNS: tuple[str, ...] = (
 )
 COL = {name: i for i, name in enumerate(COLUMNS)}
 #: the channels the feeder reads
-CHANNELS = (ch.BODY_STATE, ch.SETPOINTS, ch.POWER, ch.STATUS, *(ch.fin_plan(i) for i in range(N_FINS)))
+CHANNELS = (ch.BODY_STATE, ch.SETPOINTS, ch.POWER, ch.STATUS, ch.EVENTS, *(ch.fin_plan(i) for i in range(N_FINS)))
+#: the events marked on every chart's time axis: mode, tuning (the formulation too),
+#: setpoint changes and markers
+MARK_CODES = frozenset({"mode", "tuning", "setpoints", "marker"})
+MARK_COLOUR = "#e377c2"
+_MARKS_KEPT = 500
 
 #: the type of the values sent to the pages (the time axis is float64)
 VALUES = np.float32
 _VALUES_MAX = float(np.finfo(VALUES).max)
-FIN_COLOURS = ("#d62728", "#1f77b4", "#2ca02c", "#ff7f0e")
+FIN_COLOURS = tuple(hex_colour(c) for c in look.FIN_COLOURS)  # each fin its 3-D blade's colour
 _PLANS = {ch.fin_plan(i): i for i in range(N_FINS)}
 
 
@@ -119,12 +130,18 @@ class PlotFeeder:
         self.buffer = RingBuffer(capacity, len(COLUMNS))
         self._latest = [math.nan] * len(COLUMNS)
         self._t_last_row = -math.inf
+        #: the times of the changes marked on the charts (MARK_CODES), oldest first
+        self.changes: collections.deque[float] = collections.deque(maxlen=_MARKS_KEPT)
 
     @property
     def latest(self) -> list[float]:
         return list(self._latest)
 
     def on_message(self, channel: str, msg: Any) -> None:
+        if channel == ch.EVENTS:
+            if msg.code in MARK_CODES and math.isfinite(msg.t):
+                self.changes.append(float(msg.t))
+            return
         row = self._latest
         fin = _PLANS.get(channel)
         if fin is not None:
@@ -171,6 +188,21 @@ class PlotFeeder:
         self.buffer = RingBuffer(self.buffer.capacity, len(COLUMNS))
         self._latest = [math.nan] * len(COLUMNS)
         self._t_last_row = -math.inf
+        self.changes.clear()
+
+
+def change_marks(t: np.ndarray, changes: Sequence[float]) -> np.ndarray:
+    """The change marks' series on the time axis ``t`` (ascending), on the charts' "mark"
+    scale (0 to 1): 1 at the first row at or after each change, -1 (below the chart,
+    clipped) elsewhere, so that each change draws as a narrow spike across the chart and
+    nothing else shows (uPlot draws NaN neither as a point nor as a gap)."""
+    out = np.full(t.shape[0], -1.0, dtype=VALUES)
+    if t.shape[0] == 0 or not changes:
+        return out
+    c = np.asarray(changes, dtype=np.float64)
+    c = c[(c >= t[0]) & (c <= t[-1])]
+    out[np.searchsorted(t, c)] = 1.0
+    return out
 
 
 def _series(label: str, stroke: str, width: float = 1.5, dash: tuple[float, ...] | None = None) -> dict:
@@ -183,7 +215,8 @@ def _series(label: str, stroke: str, width: float = 1.5, dash: tuple[float, ...]
 _X = {"label": "t (s)"}
 _X_AXIS = {"label": "t (s)", "size": 30, "labelSize": 14, "labelGap": 0}
 _NO_LEGEND = {"show": False}
-_SCALES = {"x": {"time": False}}
+_SCALES = {"x": {"time": False}, "mark": {"range": [0.0, 1.0], "auto": False}}
+_MARK = {"label": "changes", "stroke": MARK_COLOUR, "width": 1.5, "scale": "mark", "points": {"show": False}}
 _CURSOR = {"sync": {"key": "ucat"}}
 _PIN = {"label": "axis span", "stroke": "rgba(0,0,0,0)", "width": 0.5, "points": {"show": False}}
 
@@ -211,44 +244,46 @@ class LivePlots:
         empty = np.array([0.0, 1.0])
         fins = range(N_FINS)
         common = dict(scales=_SCALES, cursor=_CURSOR, height=height)
-        st_scales = {"x": {"time": False}, "y": {"range": [0.0, 1.0], "auto": False}}
+        st_scales = {**_SCALES, "y": {"range": [0.0, 1.0], "auto": False}}
         above = {"label": "St > 1 (at 1)", "stroke": "rgba(0,0,0,0)", "width": 0.5,
                  "points": {"show": True, "size": 7, "stroke": "#d62728", "fill": "#d62728"}}
         self.st = gui.add_uplot(
-            (empty,) * (2 + N_FINS + 2),
+            (empty,) * (2 + N_FINS + 3),
             (_X, _series("St high", "#2ca02c", 1.0), _series("St low", "#2ca02c", 1.0),
-             *(_series(f"St fin {i}", FIN_COLOURS[i]) for i in fins), above),
+             *(_series(f"St fin {i}", FIN_COLOURS[i]) for i in fins), above, _MARK),
             bands=({"series": (1, 2), "fill": "rgba(44, 160, 44, 0.28)"},),
-            title="St per fin 0-3 (red, blue, green, orange); corridor green; none while disarmed or still",
+            title="St per fin 0-3 (red, blue, green, orange); corridor green; none while disarmed or still; "
+                  "changes pink",
             axes=(_X_AXIS, {"label": "St", "size": 40}), cursor=_CURSOR, height=height, scales=st_scales,
             legend=_NO_LEGEND,
         )
         self.depth = gui.add_uplot(
-            (empty,) * 5, (_X, _series("depth", "#1f77b4"), _series("target", "#555", 1.0, (6, 3)), _PIN, _PIN),
+            (empty,) * 6, (_X, _series("depth", "#1f77b4"), _series("target", "#555", 1.0, (6, 3)), _PIN, _PIN, _MARK),
             title="Depth (m): measured, target dashed", axes=(_X_AXIS, {"label": "m", "size": 40}),
             legend=_NO_LEGEND, **common,
         )
         self.velocity = gui.add_uplot(
-            (empty,) * 5, (_X, _series("u", "#d62728"), _series("target", "#555", 1.0, (6, 3)), _PIN, _PIN),
+            (empty,) * 6, (_X, _series("u", "#d62728"), _series("target", "#555", 1.0, (6, 3)), _PIN, _PIN, _MARK),
             title="Forward velocity (m/s): measured, target dashed", axes=(_X_AXIS, {"label": "m/s", "size": 40}),
             legend=_NO_LEGEND, **common,
         )
         self.yaw_rate = gui.add_uplot(
-            (empty,) * 5, (_X, _series("r", "#9467bd"), _series("target", "#555", 1.0, (6, 3)), _PIN, _PIN),
+            (empty,) * 6, (_X, _series("r", "#9467bd"), _series("target", "#555", 1.0, (6, 3)), _PIN, _PIN, _MARK),
             title="Yaw rate (rad/s): measured, target dashed", axes=(_X_AXIS, {"label": "rad/s", "size": 40}),
             legend=_NO_LEGEND, **common,
         )
         epm = _series("energy per metre (J/m, right)", "#17becf", 2.0)
         epm["scale"] = "epm"
         self.power = gui.add_uplot(
-            (empty,) * (1 + N_FINS + 3),
+            (empty,) * (1 + N_FINS + 4),
             (_X, *(_series(f"fin {i}", FIN_COLOURS[i], 1.0) for i in fins),
-             _series("total", "#888", 2.0), _series("running mean", "#8c564b", 1.5, (6, 3)), epm),
+             _series("total", "#888", 2.0), _series("running mean", "#8c564b", 1.5, (6, 3)), epm, _MARK),
             title="Power (W) and energy per metre (J/m)",
             axes=(_X_AXIS, {"label": "W", "size": 40},
                   {"scale": "epm", "side": 1, "label": "J/m", "grid": {"show": False}, "size": 40}),
-            scales={"x": {"time": False}, "epm": {"auto": True}}, cursor=_CURSOR, height=height,
+            scales={**_SCALES, "epm": {"auto": True}}, cursor=_CURSOR, height=height,
             legend={"show": True, "live": False},
+            order=self.st.order + 1e-3,  # second, in view at 1280x800 with the efficiency figures above
         )
         self.energy = self.power  # one chart: power and energy per metre
 
@@ -260,10 +295,11 @@ class LivePlots:
             return
         # new arrays each time: set without viser's casts and comparisons (ui.fast_props)
         t, v = got
-        set_prop(self.st, "data", (t, *v[ps.ST_HIGH:ps.ST_ABOVE + 1]))
+        marks = change_marks(t, list(self.feeder.changes))
+        set_prop(self.st, "data", (t, *v[ps.ST_HIGH:ps.ST_ABOVE + 1], marks))
         for k, chart in enumerate((self.depth, self.velocity, self.yaw_rate)):
-            set_prop(chart, "data", (t, *v[ps.TRACKED + 4 * k:ps.TRACKED + 4 * k + 4]))
-        set_prop(self.power, "data", (t, *v[ps.POWER:ps.ROWS]))
+            set_prop(chart, "data", (t, *v[ps.TRACKED + 4 * k:ps.TRACKED + 4 * k + 4], marks))
+        set_prop(self.power, "data", (t, *v[ps.POWER:ps.ROWS], marks))
         self.updates += 1
 
 

@@ -32,7 +32,7 @@ import numpy as np
 
 from ucat_console.robot.fins import N_FINS
 from ucat_console.robot.geometry import BLADE_LENGTH_FACTOR, BLADE_SPAN, BLADE_THICKNESS, Geometry, fin_mount
-from ucat_console.robot.look import FIN_COLOUR, GHOST_COLOUR, HULL_COLOUR, NOSE_COLOUR
+from ucat_console.robot.look import FIN_COLOURS, GHOST_COLOUR, HULL_COLOUR, NOSE_COLOUR
 from ucat_console.telemetry.messages import BodyState, FinState
 from ucat_console.ui.fast_props import set_pose, set_prop
 
@@ -156,7 +156,7 @@ class RobotScene:
         neutral = blade_wxyzs(self.mount_wxyz, [0.0] * N_FINS)
         self.blades = scene.add_batched_meshes_simple(
             f"{r}/ucat/blades", verts, faces, batched_wxyzs=neutral, batched_positions=positions,
-            batched_colors=FIN_COLOUR, lod="off", side="double")
+            batched_colors=np.array(FIN_COLOURS, dtype=np.uint8), lod="off", side="double")
         self.ghosts = scene.add_batched_meshes_simple(
             f"{r}/ucat/ghosts", verts, faces, batched_wxyzs=neutral, batched_positions=positions,
             batched_colors=GHOST_COLOUR, lod="off", opacity=0.35, side="double", cast_shadow=False)
@@ -191,7 +191,8 @@ class RobotScene:
 
     def update_label(self, body: BodyState | None) -> None:
         if body is not None:
-            text = f"depth {body.depth:.2f} m"
+            # a reviewed robot says so, beside its depth: it is a recording, not the robot now
+            text = f"{'REVIEW · ' if self.root == REVIEW_ROOT else ''}depth {body.depth:.2f} m"
             if text != self._label_text:  # (viser's assignment costs more than the comparison)
                 self.label.text = self._label_text = text
 

@@ -187,3 +187,14 @@ def test_plans_timed_by_the_drive_replay_exactly_with_the_recorded_drive(session
     with SessionReader(path, sessions) as r:
         res = counterfactual(r, {}, seed=SEED)
     assert [row.u for row in sorted(res.rows, key=lambda x: x.t)] == [m.u for _, m in items]
+
+
+def test_the_summary_lists_the_fins_in_order_whatever_order_their_plans_came_in():
+    from ucat_console.backend.sessions.replay import ReplayResult, ReplayRow
+
+    u = (0.5, -0.5, 2.0, 2.0)
+    rows = tuple(ReplayRow(0.1 * k, fin, "mpc", u, 0.3, 0.1, 1.0, 0.5, u, 0.3, 0.1, 1.0, 0.5)
+                 for k, fin in enumerate((0, 3, 1, 2, 3)))
+    summary = ReplayResult(MpcConfig(), rows, 0).summary()
+    assert [s["fin"] for s in summary] == ["0", "1", "2", "3", "all"]
+    assert [s["plans"] for s in summary] == [1, 1, 1, 2, 5]

@@ -108,8 +108,11 @@ class Actuators:
 
     def __init__(self, cfg: LoopConfig, s: np.ndarray, members: np.ndarray, watches: StrokeWatches,
                  planning: PlanningService, outbox: Outbox, command_fin: Callable[[int, float, float], None],
-                 wall_deadline: Callable[[float], float], driving: Callable[[], bool]) -> None:
+                 wall_deadline: Callable[[float], float], driving: Callable[[], bool],
+                 mpc_planner: Callable[[int], Planner] | None = None) -> None:
         self.cfg = cfg
+        # an experiment's own planner for the MPC modes (by actuator index), e.g. E7's oracle
+        self._mpc_planner = mpc_planner
         self.blocks: dict[str, Any] = {"mpc": cfg.mpc, "baseline": cfg.baseline, "manoeuvre": cfg.manoeuvre}
         self._s = s
         self._members = members
@@ -300,6 +303,8 @@ class Actuators:
 
     # ------------------------------------------------------------------ modes and tuning
     def _planner(self, mode: str, index: int) -> Planner:
+        if self._mpc_planner is not None and MODES[mode].mpc:
+            return self._mpc_planner(index)
         b = self.blocks
         seed = int(np.random.SeedSequence([self.cfg.planner_seed, self._generation, index]).generate_state(1)[0])
         return MODES[mode].planner(PlannerSetting(b["mpc"], b["baseline"], self.cfg.executor, b["manoeuvre"], seed))

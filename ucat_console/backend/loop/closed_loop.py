@@ -80,7 +80,7 @@ from ucat_console.backend.loop.commands import PID_LOOPS, LoopCommands, check_se
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.backend.loop.modes import MODES
 from ucat_console.backend.loop.outbox import Outbox
-from ucat_console.backend.loop.planners import PlanningService, ThreadedPlanning
+from ucat_console.backend.loop.planners import Planner, PlanningService, ThreadedPlanning
 from ucat_console.control import loop_core as lc
 from ucat_console.control.allocation import BodySetpoints
 from ucat_console.control.argcheck import finite
@@ -113,6 +113,7 @@ class ClosedLoop:
         source: str = "sim",
         driving: Callable[[], bool] | None = None,
         status: Callable[[float], Status] | None = None,
+        mpc_planner: Callable[[int], Planner] | None = None,
     ) -> None:
         self.cfg = cfg
         # the Status message at time t: the supervisor's (armed, pilot, failsafes) when one
@@ -156,7 +157,7 @@ class ClosedLoop:
         # looked up at each call: a caller may wrap the robot's command_fin or replace driving
         self.fins = Actuators(cfg, self._s, members, watches, self._planning, self.outbox,
                               lambda fin, angle, rate: self.io.command_fin(fin, angle, rate),
-                              self.clock.wall_deadline, lambda: self._driving())
+                              self.clock.wall_deadline, lambda: self._driving(), mpc_planner)
 
     # ------------------------------------------------------------------ public state
     @property

@@ -50,6 +50,7 @@ class Mode:
     planner: Callable[[PlannerSetting], Planner]
     reads: tuple[str, ...] = ("mpc",)  # blocks of BLOCKS its planners are made from
     follows_targets: bool = True  # False: its fins ignore the body loops (no tracking to judge)
+    mpc: bool = False  # its planner is the MPC (an experiment's ``mpc_planner`` stands in for it)
 
     def __post_init__(self) -> None:
         if self.fins not in (INDEPENDENT_FINS, SYNC_FINS):
@@ -91,9 +92,9 @@ def mode_names(*, follows_targets: bool | None = None) -> tuple[str, ...]:
 
 
 register(Mode("mpc", "MPC", "MPC", INDEPENDENT_FINS,
-              lambda s: MpcFinPlanner(s.mpc, s.seed, s.executor)))
+              lambda s: MpcFinPlanner(s.mpc, s.seed, s.executor), mpc=True))
 register(Mode("mpc_sync", "MPC, rear fins synchronised", "MPC sync", SYNC_FINS,
-              lambda s: MpcFinPlanner(s.mpc, s.seed, s.executor)))
+              lambda s: MpcFinPlanner(s.mpc, s.seed, s.executor), mpc=True))
 register(Mode("baseline", "baseline inverse model", "baseline", INDEPENDENT_FINS,
               lambda s: BaselineFinPlanner(s.mpc, s.baseline, s.executor), reads=("mpc", "baseline")))
 register(Mode("identify", "the identification manoeuvre (Session tab)", "identify", INDEPENDENT_FINS,

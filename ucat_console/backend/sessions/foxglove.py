@@ -41,7 +41,7 @@ from ucat_console.telemetry.channels import BODY_STATE, EVENTS, N_FINS, fin_stat
 from ucat_console.telemetry.events import LEVELS, Event
 from ucat_console.telemetry.messages import BodyState, FinState
 from ucat_console.robot.geometry import BLADE_LENGTH_FACTOR, BLADE_SPAN, BLADE_THICKNESS, fin_mount
-from ucat_console.robot.look import FIN_COLOUR, HULL_COLOUR, NOSE_COLOUR
+from ucat_console.robot.look import FIN_COLOURS, HULL_COLOUR, NOSE_COLOUR
 
 FRAME_TRANSFORM = "foxglove.FrameTransform"
 LOG = "foxglove.Log"
@@ -295,7 +295,8 @@ def scene_update(hull_size: Vec3, fin_mounts: Sequence[tuple[Vec3, Quat]], fin_l
     ])]
     for i in range(len(fin_mounts)):
         entities.append(_entity(ns, fin_frame(i), f"fin{i}", [
-            _cube((fin_length / 2, 0.0, 0.0), (fin_length, BLADE_THICKNESS, BLADE_SPAN), FIN_COLOUR),
+            _cube((fin_length / 2, 0.0, 0.0), (fin_length, BLADE_THICKNESS, BLADE_SPAN),
+                  FIN_COLOURS[i % len(FIN_COLOURS)]),
         ]))
     return {"deletions": [], "entities": entities}
 

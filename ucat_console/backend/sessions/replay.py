@@ -153,9 +153,9 @@ class ReplayResult:
     skipped: int  # recorded plans the planner refused (their inputs are in the log)
 
     def summary(self) -> list[dict[str, float | int | str]]:
-        """Means per fin and over all fins."""
+        """Means per fin (in fin order) and over all fins."""
         groups: dict[str, list[ReplayRow]] = {}
-        for r in self.rows:
+        for r in sorted(self.rows, key=lambda r: r.fin):
             groups.setdefault(str(r.fin), []).append(r)
         if self.rows:
             groups["all"] = list(self.rows)

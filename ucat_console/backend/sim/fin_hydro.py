@@ -86,7 +86,8 @@ H_SIN_A = 15
 H_ARM_R = 16
 H_ARM_P = 17
 H_ARM_Y = 18
-NPH = 19
+H_FOIL = 19  # the foil option's entries (``foil.P_*``) start here
+NPH = H_FOIL + 10
 
 
 def hydro_params(hydro: FinHydroConfig, geometry: FinGeometryConfig) -> np.ndarray:
@@ -113,6 +114,9 @@ def hydro_params(hydro: FinHydroConfig, geometry: FinGeometryConfig) -> np.ndarr
     ph[H_ARM_R] = geometry.arm_roll
     ph[H_ARM_P] = geometry.arm_pitch
     ph[H_ARM_Y] = geometry.arm_yaw
+    from ucat_console.backend.sim import foil  # foil imports this module
+
+    ph[H_FOIL:] = foil.foil_params(hydro)
     return ph
 
 
@@ -136,21 +140,33 @@ def fin_strouhal(mean_abs_rate: float, surge_rel: float, ph: np.ndarray) -> floa
 
 
 @njit(cache=True)
-def fin_force(
-    theta: float, omega: float, theta_start: float, st: float, ph: np.ndarray
-) -> tuple[float, float, float]:
-    """(f_x, f_y, thrust factor) of one fin in its 2-D frame (module docstring)."""
+def quasi_steady_force(theta: float, omega: float, theta_start: float, ph: np.ndarray) -> tuple[float, float]:
+    """(f_x, f_y) of one fin in its 2-D frame by the quasi-steady model alone (module
+    docstring), before the thrust gain."""
     v = ph[H_RC] * omega
     q = 0.5 * ph[H_RHO] * ph[H_AREA] * v * v
     lift = ph[H_CL] * q
     drag = ph[H_CD] * q
     thr = theta - theta_start
-    ct, st_ = math.cos(thr), math.sin(thr)
-    fxl = -lift * ct - drag * st_
-    fyl = -lift * st_ - drag * ct
+    ct, s_thr = math.cos(thr), math.sin(thr)
+    fxl = -lift * ct - drag * s_thr
+    fyl = -lift * s_thr - drag * ct
     c, s = math.cos(theta), math.sin(theta)
-    fx = c * fxl - s * fyl
-    fy = s * fxl + c * fyl
+    return c * fxl - s * fyl, s * fxl + c * fyl
+
+
+@njit(cache=True)
+def drag_torque_coefficient(ph: np.ndarray) -> float:
+    """k_D = rho C_D A_f r_c^3 / 2: the still-water drag power is k_D |w|^3."""
+    return 0.5 * ph[H_RHO] * ph[H_CD] * ph[H_AREA] * ph[H_RC] ** 3
+
+
+@njit(cache=True)
+def fin_force(
+    theta: float, omega: float, theta_start: float, st: float, ph: np.ndarray
+) -> tuple[float, float, float]:
+    """(f_x, f_y, thrust factor) of one fin in its 2-D frame (module docstring)."""
+    fx, fy = quasi_steady_force(theta, omega, theta_start, ph)
     scale = ph[H_GAIN]
     if ph[H_WAKE_ON] > 0.5:
         scale *= wake_factor(st, ph[H_ST_PEAK], ph[H_SIG_LO], ph[H_SIG_HI], ph[H_FLOOR])

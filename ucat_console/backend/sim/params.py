@@ -26,7 +26,7 @@ from ucat_console.typedconf import Config, param, require_below
 
 #: Names of the fin coefficient sets (see :class:`FinHydroConfig`).
 COEFFICIENT_SETS = ("paper", "eeuvsim", "soft_fin", "custom")
-WAKE_OPTIONS = ("quasi_steady", "strouhal_wake")
+WAKE_OPTIONS = ("quasi_steady", "strouhal_wake", "foil_inflow")
 
 
 def _check_vec3(name: str, value: tuple[float, ...]) -> None:
@@ -150,6 +150,9 @@ class FinHydroConfig(Config):
 
     The wake factor (``strouhal_wake``) is a split Gaussian in the fin's current Strouhal
     number with a floor; see :func:`ucat_console.backend.sim.fin_hydro.wake_factor`.
+    ``foil_inflow`` leaves the still-water force as it is and adds what the flow past the
+    hull changes, by blade-element strips of a flat plate (``foil_*`` fields;
+    :mod:`ucat_console.backend.sim.foil`, docs/foil-plant.md).
     """
 
     coefficients: str = param("soft_fin", choices=COEFFICIENT_SETS, doc="fin coefficient set")
@@ -162,6 +165,17 @@ class FinHydroConfig(Config):
     v_floor: float = param(0.05, lo=0.001, hi=5.0, unit="m/s", doc="speed floor for the fin's Strouhal number")
     tau_rate: float = param(
         0.3, lo=0.001, hi=10.0, unit="s", doc="time constant of the fin's mean |rate| (wake memory)"
+    )
+    foil_cd0: float = param(0.05, lo=0.0, hi=2.0, doc="foil_inflow: the plate's profile drag C_D0")
+    foil_cd90: float = param(
+        2.0, lo=0.0, hi=5.0, lo_open=True, doc="foil_inflow: the plate's drag across the flow, C_D0 + C_D90 at 90 deg"
+    )
+    foil_cl_max: float = param(
+        1.2, lo=0.0, hi=5.0, doc="foil_inflow: the plate's largest lift, C_L = C_Lmax sin(2 alpha)"
+    )
+    foil_strips: int = param(8, lo=1, hi=64, doc="foil_inflow: blade-element strips along the plate")
+    foil_added_mass: float = param(
+        1.0, lo=0.0, hi=2.0, doc="foil_inflow: share of the plate's strip-theory added inertia on the shaft"
     )
 
     def _check(self) -> None:

@@ -5,8 +5,10 @@ it, :func:`advance_steps` is the functional core: one compiled call runs many ph
 (state arrays in, state arrays out, nothing allocated in the loop). Each step:
 
 1. every fin servo moves one step along its profile (``servo``), the fin's stroke start,
-   mean |rate| and true shaft power are updated;
-2. each fin's force follows from its angle and rate (``fin_hydro``) and adds its wrench;
+   mean |rate| and true shaft power are updated (with the ``foil_inflow`` option the power
+   in step 2, as it depends on the flow);
+2. each fin's force follows from its angle and rate (``fin_hydro``; with ``foil_inflow``
+   also from the flow past the hull, ``foil``) and adds its wrench;
 3. the hull takes one semi-implicit Euler step (``vehicle``).
 
 The plant never reads the controller's parameters; it has its own (``params``).
@@ -22,17 +24,18 @@ import numpy as np
 from numba import njit
 
 from ucat_console.backend.sim.fin_hydro import (
-    H_CD,
-    H_RC,
-    H_RHO,
-    H_AREA,
+    H_COS_A,
+    H_FOIL,
     H_TAU,
     add_fin_wrench,
+    drag_torque_coefficient,
     fin_force,
     fin_sign_table,
     fin_strouhal,
     hydro_params,
 )
+from ucat_console.backend.sim.foil import P_ON as FOIL_ON
+from ucat_console.backend.sim.foil import foil_fin
 from ucat_console.backend.sim.params import PlantConfig
 from ucat_console.backend.sim.sensors import SensorSuite, sample_rows, sense
 from ucat_console.backend.sim.vehicle import (
@@ -111,7 +114,8 @@ def advance_steps(
     tau = np.empty(6)
     nuc = np.empty(3)
     k_rate = dt / ph[H_TAU]
-    k_drag = 0.5 * ph[H_RHO] * ph[H_CD] * ph[H_AREA] * ph[H_RC] ** 3
+    k_drag = drag_torque_coefficient(ph)
+    foil_on = ph[H_FOIL + FOIL_ON] > 0.5
     for _ in range(n_steps):
         # 1. servos, stroke tracking, mean |rate|, shaft power
         for i in range(4):
@@ -126,11 +130,12 @@ def advance_steps(
             if om == 0.0 or om * om0 < 0.0:
                 xf_out[i, F_THETA_START] = th
             xf_out[i, F_RATE_MEAN] += (abs(om) - xf_out[i, F_RATE_MEAN]) * k_rate
-            p = fin_inertia * al * om + k_drag * abs(om) ** 3
-            if p < 0.0:
-                p = 0.0
-            xf_out[i, F_POWER] = p
-            xf_out[i, F_ENERGY] += p * dt
+            if not foil_on:
+                p = fin_inertia * al * om + k_drag * abs(om) ** 3
+                if p < 0.0:
+                    p = 0.0
+                xf_out[i, F_POWER] = p
+                xf_out[i, F_ENERGY] += p * dt
         # 2. fin forces -> body wrench
         quat_to_rot(xv_out[QUAT : QUAT + 4], r)
         body_current(r, pv, nuc)
@@ -138,10 +143,16 @@ def advance_steps(
         for j in range(6):
             tau[j] = 0.0
         for i in range(4):
-            st = fin_strouhal(xf_out[i, F_RATE_MEAN], surge_rel, ph)
-            fx, fy, scale = fin_force(
-                xf_out[i, F_THETA], xf_out[i, F_OMEGA], xf_out[i, F_THETA_START], st, ph
-            )
+            st = fin_strouhal(xf_out[i, F_RATE_MEAN], surge_rel, ph)  # recorded; the foil never reads it
+            if foil_on:
+                fx, fy, scale, p = foil_fin(xf_out[i, F_THETA], xf_out[i, F_OMEGA], xf_out[i, F_THETA_START],
+                                            xf_out[i, F_ALPHA], surge_rel * ph[H_COS_A], fin_inertia, ph)
+                xf_out[i, F_POWER] = p
+                xf_out[i, F_ENERGY] += p * dt
+            else:
+                fx, fy, scale = fin_force(
+                    xf_out[i, F_THETA], xf_out[i, F_OMEGA], xf_out[i, F_THETA_START], st, ph
+                )
             xf_out[i, F_FX] = fx
             xf_out[i, F_FY] = fy
             xf_out[i, F_IMPULSE_X] += fx * dt

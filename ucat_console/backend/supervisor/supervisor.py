@@ -56,6 +56,7 @@ from ucat_console.backend.loop.clock import Clock, PacedClock
 from ucat_console.backend.loop.closed_loop import PID_LOOPS, ClosedLoop
 from ucat_console.backend.loop.config import MODES
 from ucat_console.backend.loop.kernels_warm_up import warm_up
+from ucat_console.backend.review.effects import ChangeEffects
 from ucat_console.backend.safety import CHANNELS as SAFETY_CHANNELS
 from ucat_console.backend.safety import SafetyMonitor, Transition
 from ucat_console.backend.sessions import limits
@@ -162,6 +163,8 @@ class Supervisor:
         self.rig_control = RigControl(self)
         #: plan overruns and the loop's stalls, one event per burst
         self.bursts = BurstFolder(lambda ev: self.stream.publish(ch.EVENTS, ev), ("plan_overrun", "stall"))
+        #: each tuning, mode or setpoint change with the figures before and after it
+        self.effects = ChangeEffects(cfg.metrics, lambda ev: self.stream.publish(ch.EVENTS, ev))
         self._thread: threading.Thread | None = None
         self._stopping = False
         self._closed = False
@@ -169,6 +172,7 @@ class Supervisor:
         self._unsubs = [
             self.stream.subscribe_batches(self.safety.on_messages, SAFETY_CHANNELS),
             self.stream.subscribe_batches(self._on_bodies, [ch.BODY_STATE]),
+            self.stream.subscribe(self.effects.on_message, self.effects.channels),
         ]
         self.access.add_listener(self._on_access)
 
@@ -289,6 +293,7 @@ class Supervisor:
         for tr in self.safety.check(now):
             self._on_failsafe(tr)
         self.bursts.check(now)
+        self.effects.check(now)
         self.recording.check(now, self.gate.armed, faulted=bool(self.safety.active() or self.safety.motor_faults()))
         run = self.manoeuvre
         if run is not None and not run.finished:
@@ -665,6 +670,16 @@ class Supervisor:
         """Back to the saved tuning in one step (journalled like any change)."""
         self.access.require_pilot(who, "revert tuning")
         self._apply_tuning(self.saved_tuning(), actor_name(who))
+
+    def undo_tuning(self, who: Actor) -> None:
+        """The latest tuning change undone in one step: the parameters it changed back to
+        their values before it (journalled like any change, so a second undo redoes it)."""
+        self.access.require_pilot(who, "undo tuning")
+        changes = [e for e in self.journal() if e.key.split(".", 1)[0] in ("mpc", "baseline", "pid")]
+        if not changes:
+            raise CommandRefused("undo: no tuning change to undo")
+        last = changes[-1]
+        self.set_params(who, {e.key: e.old for e in changes if (e.t, e.who) == (last.t, last.who)})
 
     # ================================================================== recording and markers
     def start_recording(self, who: Actor, notes: object = "") -> str:

@@ -1,0 +1,51 @@
+"""Two recorded sessions compared in the Review tab in headless Chromium at 1280x800: chosen,
+overlaid and tabled with the not-comparable flag."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("playwright.sync_api")
+from playwright.sync_api import Browser, expect  # noqa: E402
+from test_browser_console import ARTIFACTS, Console, browser, gui_input, open_page  # noqa: E402,F401
+
+sys.path.insert(0, str(Path(__file__).parents[1] / "backend" / "sessions"))
+from session_helpers import record  # noqa: E402
+from synthetic_run import run_items  # noqa: E402
+
+pytestmark = [pytest.mark.browser, pytest.mark.slow]
+SLOW, FAST = "20231114-221320-slow", "20231114-221500-fast"
+
+
+@pytest.fixture
+def console(tmp_path: Path):
+    record(tmp_path, run_items(), label="slow", wall_time=1_700_000_000.0)
+    record(tmp_path, run_items(scale=2.0, speed=0.25), label="fast", wall_time=1_700_000_100.0)
+    c = Console(tmp_path)
+    yield c
+    c.stop()
+
+
+def test_two_sessions_compared_in_the_review_tab(browser: Browser, console: Console) -> None:
+    page = open_page(browser, console, 1280, 800)
+    page.get_by_role("tab", name="Review", exact=True).click()
+    page.get_by_text("Compare runs").click()  # the folder opens
+    for k, name in ((1, SLOW), (2, FAST)):
+        box = gui_input(page, f"Run {k}")
+        expect(box).to_be_visible()
+        box.click()
+        page.get_by_role("option", name=name).click()
+        expect(box).to_have_value(name)
+    page.get_by_role("button", name="Compare", exact=True).click()
+    expect(page.get_by_text("not comparable").first).to_be_visible(timeout=60_000)
+    table = page.locator("table", has_text="J/m").last
+    expect(table).to_contain_text(SLOW)
+    expect(table).to_contain_text("32 [32, 32]")  # 8 W at 0.25 m/s
+    expect(page.get_by_role("button", name="Download CSV")).to_be_enabled()
+    expect(page.locator("img").last).to_be_visible()
+    ARTIFACTS.mkdir(exist_ok=True)
+    page.screenshot(path=str(ARTIFACTS / "compare-1280x800.png"))
+    page.close()

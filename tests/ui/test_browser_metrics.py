@@ -1,0 +1,60 @@
+"""The live efficiency figures in headless Chromium at 1280x800: in view without scrolling
+with the power chart, each stroke's St coloured by its corridor."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+from support import wait_for
+
+pytest.importorskip("playwright.sync_api")
+from playwright.sync_api import Browser, expect  # noqa: E402
+from test_browser_console import ARTIFACTS, Console, browser, console, open_page  # noqa: E402,F401
+
+from ucat_console.backend.access import LOCAL  # noqa: E402
+from ucat_console.ui.metrics_panel import IN_COLOUR, OUT_COLOUR  # noqa: E402
+
+pytestmark = [pytest.mark.browser, pytest.mark.slow]
+
+
+#: whether every element the selector finds is inside the window, measured in one script
+#: (the panel's elements are replaced a few times a second)
+IN_VIEW = """sel => { const els = [...document.querySelectorAll(sel)];
+    return els.length > 0 && els.every(e => { const r = e.getBoundingClientRect();
+        return r.width > 0 && r.left >= 0 && r.top >= 0 && r.right <= innerWidth && r.bottom <= innerHeight; }); }"""
+
+
+def _rgb(hex_colour: str) -> str:
+    r, g, b = (int(hex_colour[i:i + 2], 16) for i in (1, 3, 5))
+    return f"rgb({r}, {g}, {b})"
+
+
+def test_live_figures_are_in_view_and_coloured_by_the_corridor(browser: Browser, console: Console) -> None:
+    page = open_page(browser, console, 1280, 800)
+    console.sup.arm(LOCAL)
+    # every fin has had two strokes
+    expect(page.locator(".ucat-st")).to_have_count(8, timeout=60_000)
+    # the panel is re-rendered a few times a second: measure it whole, in one script
+    wait_for(lambda: page.evaluate(IN_VIEW, ".ucat-metrics, .ucat-robot"), what="the figures in view")
+    title = page.get_by_text("Power (W) and energy per metre (J/m)")
+    box = title.bounding_box()
+    assert box is not None and box["y"] + box["height"] <= 800
+    wait_for(lambda: "P –" not in page.locator(".ucat-power").inner_text(), what="a power figure")
+    strokes = page.evaluate("""() => [...document.querySelectorAll('.ucat-st')].map(e => ({
+        text: e.innerText, title: e.title, cls: e.className, colour: getComputedStyle(e).backgroundColor}))""")
+    assert len(strokes) == 8
+    for s in strokes:
+        value = float(s["text"])
+        lo, hi = (float(x) for x in re.findall(r"[\d.]+", s["title"]))
+        inside = lo <= value <= hi
+        assert ("in" if inside else "out") in s["cls"].split()
+        assert s["colour"] == _rgb(IN_COLOUR if inside else OUT_COLOUR), s
+    # a mode change is marked on the charts (their legend names the marks)
+    console.sup.set_mode(LOCAL, "baseline")
+    expect(page.get_by_text("changes", exact=True)).to_be_visible()
+    wait_for(lambda: any(e.code == "mode" for e in console.app.recent_events()), what="the mode event")
+    wait_for(lambda: len(console.app.view.feeder.changes) >= 1, what="the change noted for the plots")
+    ARTIFACTS.mkdir(exist_ok=True)
+    page.screenshot(path=str(ARTIFACTS / "metrics-1280x800.png"))
+    page.close()

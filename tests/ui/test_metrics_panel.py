@@ -1,0 +1,78 @@
+"""The efficiency figures' panel: numbers coloured in or out of the corridor, fin swatches in
+the plot colours, a reset on another session, and (in headless Chromium) the live page at
+1280x800 with the figures and the power chart in view."""
+
+from __future__ import annotations
+
+import re
+import sys
+import types
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).parents[1] / "backend" / "sessions"))
+from synthetic_run import run_items  # noqa: E402
+
+from ucat_console.backend.review.metrics import MetricsConfig  # noqa: E402
+from ucat_console.robot.look import FIN_COLOURS, hex_colour  # noqa: E402
+from ucat_console.telemetry.stream import TelemetryStream  # noqa: E402
+from ucat_console.ui.metrics_panel import IN_COLOUR, OUT_COLOUR, MetricsPanel  # noqa: E402
+
+
+class _Gui:
+    def add_html(self, content: str, order: float | None = None) -> types.SimpleNamespace:
+        return types.SimpleNamespace(content=content)
+
+
+def _panel() -> tuple[MetricsPanel, TelemetryStream]:
+    stream = TelemetryStream()
+    panel = MetricsPanel(_Gui(), MetricsConfig(window=10.0))
+    panel.subscribe(stream)
+    return panel, stream
+
+
+def test_the_panel_shows_each_fins_strokes_coloured_and_the_robots_figures():
+    panel, stream = _panel()
+    assert "no telemetry yet" in panel.html.content
+    for channel, m in run_items():
+        stream.publish(channel, m)
+    panel.refresh()
+    html = panel.html.content
+    for fin in range(4):
+        # the latest two strokes: 0.30 (inside 0.25..0.35) then 0.40 (outside)
+        for stroke, (where, colour, value) in enumerate((("in", IN_COLOUR, "0.30"), ("out", OUT_COLOUR, "0.40"))):
+            assert re.search(rf'class="ucat-st {where}" data-fin="{fin}" data-stroke="{stroke}"'
+                             rf'[^>]*background:{colour}[^>]*>{value}<', html)
+        assert f"background:{hex_colour(FIN_COLOURS[fin])}" in html
+    assert "P 4.00 W" in html and "20.0 J/m" in html and "CoT 0.91 J/(kg m)" in html
+    assert "depth 0.050 m" in html
+    panel.reset()
+    assert "no telemetry yet" in panel.html.content
+
+
+def test_the_effects_list_shows_before_and_after_and_what_is_still_pending():
+    from ucat_console.backend.review.effects import Effect
+    from ucat_console.ui.metrics_panel import effects_markdown
+
+    done = Effect(10.0, "tuning", "client 1: mpc.lam_st 5 -> 2", {}, 20.0, {"power": 4.0, "energy_per_metre": 20.0,
+                  "speed_mae": 0.02, "st_in": 50.0}, {"power": 3.0, "energy_per_metre": 15.0, "speed_mae": None,
+                                                      "st_in": 80.0})
+    pending = Effect(30.0, "mode", "controller mpc -> baseline", {}, 40.0, {"power": 3.0})
+    md = effects_markdown([pending, done], now=34.0)
+    assert "4.00 → 3.00 W" in md and "20.0 → 15.0 J/m" in md and "50 → 80 % St in corridor" in md
+    assert "0.020 → – m/s" in md
+    assert "3.00 → … W" in md and "fills in 6 s" in md
+    assert md.index("controller mpc") < md.index("lam")  # newest first
+
+
+def test_a_seek_back_starts_the_figures_afresh():
+    panel, stream = _panel()
+    for channel, m in run_items():
+        stream.publish(channel, m)
+    panel.refresh()
+    assert "P 4.00 W" in panel.html.content
+    # the review seeks back to 2 s and plays a run of twice the power from there
+    for channel, m in run_items(scale=2.0):
+        if m.t >= 2.0:
+            stream.publish(channel, m)
+    panel.refresh()
+    assert "P 8.00 W" in panel.html.content

@@ -1,0 +1,1 @@
+"""Reviewing runs: efficiency figures, segments, comparisons (docs/review.md)."""

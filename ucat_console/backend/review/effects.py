@@ -1,0 +1,116 @@
+"""Each change's measured effect: the figures over a window before a tuning, mode or
+setpoint change and over a window after it (docs/review.md).
+
+:class:`ChangeEffects` subscribes to the telemetry stream: it keeps the figures' messages
+of the last few windows and notes each change event as it comes (cheap: the publisher's
+thread). :meth:`ChangeEffects.check`, called by the supervisor between chunks of the loop
+(stream time ``now``), computes the figures before a change at once and those after it when
+``after`` seconds of stream time have passed, and publishes the completed entry as an
+Event (source ``"review"``, code ``"effect"``) on the stream, so the session records it and
+review shows it. Figures are those of :func:`~ucat_console.backend.review.metrics.window_figures`;
+NaN is written as null (an event's data is JSON).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+from ucat_console.backend.review.metrics import TABLE_CHANNELS, MetricsConfig, RunData, window_figures
+from ucat_console.telemetry.channels import EVENTS
+from ucat_console.telemetry.events import Event
+
+#: the changes whose effect is measured (event codes)
+CHANGE_CODES = ("tuning", "mode", "setpoints")
+#: the figures an entry carries
+EFFECT_FIGURES = ("power", "energy_per_metre", "cost_of_transport", "speed", "speed_mae", "depth_mae",
+                  "heading_mae", "st_mae", "st_in")
+_KEEP = 50
+
+
+@dataclass
+class Effect:
+    """One change and the figures before and after it (``after`` None until its window passed)."""
+
+    t: float
+    code: str
+    message: str
+    data: dict[str, Any]
+    due: float  # stream time when the after-window has passed
+    before: dict[str, float | None] = field(default_factory=dict)
+    after: dict[str, float | None] | None = None
+
+
+def _json(figures: dict[str, float]) -> dict[str, float | None]:
+    return {k: (v if math.isfinite(v) else None) for k, v in figures.items() if k in EFFECT_FIGURES}
+
+
+class ChangeEffects:
+    """The effects of the changes on one stream (module docstring)."""
+
+    def __init__(self, cfg: MetricsConfig, publish: Callable[[Event], None]) -> None:
+        self.cfg = cfg
+        self._publish = publish
+        self._lock = threading.Lock()
+        self._data = RunData()
+        self._pending: list[Effect] = []
+        self._done: list[Effect] = []
+        self._t = -math.inf
+
+    @property
+    def channels(self) -> tuple[str, ...]:
+        return (*TABLE_CHANNELS, EVENTS)
+
+    def on_message(self, channel: str, msg: Any) -> None:
+        with self._lock:
+            if channel == EVENTS:
+                if msg.code in CHANGE_CODES:
+                    self._pending.append(Effect(msg.t, msg.code, msg.message, dict(msg.data), msg.t + self.cfg.after))
+                return
+            self._data.feed(channel, msg)
+            self._t = max(self._t, msg.t)
+
+    def check(self, now: float) -> list[Effect]:
+        """Fill in what is due at stream time ``now``; the entries completed now."""
+        cfg = self.cfg
+        done = []
+        with self._lock:
+            for e in self._pending:
+                if not e.before:
+                    e.before = _json(window_figures(self._data, e.t - cfg.before, e.t, cfg.mass, closed=False))
+                if now >= e.due:
+                    e.after = _json(window_figures(self._data, e.t, e.t + cfg.after, cfg.mass))
+                    done.append(e)
+            if done:
+                self._pending = [e for e in self._pending if e.after is None]
+                self._done = (self._done + done)[-_KEEP:]
+                oldest = min([e.t for e in self._pending], default=now)
+                self._data.drop_before(min(oldest, now) - cfg.before - 1.0)
+            elif not self._pending and self._t - self._data.start > 4 * (cfg.before + cfg.after):
+                self._data.drop_before(self._t - cfg.before - 1.0)
+        for e in done:
+            self._publish(Event(now, "review", "effect", f"{e.message}: {summary(e)}", "info",
+                                {"change_t": e.t, "code": e.code, "change": e.data, "before": e.before,
+                                 "after": e.after, "before_s": cfg.before, "after_s": cfg.after}))
+        return done
+
+    def entries(self) -> list[Effect]:
+        """The latest changes, newest first (pending ones without ``after``)."""
+        with self._lock:
+            return [*reversed(self._pending), *reversed(self._done)]
+
+
+def _fmt(v: float | None, f: str) -> str:
+    return "–" if v is None else format(v, f)
+
+
+def summary(e: Effect) -> str:
+    """``4.00 → 3.50 W, 20.0 → 17.5 J/m, ...`` (before → after)."""
+    a = e.after or {}
+    parts = []
+    for key, f, unit in (("power", ".2f", " W"), ("energy_per_metre", ".1f", " J/m"),
+                         ("speed_mae", ".3f", " m/s speed MAE"), ("st_in", ".0f", " % St in corridor")):
+        parts.append(f"{_fmt(e.before.get(key), f)} → {_fmt(a.get(key), f) if e.after else '…'}{unit}")
+    return ", ".join(parts)

@@ -1,0 +1,121 @@
+"""One fin of the plant beating at a held hull speed: what its strokes and cycles make and cost.
+
+The open-loop view of the plant the foil experiment (E7) declares before it runs: a fin
+driven through the plant's own servo profile (``robot.servo``) and hydrodynamics
+(``fin_hydro``, ``foil``), the hull held at a surge speed through the water, with no body
+dynamics. :func:`stroke` runs one stroke from rest to rest; :func:`cycle` runs symmetric
+stroke pairs about a centre until they repeat and measures the last ones. Both return the
+mean fin-frame force (N), the mean true shaft power (W, no regeneration) and the duration
+(s), the same quantities the plant integrates in a closed-loop run.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from ucat_console.backend.sim.fin_hydro import (
+    H_COS_A,
+    H_FOIL,
+    H_TAU,
+    drag_torque_coefficient,
+    fin_force,
+    fin_strouhal,
+    hydro_params,
+)
+from ucat_console.backend.sim.foil import P_ON, foil_fin
+from ucat_console.backend.sim.params import PlantConfig
+from ucat_console.control.stroke_timing import mean_rate_limit, profile_velocity
+from ucat_console.robot.servo import servo_step
+
+
+class FinMeans(NamedTuple):
+    """Means over a stroke or the measured cycles: fin-frame force, shaft power, time."""
+
+    fx: float  # N, fin frame (x_m rearwards: f_x < 0 pushes the hull forward)
+    fy: float  # N, fin frame (y_m up)
+    power: float  # W, true shaft power
+    duration: float  # s
+
+    def thrust(self, cos_mount: float) -> float:
+        """The forward force on the hull (N): ``-f_x cos(mounting angle)``."""
+        return -self.fx * cos_mount
+
+
+@njit(cache=True)
+def _run(ph, acc, vmax, inertia, dt, surge, start, targets, vel, n_skip, max_steps):
+    """Drive the fin from rest at ``start`` through ``targets`` (each reached at rest before
+    the next is sent, at profile velocity ``vel``); integrate force and power over every
+    stroke after the first ``n_skip``. Returns (fx, fy, energy, time) sums."""
+    theta = start
+    omega = 0.0
+    theta_start = start
+    rate_mean = 0.0
+    k_rate = dt / ph[H_TAU]
+    k_drag = drag_torque_coefficient(ph)
+    foil_on = ph[H_FOIL + P_ON] > 0.5
+    flow = surge * ph[H_COS_A]
+    sx = sy = se = st_time = 0.0
+    k = 0
+    steps = 0
+    while k < targets.shape[0] and steps < max_steps:
+        steps += 1
+        th, om, al = servo_step(theta, omega, targets[k], vel, acc, vmax, dt)
+        if om == 0.0 or om * omega < 0.0:
+            theta_start = th
+        theta, omega = th, om
+        rate_mean += (abs(om) - rate_mean) * k_rate
+        if foil_on:
+            fx, fy, _, p = foil_fin(theta, omega, theta_start, al, flow, inertia, ph)
+        else:
+            fx, fy, _ = fin_force(theta, omega, theta_start, fin_strouhal(rate_mean, surge, ph), ph)
+            p = max(0.0, inertia * al * om + k_drag * abs(om) ** 3)
+        if k >= n_skip:
+            sx += fx * dt
+            sy += fy * dt
+            se += p * dt
+            st_time += dt
+        if om == 0.0 and theta == targets[k]:
+            k += 1
+    return sx, sy, se, st_time
+
+
+class FinRig:
+    """One fin of a plant (its hydrodynamics, servo and fin inertia) at a held hull speed."""
+
+    def __init__(self, plant: PlantConfig) -> None:
+        self.plant = plant
+        self._ph = hydro_params(plant.hydro, plant.fins)
+        self._acc = float(plant.servo.acceleration)
+        self._vmax = float(plant.servo.max_rate)
+        self._inertia = float(plant.fins.fin_inertia)
+        self._dt = float(plant.dt)
+        self.cos_mount = math.cos(math.radians(plant.fins.mounting_angle_deg))
+
+    def mean_rate_limit(self, stroke: float) -> float:
+        """The fastest mean rate (rad/s) of a stroke of ``|stroke|`` on this plant's servo."""
+        return mean_rate_limit(stroke, self._acc, self._vmax)
+
+    def _means(self, surge: float, start: float, targets: np.ndarray, rate: float, n_skip: int) -> FinMeans:
+        vel = profile_velocity(abs(targets[0] - start), rate, self._acc, self._vmax)
+        budget = int(20.0 * targets.size * (abs(targets[0] - start) / max(rate, 1e-3) + 1.0) / self._dt)
+        sx, sy, se, t = _run(self._ph, self._acc, self._vmax, self._inertia, self._dt, float(surge),
+                             float(start), targets, vel, n_skip, budget)
+        if t <= 0.0:
+            raise ValueError(f"fin rig: the strokes from {start} did not finish (rate {rate})")
+        return FinMeans(sx / t, sy / t, se / t, t)
+
+    def stroke(self, surge: float, start: float, d: float, rate: float) -> FinMeans:
+        """One stroke of ``d`` rad from rest at ``start``, timed for the mean ``rate`` (rad/s;
+        the servo's fastest if it cannot), at hull speed ``surge`` (m/s through the water)."""
+        return self._means(surge, start, np.array([start + d]), rate, 0)
+
+    def cycle(self, surge: float, centre: float, amplitude: float, rate: float, cycles: int = 3,
+              measured: int = 2) -> FinMeans:
+        """Symmetric stroke pairs between ``centre -+ amplitude`` at the mean ``rate``, from
+        rest at ``centre - amplitude``; the means of the last ``measured`` cycles."""
+        targets = np.array([centre + amplitude, centre - amplitude] * cycles)
+        return self._means(surge, centre - amplitude, targets, rate, 2 * (cycles - measured))
