@@ -20,7 +20,8 @@ import statistics
 import time
 
 from ucat_console.backend.loop.closed_loop import ClosedLoop
-from ucat_console.backend.loop.config import MODES, LoopConfig
+from ucat_console.backend.loop.config import LoopConfig
+from ucat_console.backend.loop.modes import mode as registered_mode
 from ucat_console.backend.sim_robot_io import SimRobotIO
 from ucat_console.control.allocation import BodySetpoints
 from ucat_console.telemetry.stream import TelemetryStream
@@ -34,8 +35,7 @@ def measure_realtime_factor(mode: str, seconds: float = 30.0, warmup_s: float = 
     """(median, per chunk) headless real-time factor of the closed loop in ``mode`` over
     ``seconds`` of simulation cut into ``chunks`` (after ``warmup_s`` simulated seconds,
     which also load the compiled kernels)."""
-    if mode not in MODES:
-        raise ValueError(f"mode: {mode!r} is not one of {', '.join(MODES)}")
+    registered_mode(mode)  # else ValueError naming the modes
     if telemetry not in TELEMETRY:
         raise ValueError(f"telemetry: {telemetry!r} is not one of {', '.join(TELEMETRY)}")
     if not seconds > 0.0:

@@ -31,8 +31,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run_mpc)
     q = kinds.add_parser("sim", help="headless real-time factor of the closed loop (1 kHz physics)")
     q.add_argument("--seconds", type=float, default=30.0, help="simulated seconds timed per mode")
-    q.add_argument("--modes", nargs="+", choices=("mpc", "mpc_sync", "baseline"),
-                   default=["mpc", "mpc_sync", "baseline"])
+    from ucat_console.backend.loop.modes import mode_names
+
+    steered = mode_names(follows_targets=True)  # the modes whose fins follow the body loops
+    q.add_argument("--modes", nargs="+", choices=steered, default=list(steered))
     q.add_argument("--cpu", type=int, default=None, help="CPU to pin to (default: the last one)")
     q.add_argument("--json", type=Path, default=None, help="write the results as JSON")
     q.set_defaults(func=run_sim)

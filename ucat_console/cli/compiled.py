@@ -71,7 +71,7 @@ def needed_steps(cfg: Any) -> list[Any]:
 
 
 def compile_planner(cfg: Any, formulation: str) -> None:
-    from ucat_console.backend.loop.planners import warm_up
+    from ucat_console.backend.loop.kernels_warm_up import warm_up
 
     warm_up(cfg.loop, formulations=(formulation,))
 

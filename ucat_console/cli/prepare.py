@@ -4,6 +4,8 @@ The same preparation as the console's first start (``backend.prepare``), every s
 waited for, in up to two child processes, with each step's time: run it once after an
 install (the Docker image does, at build time) so that no start compiles.
 ``ucat-console bench compile`` measures the same steps cold, in a cache of its own.
+numba's cache is keyed by the compiled sources (``compiled_cache``): after an edit or a
+pull this compiles afresh, and it removes the cache of the older sources.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ucat_console import compiled_cache
     from ucat_console.cli import compiled
     from ucat_console.config import load_config
 
@@ -41,6 +44,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"preparing failed: {prep.error}")
         return 1
     print(f"ready for the console in {prep.ready_after:.1f} s, everything in {prep.complete_after:.1f} s")
+    removed = compiled_cache.prune()
+    print(f"compiled code in {compiled_cache.cache_dir()}"
+          + (f" ({len(removed)} entries of older sources removed)" if removed else ""))
     return 0
 
 

@@ -26,7 +26,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from ucat_console.backend.loop.config import MODES
+from ucat_console.backend.loop.modes import mode_names
 from ucat_console.cli import compiled
 
 
@@ -40,7 +40,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--fast", action="store_true", help="headless simulator runs as fast as it can")
     p.add_argument("--duration", type=float, default=None, metavar="S",
                    help="stop after S s of robot time (headless: from arming)")
-    p.add_argument("--mode", choices=MODES, default=None, help="fin controller")
+    p.add_argument("--mode", choices=mode_names(), default=None, help="fin controller")
     p.add_argument("--velocity", type=float, default=None, help="forward velocity setpoint, m/s")
     p.add_argument("--depth", type=float, default=None, help="depth setpoint, m")
     p.add_argument("--yaw-rate", type=float, default=None, help="yaw rate setpoint, rad/s")

@@ -25,9 +25,11 @@ step (:func:`body_set_heading`). A loop runs only on a new sample; otherwise its
 held. A DVL report with ``valid=False`` is missing data: it is counted and never enters the
 filter as a zero velocity.
 
-All numbers are one array (layout ``B_*``) that the ``body_*`` functions work on:
-:class:`BodyController` runs them as Python, the closed loop's compiled core runs the same
-functions compiled on the loop's controller's array.
+All numbers are one array (its declared layout :data:`BODY`, columns ``B_*``) that the
+``body_*`` functions work on: :class:`BodyController` runs them as Python, the closed
+loop's compiled core runs the same functions compiled on the loop's controller's array. Over 500 lines because the layer's
+compiled functions and the Python controller that runs them share that one array's layout
+and its loops; split, one layer would be spread over files.
 """
 
 from __future__ import annotations
@@ -68,52 +70,47 @@ from ucat_console.control.pid import EARLIER, NPID, Pid, pid_reset, pid_step, pi
 from ucat_console.control.stroke_timing import deliverable_force
 from ucat_console.robot.fins import PAPER_SIDES
 from ucat_console.robot.geometry import ARM_YAW, MOUNTING_ANGLE_DEG
+from ucat_console.robot.layout import Layout
 from ucat_console.robot.readings import DepthReading, DvlVelocity, ImuReading
 
-# layout of the body-frame layer's numbers (one float array): what the readings left, the
-# loops' outputs, the designed layer's parameters and state, the allocation's parameters
-# and output, then the three PIDs (``pid.PID_*`` rows) and the two median filters
-B_DVL_MISSING = 0  # DVL reports without bottom lock since the reset
-B_LAST_DVL_T = 1  # time of the last valid DVL report (NaN: none)
-B_LAST_DEPTH_T = 2
-B_LAST_IMU_T = 3
-B_YAW_RATE = 4  # the last gyro rate (NaN: none)
-B_NEW_V = 5  # 1.0: a sample the loop has not run on yet
-B_NEW_Z = 6
-B_NEW_R = 7
-B_FX = 8  # paper layer: the loops' last outputs F_x*, F_y*, m (held while a loop has no new sample)
-B_FY = 9
-B_YAW = 10
-B_DEPTH_SIGN = 11
-B_WINDOW = 12  # the median filters' length
-B_LAYER = 13  # 0.0 paper, 1.0 designed
-B_HEADING = 14  # the attitude estimate's heading (rad; NaN: none)
-B_HEADING_REF = 15  # the heading reference (NaN: take the present heading)
-B_T_REF = 16  # when the references last moved (NaN: not yet)
-B_TRIM = 17  # heave trim (N)
-B_HULL = 18  # the hull model (H_* offsets, NH numbers)
+# the declared layout of the body-frame layer's numbers (one float array): what the readings
+# left, the loops' outputs, the designed layer's parameters and state, the allocation's
+# parameters and output, then the three PIDs (``pid.PID_ROW`` each) and the two median filters
 H_SURGE_D, H_SURGE_DQ, H_HEAVE_D, H_HEAVE_DQ, H_YAW_D, H_YAW_DQ, H_SURGE_M, H_HEAVE_M, H_YAW_J = range(9)
 NH = 9
-B_LEAD = B_HULL + NH  # the largest heading lead (rad)
-B_REF_RATE = B_LEAD + 1  # how fast the references close on their setpoints (1/s)
-B_MAX_DIVE = B_LEAD + 2  # the references' rate limits: depth rate, acceleration, yaw acceleration
-B_MAX_ACC = B_LEAD + 3
-B_MAX_YAW_ACC = B_LEAD + 4
-B_V_REF = B_LEAD + 5  # the references: speed, its rate of change; depth, its rate; yaw rate, its rate
-B_V_REF_RATE = B_LEAD + 6
-B_Z_REF = B_LEAD + 7
-B_Z_REF_RATE = B_LEAD + 8
-B_R_REF = B_LEAD + 9
-B_R_REF_RATE = B_LEAD + 10
-B_X = B_LEAD + 11  # designed: the loops' demand: surge (N), heave (N, down > 0), yaw moment (N m)
-B_Z = B_X + 1
-B_N = B_X + 2
-B_APPLIED = B_X + 3  # what the allocation applied (3, the order of B_X..B_N)
-B_CUT = B_X + 6  # its cut bits (allocation.CUT_*)
-B_ALLOC = B_X + 7  # the allocation's parameters (allocation.A_*, NA numbers)
-B_OUT = B_ALLOC + NA  # its output (allocation.W_*, NW numbers)
-B_PIDS = B_OUT + NW  # velocity, depth, yaw rate or heading: NPID numbers each
-B_FILTERS = B_PIDS + 3 * NPID  # velocity filter, then depth filter
+BODY = Layout("the body-frame layer's array", [
+    ("dvl_missing", 1, "DVL reports without bottom lock since the reset"),
+    ("last_dvl_t", 1, "time of the last valid DVL report (NaN: none)"),
+    ("last_depth_t", 1, "time of the last depth"), ("last_imu_t", 1, "time of the last IMU reading"),
+    ("yaw_rate", 1, "the last gyro rate (NaN: none)"),
+    ("new_v", 1, "1.0: a speed sample the loop has not run on yet"), ("new_z", 1, "a depth sample"),
+    ("new_r", 1, "a yaw rate sample"),
+    ("fx", 1, "paper layer: the loops' last output F_x* (held while a loop has no new sample)"),
+    ("fy", 1, "F_y*"), ("yaw", 1, "m"), ("depth_sign", 1, "the depth loop's sign"),
+    ("window", 1, "the median filters' length"), ("layer", 1, "0.0 paper, 1.0 designed"),
+    ("heading", 1, "the attitude estimate's heading (rad; NaN: none)"),
+    ("heading_ref", 1, "the heading reference (NaN: take the present heading)"),
+    ("t_ref", 1, "when the references last moved (NaN: not yet)"), ("trim", 1, "heave trim (N)"),
+    ("hull", NH, "the hull model (H_* offsets)"), ("lead", 1, "the largest heading lead (rad)"),
+    ("ref_rate", 1, "how fast the references close on their setpoints (1/s)"),
+    ("max_dive", 1, "the references' rate limits: depth rate"), ("max_acc", 1, "acceleration"),
+    ("max_yaw_acc", 1, "yaw acceleration"),
+    ("v_ref", 1, "the speed reference"), ("v_ref_rate", 1, "its rate of change"), ("z_ref", 1, "the depth reference"),
+    ("z_ref_rate", 1, "its rate"), ("r_ref", 1, "the yaw rate reference"), ("r_ref_rate", 1, "its rate"),
+    ("x", 1, "designed: the loops' demand: surge (N)"), ("z", 1, "heave (N, down > 0)"), ("n", 1, "yaw moment (N m)"),
+    ("applied", 3, "what the allocation applied (the order of x, z, n)"), ("cut", 1, "its cut bits (allocation.CUT_*)"),
+    ("alloc", NA, "the allocation's parameters (allocation.A_*)"), ("out", NW, "its output (allocation.W_*)"),
+    ("pids", 3 * NPID, "velocity, depth, yaw rate or heading: a PID row each"),
+    ("filters", 1, "velocity filter, then depth filter: median_size(window) numbers each (the array's rest)"),
+])
+B_DVL_MISSING, B_LAST_DVL_T, B_LAST_DEPTH_T, B_LAST_IMU_T, B_YAW_RATE, B_NEW_V, B_NEW_Z, B_NEW_R = (
+    BODY.at(f) for f in BODY.fields[:8])
+B_FX, B_FY, B_YAW, B_DEPTH_SIGN, B_WINDOW, B_LAYER, B_HEADING, B_HEADING_REF, B_T_REF, B_TRIM, B_HULL = (
+    BODY.at(f) for f in BODY.fields[8:19])
+B_LEAD, B_REF_RATE, B_MAX_DIVE, B_MAX_ACC, B_MAX_YAW_ACC, B_V_REF, B_V_REF_RATE, B_Z_REF, B_Z_REF_RATE = (
+    BODY.at(f) for f in BODY.fields[19:28])
+B_R_REF, B_R_REF_RATE, B_X, B_Z, B_N, B_APPLIED, B_CUT, B_ALLOC, B_OUT, B_PIDS, B_FILTERS = (
+    BODY.at(f) for f in BODY.fields[28:])
 #: what the body functions return: all is well, or which input was not a finite number
 BODY_OK, BAD_DVL_VX, BAD_DVL_T, BAD_DEPTH, BAD_DEPTH_T, BAD_GYRO, BAD_IMU_T, BAD_T, EARLIER_T = range(9)
 #: the field each bad input is named by

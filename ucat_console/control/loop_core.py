@@ -24,11 +24,13 @@ stopped. So the order of everything within an event is the loop's (plan hand-ove
 readings in order, hand-over checks, control, state, power and status ticks), and a run
 gives the same trajectory however often the core returns.
 
-All numbers live in arrays the loop owns (:class:`LoopCore`): ``s`` (the layout ``C_*``
-below: the estimate, the schedule, the loop's inputs), the body-frame layer's array
+All numbers live in arrays the loop owns (:class:`LoopCore`): ``s`` (its declared layout
+:data:`STATE`, whose columns are the constants ``C_*``: the estimate, the schedule, the loop's inputs), the body-frame layer's array
 (``allocation.B_*``), the stroke-end table and the power table (one row per fin), the
 readings of the event and the outbox. Time is an argument, like everywhere in the core:
 the loop says how far it may run (``C_T_END``, and ``C_HORIZON`` when paced by a clock).
+Over 500 lines because the step is one compiled state machine over one array: its declared
+layouts, its phases and the steps between them are one piece.
 """
 
 from __future__ import annotations
@@ -69,63 +71,80 @@ from ucat_console.control.power import (
 from ucat_console.control.stroke_watch import BACKWARDS, feedback_kernel
 from ucat_console.robot import reading_rows as rr
 from ucat_console.robot.fins import N_FINS, PAPER_SIDES, ROBOT_TO_PAPER
+from ucat_console.robot.layout import Layout
 
 #: events closer than this (s) are simultaneous
 EPS = 1e-7
 
-# --- the scalar array ``s`` -------------------------------------------------------------
-# the estimate (what the readings say of the robot)
-C_T = 0  # simulated time of the last event processed
-C_Q = 1  # attitude (4: w, x, y, z)
-C_GYRO = 5  # the last gyro rates (3)
-C_DVL_V = 8  # the last valid DVL velocity (3)
-C_DVL_T = 11  # its time (NaN: none yet)
-C_XY = 12  # dead-reckoned north, east (2)
-C_DEPTH = 14  # the filtered depth at the last control tick
-C_DISTANCE = 15  # m travelled while driving
-C_V_BODY = 16  # the filtered forward speed at the last control tick
-C_FB_ANGLE = 17  # each fin's last encoder angle (robot order, 4; NaN: none yet)
-C_FB_RATE = 21  # and rate (4)
-C_CMD_ANGLE = 25  # each fin's last set-point, angle (4) and rate (4): the loop writes them
-C_CMD_RATE = 29
-C_TARGETS = 33  # the allocation's (f_x, f_y) per logical fin (4 x 2), the mode's order
-# the schedule
-C_N_CONTROL = 41  # ticks done (the next one is at count * period)
-C_N_STATE = 42
-C_N_POWER = 43
-C_N_STATUS = 44
-C_P_CONTROL = 45  # periods (s)
-C_P_STATE = 46
-C_P_POWER = 47
-C_P_STATUS = 48
-C_PHASE = 49  # where the step goes on (PH_*)
-C_CURSOR = 50  # the reading being taken
-C_FIN_K = 51  # the next fin of an encoder reading to feed (-1: the reading is not begun)
-C_NROWS = 52  # readings of the event (the robot's, in ``rows``)
-C_T_NEXT = 53  # the next event's time (when waiting for it or for its readings)
-C_DUE = 54  # the ticks due at this event (DUE_* bits)
-C_ROWS_PENDING = 55  # 1: the step waits for the robot's readings of C_T_NEXT
-C_T_NOW = 56  # the time a stroke end was seen at (with C_STROKE_ROW)
-C_STROKE_ROW = 57  # the paper fin whose executor saw a stroke end
-C_ERR = 58  # what went wrong (ERR_* in C_ERR_CODE) and for which fin or field
-C_ERR_CODE = 59
-C_OUT_N = 60  # rows in the outbox
-# the loop's inputs (written before each call)
-C_T_END = 61  # run to here
-C_HORIZON = 62  # and no event later than this now (paced clock; inf headless)
-C_T_DELIVER = 63  # the earliest plan hand-over
-C_T_ROBOT = 64  # when the robot's next reading is due
-C_FLAGS = 65  # F_* bits
-C_SP_V = 66  # setpoints in force
-C_SP_Z = 67
-C_SP_R = 68
-# parameters
-C_W_TH = 69  # the executors' rate threshold and shortest stroke
-C_MIN_TIME = 70
-C_K_DRAG = 71  # the power estimate's drag coefficient, fin inertia and filter
-C_INERTIA = 72
-C_TAU = 73
-NC = 74
+# --- the scalar array ``s``: its declared layout, and its columns as constants ----------
+STATE = Layout("the loop core's scalar array s", [
+    # the estimate (what the readings say of the robot)
+    ("t", 1, "simulated time of the last event processed"),
+    ("q", 4, "attitude (w, x, y, z)"),
+    ("gyro", 3, "the last gyro rates"),
+    ("dvl_v", 3, "the last valid DVL velocity"),
+    ("dvl_t", 1, "its time (NaN: none yet)"),
+    ("xy", 2, "dead-reckoned north, east"),
+    ("depth", 1, "the filtered depth at the last control tick"),
+    ("distance", 1, "m travelled while driving"),
+    ("v_body", 1, "the filtered forward speed at the last control tick"),
+    ("fb_angle", N_FINS, "each fin's last encoder angle (robot order; NaN: none yet)"),
+    ("fb_rate", N_FINS, "and rate"),
+    ("cmd_angle", N_FINS, "each fin's last set-point angle: the loop writes them"),
+    ("cmd_rate", N_FINS, "and profile velocity"),
+    ("targets", 8, "the allocation's (f_x, f_y) per logical fin, the mode's order"),
+    # the schedule
+    ("n_control", 1, "control ticks done (the next one is at count * period)"),
+    ("n_state", 1, "state ticks done"),
+    ("n_power", 1, "power ticks done"),
+    ("n_status", 1, "status ticks done"),
+    ("p_control", 1, "control period, s"),
+    ("p_state", 1, "state period, s"),
+    ("p_power", 1, "power period, s"),
+    ("p_status", 1, "status period, s"),
+    ("phase", 1, "where the step goes on (PH_*)"),
+    ("cursor", 1, "the reading being taken"),
+    ("fin_k", 1, "the next fin of an encoder reading to feed (-1: the reading is not begun)"),
+    ("nrows", 1, "readings of the event (the robot's, in rows)"),
+    ("t_next", 1, "the next event's time (when waiting for it or for its readings)"),
+    ("due", 1, "the ticks due at this event (DUE_* bits)"),
+    ("rows_pending", 1, "1: the step waits for the robot's readings of t_next"),
+    ("t_now", 1, "the time a stroke end was seen at (with stroke_row)"),
+    ("stroke_row", 1, "the paper fin whose executor saw a stroke end"),
+    ("err", 1, "for which fin or field it went wrong"),
+    ("err_code", 1, "what went wrong (ERR_*)"),
+    ("out_n", 1, "rows in the outbox"),
+    # the loop's inputs (written before each call)
+    ("t_end", 1, "run to here"),
+    ("horizon", 1, "and no event later than this now (paced clock; inf headless)"),
+    ("t_deliver", 1, "the earliest plan hand-over"),
+    ("t_robot", 1, "when the robot's next reading is due"),
+    ("flags", 1, "F_* bits"),
+    ("sp_v", 1, "velocity setpoint in force"),
+    ("sp_z", 1, "depth setpoint in force"),
+    ("sp_r", 1, "yaw rate setpoint in force"),
+    # parameters
+    ("w_th", 1, "the executors' rate threshold"),
+    ("min_time", 1, "and shortest stroke"),
+    ("k_drag", 1, "the power estimate's drag coefficient"),
+    ("inertia", 1, "fin inertia"),
+    ("tau", 1, "and filter time constant"),
+])
+C_T, C_Q, C_GYRO, C_DVL_V, C_DVL_T, C_XY, C_DEPTH, C_DISTANCE, C_V_BODY = (
+    STATE.at(f) for f in ("t", "q", "gyro", "dvl_v", "dvl_t", "xy", "depth", "distance", "v_body"))
+C_FB_ANGLE, C_FB_RATE, C_CMD_ANGLE, C_CMD_RATE, C_TARGETS = (
+    STATE.at(f) for f in ("fb_angle", "fb_rate", "cmd_angle", "cmd_rate", "targets"))
+C_N_CONTROL, C_N_STATE, C_N_POWER, C_N_STATUS, C_P_CONTROL, C_P_STATE, C_P_POWER, C_P_STATUS = (
+    STATE.at(f) for f in ("n_control", "n_state", "n_power", "n_status", "p_control", "p_state", "p_power",
+                          "p_status"))
+C_PHASE, C_CURSOR, C_FIN_K, C_NROWS, C_T_NEXT, C_DUE, C_ROWS_PENDING, C_T_NOW, C_STROKE_ROW = (
+    STATE.at(f) for f in ("phase", "cursor", "fin_k", "nrows", "t_next", "due", "rows_pending", "t_now",
+                          "stroke_row"))
+C_ERR, C_ERR_CODE, C_OUT_N, C_T_END, C_HORIZON, C_T_DELIVER, C_T_ROBOT, C_FLAGS = (
+    STATE.at(f) for f in ("err", "err_code", "out_n", "t_end", "horizon", "t_deliver", "t_robot", "flags"))
+C_SP_V, C_SP_Z, C_SP_R, C_W_TH, C_MIN_TIME, C_K_DRAG, C_INERTIA, C_TAU = (
+    STATE.at(f) for f in ("sp_v", "sp_z", "sp_r", "w_th", "min_time", "k_drag", "inertia", "tau"))
+NC = STATE.size
 
 # flags (C_FLAGS): what the loop wants to be called for, and the mode
 F_HANDOVER = 1  # a mode hand-over waits for fins to go idle: check after the readings
@@ -178,25 +197,54 @@ ERR_POWER = 2  # an encoder sample not after its fin's last (C_ERR: robot fin)
 ERR_BACKWARDS = 3  # an encoder sample older than its fin's last (C_ERR: robot fin)
 ERR_KIND = 4  # a reading of no known kind
 
-# --- the outbox: telemetry rows --------------------------------------------------------
+# --- the outbox: telemetry rows, each kind with its declared layout --------------------
+# every row begins with its kind and its time; the readings' rows are robot.reading_rows'
 O_KIND = 0
 O_T = 1
-OUT_ROW = 40
 OUT_ROWS = 64
 # kinds besides the readings' (rr.IMU ... rr.FIN)
-O_BODY_COMMAND = 10.0  # sums of the fins' f_x, f_y, s_lat f_x; the wrench asked (3), applied (3); cut
-#                         bits; driving; references (speed, depth, heading, yaw rate) and errors (3)
-O_STATE = 11.0  # position (3), q (4), velocity (3), rates (3), depth, then the fins' angle,
-#                 rate, set-point angle and rate (4 each)
-O_POWER = 12.0  # per fin: power (4), energy (4), mean power (4, NaN: none yet); distance
-O_V = 2
+O_BODY_COMMAND = 10.0
+O_STATE = 11.0
+O_POWER = 12.0
+_HEAD = [("kind", 1, "the row's kind (O_* or a reading's)"), ("t", 1, "time, s")]
+BODY_COMMAND_ROW = Layout("the outbox's body-command row", _HEAD + [
+    ("force_x", 1, "sum of the fins' f_x targets, N"),
+    ("force_y", 1, "sum of the fins' f_y targets, N"),
+    ("yaw_force", 1, "sum of s_lat f_x over the fins, N"),
+    ("asked", 3, "the wrench asked (X, Z, N)"),
+    ("applied", 3, "the wrench the allocation applied (X, Z, N)"),
+    ("cut", 1, "the allocation's cut bits"),
+    ("driving", 1, "1: the fins are driven"),
+    ("references", 4, "speed, depth, heading and yaw rate references"),
+    ("errors", 3, "speed, depth and heading errors"),
+])
+STATE_ROW = Layout("the outbox's state row", _HEAD + [
+    ("position", 3, "dead-reckoned north, east and the depth, m"),
+    ("orientation", 4, "attitude (w, x, y, z)"),
+    ("velocity", 3, "body velocity, m/s"),
+    ("rates", 3, "body rates, rad/s"),
+    ("depth", 1, "depth, m"),
+    ("fin_angle", N_FINS, "each fin's angle (robot order; NaN: none yet), rad"),
+    ("fin_rate", N_FINS, "and rate, rad/s"),
+    ("fin_set_angle", N_FINS, "each fin's set-point angle, rad"),
+    ("fin_set_rate", N_FINS, "and profile velocity, rad/s"),
+])
+POWER_ROW = Layout("the outbox's power row", _HEAD + [
+    ("power", N_FINS, "each fin's power, W"),
+    ("energy", N_FINS, "each fin's energy while driving, J"),
+    ("mean", N_FINS, "each fin's mean power (NaN: none yet), W"),
+    ("distance", 1, "m travelled while driving"),
+])
+#: columns of an outbox row: the widest kind's
+OUT_ROW = 40
+assert max(BODY_COMMAND_ROW.size, STATE_ROW.size, POWER_ROW.size, rr.ROW) <= OUT_ROW
+_BC_FX, _BC_FY, _BC_YAW, _BC_ASKED, _BC_APPLIED, _BC_CUT, _BC_DRIVING, _BC_REFS, _BC_ERRORS = (
+    BODY_COMMAND_ROW.at(f) for f in BODY_COMMAND_ROW.fields[2:])
+_S_POS, _S_Q, _S_V, _S_RATES, _S_DEPTH, _S_ANGLE, _S_RATE, _S_SET_ANGLE, _S_SET_RATE = (
+    STATE_ROW.at(f) for f in STATE_ROW.fields[2:])
+_P_POWER, _P_ENERGY, _P_MEAN, _P_DISTANCE = (POWER_ROW.at(f) for f in POWER_ROW.fields[2:])
 #: rows of readings one event can hand the core at a time
 ROWS = 16
-O_STATE_FINS = O_V + 14
-O_POWER_ENERGY = O_V + N_FINS
-O_POWER_MEAN = O_V + 2 * N_FINS
-O_POWER_DISTANCE = O_V + 3 * N_FINS
-
 
 
 @njit(cache=True)
@@ -378,24 +426,24 @@ def _keep_body_command(s: np.ndarray, body: np.ndarray, out: np.ndarray, t: floa
         fx_sum += fx
         fy_sum += fy
         yaw += PAPER_SIDES[k] * fx
-    o[O_V], o[O_V + 1], o[O_V + 2] = fx_sum, fy_sum, yaw
+    o[_BC_FX], o[_BC_FY], o[_BC_YAW] = fx_sum, fy_sum, yaw
     if body[B_LAYER] == 0.0:
         x, z, n = body_wrench(body)
-        o[O_V + 3], o[O_V + 4], o[O_V + 5] = x, z, n
-        o[O_V + 6], o[O_V + 7], o[O_V + 8] = x, z, n
-        o[O_V + 9] = 0.0
+        o[_BC_ASKED], o[_BC_ASKED + 1], o[_BC_ASKED + 2] = x, z, n
+        o[_BC_APPLIED], o[_BC_APPLIED + 1], o[_BC_APPLIED + 2] = x, z, n
+        o[_BC_CUT] = 0.0
     else:
-        o[O_V + 3], o[O_V + 4], o[O_V + 5] = body[B_X], body[B_Z], body[B_N]
+        o[_BC_ASKED], o[_BC_ASKED + 1], o[_BC_ASKED + 2] = body[B_X], body[B_Z], body[B_N]
         for k in range(3):
-            o[O_V + 6 + k] = body[B_APPLIED + k]
-        o[O_V + 9] = body[B_CUT]
-    o[O_V + 10] = 1.0 if (int(s[C_FLAGS]) & F_DRIVING) != 0 else 0.0
+            o[_BC_APPLIED + k] = body[B_APPLIED + k]
+        o[_BC_CUT] = body[B_CUT]
+    o[_BC_DRIVING] = 1.0 if (int(s[C_FLAGS]) & F_DRIVING) != 0 else 0.0
     v_ref, z_ref, psi_ref, r_ref = body_references(body, s[C_SP_V], s[C_SP_Z], s[C_SP_R])
-    o[O_V + 11], o[O_V + 12], o[O_V + 13], o[O_V + 14] = v_ref, z_ref, psi_ref, r_ref
-    o[O_V + 15] = s[C_V_BODY] - v_ref
-    o[O_V + 16] = s[C_DEPTH] - z_ref
+    o[_BC_REFS], o[_BC_REFS + 1], o[_BC_REFS + 2], o[_BC_REFS + 3] = v_ref, z_ref, psi_ref, r_ref
+    o[_BC_ERRORS] = s[C_V_BODY] - v_ref
+    o[_BC_ERRORS + 1] = s[C_DEPTH] - z_ref
     psi = body[B_HEADING]
-    o[O_V + 17] = (psi - psi_ref + math.pi) % (2.0 * math.pi) - math.pi
+    o[_BC_ERRORS + 2] = (psi - psi_ref + math.pi) % (2.0 * math.pi) - math.pi
 
 
 @njit(cache=True)
@@ -403,20 +451,20 @@ def _keep_state(s: np.ndarray, out: np.ndarray, t: float) -> None:
     o = _next_out(s, out)
     o[O_KIND] = O_STATE
     o[O_T] = t
-    o[O_V] = s[C_XY]
-    o[O_V + 1] = s[C_XY + 1]
-    o[O_V + 2] = s[C_DEPTH]
+    o[_S_POS] = s[C_XY]
+    o[_S_POS + 1] = s[C_XY + 1]
+    o[_S_POS + 2] = s[C_DEPTH]
     for i in range(4):
-        o[O_V + 3 + i] = s[C_Q + i]
+        o[_S_Q + i] = s[C_Q + i]
     for i in range(3):
-        o[O_V + 7 + i] = s[C_DVL_V + i]
-        o[O_V + 10 + i] = s[C_GYRO + i]
-    o[O_V + 13] = s[C_DEPTH]
+        o[_S_V + i] = s[C_DVL_V + i]
+        o[_S_RATES + i] = s[C_GYRO + i]
+    o[_S_DEPTH] = s[C_DEPTH]
     for i in range(N_FINS):
-        o[O_STATE_FINS + i] = s[C_FB_ANGLE + i]
-        o[O_STATE_FINS + N_FINS + i] = s[C_FB_RATE + i]
-        o[O_STATE_FINS + 2 * N_FINS + i] = s[C_CMD_ANGLE + i]
-        o[O_STATE_FINS + 3 * N_FINS + i] = s[C_CMD_RATE + i]
+        o[_S_ANGLE + i] = s[C_FB_ANGLE + i]
+        o[_S_RATE + i] = s[C_FB_RATE + i]
+        o[_S_SET_ANGLE + i] = s[C_CMD_ANGLE + i]
+        o[_S_SET_RATE + i] = s[C_CMD_RATE + i]
 
 
 @njit(cache=True)
@@ -425,11 +473,11 @@ def _keep_power(s: np.ndarray, power: np.ndarray, out: np.ndarray, t: float) -> 
     o[O_KIND] = O_POWER
     o[O_T] = t
     for i in range(N_FINS):
-        o[O_V + i] = power[i, P_LAST_FIN]
-        o[O_POWER_ENERGY + i] = power[i, P_ENERGY]
+        o[_P_POWER + i] = power[i, P_LAST_FIN]
+        o[_P_ENERGY + i] = power[i, P_ENERGY]
         d = power[i, P_DURATION]
-        o[O_POWER_MEAN + i] = power[i, P_ENERGY] / d if d > 0.0 else math.nan
-    o[O_POWER_DISTANCE] = s[C_DISTANCE]
+        o[_P_MEAN + i] = power[i, P_ENERGY] / d if d > 0.0 else math.nan
+    o[_P_DISTANCE] = s[C_DISTANCE]
 
 
 @njit(cache=True)

@@ -33,7 +33,9 @@ which times the whole call) the solve is one compiled call and both times are Na
 
 from __future__ import annotations
 
+import functools
 import math
+import os
 from typing import Callable, NamedTuple, Sequence
 
 import numpy as np
@@ -90,6 +92,36 @@ def _check_vector(name: str, value: Sequence[float], n: int, lo: float, hi: floa
     return out
 
 
+def check_config(cfg: MpcConfig) -> ForceTable | None:
+    """The one check of an MPC configuration beyond its fields' (``MpcConfig`` checks those
+    when it is made): its force table (None: the analytic model), loaded or built and checked
+    to span the decision box; ValueError naming what is wrong. Each configuration (and table
+    file version) is checked once: the caller changing it checks it, the planners made of
+    it take the result."""
+    if cfg.force_model != "table":
+        return None
+    stamp = None
+    if cfg.table_path:
+        try:
+            st = os.stat(cfg.table_path)
+            stamp = (st.st_mtime_ns, st.st_size)
+        except OSError:
+            pass  # the load names the missing file
+    return _checked_table(cfg, stamp)
+
+
+@functools.lru_cache(maxsize=8)
+def _checked_table(cfg: MpcConfig, stamp: tuple[int, int] | None) -> ForceTable:
+    table = ForceTable.load(cfg.table_path) if cfg.table_path else ForceTable.from_model(cfg)
+    if not table.covers(cfg):
+        raise ValueError(
+            f"table_path: force table spans d [{table.d[0]}, {table.d[-1]}], "
+            f"w [{table.w[0]}, {table.w[-1]}]; it must cover d in "
+            f"[-{cfg.d_max}, {cfg.d_max}] and w in [{cfg.w_min}, {cfg.w_max}]"
+        )
+    return table
+
+
 class FinMpc:
     """Planner for one fin. Not thread-safe: give each planner thread its own instance."""
 
@@ -104,22 +136,13 @@ class FinMpc:
         self._clock = clock
         self._drive = None if drive is None else (float(drive.acceleration), float(drive.max_rate))
         cfg = self.config
-        if cfg.force_model == "table":
-            table = (
-                ForceTable.load(cfg.table_path) if cfg.table_path else ForceTable.from_model(cfg)
-            )
-            if not table.covers(cfg):
-                raise ValueError(
-                    f"table_path: force table spans d [{table.d[0]}, {table.d[-1]}], "
-                    f"w [{table.w[0]}, {table.w[-1]}]; it must cover d in "
-                    f"[-{cfg.d_max}, {cfg.d_max}] and w in [{cfg.w_min}, {cfg.w_max}]"
-                )
-            self.table: ForceTable | None = table
+        table = check_config(cfg)
+        self.table: ForceTable | None = table
+        if table is not None:
             self._gx, self._gy = table.stroke_frame()
             axes = (table.d[0], table.d[1] - table.d[0], table.w[0], table.w[1] - table.w[0])
             self._params = K.pack_params(cfg, axes, self._drive)
         else:
-            self.table = None
             self._gx = self._gy = np.zeros((2, 2))
             self._params = K.pack_params(cfg, None, self._drive)
         (self._plan_kernel, self._sample_kernel, self._finish_kernel,

@@ -15,14 +15,16 @@ from its seed on every machine.
 
 No clock is read here: a caller timing the two stages calls :func:`sample_kernel` and
 :func:`finish_kernel` (together the same solve as :func:`plan_kernel`) with its own clock
-between them. Over 500 lines because this is one compiled solver whose parts inline into
+between them. The vectors the solver shares with Python (parameters, problem, terms) and
+its refinement rows have declared layouts (:data:`PARAMS`, :data:`PROBLEM`, :data:`TERMS`,
+:data:`RUN_ROW`). Over 500 lines because this is one compiled solver whose parts inline into
 one another (cost, gradient, sampler, quasi-Newton step); split, it would be one algorithm
 spread over files.
 
 The closed-stroke formulation (``control.cost``) is the same solver with the flag
 ``closed`` (a compile-time constant, like ``table``). Each formulation and force model has
-its own entry points (:data:`KERNELS`), so a configuration compiles only the solver it
-runs. Its sampler draws
+its own entry points (:data:`KERNELS`, made from the two flags), so a configuration
+compiles only the solver it runs. Its sampler draws
 half of the stroke pairs closed (d_2 = -d_1); a closed warm start is refined on the closed
 subspace (the gradient projected onto d_2 = -d_1, every trial point kept on it), so a plan
 that closes comes back closed exactly; the other warm starts are refined freely and pay
@@ -39,29 +41,48 @@ from llvmlite import ir
 from numba.core import types
 from numba.extending import intrinsic
 
-from ucat_console.control.params import MpcConfig
+from ucat_console.control.params import FORCE_MODELS, FORMULATIONS, MpcConfig
 from ucat_console.control.power import drag_coefficient
+from ucat_console.robot.layout import Layout
 
-# --- layout of the constant parameter vector -------------------------------------------
-P_LAM_F, P_LAM_ST, P_LAM_A, P_LAM_D = 0, 1, 2, 3
-P_Q, P_CL, P_CD, P_LF = 4, 5, 6, 7
-P_ST_OPT, P_ETA_MAX, P_VFLOOR, P_AMIN = 8, 9, 10, 11
-P_DEPS, P_DMAX, P_WMIN, P_WMAX = 12, 13, 14, 15
-P_TD0, P_THD, P_TW0, P_THW, P_MODE = 16, 17, 18, 19, 20
-P_LAM_C, P_LAM_E, P_KD, P_INERTIA = 21, 22, 23, 24  # the closed-stroke formulation's
-P_SCREEN, P_KEEP = 25, 26  # the refinement: iterations every kept sample gets, and how many go on
-P_ACC, P_VMAX = 27, 28  # the drives' acceleration (0: rates as planned) and largest rate
-N_PARAMS = 29
+# --- the declared layouts of the solver's vectors, and their columns as constants -------
+PARAMS = Layout("the MPC's constant parameter vector", [
+    ("lam_f", 1, "weight of the force error"), ("lam_st", 1, "weight of the Strouhal penalty"),
+    ("lam_a", 1, "weight of the amplitude penalty"), ("lam_d", 1, "weight of the smoothness penalty"),
+    ("q", 1, "0.5 rho A_f r_c^2"), ("c_l", 1, "lift coefficient"), ("c_d", 1, "drag coefficient"),
+    ("l_f", 1, "fin length, m"),
+    ("st_opt", 1, "optimal Strouhal number"), ("eta_max", 1, "surrogate scale"), ("v_floor", 1, "speed floor, m/s"),
+    ("a_min", 1, "amplitude penalty threshold, m"),
+    ("d_eps", 1, "shortest stroke, rad"), ("d_max", 1, "stroke limit, rad"), ("w_min", 1, "slowest mean rate"),
+    ("w_max", 1, "fastest mean rate"),
+    ("td0", 1, "force table: first d"), ("thd", 1, "its d step"), ("tw0", 1, "first w"), ("thw", 1, "its w step"),
+    ("mode", 1, "force model (MODE_ANALYTIC, MODE_TABLE)"),
+    ("lam_c", 1, "closed_stroke: weight of the opening"), ("lam_e", 1, "closed_stroke: weight of the energy"),
+    ("kd", 1, "the drag coefficient of the energy term"), ("inertia", 1, "fin inertia, kg m2"),
+    ("screen", 1, "the refinement: iterations every kept sample gets"), ("keep", 1, "and how many go on"),
+    ("acc", 1, "the drives' acceleration (0: rates as planned)"), ("vmax", 1, "and largest rate"),
+])
+P_LAM_F, P_LAM_ST, P_LAM_A, P_LAM_D, P_Q, P_CL, P_CD, P_LF = (PARAMS.at(f) for f in PARAMS.fields[:8])
+P_ST_OPT, P_ETA_MAX, P_VFLOOR, P_AMIN, P_DEPS, P_DMAX, P_WMIN, P_WMAX = (PARAMS.at(f) for f in PARAMS.fields[8:16])
+P_TD0, P_THD, P_TW0, P_THW, P_MODE = (PARAMS.at(f) for f in PARAMS.fields[16:21])
+P_LAM_C, P_LAM_E, P_KD, P_INERTIA, P_SCREEN, P_KEEP, P_ACC, P_VMAX = (PARAMS.at(f) for f in PARAMS.fields[21:])
+N_PARAMS = PARAMS.size
 MODE_ANALYTIC, MODE_TABLE = 0.0, 1.0
 
-# --- layout of the per-solve problem vector ---------------------------------------------
-Q_FX, Q_FY, Q_V, Q_C0, Q_S0 = 0, 1, 2, 3, 4
-Q_PREV = 5  # 5..8: u_prev
-N_PROBLEM = 9
+PROBLEM = Layout("the MPC's per-solve problem vector", [
+    ("fx", 1, "force target f_x*, N"), ("fy", 1, "force target f_y*, N"), ("v", 1, "forward speed, m/s"),
+    ("c0", 1, "cos theta0"), ("s0", 1, "sin theta0"), ("u_prev", 4, "the previous plan"),
+])
+Q_FX, Q_FY, Q_V, Q_C0, Q_S0, Q_PREV = (PROBLEM.at(f) for f in PROBLEM.fields)
+N_PROBLEM = PROBLEM.size
 
-# --- layout of the terms output ---------------------------------------------------------
-T_TOTAL, T_FORCE, T_ST_PEN, T_AMP, T_DIFF, T_ST, T_FBX, T_FBY, T_CLOSE, T_ENERGY = range(10)
-N_TERMS = 10
+TERMS = Layout("the MPC's cost terms output", [
+    ("total", 1, "J"), ("force", 1, "force error"), ("st_pen", 1, "Strouhal penalty"), ("amp", 1, "amplitude penalty"),
+    ("diff", 1, "smoothness penalty"), ("st", 1, "Strouhal number"), ("fbx", 1, "mean force x"),
+    ("fby", 1, "mean force y"), ("close", 1, "opening |d_1 + d_2|"), ("energy", 1, "energy per second"),
+])
+T_TOTAL, T_FORCE, T_ST_PEN, T_AMP, T_DIFF, T_ST, T_FBX, T_FBY, T_CLOSE, T_ENERGY = (TERMS.at(f) for f in TERMS.fields)
+N_TERMS = TERMS.size
 
 
 def pack_params(cfg: MpcConfig, table_axes: tuple[float, float, float, float] | None,
@@ -563,9 +584,14 @@ def _tie(v):
 # inverse Hessian (row-major), the cost, and how it goes on (a fresh Hessian, the last
 # accepted step length, the iterations done, whether it is over, whether it is tied to the
 # closed subspace).
-R_X, R_G, R_LO, R_HI, R_H = 0, 4, 8, 12, 16
-R_J, R_FRESH, R_ALPHA, R_ITER, R_DONE, R_TIED = 32, 33, 34, 35, 36, 37
-RUN = 38
+RUN_ROW = Layout("a refinement's row of runs", [
+    ("x", 4, "the point"), ("g", 4, "its gradient"), ("lo", 4, "its sign box, low"), ("hi", 4, "and high"),
+    ("h", 16, "the inverse Hessian, row-major"), ("j", 1, "the cost"), ("fresh", 1, "1: a fresh Hessian"),
+    ("alpha", 1, "the last accepted step length"), ("iter", 1, "iterations done (-1: screened out)"),
+    ("done", 1, "1: over"), ("tied", 1, "1: tied to the closed subspace"),
+])
+R_X, R_G, R_LO, R_HI, R_H, R_J, R_FRESH, R_ALPHA, R_ITER, R_DONE, R_TIED = (RUN_ROW.at(f) for f in RUN_ROW.fields)
+RUN = RUN_ROW.size
 
 
 @_inline
@@ -812,60 +838,6 @@ def _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, runs, u_o
     cost_terms_at(p, q, gx_tab, gy_tab, u_out, terms, table, closed)
 
 
-# The entry points: one per formulation and force model, each with its flags as literals
-# (one more inlined layer between them and the solver would multiply numba's inlining
-# time), so a configuration compiles only the solver it runs: the analytic force model's
-# kernels by default, the table's only where ``force_model = "table"`` asks for them.
-@_jit
-def plan_kernel(p, q, gx_tab, gy_tab, n, max_iter, rng, best_u, best_j, block, work, runs, u_out, terms):
-    """One solve (analytic force model): sampling, refinement of the best len(best_j)
-    samples, final terms."""
-    _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, False, False)
-    _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, runs, u_out, terms, False, False)
-
-
-@_jit
-def sample_kernel(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out):
-    """The first half of :func:`plan_kernel` (for a caller timing the two stages)."""
-    _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, False, False)
-
-
-@_jit
-def finish_kernel(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, runs, u_out, terms):
-    """The second half of :func:`plan_kernel` (for a caller timing the two stages)."""
-    _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, runs, u_out, terms, False, False)
-
-
-@_jit
-def cost_kernel(p, q, gx_tab, gy_tab, u, grad, terms):
-    """J, its gradient and its terms at one point (for callers outside the solver)."""
-    cost_terms_at(p, q, gx_tab, gy_tab, u, terms, False, False)
-    return cost_grad_at(p, q, gx_tab, gy_tab, u, grad, False, False)
-
-
-@_jit
-def table_plan_kernel(p, q, gx_tab, gy_tab, n, max_iter, rng, best_u, best_j, block, work, runs, u_out, terms):
-    """:func:`plan_kernel` with the force table."""
-    _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, True, False)
-    _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, runs, u_out, terms, True, False)
-
-
-@_jit
-def table_sample_kernel(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out):
-    _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, True, False)
-
-
-@_jit
-def table_finish_kernel(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, runs, u_out, terms):
-    _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, runs, u_out, terms, True, False)
-
-
-@_jit
-def table_cost_kernel(p, q, gx_tab, gy_tab, u, grad, terms):
-    cost_terms_at(p, q, gx_tab, gy_tab, u, terms, True, False)
-    return cost_grad_at(p, q, gx_tab, gy_tab, u, grad, True, False)
-
-
 @_jit
 def refine_kernel(p, q, gx_tab, gy_tab, x, max_iter, work, runs):
     """Stage 2 alone from the start point x (updated in place), to ``max_iter``; returns
@@ -884,59 +856,40 @@ def cost_grad_at(p, q, gx_tab, gy_tab, u, grad, table, closed):
     return cost_grad(p, q, gx_tab, gy_tab, u, grad, table, closed)
 
 
-# --- the closed-stroke formulation: the same solves with ``closed`` set ------------------
-@_jit
-def closed_plan_kernel(p, q, gx_tab, gy_tab, n, max_iter, rng, best_u, best_j, block, work, runs, u_out, terms):
-    """:func:`plan_kernel` of the closed-stroke formulation."""
-    _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, False, True)
-    _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, runs, u_out, terms, False, True)
+# The entry points: four per formulation and force model (plan, sample, finish, cost), made
+# from the two flags by :func:`_entry_points`. The flags are constants of each entry point
+# (closure values, which numba compiles in as constants and keys its cache by), so a
+# configuration compiles only the solver it runs: the analytic force model's kernels by
+# default, the table's only where ``force_model = "table"`` asks for them; and each calls
+# the inlined solver directly (one more inlined layer would multiply numba's inlining time).
+def _entry_points(table: bool, closed: bool) -> tuple:
+    """(plan, sample, finish, cost) of the force table (``table``) or the analytic model, in
+    the closed-stroke formulation (``closed``) or the paper's."""
 
+    @_jit
+    def plan_kernel(p, q, gx_tab, gy_tab, n, max_iter, rng, best_u, best_j, block, work, runs, u_out, terms):
+        """One solve: sampling, refinement of the best len(best_j) samples, final terms."""
+        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, table, closed)
+        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, runs, u_out, terms, table, closed)
 
-@_jit
-def closed_sample_kernel(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out):
-    _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, False, True)
+    @_jit
+    def sample_kernel(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out):
+        """The first half of the plan kernel (for a caller timing the two stages)."""
+        _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, table, closed)
 
+    @_jit
+    def finish_kernel(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, runs, u_out, terms):
+        """The second half of the plan kernel (for a caller timing the two stages)."""
+        _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, runs, u_out, terms, table, closed)
 
-@_jit
-def closed_finish_kernel(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, runs, u_out, terms):
-    _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, runs, u_out, terms, False, True)
+    @_jit
+    def cost_kernel(p, q, gx_tab, gy_tab, u, grad, terms):
+        """J, its gradient and its terms at one point (for callers outside the solver)."""
+        cost_terms_at(p, q, gx_tab, gy_tab, u, terms, table, closed)
+        return cost_grad_at(p, q, gx_tab, gy_tab, u, grad, table, closed)
 
-
-@_jit
-def closed_cost_kernel(p, q, gx_tab, gy_tab, u, grad, terms):
-    cost_terms_at(p, q, gx_tab, gy_tab, u, terms, False, True)
-    return cost_grad_at(p, q, gx_tab, gy_tab, u, grad, False, True)
-
-
-@_jit
-def closed_table_plan_kernel(p, q, gx_tab, gy_tab, n, max_iter, rng, best_u, best_j, block, work, runs, u_out,
-                             terms):
-    _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, True, True)
-    _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, runs, u_out, terms, True, True)
-
-
-@_jit
-def closed_table_sample_kernel(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out):
-    _sample(p, q, gx_tab, gy_tab, n, rng, best_u, best_j, block, u_out, True, True)
-
-
-@_jit
-def closed_table_finish_kernel(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, runs, u_out, terms):
-    _refine_best(p, q, gx_tab, gy_tab, max_iter, best_u, best_j, work, runs, u_out, terms, True, True)
-
-
-@_jit
-def closed_table_cost_kernel(p, q, gx_tab, gy_tab, u, grad, terms):
-    cost_terms_at(p, q, gx_tab, gy_tab, u, terms, True, True)
-    return cost_grad_at(p, q, gx_tab, gy_tab, u, grad, True, True)
+    return plan_kernel, sample_kernel, finish_kernel, cost_kernel
 
 
 #: (formulation, force model) -> the entry points (plan, sample, finish, cost)
-KERNELS = {
-    ("paper", "analytic"): (plan_kernel, sample_kernel, finish_kernel, cost_kernel),
-    ("paper", "table"): (table_plan_kernel, table_sample_kernel, table_finish_kernel, table_cost_kernel),
-    ("closed_stroke", "analytic"): (closed_plan_kernel, closed_sample_kernel, closed_finish_kernel,
-                                    closed_cost_kernel),
-    ("closed_stroke", "table"): (closed_table_plan_kernel, closed_table_sample_kernel,
-                                 closed_table_finish_kernel, closed_table_cost_kernel),
-}
+KERNELS = {(f, m): _entry_points(m == "table", f == "closed_stroke") for f in FORMULATIONS for m in FORCE_MODELS}

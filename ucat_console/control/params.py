@@ -19,6 +19,8 @@ DESIGN_DELAY, DESIGN_FACTOR = 1.25, 4.0
 #: the MPC's cost formulations: the paper's eq 17, and the closed-stroke cost
 #: (``control.cost``: strokes that close, the Strouhal penalty per stroke, an energy term)
 FORMULATIONS = ("paper", "closed_stroke")
+#: the fin force models the MPC plans with: the analytic model, or a table of it (or of a file)
+FORCE_MODELS = ("analytic", "table")
 
 
 @dataclass(frozen=True)
@@ -56,7 +58,7 @@ class MpcConfig(Config):
     )
     refine_keep: int = param(2, lo=1, hi=64, doc="refined samples that go on to max_iter")
     solver: str = param("numba", choices=("numba", "scipy"), doc="stage-2 implementation")
-    force_model: str = param("analytic", choices=("analytic", "table"), doc="fin force model")
+    force_model: str = param("analytic", choices=FORCE_MODELS, doc="fin force model")
     table_path: str | None = param(None, doc="force table file (.npz); None: built from the model")
     table_n_d: int = param(241, lo=2, hi=4001, doc="force table nodes along the stroke d")
     table_n_w: int = param(121, lo=2, hi=4001, doc="force table nodes along the rate w")

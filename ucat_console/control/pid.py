@@ -26,18 +26,21 @@ from numba.extending import register_jitable
 
 from ucat_console.control.argcheck import finite
 from ucat_console.control.params import PidGains
+from ucat_console.robot.layout import Layout
 
-# layout of one PID's numbers (a row of a float array): its state, then its gains
-PID_INTEGRAL = 0  # integral term, in output units
-PID_OUTPUT = 1  # the last output
-PID_SATURATED = 2  # 1.0: the last output was limited
-PID_T = 3  # time of the last sample (NaN: none yet)
-PID_Y = 4  # the last measurement, or -error (NaN: none yet)
-PID_P = 5  # the last proportional term
-PID_D = 6  # the last derivative term
-PID_KP, PID_KI, PID_KD, PID_LIMIT = 7, 8, 9, 10
-PID_I_PREV = 11  # the integral before the last step's increment (pid_unwind)
-NPID = 12
+# the declared layout of one PID's numbers (a row of a float array): its state, then its gains
+PID_ROW = Layout("one PID's numbers", [
+    ("integral", 1, "integral term, in output units"), ("output", 1, "the last output"),
+    ("saturated", 1, "1.0: the last output was limited"), ("t", 1, "time of the last sample (NaN: none yet)"),
+    ("y", 1, "the last measurement, or -error (NaN: none yet)"), ("p", 1, "the last proportional term"),
+    ("d", 1, "the last derivative term"), ("kp", 1, "proportional gain"), ("ki", 1, "integral gain"),
+    ("kd", 1, "derivative gain"), ("limit", 1, "output limit"),
+    ("i_prev", 1, "the integral before the last step's increment (pid_unwind)"),
+])
+PID_INTEGRAL, PID_OUTPUT, PID_SATURATED, PID_T, PID_Y, PID_P, PID_D, PID_KP, PID_KI, PID_KD, PID_LIMIT, \
+    PID_I_PREV = (PID_ROW.at(f) for f in PID_ROW.fields)
+NPID = PID_ROW.size
+
 #: what :func:`pid_step` returns for a time earlier than the last update (nothing changed)
 EARLIER = math.inf
 

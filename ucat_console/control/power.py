@@ -33,6 +33,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ucat_console.control.argcheck import finite, finite_array, in_range
 from ucat_console.control.params import MpcConfig, PowerConfig
+from ucat_console.robot.layout import Layout
 
 
 def drag_coefficient(cfg: MpcConfig | PowerConfig) -> float:
@@ -70,22 +71,18 @@ class PowerSample:
     p_fin: float
 
 
-# row layout of a power table ("none yet" is NaN)
-P_T = 0  # time of the last angle sample
-P_THETA = 1  # the last angle
-P_W = 2  # the last filtered rate
-P_LPW_T = 3  # the rate filter's last time
-P_LPA = 4  # the acceleration filter's value
-P_LPA_T = 5  # its last time
-P_LAST_T = 6  # the last estimate: time, rate, acceleration, inertial, drag and fin power
-P_LAST_W = 7
-P_LAST_ALPHA = 8
-P_LAST_INERT = 9
-P_LAST_DRAG = 10
-P_LAST_FIN = 11
-P_ENERGY = 12  # J over the accumulated spans
-P_DURATION = 13  # s covered by the energy
-NP = 14
+# the declared layout of a power table's row ("none yet" is NaN), and its columns
+POWER_ROW = Layout("a power table's row", [
+    ("t", 1, "time of the last angle sample"), ("theta", 1, "the last angle"), ("w", 1, "the last filtered rate"),
+    ("lpw_t", 1, "the rate filter's last time"), ("lpa", 1, "the acceleration filter's value"),
+    ("lpa_t", 1, "its last time"),
+    ("last_t", 1, "the last estimate: time"), ("last_w", 1, "rate"), ("last_alpha", 1, "acceleration"),
+    ("last_inert", 1, "inertial power"), ("last_drag", 1, "drag power"), ("last_fin", 1, "fin power"),
+    ("energy", 1, "J over the accumulated spans"), ("duration", 1, "s covered by the energy"),
+])
+P_T, P_THETA, P_W, P_LPW_T, P_LPA, P_LPA_T, P_LAST_T, P_LAST_W, P_LAST_ALPHA, P_LAST_INERT, P_LAST_DRAG, \
+    P_LAST_FIN, P_ENERGY, P_DURATION = (POWER_ROW.at(f) for f in POWER_ROW.fields)
+NP = POWER_ROW.size
 
 #: what an update gave
 FIRST, SECOND, ESTIMATE, NOT_AFTER = 0, 1, 2, -1

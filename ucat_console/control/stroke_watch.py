@@ -33,20 +33,20 @@ import numpy as np
 from numba import njit
 
 from ucat_console.control.params import ExecutorConfig
+from ucat_console.robot.layout import Layout
 
-# row layout
-W_T_FB = 0  # time of the last feedback sample (NaN: none yet)
-W_W_FB = 1  # its rate
-W_A = 2  # rate change between the last two samples
-W_THETA_FB = 3  # last feedback angle (NaN: none yet)
-W_TARGET = 4  # target of the current / last stroke (NaN: none yet)
-W_DONE = 5  # 1: the stroke is over (or none was sent)
-W_T_START = 6  # when the stroke was sent
-W_DIRECTION = 7  # +1 / -1, 0 when unknown
-W_ARMED = 8  # 1: the fin has been seen moving (or need not be)
-W_PLANNED = 9  # planned duration (s)
-W_TIMEOUT_AT = 10  # the stroke is over by then in any case
-NW = 11
+# the declared layout of a watch's row, and its columns
+WATCH_ROW = Layout("a stroke-end watch's row", [
+    ("t_fb", 1, "time of the last feedback sample (NaN: none yet)"), ("w_fb", 1, "its rate"),
+    ("a", 1, "rate change between the last two samples"), ("theta_fb", 1, "last feedback angle (NaN: none yet)"),
+    ("target", 1, "target of the current / last stroke (NaN: none yet)"),
+    ("done", 1, "1: the stroke is over (or none was sent)"), ("t_start", 1, "when the stroke was sent"),
+    ("direction", 1, "+1 / -1, 0 when unknown"), ("armed", 1, "1: the fin has been seen moving (or need not be)"),
+    ("planned", 1, "planned duration (s)"), ("timeout_at", 1, "the stroke is over by then in any case"),
+])
+W_T_FB, W_W_FB, W_A, W_THETA_FB, W_TARGET, W_DONE, W_T_START, W_DIRECTION, W_ARMED, W_PLANNED, \
+    W_TIMEOUT_AT = (WATCH_ROW.at(f) for f in WATCH_ROW.fields)
+NW = WATCH_ROW.size
 
 # what a check found
 NOTHING = 0

@@ -8,13 +8,10 @@ objects (the drivers) has them turned into rows by :func:`to_row`, and a row bec
 reading it stands for with :func:`from_row` (for the telemetry, and for robots that hand
 readings to the loop as objects).
 
-Columns by kind (after ``KIND`` and ``T``)::
-
-    IMU    accel_g (3), gyro (3), quaternion (4, NaN: not streamed), euler (3, NaN: none)
-    DEPTH  depth_m, pressure_pa
-    DVL    vx, vy, vz, valid (1.0 / 0.0), altitude, fom
-    FINS   every fin's angle (N_FINS), then every fin's rate (N_FINS), robot order
-    FIN    fin, angle, rate (one fin's drive)
+Each kind's columns are its declared layout (``robot.layout``): :data:`IMU_ROW`,
+:data:`DEPTH_ROW`, :data:`DVL_ROW`, :data:`FINS_ROW` (every fin's angle, then every fin's
+rate, robot order), :data:`FIN_ROW` (one fin's drive); the column constants (``IMU_GYRO``
+...) are taken from them.
 """
 
 from __future__ import annotations
@@ -24,34 +21,34 @@ import math
 import numpy as np
 
 from ucat_console.robot.fins import N_FINS
+from ucat_console.robot.layout import Layout
 from ucat_console.robot.readings import DepthReading, DvlVelocity, FinFeedback, FinFeedbacks, ImuReading, Reading
 
-KIND = 0
-T = 1
-V = 2  # first value column
+# the declared layout of each kind's row: its kind, its time, then its values
+_HEAD = [("kind", 1, "the reading's kind (IMU ... FIN)"), ("t", 1, "time, s")]
+IMU_ROW = Layout("an IMU reading's row", _HEAD + [
+    ("accel", 3, "acceleration, g"), ("gyro", 3, "rates, rad/s"), ("q", 4, "attitude (NaN: not streamed)"),
+    ("euler", 3, "roll, pitch, yaw (NaN: none)")])
+DEPTH_ROW = Layout("a depth reading's row", _HEAD + [("depth_m", 1, "depth, m"), ("pressure_pa", 1, "pressure, Pa")])
+DVL_ROW = Layout("a DVL report's row", _HEAD + [
+    ("v", 3, "velocity, m/s"), ("valid", 1, "1.0: bottom lock, 0.0: none"), ("altitude", 1, "altitude, m"),
+    ("fom", 1, "figure of merit")])
+FINS_ROW = Layout("every fin's feedback row", _HEAD + [
+    ("angle", N_FINS, "every fin's angle, robot order, rad"), ("rate", N_FINS, "and rate, rad/s")])
+FIN_ROW = Layout("one fin's feedback row", _HEAD + [
+    ("fin", 1, "the fin (robot order)"), ("angle", 1, "its angle, rad"), ("rate", 1, "its rate, rad/s")])
+LAYOUTS = (IMU_ROW, DEPTH_ROW, DVL_ROW, FINS_ROW, FIN_ROW)
+KIND, T = IMU_ROW.at("kind"), IMU_ROW.at("t")
 ROW = 16
+assert max(lay.size for lay in LAYOUTS) <= ROW
+
 # kinds
 IMU, DEPTH, DVL, FINS, FIN = 1.0, 2.0, 3.0, 4.0, 5.0
-# IMU columns
-IMU_ACCEL = V
-IMU_GYRO = V + 3
-IMU_Q = V + 6
-IMU_EULER = V + 10
-# DEPTH
-DEPTH_M = V
-DEPTH_PA = V + 1
-# DVL
-DVL_V = V
-DVL_VALID = V + 3
-DVL_ALTITUDE = V + 4
-DVL_FOM = V + 5
-# FINS
-FINS_ANGLE = V
-FINS_RATE = V + N_FINS
-# FIN
-FIN_INDEX = V
-FIN_ANGLE = V + 1
-FIN_RATE = V + 2
+IMU_ACCEL, IMU_GYRO, IMU_Q, IMU_EULER = (IMU_ROW.at(f) for f in ("accel", "gyro", "q", "euler"))
+DEPTH_M, DEPTH_PA = DEPTH_ROW.at("depth_m"), DEPTH_ROW.at("pressure_pa")
+DVL_V, DVL_VALID, DVL_ALTITUDE, DVL_FOM = (DVL_ROW.at(f) for f in ("v", "valid", "altitude", "fom"))
+FINS_ANGLE, FINS_RATE = FINS_ROW.at("angle"), FINS_ROW.at("rate")
+FIN_INDEX, FIN_ANGLE, FIN_RATE = (FIN_ROW.at(f) for f in ("fin", "angle", "rate"))
 
 _NAN3 = (math.nan,) * 3
 _NAN4 = (math.nan,) * 4

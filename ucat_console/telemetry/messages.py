@@ -132,7 +132,7 @@ class FinPlan:
 
     t: Time
     fin: Fin
-    mode: Annotated[str, Doc('fin controller: "mpc", "mpc_sync" or "baseline"')]
+    mode: Annotated[str, Doc("fin controller (a mode of backend.loop.modes.MODES)")]
     target: Annotated[tuple[float, float], Doc("force target (f_x*, f_y*)", "N", "fin model", XY)]
     v_body: Annotated[float, Doc("measured forward speed used", "m/s")]
     theta0: Annotated[float, Doc("fin angle the plan starts from", "rad")]

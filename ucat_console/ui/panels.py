@@ -28,7 +28,7 @@ import time
 from typing import TYPE_CHECKING, Any, Callable
 
 from ucat_console.backend.access import MAX_NAME, AccessDenied, actor_name
-from ucat_console.backend.loop.config import MODES
+from ucat_console.backend.loop.modes import MODES
 from ucat_console.backend.supervisor import SETPOINTS, CommandRefused
 from ucat_console.ui.driving import KEY_MAP, KEYS, Driving
 from ucat_console.ui.markdown import _set, esc, events_markdown, within
@@ -41,8 +41,6 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-MODE_LABELS = {"mpc": "MPC", "mpc_sync": "MPC, rear fins synchronised", "baseline": "baseline inverse model",
-               "identify": "the identification manoeuvre (Session tab)"}
 REFUSALS = (AccessDenied, CommandRefused, ValueError)
 #: the events list's filters: name -> the levels shown
 SEVERITY_FILTERS = {
@@ -85,8 +83,8 @@ class ControlPanel:
                 self.arm = gui.add_button("Arm motors", color="green")
                 # the status bar's DISARM button (and Esc) press this one; it is not drawn here
                 self.disarm = gui.add_button("DISARM", color="red", visible=False)
-                self.mode = gui.add_dropdown("Mode", MODES, initial_value=sup.mode,
-                                             hint=", ".join(f"{k}: {v}" for k, v in MODE_LABELS.items()))
+                self.mode = gui.add_dropdown("Mode", tuple(MODES), initial_value=sup.mode,
+                                             hint=", ".join(f"{m.name}: {m.label}" for m in MODES.values()))
                 sp = sup.setpoints
                 self.sp_inputs = {
                     "velocity": gui.add_number(f"Velocity m/s [-{env.max_velocity:g}, {env.max_velocity:g}]",

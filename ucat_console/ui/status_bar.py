@@ -12,12 +12,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+from ucat_console.backend.loop.modes import MODES
 from ucat_console.backend.safety import SENSORS
 
 #: the lights, in the bar's order: sensor or part -> label
 LIGHTS = {"imu": "IMU", "dvl": "DVL", "depth": "Depth", "drives": "Drives", "planner": "Planner",
           "control": "Control", "recording": "Recording"}
-MODE_LABELS = {"mpc": "MPC", "mpc_sync": "MPC sync", "baseline": "baseline"}
 ACTIONS = {"hold": "stops and holds its depth", "surface": "stops and rises to the surface",
            "disarm": "turns its motors off", "warn": "goes on (warn only)"}
 
@@ -107,6 +107,11 @@ def link_policy(sup: Any) -> str:
             "Reload the page when the link is back; the token is needed again.")
 
 
+def mode_label(mode: str) -> str:
+    """The bar's short label of a mode (its registration's, ``backend.loop.modes``)."""
+    return MODES[mode].short if mode in MODES else mode
+
+
 def pilot_label(sup: Any, client: int | None) -> str:
     p = sup.access.pilot
     if p is None:
@@ -123,7 +128,7 @@ def bar_state(sup: Any, client: int | None, *, dark: bool, uuids: dict[str, str]
     slow and its telemetry thinned (:mod:`ucat_console.ui.link`)."""
     return {
         "armed": bool(sup.armed),
-        "mode": MODE_LABELS.get(sup.mode, sup.mode),
+        "mode": mode_label(sup.mode),
         "pilot": pilot_label(sup, client),
         "you_pilot": client is not None and sup.access.is_pilot(client),
         "recording": sup.recording.session_id,

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from ucat_console.backend.loop.modes import mode_names
 from ucat_console.control.params import (
     BaselineConfig,
     BodyConfig,
@@ -20,9 +21,9 @@ from ucat_console.control.params import (
 )
 from ucat_console.typedconf import Config, param
 
-#: controller modes: four MPC fins, three MPC problems with the rear pair synchronised,
-#: the inverse-model baseline, the identification manoeuvre (``manoeuvre``; fin targets ignored)
-MODES = ("mpc", "mpc_sync", "baseline", "identify")
+#: the fin controllers' names (``modes.MODES``: four MPC fins, three MPC problems with the
+#: rear pair synchronised, the inverse-model baseline, the identification manoeuvre)
+MODES = mode_names()
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,7 @@
-"""Loading (or compiling) the closed loop's compiled per-sample kernels without a robot.
+"""Loading (or compiling) the planners and the closed loop's per-sample kernels without a robot.
+
+:func:`warm_up` makes one plan of each planner kind (the MPC in each formulation, the
+baseline scored with each).
 
 :func:`warm_up_loop` runs a :class:`~ucat_console.backend.loop.closed_loop.ClosedLoop` for
 half a second on :class:`_StubRobot`, which delivers every kind of reading the loop takes
@@ -16,6 +19,8 @@ import numpy as np
 
 from ucat_console.backend.loop.closed_loop import ClosedLoop
 from ucat_console.backend.loop.config import LoopConfig
+from ucat_console.backend.loop.planners import BaselineFinPlanner, MpcFinPlanner, PlanInputs
+from ucat_console.control.params import FORMULATIONS
 from ucat_console.robot.fins import N_FINS
 from ucat_console.robot.interface import RobotIO
 from ucat_console.robot.readings import DepthReading, DvlVelocity, FinFeedback, FinFeedbacks, ImuReading, Reading
@@ -54,6 +59,24 @@ class _StubRobot(RobotIO):
                 fb.flags.writeable = False
                 out.append(FinFeedbacks(tk, fb[:N_FINS], fb[N_FINS:]))
         return out
+
+
+def warm_up(cfg: LoopConfig | None = None, formulations: tuple[str, ...] | None = None) -> float:
+    """One plan of each kind: the MPC in ``formulations`` (default: every formulation, as
+    either may be switched to live) and the baseline scored with each: loads the compiled
+    solver from numba's on-disk cache, or compiles it (a minute or more a formulation, once
+    per machine) and fills that cache. Seconds taken."""
+    cfg = cfg or LoopConfig()
+    x = PlanInputs(t=0.0, fins=(0,), target=(-0.3, 0.0), v_body=0.0, theta0=0.0,
+                   u_prev=cfg.initial_u_prev)
+    if formulations is None:
+        formulations = FORMULATIONS if cfg.mpc.solver == "numba" else (cfg.mpc.formulation,)
+    t0 = time.perf_counter()
+    for formulation in formulations:
+        m = cfg.mpc.replace(formulation=formulation)
+        MpcFinPlanner(m, 0)(x)
+        BaselineFinPlanner(m, cfg.baseline, cfg.executor)(x)
+    return time.perf_counter() - t0
 
 
 def warm_up_loop(cfg: LoopConfig | None = None) -> float:

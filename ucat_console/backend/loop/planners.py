@@ -7,7 +7,7 @@ no clock). The loop publishes it with the hand-over time, the robot fin, the mod
 whether it came late filled in (:func:`dataclasses.replace`):
 
 * :class:`MpcFinPlanner`: the Strouhal-aware MPC (``control.mpc.FinMpc``), for the modes
-  "mpc" and "mpc_sync";
+  "mpc" and "mpc_sync" (``modes`` says which planner each mode uses);
 * :class:`BaselineFinPlanner`: the inverse-model baseline (``control.baseline``), whose
   plan is scored with the MPC's cost so St and force error are reported the same way;
 * :class:`ManoeuvreFinPlanner`: the identification manoeuvre (``control.manoeuvre``), mode
@@ -28,12 +28,10 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Callable, Hashable
 
-
-from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.control.baseline import BaselinePlanner, wrap_angle
 from ucat_console.control.manoeuvre import ManoeuvrePlanner
 from ucat_console.control.mpc import FinMpc
-from ucat_console.control.params import FORMULATIONS, BaselineConfig, ExecutorConfig, ManoeuvreConfig, MpcConfig
+from ucat_console.control.params import BaselineConfig, ExecutorConfig, ManoeuvreConfig, MpcConfig
 from ucat_console.telemetry.messages import FinPlan
 
 Vec4 = tuple[float, float, float, float]
@@ -150,24 +148,6 @@ class ManoeuvreFinPlanner:
 
 
 Planner = Callable[[PlanInputs], FinPlan]
-
-
-def warm_up(cfg: LoopConfig | None = None, formulations: tuple[str, ...] | None = None) -> float:
-    """One plan of each kind: the MPC in ``formulations`` (default: every formulation, as
-    either may be switched to live) and the baseline scored with each: loads the compiled
-    solver from numba's on-disk cache, or compiles it (a minute or more a formulation, once
-    per machine) and fills that cache. Seconds taken."""
-    cfg = cfg or LoopConfig()
-    x = PlanInputs(t=0.0, fins=(0,), target=(-0.3, 0.0), v_body=0.0, theta0=0.0,
-                   u_prev=cfg.initial_u_prev)
-    if formulations is None:
-        formulations = FORMULATIONS if cfg.mpc.solver == "numba" else (cfg.mpc.formulation,)
-    t0 = time.perf_counter()
-    for formulation in formulations:
-        m = cfg.mpc.replace(formulation=formulation)
-        MpcFinPlanner(m, 0)(x)
-        BaselineFinPlanner(m, cfg.baseline, cfg.executor)(x)
-    return time.perf_counter() - t0
 
 
 class PlanJob:

@@ -16,9 +16,9 @@ from dataclasses import dataclass, fields
 from typing import Any, Callable, Mapping
 
 from ucat_console.backend.loop.closed_loop import PID_LOOPS, ClosedLoop
-from ucat_console.backend.loop.planners import MpcFinPlanner
 from ucat_console.backend.supervisor.commands import CommandRefused, number
 from ucat_console.config import AppConfig
+from ucat_console.control.mpc import check_config
 from ucat_console.typedconf import check_value
 
 #: what the operator may tune live: block -> fields (PID blocks are "pid.<loop>")
@@ -145,7 +145,7 @@ class Tuning:
                 raise CommandRefused(f"{block}.{e}" if not str(e).startswith(block) else str(e)) from None
             if block == "mpc":
                 try:
-                    MpcFinPlanner(new, 0)
+                    check_config(new)
                 except ValueError as e:
                     raise CommandRefused(f"mpc: {e}") from None
                 f = new.formulation

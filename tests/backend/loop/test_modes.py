@@ -1,0 +1,106 @@
+"""The fin controllers' registry: a new mode is one registration, and everything that
+names a mode (the loop, its configuration, the command line, the page's dropdown and status
+bar) reads it."""
+
+from __future__ import annotations
+
+from dataclasses import fields
+
+import pytest
+
+from ucat_console.backend.loop import modes
+from ucat_console.backend.loop.closed_loop import ClosedLoop
+from ucat_console.backend.loop.config import LoopConfig
+from ucat_console.backend.loop.modes import MODES, Mode, PlannerSetting, mode_names, register
+from ucat_console.backend.loop.planners import MpcFinPlanner
+from ucat_console.backend.sim_robot_io import SimRobotIO
+from ucat_console.cli import build_parser
+from ucat_console.control.allocation import INDEPENDENT_FINS, SYNC_FINS, BodySetpoints
+from ucat_console.telemetry.stream import TelemetryStream
+
+
+@pytest.fixture
+def echo():
+    """A mode registered for the test (the MPC's planner, made through the registry), and
+    the settings its planners were made from."""
+    made: list[PlannerSetting] = []
+
+    def planner(s: PlannerSetting) -> MpcFinPlanner:
+        made.append(s)
+        return MpcFinPlanner(s.mpc, s.seed, s.executor)
+
+    before = dict(MODES)
+    register(Mode("echo", "the MPC, registered by a test", "echo", INDEPENDENT_FINS, planner))
+    yield made
+    MODES.clear()
+    MODES.update(before)
+
+
+def test_the_built_in_modes_are_registered_in_the_page_order() -> None:
+    assert mode_names() == ("mpc", "mpc_sync", "baseline", "identify")
+    assert mode_names(follows_targets=True) == ("mpc", "mpc_sync", "baseline")
+    assert MODES["mpc_sync"].rear_synchronised and not MODES["mpc"].rear_synchronised
+    assert MODES["baseline"].reads == ("mpc", "baseline")
+
+
+def test_the_loop_configuration_takes_the_registered_modes() -> None:
+    f = next(f for f in fields(LoopConfig) if f.name == "mode")
+    assert f.metadata["choices"] == mode_names()
+    with pytest.raises(ValueError, match="mode"):
+        LoopConfig(mode="oracle")
+
+
+def _choices(argv_prefix: list[str], option: str) -> tuple[str, ...]:
+    parser = build_parser()
+    sub = parser._subparsers._group_actions[0].choices  # type: ignore[union-attr]
+    for name in argv_prefix:
+        p = sub[name]
+        subs = [a for a in p._actions if a.__class__.__name__ == "_SubParsersAction"]
+        sub = subs[0].choices if subs else None
+    action = next(a for a in p._actions if option in a.option_strings)
+    return tuple(action.choices)
+
+
+def test_the_command_line_reads_the_registry(echo) -> None:
+    assert _choices(["run"], "--mode") == mode_names()
+    assert "echo" in _choices(["run"], "--mode")
+    assert _choices(["bench", "sim"], "--modes") == mode_names(follows_targets=True)
+    assert build_parser().parse_args(["run", "--headless", "--mode", "echo"]).mode == "echo"
+
+
+def test_a_registered_mode_runs_in_the_loop(echo) -> None:
+    stream = TelemetryStream()
+    plans = []
+    stream.subscribe(lambda channel, msg: plans.append(msg) if channel.startswith("fin/") and
+                     channel.endswith("/plan") else None)
+    io = SimRobotIO(depth=1.0, velocity=0.2, seed=0)
+    loop = ClosedLoop(LoopConfig(mode="mpc"), io, stream, setpoints=BodySetpoints(velocity=0.2, depth=1.0))
+    loop.run_until(1.0)
+    assert loop.set_mode("echo", who="test") == "mpc"
+    loop.run_until(4.0)
+    loop.close()
+    assert loop.mode == "echo"
+    assert len(echo) == 4 and {s.mpc for s in echo} == {loop.mpc_config}
+    assert len({s.seed for s in echo}) == 4  # each logical fin its own stream
+    assert {p.mode for p in plans} == {"mpc", "echo"}
+    with pytest.raises(ValueError, match="is not one of mpc, mpc_sync, baseline, identify, echo"):
+        loop.set_mode("oracle")
+
+
+def test_a_mode_is_refused_when_the_loop_cannot_run_it() -> None:
+    planner = MODES["mpc"].planner
+    with pytest.raises(ValueError, match="registered already"):
+        register(Mode("mpc", "again", "again", INDEPENDENT_FINS, planner))
+    with pytest.raises(ValueError, match="fins must be INDEPENDENT_FINS or SYNC_FINS"):
+        Mode("pairs", "front and rear pairs", "pairs", ((0, 1), (2, 3)), planner)
+    with pytest.raises(ValueError, match="reads"):
+        Mode("x", "x", "x", SYNC_FINS, planner, reads=("weather",))
+    with pytest.raises(ValueError, match="mode: 'nope' is not one of"):
+        modes.mode("nope")
+
+
+def test_the_status_bar_labels_each_mode_from_the_registry(echo) -> None:
+    from ucat_console.ui.status_bar import mode_label
+
+    assert [mode_label(m) for m in mode_names()] == ["MPC", "MPC sync", "baseline", "identify", "echo"]
+    assert mode_label("unknown") == "unknown"

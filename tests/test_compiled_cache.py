@@ -1,0 +1,116 @@
+"""numba's cache is keyed by the compiled sources: an edit to a jitted helper in another
+module recompiles the kernels that inline it; an unchanged package loads them."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import ucat_console
+from ucat_console import compiled_cache
+
+PACKAGE = Path(ucat_console.__file__).resolve().parent
+
+#: a kernel in its own module inlining a helper of another module (control.filters)
+PROBE = '''
+import numba
+from ucat_console.control.filters import median_size
+
+
+@numba.njit(cache=True)
+def probe(window):
+    return median_size(window)
+'''
+
+RUN = '''
+import json
+import ucat_console
+from ucat_console.control.cache_probe import probe
+value = probe(5)
+s = probe.stats
+print(json.dumps({"value": int(value), "hits": sum(s.cache_hits.values()),
+                  "misses": sum(s.cache_misses.values()), "package": ucat_console.__file__}))
+'''
+
+
+def _copy(tmp: Path) -> Path:
+    root = tmp / "ucat_console"
+    shutil.copytree(PACKAGE, root, ignore=shutil.ignore_patterns("__pycache__"))
+    (root / "control" / "cache_probe.py").write_text(PROBE)
+    return root
+
+
+def _run(root: Path) -> dict:
+    env = dict(os.environ)  # this process set NUMBA_CACHE_DIR: the copy must not take it for its own
+    env["PYTHONPATH"] = str(root.parent)
+    out = subprocess.run([sys.executable, "-c", RUN], env=env, cwd=root.parent, capture_output=True,
+                         text=True, timeout=240, check=True)
+    got = json.loads(out.stdout.strip().splitlines()[-1])
+    assert Path(got["package"]).resolve().parent == root  # the copy ran, not the installed package
+    return got
+
+
+def _edit(path: Path, old: str, new: str) -> None:
+    text = path.read_text()
+    assert old in text
+    path.write_text(text.replace(old, new))
+
+
+def test_an_edited_helper_in_another_module_recompiles(tmp_path: Path) -> None:
+    root = _copy(tmp_path)
+    first = _run(root)
+    assert first["misses"] == 1 and first["value"] == _median_size(5)
+    again = _run(root)  # unchanged: loaded from the cache
+    assert again == {**first, "hits": 1, "misses": 0}
+    _edit(root / "control" / "filters.py", "return MED_RING + 2 * window", "return MED_RING + 3 * window")
+    edited = _run(root)  # the helper changed, the kernel's own module did not
+    assert edited["misses"] == 1 and edited["hits"] == 0
+    assert edited["value"] == first["value"] + 5
+    assert _run(root)["hits"] == 1
+
+
+def test_an_edit_outside_the_compiled_sources_keeps_the_cache(tmp_path: Path) -> None:
+    root = _copy(tmp_path)
+    before = compiled_cache.cache_dir(root)
+    assert _run(root)["misses"] == 1
+    _edit(root / "cli" / "run.py", '"""', '"""An edit. ')
+    assert compiled_cache.cache_dir(root) == before
+    assert _run(root)["hits"] == 1
+
+
+def test_the_compiled_sources_follow_the_imports_of_the_kernels() -> None:
+    names = {f.relative_to(PACKAGE).as_posix() for f in compiled_cache.compiled_sources()}
+    # kernels, the helpers they inline, and the layouts whose constants they freeze
+    assert {"control/loop_core.py", "control/filters.py", "control/pid.py", "robot/reading_rows.py",
+            "control/mpc_kernels.py", "backend/sim/plant.py"} <= names
+    assert not any(n.startswith(("cli/", "bench/tracking")) for n in names)
+
+
+def test_each_copy_and_each_version_of_the_sources_has_its_own_directory(tmp_path: Path) -> None:
+    root = _copy(tmp_path)
+    d = compiled_cache.cache_dir(root)
+    assert d != compiled_cache.cache_dir(PACKAGE)
+    _edit(root / "robot" / "reading_rows.py", '"""', '"""An edit. ')
+    assert compiled_cache.cache_dir(root) != d
+    os.makedirs(d)
+    (root / "control" / "__pycache__").mkdir(exist_ok=True)
+    old_file = root / "control" / "__pycache__" / "loop_core.core_step-1.py311.nbi"
+    old_file.write_bytes(b"")
+    removed = compiled_cache.prune(root)
+    assert d in removed and old_file in removed and not d.exists() and not old_file.exists()
+
+
+def _median_size(window: int) -> int:
+    from ucat_console.control.filters import MED_RING
+
+    return MED_RING + 2 * window
+
+
+def test_a_cache_directory_the_user_sets_is_the_base(tmp_path: Path, monkeypatch) -> None:
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "user"))
+    d = compiled_cache.cache_dir()
+    assert d.parent == tmp_path / "user" and d.name.startswith("ucat-numba-")
