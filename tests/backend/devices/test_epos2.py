@@ -544,7 +544,7 @@ def test_current_and_voltage_frames_are_the_epos2s_and_the_driver_reads_them():
         assert drives.enable_all()
         emu = emulators[21]
         # the averaged current settles on the motor current (1234 mA = 0x04D2)
-        assert _wait(lambda: emu.value(0x2027) == 1234)
+        wait_for(lambda: emu.value(0x2027) == 1234, what="the emulated current")
         [(fin, reading)] = drives.read_electrical().items()  # one round, by fin
         assert fin == 0 and reading is not None and reading.fin == 0
         assert reading.current_a == pytest.approx(1.234, abs=1e-12)
