@@ -20,7 +20,6 @@ from support import TOKEN, Console, console_config, wait_for
 
 from ucat_console.backend.access import LOCAL
 from ucat_console.bench.raw_page import RawPage
-from ucat_console.telemetry import channels as ch
 from ucat_console.ui import viser_compat
 from ucat_console.ui.guard import MAX_FRAME, PageGuard, PortTaken, origin_allowed
 

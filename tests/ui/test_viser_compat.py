@@ -8,7 +8,6 @@ from typing import Any, Iterator
 
 import asyncio
 import threading
-import warnings
 
 import msgspec.msgpack
 import numpy as np
@@ -16,8 +15,6 @@ import pytest
 import viser
 import viser._messages as vm
 import zstandard
-from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
 from support import wait_for
 
 from ucat_console.bench.raw_page import RawPage, split_buffers, with_arrays

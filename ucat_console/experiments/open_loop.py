@@ -27,7 +27,7 @@ from ucat_console.backend.loop.planners import BaselineFinPlanner, MpcFinPlanner
 from ucat_console.bench import mpc as bench
 from ucat_console.control.allocation import allocate
 from ucat_console.control.baseline import wrap_angle
-from ucat_console.control.params import PAPER_BASELINE, BaselineConfig, MpcConfig
+from ucat_console.control.params import PAPER_BASELINE, MpcConfig
 from ucat_console.experiments import paper
 
 SPEEDS = (0.2, 0.3, 0.4)

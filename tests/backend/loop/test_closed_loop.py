@@ -19,7 +19,7 @@ from ucat_console.config import load_config
 from ucat_console.robot.fins import PAPER_TO_ROBOT as PAPER_TO_PLANT_FIN
 from ucat_console.robot.fins import ROBOT_TO_PAPER as PLANT_TO_PAPER
 from ucat_console.control.allocation import BodySetpoints
-from ucat_console.control.params import BaselineConfig, BodyConfig, MpcConfig, PidGains, PowerConfig
+from ucat_console.control.params import BaselineConfig, MpcConfig, PidGains, PowerConfig
 from ucat_console.control.power import PowerEstimator
 from ucat_console.robot.readings import FinFeedbacks
 from ucat_console.experiments.scenario import START_FIN_ANGLE
