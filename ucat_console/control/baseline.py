@@ -50,6 +50,7 @@ defines it, and its thrust saturates through the amplitude (which is why it cann
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -108,14 +109,7 @@ def model_amplitude(force_magnitude: float, cfg: MpcConfig, bcfg: BaselineConfig
     def force(a: float) -> float:
         return model_force(a, cfg, bcfg, acceleration, max_rate)
 
-    lo, hi = 0.0, min(cfg.d_max, 0.5 * math.pi)
-    for _ in range(60):  # the force rises to one peak and falls: find the peak
-        m1, m2 = lo + (hi - lo) / 3.0, hi - (hi - lo) / 3.0
-        if force(m1) < force(m2):
-            lo = m1
-        else:
-            hi = m2
-    peak = 0.5 * (lo + hi)
+    peak = _peak_amplitude(cfg, bcfg, acceleration, max_rate)
     if force(peak) <= f:
         return peak
     lo, hi = 0.0, peak
@@ -126,6 +120,20 @@ def model_amplitude(force_magnitude: float, cfg: MpcConfig, bcfg: BaselineConfig
         else:
             hi = mid
     return hi
+
+
+@functools.lru_cache(maxsize=64)
+def _peak_amplitude(cfg: MpcConfig, bcfg: BaselineConfig, acceleration: float, max_rate: float) -> float:
+    """The amplitude of the fin model's largest beat force (the same for every plan of one
+    configuration: found once)."""
+    lo, hi = 0.0, min(cfg.d_max, 0.5 * math.pi)
+    for _ in range(60):  # the force rises to one peak and falls: find the peak
+        m1, m2 = lo + (hi - lo) / 3.0, hi - (hi - lo) / 3.0
+        if model_force(m1, cfg, bcfg, acceleration, max_rate) < model_force(m2, cfg, bcfg, acceleration, max_rate):
+            lo = m1
+        else:
+            hi = m2
+    return 0.5 * (lo + hi)
 
 
 def zero_direction(cfg: MpcConfig) -> float:
