@@ -9,7 +9,10 @@ network would do. By default it answers the console's heartbeats as the real pag
 stops reading its socket without closing it, ``read_rate`` (bytes a second, settable at
 any time) one on a slow link. It keeps the status bar's last state (:attr:`RawPage.bar`).
 
-The safety benchmark and the tests use it; it is not part of the console.
+The safety benchmark and the tests use it; it is not part of the console. It uses no
+private name of viser: it speaks viser's wire protocol (its message names and fields, as
+viser's client sends them), which is what a hostile page would do, and checks the installed
+viser against the supported range as the console does (``backend.dependencies.require``).
 """
 
 from __future__ import annotations
@@ -25,6 +28,8 @@ import numpy as np
 import viser
 import websockets.sync.client
 import zstandard
+
+from ucat_console.backend.dependencies import require
 
 CAMERA = {
     "type": "ViewerCameraMessage", "wxyz": (1.0, 0.0, 0.0, 0.0), "position": (0.0, 0.0, 3.0),
@@ -97,6 +102,7 @@ class RawPage:
     def __init__(self, url: str, *, origin: str | None = None, local_host: str | None = None,
                  answer_heartbeats: bool = True, open_timeout: float = 20.0,
                  read_rate: float | None = None) -> None:
+        require("viser")  # the wire protocol spoken here is that of the supported versions
         ws_url = url.replace("http://", "ws://", 1)
         host, port = ws_url.split("//", 1)[1].split("/", 1)[0].rsplit(":", 1)
         addr = socket.getaddrinfo(host, int(port), type=socket.SOCK_STREAM)[0]
