@@ -54,6 +54,9 @@ import functools
 import math
 from dataclasses import dataclass
 
+from numba import njit
+from numba.extending import register_jitable
+
 from ucat_console.control.argcheck import finite, in_range
 from ucat_console.control.params import BaselineConfig, ExecutorConfig, MpcConfig
 from ucat_console.control.stroke_timing import mean_rate_limit
@@ -85,55 +88,76 @@ def baseline_amplitude(force_magnitude: float, cfg: MpcConfig, bcfg: BaselineCon
     return min(math.acos(arg), cfg.d_max)
 
 
+@register_jitable
 def model_rate(amplitude: float, frequency: float, acceleration: float, max_rate: float) -> float:
     """Mean rate (rad/s) of a beat of ``amplitude`` at ``frequency`` as the drive can make it:
     ``min(4 A f, mean_rate_limit(2 A))``."""
     return min(4.0 * amplitude * frequency, mean_rate_limit(2.0 * amplitude, acceleration, max_rate))
 
 
-def model_force(amplitude: float, cfg: MpcConfig, bcfg: BaselineConfig, acceleration: float,
-                max_rate: float) -> float:
-    """The fin model's mean force (N) of a symmetric beat of ``amplitude`` (module docstring)."""
-    w = model_rate(amplitude, bcfg.frequency, acceleration, max_rate)
-    return 0.5 * cfg.rho * cfg.fin_area * cfg.r_c ** 2 * math.hypot(cfg.c_l, cfg.c_d) * w * w * math.cos(amplitude)
+@register_jitable
+def _beat_force(amplitude: float, q: float, frequency: float, acceleration: float, max_rate: float) -> float:
+    w = model_rate(amplitude, frequency, acceleration, max_rate)
+    return q * w * w * math.cos(amplitude)
 
 
-def model_amplitude(force_magnitude: float, cfg: MpcConfig, bcfg: BaselineConfig, acceleration: float,
+@njit(cache=True)
+def _beat_amplitude(force: float, peak: float, q: float, frequency: float, acceleration: float,
                     max_rate: float) -> float:
-    """The smallest amplitude (rad, at most ``cfg.d_max``) whose beat makes ``force_magnitude``
-    (N) by the fin model, or the amplitude of the largest force when none does."""
-    f = in_range("force_magnitude", force_magnitude, 0.0, unit="N")
-    if f == 0.0:
-        return 0.0
-
-    def force(a: float) -> float:
-        return model_force(a, cfg, bcfg, acceleration, max_rate)
-
-    peak = _peak_amplitude(cfg, bcfg, acceleration, max_rate)
-    if force(peak) <= f:
-        return peak
-    lo, hi = 0.0, peak
+    """Bisection on ``(0, peak]`` for the smallest amplitude whose beat force reaches ``force``
+    (``0 < force < F(peak)``); compiled: a plan runs it for every fin."""
+    lo, hi = 0.0, peak  # F(lo) < force <= F(hi) throughout
     for _ in range(60):
         mid = 0.5 * (lo + hi)
-        if force(mid) < f:
+        if mid == lo or mid == hi:  # no amplitude left between them: neither can move
+            break
+        if _beat_force(mid, q, frequency, acceleration, max_rate) < force:
             lo = mid
         else:
             hi = mid
     return hi
 
 
+class FinModelInverse:
+    """The fin model's beat force ``F(A)`` for one configuration and drive (module docstring),
+    and its inverse: the smallest amplitude that makes a force. The configuration's constants
+    are taken once; the peak of ``F`` is found once."""
+
+    def __init__(self, cfg: MpcConfig, bcfg: BaselineConfig, acceleration: float, max_rate: float) -> None:
+        self._q = 0.5 * cfg.rho * cfg.fin_area * cfg.r_c ** 2 * math.hypot(cfg.c_l, cfg.c_d)
+        self._frequency = bcfg.frequency
+        self._drive = (acceleration, max_rate)
+        lo, hi = 0.0, min(cfg.d_max, 0.5 * math.pi)
+        for _ in range(60):  # the force rises to one peak and falls: find the peak
+            m1, m2 = lo + (hi - lo) / 3.0, hi - (hi - lo) / 3.0
+            if self.force(m1) < self.force(m2):
+                lo = m1
+            else:
+                hi = m2
+        #: the amplitude of the largest beat force (rad)
+        self.peak = 0.5 * (lo + hi)
+        self._peak_force = self.force(self.peak)
+
+    def force(self, amplitude: float) -> float:
+        """The mean force (N) of a symmetric beat of ``amplitude`` (rad)."""
+        return _beat_force(amplitude, self._q, self._frequency, *self._drive)
+
+    def amplitude(self, force_magnitude: float) -> float:
+        """The smallest amplitude (rad, at most the peak's) whose beat makes
+        ``force_magnitude`` (N), or the peak's amplitude when none does."""
+        f = in_range("force_magnitude", force_magnitude, 0.0, unit="N")
+        if f == 0.0:
+            return 0.0
+        if self._peak_force <= f:
+            return self.peak
+        return _beat_amplitude(f, self.peak, self._q, self._frequency, *self._drive)
+
+
 @functools.lru_cache(maxsize=64)
-def _peak_amplitude(cfg: MpcConfig, bcfg: BaselineConfig, acceleration: float, max_rate: float) -> float:
-    """The amplitude of the fin model's largest beat force (the same for every plan of one
-    configuration: found once)."""
-    lo, hi = 0.0, min(cfg.d_max, 0.5 * math.pi)
-    for _ in range(60):  # the force rises to one peak and falls: find the peak
-        m1, m2 = lo + (hi - lo) / 3.0, hi - (hi - lo) / 3.0
-        if model_force(m1, cfg, bcfg, acceleration, max_rate) < model_force(m2, cfg, bcfg, acceleration, max_rate):
-            lo = m1
-        else:
-            hi = m2
-    return 0.5 * (lo + hi)
+def fin_model_inverse(cfg: MpcConfig, bcfg: BaselineConfig, acceleration: float,
+                      max_rate: float) -> FinModelInverse:
+    """The :class:`FinModelInverse` of one configuration and drive (made once)."""
+    return FinModelInverse(cfg, bcfg, acceleration, max_rate)
 
 
 def zero_direction(cfg: MpcConfig) -> float:
@@ -168,12 +192,13 @@ class BaselinePlanner:
         self.bcfg = bcfg
         ex = executor or ExecutorConfig()
         self._drive = (ex.acceleration, ex.max_rate)
+        self._inverse = fin_model_inverse(cfg, bcfg, ex.acceleration, ex.max_rate)
 
     def amplitude(self, force_magnitude: float) -> float:
         """The beat's amplitude (rad) for a mean force (N), by the configured inverse model."""
         if self.bcfg.inverse_model == "eq19":
             return baseline_amplitude(force_magnitude, self.cfg, self.bcfg)
-        return model_amplitude(force_magnitude, self.cfg, self.bcfg, *self._drive)
+        return self._inverse.amplitude(force_magnitude)
 
     def rate(self, amplitude: float) -> float:
         """Mean stroke rate (rad/s) of a beat of ``amplitude`` at the fixed frequency (as the

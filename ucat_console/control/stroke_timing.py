@@ -26,9 +26,12 @@ from __future__ import annotations
 
 import math
 
+from numba.extending import register_jitable
+
 from ucat_console.control.params import MpcConfig
 
 
+@register_jitable
 def mean_rate_limit(stroke: float, acceleration: float, max_rate: float) -> float:
     """The fastest mean rate (rad/s) of a stroke of ``|stroke|`` rad from rest to rest."""
     d = abs(stroke)
