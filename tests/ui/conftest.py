@@ -1,7 +1,8 @@
 """The page's tests; their helpers live beside this file (``plots_reference.py``, the browser
-harness ``browser_harness.py``), and the browser fixtures here: ``chromium`` (a headless
-Chromium in a process group of our own, one per module) with ``frozen_browser``
-(Playwright connected to it over CDP), for a test that freezes the browser's processes."""
+harness ``browser_harness.py``), and the browser fixtures here: ``browser`` (Playwright's
+headless Chromium, Debian's, one per module), ``chromium`` (a headless Chromium in a process
+group of our own, one per module) with ``frozen_browser`` (Playwright connected to it over
+CDP), for a test that freezes the browser's processes."""
 
 from __future__ import annotations
 
@@ -12,6 +13,20 @@ from typing import Any, Iterator
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))  # for ``import plots_reference``, ``browser_harness``
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[Any]:
+    """Playwright's headless Chromium (``bench.ui.CHROMIUM``, with the benchmark's flags)."""
+    sync_api = pytest.importorskip("playwright.sync_api")
+    from ucat_console.bench.ui import CHROMIUM, CHROMIUM_ARGS
+
+    if not Path(CHROMIUM).exists():
+        pytest.skip(f"no Chromium at {CHROMIUM}")
+    with sync_api.sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        yield b
+        b.close()
 
 
 @pytest.fixture(scope="module")

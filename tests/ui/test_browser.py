@@ -7,101 +7,40 @@ live page is saved under ``test-artifacts/``.
 
 from __future__ import annotations
 
-import os
 import re
-import shutil
-from pathlib import Path
 from typing import Iterator
 
 import pytest
-from support import wait_for
+from support import Console, wait_for
 
 playwright_api = pytest.importorskip("playwright.sync_api")
-from playwright.sync_api import Browser, Locator, Page, expect, sync_playwright  # noqa: E402
-
-from ucat_console.backend.supervisor import Supervisor  # noqa: E402
-from ucat_console.bench.ui import CHROMIUM_ARGS  # noqa: E402
-from ucat_console.config import (  # noqa: E402
-    AccessConfig,
-    AppConfig,
-    ConsoleConfig,
-    FailsafeConfig,
-    FailsafeRule,
-)
-from ucat_console.telemetry import channels as ch  # noqa: E402
-from ucat_console.ui.app import ConsoleApp  # noqa: E402
+from browser_harness import ARTIFACTS, browser_console, gui_input, take_control  # noqa: E402
+from browser_harness import open_page as open_url  # noqa: E402
+from playwright.sync_api import Browser, Page, expect  # noqa: E402
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
-CHROMIUM = os.environ.get("UCAT_CHROMIUM", "/usr/bin/chromium")
-ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
-TOKEN = "browser-test-token"
 PILOT_GONE_TIMEOUT = 1.5
-# how long the page may take to show what the server sent: generous, since the page renders
-# in software on the cores the supervisor runs on (a wait, not a timing assertion)
-expect.set_options(timeout=15_000)
-
-
-class Console:
-    def __init__(self, tmp: Path) -> None:
-        cfg = AppConfig(
-            access=AccessConfig(token=TOKEN),
-            console=ConsoleConfig(port=0, record_on_arm=False, scene_rate=15.0, plot_rate=5.0),
-            failsafe=FailsafeConfig(pilot_gone=FailsafeRule("hold", PILOT_GONE_TIMEOUT)),
-        )
-        self.sup = Supervisor(cfg, sessions_dir=tmp)
-        self.events: list = []
-        self.sup.stream.subscribe(lambda c, m: self.events.append(m), [ch.EVENTS])
-        self.app = ConsoleApp(self.sup)
-        self.app.start()
-        self.sup.start()
-
-    def stop(self) -> None:
-        self.sup.stop()
-        self.app.stop()
 
 
 @pytest.fixture(scope="module")
 def console(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Console]:
-    c = Console(tmp_path_factory.mktemp("sessions"))
+    c = browser_console(tmp_path_factory.mktemp("sessions"), PILOT_GONE_TIMEOUT)
     yield c
     c.stop()
-
-
-@pytest.fixture(scope="module")
-def browser() -> Iterator[Browser]:
-    if not Path(CHROMIUM).exists() and shutil.which("chromium") is None:
-        pytest.skip(f"no Chromium at {CHROMIUM}")
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        yield b
-        b.close()
 
 
 PAGES: dict[str, tuple[Page, int]] = {}
 
 
 def open_page(browser: Browser, console: Console, width: int = 1400, height: int = 900) -> tuple[Page, int]:
+    """A page on the console and the client id the console gave it."""
     before = set(console.sup.access.clients)
-    page = browser.new_page(viewport={"width": width, "height": height})
-    page.goto(console.app.url)
-    page.wait_for_function("() => !document.body.innerText.includes('Connecting...')", timeout=20_000)
+    page = open_url(browser, console.url, width, height)
     wait_for(lambda: set(console.sup.access.clients) - before, what="the page's connection")
     (cid,) = set(console.sup.access.clients) - before
     expect(page.get_by_role("button", name="Take control")).to_be_visible()
     return page, cid
-
-
-def gui_input(page: Page, label: str) -> Locator:
-    """The input of the GUI row whose label starts with ``label``."""
-    label_el = page.locator("label", has_text=re.compile("^" + re.escape(label))).first
-    row = label_el.locator("xpath=ancestor::div[contains(@class, 'Flex-root')][1]")
-    return row.locator("input:not([type='hidden'])").first
-
-
-def take_control(page: Page) -> None:
-    gui_input(page, "Pilot token").fill(TOKEN)
-    page.get_by_role("button", name="Take control").click()
 
 
 def test_the_page_loads_and_shows_the_robot(browser: Browser, console: Console) -> None:

@@ -10,7 +10,9 @@ import pytest
 
 pytest.importorskip("playwright.sync_api")
 from playwright.sync_api import Browser, expect  # noqa: E402
-from test_browser_console import ARTIFACTS, Console, browser, gui_input, open_page  # noqa: E402,F401
+from browser_harness import ARTIFACTS, browser_console, gui_input  # noqa: E402
+from support import Console  # noqa: E402
+from test_browser_console import open_page  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "backend" / "sessions"))
 from session_helpers import record  # noqa: E402
@@ -24,7 +26,7 @@ SLOW, FAST = "20231114-221320-slow", "20231114-221500-fast"
 def console(tmp_path: Path):
     record(tmp_path, run_items(), label="slow", wall_time=1_700_000_000.0)
     record(tmp_path, run_items(scale=2.0, speed=0.25), label="fast", wall_time=1_700_000_100.0)
-    c = Console(tmp_path)
+    c = browser_console(tmp_path)
     yield c
     c.stop()
 

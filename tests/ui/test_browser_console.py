@@ -14,85 +14,40 @@ import pytest
 from support import wait_for
 
 pytest.importorskip("playwright.sync_api")
-from playwright.sync_api import Browser, Page, expect, sync_playwright  # noqa: E402
+from browser_harness import (  # noqa: E402
+    ARTIFACTS,
+    become_pilot,
+    browser_console,
+    gui_input,
+    inside_viewport,
+)
+from browser_harness import open_page as open_url  # noqa: E402
+from playwright.sync_api import Browser, Page, expect  # noqa: E402
+from support import Console  # noqa: E402
 
 from ucat_console.backend.access import LOCAL  # noqa: E402
-from ucat_console.backend.supervisor import Supervisor  # noqa: E402
-from ucat_console.bench.ui import CHROMIUM, CHROMIUM_ARGS  # noqa: E402
-from ucat_console.config import AccessConfig, AppConfig, ConsoleConfig  # noqa: E402
 from ucat_console.telemetry.events import Event  # noqa: E402
-from ucat_console.ui.app import ConsoleApp  # noqa: E402
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
-TOKEN = "pool-side-browser-token"
-ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
 TABS = ("Tuning", "MPC", "Safety", "Session", "Review")
-expect.set_options(timeout=15_000)
-
-
-class Console:
-    def __init__(self, tmp: Path, port: int = 0) -> None:
-        cfg = AppConfig(access=AccessConfig(token=TOKEN),
-                        console=ConsoleConfig(port=port, record_on_arm=False, scene_rate=15.0, plot_rate=5.0))
-        self.sup = Supervisor(cfg, sessions_dir=tmp)
-        self.app = ConsoleApp(self.sup)
-        self.app.start()
-        self.sup.start()
-
-    def stop(self) -> None:
-        self.sup.stop()
-        self.app.stop()
-
-
-@pytest.fixture(scope="module")
-def browser() -> Iterator[Browser]:
-    if not Path(CHROMIUM).exists():
-        pytest.skip(f"no Chromium at {CHROMIUM}")
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        yield b
-        b.close()
 
 
 @pytest.fixture
 def console(tmp_path: Path) -> Iterator[Console]:
-    c = Console(tmp_path)
+    c = browser_console(tmp_path)
     yield c
     c.stop()
 
 
 def open_page(browser: Browser, console: Console, width: int = 1280, height: int = 800, context=None) -> Page:
-    page = context.new_page() if context is not None else browser.new_page(viewport={"width": width, "height": height})
-    page.goto(console.app.url)
-    page.wait_for_function("() => !document.body.innerText.includes('Connecting...')", timeout=30_000)
-    expect(page.locator("#ucat-armed")).to_be_visible()
-    return page
-
-
-def gui_input(page: Page, label: str):
-    label_el = page.locator("label", has_text=re.compile("^" + re.escape(label))).first
-    return label_el.locator("xpath=ancestor::div[contains(@class, 'Flex-root')][1]").locator(
-        "input:not([type='hidden'])").first
-
-
-def take_control(page: Page) -> None:
-    gui_input(page, "Pilot token").fill(TOKEN)
-    page.get_by_role("button", name="Take control").click()
-    expect(page.get_by_text("You are the pilot")).to_be_visible()
-
-
-def inside_viewport(page: Page, selector: str) -> bool:
-    box = page.locator(selector).bounding_box()
-    vp = page.viewport_size
-    return (box is not None and box["width"] > 0 and box["x"] >= 0 and box["y"] >= 0
-            and box["x"] + box["width"] <= vp["width"] and box["y"] + box["height"] <= vp["height"])
+    return open_url(browser, console.url, width, height, context)
 
 
 @pytest.mark.parametrize("size", [(1280, 800), (1920, 1080)])
 def test_status_bar_armed_state_and_disarm_are_on_screen_on_every_tab(browser: Browser, console: Console,
                                                                       size: tuple[int, int]) -> None:
     page = open_page(browser, console, *size)
-    take_control(page)
+    become_pilot(page)
     console.sup.arm(LOCAL)
     expect(page.locator("#ucat-armed")).to_have_text("ARMED")
     expect(page.locator("#ucat-disarm")).to_be_enabled()
@@ -124,7 +79,7 @@ def test_a_full_bar_keeps_the_armed_state_and_disarm_on_screen(browser: Browser,
     in between gives way, never the armed state or DISARM."""
     sup = console.sup
     page = open_page(browser, console, 1280, 800)
-    take_control(page)
+    become_pilot(page)
     name = gui_input(page, "Your name")
     name.fill("Operator on the far deck of the pool")
     name.press("Enter")
@@ -142,7 +97,7 @@ def test_a_full_bar_keeps_the_armed_state_and_disarm_on_screen(browser: Browser,
 def test_a_number_box_left_without_a_number_gets_its_value_back(browser: Browser, console: Console) -> None:
     sup = console.sup
     page = open_page(browser, console)
-    take_control(page)
+    become_pilot(page)
     page.get_by_role("tab", name="Tuning", exact=True).click()
     box = gui_input(page, "lam_st ")
     before = box.input_value()
@@ -165,7 +120,7 @@ def test_keys_drive_the_pilot_and_do_nothing_for_a_viewer(browser: Browser, cons
     sup = console.sup
     pilot = open_page(browser, console)
     viewer = open_page(browser, console)
-    take_control(pilot)
+    become_pilot(pilot)
     pilot.locator("#ucat-bar").click()  # focus on the page, not in a text box
     for _ in range(3):
         pilot.keyboard.press("w")
@@ -212,7 +167,7 @@ def test_the_gamepad_drives_the_pilot_stops_when_lost_and_disarms(browser: Brows
     lc = sup.cfg.loop
     pilot, pilot_ctx = page_with_gamepad(browser, console)
     viewer, viewer_ctx = page_with_gamepad(browser, console)
-    take_control(pilot)
+    become_pilot(pilot)
     assert pilot.evaluate("() => document.hasFocus()")
     # a viewer's stick does nothing: its page sends nothing, and the setpoints stay
     viewer.evaluate("() => { window.__pad.axes[1] = -1.0; }")
@@ -259,7 +214,7 @@ def test_the_theme_switch_is_remembered_across_reloads(browser: Browser, console
 
 def test_the_link_loss_banner_shows_when_the_console_stops_and_goes_when_it_returns(
         browser: Browser, tmp_path: Path) -> None:
-    c = Console(tmp_path)
+    c = browser_console(tmp_path)
     page = open_page(browser, c)
     port = c.app.port
     banner = page.locator("#ucat-banner")
@@ -271,7 +226,7 @@ def test_the_link_loss_banner_shows_when_the_console_stops_and_goes_when_it_retu
     expect(page.locator("#ucat-info")).to_contain_text("LINK LOST")  # the bar is not live either
     expect(page.locator("#ucat-armed")).to_have_text(re.compile(r"ARMED\?$"))
     page.screenshot(path=str(ARTIFACTS / "console-link-lost.png"))
-    back = Console(tmp_path, port=port)
+    back = browser_console(tmp_path, port=port)
     try:
         expect(banner).to_be_hidden(timeout=30_000)
     finally:

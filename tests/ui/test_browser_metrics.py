@@ -10,7 +10,9 @@ from support import wait_for
 
 pytest.importorskip("playwright.sync_api")
 from playwright.sync_api import Browser, expect  # noqa: E402
-from test_browser_console import ARTIFACTS, Console, browser, console, open_page  # noqa: E402,F401
+from browser_harness import ARTIFACTS  # noqa: E402
+from support import Console  # noqa: E402
+from test_browser_console import console, open_page  # noqa: E402,F401
 
 from ucat_console.backend.access import LOCAL  # noqa: E402
 from ucat_console.ui.metrics_panel import IN_COLOUR, OUT_COLOUR  # noqa: E402

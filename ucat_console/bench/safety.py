@@ -102,6 +102,9 @@ def frozen_pilot(trials: int, pilot_gone: float) -> dict[str, Any]:
                         box.fill(TOKEN)
                         page.get_by_role("button", name="Take control").click()
                         _wait(lambda: sup.access.pilot is not None, 30.0, "the page taking control")
+                        # the last trial's failsafe clears once the supervisor sees the new pilot
+                        _wait(lambda: not any(s.active for s in sup.safety.states() if s.name == "pilot_gone"),
+                              30.0, "the last trial's pilot_gone failsafe cleared")
                         if not sup.armed:
                             sup.arm(LOCAL)
                         sup.set_setpoints(LOCAL, velocity=0.2)
