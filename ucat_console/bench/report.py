@@ -139,7 +139,8 @@ def _tracking(d: dict[str, Any]) -> list[Row]:
 def _load(d: dict[str, Any]) -> list[Row]:
     return [
         Row(f"emulated rig swimming for {d['load_s'] / 60:g} min under {d['hogs']} spinning processes "
-            f"(1-minute load average {d['loadavg_min']:.1f}-{d['loadavg_max']:.1f}, mean {d['loadavg_mean']:.1f}): "
+            f"(1-minute load average {d['loadavg_min']:.1f}-{d['loadavg_max']:.1f}, mean {d['loadavg_mean']:.1f}"
+            + (f", at least 8 for {d['load_at_goal_s'] / 60:.1f} min" if "load_at_goal_s" in d else "") + "): "
             "spurious drive / sensor faults",
             f"{d['drive_faults']} / {d['sensor_faults']}", "0 / 0", "`bench load`"),
         Row("the loop's lag back under 100 ms after the load ended", f"{d['lag_back_under_goal_after_s']:.1f} s",
