@@ -8,6 +8,7 @@ live page is saved under ``test-artifacts/``.
 from __future__ import annotations
 
 import re
+import zipfile
 from typing import Iterator
 
 import pytest
@@ -172,4 +173,14 @@ def test_a_recorded_session_is_reviewed_in_the_page(console: Console) -> None:
     box.press("Enter")
     expect(a.get_by_text(re.compile(r"speed: 9(\.0)? is out of range")).first).to_be_visible()
     wait_for(lambda: panel.player.speed == 1.0, what="the speed left unchanged")
+    expect(a.locator("#ucat-review")).to_have_text(f"REVIEW {session_id}")  # the status bar says so
     a.screenshot(path=str(ARTIFACTS / "console-review.png"))
+    with a.expect_download() as got:  # the shown window of the session, as CSV files
+        a.get_by_role("button", name="Export CSV").click()
+    download = got.value
+    assert download.suggested_filename.startswith(session_id) and download.suggested_filename.endswith(".zip")
+    with zipfile.ZipFile(download.path()) as z:
+        assert any(n.endswith("/body_state.csv") for n in z.namelist())
+    a.get_by_role("button", name="Close", exact=True).click()
+    wait_for(lambda: panel.player is None, what="the session closing")
+    expect(a.locator("#ucat-review")).to_be_hidden()

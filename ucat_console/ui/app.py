@@ -433,16 +433,19 @@ class ConsoleApp:
         with self._lock:
             pages = list(self.pages.items())
             ps = dict(self.panels)
+            reviews = dict(self.reviews)
         for cid, page in pages:
             panel = ps.get(cid)
             if panel is None:
                 continue
+            review = reviews.get(cid)
             try:
                 panel.show_events()
                 uuids = {f"{name}_uuid": viser_compat.handle_uuid(handle) for name, handle in
                          (("disarm", panel.disarm), ("drive", panel.drive_input), ("theme", panel.theme_button))}
                 state = bar_state(sup, cid, dark=page.dark, uuids=uuids, loading=self.loading,
-                                  link_slow=self.guard.link_slow(cid))
+                                  link_slow=self.guard.link_slow(cid),
+                                  review=review.reviewing if review is not None else "")
                 # what the pilot must see first (ahead of the telemetry on a slow link)
                 self.guard.send_first(cid, [viser_compat.run_javascript(page_script.update_source(state))])
             except Exception:

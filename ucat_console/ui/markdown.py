@@ -134,7 +134,8 @@ def replay_markdown(result: ReplayResult, weights: dict[str, float]) -> str:
     return "\n".join(lines)
 
 
-def _describe(what: Event | Marker) -> str:
+def _describe(what: Event | Marker, origin: float = 0.0) -> str:
+    """An event or a review marker, at its time from ``origin`` (a session's start)."""
     if isinstance(what, Marker):
-        return f"marker at {what.t:.2f} s: {what.note or '(no note)'}"
-    return f"event at {what.t:.2f} s: {what.source}/{what.code} {what.message}"
+        return f"marker at {what.t - origin:.2f} s: {what.note or '(no note)'}"
+    return f"event at {what.t - origin:.2f} s: {what.source}/{what.code} {what.message}"

@@ -66,6 +66,7 @@ INSTALL = r"""
     #ucat-bar .armed.stale { background: #6b7280; }
     #ucat-bar .rec { color: #ff5c5c; font-weight: 700; }
     #ucat-bar .rec-failed { color: #fff; background: #b91c1c; padding: 2px 8px; border-radius: 3px; cursor: help; }
+    #ucat-bar .review { color: #fff; background: #6d28d9; padding: 2px 8px; border-radius: 3px; font-weight: 700; }
     #ucat-bar .fs { color: #fff; background: #b45309; padding: 2px 8px; border-radius: 3px; font-weight: 700; }
     #ucat-bar #ucat-link.slow { color: #111; background: #f59e0b; padding: 2px 8px; border-radius: 3px;
       font-weight: 700; }
@@ -94,6 +95,7 @@ INSTALL = r"""
   const info = el("span", "item"); info.id = "ucat-info";
   const link = el("span", "item", "link ok"); link.id = "ucat-link";
   const rec = el("span", "rec"); rec.id = "ucat-rec";
+  const review = el("span", "review"); review.id = "ucat-review"; review.style.display = "none";
   const fs = el("span", "fs"); fs.id = "ucat-failsafes"; fs.style.display = "none";
   const lights = el("span", "item"); lights.id = "ucat-lights";
   const battery = el("span", "item"); battery.id = "ucat-battery";
@@ -101,7 +103,7 @@ INSTALL = r"""
   const theme = el("button", "", "theme"); theme.id = "ucat-theme"; theme.title = "dark / light (this browser)";
   const disarm = el("button", "", "DISARM"); disarm.id = "ucat-disarm"; disarm.disabled = true;
   disarm.title = "motors off now (key: Esc)";
-  bar.append(armed, info, link, rec, fs, lights, battery, grow, theme, disarm);
+  bar.append(armed, info, link, rec, review, fs, lights, battery, grow, theme, disarm);
   const banner = el("div"); banner.id = "ucat-banner";
   const install = () => { if (!document.body) return setTimeout(install, 50);
     document.body.append(bar, banner); document.body.classList.add("ucat-has-bar"); };
@@ -147,6 +149,9 @@ INSTALL = r"""
       + "and plots, not every one; heartbeats and this bar go first" : "";
     rec.textContent = s.recording_failed ? "● REC FAILED" : (s.recording ? `● REC ${s.recording}` : "");
     rec.className = "rec" + (s.recording_failed ? " rec-failed" : ""); rec.title = s.recording_failed || "";
+    review.style.display = s.review ? "inline" : "none";
+    review.textContent = s.review ? `REVIEW ${s.review}` : "";
+    review.title = s.review ? "this page plays a recording: the 3-D view and the Review plots show it, not the live robot" : "";
     fs.style.display = s.failsafes.length ? "inline" : "none";
     fs.textContent = s.failsafes.length ? "FAILSAFE " + s.failsafes.join(", ") : "";
     lights.textContent = "";

@@ -9,7 +9,10 @@ under ``/review``, drawn in place of the live one: while a page reviews, the liv
 hidden for that page; its plots in the "Review plots" tab of the plot panel). The live
 view keeps its own stream, scene and plots and never stops.
 
-Rows of the review plots are taken on the recording's clock (one row per
+Review speaks session time (seconds from the session's start): the position, the timeline,
+the plots' axis (the feeder's ``origin`` is the session's start), the events and markers; the
+plots draw a playhead at the position. Opening or closing a session clears everything of
+the one before. Rows of the review plots are taken on the recording's clock (one row per
 ``1 / plot_rate`` s of stream time, holding every message up to that time,
 :class:`StreamSampler`), so the plots do not depend on the playback speed. After a jump
 (seek, step back, event) the plot buffer is rebuilt from the file for the history window
@@ -32,10 +35,11 @@ most ``scene_rate``), the plots (at ``plot_rate``) and the timeline and status (
 while a session is open.
 
 What reads session files (listing, opening, repairing, seeking, stepping back, jumping to an
-event, starting a replay) does not run in the page's callback: the callback hands it to the
+event, adding a marker, exporting CSV, starting a replay) does not run in the page's callback: the callback hands it to the
 console's :class:`~ucat_console.ui.page_jobs.PageJobs` (``jobs``), which runs a page's jobs one
 at a time and rations them; one asked for too soon is refused with the reason shown on the
-page. The sessions' listing is the console's shared :class:`~ucat_console.ui.session_list.SessionList`.
+page. A page's jobs run in the order asked, each with the value the page sent (a seek or a
+marker asked while a session opens lands once it is open). The sessions' listing is the console's shared :class:`~ucat_console.ui.session_list.SessionList`.
 
 A counterfactual replay runs in a child process at a lower CPU priority
 (:class:`~ucat_console.backend.sessions.replay_job.ReplayJob`), one at a time per console
@@ -50,21 +54,25 @@ the sampler, the markdown, the replay job, the player) are in their own modules.
 
 from __future__ import annotations
 
+import io
 import logging
 import math
+import tempfile
 import threading
 import time
+import zipfile
 from pathlib import Path
 from typing import Any, Callable
 
 from ucat_console.backend.review.metrics import MetricsConfig
-from ucat_console.backend.sessions import files, index, repair, shared
+from ucat_console.backend.sessions import export, files, index, repair, shared
 from ucat_console.backend.sessions.markers import MAX_NOTE_BYTES, Marker, check_note
 from ucat_console.backend.sessions.player import MAX_SPEED, MIN_SPEED, Player, check_speed
 from ucat_console.backend.sessions.reader import SessionParts, part_paths
 from ucat_console.backend.sessions.replay import ReplayResult, parse_weights, recorded_config, replay_config
 from ucat_console.backend.sessions.replay_job import ReplayJob, ReplaySlot
 from ucat_console.robot.geometry import Geometry
+from ucat_console.telemetry.channels import CHANNELS
 from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.stream import TelemetryStream
 from ucat_console.ui.markdown import _describe, esc, replay_markdown, sessions_markdown, within
@@ -158,7 +166,7 @@ class PlaybackPanel:
                 scene, gui, geometry, plot_rate=plot_rate, scene_rate=scene_rate, max_plot_points=max_plot_points,
                 history=history, max_history=max_history, corridor=corridor, trail_points=trail_points,
                 trail_spacing=trail_spacing, root=REVIEW_ROOT, sample_rows=False, on_slow=self._tick_slow,
-                plot_height=plot_height, name="review", present=present,
+                plot_height=plot_height, name="review", present=present, playhead=self.position,
             )
             # the reviewed robot's efficiency figures above its plots, as the live ones
             self.metrics = MetricsPanel(gui, metrics or MetricsConfig(), order=0.0)
@@ -196,6 +204,9 @@ class PlaybackPanel:
                 self.marker_button = gui.add_button("Add review marker",
                                                     hint="saved beside the session (any page reviewing may add one); "
                                                          "the recording itself is untouched")
+                self.export_button = gui.add_button("Export CSV",
+                                                    hint="the session's channels over the plots' time window, "
+                                                         "one CSV per channel (zip)")
                 self.message = gui.add_markdown("")
             with gui.add_folder("Counterfactual replay", order=3.0, expand_by_default=False):
                 self.weights = gui.add_text("Weights", DEFAULT_WEIGHTS,
@@ -210,7 +221,7 @@ class PlaybackPanel:
             for h in (self.choice, self.refresh_list, self.open_button, self.repair_button, self.close_button,
                       self.timeline, self.play_button, self.pause_button, self.speed, self.loop, self.step_back,
                       self.step_fwd, self.jump_levels, self.prev_button, self.next_button, self.marker_button,
-                      self.replay_button,
+                      self.export_button, self.replay_button,
                       self.cancel_button):
                 allow(h, False)
             allow(self.note, False, MAX_NOTE_BYTES)
@@ -227,8 +238,9 @@ class PlaybackPanel:
         self.open_button.on_click(self._job("Open", lambda: self.open(self.choice.value)))
         self.repair_button.on_click(self._job("Repair", lambda: self.repair(self.choice.value)))
         self.close_button.on_click(self._page(self.close_session))
-        # a dragged timeline: the latest position wins
-        self.timeline.on_update(self._job("Seek", lambda: self.seek(self.timeline.value), coalesce=True))
+        # a dragged timeline: the latest position wins; the value the page sent, read now (by
+        # the time the job runs, the timeline may show the player's position again)
+        self.timeline.on_update(self._job("Seek", self.seek, coalesce=True, value=lambda: self.timeline.value))
         self.play_button.on_click(self._page(self.play))
         self.pause_button.on_click(self._page(self.pause))
         self.speed.on_update(self._page(lambda: self.set_speed(self.speed.value)))
@@ -237,25 +249,40 @@ class PlaybackPanel:
         self.step_fwd.on_click(self._page(lambda: self.step(1)))
         self.prev_button.on_click(self._job("Previous event", self.prev_event))
         self.next_button.on_click(self._job("Next event", self.next_event))
-        self.marker_button.on_click(self._page(lambda: self.add_marker(self.note.value)))
+        # after the jobs asked before it (an open, a seek): the marker goes where they leave the player
+        self.marker_button.on_click(self._job("Add marker", self.add_marker, value=lambda: self.note.value))
+        self.export_button.on_click(self._export)
         self.replay_button.on_click(self._job("Replay", lambda: self.run_counterfactual(self.weights.value)))
         self.cancel_button.on_click(self._page(self.cancel_counterfactual))
 
     def _page(self, fn: Callable[[], Any]) -> Callable[[Any], None]:
         return from_page(fn, self.act)
 
-    def _job(self, what: str, fn: Callable[[], Any], coalesce: bool = False) -> Callable[[Any], None]:
-        """A callback handing ``fn`` to the console's page jobs (refused: the reason shown)."""
+    def _job(self, what: str, fn: Callable[..., Any], coalesce: bool = False,
+             value: Callable[[], Any] | None = None) -> Callable[[Any], None]:
+        """A callback handing ``fn`` to the console's page jobs (refused: the reason shown);
+        with ``value``, ``fn(value())``, the value read in the callback."""
         jobs = self.jobs
-        if jobs is None:
-            return self._page(fn)
 
         def submit(f: Callable[[], Any]) -> None:
+            if value is not None:
+                v = value()
+                f = lambda: fn(v)  # noqa: E731
+            if jobs is None:
+                self.act(f)
+                return
             why = jobs(what, lambda: self.act(f), coalesce)
             if why is not None:
                 self.act(lambda: self.show(why, error=True))
 
         return from_page(fn, submit)
+
+    def _export(self, event: Any) -> None:
+        """Export CSV: the file goes to the page that asked."""
+        client = getattr(event, "client", None)
+        if client is not None:
+            self._job("Export CSV", lambda: self.export_csv(
+                lambda name, content: client.send_file_download(name, content, save_immediately=True)))(event)
 
     def act(self, fn: Callable[[], Any]) -> bool:
         """Run one command; a refusal (ValueError) is shown and the inputs show the state.
@@ -346,7 +373,7 @@ class PlaybackPanel:
         self.close_session(quiet=True)
         with self._lock:
             self.reader, self.player = reader, player
-            self.view.reset()
+            self.feeder.origin = player.start  # the plots in seconds from the session's start
             self.view.show()  # a fresh robot and trail
             if self._hide_live is None:  # the reviewed robot in place of the live one
                 self._hide_live = self.view.scene_api.add_frame(LIVE_ROOT, show_axes=False, visible=False)
@@ -382,9 +409,16 @@ class PlaybackPanel:
             log.debug("a playback failure was not shown", exc_info=True)
 
     def close_session(self, quiet: bool = False) -> None:
+        """Close the session: nothing of it stays (plots, timeline ticks, replay table, robot)."""
         was_open = self._let_go()
         self._show_live()
         self.view.hide()
+        self.view.reset()
+        self.metrics.reset()
+        self._mark_times([])
+        if self.job is None:
+            self.replay_table.content = ""
+            self.last_replay = None
         if self.job is not None:
             self.view.start()  # the replay's progress still shows
         self._set_enabled()
@@ -461,13 +495,13 @@ class PlaybackPanel:
     def next_event(self) -> Event | Marker | None:
         p = self._need()
         what = self._moved(lambda: p.next_event(self._levels()))
-        self.show(_describe(what) if what is not None else "no event after this one")
+        self.show(_describe(what, p.start) if what is not None else "no event after this one")
         return what
 
     def prev_event(self) -> Event | Marker | None:
         p = self._need()
         what = self._moved(lambda: p.prev_event(self._levels()))
-        self.show(_describe(what) if what is not None else "no event before this one")
+        self.show(_describe(what, p.start) if what is not None else "no event before this one")
         return what
 
     def add_marker(self, note: object) -> Marker:
@@ -476,10 +510,43 @@ class PlaybackPanel:
         if now - self._last_marker < MARKER_INTERVAL:
             raise ValueError(f"marker: at most one every {MARKER_INTERVAL:g} s from a page")
         self._last_marker = now
-        m = self._need().add_marker(note)
+        p = self._need()
+        m = p.add_marker(note)
         self.note.value = ""
-        self.show(f"marker at {m.t - self._need().start:.2f} s saved to {self._need().markers.path.name}")
+        self.show(f"marker at {m.t - p.start:.2f} s saved to {p.markers.path.name}")
         return m
+
+    def position(self) -> float | None:
+        """The playback position in seconds from the session's start (None: none open)."""
+        p = self.player
+        return None if p is None else min(max(p.position - p.start, 0.0), p.end - p.start)
+
+    @property
+    def reviewing(self) -> str:
+        """The session this page plays ("" when none is open)."""
+        r = self.reader
+        return r.session_id if r is not None else ""
+
+    def export_csv(self, send: Callable[[str, bytes], Any]) -> dict[str, int]:
+        """The open session's channels over the plots' time window (the history before the
+        position), as ``sessions export`` writes them, zipped and handed to ``send(name,
+        content)``; channel -> rows."""
+        p, r = self.player, self.reader
+        if p is None or r is None:
+            raise ValueError("no session open: choose one and press Open")
+        end = p.position
+        start = max(end - float(self.history()), p.start)
+        name = f"{r.session_id}_{start - p.start:.1f}-{end - p.start:.1f}s_csv"
+        buf = io.BytesIO()
+        with tempfile.TemporaryDirectory() as d:
+            got = export.export_csv(r, [c for c in CHANNELS if c in r.channels], d, start,
+                                    math.nextafter(end, math.inf))
+            with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
+                for f in sorted(Path(d).iterdir()):
+                    z.write(f, f"{name}/{f.name}")
+        send(f"{name}.zip", buf.getvalue())
+        self.show(f"exported {len(got)} channels, {start - p.start:.2f} to {end - p.start:.2f} s, as {name}.zip")
+        return {c: n for c, (_, n) in got.items()}
 
     def _moved(self, fn: Callable[[], Any]) -> Any:
         """Run a jump with playback paused, then rebuild the plots before the new position."""
@@ -592,6 +659,9 @@ class PlaybackPanel:
         if len(times) > MAX_TIMELINE_MARKS:  # keep the slider readable
             step = len(times) / MAX_TIMELINE_MARKS
             times = [times[int(i * step)] for i in range(MAX_TIMELINE_MARKS)]
+        self._mark_times(times)
+
+    def _mark_times(self, times: list[float]) -> None:
         try:
             set_slider_marks(self.timeline, times)
         except Exception:
@@ -614,7 +684,7 @@ class PlaybackPanel:
             if self.speed.value != self._speed:
                 self.speed.value = self._speed
             return
-        rel = min(max(p.position - p.start, 0.0), p.end - p.start)
+        rel = self.position() or 0.0
         if abs(self.timeline.value - rel) > 1e-9:
             self.timeline.value = rel
         if self.speed.value != p.speed:
@@ -635,7 +705,7 @@ class PlaybackPanel:
     def _set_enabled(self) -> None:
         closed = self.player is None
         for h in (self.timeline, self.play_button, self.pause_button, self.step_back, self.step_fwd,
-                  self.prev_button, self.next_button, self.note, self.marker_button, self.replay_button,
-                  self.close_button):
+                  self.prev_button, self.next_button, self.note, self.marker_button, self.export_button,
+                  self.replay_button, self.close_button):
             h.disabled = closed
         self._sync_inputs()

@@ -10,7 +10,8 @@ configuration, never by the length of the session. A value not known at a row (N
 not finite) is drawn as the last known one before it (uPlot takes NaN for data, not for a
 gap); the series are computed in one compiled pass (:mod:`ucat_console.ui.plot_series`).
 
-Charts (one shared time axis labelled in seconds of stream time, synchronised cursors):
+Charts (one shared time axis labelled in seconds: of stream time live, from the session's start
+(:attr:`PlotFeeder.origin`) in review; synchronised cursors; no line until there are rows):
 
 * Strouhal number of each fin's last plan on a fixed 0-1 axis with the optimal corridor
   filled; a value above 1 is drawn at 1 and marked with a point; no St is drawn while
@@ -23,7 +24,8 @@ Charts (one shared time axis labelled in seconds of stream time, synchronised cu
   metre travelled on the right-hand axis of the same chart (second, so that it is in view
   at 1280x800);
 * on every chart, each change (mode, tuning and formulation, setpoints, marker: the events
-  of :data:`MARK_CODES`) as a pink spike at its time (:func:`change_marks`).
+  of :data:`MARK_CODES`) as a pink spike at its time (:func:`change_marks`);
+* in review, the playhead: a black spike at the playback position (:func:`playhead_marks`).
 """
 
 from __future__ import annotations
@@ -71,6 +73,8 @@ CHANNELS = (ch.BODY_STATE, ch.SETPOINTS, ch.POWER, ch.STATUS, ch.EVENTS, *(ch.fi
 #: setpoint changes and markers
 MARK_CODES = frozenset({"mode", "tuning", "setpoints", "marker"})
 MARK_COLOUR = "#e377c2"
+#: the review plots' playhead (the playback position)
+PLAYHEAD_COLOUR = "#000000"
 _MARKS_KEPT = 500
 
 #: the type of the values sent to the pages (the time axis is float64)
@@ -128,6 +132,9 @@ class PlotFeeder:
 
     def __init__(self, capacity: int) -> None:
         self.buffer = RingBuffer(capacity, len(COLUMNS))
+        #: the stream time shown as 0 (a review: the session's start; rows and changes are
+        #: times from it)
+        self.origin = 0.0
         self._latest = [math.nan] * len(COLUMNS)
         self._t_last_row = -math.inf
         #: the times of the changes marked on the charts (MARK_CODES), oldest first
@@ -140,7 +147,7 @@ class PlotFeeder:
     def on_message(self, channel: str, msg: Any) -> None:
         if channel == ch.EVENTS:
             if msg.code in MARK_CODES and math.isfinite(msg.t):
-                self.changes.append(float(msg.t))
+                self.changes.append(float(msg.t) - self.origin)
             return
         row = self._latest
         fin = _PLANS.get(channel)
@@ -150,7 +157,7 @@ class PlotFeeder:
             return
         if channel == ch.BODY_STATE:
             b: BodyState = msg
-            row[0] = b.t
+            row[0] = b.t - self.origin
             row[COL["depth"]] = b.depth
             row[COL["velocity"]] = b.velocity[0]
             row[COL["yaw_rate"]] = b.rates[2]
@@ -170,8 +177,9 @@ class PlotFeeder:
         elif channel == ch.STATUS:
             st: Status = msg
             row[COL["armed"]] = 1.0 if st.armed else 0.0
-        if msg.t > row[0] or row[0] != row[0]:
-            row[0] = msg.t
+        t = msg.t - self.origin
+        if t > row[0] or row[0] != row[0]:
+            row[0] = t
 
     def sample(self) -> bool:
         """Append the latest values as one row; False when no time has passed since the last."""
@@ -205,6 +213,23 @@ def change_marks(t: np.ndarray, changes: Sequence[float]) -> np.ndarray:
     return out
 
 
+def playhead_marks(t: np.ndarray, at: float | None) -> np.ndarray:
+    """The playhead's series on the time axis ``t`` (ascending), on the "mark" scale as
+    :func:`change_marks`: 1 at the last row at or before ``at`` (a spike there), -1
+    elsewhere; nothing when ``at`` is None or before the first row."""
+    out = np.full(t.shape[0], -1.0, dtype=VALUES)
+    if at is not None and t.shape[0] and t[0] <= at:
+        out[int(np.searchsorted(t, at, side="right")) - 1] = 1.0
+    return out
+
+
+def _empty(n: int) -> tuple[np.ndarray, ...]:
+    """A chart's data before it has any: the x range 0-1 and no value (NaN draws nothing).
+    Never an empty x array: viser's page derives the x range from the data, and an empty
+    one gives it a NaN range that it then keeps for good (no lines, no ticks)."""
+    return (_EMPTY_X, *(np.full(2, np.nan, dtype=VALUES),) * (n - 1))
+
+
 def _series(label: str, stroke: str, width: float = 1.5, dash: tuple[float, ...] | None = None) -> dict:
     s: dict[str, Any] = {"label": label, "stroke": stroke, "width": width, "points": {"show": False}}
     if dash:
@@ -218,6 +243,8 @@ _NO_LEGEND = {"show": False}
 _SCALES = {"x": {"time": False}, "mark": {"range": [0.0, 1.0], "auto": False}}
 _MARK = {"label": "changes", "stroke": MARK_COLOUR, "width": 1.5, "scale": "mark", "points": {"show": False}}
 _CURSOR = {"sync": {"key": "ucat"}}
+_PLAYHEAD = {"label": "playhead", "stroke": PLAYHEAD_COLOUR, "width": 2.0, "scale": "mark", "points": {"show": False}}
+_EMPTY_X = np.array([0.0, 1.0])
 _PIN = {"label": "axis span", "stroke": "rgba(0,0,0,0)", "width": 0.5, "points": {"show": False}}
 
 
@@ -233,24 +260,26 @@ class LivePlots:
     """The uPlot charts of the live view (server-wide: every page sees the same plots)."""
 
     def __init__(self, gui: Any, feeder: PlotFeeder, *, rate: float, max_points: int,
-                 corridor: Callable[[], tuple[float, float]], height: int = 170) -> None:
+                 corridor: Callable[[], tuple[float, float]], height: int = 170,
+                 playhead: Callable[[], float | None] | None = None) -> None:
+        """``playhead()``: where to draw the playhead (a time on the rows' axis; None: none
+        now); without it the charts have no playhead series."""
         self.feeder = feeder
+        self.playhead = playhead
         self.rate = float(rate)
         self.max_points = int(max_points)
         self.corridor = corridor
         self.updates = 0
-        # never an empty chart: viser's page derives the x range from the data, and an empty
-        # x array gives it a NaN range that it then keeps for good (no lines, no ticks)
-        empty = np.array([0.0, 1.0])
         fins = range(N_FINS)
+        head = (_PLAYHEAD,) if playhead is not None else ()
         common = dict(scales=_SCALES, cursor=_CURSOR, height=height)
         st_scales = {**_SCALES, "y": {"range": [0.0, 1.0], "auto": False}}
         above = {"label": "St > 1 (at 1)", "stroke": "rgba(0,0,0,0)", "width": 0.5,
                  "points": {"show": True, "size": 7, "stroke": "#d62728", "fill": "#d62728"}}
         self.st = gui.add_uplot(
-            (empty,) * (2 + N_FINS + 3),
+            _empty(2 + N_FINS + 3 + len(head)),
             (_X, _series("St high", "#2ca02c", 1.0), _series("St low", "#2ca02c", 1.0),
-             *(_series(f"St fin {i}", FIN_COLOURS[i]) for i in fins), above, _MARK),
+             *(_series(f"St fin {i}", FIN_COLOURS[i]) for i in fins), above, _MARK, *head),
             bands=({"series": (1, 2), "fill": "rgba(44, 160, 44, 0.28)"},),
             title="St per fin 0-3 (red, blue, green, orange); corridor green; none while disarmed or still; "
                   "changes pink",
@@ -258,26 +287,29 @@ class LivePlots:
             legend=_NO_LEGEND,
         )
         self.depth = gui.add_uplot(
-            (empty,) * 6, (_X, _series("depth", "#1f77b4"), _series("target", "#555", 1.0, (6, 3)), _PIN, _PIN, _MARK),
+            _empty(6 + len(head)),
+            (_X, _series("depth", "#1f77b4"), _series("target", "#555", 1.0, (6, 3)), _PIN, _PIN, _MARK, *head),
             title="Depth (m): measured, target dashed", axes=(_X_AXIS, {"label": "m", "size": 40}),
             legend=_NO_LEGEND, **common,
         )
         self.velocity = gui.add_uplot(
-            (empty,) * 6, (_X, _series("u", "#d62728"), _series("target", "#555", 1.0, (6, 3)), _PIN, _PIN, _MARK),
+            _empty(6 + len(head)),
+            (_X, _series("u", "#d62728"), _series("target", "#555", 1.0, (6, 3)), _PIN, _PIN, _MARK, *head),
             title="Forward velocity (m/s): measured, target dashed", axes=(_X_AXIS, {"label": "m/s", "size": 40}),
             legend=_NO_LEGEND, **common,
         )
         self.yaw_rate = gui.add_uplot(
-            (empty,) * 6, (_X, _series("r", "#9467bd"), _series("target", "#555", 1.0, (6, 3)), _PIN, _PIN, _MARK),
+            _empty(6 + len(head)),
+            (_X, _series("r", "#9467bd"), _series("target", "#555", 1.0, (6, 3)), _PIN, _PIN, _MARK, *head),
             title="Yaw rate (rad/s): measured, target dashed", axes=(_X_AXIS, {"label": "rad/s", "size": 40}),
             legend=_NO_LEGEND, **common,
         )
         epm = _series("energy per metre (J/m, right)", "#17becf", 2.0)
         epm["scale"] = "epm"
         self.power = gui.add_uplot(
-            (empty,) * (1 + N_FINS + 4),
+            _empty(1 + N_FINS + 4 + len(head)),
             (_X, *(_series(f"fin {i}", FIN_COLOURS[i], 1.0) for i in fins),
-             _series("total", "#888", 2.0), _series("running mean", "#8c564b", 1.5, (6, 3)), epm, _MARK),
+             _series("total", "#888", 2.0), _series("running mean", "#8c564b", 1.5, (6, 3)), epm, _MARK, *head),
             title="Power (W) and energy per metre (J/m)",
             axes=(_X_AXIS, {"label": "W", "size": 40},
                   {"scale": "epm", "side": 1, "label": "J/m", "grid": {"show": False}, "size": 40}),
@@ -295,12 +327,23 @@ class LivePlots:
             return
         # new arrays each time, sent as they are (float32 values: ui.viser_compat.set_plot_data)
         t, v = got
-        marks = change_marks(t, list(self.feeder.changes))
-        set_plot_data(self.st, (t, *v[ps.ST_HIGH:ps.ST_ABOVE + 1], marks))
+        marks: tuple[np.ndarray, ...] = (change_marks(t, list(self.feeder.changes)),)
+        if self.playhead is not None:
+            marks += (playhead_marks(t, self.playhead()),)
+        set_plot_data(self.st, (t, *v[ps.ST_HIGH:ps.ST_ABOVE + 1], *marks))
         for k, chart in enumerate((self.depth, self.velocity, self.yaw_rate)):
-            set_plot_data(chart, (t, *v[ps.TRACKED + 4 * k:ps.TRACKED + 4 * k + 4], marks))
-        set_plot_data(self.power, (t, *v[ps.POWER:ps.ROWS], marks))
+            set_plot_data(chart, (t, *v[ps.TRACKED + 4 * k:ps.TRACKED + 4 * k + 4], *marks))
+        set_plot_data(self.power, (t, *v[ps.POWER:ps.ROWS], *marks))
         self.updates += 1
+
+    @property
+    def charts(self) -> tuple[Any, ...]:
+        return self.st, self.depth, self.velocity, self.yaw_rate, self.power
+
+    def clear(self) -> None:
+        """Empty charts (a new source, before its first rows)."""
+        for chart in self.charts:
+            set_plot_data(chart, _empty(len(chart.data)))
 
 
 def series_of(buffer: RingBuffer, n: int, max_points: int,

@@ -123,9 +123,10 @@ def pilot_label(sup: Any, client: int | None) -> str:
 
 
 def bar_state(sup: Any, client: int | None, *, dark: bool, uuids: dict[str, str], loading: str = "",
-              link_slow: bool = False) -> dict[str, Any]:
+              link_slow: bool = False, review: str = "") -> dict[str, Any]:
     """The bar's state for page ``client`` (JSON-ready); ``link_slow``: the page's link is
-    slow and its telemetry thinned (:mod:`ucat_console.ui.link`)."""
+    slow and its telemetry thinned (:mod:`ucat_console.ui.link`); ``review``: the session
+    the page plays in its Review tab ("" for none: no REVIEW badge)."""
     return {
         "armed": bool(sup.armed),
         "mode": mode_label(sup.mode),
@@ -138,6 +139,7 @@ def bar_state(sup: Any, client: int | None, *, dark: bool, uuids: dict[str, str]
         "battery": "no battery sensor",
         "link_policy": link_policy(sup),
         "link_slow": bool(link_slow),
+        "review": str(review),
         "dark": bool(dark),
         **uuids,
     }

@@ -114,7 +114,8 @@ class StreamView:
                  root: str = LIVE_ROOT, sample_rows: bool = True, atomic: Callable[[], Any] | None = None,
                  on_slow: Callable[[], None] | None = None, on_tick: Callable[[], None] | None = None,
                  on_pose: Callable[[], None] | None = None, plot_height: int = 170, name: str = "view",
-                 present: Callable[[], bool] = lambda: True) -> None:
+                 present: Callable[[], bool] = lambda: True,
+                 playhead: Callable[[], float | None] | None = None) -> None:
         self.scene_api = scene
         self.geometry = geometry
         self.plot_rate = float(plot_rate)
@@ -137,7 +138,7 @@ class StreamView:
         self.feeder = PlotFeeder(int(math.ceil(max_history * plot_rate)) + 2)
         self.sampler = StreamSampler(self.feeder, 1.0 / self.plot_rate)
         self.plots = LivePlots(gui, self.feeder, rate=plot_rate, max_points=max_plot_points, corridor=corridor,
-                               height=plot_height)
+                               height=plot_height, playhead=playhead)
         self._stop = threading.Event()
         self._wake = threading.Event()  # a new body state, or stop()
         self._thread: threading.Thread | None = None
@@ -173,6 +174,7 @@ class StreamView:
         """Forget the robot's state and the plot rows (a new source)."""
         self.body, self.fins = None, [None] * N_FINS
         self.sampler.reset()
+        self.plots.clear()
 
     # ------------------------------------------------------------------ scene
     def show(self) -> RobotScene:
