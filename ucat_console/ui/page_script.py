@@ -151,7 +151,8 @@ INSTALL = r"""
     rec.className = "rec" + (s.recording_failed ? " rec-failed" : ""); rec.title = s.recording_failed || "";
     review.style.display = s.review ? "inline" : "none";
     review.textContent = s.review ? `REVIEW ${s.review}` : "";
-    review.title = s.review ? "this page plays a recording: the 3-D view and the Review plots show it, not the live robot" : "";
+    review.title = s.review ? "this page plays a recording: the 3-D view and the Review plots show it, "
+      + "not the live robot" : "";
     fs.style.display = s.failsafes.length ? "inline" : "none";
     fs.textContent = s.failsafes.length ? "FAILSAFE " + s.failsafes.join(", ") : "";
     lights.textContent = "";

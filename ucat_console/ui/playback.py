@@ -34,12 +34,14 @@ thread plays; a small UI thread here pushes the review scene (on each new body s
 most ``scene_rate``), the plots (at ``plot_rate``) and the timeline and status (4 Hz)
 while a session is open.
 
-What reads session files (listing, opening, repairing, seeking, stepping back, jumping to an
-event, adding a marker, exporting CSV, starting a replay) does not run in the page's callback: the callback hands it to the
-console's :class:`~ucat_console.ui.page_jobs.PageJobs` (``jobs``), which runs a page's jobs one
-at a time and rations them; one asked for too soon is refused with the reason shown on the
-page. A page's jobs run in the order asked, each with the value the page sent (a seek or a
-marker asked while a session opens lands once it is open). The sessions' listing is the console's shared :class:`~ucat_console.ui.session_list.SessionList`.
+What reads or writes session files (listing, opening, repairing, seeking, stepping back,
+jumping to an event, adding a marker, exporting CSV, starting a replay) does not run in the
+page's callback: the callback hands it to the console's
+:class:`~ucat_console.ui.page_jobs.PageJobs` (``jobs``), which runs a page's jobs one at a
+time, in the order asked, and rations them; one asked for too soon is refused with the
+reason shown on the page. A job takes the value the page sent when it sent it, so a seek or
+a marker asked while a session opens lands once it is open. The sessions' listing is the
+console's shared :class:`~ucat_console.ui.session_list.SessionList`.
 
 A counterfactual replay runs in a child process at a lower CPU priority
 (:class:`~ucat_console.backend.sessions.replay_job.ReplayJob`), one at a time per console
