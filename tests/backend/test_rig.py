@@ -98,7 +98,7 @@ def test_a_resync_anchors_the_device_clock_and_drops_the_readings_of_the_stall()
     io.advance_to(0.0)
     for k in range(5):  # a second of readings queued while the loop was held back
         io._on_reading(DepthReading(t=500.2 + 0.2 * k, depth_m=1.0 + k, pressure_pa=0.0))
-        io._on_reading(ImuReading(t=500.2 + 0.2 * k, accel_g=(0.0, 0.0, -1.0), gyro=(0.0, 0.0, float(k))))
+        io._on_reading(ImuReading(t=500.2 + 0.2 * k, accel=(0.0, 0.0, -9.80665), gyro=(0.0, 0.0, float(k))))
     wall[0] = 501.5
     io.resync(0.5)  # the loop skipped ahead: its 0.5 s is due now, at 501.5
     batch = io.advance_to(0.5)
@@ -351,7 +351,7 @@ def test_hardware_robot_uses_the_configured_endpoints(stand_ins: DevicesConfig) 
         dvl = [r for r in seen if isinstance(r, DvlVelocity)]
         assert all(r.valid and r.vx == pytest.approx(0.3, abs=1e-6) for r in dvl)
         imu = [r for r in seen if isinstance(r, ImuReading)]
-        assert imu[-1].accel_g == pytest.approx((0.0, 0.0, -1.0), abs=1e-6)
+        assert imu[-1].accel == pytest.approx((0.0, 0.0, -9.80665), abs=1e-5)  # level: -g0, in m/s^2
     finally:
         close()
 

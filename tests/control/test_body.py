@@ -30,7 +30,7 @@ def dvl(t, vx, valid=True):
 
 def imu(t, r, yaw=None):
     q = None if yaw is None else (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
-    return ImuReading(t=t, accel_g=(0.0, 0.0, 1.0), gyro=(0.0, 0.0, r), quaternion=q)
+    return ImuReading(t=t, accel=(0.0, 0.0, 9.80665), gyro=(0.0, 0.0, r), quaternion=q)
 
 
 def paper_cfg(**kw) -> BodyConfig:

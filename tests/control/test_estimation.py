@@ -10,21 +10,22 @@ import pytest
 from ucat_console.control import estimation as att
 from ucat_console.robot import rotations as rot
 from ucat_console.robot.readings import ImuReading
+from ucat_console.robot.units import GRAVITY as G0
 
 ROLL, PITCH = 0.3, -0.2
 
 
 def specific_force(roll: float, pitch: float) -> tuple[float, float, float]:
-    """Sensor-frame specific force at rest, z down, in g: R^T (0, 0, -1) for R = Rz Ry Rx.
+    """Sensor-frame specific force at rest, z down, in m/s^2: R^T (0, 0, -g0) for R = Rz Ry Rx.
 
     The third row of Rz(yaw) Ry(pitch) Rx(roll) is (-sin p, sin r cos p, cos r cos p).
     """
-    return (math.sin(pitch), -math.sin(roll) * math.cos(pitch), -math.cos(roll) * math.cos(pitch))
+    return (G0 * math.sin(pitch), -G0 * math.sin(roll) * math.cos(pitch), -G0 * math.cos(roll) * math.cos(pitch))
 
 
 def test_tilt_from_accel_inverts_the_gravity_model() -> None:
     assert att.tilt_from_accel(specific_force(ROLL, PITCH)) == pytest.approx((ROLL, PITCH), abs=1e-12)
-    assert att.tilt_from_accel((0.0, 0.0, -1.0)) == pytest.approx((0.0, 0.0), abs=1e-12)
+    assert att.tilt_from_accel((0.0, 0.0, -G0)) == pytest.approx((0.0, 0.0), abs=1e-12)
 
 
 def test_converges_to_a_static_tilt_from_level_start() -> None:
@@ -46,7 +47,7 @@ def test_tracks_a_constant_yaw_rate_while_tilted() -> None:
     down = (-math.sin(PITCH), math.sin(ROLL) * math.cos(PITCH), math.cos(ROLL) * math.cos(PITCH))
     gyro = tuple(r * d for d in down)
     f = specific_force(ROLL, PITCH)
-    state = att.initial_state(0.0, accel_g=f)
+    state = att.initial_state(0.0, accel=f)
     for k in range(1, 1001):  # 10 s
         state = att.step(state, k * 0.01, f, gyro)
         if k % 250 == 0:
@@ -58,17 +59,17 @@ def test_tracks_a_constant_yaw_rate_while_tilted() -> None:
 
 def test_estimates_a_gyro_bias_at_rest() -> None:
     bias = (0.01, -0.02, 0.0)
-    state = att.initial_state(0.0, accel_g=(0.0, 0.0, -1.0))
+    state = att.initial_state(0.0, accel=(0.0, 0.0, -G0))
     for k in range(1, 3001):
-        state = att.step(state, k * 0.01, (0.0, 0.0, -1.0), bias)
+        state = att.step(state, k * 0.01, (0.0, 0.0, -G0), bias)
     assert state.bias[:2] == pytest.approx(bias[:2], abs=1e-3)
     roll, pitch, _ = state.euler
     assert abs(roll) < 1e-3 and abs(pitch) < 1e-3
 
 
 def test_acceleration_beyond_the_gate_is_not_used_as_gravity() -> None:
-    state = att.initial_state(0.0, accel_g=(0.0, 0.0, -1.0))
-    after = att.correct(state, (0.8, 0.0, -1.0))  # |a| = 1.281 g, beyond the 0.15 g gate
+    state = att.initial_state(0.0, accel=(0.0, 0.0, -G0))
+    after = att.correct(state, (0.8 * G0, 0.0, -G0))  # |a| = 1.281 g0, beyond the 0.15 g0 gate
     assert after.q == state.q
 
 
@@ -85,15 +86,15 @@ def test_non_finite_inputs_are_refused() -> None:
     with pytest.raises(ValueError, match="gyro"):
         att.predict(state, 0.01, (math.nan, 0.0, 0.0))
     with pytest.raises(ValueError, match="accel"):
-        att.correct(state, (0.0, math.inf, -1.0))
+        att.correct(state, (0.0, math.inf, -G0))
 
 
 def test_estimator_object_initialises_from_the_first_reading() -> None:
     est = att.AttitudeEstimator()
     f = specific_force(ROLL, PITCH)
-    first = est.update(ImuReading(t=0.0, accel_g=f, gyro=(0.0, 0.0, 0.0)))
+    first = est.update(ImuReading(t=0.0, accel=f, gyro=(0.0, 0.0, 0.0)))
     assert first.euler[:2] == pytest.approx((ROLL, PITCH), abs=1e-9)
-    second = est.update(ImuReading(t=0.01, accel_g=f, gyro=(0.0, 0.0, 0.0)))
+    second = est.update(ImuReading(t=0.01, accel=f, gyro=(0.0, 0.0, 0.0)))
     assert second.t == 0.01
 
 

@@ -54,7 +54,7 @@ def reading_finite(r: Reading) -> tuple[str, bool]:
     if isinstance(r, FinFeedback):
         return "fin", _finite(r.position_rad, r.velocity_rad_s, r.t)
     if isinstance(r, ImuReading):
-        ok = _finite(r.t, *r.gyro, *r.accel_g) and (r.quaternion is None or _finite(*r.quaternion))
+        ok = _finite(r.t, *r.gyro, *r.accel) and (r.quaternion is None or _finite(*r.quaternion))
         return "imu", ok
     if isinstance(r, DvlVelocity):
         # an invalid report may carry NaN velocities: the loop skips it by its flag

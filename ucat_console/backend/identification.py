@@ -94,7 +94,7 @@ def _roll_pitch(m: ImuReading) -> tuple[float, float]:
     if m.quaternion is not None:
         r, pch, _ = euler_from_quaternion(m.quaternion)
         return r, pch
-    return tilt_from_accel(m.accel_g)
+    return tilt_from_accel(m.accel)
 
 
 @dataclass(frozen=True)

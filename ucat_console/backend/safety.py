@@ -117,7 +117,7 @@ def _finite(*values: float) -> bool:
 def reading_valid(reading: Any) -> bool:
     """Whether a sensor reading carries usable data."""
     if isinstance(reading, ImuReading):
-        return _finite(*reading.gyro, *reading.accel_g)
+        return _finite(*reading.gyro, *reading.accel)
     if isinstance(reading, DvlVelocity):
         return bool(reading.valid) and _finite(reading.vx, reading.vy, reading.vz)
     if isinstance(reading, DepthReading):

@@ -203,7 +203,7 @@ def _probe_imu(args: argparse.Namespace, out: _Output, stack: ExitStack) -> int:
         port = _started(ImuEmulator(synthetic_imu), stack).port
 
     def on_reading(r: ImuReading) -> None:
-        record: dict[str, Any] = {"kind": "imu", "t": r.t, "accel": list(r.accel_g), "gyro": list(r.gyro)}
+        record: dict[str, Any] = {"kind": "imu", "t": r.t, "accel": list(r.accel), "gyro": list(r.gyro)}
         if r.quaternion is not None:
             record["quaternion"] = list(r.quaternion)
         if r.euler is not None:
@@ -282,10 +282,11 @@ def synthetic_imu(t: float) -> Any:
     """Level, at rest, turning at 0.1 rad/s about the vertical."""
     from ucat_console.robot.readings import ImuReading
     from ucat_console.robot.rotations import quaternion_from_euler, quaternion_normalize
+    from ucat_console.robot.units import GRAVITY
 
     yaw = math.remainder(0.1 * t, 2.0 * math.pi)
     return ImuReading(
-        t=t, accel_g=(0.0, 0.0, -1.0), gyro=(0.0, 0.0, 0.1),
+        t=t, accel=(0.0, 0.0, -GRAVITY), gyro=(0.0, 0.0, 0.1),
         quaternion=quaternion_normalize(quaternion_from_euler(0.0, 0.0, yaw)), euler=(0.0, 0.0, yaw),
     )
 

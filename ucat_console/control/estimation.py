@@ -10,14 +10,15 @@ does not stream its own orientation. Pure functions on a frozen :class:`Attitude
 
 Conventions (those of the 3DM-CX5): sensor frame x forward, y right, z down; world frame
 NED; ``q = (w, x, y, z)`` rotates sensor vectors into the world (``v_w = R(q) v_b``);
-Euler angles are ZYX (yaw, pitch, roll). The accelerometer measures specific force in g,
-so a level sensor at rest reads ``(0, 0, -1)``.
+Euler angles are ZYX (yaw, pitch, roll). The accelerometer measures specific force in
+m/s^2, so a level sensor at rest reads ``(0, 0, -g0)`` (g0: standard gravity); the filter's
+accelerometer settings are in standard gravities (``g_n``), as data sheets give them.
 
 Filter: nominal quaternion and gyro bias, error state ``[dtheta (sensor frame), dbias]``
 with a 6x6 covariance. Prediction integrates ``gyro - bias`` exactly for a constant rate
 over the step; the correction compares the measured specific-force direction with
 ``R(q)^T (0, 0, -1)``. The correction is skipped while the vehicle accelerates (the norm
-of the specific force differs from 1 g by more than ``accel_gate``). Yaw is not
+of the specific force differs from g0 by more than ``accel_gate`` g0). Yaw is not
 observable from gravity: it follows the gyro alone, as in the paper's EKF without a
 magnetometer.
 
@@ -47,6 +48,7 @@ from ucat_console.robot.rotations import (
     rotation_matrix,
     skew,
 )
+from ucat_console.robot.units import GRAVITY
 from ucat_console.typedconf import Config, param
 
 _GRAVITY_DIRECTION_NED = np.array([0.0, 0.0, -1.0])  # specific force at rest, in g
@@ -63,11 +65,11 @@ class AttitudeConfig(Config):
         1e-4, lo=0.0, hi=0.1, unit="rad/s/sqrt(s)", doc="gyro bias random walk"
     )
     accel_noise: float = param(
-        0.03, lo=0.0, hi=1.0, lo_open=True, unit="g", doc="accelerometer noise per sample"
+        0.03, lo=0.0, hi=1.0, lo_open=True, unit="g_n", doc="accelerometer noise per sample"
     )
     accel_gate: float = param(
-        0.15, lo=0.0, hi=2.0, lo_open=True, unit="g",
-        doc="skip the accel correction when | |a| - 1 g | exceeds this",
+        0.15, lo=0.0, hi=2.0, lo_open=True, unit="g_n",
+        doc="skip the accel correction when | |a| / g0 - 1 | exceeds this",
     )
     initial_attitude_std: float = param(
         0.5, lo=0.0, hi=3.2, lo_open=True, unit="rad", doc="initial attitude uncertainty"
@@ -103,9 +105,9 @@ class AttitudeState:
 # ---------------------------------------------------------------- attitude
 
 
-def tilt_from_accel(accel_g: Sequence[float]) -> tuple[float, float]:
-    """Roll and pitch (rad) of a sensor at rest from its specific force."""
-    fx, fy, fz = (float(v) for v in accel_g)
+def tilt_from_accel(accel: Sequence[float]) -> tuple[float, float]:
+    """Roll and pitch (rad) of a sensor at rest from its specific force (any unit)."""
+    fx, fy, fz = (float(v) for v in accel)
     roll = math.atan2(-fy, -fz)
     pitch = math.atan2(fx, math.hypot(fy, fz))
     return roll, pitch
@@ -121,13 +123,14 @@ def _frozen(a: np.ndarray) -> np.ndarray:
 def initial_state(
     t: float,
     config: AttitudeConfig = AttitudeConfig(),
-    accel_g: Sequence[float] | None = None,
+    accel: Sequence[float] | None = None,
     yaw: float = 0.0,
 ) -> AttitudeState:
-    """Start at ``yaw``; level, or tilted as the accelerometer says when it is given."""
+    """Start at ``yaw``; level, or tilted as the accelerometer (``accel``, m/s^2) says when
+    it is given."""
     roll = pitch = 0.0
-    if accel_g is not None and all(math.isfinite(float(v)) for v in accel_g):
-        roll, pitch = tilt_from_accel(accel_g)
+    if accel is not None and all(math.isfinite(float(v)) for v in accel):
+        roll, pitch = tilt_from_accel(accel)
     cov = np.diag(
         [config.initial_attitude_std**2] * 3 + [config.initial_bias_std**2] * 3
     )
@@ -168,14 +171,15 @@ def predict(
 
 
 def correct(
-    state: AttitudeState, accel_g: Sequence[float], config: AttitudeConfig = AttitudeConfig()
+    state: AttitudeState, accel: Sequence[float], config: AttitudeConfig = AttitudeConfig()
 ) -> AttitudeState:
-    """Correct roll and pitch (and the gyro bias) with the specific-force direction."""
-    a = np.array([float(v) for v in accel_g])
+    """Correct roll and pitch (and the gyro bias) with the direction of the specific force
+    ``accel`` (m/s^2)."""
+    a = np.array([float(v) for v in accel])
     if not np.all(np.isfinite(a)):
-        raise ValueError(f"accel: {tuple(accel_g)!r} is not finite")
+        raise ValueError(f"accel: {tuple(accel)!r} is not finite")
     norm = float(np.linalg.norm(a))
-    if abs(norm - 1.0) > config.accel_gate:
+    if abs(norm / GRAVITY - 1.0) > config.accel_gate:
         return state
     z = a / norm
     R = rotation_matrix(state.q)
@@ -199,12 +203,12 @@ def correct(
 def step(
     state: AttitudeState,
     t: float,
-    accel_g: Sequence[float],
+    accel: Sequence[float],
     gyro: Sequence[float],
     config: AttitudeConfig = AttitudeConfig(),
 ) -> AttitudeState:
-    """One IMU sample: predict to ``t`` with ``gyro``, then correct with ``accel_g``."""
-    return correct(predict(state, t, gyro, config), accel_g, config)
+    """One IMU sample: predict to ``t`` with ``gyro``, then correct with ``accel`` (m/s^2)."""
+    return correct(predict(state, t, gyro, config), accel, config)
 
 
 class AttitudeEstimator:
@@ -217,9 +221,9 @@ class AttitudeEstimator:
 
     def update(self, reading: ImuReading) -> AttitudeState:
         if self.state is None:
-            self.state = initial_state(reading.t, self.config, reading.accel_g, self._yaw0)
+            self.state = initial_state(reading.t, self.config, reading.accel, self._yaw0)
             return self.state
-        self.state = step(self.state, reading.t, reading.accel_g, reading.gyro, self.config)
+        self.state = step(self.state, reading.t, reading.accel, reading.gyro, self.config)
         return self.state
 
     def reset(self, initial_yaw: float = 0.0) -> None:

@@ -24,7 +24,7 @@ class Doc:
 
     ``unit``: SI unit symbol ("" for text, flags and counts, "1" for dimensionless
     numbers), written so that a units library parses it (``m/s``, ``rad/s``, ``N m``,
-    ``g_n`` for the standard acceleration of gravity, 9.80665 m/s^2); a tuple of them for
+    ``m/s^2``); a tuple of them for
     a vector whose parts differ (one per part, in tuple order); ``frame``: the frame a
     vector is expressed in; ``names``: a fixed-length tuple is written as an object with
     these keys (in tuple order), so tools show ``position.x`` rather than ``position[0]``;

@@ -27,7 +27,7 @@ from ucat_console.robot.readings import DepthReading, DvlVelocity, FinFeedback, 
 # the declared layout of each kind's row: its kind, its time, then its values
 _HEAD = [("kind", 1, "the reading's kind (IMU ... FIN)"), ("t", 1, "time, s")]
 IMU_ROW = Layout("an IMU reading's row", _HEAD + [
-    ("accel", 3, "acceleration, g"), ("gyro", 3, "rates, rad/s"), ("q", 4, "attitude (NaN: not streamed)"),
+    ("accel", 3, "specific force, m/s^2"), ("gyro", 3, "rates, rad/s"), ("q", 4, "attitude (NaN: not streamed)"),
     ("euler", 3, "roll, pitch, yaw (NaN: none)")])
 DEPTH_ROW = Layout("a depth reading's row", _HEAD + [("depth_m", 1, "depth, m"), ("pressure_pa", 1, "pressure, Pa")])
 DVL_ROW = Layout("a DVL report's row", _HEAD + [
@@ -70,7 +70,7 @@ def to_row(r: Reading, row: np.ndarray) -> None:
         row[FIN_RATE] = r.velocity_rad_s
     elif tp is ImuReading:
         row[KIND] = IMU
-        row[IMU_ACCEL:IMU_ACCEL + 3] = r.accel_g
+        row[IMU_ACCEL:IMU_ACCEL + 3] = r.accel
         row[IMU_GYRO:IMU_GYRO + 3] = r.gyro
         if r.quaternion is not None:
             row[IMU_Q:IMU_Q + 4] = r.quaternion

@@ -21,12 +21,12 @@ Time = Annotated[float, Doc("time on the receiving clock", unit="s")]
 
 @dataclass(frozen=True)
 class ImuReading:
-    """MIP sensor data set 0x80: accel in units of the standard acceleration of gravity
-    (g_n = 9.80665 m/s^2, as the sensor reports it), gyro in rad/s, orientation when
-    streamed."""
+    """MIP sensor data set 0x80: the specific force (acceleration less gravity) in m/s^2
+    (the sensor reports it in standard gravities; its driver converts), gyro in rad/s,
+    orientation when streamed."""
 
     t: Time
-    accel_g: Annotated[tuple[float, float, float], Doc("acceleration in standard gravities (x 9.80665 = m/s^2)", "g_n", "IMU", XYZ)]
+    accel: Annotated[tuple[float, float, float], Doc("specific force (acceleration less gravity)", "m/s^2", "IMU", XYZ)]
     gyro: Annotated[tuple[float, float, float], Doc("angular rate", "rad/s", "IMU", XYZ)]
     quaternion: Annotated[tuple[float, float, float, float] | None,
                           Doc("orientation when streamed (held w first)", "1", "IMU to NED",

@@ -40,7 +40,7 @@ def test_probe_imu_emulator(run, tmp_path) -> None:
     assert records
     for r in records:
         assert len(r["accel"]) == 3 and len(r["gyro"]) == 3
-    assert r["accel"] == [0.0, 0.0, -1.0]  # the synthetic source is level at rest
+    assert r["accel"] == [0.0, 0.0, -9.80665]  # the synthetic source is level at rest: -g0, in m/s^2
     assert any(len(r.get("quaternion", [])) == 4 for r in records)
 
 

@@ -11,9 +11,10 @@ from ucat_console.backend.devices.imu import ImuConfig, ImuDriver
 from ucat_console.backend.devices.imu_emulator import ImuEmulator, ImuEmulatorConfig
 from ucat_console.robot.readings import ImuReading
 
-# values exactly representable in float32, so they survive the wire unchanged
+# values exactly representable in float32, so they survive the wire unchanged: the sensor
+# sends the specific force in standard gravities (0.25, -0.5, -0.75) g0, the reading holds m/s^2
 TRUTH = ImuReading(
-    t=0.0, accel_g=(0.25, -0.5, -0.75), gyro=(0.0, 0.125, -0.5),
+    t=0.0, accel=(0.25 * 9.80665, -0.5 * 9.80665, -0.75 * 9.80665), gyro=(0.0, 0.125, -0.5),
     quaternion=(0.5, 0.5, -0.5, 0.5), euler=(0.25, -0.125, 1.5),
 )
 
@@ -58,7 +59,8 @@ def test_configures_and_streams_quaternion(rig, wait_for) -> None:
     assert not emulator.idle and emulator.stream_enabled
     wait_for(lambda: any(r.quaternion is not None for r in readings.items), what="quaternion readings")
     r = [r for r in readings.items if r.quaternion is not None][-1]
-    assert r.accel_g == TRUTH.accel_g and r.gyro == TRUTH.gyro and r.quaternion == TRUTH.quaternion
+    assert r.accel == pytest.approx((2.4516625, -4.903325, -7.3549875), rel=1e-15)  # g0 = 9.80665 m/s^2
+    assert r.gyro == TRUTH.gyro and r.quaternion == TRUTH.quaternion
     assert r.euler is None
     assert "configured" in events.codes()
     assert not [e for e in events.items if e.level in ("warning", "error")]
@@ -97,7 +99,7 @@ def test_checksum_corruption_is_reported_and_stream_recovers(rig, wait_for) -> N
     wait_for(lambda: len(readings) > n + 5, what="readings after the corruption ends")
     e = events.with_code("checksum")[0]
     assert e.source == "imu" and e.t > 0.0
-    assert all(r.accel_g == TRUTH.accel_g for r in readings.items)  # nothing corrupted got through
+    assert all(r.accel == TRUTH.accel for r in readings.items)  # nothing corrupted got through
 
 
 def test_silence_is_reported_then_recovery(rig, wait_for) -> None:
@@ -119,7 +121,7 @@ def test_invalid_samples_are_dropped_and_reported(rig, wait_for) -> None:
     emulator.inject("invalid")
     wait_for(lambda: events.with_code("invalid_data"), what="invalid_data event")
     emulator.clear()
-    assert all(all(math.isfinite(v) for v in r.accel_g) for r in readings.items)
+    assert all(all(math.isfinite(v) for v in r.accel) for r in readings.items)
 
 
 def test_slow_replies_within_timeout_still_configure(rig) -> None:

@@ -359,7 +359,7 @@ def test_every_unit_of_the_schemas_is_one_pint_parses_and_each_vector_part_has_i
     assert seen["FinPlan.commands.theta_2"] == "rad" and seen["FinPlan.commands.w_1"] == "rad/s"
     assert seen["BodyState.position.z"] == "m" and seen["BodyState.rates.x"] == "rad/s"
     assert seen["Power.per_fin[3]"] == "W" and seen["ElectricalPower.current[0]"] == "A"
-    assert ureg.Quantity(1.0, seen["ImuReading.accel_g.z"]).to("m/s^2").magnitude == pytest.approx(9.80665)
+    assert seen["ImuReading.accel.z"] == "m/s^2"  # SI, not standard gravities
     assert ureg.Quantity(2.0, seen["BodyAllocation.yaw"]).to("J").magnitude == pytest.approx(2.0)  # N m
     # every number whose field documents a unit carries it
     for cls in TYPES:
@@ -367,3 +367,25 @@ def test_every_unit_of_the_schemas_is_one_pint_parses_and_each_vector_part_has_i
             if doc.unit:
                 assert any(p == f"{cls.__name__}.{name}" or p.startswith(f"{cls.__name__}.{name}.")
                            or p.startswith(f"{cls.__name__}.{name}[") for p in seen), (cls.__name__, name)
+
+
+# ------------------------------------------------------------------ fields renamed since a session was recorded
+def test_an_imu_reading_recorded_in_standard_gravities_opens_in_metres_per_second_squared() -> None:
+    """Sessions recorded before the IMU's acceleration was in m/s^2 hold ``accel_g`` in
+    standard gravities: both encodings read it as ``accel`` times g0 = 9.80665 m/s^2, a
+    non-finite part staying non-finite."""
+    old2 = json.dumps({"t": 1.5, "accel_g": {"x": 0.5, "z": -1.0}, "gyro": {"x": 0.0, "y": 0.0, "z": 0.25},
+                       "nonfinite": {"accel_g.y": "nan"}}).encode()
+    r = codec.decode(ImuReading, old2)
+    assert r.accel[0] == pytest.approx(4.903325, rel=1e-15) and r.accel[2] == pytest.approx(-9.80665, rel=1e-15)
+    assert math.isnan(r.accel[1]) and r.gyro == (0.0, 0.0, 0.25)
+    old1 = json.dumps({"t": 1.5, "accel_g": [0.5, None, -1.0], "gyro": [0.0, 0.0, 0.25]}).encode()
+    r1 = legacy.decode(ImuReading, old1)
+    assert r1.accel[0] == pytest.approx(4.903325, rel=1e-15) and math.isnan(r1.accel[1])
+    # a present-day message is read as it is, and one with both names is refused, naming the field
+    now = codec.encode(ImuReading(2.0, (0.1, 0.2, -9.8), (0.0, 0.0, 0.0)))
+    assert codec.decode(ImuReading, now).accel == (0.1, 0.2, -9.8)
+    both = json.dumps({"t": 1.5, "accel": {"x": 0.0, "y": 0.0, "z": -9.8}, "accel_g": {"x": 0.0, "y": 0.0, "z": -1.0},
+                       "gyro": {"x": 0.0, "y": 0.0, "z": 0.0}}).encode()
+    with pytest.raises(ValueError, match="accel_g"):
+        codec.decode(ImuReading, both)

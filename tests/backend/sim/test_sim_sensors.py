@@ -80,7 +80,7 @@ def test_noise_statistics_at_rest() -> None:
     dep = [r for r in readings if isinstance(r, DepthReading)]
     assert len(imu) == 4000 and len(dvl) == 600 and len(dep) == 4000
     gyro = np.array([r.gyro for r in imu])
-    accel = np.array([r.accel_g for r in imu])
+    accel = np.array([r.accel for r in imu]) / 9.80665  # in standard gravities, as the noise is given
     assert gyro.std(axis=0) == pytest.approx([0.01] * 3, rel=0.08)
     assert gyro.mean(axis=0) == pytest.approx(suite.gyro_bias, abs=4 * 0.01 / math.sqrt(4000))
     assert accel.std(axis=0) == pytest.approx([0.02] * 3, rel=0.08)
@@ -104,9 +104,9 @@ def test_accelerometer_sees_gravity_through_the_attitude() -> None:
     pitch, roll = 0.3, -0.2
     xv = initial_state((0.0, 0.0, 1.0), quaternion_from_euler(roll, pitch, 0.0), (0.0, 0.0, 0.0, 0.0, 0.0, 0.2))
     imu = [r for r in suite.sample(0.0, xv, ZERO4, ZERO4) if isinstance(r, ImuReading)][0]
-    # specific force -g in body axes: (sin p, -cos p sin r, -cos p cos r)
+    # specific force -g in body axes: g0 (sin p, -cos p sin r, -cos p cos r)
     expected = (math.sin(pitch), -math.cos(pitch) * math.sin(roll), -math.cos(pitch) * math.cos(roll))
-    assert imu.accel_g == pytest.approx(expected, abs=1e-12)
+    assert imu.accel == pytest.approx(tuple(9.80665 * e for e in expected), abs=1e-11)  # m/s^2
     assert imu.gyro == pytest.approx((0.0, 0.0, 0.2))
     assert imu.euler == pytest.approx((roll, pitch, 0.0), abs=1e-12)
 

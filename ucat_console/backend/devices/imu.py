@@ -27,6 +27,7 @@ from typing import Callable
 
 from ucat_console.backend.devices import mip
 from ucat_console.robot.readings import ImuReading
+from ucat_console.robot.units import GRAVITY
 from ucat_console.backend.devices.serial_link import BAUD_RATES, SERIAL_ERRORS
 from ucat_console.backend.devices.serial_reader import SerialReader
 from ucat_console.telemetry.events import EventSink
@@ -290,7 +291,8 @@ class ImuDriver(SerialReader[ImuReading]):
             self.events.throttled("invalid_data", "data packet with non-finite values dropped")
             return
         reading = ImuReading(
-            t=now, accel_g=data.accel, gyro=data.gyro, quaternion=data.quaternion, euler=data.euler
+            t=now, accel=tuple(v * GRAVITY for v in data.accel),  # the sensor's g_n -> m/s^2
+            gyro=data.gyro, quaternion=data.quaternion, euler=data.euler
         )
         self._deliver(reading)
 

@@ -14,8 +14,8 @@ naming quaternion 0x0A or Euler 0x0C is NACKed with 0x03 (invalid parameter) and
 previous format stays.
 
 Samples come from ``source(t)`` (``t``: seconds since :meth:`start`), which returns an
-object with ``accel_g`` and ``gyro`` (and optionally ``quaternion``, ``euler``) such as
-:class:`ImuReading`, or None for "no sample now". A requested orientation field the truth
+object with ``accel`` (m/s^2, sent in standard gravities as the sensor does) and ``gyro``
+(and optionally ``quaternion``, ``euler``) such as :class:`ImuReading`, or None for "no sample now". A requested orientation field the truth
 does not carry is left out of the packet.
 
 Faults (:mod:`.faults`): ``silence`` sends nothing and answers nothing; ``corrupt`` breaks
@@ -34,6 +34,7 @@ from ucat_console.backend.devices import mip
 from ucat_console.backend.devices.emulator_base import DelayedOutput, EmulatorThread
 from ucat_console.backend.devices.faults import Fault, FaultSettings
 from ucat_console.backend.devices.pty_port import PtyPort
+from ucat_console.robot.units import GRAVITY
 from ucat_console.typedconf import Config, param
 
 _GARBAGE = b"\x00\x75\xff\x13\x65"  # includes a lone sync byte, to exercise resynchronisation
@@ -150,7 +151,7 @@ class ImuEmulator(EmulatorThread):
         truth = self._source(now - self._t0)
         if truth is None:
             return
-        accel = tuple(getattr(truth, "accel_g"))
+        accel = tuple(v / GRAVITY for v in getattr(truth, "accel"))
         gyro = tuple(getattr(truth, "gyro"))
         if self.faults.active(Fault.INVALID):
             accel = (math.nan, math.nan, math.nan)

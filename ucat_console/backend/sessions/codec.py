@@ -39,6 +39,7 @@ from ucat_console.backend.sessions.schema import (
     FieldSpec,
     field_specs,
 )
+from ucat_console.robot.units import GRAVITY
 
 _WIDE = re.compile(WIDE_PATTERN)
 
@@ -396,6 +397,44 @@ def loads(cls: type, data: bytes) -> Any:
         raise ValueError(f"{cls.__name__}: message is not valid JSON ({str(e)[:120]})") from None
 
 
+#: fields a message type once had under another name and unit: type name -> (the former
+#: name, the present one, the factor from the former unit to the present one); a session
+#: recorded before the change keeps opening, the former field read as the present one
+FORMER_FIELDS: dict[str, tuple[str, str, float]] = {
+    "ImuReading": ("accel_g", "accel", GRAVITY),  # standard gravities -> m/s^2
+}
+
+
+def _scaled(v: Any, factor: float) -> Any:
+    """A number, or an array or object of numbers, times ``factor`` (anything else as it
+    is, for the decoder to judge)."""
+    def one(x: Any) -> Any:
+        return x * factor if isinstance(x, (int, float)) and not isinstance(x, bool) else x
+    if isinstance(v, list):
+        return [one(x) for x in v]
+    if isinstance(v, dict):
+        return {k: one(x) for k, x in v.items()}
+    return one(v)
+
+
+def from_former_fields(cls: type, obj: Any) -> Any:
+    """``obj`` (a ``cls`` message's JSON object) with a field of :data:`FORMER_FIELDS`
+    renamed and converted to its present unit, its non-finite entries renamed with it."""
+    former = FORMER_FIELDS.get(cls.__name__)
+    if former is None or not isinstance(obj, dict):
+        return obj
+    old, new, factor = former
+    if old not in obj or new in obj:
+        return obj
+    out = dict(obj)
+    out[new] = _scaled(out.pop(old), factor)
+    listed = out.get(NONFINITE)
+    if isinstance(listed, dict):
+        out[NONFINITE] = {(new + k[len(old):] if k == old or k.startswith(old + ".") else k): x
+                          for k, x in listed.items()}
+    return out
+
+
 def decode(cls: type, data: bytes) -> Any:
     """JSON bytes -> a ``cls`` message (ValueError naming what is wrong)."""
-    return from_json_obj(cls, loads(cls, data))
+    return from_json_obj(cls, from_former_fields(cls, loads(cls, data)))

@@ -63,4 +63,4 @@ def upgrade(cls: type, obj: Any) -> Any:
 
 def decode(cls: type, data: bytes) -> Any:
     """Encoding-1 JSON bytes -> a ``cls`` message (ValueError naming what is wrong)."""
-    return codec.from_json_obj(cls, upgrade(cls, codec.loads(cls, data)))
+    return codec.from_json_obj(cls, upgrade(cls, codec.from_former_fields(cls, codec.loads(cls, data))))

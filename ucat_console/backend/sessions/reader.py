@@ -170,6 +170,9 @@ def _check_schema(topic: str, schema: Schema | None, channel: Channel, path: Pat
         except ValueError as e:
             raise ValueError(f"{path}: channel {codec.short(topic)}: {e}") from None
         fields = {s.name for s in field_specs(cls)} | {NONFINITE}
+        former = codec.FORMER_FIELDS.get(cls.__name__)
+        if former is not None:  # a field under its former name (the decoder converts it)
+            fields.add(former[0])
         if not props <= fields:
             raise ValueError(f"{path}: channel {codec.short(topic)}: schema fields "
                              f"{codec.short(sorted(props - fields))} are not fields of {cls.__name__}")

@@ -24,8 +24,8 @@ Type mapping (the only kinds a message field may have), encoding 2:
 
 Units. Every number with a unit carries it machine-readably in a ``unit`` keyword beside
 its ``type`` (one per vector part: ``position.x``, ``per_fin[2]``, ``u.w_1``): an SI
-symbol a units library parses (``m/s``, ``rad/s``, ``N m``; ``1`` for a dimensionless
-number; ``g_n``, the standard acceleration of gravity, for the IMU's raw acceleration).
+symbol a units library parses (``m/s``, ``m/s^2``, ``rad/s``, ``N m``; ``1`` for a
+dimensionless number).
 JSON Schema 2020-12 keeps an unknown keyword as an annotation, so validators and Foxglove
 read the schemas as before (a validator in a strict mode, like ajv's default, is told about
 the keyword: ``ajv.addKeyword("unit")``).

@@ -230,13 +230,14 @@ class PressureModelConfig(Config):
 
 @dataclass(frozen=True)
 class ImuModelConfig(Config):
-    """Microstrain 3DM-CX5: gyro, accelerometer (in g) and attitude."""
+    """Microstrain 3DM-CX5: gyro, accelerometer and attitude (the accelerometer's noise and
+    bias in standard gravities, g_n, as its data sheet gives them)."""
 
     rate: float = param(100.0, lo=1.0, hi=1000.0, unit="Hz", doc="sample rate")
     gyro_noise_std: float = param(0.001, lo=0.0, hi=1.0, unit="rad/s", doc="gyro white noise")
     gyro_bias_std: float = param(0.0005, lo=0.0, hi=1.0, unit="rad/s", doc="spread of the constant gyro bias")
-    accel_noise_std: float = param(0.001, lo=0.0, hi=1.0, unit="g", doc="accelerometer white noise")
-    accel_bias_std: float = param(0.002, lo=0.0, hi=1.0, unit="g", doc="spread of the constant accel bias")
+    accel_noise_std: float = param(0.001, lo=0.0, hi=1.0, unit="g_n", doc="accelerometer white noise")
+    accel_bias_std: float = param(0.002, lo=0.0, hi=1.0, unit="g_n", doc="spread of the constant accel bias")
     attitude_noise_std: float = param(0.002, lo=0.0, hi=1.0, unit="rad", doc="attitude noise per axis")
 
 

@@ -13,8 +13,9 @@ one sensor's sampling does not shift another's noise.
   4-20 mA loop current (saturating at 3.8 and 20.5 mA, NAMUR NE 43), quantised by the ADC,
   and converted back to pressure and depth (the conversions of ``robot/units.py``, which the
   pressure driver uses too).
-* IMU (3DM-CX5): gyro = body rate + constant bias + noise; accel in g = specific force
-  (a - g) / g0 in the body frame (level and at rest: (0, 0, -1)) + bias + noise; attitude
+* IMU (3DM-CX5): gyro = body rate + constant bias + noise; accel in m/s^2 = the specific
+  force a - g in the body frame (level and at rest: (0, 0, -g0)) plus the bias and noise,
+  which are given in standard gravities g0 as the sensor's data sheet gives them; attitude
   = the true quaternion turned by a small random rotation, with its ZYX Euler angles.
 * Encoders: fin angle and rate quantised as the EPOS2 reports them (``robot.servo``), at the
   feedback (PDO) rate.
@@ -74,7 +75,7 @@ def adc_quantise(current_ma: float, cfg: PressureModelConfig) -> float:
 def imu_kernel(
     xv: np.ndarray, noise: np.ndarray, gyro_bias: np.ndarray, accel_bias: np.ndarray, out: np.ndarray
 ) -> None:
-    """IMU outputs from the true state into ``out`` (13): accel in g (3), gyro (3), q (4), euler (3).
+    """IMU outputs from the true state into ``out`` (13): accel in m/s^2 (3), gyro (3), q (4), euler (3).
 
     ``noise`` (9) holds the scaled accel, gyro and attitude noise of this sample.
     """
@@ -88,9 +89,10 @@ def imu_kernel(
     ax = xv[NU_DOT] + (q * ww - r * v)
     ay = xv[NU_DOT + 1] + (r * u - p * ww)
     az = xv[NU_DOT + 2] + (p * v - q * u)
-    out[0] = ax / GRAVITY - g0x + accel_bias[0] + noise[0]
-    out[1] = ay / GRAVITY - g0y + accel_bias[1] + noise[1]
-    out[2] = az / GRAVITY - g0z + accel_bias[2] + noise[2]
+    # in standard gravities (the bias and noise are), then in m/s^2
+    out[0] = (ax / GRAVITY - g0x + accel_bias[0] + noise[0]) * GRAVITY
+    out[1] = (ay / GRAVITY - g0y + accel_bias[1] + noise[1]) * GRAVITY
+    out[2] = (az / GRAVITY - g0z + accel_bias[2] + noise[2]) * GRAVITY
     out[3] = p + gyro_bias[0] + noise[3]
     out[4] = q + gyro_bias[1] + noise[4]
     out[5] = r + gyro_bias[2] + noise[5]
