@@ -77,12 +77,14 @@ def journal_markdown(entries: list[JournalEntry]) -> str:
 
 
 def events_markdown(events: list[Event]) -> str:
+    """The events, newest first, one list item each (the time unpadded: a list item whose
+    text starts with four spaces would be a code block, its escapes shown as they are)."""
     if not events:
         return "No events yet."
     out = []
     for e in reversed(events):
         mark = "**" if e.level in ("error", "fatal") else ""
-        out.append(f"- {e.t:7.1f} s {mark}{esc(e.source)} {esc(e.code)}{mark}: {esc(e.message)}")
+        out.append(f"- {e.t:.1f} s {mark}{esc(e.source)} {esc(e.code)}{mark}: {esc(e.message)}")
     return "\n".join(out)
 
 
