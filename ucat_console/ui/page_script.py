@@ -61,8 +61,9 @@ INSTALL = r"""
     #ucat-bar .armed.off { background: #2f6f3e; color: #fff; }
     #ucat-bar > * { flex-shrink: 0; }
     #ucat-bar .item { opacity: 0.95; }
-    #ucat-bar #ucat-info, #ucat-bar #ucat-lights, #ucat-bar #ucat-battery { flex-shrink: 1; min-width: 0;
-      overflow: hidden; text-overflow: ellipsis; }
+    #ucat-bar #ucat-info, #ucat-bar #ucat-battery { min-width: 0; overflow: hidden; text-overflow: ellipsis; }
+    #ucat-bar #ucat-battery { flex-shrink: 50; }  /* where the bar is short: the battery's text first, */
+    #ucat-bar #ucat-info { flex-shrink: 5; }  /* then the mode and pilot (in the tabs too); never the lights */
     #ucat-bar .armed.stale { background: #6b7280; }
     #ucat-bar .rec { color: #ff5c5c; font-weight: 700; }
     #ucat-bar .rec-failed { color: #fff; background: #b91c1c; padding: 2px 8px; border-radius: 3px; cursor: help; }
@@ -147,8 +148,9 @@ INSTALL = r"""
     link.className = "item" + (s.link_slow ? " slow" : "");
     link.title = s.link_slow ? "this page reads slower than the console sends: it gets the newest poses "
       + "and plots, not every one; heartbeats and this bar go first" : "";
-    rec.textContent = s.recording_failed ? "● REC FAILED" : (s.recording ? `● REC ${s.recording}` : "");
-    rec.className = "rec" + (s.recording_failed ? " rec-failed" : ""); rec.title = s.recording_failed || "";
+    rec.textContent = s.recording_failed ? "● REC FAILED" : (s.recording ? "● REC" : "");
+    rec.className = "rec" + (s.recording_failed ? " rec-failed" : "");
+    rec.title = s.recording_failed || (s.recording ? `recording ${s.recording}` : "");
     review.style.display = s.review ? "inline" : "none";
     review.textContent = s.review ? `REVIEW ${s.review}` : "";
     review.title = s.review ? "this page plays a recording: the 3-D view and the Review plots show it, "

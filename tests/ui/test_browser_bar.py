@@ -1,0 +1,39 @@
+"""The status bar at 1280x800 while armed and recording, in headless Chromium: the armed
+state, the link, every light and DISARM are whole on screen (nothing of them clipped)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("playwright.sync_api")
+from browser_harness import ARTIFACTS, become_pilot, browser_console, open_page  # noqa: E402
+from playwright.sync_api import Browser, expect  # noqa: E402
+
+from ucat_console.backend.access import LOCAL  # noqa: E402
+
+pytestmark = [pytest.mark.browser, pytest.mark.slow]
+
+#: for each element: whether its text is cut (its content wider than its box) or it reaches
+#: past the window's right edge
+CLIPPED = """ids => ids.map(id => { const e = document.getElementById(id); const r = e.getBoundingClientRect();
+    return [id, e.scrollWidth > e.clientWidth + 1 || r.right > innerWidth || r.width === 0]; })"""
+
+
+def test_the_bar_keeps_the_armed_state_link_lights_and_disarm_whole_at_1280(browser: Browser,
+                                                                             tmp_path: Path) -> None:
+    console = browser_console(tmp_path)
+    try:
+        page = open_page(browser, console.url, 1280, 800)
+        become_pilot(page)
+        console.sup.arm(LOCAL)
+        console.sup.start_recording(LOCAL)
+        expect(page.locator("#ucat-armed")).to_have_text("ARMED")
+        expect(page.locator("#ucat-rec")).to_contain_text("REC")
+        expect(page.locator("#ucat-lights")).to_contain_text("Recording")
+        clipped = dict(page.evaluate(CLIPPED, ["ucat-armed", "ucat-link", "ucat-rec", "ucat-lights", "ucat-disarm"]))
+        page.screenshot(path=str(ARTIFACTS / "bar-recording-1280x800.png"), clip={"x": 0, "y": 0, "width": 1280, "height": 46})
+        assert not any(clipped.values()), clipped
+    finally:
+        console.stop()
