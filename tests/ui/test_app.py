@@ -16,7 +16,7 @@ from ucat_console.config import AccessConfig, AppConfig, ConsoleConfig, load_con
 from ucat_console.telemetry import channels as ch
 from ucat_console.ui.app import ConsoleApp, is_loopback
 from ucat_console.ui.identify_inputs import NO_SESSION
-from ucat_console.ui.panels import ControlPanel, esc
+from ucat_console.ui.panels import DRAFT_MARK, ControlPanel, esc
 from ucat_console.ui.tuning_inputs import param_specs, step_for
 
 TOKEN = "pool-side-token"
@@ -94,6 +94,38 @@ def test_a_pilots_draft_is_not_overwritten_by_unrelated_refreshes(app: ConsoleAp
     pilot.refresh()
     assert pilot.params["mpc.lam_a"].value == 4.0
     assert pilot.mode.value == "baseline"
+
+
+def test_an_edited_input_says_it_is_not_applied_until_it_is(app: ConsoleApp) -> None:
+    pilot = page(app, 3, pilot=True)
+    lam, vel = pilot.params["mpc.lam_a"], pilot.sp_inputs["velocity"]
+    label_lam, label_vel = lam.label, vel.label
+    lam.value, vel.value = 4.0, 0.3  # typed, not applied
+    pilot.refresh()
+    assert lam.label == label_lam + DRAFT_MARK and vel.label == label_vel + DRAFT_MARK
+    assert app.sup.setpoints.velocity == 0.0  # what the arm dialog would show: not the box
+    assert pilot.act(pilot._apply_setpoints) is True
+    pilot.refresh()
+    assert vel.label == label_vel and lam.label == label_lam + DRAFT_MARK  # the tuning still a draft
+    lam.value = app.sup.param_value("mpc.lam_a")  # typed back to the value in force
+    pilot.refresh()
+    assert lam.label == label_lam
+
+
+def test_the_feedback_line_follows_a_revert_of_what_it_applied(app: ConsoleApp) -> None:
+    pilot = page(app, 3, pilot=True)
+    before = app.sup.param_value("mpc.lam_st")
+    pilot.params["mpc.lam_st"].value = 2.5
+    assert pilot.act(pilot._apply_tuning, tuning=True) is True
+    shown = pilot.tuning_message.content
+    assert pilot.messages[-1] == "applied: mpc.lam_st = 2.5" and "2.5" in shown
+    pilot.refresh()
+    assert pilot.tuning_message.content == shown  # still in force: it stays
+    app.sup.undo_tuning(3)  # undone (by the pilot, another of its pages, or a revert)
+    pilot.refresh()
+    assert pilot.messages[-1] == f"now in force: mpc.lam_st = {before:g}"
+    assert "now in force" in pilot.tuning_message.content and "2.5" not in pilot.tuning_message.content
+    assert pilot.params["mpc.lam_st"].value == before
 
 
 def test_arming_from_the_page_takes_a_confirmation(app: ConsoleApp) -> None:

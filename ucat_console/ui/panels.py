@@ -66,6 +66,9 @@ class ControlPanel:
         self.gui = gui
         self.client = client
         self._pushed: dict[str, Any] = {}
+        #: what this page applied last (input key -> value) while its feedback line says so
+        self._applied: dict[str, Any] = {}
+        self._labels: dict[str, str] = {}  # each input's own label (a draft mark is added to it)
         self._arm_nonce: str | None = None
         self.messages: list[str] = []
         c = containers or {}
@@ -377,6 +380,7 @@ class ControlPanel:
             return
         self.sup.set_setpoints(self.cid, **changed)
         self.show("setpoints applied: " + ", ".join(f"{k} {v:g}" for k, v in changed.items()))
+        self._applied = {f"sp.{k}": v for k, v in changed.items()}
 
     def _apply_tuning(self) -> None:
         changes = {}
@@ -389,6 +393,7 @@ class ControlPanel:
         self.sup.set_params(self.cid, changes)
         self.show("applied: " + ", ".join(f"{k} = {v:g}" if not isinstance(v, str) else f"{k} = {v}"
                                           for k, v in changes.items()), tuning=True)
+        self._applied = dict(changes)
 
     def _set_history(self) -> None:
         self.app.set_history(self.cid, self.history.value)
@@ -424,6 +429,38 @@ class ControlPanel:
             handle.value = value
             self._pushed[key] = value
 
+    def _in_force(self, key: str) -> Any:
+        """The value in force of input ``key`` (``sp.<setpoint>`` or a tuning key)."""
+        if key.startswith("sp."):
+            return round(float(getattr(self.sup.setpoints, key[3:])), 4)
+        v = self.sup.param_value(key)
+        return v if isinstance(v, str) else float(v)
+
+    @staticmethod
+    def _same(a: Any, b: Any) -> bool:
+        if isinstance(a, str) or isinstance(b, str):
+            return a == b
+        return abs(float(a) - float(b)) <= 1e-9 * max(1.0, abs(float(b)))
+
+    def _mark_draft(self, key: str, handle: Any) -> None:
+        """An input whose value is not the one in force says so in its label."""
+        base = self._labels.setdefault(key, handle.label)
+        drafted = not self._same(handle.value, self._in_force(key))
+        self._set_prop(handle, "label", base + (DRAFT_MARK if drafted else ""))
+
+    def _follow_applied(self) -> None:
+        """The feedback line of the last apply is replaced once what it applied is no longer in
+        force (reverted, undone, changed by a failsafe or another pilot)."""
+        if not self._applied:
+            return
+        now = {k: self._in_force(k) for k in self._applied}
+        if all(self._same(v, now[k]) for k, v in self._applied.items()):
+            return
+        tuning = not any(k.startswith("sp.") for k in self._applied)
+        self._applied = {}
+        self.show("now in force: " + ", ".join(f"{k.removeprefix('sp.')} = {v:g}" if not isinstance(v, str)
+                                              else f"{k} = {v}" for k, v in now.items()), tuning=tuning)
+
     def refresh(self, force: bool = False) -> None:
         """Show the supervisor's state: values in force, which controls this page may use."""
         sup, cid = self.sup, self.cid
@@ -457,10 +494,13 @@ class ControlPanel:
         for k in SETPOINTS:
             self._set_prop(self.sp_inputs[k], "disabled", not pilot)
             self._push(f"sp.{k}", self.sp_inputs[k], round(float(getattr(sp, k)), 4), force)
+            self._mark_draft(f"sp.{k}", self.sp_inputs[k])
         for key, handle in self.params.items():
             self._set_prop(handle, "disabled", not pilot)
             v = sup.param_value(key)
             self._push(key, handle, v if isinstance(v, str) else float(v), force)
+            self._mark_draft(key, handle)
+        self._follow_applied()
         for h in (self.apply_sp, self.apply_tuning, self.revert, self.undo, self.save, self.history, self.note, self.marker,
                   self.marker_key, self.stop_key, self.disarm_key, *self.key_commands.values()):
             self._set_prop(h, "disabled", not pilot)
@@ -515,4 +555,6 @@ class ControlPanel:
 _EVENTS_SHOWN = 12
 
 
+#: added to the label of an input whose value is not the one in force
+DRAFT_MARK = " (not applied)"
 _UNSET = object()
