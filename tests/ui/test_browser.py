@@ -21,7 +21,7 @@ from playwright.sync_api import Browser, Page, expect  # noqa: E402
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
-PILOT_GONE_TIMEOUT = 1.5
+PILOT_GONE_TIMEOUT = 4.0  # the pilot page's allowed silence: a busy machine slows its answers
 
 
 @pytest.fixture(scope="module")

@@ -225,10 +225,19 @@ def test_the_link_loss_banner_shows_when_the_console_stops_and_goes_when_it_retu
     expect(banner).to_contain_text("pilot_gone")  # what the robot does meanwhile
     expect(page.locator("#ucat-info")).to_contain_text("LINK LOST")  # the bar is not live either
     expect(page.locator("#ucat-armed")).to_have_text(re.compile(r"ARMED\?$"))
+    # nothing looks live or can act: the lights grey, the page's controls off
+    expect(page.locator("#ucat-bar")).to_have_class(re.compile(r"\blost\b"))
+    assert page.evaluate("""() => [...document.querySelectorAll('#ucat-lights .dot')].every(
+        d => getComputedStyle(d).backgroundColor === 'rgb(107, 114, 128)')""")
+    expect(page.get_by_role("button", name="Take control")).to_be_disabled()
     page.screenshot(path=str(ARTIFACTS / "console-link-lost.png"))
     back = browser_console(tmp_path, port=port)
     try:
+        # the page reconnects by itself, says the console restarted, and its controls work again
         expect(banner).to_be_hidden(timeout=30_000)
+        expect(page.locator("#ucat-notice")).to_contain_text("The console restarted")
+        expect(page.locator("#ucat-bar")).not_to_have_class(re.compile(r"\blost\b"))
+        expect(page.get_by_role("button", name="Take control")).to_be_enabled()
     finally:
         back.stop()
 

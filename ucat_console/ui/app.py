@@ -139,6 +139,9 @@ class ConsoleApp:
         self.replay_slot = ReplaySlot()
         #: what the planner light says while the planners load ("" when ready)
         self.loading = ""
+        #: this run of the console, as the pages' bars carry it (a page that comes back to
+        #: another run says the console restarted)
+        self.run_id = {"id": f"{time.time_ns():x}", "started": time.strftime("%H:%M:%S")}
 
         self.guard = PageGuard(
             is_pilot=supervisor.access.is_pilot,
@@ -445,7 +448,7 @@ class ConsoleApp:
                          (("disarm", panel.disarm), ("drive", panel.drive_input), ("theme", panel.theme_button))}
                 state = bar_state(sup, cid, dark=page.dark, uuids=uuids, loading=self.loading,
                                   link_slow=self.guard.link_slow(cid),
-                                  review=review.reviewing if review is not None else "")
+                                  review=review.reviewing if review is not None else "", console=self.run_id)
                 # what the pilot must see first (ahead of the telemetry on a slow link)
                 self.guard.send_first(cid, [viser_compat.run_javascript(page_script.update_source(state))])
             except Exception:

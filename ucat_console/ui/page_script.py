@@ -11,8 +11,9 @@ page does on its own:
 * **Link loss**: when no state has arrived for :data:`LINK_LOST_AFTER` s (checked every
   0.25 s, so within 1.75 s), a full-width banner says the link is lost and what the robot
   does meanwhile (the configured pilot-gone failsafe, as last told by the server), and the
-  bar shows its last state greyed with a question mark (nothing in it is live); both go
-  with the next state.
+  bar shows its last state greyed with a question mark (nothing in it is live), the page's
+  panels greyed and their buttons and boxes disabled; all go with the next state. A state
+  from another run of the console (its ``console.id``) puts up a line saying it restarted.
 * **Link slow**: the server says when this page's link is too slow for the telemetry
   (:mod:`ucat_console.ui.link`); the bar then shows "LINK SLOW: updates thinned" in amber.
 * **Number boxes**: viser sends nothing for a number box left empty or holding text that is
@@ -85,6 +86,13 @@ INSTALL = r"""
       padding: 14px 18px; font: 700 20px/1.3 system-ui, sans-serif; color: #fff; background: #b91c1c;
       text-align: center; box-shadow: 0 4px 12px rgba(0,0,0,.4); }
     #ucat-banner small { display: block; font-weight: 500; font-size: 15px; margin-top: 4px; }
+    #ucat-bar.lost .dot { background: #6b7280 !important; }
+    #ucat-bar.lost .rec, #ucat-bar.lost .review, #ucat-bar.lost .fs { color: #d1d5db !important;
+      background: #4b5563 !important; }
+    body.ucat-lost #root { filter: grayscale(1) opacity(0.6); }
+    #ucat-notice { position: fixed; top: 46px; left: 0; right: 0; z-index: 2147483001; display: none;
+      padding: 8px 18px; font: 600 15px/1.3 system-ui, sans-serif; color: #111; background: #f59e0b;
+      text-align: center; }
     body.ucat-has-bar #root { position: fixed !important; top: 46px !important; left: 0; right: 0;
       bottom: 0; height: auto !important; }
   `;
@@ -106,8 +114,9 @@ INSTALL = r"""
   disarm.title = "motors off now (key: Esc)";
   bar.append(armed, info, link, rec, review, fs, lights, battery, grow, theme, disarm);
   const banner = el("div"); banner.id = "ucat-banner";
+  const notice = el("div"); notice.id = "ucat-notice";
   const install = () => { if (!document.body) return setTimeout(install, 50);
-    document.body.append(bar, banner); document.body.classList.add("ucat-has-bar"); };
+    document.body.append(bar, banner, notice); document.body.classList.add("ucat-has-bar"); };
   install();
   const send = (uuid, value) => {
     const m = %(viser_client)s;
@@ -122,6 +131,15 @@ INSTALL = r"""
     if (on === u.lost) return;
     u.lost = on;
     banner.style.display = on ? "block" : "none";
+    // nothing on the page is live or can act while the link is lost: greyed, its controls off
+    bar.classList.toggle("lost", on); document.body.classList.toggle("ucat-lost", on);
+    if (on) {
+      u.offed = [...document.querySelectorAll("#root button:not([disabled]), #root input:not([disabled])")];
+      for (const b of u.offed) b.disabled = true;
+    } else {
+      for (const b of u.offed || []) if (b.isConnected) b.disabled = false;
+      u.offed = [];
+    }
     if (on) {
       banner.textContent = "";
       banner.append(document.createTextNode("LINK LOST: this page no longer reaches the console"));
@@ -139,6 +157,13 @@ INSTALL = r"""
     }
   };
   u.render = (s) => {
+    if (u.state && s.console && u.state.console && s.console.id !== u.state.console.id) {
+      // the page came back to another run of the console: it says so (for a while)
+      notice.textContent = `The console restarted (at ${s.console.started}) while this page was away: ` +
+        "what it shows now is the new run's; take control again to pilot.";
+      notice.style.display = "block"; clearTimeout(u.noticeTimer);
+      u.noticeTimer = setTimeout(() => { notice.style.display = "none"; }, 20000);
+    }
     u.state = s; u.last = Date.now(); showBanner(false);
     armed.textContent = s.armed ? "ARMED" : "DISARMED";
     armed.className = "armed " + (s.armed ? "on" : "off");

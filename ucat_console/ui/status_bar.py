@@ -104,7 +104,7 @@ def link_policy(sup: Any) -> str:
             f"has taken control (then: {rule.escalate})" if rule.escalates else "")
     return (f"If this page was the pilot's, the robot {ACTIONS.get(rule.action, rule.action)} "
             f"{rule.timeout:g} s after the page's last answer (failsafe pilot_gone: {rule.action}){then}. "
-            "Reload the page when the link is back; the token is needed again.")
+            "The page reconnects by itself when the console is back; the token is needed again.")
 
 
 def mode_label(mode: str) -> str:
@@ -123,10 +123,11 @@ def pilot_label(sup: Any, client: int | None) -> str:
 
 
 def bar_state(sup: Any, client: int | None, *, dark: bool, uuids: dict[str, str], loading: str = "",
-              link_slow: bool = False, review: str = "") -> dict[str, Any]:
+              link_slow: bool = False, review: str = "", console: dict[str, str] | None = None) -> dict[str, Any]:
     """The bar's state for page ``client`` (JSON-ready); ``link_slow``: the page's link is
     slow and its telemetry thinned (:mod:`ucat_console.ui.link`); ``review``: the session
-    the page plays in its Review tab ("" for none: no REVIEW badge)."""
+    the page plays in its Review tab ("" for none: no REVIEW badge); ``console``: this run
+    of the console (``id``, ``started``), so that a page that comes back to another run says so."""
     return {
         "armed": bool(sup.armed),
         "mode": mode_label(sup.mode),
@@ -141,5 +142,6 @@ def bar_state(sup: Any, client: int | None, *, dark: bool, uuids: dict[str, str]
         "link_slow": bool(link_slow),
         "review": str(review),
         "dark": bool(dark),
+        "console": dict(console or {}),
         **uuids,
     }
