@@ -1,5 +1,5 @@
 """The page's tests; their helpers live beside this file (``plots_reference.py``, the browser
-harness ``browser_harness.py``), and the browser fixtures here: ``browser`` (Playwright's
+harness ``browser_harness.py``), ``server`` (a viser server of its own), and the browser fixtures here: ``browser`` (Playwright's
 headless Chromium, Debian's, one per module), ``chromium`` (a headless Chromium in a process
 group of our own, one per module) with ``frozen_browser`` (Playwright connected to it over
 CDP), for a test that freezes the browser's processes."""
@@ -13,6 +13,16 @@ from typing import Any, Iterator
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))  # for ``import plots_reference``, ``browser_harness``
+
+
+@pytest.fixture
+def server() -> Iterator[Any]:
+    """A viser server of its own on a free loopback port (a page's panels built on it)."""
+    import viser
+
+    s = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    yield s
+    s.stop()
 
 
 @pytest.fixture(scope="module")

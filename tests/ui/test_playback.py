@@ -80,13 +80,6 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> Run:
 
 
 @pytest.fixture
-def server():
-    s = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
-    yield s
-    s.stop()
-
-
-@pytest.fixture
 def panel(server: viser.ViserServer, run: Run):
     p = PlaybackPanel(server.gui, server.scene, AppConfig().plant.geometry, directory=run.directory,
                       plot_rate=PLOT_RATE, max_history=60.0, history=lambda: 60.0)

@@ -71,13 +71,6 @@ def late(tmp_path_factory: pytest.TempPathFactory) -> Late:
     return Late(d, path, start, end, body_times)
 
 
-@pytest.fixture
-def server():
-    s = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
-    yield s
-    s.stop()
-
-
 def make_panel(server: viser.ViserServer, late: Late, **kw: Any) -> PlaybackPanel:
     return PlaybackPanel(server.gui, server.scene, AppConfig().plant.geometry, directory=late.directory,
                          plot_rate=PLOT_RATE, max_history=60.0, history=lambda: 60.0, **kw)
