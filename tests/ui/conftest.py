@@ -1,8 +1,8 @@
 """The page's tests; their helpers live beside this file (``plots_reference.py``, the browser
-harness ``browser_harness.py``), ``server`` (a viser server of its own), and the browser fixtures here: ``browser`` (Playwright's
-headless Chromium, Debian's, one per module), ``chromium`` (a headless Chromium in a process
-group of our own, one per module) with ``frozen_browser`` (Playwright connected to it over
-CDP), for a test that freezes the browser's processes."""
+harness ``browser_harness.py``), and the fixtures here: ``server`` (a viser server of its
+own), ``browser`` (Playwright's headless Chromium, Debian's, one per module), ``chromium`` (a
+headless Chromium in a process group of our own, one per module) with ``frozen_browser``
+(Playwright connected to it over CDP), for a test that freezes the browser's processes."""
 
 from __future__ import annotations
 
