@@ -322,3 +322,46 @@ def test_the_shipped_gains_are_the_designed_ones():
     assert cfg.yaw_rate.kd == pytest.approx(g["heading"].kd, abs=1e-4)
     assert cfg.velocity.ki == pytest.approx(g["velocity"].ki, abs=1e-4)
     assert cfg.reference_rate == pytest.approx(1.0 / (DESIGN_DELAY * DESIGN_FACTOR), abs=1e-4)
+    assert cfg.speed_filter == pytest.approx(DESIGN_DELAY * DESIGN_FACTOR / 5.0, abs=1e-4)
+
+
+def test_the_velocity_loop_closes_on_the_low_passed_dvl_speed():
+    """A DVL step from 0.2 to 0.3 m/s (median window 1): the speed the loop uses moves by
+    1 - exp(-dt / tau) of the way at each report; the paper's layer keeps the median alone."""
+    tau = 1.0
+    ctl = designed(median_window=1, speed_filter=tau)
+    ctl.on_dvl(dvl(0.0, 0.2))
+    assert ctl.update(0.0, BodySetpoints(velocity=0.2)).velocity == pytest.approx(0.2)
+    expected = 0.2
+    for k in range(1, 9):  # 8 Hz for 1 s
+        t = k / 8.0
+        ctl.on_dvl(dvl(t, 0.3))
+        expected += (1.0 - math.exp(-0.125 / tau)) * (0.3 - expected)
+        assert ctl.update(t, BodySetpoints(velocity=0.2)).velocity == pytest.approx(expected, rel=1e-12)
+    assert expected == pytest.approx(0.3 - 0.1 * math.exp(-1.0))
+    off = designed(median_window=1, speed_filter=0.0)
+    paper = BodyController(paper_cfg(median_window=1, speed_filter=tau))
+    for c in (off, paper):
+        c.on_dvl(dvl(0.0, 0.2))
+        c.on_dvl(dvl(0.125, 0.3))
+        assert c.update(0.125, BodySetpoints(velocity=0.2)).velocity == 0.3
+
+
+def test_dvl_noise_barely_reaches_the_fins_surge_targets():
+    """8 Hz DVL reports with 5 mm/s of noise about a held speed: what the fins are asked
+    for forwards varies less than half as much with the shipped low-pass as without it (each fin
+    samples its target once a cycle, so the noise would reach the four fins differently)."""
+    rng = np.random.default_rng(3)
+    noise = rng.normal(0.0, 0.005, 8 * 120)
+    spread = {}
+    for tau in (0.0, BodyConfig().speed_filter):
+        ctl = designed(speed_filter=tau)
+        fx = []
+        for k, e in enumerate(noise):
+            t = k / 8.0
+            ctl.on_dvl(dvl(t, 0.2 + e))
+            step = ctl.update(t, BodySetpoints(velocity=0.2))
+            if t >= 60.0:
+                fx.append(step.allocation.per_fin()[0][0])
+        spread[tau] = float(np.std(fx))
+    assert spread[BodyConfig().speed_filter] < spread[0.0] / 2.0

@@ -99,6 +99,8 @@ BODY = Layout("the body-frame layer's array", [
     ("z_ref_rate", 1, "its rate"), ("r_ref", 1, "the yaw rate reference"), ("r_ref_rate", 1, "its rate"),
     ("x", 1, "designed: the loops' demand: surge (N)"), ("z", 1, "heave (N, down > 0)"), ("n", 1, "yaw moment (N m)"),
     ("applied", 3, "what the allocation applied (the order of x, z, n)"), ("cut", 1, "its cut bits (allocation.CUT_*)"),
+    ("speed_tau", 1, "designed: the speed low-pass's time constant (s; 0: none)"),
+    ("v_lp", 1, "the low-passed speed (NaN: no sample yet)"), ("v_lp_t", 1, "the time of its last sample"),
     ("alloc", NA, "the allocation's parameters (allocation.A_*)"), ("out", NW, "its output (allocation.W_*)"),
     ("pids", 3 * NPID, "velocity, depth, yaw rate or heading: a PID row each"),
     ("filters", 1, "velocity filter, then depth filter: median_size(window) numbers each (the array's rest)"),
@@ -109,8 +111,8 @@ B_FX, B_FY, B_YAW, B_DEPTH_SIGN, B_WINDOW, B_LAYER, B_HEADING, B_HEADING_REF, B_
     BODY.at(f) for f in BODY.fields[8:19])
 B_LEAD, B_REF_RATE, B_MAX_DIVE, B_MAX_ACC, B_MAX_YAW_ACC, B_V_REF, B_V_REF_RATE, B_Z_REF, B_Z_REF_RATE = (
     BODY.at(f) for f in BODY.fields[19:28])
-B_R_REF, B_R_REF_RATE, B_X, B_Z, B_N, B_APPLIED, B_CUT, B_ALLOC, B_OUT, B_PIDS, B_FILTERS = (
-    BODY.at(f) for f in BODY.fields[28:])
+B_R_REF, B_R_REF_RATE, B_X, B_Z, B_N, B_APPLIED, B_CUT, B_SPEED_TAU, B_V_LP, B_V_LP_T, B_ALLOC, B_OUT, B_PIDS, \
+    B_FILTERS = (BODY.at(f) for f in BODY.fields[28:])
 #: what the body functions return: all is well, or which input was not a finite number
 BODY_OK, BAD_DVL_VX, BAD_DVL_T, BAD_DEPTH, BAD_DEPTH_T, BAD_GYRO, BAD_IMU_T, BAD_T, EARLIER_T = range(9)
 #: the field each bad input is named by
@@ -144,6 +146,8 @@ def body_reset(b: np.ndarray) -> None:
     b[B_HEADING] = math.nan
     b[B_HEADING_REF] = math.nan
     b[B_T_REF] = math.nan
+    b[B_V_LP] = math.nan
+    b[B_V_LP_T] = math.nan
     for k in range(B_V_REF, B_R_REF_RATE + 1):
         b[k] = math.nan
     b[B_X] = 0.0
@@ -169,6 +173,13 @@ def body_on_dvl(b: np.ndarray, valid: bool, v: float, t: float) -> int:
         return BAD_DVL_T
     w = int(b[B_WINDOW])
     median_push(b, B_FILTERS, w, v)
+    m = median_value(b, B_FILTERS, w)
+    tau = b[B_SPEED_TAU]
+    if math.isnan(b[B_V_LP]) or not tau > 0.0:
+        b[B_V_LP] = m
+    else:
+        b[B_V_LP] += (1.0 - math.exp(-max(0.0, t - b[B_V_LP_T]) / tau)) * (m - b[B_V_LP])
+    b[B_V_LP_T] = t
     b[B_LAST_DVL_T] = t
     b[B_NEW_V] = 1.0
     return BODY_OK
@@ -342,7 +353,7 @@ def body_update(b: np.ndarray, t: float, sp_v: float, sp_z: float, sp_r: float,
     if not math.isfinite(t):
         return BAD_T, math.nan, math.nan
     w = int(b[B_WINDOW])
-    v = median_value(b, B_FILTERS, w)
+    v = median_value(b, B_FILTERS, w) if b[B_LAYER] == 0.0 else b[B_V_LP]
     z = median_value(b, B_FILTERS + median_size(w), w)
     r = b[B_YAW_RATE]
     if b[B_LAYER] == 0.0:
@@ -478,6 +489,7 @@ class BodyController:
         b[B_LEAD] = cfg.max_heading_lead
         b[B_REF_RATE] = cfg.reference_rate
         b[B_MAX_DIVE], b[B_MAX_ACC], b[B_MAX_YAW_ACC] = cfg.max_dive_rate, cfg.max_acceleration, cfg.max_yaw_acceleration
+        b[B_SPEED_TAU] = cfg.speed_filter
         self._executor = executor or ExecutorConfig()
         self.velocity_pid = Pid(cfg.velocity, b[B_PIDS:B_PIDS + NPID])
         self.depth_pid = Pid(cfg.depth, b[B_PIDS + NPID:B_PIDS + 2 * NPID])

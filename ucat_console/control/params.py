@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ucat_console.control.body_design import HullModel, designed_gains
+from ucat_console.control.body_design import HullModel, designed_gains, speed_filter
 from ucat_console.robot.servo import FIN_ACCELERATION, FIN_MAX_RATE
 from ucat_console.typedconf import Config, param, require_below
 
@@ -142,6 +142,8 @@ class PidGains(Config):
 BODY_LAYERS = ("designed", "paper")
 #: the designed layer's gains, from the default hull model (control.body_design)
 _DESIGN = designed_gains(HullModel(), DESIGN_DELAY, DESIGN_FACTOR)
+#: the designed layer's speed low-pass (s; control.body_design)
+SPEED_FILTER = round(speed_filter(DESIGN_DELAY, DESIGN_FACTOR), 4)
 #: the designed loops' own output limits: none (the fins' deliverable force limits them)
 _NO_LIMIT = 1000.0
 
@@ -199,6 +201,12 @@ class BodyConfig(Config):
     yaw_on_rear: bool = param(
         True, doc="designed layer: the rear pair makes yaw moment too (not in sync mode, where its fins "
         "run one plan)",
+    )
+    speed_filter: float = param(
+        SPEED_FILTER, lo=0.0, hi=10.0, unit="s",
+        doc="designed layer: time constant of the low-pass on the median-filtered DVL speed the velocity "
+        "loop closes on (0: none): the fins sample their force targets once a cycle, so DVL noise in the "
+        "surge demand would reach each fin at a different time and turn the robot",
     )
     max_heading_lead: float = param(
         0.5, lo=0.01, hi=3.0, unit="rad",
