@@ -228,10 +228,10 @@ def test_a_viewer_that_stops_answering_is_closed_too(guarded: Callable[..., Cons
 
 def test_a_socket_that_never_shows_is_counted_among_the_clients(console: Console) -> None:
     import websockets.sync.client
-    import viser
 
-    ws = websockets.sync.client.connect(console.url.replace("http", "ws"),
-                                        subprotocols=[f"viser-v{viser.__version__}"])
+    from ucat_console.bench.raw_page import SUBPROTOCOL
+
+    ws = websockets.sync.client.connect(console.url.replace("http", "ws"), subprotocols=[SUBPROTOCOL])
     try:  # no camera message: viser never calls the page connected
         wait_for(lambda: len(console.sup.access.clients) == 1, what="the socket counted")
         assert console.sup.health().clients == 1

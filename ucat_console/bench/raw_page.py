@@ -31,6 +31,9 @@ import zstandard
 
 from ucat_console.backend.dependencies import require
 
+#: the websocket subprotocol viser's page asks for (its wire protocol's version)
+SUBPROTOCOL = f"viser-v{viser.__version__}"
+
 CAMERA = {
     "type": "ViewerCameraMessage", "wxyz": (1.0, 0.0, 0.0, 0.0), "position": (0.0, 0.0, 3.0),
     "fov": 1.0, "near": 0.01, "far": 1000.0, "image_height": 600, "image_width": 800,
@@ -114,7 +117,7 @@ class RawPage:
         self.socket = sock
         headers = {"Origin": origin} if origin is not None else None
         self.ws = websockets.sync.client.connect(
-            ws_url, sock=sock, subprotocols=[f"viser-v{viser.__version__}"], additional_headers=headers,
+            ws_url, sock=sock, subprotocols=[SUBPROTOCOL], additional_headers=headers,
             max_size=None, open_timeout=open_timeout, compression=None,
         )
         self.answer_heartbeats = answer_heartbeats
