@@ -42,7 +42,7 @@ import logging
 import typing
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Self
+from typing import Any, ClassVar, Self
 
 import tomli_w
 
@@ -231,6 +231,14 @@ class FailsafeConfig(Config):
     tracking_heading: float = param(
         0.35, lo=0.01, hi=3.15, unit="rad", doc="tracking: heading further than this from its reference"
     )
+
+    #: the rules whose default acts on the robot (the others warn by default)
+    PROTECTIVE: ClassVar[tuple[str, ...]] = ("pilot_gone", "imu", "dvl", "depth", "motor", "planner_late")
+
+    def warn_only(self) -> tuple[str, ...]:
+        """The protective rules configured only to warn: the console logs them at start and the
+        Safety tab lists them, since such a rule no longer protects the robot."""
+        return tuple(name for name in self.PROTECTIVE if getattr(self, name).action == "warn")
 
 
 @dataclass(frozen=True)
