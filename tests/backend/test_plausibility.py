@@ -8,13 +8,19 @@ import math
 
 import numpy as np
 import pytest
+from support import Collector, wait_for
 
 from ucat_console.backend.devices import plausibility as pl
 from ucat_console.backend.devices.config import DevicesConfig
+from ucat_console.backend.devices.dvl_emulator import DvlEmulator
+from ucat_console.backend.devices.imu_emulator import ImuEmulator
 from ucat_console.backend.devices.plausibility import Plausibility, PlausibilityConfig, loop_current_problem
+from ucat_console.backend.devices.pressure import PressureConfig, PressureDriver
+from ucat_console.backend.devices.pressure_emulator import PressureEmulator
 from ucat_console.backend.loop.closed_loop import ClosedLoop
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.backend.safety import SafetyMonitor
+from ucat_console.backend.sim_rig import SimRig
 from ucat_console.backend.sim_robot_io import SimRobotIO
 from ucat_console.config import AppConfig, FailsafeConfig, FailsafeRule
 from ucat_console.control.allocation import BodySetpoints
@@ -230,6 +236,56 @@ def test_the_failsafe_label_counts_the_dropped_readings_and_gives_the_reason() -
 def test_a_loop_current_outside_the_transducers_span_is_no_measurement(current: float, problem: str) -> None:
     found = loop_current_problem(current, 104.8)
     assert (problem in found) if problem else found == ""
+
+
+# ------------------------------------------------------------------ the pressure driver, the emulators
+def test_the_pressure_driver_drops_a_current_outside_the_span_and_reports_it_with_the_count() -> None:
+    emulator = PressureEmulator(lambda t: 1.0).start()
+    readings, events = Collector(), Collector()
+    driver = PressureDriver(PressureConfig(port=emulator.port), readings, events)
+    try:
+        assert driver.start()
+        wait_for(lambda: len(readings) > 2, what="readings")
+        for current, dropped in ((20.0, False), (20.4, True), (4.0001, False), (4.0, True)):
+            emulator.set_implausible(current_ma=current)
+            emulator.inject("implausible")
+            n, k = len(readings), len(events)
+            if dropped:
+                found = wait_for(lambda: [e for e in events.items[k:] if e.code == "implausible"],
+                                 what=f"{current} mA dropped")
+                assert found[0].data["dropped"] >= 1 and f"{current:.3f} mA" in found[0].data["reason"]
+                assert len(readings) == n  # no depth came of it
+            else:
+                wait_for(lambda: len(readings) > n + 2, what=f"readings at {current} mA")
+                assert readings.items[-1].depth_m == pytest.approx(
+                    (current - 4.0) / 16.0 * 1e6 / (RHO_FRESH * GRAVITY), abs=1e-3)
+            emulator.clear()
+    finally:
+        driver.stop()
+        emulator.stop()
+
+
+def test_the_emulators_implausible_values_are_checked_and_named() -> None:
+    pressure, imu_e, dvl_e = PressureEmulator(lambda t: 1.0), ImuEmulator(lambda t: None), DvlEmulator(lambda t: None)
+    try:
+        with pytest.raises(ValueError, match="current_ma/jump_m: give one"):
+            pressure.set_implausible(current_ma=20.4, jump_m=1.0)
+        with pytest.raises(ValueError, match="current_ma: expected 1 finite"):
+            pressure.set_implausible(current_ma=math.inf)
+        with pytest.raises(ValueError, match="gyro: expected 3 numbers"):
+            imu_e.set_implausible(gyro=(0.0, 1000.0))
+        with pytest.raises(ValueError, match="quaternion: expected 4 finite numbers"):
+            imu_e.set_implausible(quaternion=(0.0, 0.0, "x", 0.0))
+        with pytest.raises(ValueError, match="velocity: expected 3 numbers"):
+            dvl_e.set_implausible(velocity="fast")
+    finally:
+        for e in (pressure, imu_e, dvl_e):
+            e.stop()
+    rig = SimRig(DevicesConfig())
+    with pytest.raises(ValueError, match="velocity: not an argument of this fault; allowed: duration, current_ma"):
+        rig.inject("pressure", "implausible", velocity=(5.0, 0.0, 0.0))
+    with pytest.raises(ValueError, match="gyro: not an argument of this fault; allowed: duration$"):
+        rig.inject("imu", "silence", gyro=(0.0, 0.0, 1.0))
 
 
 # ------------------------------------------------------------------ the in-process simulator

@@ -7,8 +7,8 @@ the compiled call that runs the loop's core on the plant, and in ``advance_to``)
 compiled check, :func:`check_row`, judges a reading as a row (``robot.reading_rows``); a
 reading that fails is dropped (the loop, the estimator and the telemetry never see it),
 counted, and reported as an Event ``implausible`` of its sensor's source (``imu``, ``dvl``,
-``pressure``) with the count and the reason, at most once a second
-(:class:`DropCounter`); the failsafes label the sensor with them
+``pressure``) with the count and the reason: at once when a burst of them begins, then
+once a second while it lasts (:class:`DropCounter`); the failsafes label the sensor with them
 (``reporting.READING_FAULTS``) and, since a dropped reading is not a valid one, a sensor
 that keeps failing starts its failsafe after the rule's timeout.
 
@@ -58,8 +58,10 @@ log = logging.getLogger(__name__)
 
 #: Event code of a dropped reading
 CODE = "implausible"
-#: s between two reports of one sensor's dropped readings
+#: s between two reports of one sensor's dropped readings while they go on
 REPORT_INTERVAL = 1.0
+#: s between the report that ended a burst and the one of a new burst (one after a reading passed)
+BURST_GAP = 0.25
 #: s without a valid DVL report (or a depth) after which the agreement starts afresh
 AGREEMENT_GAP = 1.0
 
@@ -140,9 +142,11 @@ STATE = Layout("the plausibility state", [
     ("code", 3, "the last one's reason (a code below), per sensor"),
     ("v1", 3, "the last one's offending value, per sensor"),
     ("v2", 3, "and a second figure (the axis, the time between readings), per sensor"),
+    ("dropped_t", 3, "and its time, per sensor"),
+    ("passed", 3, "readings that passed, per sensor"),
 ])
 S_DEPTH_T, S_DEPTH_Z, S_Q_T, S_Q, S_W_T, S_W, S_W_SUM, S_E_T, S_E_REF, S_APART, S_DISAGREE, S_DROPPED, S_CODE, \
-    S_V1, S_V2 = (STATE.at(f) for f in STATE.fields)
+    S_V1, S_V2, S_DROPPED_T, S_PASSED = (STATE.at(f) for f in STATE.fields)
 
 # reasons
 OK, DEEP, ABOVE, DEPTH_JUMP, ACCEL, GYRO, Q_NORM, Q_JUMP, DVL_SPEED, APART = range(10)
@@ -170,8 +174,9 @@ def state_array() -> np.ndarray:
 
 
 @njit(cache=True)
-def _drop(st: np.ndarray, sensor: int, code: int, v1: float, v2: float) -> int:
+def _drop(st: np.ndarray, sensor: int, t: float, code: int, v1: float, v2: float) -> int:
     st[S_DROPPED + sensor] += 1.0
+    st[S_DROPPED_T + sensor] = t
     st[S_CODE + sensor] = code
     st[S_V1 + sensor] = v1
     st[S_V2 + sensor] = v2
@@ -218,19 +223,19 @@ def _check_depth(lim: np.ndarray, st: np.ndarray, row: np.ndarray, t: float) -> 
     if not (math.isfinite(d) and math.isfinite(z) and math.isfinite(t)):
         return OK
     if d > lim[L_MAX_DEPTH]:
-        return _drop(st, DEPTH, DEEP, d, 0.0)
+        return _drop(st, DEPTH, t, DEEP, d, 0.0)
     if d < lim[L_MIN_DEPTH]:
-        return _drop(st, DEPTH, ABOVE, d, 0.0)
+        return _drop(st, DEPTH, t, ABOVE, d, 0.0)
     t0 = st[S_DEPTH_T]
     if not math.isnan(t0):
         dt = max(t - t0, 0.0)
         dz = z - st[S_DEPTH_Z]
         if abs(dz) > lim[L_DEPTH_RATE] * dt + lim[L_DEPTH_NOISE]:
-            return _drop(st, DEPTH, DEPTH_JUMP, dz, dt)
+            return _drop(st, DEPTH, t, DEPTH_JUMP, dz, dt)
     st[S_DEPTH_T] = t
     st[S_DEPTH_Z] = z
     if _compare_depth(lim, st, z, t):
-        return _drop(st, DEPTH, APART, st[S_APART], 0.0)
+        return _drop(st, DEPTH, t, APART, st[S_APART], 0.0)
     return OK
 
 
@@ -241,16 +246,16 @@ def _check_imu(lim: np.ndarray, st: np.ndarray, row: np.ndarray, t: float) -> in
             return OK
     for i in range(3):
         if abs(row[rr.IMU_ACCEL + i]) > lim[L_ACCEL]:
-            return _drop(st, IMU, ACCEL, row[rr.IMU_ACCEL + i], i)
+            return _drop(st, IMU, t, ACCEL, row[rr.IMU_ACCEL + i], i)
     for i in range(3):
         if abs(row[rr.IMU_GYRO + i]) > lim[L_GYRO]:
-            return _drop(st, IMU, GYRO, row[rr.IMU_GYRO + i], i)
+            return _drop(st, IMU, t, GYRO, row[rr.IMU_GYRO + i], i)
     w, x, y, z = row[rr.IMU_Q], row[rr.IMU_Q + 1], row[rr.IMU_Q + 2], row[rr.IMU_Q + 3]
     if not (math.isfinite(w) and math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
         return OK  # not streamed (NaN), or non-finite: the arming gate's
     n = math.sqrt(w * w + x * x + y * y + z * z)
     if abs(n - 1.0) > lim[L_Q_TOL]:
-        return _drop(st, IMU, Q_NORM, n, 0.0)
+        return _drop(st, IMU, t, Q_NORM, n, 0.0)
     w, x, y, z = w / n, x / n, y / n, z / n
     t0 = st[S_Q_T]
     if not math.isnan(t0):
@@ -258,7 +263,7 @@ def _check_imu(lim: np.ndarray, st: np.ndarray, row: np.ndarray, t: float) -> in
         dot = abs(w * st[S_Q] + x * st[S_Q + 1] + y * st[S_Q + 2] + z * st[S_Q + 3])
         angle = 2.0 * math.acos(min(dot, 1.0))
         if angle > _SQRT3 * lim[L_GYRO] * dt + lim[L_Q_NOISE]:
-            return _drop(st, IMU, Q_JUMP, angle, dt)
+            return _drop(st, IMU, t, Q_JUMP, angle, dt)
     st[S_Q_T] = t
     st[S_Q], st[S_Q + 1], st[S_Q + 2], st[S_Q + 3] = w, x, y, z
     return OK
@@ -272,7 +277,7 @@ def _check_dvl(lim: np.ndarray, st: np.ndarray, row: np.ndarray, t: float) -> in
         return OK  # missing data, or the arming gate's
     speed = math.sqrt(vx * vx + vy * vy + vz * vz)
     if speed > lim[L_DVL]:
-        return _drop(st, DVL, DVL_SPEED, speed, 0.0)
+        return _drop(st, DVL, t, DVL_SPEED, speed, 0.0)
     # the vertical velocity: the body-frame velocity turned to NED by the last orientation
     if math.isnan(st[S_Q_T]):
         down = vz
@@ -291,7 +296,7 @@ def _check_dvl(lim: np.ndarray, st: np.ndarray, row: np.ndarray, t: float) -> in
     if math.isnan(e_t) or t - e_t > AGREEMENT_GAP:
         st[S_DISAGREE] = 0.0  # no depth to disagree with
     if st[S_DISAGREE] != 0.0:
-        return _drop(st, DVL, APART, st[S_APART], 0.0)
+        return _drop(st, DVL, t, APART, st[S_APART], 0.0)
     return OK
 
 
@@ -301,12 +306,16 @@ def check_row(lim: np.ndarray, st: np.ndarray, row: np.ndarray) -> int:
     in ``st`` when it is, and learns from it when it is not."""
     kind, t = row[rr.KIND], row[rr.T]
     if kind == rr.DEPTH:
-        return _check_depth(lim, st, row, t)
-    if kind == rr.IMU:
-        return _check_imu(lim, st, row, t)
-    if kind == rr.DVL:
-        return _check_dvl(lim, st, row, t)
-    return OK
+        sensor, found = DEPTH, _check_depth(lim, st, row, t)
+    elif kind == rr.IMU:
+        sensor, found = IMU, _check_imu(lim, st, row, t)
+    elif kind == rr.DVL:
+        sensor, found = DVL, _check_dvl(lim, st, row, t)
+    else:
+        return OK
+    if found == OK:
+        st[S_PASSED + sensor] += 1.0
+    return found
 
 
 @njit(cache=True)
@@ -372,15 +381,23 @@ def loop_current_problem(current_ma: float, depth_m: float) -> str:
 
 
 class DropCounter:
-    """Readings of one sensor dropped as implausible, reported at most once every
-    :data:`REPORT_INTERVAL` s: ``emit(dropped, reason)`` with the count since the last
-    report and the latest reason."""
+    """Readings of one sensor dropped as implausible, reported (``emit(dropped, reason)``,
+    the count since the last report and the latest reason) at once when a burst of them
+    begins (a reading passed since the last report, which is at least :data:`BURST_GAP`
+    s old), then every :data:`REPORT_INTERVAL` s while it lasts: the failsafes know why a
+    sensor went quiet before its rule's timeout, and a sensor failing on and off does not
+    flood the events."""
 
     def __init__(self, emit: Callable[[int, str], None]) -> None:
         self._emit = emit
         self._pending = 0
         self._reason = ""
         self._last = -math.inf
+        self._passed = True
+
+    def passed(self) -> None:
+        """A reading passed: the next one dropped begins a burst."""
+        self._passed = True
 
     def note(self, n: int, why: str, now: float) -> None:
         """``n`` more dropped at ``now``, the latest for ``why``."""
@@ -390,9 +407,10 @@ class DropCounter:
 
     def flush(self, now: float) -> None:
         """Report what is pending when the interval since the last report has passed."""
-        if self._pending and not now - self._last < REPORT_INTERVAL:
+        if self._pending and not now - self._last < (BURST_GAP if self._passed else REPORT_INTERVAL):
             n, self._pending = self._pending, 0
             self._last = now
+            self._passed = False
             self._emit(n, self._reason)
 
 
@@ -405,7 +423,8 @@ def report_event(t: float, source: str, dropped: int, why: str, **data: object) 
 
 class Plausibility:
     """The checks of one robot's readings (module docstring), what they dropped, and its
-    reports: Events (loop time ``now``) to ``on_event``."""
+    reports: Events to ``on_event``, each stamped with the time of the last reading it
+    counts (so that a valid reading before it does not end it in the failsafes' eyes)."""
 
     def __init__(self, cfg: PlausibilityConfig | None = None, on_event: EventSink | None = None) -> None:
         self.cfg = cfg or PlausibilityConfig()
@@ -414,8 +433,8 @@ class Plausibility:
         self.on_event = on_event
         self._row = np.full(rr.ROW, math.nan)
         self._counted = [0, 0, 0]
-        self._now = 0.0
-        self._counters = [DropCounter(lambda n, why, s=s: self._report(SOURCES[s], n, why)) for s in range(3)]
+        self._passed = [0, 0, 0]
+        self._counters = [DropCounter(lambda n, why, s=s: self._report(s, n, why)) for s in range(3)]
         check_row(self.limits, state_array(), self._row)  # compiled (or loaded) now, not on a reading
 
     def dropped(self, sensor: str) -> int:
@@ -446,9 +465,12 @@ class Plausibility:
 
     def report(self, now: float) -> None:
         """Report the readings dropped since the last report (at loop time ``now``)."""
-        self._now = now
         st = self.state
         for s, counter in enumerate(self._counters):
+            passed = int(st[S_PASSED + s])
+            if passed > self._passed[s]:
+                self._passed[s] = passed
+                counter.passed()
             n = int(st[S_DROPPED + s])
             if n > self._counted[s]:
                 counter.note(n - self._counted[s], self.reason(SENSORS[s]), now)
@@ -456,8 +478,9 @@ class Plausibility:
             else:
                 counter.flush(now)
 
-    def _report(self, source: str, dropped: int, why: str) -> None:
-        event = report_event(self._now, source, dropped, why)
+    def _report(self, sensor: int, dropped: int, why: str) -> None:
+        source = SOURCES[sensor]
+        event = report_event(float(self.state[S_DROPPED_T + sensor]), source, dropped, why)
         log.warning("%s: %s", source, event.message)
         if self.on_event is not None:
             try:

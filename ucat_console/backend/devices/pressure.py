@@ -20,7 +20,8 @@ broken or shorted loop: it is reported as a ``broken_loop`` Event (and ``recover
 when it ends) and never turned into a depth. A current within those but at or below
 4 mA or above 20 mA is outside the transducer's span (saturated,
 ``plausibility.loop_current_problem``): it is dropped too, counted and reported as
-``implausible`` (at most once a second, with the count), and never zeroed on. Other
+``implausible`` (``plausibility.DropCounter``: with the count, at once and then once a
+second), and never zeroed on. Other
 Events (source ``"pressure"``): ``malformed_line``, ``overlong_line``, ``silence``,
 ``port_error``, ``reconnected``, ``zeroed``.
 """
@@ -215,6 +216,7 @@ class PressureDriver(SerialReader[DepthReading]):
         if problem:
             self._implausible.note(1, problem, now)
             return
+        self._implausible.passed()
         with self._lock:
             if self._zero_samples is not None and len(self._zero_samples) < self._zero_target:
                 self._zero_samples.append(p)
