@@ -4,6 +4,14 @@ A finished part is described from its summary section and metadata records (a fe
 kilobytes read from the end of the file); a truncated part from the metadata records at its
 start (the recorder writes them before any message), with its duration unknown until it is
 repaired. No message is decoded.
+
+Which session a file belongs to, and as which part, is decided by its name alone (the
+recorder's ``<session id>_<part>.mcap``), never by what its metadata claims: a file whose
+metadata names another session or part is listed under its name and marked unreadable
+(opening it is refused the same way), and a file whose name is not a part name is a
+recording of its own, listed under its file name. Symbolic links are never read as parts:
+the listing skips every one and says so (a file a link points to inside the folder is
+listed under its own name).
 """
 
 from __future__ import annotations
@@ -16,7 +24,7 @@ from pathlib import Path
 from mcap.records import Chunk, Metadata
 from mcap.stream_reader import StreamReader
 
-from ucat_console.backend.sessions import files
+from ucat_console.backend.sessions import codec, files
 from ucat_console.backend.sessions.reader import (
     MAGIC,
     SessionReader,
@@ -97,19 +105,40 @@ def _leading_metadata(path: Path) -> dict[str, dict[str, str]]:
     return out
 
 
+def listed_as(path: Path) -> tuple[str, int]:
+    """(session, part) a file is listed as, from its name: a part name's session id and part
+    number; any other file is a recording of its own, part 1, under its file name."""
+    return files.parse_part_name(path) or (path.name, 1)
+
+
+def _disagreement(path: Path, session: dict[str, str]) -> str:
+    """Why the metadata of a file named as a part contradicts its name ("" when it does not)."""
+    parsed = files.parse_part_name(path)
+    if parsed is None:
+        return ""
+    sid, part = parsed
+    if session.get("id", sid) != sid:
+        return f"its metadata names session {codec.short(session['id'])}, not {sid!r} as its name does"
+    if session.get("part", str(part)) != str(part):
+        return f"its metadata names part {codec.short(session['part'])}, not {part} as its name does"
+    return ""
+
+
 def part_info(path: str | Path, directory: str | Path | None = None) -> PartInfo:
-    """Describe one session file from its summary (or its first records when truncated)."""
+    """Describe one session file from its summary (or its first records when truncated);
+    its session and part are those of its name (module docstring)."""
     p = files.inside_sessions(path, directory)
     size = p.stat().st_size
-    parsed = files.parse_part_name(p) or (p.stem, 1)
+    sid, part = listed_as(p)
     try:
         with SessionReader(p, p.parent) as r:
             counts = r.message_counts()
             return PartInfo(
-                path=p, session_id=r.session_id, part=r.part, size=size, truncated=False,
+                path=p, session_id=sid, part=part, size=size, truncated=False,
                 start=r.start_ns * 1e-9 if r.message_count else None,
                 duration=r.duration, messages=r.message_count,
                 events=counts.get(EVENTS, 0), notes=r.notes,
+                error=_disagreement(p, r.metadata.get(files.META_SESSION, {})),
             )
     except TruncatedSessionError:
         with open(p, "rb") as fh:
@@ -118,15 +147,14 @@ def part_info(path: str | Path, directory: str | Path | None = None) -> PartInfo
         session = meta.get(files.META_SESSION, {})
         started = session.get("started_ns", "")
         return PartInfo(
-            path=p, session_id=session.get("id", parsed[0]),
-            part=int(session["part"]) if session.get("part", "").isdigit() else parsed[1],
-            size=size, truncated=True,
+            path=p, session_id=sid, part=part, size=size, truncated=True,
             start=int(started) * 1e-9 if started.isdigit() else None,
             duration=None, messages=None, events=None,
             notes=meta.get(files.META_NOTES, {}).get("text", ""),
+            error=_disagreement(p, session),
         )
     except (ValueError, OSError) as e:
-        return PartInfo(p, parsed[0], parsed[1], size, False, None, None, None, None, "", str(e))
+        return PartInfo(p, sid, part, size, False, None, None, None, None, "", str(e))
 
 
 @dataclass(frozen=True)
@@ -152,9 +180,8 @@ def _why_skipped(entry: os.DirEntry, root: Path) -> str:
             target = Path(entry.path).resolve()
             if not target.is_relative_to(root):
                 return f"a symbolic link out of the sessions directory (to {files.printable(str(target))}): not followed"
-            if not target.is_file():
-                return "a symbolic link to something that is not a file"
-            return ""
+            return (f"a symbolic link (to {files.printable(target.name)}): not followed; a session file "
+                    "is listed under its own name")
         if not entry.is_file(follow_symlinks=False):
             return "not a regular file"
     except (OSError, RuntimeError) as e:  # a link loop, permissions
@@ -163,9 +190,9 @@ def _why_skipped(entry: os.DirEntry, root: Path) -> str:
 
 
 def scan(directory: str | Path | None = None) -> Listing:
-    """Every session in the directory (oldest first, parts in order) and the ``*.mcap``
-    entries that are not read: symbolic links out of the directory (never followed), what is
-    not a regular file (a directory, a pipe, a device), names that cannot be shown."""
+    """Every session in the directory (oldest first, parts in order, grouped by their file
+    names) and the ``*.mcap`` entries that are not read: symbolic links (never followed),
+    what is not a regular file (a directory, a pipe, a device), names that cannot be shown."""
     root = files.sessions_dir(directory)
     if not root.is_dir():
         return Listing([], [])

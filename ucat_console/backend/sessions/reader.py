@@ -746,7 +746,8 @@ class SessionReader(_Recording):
 
 # ---------------------------------------------------------------------- whole sessions
 def part_paths(session_id: str, directory: str | Path | None = None) -> dict[int, Path]:
-    """The part files of ``session_id`` in ``directory``, by part number (empty when none).
+    """The part files of ``session_id`` in ``directory``, by part number (empty when none):
+    the regular files named ``<session_id>_<part>.mcap`` (a symbolic link is never a part).
 
     Two files naming the same part (``_001`` and ``_0001``) raise ValueError naming both.
     """
@@ -756,7 +757,7 @@ def part_paths(session_id: str, directory: str | Path | None = None) -> dict[int
         return found
     for path in sorted(root.iterdir()):
         parsed = files.parse_part_name(path)
-        if parsed is None or parsed[0] != session_id or not path.is_file():
+        if parsed is None or parsed[0] != session_id or path.is_symlink() or not path.is_file():
             continue
         if parsed[1] in found:
             raise ValueError(f"{path}: part {parsed[1]} of session {session_id!r} is also "
@@ -843,7 +844,7 @@ class SessionParts(_Recording):
 
     Opened from a session id (its parts in the sessions ``directory``) or from the path of
     any one part (its parts beside it); a file whose name is not a part name is read
-    alone. Holds one :class:`SessionReader` per part in part order (``parts``) and offers
+    alone, as the session named by its file name (whatever its metadata says). Holds one :class:`SessionReader` per part in part order (``parts``) and offers
     their interface over the whole session, so the player, the review panel, the export
     and counterfactual replay read a split session as one file:
 
@@ -875,7 +876,7 @@ class SessionParts(_Recording):
             raise
         self.parts: tuple[SessionReader, ...] = tuple(readers)
         first = readers[0]
-        self.session_id: str = sid if sid is not None else first.session_id
+        self.session_id: str = sid if sid is not None else first.path.name  # by name, not metadata
         self.path: Path = first.path
         self.paths: tuple[Path, ...] = tuple(r.path for r in readers)
         self.epoch_offset: float = first.epoch_offset
