@@ -27,6 +27,7 @@ from ucat_console.backend.sessions.recorder import RecorderConfig
 from ucat_console.config import AppConfig
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.stream import TelemetryStream
+from ucat_console.ui.markdown import esc
 from ucat_console.ui.playback import PlaybackPanel, StreamSampler
 from ucat_console.ui.plots import CHANNELS as PLOT_CHANNELS
 from ucat_console.ui.plots import COLUMNS, PlotFeeder
@@ -303,7 +304,8 @@ def test_a_truncated_file_is_listed_and_repaired_from_the_panel(
         assert "truncated" in p.browser.content and not p.repair_button.disabled
         assert p.act(lambda: p.open(cut.name)) is False  # it does not open before the repair
         assert p.act(lambda: p.repair(cut.name))
-        assert "repaired" in p.messages[-1] and "truncated" not in p.browser.content
+        assert "repaired" in p.messages[-1] and esc("truncated (repair)") not in p.browser.content
+        assert esc(f"the original of {cut.name}, kept by its repair") in p.browser.content
         assert p.act(lambda: p.open(cut.name))
         assert p.player is not None and p.player.end > p.player.start
         assert p.act(lambda: p.open("../escape.mcap")) is False
@@ -506,7 +508,7 @@ def test_a_truncated_part_is_repaired_from_the_session_chooser(
         assert cut.name in p.messages[-1] and "repair" in p.messages[-1]
         assert p.act(lambda: p.repair(p.choice.value))
         assert f"repaired {cut.name}" in p.messages[-1]
-        assert p.repair_button.disabled and "truncated" not in p.browser.content
+        assert p.repair_button.disabled and esc("truncated (repair)") not in p.browser.content
         assert p.act(lambda: p.open(p.choice.value))
         assert p.reader is not None and len(p.reader.parts) == len(split_run.paths)
         # the other parts were left alone

@@ -2,7 +2,8 @@
 
 SESSION is a session id or any one of its part files (a path, or a file name inside the
 sessions directory): ``info`` and ``export`` cover every part of the session, in order, as
-one recording; ``repair`` takes one file; ``compare`` writes two to four sessions' (or their
+one recording; ``repair`` takes one file (not one being recorded; the original is kept,
+listed, as ``<name>.orig.mcap``); ``compare`` writes two to four sessions' (or their
 segments') efficiency figures side by side (docs/review.md). ``--dir`` names the sessions directory (default:
 ``$UCAT_CONSOLE_SESSIONS``, else the user's data folder: ``ucat-console paths``); files
 outside it are refused.
@@ -47,7 +48,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     p = kinds.add_parser("repair", help="re-index a truncated file (a killed recorder)")
     p.add_argument("file", metavar="FILE", help="session file")
-    p.add_argument("--no-keep", action="store_true", help="do not keep the original as FILE.orig")
+    p.add_argument("--no-keep", action="store_true", help="do not keep the original as NAME.orig.mcap")
     p.add_argument("--force", action="store_true", help="rewrite even a file that opens")
     _add_dir(p)
     p.set_defaults(func=run_repair)
@@ -118,7 +119,11 @@ def run_list(args: argparse.Namespace) -> int:
     for s in sessions:
         start = _fmt_time(s.start)
         events = "?" if s.events is None else str(s.events)
-        flag = "  [truncated: run `sessions repair`]" if s.truncated else ""
+        flag = ("  [recording]" if s.recording else "  [truncated: run `sessions repair`]"
+                if any(p.repairable for p in s.parts) else "  [truncated]" if s.truncated else "")
+        original = next((p.original_of for p in s.parts if p.original_of), "")
+        if original:
+            flag += f"  [the original of {files.printable(original)}, kept by its repair]"
         errors = [p.error for p in s.parts if p.error]
         note = files.printable(s.notes.replace("\n", " "))
         if len(note) > 40:

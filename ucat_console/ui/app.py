@@ -326,6 +326,7 @@ class ConsoleApp:
             if cid is not None else None,
             present=(lambda: self.page_present(cid)) if cid is not None else (lambda: True),
             sessions=lambda: self.session_list.listing(),
+            may_repair=(lambda: self.sup.access.require_pilot(cid, "repair")) if cid is not None else (lambda: None),
         )
 
     def _may_replay(self, cid: int | None) -> bool:

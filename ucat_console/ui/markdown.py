@@ -108,7 +108,10 @@ def sessions_markdown(sessions: list[index.SessionInfo], skipped: list[index.Ski
     lines = ["| session | part | duration | size | events | notes |", "|---|---|---|---|---|---|"]
     for s in sessions:
         for p in s.parts:
-            dur = "truncated (repair)" if p.truncated else (f"{p.duration:.1f} s" if p.duration is not None else "?")
+            dur = ("recording" if p.recording else "truncated (repair)" if p.repairable else "truncated") \
+                if p.truncated else (f"{p.duration:.1f} s" if p.duration is not None else "?")
+            if p.original_of:
+                dur += f"; the original of {p.original_of}, kept by its repair"
             if p.error:
                 dur = "unreadable: " + p.error
             lines.append(f"| {esc(s.session_id)} | {p.part} | {esc(dur)} | {_size(p.size)} | "

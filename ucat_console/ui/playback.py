@@ -23,7 +23,9 @@ The session chooser opens a whole session: a session split into parts
 (:class:`~ucat_console.backend.sessions.reader.SessionParts`), so the timeline, playing,
 seeking, frame steps, event jumps and counterfactual replay run across the part
 boundaries; the browser's table lists every part, and a truncated part is repaired from
-here (the session then opens).
+here (the session then opens; the original stays beside it, listed as
+``<part>.orig.mcap``). Only the pilot's page repairs (``may_repair()`` raises for any
+other), and a part being recorded is never repaired (:mod:`~ucat_console.backend.sessions.repair`).
 
 Every page reviews on its own: the console builds one panel per page on that page's
 ``client.gui`` and ``client.scene``, so each page has its own player, position, speed and
@@ -137,14 +139,17 @@ class PlaybackPanel:
         jobs: Callable[[str, Callable[[], Any], bool], str | None] | None = None,
         present: Callable[[], bool] = lambda: True,
         sessions: Callable[[], index.Listing] | None = None,
+        may_repair: Callable[[], None] = lambda: None,
     ) -> None:
         """``jobs(what, job, coalesce)``: queue an action that reads files (None when queued,
         else why not; None: run it in the callback); ``present()``: whether the page is
         still connected; ``sessions()``: the folder's listing, with what it skipped (default:
-        read it each time)."""
+        read it each time); ``may_repair()``: raises (PermissionError) when this page may not
+        repair (the console: unless it is the pilot's)."""
         self.directory = files.sessions_dir(directory)
         self.gui = gui
         self.jobs = jobs
+        self.may_repair = may_repair
         self.present = present
         self._sessions = sessions or (lambda: index.scan(self.directory))
         self.replay_slot = replay_slot if replay_slot is not None else ReplaySlot()
@@ -185,8 +190,8 @@ class PlaybackPanel:
                 self.refresh_list = gui.add_button("Refresh list")
                 self.open_button = gui.add_button("Open", color="blue")
                 self.repair_button = gui.add_button("Repair", color="orange",
-                                                    hint="rewrite the session's truncated files fully indexed "
-                                                         "(the originals are kept)")
+                                                    hint="the pilot's: rewrite the session's truncated files "
+                                                         "fully indexed (the originals are kept, listed)")
                 self.close_button = gui.add_button("Close")
             with gui.add_folder("Playback", order=2.0):
                 self.status = gui.add_markdown("No session open.")
@@ -323,7 +328,7 @@ class PlaybackPanel:
         current = self.choice.value
         self.choice.options = names
         self.choice.value = current if current in names else names[-1]
-        self.repair_button.disabled = not any(p.truncated for s in sessions for p in s.parts)
+        self.repair_button.disabled = not any(p.repairable for s in sessions for p in s.parts)
         return sessions
 
     def _name(self, name: object) -> str:
@@ -348,14 +353,20 @@ class PlaybackPanel:
         return [p for _, p in sorted(parts.items())]
 
     def repair(self, name: str) -> list[repair.RepairReport]:
-        """Repair the truncated files of a session (or one named part file)."""
+        """Repair the truncated files of a session (or one named part file); only the pilot's
+        page may, and never a part being recorded."""
+        self.may_repair()
         paths = self._files(name)
         todo = [p for p in paths if len(paths) == 1 or repair.needs_repair(p)]
-        reports = [repair.repair(p, self.directory) for p in todo]
-        self.refresh_sessions()
+        try:
+            reports = [repair.repair(p, self.directory) for p in todo]
+        finally:
+            self.refresh_sessions()
         done = [r for r in reports if r.repaired]
         if done:
-            self.show("; ".join(f"repaired {r.path.name}: {r.messages} messages recovered" for r in done))
+            self.show("; ".join(f"repaired {r.path.name}: {r.messages} messages recovered"
+                                + (f", the original kept as {r.original.name}" if r.original else "")
+                                for r in done))
         else:
             self.show(f"{name} was complete; nothing to repair")
         return reports

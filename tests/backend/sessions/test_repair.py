@@ -86,7 +86,7 @@ def test_sigkill_loses_at_most_about_a_second_and_repair_recovers_the_rest(sessi
     before = _sha(path)
 
     report = repair(path, sessions)
-    assert report.repaired and report.original == path.with_name(path.name + ".orig")
+    assert report.repaired and report.original == path.with_name(path.stem + ".orig.mcap")
     assert _sha(report.original) == before  # the original is kept as it was
     with SessionReader(path, sessions) as r:
         values = [m.velocity for _, m in r.messages()]
@@ -124,7 +124,7 @@ def test_repair_of_a_cut_file_recovers_every_complete_chunk(sessions):
     path.write_bytes(path.read_bytes()[:cut])
     report = repair(path, sessions, keep_original=False)
     assert report.messages == expected > 0
-    assert report.original is None and not path.with_name(path.name + ".orig").exists()
+    assert report.original is None and not path.with_name(path.stem + ".orig.mcap").exists()
     assert report.stop_reason  # it says where reading broke off
     with SessionReader(path, sessions) as r:
         assert [m.velocity for _, m in r.messages()] == [float(k) for k in range(setpoints)]
@@ -140,4 +140,4 @@ def test_repair_refuses_what_it_cannot_repair(sessions, tmp_path):
         repair(tmp_path / "y.mcap", sessions)
     with pytest.raises(ValueError, match="no such session file"):
         repair(sessions / "missing.mcap", sessions)
-    assert not os.path.exists(sessions / "x.mcap.orig")
+    assert not os.path.exists(sessions / "x.orig.mcap")

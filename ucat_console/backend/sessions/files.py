@@ -8,7 +8,8 @@ variable ``UCAT_CONSOLE_SESSIONS`` names, else ``sessions/`` in the user's data 
 One session is one or more MCAP files (parts) in the sessions directory, named
 ``<session id>_<part>.mcap`` with a three-digit part number from 001; the session id is
 ``YYYYmmdd-HHMMSS`` (UTC, at the start) followed by ``-<label>`` when one is given. Review
-markers live beside them in ``<session id>.markers.json``.
+markers live beside them in ``<session id>.markers.json``. A repair keeps the file it
+rewrote as ``<name>.orig.mcap`` (``<session id>_001.orig.mcap``): listed, read alone.
 
 Metadata records (MCAP metadata, string values), written at the start of every part:
 
@@ -32,6 +33,8 @@ import platformdirs
 SESSIONS_ENV = "UCAT_CONSOLE_SESSIONS"
 
 SUFFIX = ".mcap"
+#: the original of a repaired file, kept beside it: ``<name without .mcap>.orig.mcap``
+ORIGINAL_SUFFIX = ".orig" + SUFFIX
 MARKERS_SUFFIX = ".markers.json"
 PROFILE = "ucat_console"
 
@@ -67,6 +70,16 @@ def parse_part_name(path: str | Path) -> tuple[str, int] | None:
     """(session id, part) from a part file's name, None when it is not one."""
     m = _PART.match(Path(path).name)
     return (m["session"], int(m["part"])) if m else None
+
+
+def original_name(name: str) -> str:
+    """The name a repair keeps the original of file ``name`` under."""
+    return name.removesuffix(SUFFIX) + ORIGINAL_SUFFIX
+
+
+def original_of(name: str) -> str:
+    """The name of the file whose original file ``name`` is ("" when it is not one)."""
+    return name.removesuffix(ORIGINAL_SUFFIX) + SUFFIX if name.endswith(ORIGINAL_SUFFIX) else ""
 
 
 def markers_path(directory: Path, session_id: str) -> Path:

@@ -3,7 +3,7 @@
 A finished part is described from its summary section and metadata records (a few
 kilobytes read from the end of the file); a truncated part from the metadata records at its
 start (the recorder writes them before any message), with its duration unknown until it is
-repaired. No message is decoded.
+repaired (or, while a recorder writes it, ``recording``). No message is decoded.
 
 Which session a file belongs to, and as which part, is decided by its name alone (the
 recorder's ``<session id>_<part>.mcap``), never by what its metadata claims: a file whose
@@ -24,7 +24,7 @@ from pathlib import Path
 from mcap.records import Chunk, Metadata
 from mcap.stream_reader import StreamReader
 
-from ucat_console.backend.sessions import codec, files
+from ucat_console.backend.sessions import codec, files, writing
 from ucat_console.backend.sessions.reader import (
     MAGIC,
     SessionReader,
@@ -50,6 +50,13 @@ class PartInfo:
     events: int | None
     notes: str
     error: str = ""  # why the part could not be read ("" when it could)
+    recording: bool = False  # a recorder is writing it now (it has no summary yet)
+    original_of: str = ""  # the repaired file whose original this is ("" when it is none)
+
+    @property
+    def repairable(self) -> bool:
+        """Truncated, and neither being recorded nor an original a repair kept."""
+        return self.truncated and not self.recording and not self.original_of
 
 
 @dataclass(frozen=True)
@@ -71,6 +78,10 @@ class SessionInfo:
     @property
     def truncated(self) -> bool:
         return any(p.truncated for p in self.parts)
+
+    @property
+    def recording(self) -> bool:
+        return any(p.recording for p in self.parts)
 
     @property
     def events(self) -> int | None:
@@ -130,6 +141,7 @@ def part_info(path: str | Path, directory: str | Path | None = None) -> PartInfo
     p = files.inside_sessions(path, directory)
     size = p.stat().st_size
     sid, part = listed_as(p)
+    original_of = files.original_of(p.name)
     try:
         with SessionReader(p, p.parent) as r:
             counts = r.message_counts()
@@ -138,7 +150,7 @@ def part_info(path: str | Path, directory: str | Path | None = None) -> PartInfo
                 start=r.start_ns * 1e-9 if r.message_count else None,
                 duration=r.duration, messages=r.message_count,
                 events=counts.get(EVENTS, 0), notes=r.notes,
-                error=_disagreement(p, r.metadata.get(files.META_SESSION, {})),
+                error=_disagreement(p, r.metadata.get(files.META_SESSION, {})), original_of=original_of,
             )
     except TruncatedSessionError:
         with open(p, "rb") as fh:
@@ -151,10 +163,10 @@ def part_info(path: str | Path, directory: str | Path | None = None) -> PartInfo
             start=int(started) * 1e-9 if started.isdigit() else None,
             duration=None, messages=None, events=None,
             notes=meta.get(files.META_NOTES, {}).get("text", ""),
-            error=_disagreement(p, session),
+            error=_disagreement(p, session), recording=writing.being_written(p), original_of=original_of,
         )
     except (ValueError, OSError) as e:
-        return PartInfo(p, sid, part, size, False, None, None, None, None, "", str(e))
+        return PartInfo(p, sid, part, size, False, None, None, None, None, "", str(e), original_of=original_of)
 
 
 @dataclass(frozen=True)

@@ -42,7 +42,7 @@ import mcap
 from mcap.writer import CompressionType
 
 import ucat_console
-from ucat_console.backend.sessions import codec, files, foxglove
+from ucat_console.backend.sessions import codec, files, foxglove, writing
 from ucat_console.backend.dependencies import require
 from ucat_console.backend.sessions.mcap_writer import ChunkedWriter
 from ucat_console.backend.sessions.schema import (
@@ -114,13 +114,18 @@ class _Part:
     def __init__(self, path: Path, cfg: RecorderConfig) -> None:
         self.path = path
         self.file = open(path, "xb")
+        writing.hold(path, self.file)  # until closed: nothing rewrites it meanwhile
         self.writer = ChunkedWriter(
             self.file, chunk_size=cfg.chunk_size, compression=_COMPRESSION[cfg.compression]
         )
-        self.writer.start(
-            profile=files.PROFILE,
-            library=f"ucat_console {ucat_console.__version__}; mcap {mcap.__version__}",
-        )
+        try:
+            self.writer.start(
+                profile=files.PROFILE,
+                library=f"ucat_console {ucat_console.__version__}; mcap {mcap.__version__}",
+            )
+        except BaseException:
+            self.abandon()
+            raise
         self.channel_ids: dict[str, int] = {}
         self.sequence: dict[int, int] = collections.defaultdict(int)
         self.log_time = foxglove.LogTimes()
@@ -167,16 +172,32 @@ class _Part:
         try:
             self.writer.finish()
         finally:
-            self.file.close()
+            try:
+                self.file.close()
+            finally:
+                writing.let_go(self.path)
 
     def abandon(self) -> None:
         """After a failed write: close the file without finishing it and cut it back to the
-        end of its last complete chunk handed to the OS (``repair`` indexes it up to there)."""
+        end of its last complete chunk handed to the OS (``repair`` indexes it up to there).
+        The file stays held (its lock on a descriptor of its own) until it is cut back."""
         try:
-            self.file.close()  # what is still buffered may not be written: it is cut off below
-        except OSError:
-            pass
-        os.truncate(self.path, self.writer.complete)
+            keep = os.dup(self.file.fileno())
+        except OSError:  # no descriptor left: cut back by name
+            keep = -1
+        try:
+            try:
+                self.file.close()  # what is still buffered may not be written: it is cut off below
+            except OSError:
+                pass
+            if keep < 0:
+                os.truncate(self.path, self.writer.complete)
+            else:
+                os.ftruncate(keep, self.writer.complete)
+        finally:
+            if keep >= 0:
+                os.close(keep)
+            writing.let_go(self.path)
 
 
 class Recorder:
@@ -322,7 +343,13 @@ class Recorder:
             }
             if self._derived is not None:
                 self._meta[files.META_FRAMES] = dict(foxglove.FRAME_NOTES)
-            self._open_part()  # in this thread: a bad directory fails here, loudly
+            try:
+                self._open_part()  # in this thread: a bad directory fails here, loudly
+            except BaseException:
+                if self._part is not None:  # opened, then its first records failed
+                    self._part.abandon()
+                    self._part = None
+                raise
             self._unsubscribe = self.stream.subscribe_batches(self._on_messages)
             self._thread = threading.Thread(
                 target=self._run, name=f"recorder-{sid}", daemon=True

@@ -7,8 +7,14 @@ limits of :mod:`.limits` (CRCs checked, so a half-written chunk is left out; a c
 message over its limit, or a chunk that decompresses to another size than it declares,
 ends the copy like a damaged record), and copied into a new ``Writer``, which writes the chunk,
 message and metadata indexes and the summary: the result opens like any finished file.
-The copy goes to a temporary file beside the original and then atomically replaces it;
-the original is kept as ``FILE.orig`` unless told otherwise.
+The copy goes to a temporary file beside the original and then atomically replaces it,
+so the session opens under its name again; the original is kept, unchanged, as
+``<name>.orig.mcap`` beside it (:func:`files.original_name`), where the listing shows it
+(unless told otherwise: ``sessions repair --no-keep``). A kept original is never rewritten.
+
+A file a recorder is writing (the part being recorded now, in this process or another:
+:mod:`.writing`) is refused: its end is still being written, and replacing it would cut
+the recording short.
 """
 
 from __future__ import annotations
@@ -26,7 +32,7 @@ from mcap.records import Attachment, Channel, Chunk, DataEnd, Message, Metadata,
 from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
 
-from ucat_console.backend.sessions import files, limits
+from ucat_console.backend.sessions import files, limits, writing
 from ucat_console.backend.sessions.reader import (
     MAGIC,
     SessionReader,
@@ -37,7 +43,6 @@ from ucat_console.backend.sessions.reader import (
 
 log = logging.getLogger(__name__)
 
-ORIG_SUFFIX = ".orig"
 _CHUNK_SIZE = 256 * 1024
 
 
@@ -72,11 +77,17 @@ def repair(
 ) -> RepairReport:
     """Rewrite ``path`` fully indexed from its complete records.
 
-    A file that already opens is left alone (``repaired`` False) unless ``force``.
+    A file that already opens is left alone (``repaired`` False) unless ``force``; a file
+    being recorded, and an original a repair kept, are refused (ValueError).
     """
     p = files.inside_sessions(path, directory)
     if not p.is_file():
         raise ValueError(f"{path}: no such session file")
+    if files.original_of(p.name):
+        raise ValueError(f"repair: {p.name} is the original a repair of {files.original_of(p.name)} kept; "
+                         "a repair never rewrites it")
+    if writing.being_written(p):
+        raise ValueError(f"repair: {p.name} is being recorded; stop the recording first")
     with open(p, "rb") as fh:
         if fh.read(len(MAGIC)) != MAGIC:
             raise ValueError(f"{p}: not an MCAP file (it does not start with the MCAP magic)")
@@ -168,8 +179,8 @@ def _copy_records(records: Iterator[Any], w: Writer, counts: dict[str, int]) -> 
 
 
 def _keep(p: Path) -> Path:
-    """Keep the original as FILE.orig (an earlier one, from a first repair, is kept)."""
-    original = p.with_name(p.name + ORIG_SUFFIX)
+    """Keep the original as ``<name>.orig.mcap`` (an earlier one, from a first repair, is kept)."""
+    original = p.with_name(files.original_name(p.name))
     if not original.exists():
         try:
             os.link(p, original)
