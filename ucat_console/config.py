@@ -5,10 +5,10 @@ controller's ``mpc``, ``body``, ``baseline``, ``executor``, ``power``; the close
 ``loop``; the simulated robot's ``plant``; the ``recorder``; the limits on reading session
 files, ``review``; the efficiency figures and their comparison, ``metrics``; the drivers' ``devices``) with the console's own
 blocks defined here: ``console`` (web server, plots, supervision), ``access`` (pilot
-token) and ``failsafe`` (one rule per failsafe). ``robot``, the one robot selector, picks
-the robot the supervisor drives: ``"sim"`` (the in-process simulator), ``"sim-devices"`` (the
-simulator behind the device emulators, through the drivers) or ``"hardware"`` (the drivers
-on the robot's devices, ``[devices]``).
+token), ``failsafe`` (one rule per failsafe) and ``foxglove`` (the live Foxglove server).
+``robot``, the one robot selector, picks the robot the supervisor drives: ``"sim"`` (the
+in-process simulator), ``"sim-devices"`` (the simulator behind the device emulators,
+through the drivers) or ``"hardware"`` (the drivers on the robot's devices, ``[devices]``).
 
 A file of an older version (and the configuration an older recording holds) named the
 robot with two keys, ``robot = "sim" | "rig"`` and ``devices.robot``; it loads as the one
@@ -43,6 +43,7 @@ import typing
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar, Self
+from urllib.parse import urlsplit
 
 import tomli_w
 
@@ -242,6 +243,29 @@ class FailsafeConfig(Config):
 
 
 @dataclass(frozen=True)
+class FoxgloveConfig(Config):
+    """The live Foxglove server, ``run --foxglove-port`` (sessions.md, The live robot)."""
+
+    allowed_origins: tuple[str, ...] = param(
+        (), doc="web origins whose pages may read the live telemetry besides pages of this machine "
+        "(http(s)://localhost, 127.0.0.1, [::1]) and desktop apps; e.g. 'https://app.foxglove.dev' for "
+        "the Foxglove web app (each scheme://host[:port])",
+    )
+
+    def _check(self) -> None:
+        for origin in self.allowed_origins:
+            try:
+                parts = urlsplit(origin)
+                ok = parts.port is None or parts.port > 0  # a port that is not a number raises
+            except ValueError:
+                ok = False
+            if not ok or parts.scheme not in ("http", "https") or not parts.hostname \
+                    or parts.path not in ("", "/") or parts.query or parts.fragment or parts.username is not None:
+                raise ValueError(f"allowed_origins: {origin!r} is not a web origin; allowed: "
+                                 "scheme://host[:port] with scheme http or https, e.g. 'https://app.foxglove.dev'")
+
+
+@dataclass(frozen=True)
 class AppConfig(Config):
     """Everything one run of the console needs (module docstring)."""
 
@@ -259,6 +283,7 @@ class AppConfig(Config):
     access: AccessConfig = AccessConfig()
     failsafe: FailsafeConfig = FailsafeConfig()
     devices: DevicesConfig = DevicesConfig()
+    foxglove: FoxgloveConfig = FoxgloveConfig()
 
     # the controller blocks, read where they are held (the loop's configuration)
     mpc = property(lambda self: self.loop.mpc, doc="the fin MPC (``loop.mpc``)")

@@ -80,7 +80,7 @@ def _foxglove_server(port: int, cfg: Any, sup: Any) -> Any:
         print(f"WARNING: the Foxglove server binds {host}: the telemetry is readable from "
               "other machines", file=sys.stderr)
     fox = FoxgloveServer(sup.stream, host=host, port=port, epoch_offset=sup.wall0,
-                         geometry=robot_geometry(cfg.plant))
+                         geometry=robot_geometry(cfg.plant), allowed_origins=cfg.foxglove.allowed_origins)
     print(f"Foxglove server on {fox.url}  (port {fox.port}; open it in Foxglove or Lichtblick: "
           f"Open connection, Foxglove WebSocket; read-only)", flush=True)
     return fox
