@@ -119,8 +119,12 @@ def run_list(args: argparse.Namespace) -> int:
     for s in sessions:
         start = _fmt_time(s.start)
         events = "?" if s.events is None else str(s.events)
-        flag = ("  [recording]" if s.recording else "  [truncated: run `sessions repair`]"
-                if any(p.repairable for p in s.parts) else "  [truncated]" if s.truncated else "")
+        if s.recording:
+            flag = "  [recording]"
+        elif any(p.repairable for p in s.parts):
+            flag = "  [truncated: run `sessions repair`]"
+        else:
+            flag = "  [truncated]" if s.truncated else ""
         original = next((p.original_of for p in s.parts if p.original_of), "")
         if original:
             flag += f"  [the original of {files.printable(original)}, kept by its repair]"

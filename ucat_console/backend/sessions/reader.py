@@ -844,9 +844,10 @@ class SessionParts(_Recording):
 
     Opened from a session id (its parts in the sessions ``directory``) or from the path of
     any one part (its parts beside it); a file whose name is not a part name is read
-    alone, as the session named by its file name (whatever its metadata says). Holds one :class:`SessionReader` per part in part order (``parts``) and offers
-    their interface over the whole session, so the player, the review panel, the export
-    and counterfactual replay read a split session as one file:
+    alone, as the session named by its file name (whatever its metadata says). Holds one
+    :class:`SessionReader` per part in part order (``parts``) and offers their interface
+    over the whole session, so the player, the review panel, the export and counterfactual
+    replay read a split session as one file:
 
     * times: ``start_ns``/``end_ns`` span every part; the parts share the session's
       ``epoch_offset``, so ``to_ns``/``from_ns`` are those of any part;
