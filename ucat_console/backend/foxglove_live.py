@@ -188,7 +188,7 @@ class FoxgloveServer:
             self._advertise(topic, schema_name(cls), json_schema_bytes(cls))
         for topic, name in foxglove.DERIVED:
             self._advertise(topic, name, foxglove.official_schema_bytes(name))
-        self._by_id = {c["id"]: c for c in self._channels.values()}
+        self._ids = {c["id"] for c in self._channels.values()}
         self._session_id = str(time.time_ns() // 1_000_000)
         self._clients: tuple[_Client, ...] = ()  # replaced whole (the event loop); read by the sender
         self._origin_logged: dict[str, float] = {}
@@ -207,7 +207,8 @@ class FoxgloveServer:
 
         self._log_time = foxglove.LogTimes()
         self._queue: collections.deque = collections.deque(maxlen=queue_size)
-        self._dropped = 0
+        self._dropped = 0  # the stream's queue full (the publisher's thread)
+        self._dropped_gone = 0  # the backlogs of clients gone (the event loop)
         self.sent = 0
         self._resend_period = resend_period
         self._stopping = False
@@ -237,7 +238,7 @@ class FoxgloveServer:
     @property
     def dropped(self) -> int:
         """Messages dropped: the stream's queue full, or a client's backlog."""
-        return self._dropped + sum(c.dropped for c in self._clients)
+        return self._dropped + self._dropped_gone + sum(c.dropped for c in self._clients)
 
     # ------------------------------------------------------------------ lifecycle
     def stop(self) -> None:
@@ -309,6 +310,7 @@ class FoxgloveServer:
             pass
         finally:
             self._clients = tuple(c for c in self._clients if c is not client)
+            self._dropped_gone += client.dropped
             writer.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await writer
@@ -337,7 +339,7 @@ class FoxgloveServer:
         subs = dict(client.subs)
         for s in subscriptions:
             sid, cid = s["id"], s["channelId"]
-            if not isinstance(sid, int) or not 0 <= sid < _U32 or cid not in self._by_id:
+            if not isinstance(sid, int) or not 0 <= sid < _U32 or cid not in self._ids:
                 raise ValueError(f"subscription {codec.short(s)}: no such channel, or a bad id")
             subs[cid] = sid
         client.subs = subs
