@@ -1,22 +1,36 @@
 """Who may act: one pilot at a time, everyone else read-only, the pilot token.
 
 Every page that connects is a *client* (an integer id). At most one client is the pilot.
-Taking control needs the pilot token (random, printed at start-up, compared in constant
-time); when nobody flies, the right token makes its holder the pilot at once, otherwise
-the request waits for the present pilot to hand over explicitly (or to decline). A pilot
-whose page is gone (closed, or silent: :meth:`AccessControl.disconnect`) flies no more:
-the page that was waiting for its hand-over takes control at once, and any page with the
-right token may.
+Control passes only two ways:
 
-Wrong tokens are counted per page and per remote address, never for everyone, so no page
-can lock the pilot out:
+* **by the token while nobody flies**: the pilot token (random, printed at start-up,
+  compared in constant time, without the spaces around what the page sent) makes its
+  holder the pilot at once;
+* **by the pilot's hand-over**: while a pilot flies, the right token only asks it; the
+  request waits for the pilot to hand over (or decline) and lapses after
+  ``handover_timeout`` seconds, judged by the clock given (:meth:`AccessControl.expire`
+  tells the listeners; a lapsed request is never taken even before that).
+
+A pilot whose page is gone (closed, or silent: :meth:`AccessControl.disconnect`) flies no
+more, and a request made to it lapses with it: nobody takes control by waiting, so the
+pilot-gone failsafe always acts (the supervisor's), and the person with the token takes
+control back at once.
+
+Wrong tokens are counted per page and per remote address, never for everyone:
 
 * a page that sent ``max_failures`` wrong tokens within ``lockout`` seconds may not try
   again for ``lockout`` seconds (reloading gives a new page, hence the next rule);
 * once ``address_max_failures`` wrong tokens came from one address within ``lockout``
-  seconds, every page of that address that has sent a wrong token is locked out too;
-  a page of that address that has not yet failed still gets its attempt, so the pilot's
-  freshly loaded page is never refused for what another page on the same machine did.
+  seconds, no page of that address may try until ``lockout`` seconds later, a freshly
+  loaded one included (it is told how long): the address's budget of guesses survives new
+  pages. Attempts refused while locked are not counted, so the lock ends on time.
+
+The trade-off: a page on the pilot's machine (or, behind a reverse proxy, any page, since
+all have the proxy's address) that spends the address's budget keeps a *reloaded* page of
+the pilot from taking control until the lock ends; meanwhile the pilot-gone failsafe holds
+the robot. The pilot in control needs no token and is never affected, nor are other
+addresses. The random token makes guessing hopeless anyway; the budget matters for a short
+configured one.
 
 :data:`LOCAL` is the console process itself (command line, Ctrl-C, headless runs): it
 is always allowed. :class:`AccessControl` holds no other state than who is connected and
@@ -57,7 +71,7 @@ def actor_name(who: Actor) -> str:
 class AccessState:
     pilot: int | None
     clients: tuple[int, ...]
-    pending: int | None  # client asking the pilot for control
+    pending: int | None  # client asking the pilot for control (None once it lapsed)
 
 
 class _Failures:
@@ -93,6 +107,7 @@ class AccessControl:
         self._names: dict[int, str] = {}
         self._pilot: int | None = None
         self._pending: int | None = None
+        self._pending_since = 0.0  # when the pending request was made (the clock's time)
         self._page_failures: dict[int, _Failures] = {}
         self._address_failures: dict[str, _Failures] = {}
         self._listeners: list[Callable[[AccessState], None]] = []
@@ -108,7 +123,9 @@ class AccessControl:
 
     @property
     def pending(self) -> int | None:
-        return self._pending
+        """The client waiting for the pilot's hand-over (None: none, or its request lapsed)."""
+        with self._lock:
+            return None if self._lapsed() else self._pending
 
     @property
     def clients(self) -> tuple[int, ...]:
@@ -117,7 +134,7 @@ class AccessControl:
 
     def state(self) -> AccessState:
         with self._lock:
-            return AccessState(self._pilot, tuple(self._clients), self._pending)
+            return AccessState(self._pilot, tuple(self._clients), self.pending)
 
     def name(self, client: int) -> str:
         """The name page ``client`` chose ("" when none)."""
@@ -174,8 +191,7 @@ class AccessControl:
     def disconnect(self, client: int) -> bool:
         """Forget ``client`` (its page closed or went silent); True when it was the pilot.
 
-        The page that asked the gone pilot for control (with the right token) takes
-        control at once."""
+        A request for control made to the gone pilot lapses: nobody flies afterwards."""
         with self._lock:
             if client in self._clients:
                 self._clients.remove(client)
@@ -186,13 +202,37 @@ class AccessControl:
             if was_pilot:
                 self._pilot = None
                 log.warning("pilot (client %s) left", client)
-                if self._pending is not None and self._pending in self._clients:
-                    self._pilot = self._pending
-                    log.info("client %s, which asked for control, is the pilot", self._pilot)
-            if self._pending in (client, self._pilot):
+                if self._pending is not None:
+                    log.info("client %s's request for control lapsed with the pilot", self._pending)
+            if was_pilot or self._pending == client:
                 self._pending = None
         self._changed()
         return was_pilot
+
+    # ------------------------------------------------------------------ requests
+    def _lapsed(self) -> bool:
+        """(Under the lock.) Whether the pending request is older than ``handover_timeout``."""
+        return self._pending is not None and \
+            self._clock() - self._pending_since >= self.cfg.handover_timeout
+
+    def _lapse(self) -> int | None:
+        """(Under the lock.) Drop a lapsed request; the client whose request it was."""
+        if not self._lapsed():
+            return None
+        lapsed, self._pending = self._pending, None
+        log.info("client %s's request for control lapsed: not handed over within %g s", lapsed,
+                 self.cfg.handover_timeout)
+        return lapsed
+
+    def expire(self) -> int | None:
+        """Drop a request the pilot has not handed over within ``handover_timeout`` (the
+        listeners are told); the client whose request lapsed, else None. Call it often
+        (the supervisor does, every supervision period)."""
+        with self._lock:
+            lapsed = self._lapse()
+        if lapsed is not None:
+            self._changed()
+        return lapsed
 
     # ------------------------------------------------------------------ control
     def request_control(self, client: int, token: object) -> bool:
@@ -216,22 +256,19 @@ class AccessControl:
                     f"take control: too many wrong tokens from this page; its token entry is locked "
                     f"for another {page.locked_until - now:.0f} s"
                 )
-            if by_address is not None and now < by_address.locked_until and page.recent(now, window):
+            if by_address is not None and now < by_address.locked_until:
                 raise AccessDenied(
                     f"take control: too many wrong tokens from {address}; token entry is locked for "
-                    f"this page for another {by_address.locked_until - now:.0f} s"
+                    f"every page of that address for another {by_address.locked_until - now:.0f} s"
                 )
             if not isinstance(token, str) or len(token) > 1024 or not secrets.compare_digest(
                 token.strip().encode(), self._token.encode()
             ):
                 if page.add(now, window, self.cfg.max_failures):
                     log.warning("token entry locked for %.0f s for client %s after wrong tokens", window, client)
-                if by_address is not None:
-                    if now < by_address.locked_until:
-                        page.locked_until = max(page.locked_until, by_address.locked_until)
-                    elif by_address.add(now, window, self.cfg.address_max_failures):
-                        log.warning("token entry locked for %.0f s for the pages of %s that sent wrong "
-                                    "tokens", window, address)
+                if by_address is not None and by_address.add(now, window, self.cfg.address_max_failures):
+                    log.warning("token entry locked for %.0f s for every page of %s after wrong tokens",
+                                window, address)
                 self._prune(now, window)
                 raise AccessDenied("take control: wrong pilot token")
             page.times = []
@@ -242,6 +279,7 @@ class AccessControl:
                 log.info("client %s is the pilot", client)
             else:
                 self._pending = client
+                self._pending_since = now
                 granted = False
                 log.info("client %s asks client %s for control", client, self._pilot)
         self._changed()
@@ -253,19 +291,30 @@ class AccessControl:
             del self._address_failures[key]
 
     def hand_over(self, pilot: Actor, to: int) -> None:
-        """The pilot gives control to the client that asked for it."""
+        """The pilot gives control to the client that asked for it (within ``handover_timeout``)."""
         with self._lock:
+            before = (self._pilot, self._pending)
+            lapsed = self._lapse()
             if not (pilot == LOCAL or pilot == self._pilot):
-                raise AccessDenied(f"hand over: {actor_name(pilot)} is not the pilot")
-            if self._pending != to:
-                raise AccessDenied(f"hand over: client {to} has not asked for control with the token")
-            if to not in self._clients:
+                why = f"hand over: {actor_name(pilot)} is not the pilot"
+            elif lapsed == to:
+                why = (f"hand over: client {to}'s request lapsed after {self.cfg.handover_timeout:g} s; "
+                       "it may ask again")
+            elif self._pending != to:
+                why = f"hand over: client {to} has not asked for control with the token"
+            elif to not in self._clients:
                 self._pending = None
-                raise AccessDenied(f"hand over: client {to} has left")
-            self._pilot = to
-            self._pending = None
-            log.info("control handed over to client %s", to)
-        self._changed()
+                why = f"hand over: client {to} has left"
+            else:
+                self._pilot = to
+                self._pending = None
+                why = ""
+                log.info("control handed over to client %s", to)
+            changed = (self._pilot, self._pending) != before
+        if changed:
+            self._changed()
+        if why:
+            raise AccessDenied(why)
 
     def decline(self, pilot: Actor) -> None:
         with self._lock:
@@ -275,11 +324,12 @@ class AccessControl:
         self._changed()
 
     def release(self, client: Actor) -> None:
-        """The pilot gives up control (nobody flies afterwards)."""
+        """The pilot gives up control (nobody flies afterwards; a request made to it lapses)."""
         with self._lock:
             if client != self._pilot:
                 raise AccessDenied(f"release: {actor_name(client)} is not the pilot")
             self._pilot = None
+            self._pending = None
         self._changed()
 
     def _changed(self) -> None:

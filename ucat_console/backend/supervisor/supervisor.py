@@ -120,6 +120,8 @@ class Supervisor:
         self._secrets = [self.access.token, *secret_values(cfg)]
         redaction.keep_out_of_logs(self._secrets)
         self.safety = SafetyMonitor(cfg.failsafe)
+        for name in cfg.failsafe.warn_only():
+            log.warning("failsafe %s is set to warn: it will not act on the robot (failsafe.%s.action)", name, name)
         # the compiled solver first: a compile holds the interpreter for a minute or more,
         # which the drivers' heartbeat supervision would read as silent drives
         mine = (cfg.mpc.formulation,) if planner_ready is not None else None
@@ -308,6 +310,7 @@ class Supervisor:
         if isinstance(clock, PacedClock):
             self._lag = max(0.0, time.perf_counter() - clock.wall_deadline(now))
         self.commands.run_pending()
+        self._expire_request()
         for tr in self.safety.check(now):
             self._on_failsafe(tr)
         self.bursts.check(now)
@@ -425,21 +428,28 @@ class Supervisor:
     def client_disconnected(self, client: int, silent_for: float = 0.0) -> None:
         """A page is gone: its socket closed, or it has not answered for ``silent_for`` s.
 
-        When it was the pilot's, the pilot-gone failsafe counts from the page's last sign of
-        life (``silent_for`` s ago), unless the page that was waiting for a hand-over has
-        taken control."""
+        When it was the pilot's, nobody flies (a request made to it lapses) and the
+        pilot-gone failsafe counts from the page's last sign of life (``silent_for`` s ago)."""
         self.arm_requests.cancel(client)
+        asked = self.access.pending
         if not self.access.disconnect(client):
             return
-        successor = self.access.pilot
         how = (f"has not answered for {silent_for:.1f} s" if silent_for > 0 else "is gone")
         self._publish_event("access", "pilot_left", f"the pilot's page (client {client}) {how}",
                             "warning", {"client": client, "silent_for": silent_for})
-        if successor is None:
-            self.safety.pilot_left(now=max(self.loop.time - silent_for, 0.0))
-        else:
-            self._publish_event("access", "pilot", f"client {successor} took control (it had asked for it)",
-                                "info", {"client": successor})
+        self.safety.pilot_left(now=max(self.loop.time - silent_for, 0.0))
+        if asked is not None and asked != client:
+            self._publish_event("access", "request_lapsed",
+                                f"client {asked}'s request for control lapsed: the pilot's page is gone; "
+                                "the pilot token takes control at once", "info", {"client": asked})
+
+    def _expire_request(self) -> None:
+        """A request for control not handed over within ``access.handover_timeout`` lapses."""
+        lapsed = self.access.expire()
+        if lapsed is not None:
+            self._publish_event("access", "request_lapsed",
+                                f"client {lapsed}'s request for control lapsed: not handed over within "
+                                f"{self.cfg.access.handover_timeout:g} s", "info", {"client": lapsed})
 
     def take_control(self, client: int, token: object) -> bool:
         """True: ``client`` is the pilot now; False: waiting for the pilot's hand-over."""
