@@ -194,26 +194,6 @@ def test_a_pilot_that_stops_reading_trips_the_failsafe(console: Console) -> None
     page.close()
 
 
-def test_after_a_silent_pilot_the_token_gives_control_at_once_and_the_waiting_page_takes_over(
-        console: Console) -> None:
-    a, a_id = pilot_page(console)
-    b = console.page()
-    b_id = console.cid_of(b)
-    b.take_control(TOKEN)
-    wait_for(lambda: console.sup.access.pending == b_id, what="b asking a for control")
-    a.answer_heartbeats = False
-    wait_for(lambda: console.sup.access.pilot == b_id, timeout=PILOT_GONE + 20.0,
-             what="b taking control from the silent pilot")
-    assert console.event("access", "pilot") is not None
-    c = console.page()
-    b.answer_heartbeats = False
-    wait_for(lambda: console.sup.access.pilot is None, timeout=PILOT_GONE + 20.0, what="b gone")
-    c_id = console.cid_of(c)
-    c.take_control(TOKEN)  # nobody to ask: at once
-    wait_for(lambda: console.sup.access.pilot == c_id, what="c taking control")
-    c.close()
-
-
 def test_a_viewer_that_stops_answering_is_closed_too(guarded: Callable[..., Console]) -> None:
     c = guarded(page_timeout=1.0)
     try:

@@ -190,6 +190,8 @@ INSTALL = r"""
     }
     battery.textContent = s.battery;
     disarm.disabled = !(s.armed && s.you_pilot);
+    disarm.title = s.you_pilot ? "motors off now (key: Esc)"
+      : "only the pilot can disarm: enter the pilot token under Pilot to take control";
     bar.classList.toggle("light", !s.dark);
     theme.textContent = s.dark ? "☀ light" : "☾ dark";
   };

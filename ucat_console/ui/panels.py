@@ -334,7 +334,10 @@ class ControlPanel:
         if granted:
             self.show("control taken")
         else:
-            self.show(f"waiting for {actor_name(self.sup.access.pilot)} to hand over")  # type: ignore[arg-type]
+            pilot = actor_name(self.sup.access.pilot)  # type: ignore[arg-type]
+            self.show(f"{pilot} flies: asked it to hand over control; the request lapses after "
+                      f"{self.sup.cfg.access.handover_timeout:g} s. Once the pilot's page is gone, the token "
+                      "takes control at once")
 
     def _request_arm(self) -> None:
         nonce = self.sup.request_arm(self.cid)
