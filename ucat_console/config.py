@@ -87,6 +87,11 @@ class ConsoleConfig(Config):
         10.0, lo=1.0, hi=3600.0, unit="s",
         doc="a viewer's page that has not answered for this long is closed (the pilot's: failsafe.pilot_gone.timeout)",
     )
+    max_pages_per_address: int = param(
+        16, lo=1, hi=100_000,
+        doc="pages (websockets) one remote address may have open at once, this machine's too; another one "
+        "is closed as it opens, with the reason; behind a reverse proxy every page has the proxy's address",
+    )
     scene_rate: float = param(40.0, lo=1.0, hi=60.0, unit="Hz", doc="3-D view update rate")
     plot_rate: float = param(12.0, lo=1.0, hi=30.0, unit="Hz", doc="plot refresh rate")
     history: float = param(30.0, lo=5.0, hi=600.0, unit="s", doc="initial plot history window")

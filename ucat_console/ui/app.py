@@ -61,7 +61,7 @@ from ucat_console.telemetry.messages import FinPlan
 from ucat_console.ui import markdown, page_script, panels
 from ucat_console.ui import viser_compat
 from ucat_console.ui.compare_panel import ComparePanel
-from ucat_console.ui.guard import PageGuard
+from ucat_console.ui.guard import Burst, PageGuard
 from ucat_console.ui.metrics_panel import MetricsPanel, effects_markdown
 from ucat_console.ui.page_jobs import PageJobs
 from ucat_console.ui.playback import PlaybackPanel
@@ -104,6 +104,7 @@ class _Page:
         self.client = client
         self.dark = dark
         self.followed: tuple[float, float, float] | None = None
+        self.follow_failed = Burst()  # moves of its camera that failed
 
 
 class ConsoleApp:
@@ -147,7 +148,7 @@ class ConsoleApp:
             is_pilot=supervisor.access.is_pilot,
             pilot_timeout=lambda: supervisor.cfg.failsafe.pilot_gone.timeout,
             page_timeout=cfg.page_timeout, heartbeat_period=cfg.heartbeat_period,
-            allowed_origins=cfg.allowed_origins,
+            allowed_origins=cfg.allowed_origins, max_per_address=cfg.max_pages_per_address,
             on_connect=supervisor.client_connected,
             on_disconnect=supervisor.client_disconnected,
             on_gone=lambda cid, silent: supervisor.client_disconnected(cid, silent_for=silent),
@@ -188,6 +189,8 @@ class ConsoleApp:
             )
         # each page's review of recorded sessions goes here (its plots in this tab)
         self.review_plot_tab = self.plot_panel.add_tab("Review plots")
+        #: the shared containers the pages' own elements go into
+        self.shared_tabs = (self.tab_tuning, self.tab_session, self.tab_safety, self.tab_review, self.review_plot_tab)
         self.plot_panel.dock_left()
         self.plot_panel.set_width(PLOTS_WIDTH)
         self.scene = self.view.show()
@@ -256,13 +259,19 @@ class ConsoleApp:
 
     # ------------------------------------------------------------------ pages
     def _on_connect(self, client: viser.ClientHandle) -> None:
-        """A page has shown (its first camera report): its script, theme, controls and review."""
+        """A page has shown (its first camera report): its script, theme, controls and review.
+
+        A page may go at any moment of this: viser forgets it first (:meth:`page_present`),
+        then calls :meth:`_on_disconnect`, which waits for the build. So a page found gone
+        after its build was gone before :meth:`_on_disconnect` could see its panels: what
+        the build made is let go of here (:meth:`_let_go`)."""
         cid = client.client_id
         containers = {"tuning": self.tab_tuning, "session": self.tab_session, "safety": self.tab_safety}
         self.guard.send_first(cid, [viser_compat.run_javascript(page_script.INSTALL)])  # the bar first
         with self._build_lock:
-            if cid not in self.guard.clients:
+            if not self.page_present(cid):
                 return  # gone while waiting
+            review: PlaybackPanel | None = None
             # one atomic batch: the page gets its controls only with the guard's rules for
             # them, so nothing it sends at once is refused as "not an input of this page"
             try:
@@ -275,7 +284,10 @@ class ConsoleApp:
             except Exception:
                 if self.page_present(cid):
                     raise
+                panel = None
+            if panel is None or not self.page_present(cid):
                 log.info("page %s went while its controls were built", cid)
+                self._let_go(client, review)
                 return
             with self._lock:
                 self.panels[cid] = panel
@@ -340,15 +352,23 @@ class ConsoleApp:
 
     def _on_disconnect(self, client: viser.ClientHandle) -> None:
         cid = client.client_id
-        with self._build_lock:
+        with self._build_lock:  # after its build, if it is being built
             with self._lock:
                 self.panels.pop(cid, None)
                 self.pages.pop(cid, None)
             review = self.reviews.pop(cid, None)
-        self.jobs.forget(cid)
+        self._let_go(client, review)
+        log.info("page gone: client %s", cid)
+
+    def _let_go(self, client: Any, review: PlaybackPanel | None) -> None:
+        """Everything the console keeps of a page that has gone: its review, its jobs, the
+        guard's rules for its inputs, its elements in the shared tabs."""
+        cid = client.client_id
         if review is not None:
             review.stop(page_gone=True)
-        log.info("page gone: client %s", cid)
+        self.jobs.forget(cid)
+        self.guard.forget_page(cid)
+        viser_compat.release_page_elements(client, self.shared_tabs)
 
     def request_refresh(self) -> None:
         """Refresh every page's controls at the next UI tick (any thread)."""
@@ -431,7 +451,7 @@ class ConsoleApp:
         h = sup.health()
         _set(self.introspection, markdown.introspection_markdown(list(self._plans), h.late_plans,
                                                               h.plan_overruns, h.mode))
-        _set(self.failsafes, markdown.failsafe_markdown(sup.safety.states(), h.t))
+        _set(self.failsafes, self.failsafe_text(h.t))
         _set(self.journal, markdown.journal_markdown(sup.journal(12)))
         _set(self.effects, effects_markdown(sup.effects.entries(), sup.loop.time))
         with self._lock:
@@ -455,6 +475,15 @@ class ConsoleApp:
             except Exception:
                 log.debug("the status bar of client %s was not sent", cid, exc_info=True)
 
+    def failsafe_text(self, now: float) -> str:
+        """The Safety tab's text: the failsafes' table, and the protective ones set only to warn."""
+        text = markdown.failsafe_markdown(self.sup.safety.states(), now)
+        warn_only = self.sup.cfg.failsafe.warn_only()
+        if warn_only:
+            text += ("\n\n**Set to warn only** (they will not act on the robot): "
+                     + ", ".join(warn_only) + ".")
+        return text
+
     def _follow(self) -> None:
         """Move each following page's camera with the robot it shows (live or reviewed)."""
         with self._lock:
@@ -462,33 +491,38 @@ class ConsoleApp:
             ps = dict(self.panels)
         live = set(self.guard.clients)
         for cid, page in pages:
-            panel, review = ps.get(cid), self.reviews.get(cid)
-            if panel is None or not panel.follow.value or cid not in live:
+            try:
+                self._follow_page(page, ps.get(cid), self.reviews.get(cid), cid in live)
+            except Exception as e:  # this page's camera only: the others still follow
                 page.followed = None
-                continue
-            scene = review.view.scene if review is not None and review.player is not None else self.view.scene
-            p = scene.world_position() if scene is not None else None
-            if p is None:
-                continue
-            if page.followed is not None and math.dist(p, page.followed) < FOLLOW_STEP:
-                continue  # the camera moves in steps: each move costs the page a re-render
-            if page.followed is not None:
-                cam = page.client.camera  # keep the camera's offset from the robot, look at it
-                offset = tuple(float(a - b) for a, b in zip(cam.position, page.followed))
-                try:
-                    with page.client.atomic():
-                        cam.look_at = p
-                        cam.position = tuple(a + b for a, b in zip(p, offset))
-                except Exception:
-                    log.debug("moving the camera of client %s failed", cid, exc_info=True)
-            page.followed = p
+                more = page.follow_failed.note(time.monotonic())
+                if more is not None and self.page_present(cid):
+                    log.warning("the camera of page %s did not follow the robot: %s: %s%s", cid,
+                                type(e).__name__, e, f" ({more} more since the last line)" if more else "")
+
+    def _follow_page(self, page: _Page, panel: panels.ControlPanel | None, review: PlaybackPanel | None,
+                     live: bool) -> None:
+        if panel is None or not panel.follow.value or not live:
+            page.followed = None
+            return
+        scene = review.view.scene if review is not None and review.player is not None else self.view.scene
+        p = scene.world_position() if scene is not None else None
+        if p is None:
+            return
+        if page.followed is not None and math.dist(p, page.followed) < FOLLOW_STEP:
+            return  # the camera moves in steps: each move costs the page a re-render
+        if page.followed is not None:
+            cam = page.client.camera  # keep the camera's offset from the robot, look at it
+            offset = tuple(float(a - b) for a, b in zip(cam.position, page.followed, strict=True))
+            with page.client.atomic():
+                cam.look_at = p
+                cam.position = tuple(a + b for a, b in zip(p, offset))
+        page.followed = p
 
     def _refresh_panels(self) -> None:
         live = set(self.guard.clients)
         with self._lock:
-            for cid in [c for c in self.panels if c not in live]:
-                del self.panels[cid]  # a page that went while its panel was being built
-            ps = list(self.panels.values())
+            ps = [p for cid, p in self.panels.items() if cid in live]
         for p in ps:
             try:
                 p.refresh()

@@ -57,6 +57,7 @@ from dataclasses import dataclass
 from typing import Any, Callable, Iterable
 from urllib.parse import urlsplit
 
+import msgspec
 import viser
 
 from ucat_console.ui import viser_compat
@@ -92,7 +93,153 @@ MAX_TEXT = 4096
 MESSAGE_RATE = 120.0
 HEARTBEAT_KEY = "ucat-console-heartbeat"
 _HB_PREFIX = "ucat-hb-"
-_LOG_EVERY = 10.0  # s between log lines for repeated refusals of one page
+_LOG_EVERY = 10.0  # s between log lines for repeated refusals (of one page, of connections)
+
+
+class Burst:
+    """One log line per burst of a repeated event: the first at once, then at most one every
+    ``every`` s, saying how many came since the last line."""
+
+    def __init__(self, every: float = _LOG_EVERY) -> None:
+        self.every = every
+        self.count = 0  # events so far
+        self._last = -math.inf
+        self._unlogged = 0
+
+    def note(self, now: float) -> int | None:
+        """Count one event at ``now``: None when no line is due, else the number of events not
+        logged since the last line (0 for the first of a burst)."""
+        self.count += 1
+        if now - self._last < self.every:
+            self._unlogged += 1
+            return None
+        more, self._unlogged, self._last = self._unlogged, 0, now
+        return more
+
+
+def _since(more: int) -> str:
+    return f" ({more} more since the last line)" if more else ""
+
+
+# ---------------------------------------------------------------------- message fields
+#: the farthest a page's camera may be, or look at, from the origin, and its far plane (m)
+MAX_DISTANCE = 1e6
+#: the largest canvas a page may report (pixels a side)
+MAX_PIXELS = 1 << 16
+#: the longest id a page may name (an element's, a command's, a request's; characters)
+MAX_ID = 100
+#: how far from 1 the length of a page's camera orientation and up direction may be
+UNIT_TOLERANCE = 0.01
+
+_Check = Callable[[Any], "str | None"]
+
+
+def _is_number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _number(lo: float, hi: float, *, lo_open: bool = False, hi_open: bool = False, unit: str = "") -> _Check:
+    def check(v: Any) -> str | None:
+        if not _is_number(v):
+            return f"expected a number, got {type(v).__name__}"
+        if not math.isfinite(v):
+            return "not a finite number"
+        if v < lo or v > hi or (lo_open and v == lo) or (hi_open and v == hi):
+            return (f"{v!r}{unit} outside {'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
+                    f"{unit}")
+        return None
+    return check
+
+
+def _integer(lo: int, hi: int) -> _Check:
+    def check(v: Any) -> str | None:
+        if not isinstance(v, int) or isinstance(v, bool):
+            return f"expected a whole number, got {type(v).__name__}"
+        return None if lo <= v <= hi else f"{v} outside [{lo}, {hi}]"
+    return check
+
+
+def _vector(n: int, bound: float = MAX_DISTANCE, *, unit: bool = False) -> _Check:
+    """``n`` finite numbers, each within ``bound``; with ``unit`` of length 1 (UNIT_TOLERANCE)."""
+    def check(v: Any) -> str | None:
+        if not isinstance(v, (list, tuple)) or len(v) != n:
+            return f"expected {n} numbers, got {_short(repr(v), 40)}"
+        for x in v:
+            if not _is_number(x):
+                return f"expected {n} numbers, got a {type(x).__name__}"
+            if not math.isfinite(x):
+                return "not finite numbers"
+            if abs(x) > bound:
+                return f"{x:g} beyond {bound:g}"
+        if unit and abs(math.sqrt(sum(float(x) * x for x in v)) - 1.0) > UNIT_TOLERANCE:
+            return "not of length 1"
+        return None
+    return check
+
+
+def _text(max_len: int, *, optional: bool = False) -> _Check:
+    def check(v: Any) -> str | None:
+        if v is None and optional:
+            return None
+        if not isinstance(v, str):
+            return f"expected text, got {type(v).__name__}"
+        return None if len(v) <= max_len else f"text of {len(v)} characters, over the limit of {max_len}"
+    return check
+
+
+def _mapping(v: Any) -> str | None:
+    if not isinstance(v, dict) or not all(isinstance(k, str) for k in v):
+        return f"expected a map of names, got {type(v).__name__}"
+    return None
+
+
+#: every message type a page may send, and the check of each of its fields (viser's
+#: client -> server messages the console takes, ``viser._messages``; what the page's
+#: script sends, a browser's numbers as msgpack has them: a whole number as an integer)
+FIELDS: dict[str, dict[str, _Check]] = {
+    "ViewerCameraMessage": {
+        "wxyz": _vector(4, 1.0 + UNIT_TOLERANCE, unit=True),
+        "position": _vector(3),
+        "look_at": _vector(3),
+        "up_direction": _vector(3, 1.0 + UNIT_TOLERANCE, unit=True),
+        "fov": _number(0.0, math.pi, lo_open=True, hi_open=True, unit=" rad"),
+        "near": _number(0.0, MAX_DISTANCE, lo_open=True, unit=" m"),
+        "far": _number(0.0, MAX_DISTANCE, lo_open=True, unit=" m"),
+        "image_height": _integer(0, MAX_PIXELS),
+        "image_width": _integer(0, MAX_PIXELS),
+    },
+    "GuiUpdateMessage": {"uuid": _text(MAX_ID), "updates": _mapping},  # the value: by its input's rule
+    "CommandTriggerMessage": {"uuid": _text(MAX_ID)},
+    "LocalStorageGetItemResponseMessage": {
+        "value": _text(MAX_TEXT, optional=True),
+        "error": _text(MAX_TEXT, optional=True),
+        "request_uuid": _text(MAX_ID),
+    },
+}
+
+
+def field_problem(fields: Any) -> str | None:
+    """Why a page's decoded message (its msgpack map, as sent) is not one the console takes:
+    a type not in :data:`FIELDS`, a field missing or unknown, or a field of the wrong type,
+    not finite or out of its range; None when every field is fine."""
+    if not isinstance(fields, dict):
+        return f"not a message (a {type(fields).__name__}, not a map)"
+    name = fields.get("type")
+    checks = FIELDS.get(name) if isinstance(name, str) else None
+    if checks is None:
+        return f"a {_short(name)}, which the console does not take"
+    missing = [k for k in checks if k not in fields]
+    extra = [str(k) for k in fields if k != "type" and k not in checks]
+    if missing or extra:
+        return f"a {name} with {_short(', '.join(missing + extra))} " + \
+            ("missing" if not extra else "unknown" if not missing else "missing or unknown")
+    for key, check in checks.items():
+        bad = check(fields[key])
+        if bad is not None:
+            return f"a {name}: {key}: {bad}"
+    if name == "ViewerCameraMessage" and fields["far"] <= fields["near"]:
+        return f"a {name} whose far plane is not beyond its near plane"
+    return None
 
 
 # ---------------------------------------------------------------------- handshake
@@ -192,9 +339,7 @@ class _Page:
         self.gone = False
         self.tokens = 2 * MESSAGE_RATE
         self.refill = now
-        self.refused = 0
-        self.last_log = -math.inf
-        self.unlogged = 0
+        self.refused = Burst()  # its refused messages
         self.link = PageLink(now)  # touched in the server's event-loop thread only
         self.room: asyncio.Event | None = None  # set when the page answers (event-loop thread)
 
@@ -206,7 +351,8 @@ class PageGuard:
 
     ``is_pilot(client)``: whether a page is the pilot's now; ``pilot_timeout()``: the
     pilot's allowed silence (s); ``on_connect(client, address)`` / ``on_gone(client,
-    silent_for)``: called when a websocket opens and when a silent page is declared gone.
+    silent_for)``: called when a websocket opens and when a silent page is declared gone;
+    ``max_per_address``: the websockets one remote address may have open at once (None: any).
     """
 
     max_frame = MAX_FRAME
@@ -219,6 +365,7 @@ class PageGuard:
         page_timeout: float,
         heartbeat_period: float,
         allowed_origins: Iterable[str] = (),
+        max_per_address: int | None = None,
         on_connect: Callable[[int, str], None] = lambda c, a: None,
         on_disconnect: Callable[[int], None] = lambda c: None,
         on_gone: Callable[[int, float], None] = lambda c, s: None,
@@ -229,6 +376,7 @@ class PageGuard:
         self.page_timeout = float(page_timeout)
         self.heartbeat_period = float(heartbeat_period)
         self.allowed_origins = tuple(allowed_origins)
+        self.max_per_address = max_per_address
         self.on_connect = on_connect
         self.on_disconnect = on_disconnect
         self.on_gone = on_gone
@@ -239,6 +387,10 @@ class PageGuard:
         self._inputs: dict[str, InputRule] = {}
         self._commands: dict[str, InputRule] = {}
         self._origin_logged: dict[str, float] = {}
+        self._per_address: collections.Counter[str] = collections.Counter()  # open websockets (event loop)
+        self._over_cap = Burst()  # websockets closed at once: over the cap of their address
+        self._accept_failed = Burst()  # connections the server could not accept (out of file handles)
+        self._strangers = Burst()  # messages from a socket that is not a page
         self.refusals: collections.deque[tuple[int | None, str]] = collections.deque(maxlen=1000)
         self.server: viser.ViserServer | None = None
         self.loop: asyncio.AbstractEventLoop | None = None  # the pages' event loop (viser's)
@@ -264,7 +416,9 @@ class PageGuard:
         self.server = server
         viser_compat.on_socket_open(server, self._opened)
         viser_compat.on_socket_close(server, self._closed)
-        self.start(viser_compat.event_loop(server))
+        loop = viser_compat.event_loop(server)
+        loop.set_exception_handler(self._loop_exception)
+        self.start(loop)
         return server
 
     def start(self, loop: asyncio.AbstractEventLoop | None) -> None:
@@ -289,6 +443,8 @@ class PageGuard:
             return None
         now = self.clock()
         if now - self._origin_logged.get(origin, -math.inf) >= 60.0:
+            for o in [o for o, t in self._origin_logged.items() if now - t >= 60.0]:
+                del self._origin_logged[o]  # a line a minute per origin: older ones are done with
             self._origin_logged[origin] = now
             log.warning("refused a websocket from Origin %r (remote %s): not the console's own origin; "
                         "add it to console.allowed_origins if it is a reverse proxy in front of the console",
@@ -297,6 +453,51 @@ class PageGuard:
         return connection.respond(403, "Forbidden: this page's origin may not connect to the console\n")
 
     # ------------------------------------------------------------------ connections (event loop)
+    def connection_refusal(self, ws_conn: Any) -> str | None:
+        """(Event loop, a websocket just opened, before viser sees it.) The reason to close it
+        at once (its address has ``max_per_address`` open already), else None: it is counted
+        until :meth:`connection_closed`. Refusals are logged once per burst, with a count."""
+        address = _address(ws_conn)
+        if self.max_per_address is None or self._per_address[address] < self.max_per_address:
+            self._per_address[address] += 1
+            return None
+        more = self._over_cap.note(self.clock())
+        if more is not None:
+            log.warning("refused a page from %s: it has %d open, the most one address may have "
+                        "(console.max_pages_per_address)%s", address or "?", self.max_per_address, _since(more))
+        self.refusals.append((None, f"over the cap of {self.max_per_address} pages from {address}"))
+        return f"too many pages from this address (at most {self.max_per_address}: console.max_pages_per_address)"
+
+    def connection_closed(self, ws_conn: Any) -> None:
+        """(Event loop.) A websocket :meth:`connection_refusal` let through has closed."""
+        address = _address(ws_conn)
+        self._per_address[address] -= 1
+        if self._per_address[address] <= 0:
+            del self._per_address[address]
+
+    @property
+    def refused_connections(self) -> int:
+        """Websockets closed at once, over the cap of their address."""
+        return self._over_cap.count
+
+    @property
+    def failed_accepts(self) -> int:
+        """Connections the server could not accept (out of file handles, of memory)."""
+        return self._accept_failed.count
+
+    def _loop_exception(self, loop: asyncio.AbstractEventLoop, context: dict[str, Any]) -> None:
+        """The pages' event loop's exception handler: a connection the server could not accept
+        (asyncio's "socket.accept() out of system resource": no file handle left) is one log
+        line per burst, with a count, not a traceback each; anything else goes to asyncio."""
+        exc = context.get("exception")
+        if isinstance(exc, OSError) and str(context.get("message", "")).startswith("socket.accept()"):
+            more = self._accept_failed.note(self.clock())
+            if more is not None:
+                log.error("the console could not accept a connection: %s (the process is out of file handles "
+                          "or memory; new pages wait until some close)%s", exc.strerror or exc, _since(more))
+            return
+        loop.default_exception_handler(context)
+
     def _opened(self, conn: Any) -> None:
         cid = int(conn.client_id)
         ws_conn = viser_compat.page_socket(self.server, cid) if self.server else None
@@ -322,9 +523,7 @@ class PageGuard:
             page = self._pages.pop(cid, None)
             if page is not None and page.ws is not None:
                 self._by_ws.pop(page.ws, None)
-            for table in (self._inputs, self._commands):
-                for key in [k for k, r in table.items() if r.client == cid]:
-                    del table[key]
+        self.forget_page(cid)
         try:
             self.on_disconnect(cid)
         except Exception:
@@ -333,6 +532,12 @@ class PageGuard:
     def client_of(self, ws_conn: Any) -> int | None:
         with self._lock:
             return self._by_ws.get(ws_conn)
+
+    @property
+    def rules(self) -> int:
+        """Inputs and commands registered for the pages (:meth:`allow`, :meth:`allow_command`)."""
+        with self._lock:
+            return len(self._inputs) + len(self._commands)
 
     @property
     def clients(self) -> tuple[int, ...]:
@@ -362,7 +567,8 @@ class PageGuard:
         rule = InputRule(client, pilot_only, value_check(handle, max_len),
                          name or getattr(handle, "label", "") or type(handle).__name__, handle, urgent)
         with self._lock:
-            self._inputs[viser_compat.handle_uuid(handle)] = rule
+            if client in self._pages:  # a page that has gone keeps no rule
+                self._inputs[viser_compat.handle_uuid(handle)] = rule
 
     def allow_command(self, handle: Any, client: int, *, pilot_only: bool, name: str = "",
                       urgent: Callable[[], None] | None = None) -> None:
@@ -370,16 +576,47 @@ class PageGuard:
         rule = InputRule(client, pilot_only, lambda v: None, name or getattr(handle, "name", "command"),
                          urgent=urgent)
         with self._lock:
-            self._commands[viser_compat.handle_uuid(handle)] = rule
+            if client in self._pages:
+                self._commands[viser_compat.handle_uuid(handle)] = rule
 
     def forget(self, handle: Any) -> None:
         with self._lock:
             self._inputs.pop(viser_compat.handle_uuid(handle), None)
             self._commands.pop(viser_compat.handle_uuid(handle), None)
 
+    def forget_page(self, client: int) -> None:
+        """Drop every rule of page ``client`` (it has gone)."""
+        with self._lock:
+            for table in (self._inputs, self._commands):
+                for key in [k for k, r in table.items() if r.client == client]:
+                    del table[key]
+
     # ------------------------------------------------------------------ incoming (event loop)
+    def decode(self, client: int | None, raw: Any, deserialize: Callable[[bytes], Any]) -> Any:
+        """The message in frame ``raw`` from page ``client`` as viser's ``deserialize`` makes
+        it, or None (refused, with its reason): a binary frame holding a msgpack map whose
+        type and every field pass :func:`field_problem` before viser reads it."""
+        if not isinstance(raw, bytes):
+            self.refuse(client, "a text frame (the console speaks binary messages only)")
+            return None
+        try:
+            fields = msgspec.msgpack.decode(raw)
+        except Exception as e:  # not msgpack
+            self.refuse(client, f"an undecodable message ({type(e).__name__})")
+            return None
+        why = field_problem(fields)
+        if why is not None:
+            self.refuse(client, why)
+            return None
+        try:
+            return deserialize(raw)
+        except Exception as e:  # fields viser reads otherwise than checked here
+            self.refuse(client, f"an undecodable {fields['type']} ({type(e).__name__})")
+            return None
+
     def admit(self, client: int | None, message: Any) -> bool:
-        """Whether viser may act on ``message`` from page ``client`` (module docstring)."""
+        """Whether viser may act on ``message`` (:meth:`decode`'s) from page ``client``
+        (module docstring)."""
         with self._lock:
             page = self._pages.get(client) if client is not None else None
             if page is None:
@@ -410,11 +647,8 @@ class PageGuard:
         if tp is ViewerCameraMessage:
             return None
         if tp is LocalStorageGetItemResponseMessage:
-            if _heartbeat_seq(message.request_uuid) is not None:
-                return "an answer to no heartbeat request of the console"
-            value = message.value
-            return None if value is None or (isinstance(value, str) and len(value) <= MAX_TEXT) else \
-                "a stored value over the size limit"
+            return None if _heartbeat_seq(message.request_uuid) is None else \
+                "an answer to no heartbeat request of the console"
         if tp is GuiUpdateMessage:
             rule = self._inputs.get(message.uuid) if isinstance(message.uuid, str) else None
             if rule is None:
@@ -473,25 +707,15 @@ class PageGuard:
             self.urgent_runs += 1
 
     def refuse(self, client: int | None, why: str) -> None:
-        """Count and log (at most once per page every few seconds) a refused message."""
+        """Count and log (one line per burst of a page's refusals) a refused message."""
         if why == "heartbeat":
             return
         self.refusals.append((client, why))
         with self._lock:
             page = self._pages.get(client) if client is not None else None
-            if page is None:
-                first = True
-            else:
-                page.refused += 1
-                now = self.clock()
-                first = now - page.last_log >= _LOG_EVERY
-                if first:
-                    more, page.unlogged, page.last_log = page.unlogged, 0, now
-                else:
-                    page.unlogged += 1
-        if first:
-            extra = f" ({more} more refused since the last line)" if page is not None and more else ""
-            log.warning("refused from page %s: %s%s", client, why, extra)
+            more = (page.refused if page is not None else self._strangers).note(self.clock())
+        if more is not None:
+            log.warning("refused from page %s: %s%s", client, why, _since(more))
 
     # ------------------------------------------------------------------ liveness (own thread)
     def silence_limit(self, client: int) -> float:

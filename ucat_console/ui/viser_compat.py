@@ -116,9 +116,19 @@ def install() -> None:
                     return refusal
             return http(connection, request) if http is not None else None
 
+        async def guarded_handler(connection: Any) -> None:
+            refusal = guard.connection_refusal(connection)
+            if refusal is not None:  # before viser makes anything of the connection
+                await connection.close(CloseCode.TRY_AGAIN_LATER, refusal)
+                return
+            try:
+                await handler(connection)
+            finally:
+                guard.connection_closed(connection)
+
         kwargs["process_request"] = process_request
         kwargs["max_size"] = guard.max_frame
-        serving = real_serve(handler, host, port, **kwargs)
+        serving = real_serve(guarded_handler, host, port, **kwargs)
         _GUARDS[serving.server] = guard
         return serving
 
@@ -135,15 +145,8 @@ def install() -> None:
                                  f"a frame over the limit of {guard.max_frame} bytes: its socket is closed")
                 raise
             client = guard.client_of(websocket)
-            if not isinstance(raw, bytes):
-                guard.refuse(client, "a text frame (the console speaks binary messages only)")
-                continue
-            try:
-                message = message_class.deserialize(raw)
-            except Exception as e:  # not a viser message
-                guard.refuse(client, f"an undecodable message ({type(e).__name__})")
-                continue
-            if guard.admit(client, message) and not guard.take_urgent(client, message):
+            message = guard.decode(client, raw, message_class.deserialize)
+            if message is not None and guard.admit(client, message) and not guard.take_urgent(client, message):
                 handle_message(message)
 
     server_ns = types.SimpleNamespace(**{k: getattr(real_ws.asyncio.server, k)
@@ -386,6 +389,25 @@ def on_socket_open(server: viser.ViserServer, callback: Any) -> None:
 
 def on_socket_close(server: viser.ViserServer, callback: Any) -> None:
     server._websock_server.on_client_disconnect(callback)
+
+
+def release_page_elements(client: Any, containers: Sequence[Any]) -> None:
+    """Unhook a gone page's elements from the shared ``containers`` they were added to (its
+    controls in the shared tabs), so that nothing of the page stays: viser does it when the
+    page disconnects (``_release_cross_scope_nesting``, from its record of such elements),
+    but not for the elements of a page built while it went, and it misses an element it
+    unhooks while the element is being made (a folder adds itself to its container a second
+    time at the end of its constructor): such an element, and the page's handle with it,
+    would stay in the shared tab for as long as the console runs. viser has no public call
+    for it (``gui.reset()`` removes only what sits in the page's own root), hence its
+    record and the containers' ``_children``. Nothing is sent."""
+    gui = client.gui
+    gui._release_cross_scope_nesting()
+    for container in containers:
+        for uuid, handle in list(container._children.items()):
+            if getattr(getattr(handle, "_impl", None), "gui_api", None) is gui:
+                gui._tombstone_subtree(handle)
+                container._children.pop(uuid, None)
 
 
 def page_socket(server: viser.ViserServer, client_id: int) -> Any:
