@@ -241,9 +241,9 @@ def _check_depth(lim: np.ndarray, st: np.ndarray, row: np.ndarray, t: float) -> 
 
 @njit(cache=True)
 def _check_imu(lim: np.ndarray, st: np.ndarray, row: np.ndarray, t: float) -> int:
-    for i in range(6):
-        if not math.isfinite(row[rr.IMU_ACCEL + i]):
-            return OK
+    for i in range(3):
+        if not (math.isfinite(row[rr.IMU_ACCEL + i]) and math.isfinite(row[rr.IMU_GYRO + i])):
+            return OK  # the arming gate's
     for i in range(3):
         if abs(row[rr.IMU_ACCEL + i]) > lim[L_ACCEL]:
             return _drop(st, IMU, t, ACCEL, row[rr.IMU_ACCEL + i], i)

@@ -21,9 +21,8 @@ when it ends) and never turned into a depth. A current within those but at or be
 4 mA or above 20 mA is outside the transducer's span (saturated,
 ``plausibility.loop_current_problem``): it is dropped too, counted and reported as
 ``implausible`` (``plausibility.DropCounter``: with the count, at once and then once a
-second), and never zeroed on. Other
-Events (source ``"pressure"``): ``malformed_line``, ``overlong_line``, ``silence``,
-``port_error``, ``reconnected``, ``zeroed``.
+second), and never zeroed on. Other Events (source ``"pressure"``): ``malformed_line``,
+``overlong_line``, ``silence``, ``port_error``, ``reconnected``, ``zeroed``.
 """
 
 from __future__ import annotations
