@@ -1,6 +1,6 @@
 """``ucat-console bench tracking``: does the robot go where it is sent, in every mode?
 
-Manoeuvres on the simulated U-CAT (the ``strouhal_wake`` plant, the configuration given,
+Manoeuvres on the simulated U-CAT (the default plate plant, the configuration given,
 the shipped ``sim-tuned`` by default: what ``scripts/run.sh`` starts the console with), each
 run headless in every fin controller (:data:`MODES`: the baseline, the MPC, the MPC with the
 rear pair synchronised, and the MPC's closed-stroke formulation):
@@ -130,7 +130,7 @@ def run_manoeuvre(app: Any, mode: str, formulation: str, m: Manoeuvre, seed: int
 
     cfg = app.loop.replace(mode=mode, planner_seed=seed, mpc=app.mpc.replace(formulation=formulation))
     z0 = m.depth if m.start_depth is None else m.start_depth
-    io = SimRobotIO(plant_config("strouhal_wake", seed, m.current), depth=z0, velocity=m.start_velocity)
+    io = SimRobotIO(plant_config(DEFAULT_PLANT, seed, m.current), depth=z0, velocity=m.start_velocity)
     io.plant.reset(position_ned=(0.0, 0.0, z0), body_velocity=(m.start_velocity, 0.0, 0.0, 0.0, 0.0, 0.0),
                    fin_angles=(START_FIN_ANGLE,) * 4, seed=seed)
     stream = TelemetryStream(validate=False)

@@ -1,9 +1,10 @@
 """E7: does St-awareness save energy on a plant whose efficiency depends on the flow?
 
 Declared before it was run (docs/experiments/e7-declaration.md, which prints the plants'
-hash, :func:`~ucat_console.experiments.foil_curves.plant_hash`). Plants: the foil family
-(``foil_inflow`` over the profile drag C_D0, :data:`~ucat_console.experiments.foil_curves.E7_FOIL_CD0`)
-and the null plant (the soft fin's quasi-steady model, whose force ignores the flow).
+hash, :func:`~ucat_console.experiments.efficiency_curves.plant_hash`). Plants: the plate
+over the profile drag C_D0 (:data:`~ucat_console.experiments.efficiency_curves.E7_CD0`) and
+the null plant (``still_water``: the plate as if in still water, the thrust's work paid
+through the shaft, so that how a force is made costs the same at any St).
 Every run starts from rest, with the shipped sim-tuned's MPC weights and body layer.
 
 Controllers (:data:`E7_CONTROLLERS`):
@@ -37,7 +38,7 @@ import numpy as np
 from ucat_console.control.params import BaselineConfig
 from ucat_console.experiments.closed_loop_runs import _label, e4_timing, e4r_settings, identify_plant
 from ucat_console.experiments.distributed import run_all
-from ucat_console.experiments.foil_curves import (
+from ucat_console.experiments.efficiency_curves import (
     CORRIDOR,
     E7_SPEEDS,
     NULL_PLANT,
@@ -65,7 +66,7 @@ def e7_design(quick: bool, seed: int, n_seeds: int | None = None) -> dict[str, A
     if n_seeds is not None and not 1 <= n_seeds <= E7_SEEDS:
         raise ValueError(f"--seeds: {n_seeds} is not in 1..{E7_SEEDS}")
     if quick:
-        return {"plants": ["foil_cd0.1", NULL_PLANT], "speeds": [0.2], "seeds": [seed, seed + 1],
+        return {"plants": ["plate_cd0.1", NULL_PLANT], "speeds": [0.2], "seeds": [seed, seed + 1],
                 "frequencies": [1.0, 2.0], "held_out": HELD_OUT_SEED + seed}
     n = E7_SEEDS if n_seeds is None else n_seeds
     return {"plants": e7_plants(), "speeds": list(E7_SPEEDS), "seeds": [seed + k for k in range(n)],
@@ -149,16 +150,16 @@ def decisions(comparisons: list[dict[str, Any]], peaks: dict[tuple[str, float], 
                       "comparable": bool(c["comparable"] and b["comparable"]), "pays": pays,
                       "peak_st": peaks.get(key, math.nan),
                       "peak_in_corridor": bool(CORRIDOR[0] <= peaks.get(key, math.nan) <= CORRIDOR[1])})
-    foil = [c for c in cases if c["plant"] != NULL_PLANT]
-    comp = [c for c in foil if not math.isnan(c["st_saving"])]
+    flow = [c for c in cases if c["plant"] != NULL_PLANT]
+    comp = [c for c in flow if not math.isnan(c["st_saving"])]
     inside = [c["st_saving"] for c in comp if c["peak_in_corridor"]]
     outside = [c["st_saving"] for c in comp if not c["peak_in_corridor"]]
     null = [c for c in cases if c["plant"] == NULL_PLANT]
     null_ok = [c for c in null if not math.isnan(c["st_saving"])]
-    rule1 = sum(c["pays"] for c in foil)
+    rule1 = sum(c["pays"] for c in flow)
     return {
         "cases": cases,
-        "rule1": {"pays_in": rule1, "foil_cases": len(foil), "comparable": len(comp),
+        "rule1": {"pays_in": rule1, "flow_cases": len(flow), "comparable": len(comp),
                   "verdict": bool(comp and rule1 * 2 > len(comp))},
         "rule2": {"inside_mean": float(np.mean(inside)) if inside else math.nan, "inside_n": len(inside),
                   "outside_mean": float(np.mean(outside)) if outside else math.nan, "outside_n": len(outside),
@@ -248,8 +249,8 @@ def findings(res: dict[str, Any]) -> list[str]:
         out.append(f"Reduced design as declared: seeds {', '.join(str(s) for s in p['seeds'])} of the 10.")
     out.append(f"Rule 1 (St-awareness pays: closed-stroke MPC >= {p['st_pays_pct']:g} % below its no-St ablation, "
                f"interval above zero, and below the best-tuned baseline, interval above zero): holds in "
-               f"{r1['pays_in']} of {r1['foil_cases']} foil cases ({r1['comparable']} comparable): "
-               + ("St-awareness pays." if r1["verdict"] else "St-awareness does not pay (not in a majority of the comparable foil cases)."))
+               f"{r1['pays_in']} of {r1['flow_cases']} plate cases ({r1['comparable']} comparable): "
+               + ("St-awareness pays." if r1["verdict"] else "St-awareness does not pay (not in a majority of the comparable plate cases)."))
     if r2["inside_n"] and r2["outside_n"]:
         out.append(f"Rule 2 (larger saving where the plant's peak lies in the corridor): mean St-term saving "
                    f"{r2['inside_mean']:.1f} % in {r2['inside_n']} cases with the peak inside, "

@@ -152,11 +152,11 @@ def e6_figure(res: dict[str, Any], out: Path) -> str:
     its identified model (solid) and eq 19 with the identified C_D (dotted), comparable
     cases only; savings below the axis are drawn on it (with their value)."""
     fig, axes = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
-    gains = {d["plant"]: d["thrust_gain"] for d in res["identified"]}
-    wakes = {d["plant"]: d["wake"] for d in res["identified"]}
+    gains = {d["plant"]: d["scale"] for d in res["identified"]}
+    wakes = {d["plant"]: d["model"] for d in res["identified"]}
     lo = -100.0
     colours = ("tab:blue", "tab:orange", "tab:green", "tab:red")
-    for ax, wake in zip(axes, ("strouhal_wake", "quasi_steady")):
+    for ax, wake in zip(axes, ("plate", "still_water")):
         for ctrl, style in (("mpc_closed_id", "o-"), ("baseline_id", "^:")):
             for v, colour in zip(res["protocol"]["speeds"], colours):
                 rows = sorted((r for r in res["rows"] if r["controller"] == ctrl and r["v_ref"] == v

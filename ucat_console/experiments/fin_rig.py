@@ -1,8 +1,8 @@
 """One fin of the plant beating at a held hull speed: what its strokes and cycles make and cost.
 
-The open-loop view of the plant the foil experiment (E7) declares before it runs: a fin
+The open-loop view of the plant the efficiency experiment (E7) declares before it runs: a fin
 driven through the plant's own servo profile (``robot.servo``) and hydrodynamics
-(``fin_hydro``, ``foil``), the hull held at a surge speed through the water, with no body
+(``plate``), the hull held at a surge speed through the water, with no body
 dynamics. :func:`stroke` runs one stroke from rest to rest; :func:`cycle` runs symmetric
 stroke pairs about a centre until they repeat and measures the last ones. Both return the
 mean fin-frame force (N), the mean true shaft power (W, no regeneration) and the duration
@@ -17,17 +17,9 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ucat_console.backend.sim.fin_hydro import (
-    H_COS_A,
-    H_FOIL,
-    H_TAU,
-    drag_torque_coefficient,
-    fin_force,
-    fin_strouhal,
-    hydro_params,
-)
-from ucat_console.backend.sim.foil import P_ON, foil_fin
+from ucat_console.backend.sim.fin_hydro import H_COS_A, H_PLATE, hydro_params
 from ucat_console.backend.sim.params import PlantConfig
+from ucat_console.backend.sim.plate import fin_load
 from ucat_console.control.stroke_timing import mean_rate_limit, profile_velocity
 from ucat_console.robot.servo import servo_step
 
@@ -52,33 +44,21 @@ def _run(ph, acc, vmax, inertia, dt, surge, start, targets, vel, n_skip, max_ste
     stroke after the first ``n_skip``. Returns (fx, fy, energy, time) sums."""
     theta = start
     omega = 0.0
-    theta_start = start
-    rate_mean = 0.0
-    k_rate = dt / ph[H_TAU]
-    k_drag = drag_torque_coefficient(ph)
-    foil_on = ph[H_FOIL + P_ON] > 0.5
+    pf = ph[H_PLATE:]
     flow = surge * ph[H_COS_A]
     sx = sy = se = st_time = 0.0
     k = 0
     steps = 0
     while k < targets.shape[0] and steps < max_steps:
         steps += 1
-        th, om, al = servo_step(theta, omega, targets[k], vel, acc, vmax, dt)
-        if om == 0.0 or om * omega < 0.0:
-            theta_start = th
-        theta, omega = th, om
-        rate_mean += (abs(om) - rate_mean) * k_rate
-        if foil_on:
-            fx, fy, _, p = foil_fin(theta, omega, theta_start, al, flow, inertia, ph)
-        else:
-            fx, fy, _ = fin_force(theta, omega, theta_start, fin_strouhal(rate_mean, surge, ph), ph)
-            p = max(0.0, inertia * al * om + k_drag * abs(om) ** 3)
+        theta, omega, al = servo_step(theta, omega, targets[k], vel, acc, vmax, dt)
+        fx, fy, p, _ = fin_load(theta, omega, al, flow, 0.0, inertia, dt, pf)
         if k >= n_skip:
             sx += fx * dt
             sy += fy * dt
             se += p * dt
             st_time += dt
-        if om == 0.0 and theta == targets[k]:
+        if omega == 0.0 and theta == targets[k]:
             k += 1
     return sx, sy, se, st_time
 

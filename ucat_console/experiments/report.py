@@ -17,7 +17,7 @@ TITLES = {
     "E4": "E4: closed loop, power and tracking (paper Table V, Fig. 7)",
     "E4R": "E4R: E4 from rest, the paper's settings and the shipped sim-tuned",
     "E6": "E6: where St-awareness pays: a family of plants, each with its identified model",
-    "E7": "E7: St-awareness on foil plants whose efficiency depends on the flow (declared)",
+    "E7": "E7: St-awareness on plants whose efficiency depends on the flow (declared)",
     "E5": "E5: field-style circle at 3 m with a current (paper Fig. 8)",
     "sweep": "Weight sweep over the E4 protocol",
 }
@@ -166,12 +166,12 @@ def _e3(res: dict[str, Any]) -> str:
 
 
 def _plants(plants: dict[str, Any]) -> str:
-    rows = [[name, a["wake"], a["coefficients"], num(a["rho"], 1), num(a["c_d"], 3), num(a["c_l"], 3),
-             num(a["area"], 3), num(a["r_c"], 3), num(a["fin_length"], 3), num(a["thrust_gain"], 2),
-             num(a["st_peak"], 2), num(a["sigma_low"], 2), num(a["sigma_high"], 2), num(a["wake_floor"], 2)]
+    rows = [[name, a["model"], a["coefficients"], num(a["rho"], 1), num(a["c_d"], 3), num(a["c_l"], 3),
+             num(a["area"], 3), num(a["r_c"], 3), num(a["fin_length"], 3), num(a["c_d0"], 3),
+             num(a["lift_ratio"], 2), num(a["added_mass"], 2), str(a["strips"])]
             for name, a in plants.items()]
-    return table(["plant", "wake", "coefficients", "rho", "C_D", "C_L", "A_f", "r_c", "L_f", "thrust gain",
-                  "wake St peak", "sigma low", "sigma high", "wake floor"], rows)
+    return table(["plant", "fin model", "calibrated to", "rho", "C_D", "C_L", "A_f", "r_c", "L_f", "C_D0",
+                  "C_Lmax / C_N", "added mass", "strips"], rows)
 
 
 def _e4(res: dict[str, Any]) -> str:
@@ -237,8 +237,9 @@ def _e4r(res: dict[str, Any]) -> str:
 def _e6(res: dict[str, Any]) -> str:
     p = res["protocol"]
     t = p["settings"]
-    out = [f"Declared before it was run (docs/experiments/e6-declaration.md). Plants: the paper's fin "
-           f"coefficients with a soft-fin thrust gain G, each with and without the Strouhal wake "
+    out = [f"Declared before it was run (docs/experiments/e6-declaration.md). Plants: the plate "
+           f"calibrated to the paper's fin coefficients times a scale G (G times the thrust per w^2, paid with G "
+           f"times the shaft's load), each as the plate in the flow and as the still-water null plant "
            f"({', '.join(p['plants'])}). Each plant's model is identified first from its own recorded "
            f"identification manoeuvre (`ucat-console identify`'s path). Runs from rest at "
            f"{', '.join(str(v) for v in p['speeds'])} m/s, seeds {', '.join(str(s) for s in p['seeds'])}, "
@@ -254,8 +255,8 @@ def _e6(res: dict[str, Any]) -> str:
            f"track (vel MAE <= {p['tracking_mae']:g} m/s); the baseline leaves the corridor where fewer than "
            f"{100 * p['corridor_share']:g} % of its plans have St in [0.25, 0.35].\n\n",
            "Identified models:\n\n",
-           table(["plant", "thrust gain", "wake", "C_D", "+-", "C_L", "+-", "windows", "steady", "rms (N)"],
-                 [[d["plant"], num(d["thrust_gain"], 1), d["wake"], num(d["c_d"], 3), num(d["c_d_ci"], 3),
+           table(["plant", "scale", "fin model", "C_D", "+-", "C_L", "+-", "windows", "steady", "rms (N)"],
+                 [[d["plant"], num(d["scale"], 1), d["model"], num(d["c_d"], 3), num(d["c_d_ci"], 3),
                    num(d["c_l"], 3), num(d["c_l_ci"], 3), str(d["windows"]), str(d["steady_windows"]),
                    num(d["rms_residual"], 3)] for d in res["identified"]]),
            "\nRuns:\n\n"]

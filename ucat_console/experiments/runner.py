@@ -157,13 +157,13 @@ def _run_one(name: str, tmp: Path, quick: bool, seed: int, client: Any,
         band = (res["paper"]["st_low"], res["paper"]["st_high"])
         res["figures"] = [figures.e2_figure(points, open_loop.SPEEDS, band, tmp)]
         res["findings"] = ["Planner-only experiment: it does not involve the plant, so it is the same "
-                           "under both wake options."]
+                           "under every plant variant."]
         return res
     if name == "E3":
         res = open_loop.run_e3(quick, seed, progress)
         res["figures"] = [figures.e3_figure(res, tmp)]
         res["findings"] = ["Planner-only experiment: it does not involve the plant, so it is the same "
-                           "under both wake options.",
+                           "under every plant variant.",
                            "Command stability is not reproduced: the L1 smoothness term holds plans at the one "
                            "before (stability near 0), and no solver gives the paper's 1.63 from its stated cost "
                            "(docs/experiments/findings.md)."]
