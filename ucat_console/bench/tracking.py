@@ -124,7 +124,7 @@ def run_manoeuvre(app: Any, mode: str, formulation: str, m: Manoeuvre, seed: int
     from ucat_console.backend.sim_robot_io import SimRobotIO
     from ucat_console.control.allocation import BodySetpoints
     from ucat_console.control.fin_cycle import direction_error
-    from ucat_console.experiments.scenario import START_FIN_ANGLE, plant_config
+    from ucat_console.experiments.scenario import DEFAULT_PLANT, START_FIN_ANGLE, plant_config
     from ucat_console.telemetry import channels as ch
     from ucat_console.telemetry.stream import TelemetryStream
 
