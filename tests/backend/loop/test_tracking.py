@@ -38,7 +38,7 @@ def test_heading_hold_returns_to_the_held_heading_after_a_yaw_disturbance(mode: 
     from ucat_console.experiments.scenario import START_FIN_ANGLE, plant_config
     from ucat_console.telemetry.stream import TelemetryStream
 
-    io = SimRobotIO(plant_config("strouhal_wake", 5), depth=1.0, velocity=0.2)
+    io = SimRobotIO(plant_config("plate", 5), depth=1.0, velocity=0.2)
     io.plant.reset(position_ned=(0.0, 0.0, 1.0), body_velocity=(0.2, 0.0, 0.0, 0.0, 0.0, 0.0),
                    fin_angles=(START_FIN_ANGLE,) * 4, seed=5)
     loop = ClosedLoop(TUNED.loop.replace(mode=mode, planner_seed=5), io, TelemetryStream(),
