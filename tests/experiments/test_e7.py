@@ -29,7 +29,7 @@ def test_the_plants_are_the_declared_ones() -> None:
 def test_a_changed_plant_changes_the_hash(monkeypatch: pytest.MonkeyPatch) -> None:
     from ucat_console.experiments import efficiency_curves
 
-    monkeypatch.setattr(efficiency_curves, "E7_CD0", (0.02, 0.1, 0.31))
+    monkeypatch.setattr(efficiency_curves, "E7_CD0", (0.02, 0.05, 0.31))
     assert plant_hash(efficiency_curves.e7_plants()) != declared_hash()
 
 

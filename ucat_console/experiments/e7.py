@@ -66,7 +66,7 @@ def e7_design(quick: bool, seed: int, n_seeds: int | None = None) -> dict[str, A
     if n_seeds is not None and not 1 <= n_seeds <= E7_SEEDS:
         raise ValueError(f"--seeds: {n_seeds} is not in 1..{E7_SEEDS}")
     if quick:
-        return {"plants": ["plate_cd0.1", NULL_PLANT], "speeds": [0.2], "seeds": [seed, seed + 1],
+        return {"plants": ["plate_cd0.05", NULL_PLANT], "speeds": [0.2], "seeds": [seed, seed + 1],
                 "frequencies": [1.0, 2.0], "held_out": HELD_OUT_SEED + seed}
     n = E7_SEEDS if n_seeds is None else n_seeds
     return {"plants": e7_plants(), "speeds": list(E7_SPEEDS), "seeds": [seed + k for k in range(n)],

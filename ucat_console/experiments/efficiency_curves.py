@@ -33,7 +33,7 @@ from ucat_console.typedconf import to_dict
 
 #: E7's plants: the plate over the profile drag C_D0 and the null plant (the plate as if
 #: in still water, the thrust's work paid through the shaft)
-E7_CD0 = (0.02, 0.1, 0.3)
+E7_CD0 = (0.02, 0.05, 0.3)
 NULL_PLANT = "still_water"
 #: E7's speeds (m/s)
 E7_SPEEDS = (0.1, 0.2, 0.3, 0.4)
