@@ -24,7 +24,7 @@ the robot can know, the telemetry channel), and by the simulator's true force (t
 force integrated over the cycle). The figures: median direction error and the share of
 cycles more than 90 degrees off, and the executed against the planned cycle duration.
 
-The goals are the tracking issue's (:data:`GOALS`); each figure is printed with its goal
+The goals (:data:`GOALS`); each figure is printed with its goal
 and whether it is met. ``--json`` writes everything, ``--plots DIR`` the step responses and
 the turns as PNG (matplotlib, the ``experiments`` extra).
 """

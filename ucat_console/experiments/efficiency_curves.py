@@ -4,7 +4,7 @@ For each plant and hull speed V, one fin of the plant (:class:`~ucat_console.exp
 beats symmetric stroke pairs about the centre that pushes the hull forward
 (``scenario.START_FIN_ANGLE``) at amplitudes :data:`AMPLITUDES` and mean rates w. The
 experiment (not the plant) labels each beat with its per-fin Strouhal number
-``St = w L_f / (2 V)`` (a closed stroke pair, the issue's definition) and measures
+``St = w L_f / (2 V)`` (a closed stroke pair) and measures
 
     efficiency  eta = T V / P,   T = the fin's forward force on the hull, P = its true shaft power;
 
