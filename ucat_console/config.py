@@ -268,6 +268,12 @@ class AppConfig(Config):
     power = property(lambda self: self.loop.power, doc="the power estimate (``loop.power``)")
 
     def _check(self) -> None:
+        deepest, envelope = self.devices.plausibility.max_depth, self.loop.max_depth
+        if deepest < envelope:
+            raise ValueError(
+                f"devices.plausibility.max_depth: {deepest:g} m is shallower than loop.max_depth "
+                f"{envelope:g} m: the depth readings of a robot sent that deep would be dropped as "
+                f"implausible; allowed: at least loop.max_depth (or lower loop.max_depth)")
         hb, gone = self.console.heartbeat_period, self.failsafe.pilot_gone.timeout
         if 3.0 * hb > gone:
             raise ValueError(

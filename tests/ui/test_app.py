@@ -190,7 +190,7 @@ def test_the_pilot_injects_rig_faults_from_the_page_and_bad_entries_are_refused(
         # the fault list follows the device
         f.device.value = "pressure"
         f.show_faults_of_device()
-        assert set(f.fault.options) == {"silence", "corrupt", "invalid", "slow"} and f.fault.value == "silence"
+        assert set(f.fault.options) == {"silence", "corrupt", "invalid", "implausible", "slow"} and f.fault.value == "silence"
         f.device.value = "epos2"
         f.show_faults_of_device()
         assert "emcy" in f.fault.options and f.fault.value == "silence"  # still a fault of the drive

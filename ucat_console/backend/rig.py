@@ -40,7 +40,8 @@ def build_robot_io(
     """The robot ``robot`` (one of :data:`ROBOTS`, ``AppConfig.robot``) with the devices
     ``devices``, started, and the function that shuts it down.
 
-    * ``sim``: the in-process :class:`SimRobotIO` (no devices, no events);
+    * ``sim``: the in-process :class:`SimRobotIO` (no devices; events only of readings its
+      plausibility checks drop);
     * ``sim-devices``: a :class:`SimRig` (plant + emulators) and a :class:`DeviceRobotIO`
       on the rig's endpoints, at the rig's pace;
     * ``hardware``: a :class:`DeviceRobotIO` on the configured endpoints.
@@ -57,7 +58,7 @@ def build_robot_io(
     if robot == "sim":
         s = cfg.start
         io = SimRobotIO(plant_cfg, depth=s.depth, yaw=s.yaw, velocity=s.velocity,
-                        seed=None if s.seed < 0 else s.seed)
+                        seed=None if s.seed < 0 else s.seed, plausibility=cfg.plausibility, on_event=event_sink)
         return io, io.close
     if robot == "sim-devices":
         rig = SimRig(cfg, plant_cfg)

@@ -20,8 +20,11 @@ Failsafes (``FailsafeConfig`` has one rule, action and timeout, for each):
   valid reading. The cause says what happened since the last valid reading: ``silent``
   (nothing came), ``garbled`` (messages dropped as corrupt), ``invalid`` (readings that
   came without valid data: a DVL report with ``valid`` False, a non-finite value, a
-  broken current loop), ``port error``, ``unreachable``, from the readings and from the
-  sensor's driver events (``devices.reporting.READING_FAULTS``).
+  broken current loop), ``implausible`` (readings dropped by the plausibility checks,
+  ``devices.plausibility``, with the last one's reason), ``port error``, ``unreachable``,
+  from the readings and from the sensor's driver events
+  (``devices.reporting.READING_FAULTS``). A dropped reading never reaches the stream, so
+  it is not a valid one.
 * ``motor``: a motor controller reported a fault (an Event from a source ``epos2.*`` with a
   code of :data:`MOTOR_FAULTS`) that has lasted ``timeout`` s; clears when every such fault
   has been reported cleared (:data:`MOTOR_CLEARS`). The cause names each drive and what
@@ -130,26 +133,35 @@ _SENSOR_OF = {ch.IMU: "imu", ch.DVL: "dvl", ch.DEPTH: "depth"}
 #: the failsafe sensor of each sensor driver's event source
 _SENSOR_OF_SOURCE = {"imu": "imu", "dvl": "dvl", "pressure": "depth"}
 #: how a label reads with its count (messages or readings since the last valid one)
-_COUNTED = {"garbled": "corrupt messages dropped", "invalid": "invalid readings"}
+_COUNTED = {"garbled": "corrupt messages dropped", "invalid": "invalid readings",
+            "implausible": "readings dropped"}
 
 
 def fault_label(kinds: dict[str, Any]) -> str:
     """What happened to a sensor since its last valid reading, from the kinds seen with
-    their counts (``{"garbled": [12, t]}`` -> ``"garbled: 12 corrupt messages dropped"``):
-    ``silent`` only when nothing else was seen (a garbled line is not a silent one)."""
-    parts = [f"{kind}: {int(n[0])} {_COUNTED[kind]}" if kind in _COUNTED else kind
-             for kind, n in kinds.items() if kind != "silent"]
+    their counts and the last reason given (``{"garbled": [12, t, ""]}`` -> ``"garbled: 12
+    corrupt messages dropped"``; ``{"implausible": [3, t, "depth 104.8 m beyond ..."]}`` ->
+    ``"implausible: 3 readings dropped, depth 104.8 m beyond ..."``): ``silent`` only when
+    nothing else was seen (a garbled line is not a silent one)."""
+    parts = []
+    for kind, (n, _t, why) in kinds.items():
+        if kind == "silent":
+            continue
+        part = f"{kind}: {int(n)} {_COUNTED[kind]}" if kind in _COUNTED else kind
+        parts.append(f"{part}, {why}" if why else part)
     return ", ".join(parts) or "silent"
 
 
-def _note(kinds: dict[str, list[float]], kind: str, n: int, t: float) -> None:
-    """``n`` more of ``kind`` at time ``t``."""
+def _note(kinds: dict[str, list[Any]], kind: str, n: int, t: float, why: str = "") -> None:
+    """``n`` more of ``kind`` at time ``t`` (the latest ``why``, when given)."""
     seen = kinds.get(kind)
     if seen is None:
-        kinds[kind] = [float(n), t]
+        kinds[kind] = [float(n), t, why]
     else:
         seen[0] += n
         seen[1] = max(seen[1], t)
+        if why:
+            seen[2] = why
 
 
 def _stamp(t: Any, now: float) -> float:
@@ -166,7 +178,7 @@ class SafetyMonitor:
         self._now = float(t0)
         self._last_valid: dict[str, float] = {s: float(t0) for s in SENSORS}
         # what happened to each sensor since its last valid reading: kind -> [count, last time]
-        self._kinds: dict[str, dict[str, list[float]]] = {s: {} for s in SENSORS}
+        self._kinds: dict[str, dict[str, list[Any]]] = {s: {} for s in SENSORS}
         self._had_pilot = False
         self._pilot_left: float | None = None
         self._motor: dict[str, dict[str, tuple[float, str]]] = {}  # source -> fault code -> (since, message)
@@ -211,7 +223,7 @@ class SafetyMonitor:
                         last_valid[sensor] = t
                     k = kinds[sensor]
                     if k:  # what happened before this reading is over (a fault reported after it is not)
-                        for kind in [kind for kind, (_, seen) in k.items() if seen <= t]:
+                        for kind in [kind for kind, (_, seen, _why) in k.items() if seen <= t]:
                             del k[kind]
                 else:
                     _note(kinds[sensor], "invalid", 1, _stamp(msg.t, now))
@@ -235,9 +247,12 @@ class SafetyMonitor:
             if sensor is not None:
                 kind = READING_FAULTS.get(ev.code)
                 if kind is not None:
-                    suppressed = ev.data.get("suppressed", 0) if isinstance(ev.data, dict) else 0
-                    n = 1 + (suppressed if isinstance(suppressed, int) else 0)
-                    _note(self._kinds[sensor], kind, n, _stamp(ev.t, self._now))
+                    data = ev.data if isinstance(ev.data, dict) else {}
+                    suppressed, dropped, why = data.get("suppressed", 0), data.get("dropped"), data.get("reason")
+                    # a report of readings dropped says how many; a throttled event, how many more
+                    n = dropped if isinstance(dropped, int) and dropped > 0 else \
+                        1 + (suppressed if isinstance(suppressed, int) else 0)
+                    _note(self._kinds[sensor], kind, n, _stamp(ev.t, self._now), why if isinstance(why, str) else "")
             elif ev.source.startswith("epos2"):
                 faults = self._motor.setdefault(ev.source, {})
                 if ev.code in MOTOR_FAULTS:

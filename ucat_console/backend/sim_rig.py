@@ -17,7 +17,9 @@ emulators, which speak the devices' protocols to whatever drivers connect:
 * the DVL A50 (``dvl_emulator``) on 127.0.0.1, reporting the plant's latest DVL sample
   (``valid=False`` becomes lost bottom lock) and its position;
 * the pressure ADC (``pressure_emulator``) on a pty, sending the loop current of the
-  plant's latest depth sample through the driver's transducer scaling.
+  plant's latest depth sample through the driver's transducer scaling, for a transducer
+  ``rig.pressure_mount_depth`` below the robot's depth reference (under water while the
+  robot floats at the surface, as on the robot; the drivers start zeroed for it).
 
 :meth:`SimRig.start` returns the :class:`DevicesConfig` whose endpoints reach the
 emulators. :meth:`SimRig.inject` starts a fault in one emulator (the list is in its
@@ -47,6 +49,7 @@ from ucat_console.backend.devices.pressure_emulator import PressureEmulator
 from ucat_console.robot.readings import DepthReading, DvlVelocity, ImuReading
 from ucat_console.backend.sim_robot_io import SimRobotIO
 from ucat_console.robot.interface import RobotTruth
+from ucat_console.robot.units import GRAVITY
 from ucat_console.backend.sim.params import PlantConfig
 from ucat_console.backend.sim.plant import F_POWER
 from ucat_console.telemetry.events import Event, EventSink, ignore_events
@@ -60,6 +63,10 @@ EMULATOR_FAULTS: dict[str, tuple[str, ...]] = {
     "imu": tuple(f.value for f in Fault),
     "dvl": tuple(f.value for f in Fault),
     "pressure": tuple(f.value for f in Fault),
+}
+#: what the ``implausible`` fault of each sensor takes (the emulator's ``set_implausible``)
+IMPLAUSIBLE: dict[str, tuple[str, ...]] = {
+    "imu": ("accel_g", "gyro", "quaternion"), "dvl": ("velocity",), "pressure": ("current_ma", "jump_m"),
 }
 #: EMCY injected when no code is given: overcurrent
 DEFAULT_EMCY = 0x2310
@@ -157,7 +164,9 @@ class SimRig:
             self._thread.start()
             self.imu = ImuEmulator(self._imu_sample, rig.imu).start()
             self.dvl = DvlEmulator(self._dvl_sample, rig.dvl).start()
-            self.pressure = PressureEmulator(self._depth_sample, rig.pressure, transducer=cfg.pressure).start()
+            mount_pa = rig.pressure_mount_depth * cfg.pressure.rho * GRAVITY
+            emulated = rig.pressure.replace(surface_offset_pa=rig.pressure.surface_offset_pa + mount_pa)
+            self.pressure = PressureEmulator(self._depth_sample, emulated, transducer=cfg.pressure).start()
         except BaseException:
             self.stop()
             raise
@@ -169,7 +178,8 @@ class SimRig:
                                     sdo_timeout=max(cfg.epos2.sdo_timeout, cfg.rig.sdo_timeout_s)),
             imu=cfg.imu.replace(port=self.imu.port),
             dvl=cfg.dvl.replace(host=host, port=port),
-            pressure=cfg.pressure.replace(port=self.pressure.port),
+            pressure=cfg.pressure.replace(port=self.pressure.port,
+                                          surface_pressure_pa=cfg.pressure.surface_pressure_pa + mount_pa),
         )
 
     def stop(self) -> None:
@@ -242,7 +252,7 @@ class SimRig:
         now = self._clock()
         t = self.pace * (now - self._t0)
         with self.plant_lock:
-            readings = self._sim.advance_to(t)
+            readings = self.plant.advance_and_sample(t)  # what the emulators send: the drivers' robot checks it
             pose = self.plant.pose()[0], self.plant.euler()
         for r in readings:
             tp = type(r)
@@ -281,8 +291,11 @@ class SimRig:
     def inject(self, device: str, fault: str, **kw: Any) -> Event:
         """Start ``fault`` in ``device``'s emulator; returns (and reports) a ``fault_injected`` event.
 
-        * ``imu``, ``dvl``, ``pressure``: ``silence``, ``corrupt``, ``invalid``, ``slow``
-          (meaning per emulator: see its docstring); ``duration`` (s) ends it by itself.
+        * ``imu``, ``dvl``, ``pressure``: ``silence``, ``corrupt``, ``invalid``,
+          ``implausible``, ``slow`` (meaning per emulator: see its docstring); ``duration``
+          (s) ends it by itself. ``implausible`` takes what to send (:data:`IMPLAUSIBLE`:
+          ``pressure`` ``current_ma`` or ``jump_m``; ``imu`` ``accel_g``, ``gyro``,
+          ``quaternion``; ``dvl`` ``velocity``), each emulator's default when none is given.
         * ``epos2`` (``fin`` 0-3, default 0, or ``node``): ``emcy`` (``code``, default
           0x2310 overcurrent; ``register``), ``heartbeat_loss``, ``silence`` (the node
           stops answering), ``slow`` (``delay_s`` on each SDO reply, default 2 s: beyond the
@@ -301,11 +314,14 @@ class SimRig:
         if device == "epos2":
             data = self._inject_epos2(fault, dict(kw))
         else:
-            _only(kw, ("duration",))
+            _only(kw, ("duration", *IMPLAUSIBLE[device]) if fault == "implausible" else ("duration",))
+            values = {k: v for k, v in kw.items() if k != "duration"}
             duration = _duration(kw.get("duration"))
             emulator = self._emulator(device)
+            if fault == "implausible":
+                emulator.set_implausible(**values)
             emulator.inject(as_fault(fault), duration)
-            data = {"duration": duration}
+            data = {"duration": duration, **values}
         data = {"device": device, "fault": fault, **data}
         return self._event("fault_injected", f"{device}: {fault} injected", "info", data)
 

@@ -7,6 +7,12 @@ whenever the core asks for the readings of an event, the plant's physics runs to
 sensors sample into the core's rows, with no Python in between, until the core has
 something for the loop to do (``SimRobotIO.run_core``). The loop's trajectory is the same as
 when it drives the plant through :meth:`SimRobotIO.advance_to`, one event at a time.
+
+The plant's readings pass the plausibility checks (``devices.plausibility``) on either
+path, in the compiled call too: an implausible one never reaches the core, and is reported
+as an Event ``implausible`` (loop time) to ``on_event``. The plant's sensors keep their
+readings plausible (noise included); a subclass that changes the readings runs through
+:meth:`SimRobotIO.advance_to`, and the checks.
 """
 
 from __future__ import annotations
@@ -15,12 +21,14 @@ import math
 
 from numba import njit
 
+from ucat_console.backend.devices.plausibility import Plausibility, PlausibilityConfig, filter_rows
 from ucat_console.backend.sim.params import PlantConfig
 from ucat_console.backend.sim.plant import Plant, sample_plant
 from ucat_console.backend.sim.sensors import S_DVL_ROW, S_IMU_ROW, S_NEXT, S_P_ROW
 from ucat_console.control.loop_core import C_NROWS, C_ROWS_PENDING, C_T_NEXT, C_T_ROBOT, READINGS, LoopCore, core_step
 from ucat_console.robot.interface import RobotIO, RobotTruth
 from ucat_console.robot.readings import Reading
+from ucat_console.telemetry.events import EventSink
 
 #: what :func:`run_core_on_plant` returns besides the core's own statuses
 NEED_NOISE = -1  # a noise block is used up: new blocks, then call again
@@ -30,10 +38,11 @@ DIVERGED = -2  # the plant's state is no longer finite
 @njit(cache=True)
 def run_core_on_plant(s, body, watch, members, found, power, rows, outbox, fin_rows, r3,
                       xv, xf, cmd, mats, pv, ph, signs, servo, steps,
-                      sf, out, imu_noise, p_noise, dvl_noise, _sensor_rows) -> int:
+                      sf, out, imu_noise, p_noise, dvl_noise, _sensor_rows, plim, pst) -> int:
     """``control.loop_core.core_step`` (its arrays first) with the plant (``Plant.kernel_arrays``,
-    ``SensorSuite.kernel_arrays``) as its robot; what the core returns for the loop, or
-    NEED_NOISE, or DIVERGED. After NEED_NOISE the core goes on where it was."""
+    ``SensorSuite.kernel_arrays``) as its robot, its readings through the plausibility
+    checks (``plim``, ``pst``: ``Plausibility.limits``, ``.state``); what the core returns
+    for the loop, or NEED_NOISE, or DIVERGED. After NEED_NOISE the core goes on where it was."""
     while True:
         if s[C_ROWS_PENDING] != 0.0:
             if (sf[S_IMU_ROW] >= imu_noise.shape[0] or sf[S_P_ROW] >= p_noise.shape[0]
@@ -43,7 +52,7 @@ def run_core_on_plant(s, body, watch, members, found, power, rows, outbox, fin_r
                              p_noise, dvl_noise, rows)
             if n < 0:
                 return DIVERGED
-            s[C_NROWS] = n
+            s[C_NROWS] = filter_rows(plim, pst, rows, n)
             s[C_ROWS_PENDING] = 0.0
         s[C_T_ROBOT] = sf[S_NEXT]
         st = core_step(s, body, watch, members, found, power, rows, outbox, fin_rows, r3)
@@ -56,12 +65,14 @@ class SimRobotIO(RobotIO):
 
     The plant starts level at ``depth`` (m) with heading ``yaw`` (rad), surging at
     ``velocity`` (m/s, body x; 0: at rest), all fins at rest at angle 0; ``seed`` restarts
-    the sensor noise (default: the plant configuration's seed).
+    the sensor noise (default: the plant configuration's seed). ``plausibility`` limits
+    the readings (module docstring); what they drop is reported to ``on_event``.
     """
 
     def __init__(
         self, cfg: PlantConfig | None = None, *, depth: float = 0.0, yaw: float = 0.0,
-        velocity: float = 0.0, seed: int | None = None,
+        velocity: float = 0.0, seed: int | None = None, plausibility: PlausibilityConfig | None = None,
+        on_event: EventSink | None = None,
     ) -> None:
         if not math.isfinite(depth) or depth < 0.0:
             raise ValueError(f"depth: the start depth must be finite and >= 0 m, got {depth!r}")
@@ -72,6 +83,8 @@ class SimRobotIO(RobotIO):
             position_ned=(0.0, 0.0, float(depth)), euler=(0.0, 0.0, float(yaw)),
             body_velocity=(float(velocity), 0.0, 0.0, 0.0, 0.0, 0.0), seed=seed,
         )
+        #: the plausibility checks of the readings
+        self.checks = Plausibility(plausibility, on_event)
 
     @property
     def runs_core(self) -> bool:  # type: ignore[override]
@@ -86,11 +99,13 @@ class SimRobotIO(RobotIO):
         plant = self.plant
         sensors = plant.sensors
         arrays = core.arrays() + plant.kernel_arrays()
+        checks = self.checks
         while True:
-            st = run_core_on_plant(*arrays, *sensors.kernel_arrays())
+            st = run_core_on_plant(*arrays, *sensors.kernel_arrays(), checks.limits, checks.state)
             if st != NEED_NOISE:
                 break
         plant.synced()
+        checks.report(plant.time)
         if st == DIVERGED:
             raise plant.diverged()
         return st
@@ -99,7 +114,9 @@ class SimRobotIO(RobotIO):
         return self.plant.next_sensor_time()
 
     def advance_to(self, t: float) -> list[Reading]:
-        return self.plant.advance_and_sample(t)
+        readings = self.checks.filter(self.plant.advance_and_sample(t))
+        self.checks.report(t)
+        return readings
 
     def truth(self) -> RobotTruth:
         p = self.plant

@@ -12,8 +12,9 @@ Three robots behind the same closed loop:
   the DVL's address).
 
 The driver blocks are the drivers' own configuration classes (one definition of each
-parameter); ``start`` says where the simulated robot starts and ``rig`` how its emulators
-behave.
+parameter); ``plausibility`` what a sensor reading may show before the estimator takes it
+(every robot's, the in-process simulator's too); ``start`` says where the simulated robot
+starts and ``rig`` how its emulators behave.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from ucat_console.backend.devices.dvl_emulator import DvlEmulatorConfig
 from ucat_console.backend.devices.epos2 import Epos2Config
 from ucat_console.backend.devices.imu import ImuConfig
 from ucat_console.backend.devices.imu_emulator import ImuEmulatorConfig
+from ucat_console.backend.devices.plausibility import PlausibilityConfig
 from ucat_console.backend.devices.pressure import PressureConfig
 from ucat_console.backend.devices.pressure_emulator import PressureEmulatorConfig
 from ucat_console.typedconf import Config, param
@@ -68,6 +70,11 @@ class SimRigConfig(Config):
         "which answer from Python threads on this computer: a busy machine delays them "
         "beyond a real EPOS2's answer (epos2.sdo_timeout)",
     )
+    pressure_mount_depth: float = param(
+        0.15, lo=0.0, hi=1.0, unit="m",
+        doc="the emulated pressure transducer sits this far below the robot's depth reference, so it "
+        "is under water (above 4 mA) while the robot floats at the surface; the drivers start zeroed for it",
+    )
     imu: ImuEmulatorConfig = ImuEmulatorConfig()
     dvl: DvlEmulatorConfig = DvlEmulatorConfig()
     pressure: PressureEmulatorConfig = PressureEmulatorConfig()
@@ -75,7 +82,8 @@ class SimRigConfig(Config):
 
 @dataclass(frozen=True)
 class DevicesConfig(Config):
-    """The robot's devices (robot ``sim-devices`` and ``hardware``)."""
+    """The robot's devices (robot ``sim-devices`` and ``hardware``; ``plausibility`` for
+    every robot)."""
 
     epos2: Epos2Config = Epos2Config()
     imu: ImuConfig = ImuConfig()
@@ -99,5 +107,6 @@ class DevicesConfig(Config):
         3, lo=1, hi=1000,
         doc="report lost bottom lock after this many consecutive velocity_valid=false reports",
     )
+    plausibility: PlausibilityConfig = PlausibilityConfig()
     start: SimStartConfig = SimStartConfig()
     rig: SimRigConfig = SimRigConfig()

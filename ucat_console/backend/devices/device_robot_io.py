@@ -26,6 +26,11 @@ drivers' own events, a run of ``dvl_invalid_after`` velocity reports without bot
 is reported as ``bottom_lock_lost`` (and ``recovered``), since a single invalid report is
 normal missing data.
 
+Plausibility. The readings :meth:`advance_to` hands the loop have passed the plausibility
+checks (``plausibility``, configured by ``config.plausibility``): an implausible one is
+dropped, counted and reported as an Event ``implausible`` of its sensor (stamped in loop
+time).
+
 Telemetry. The drives' electrical input (each EPOS2's averaged motor current and supply
 voltage, read every ``epos2.electrical_period_ms``) becomes an
 :class:`~ucat_console.telemetry.messages.ElectricalPower` message stamped in loop time, handed
@@ -49,6 +54,7 @@ from ucat_console.backend.devices.dvl import DvlClient
 from ucat_console.backend.devices.epos2 import Epos2NoAnswer
 from ucat_console.backend.devices.fin_drives import FinDrives
 from ucat_console.backend.devices.imu import ImuDriver
+from ucat_console.backend.devices.plausibility import Plausibility
 from ucat_console.backend.devices.pressure import PressureDriver
 from ucat_console.robot.readings import DvlPosition, DvlVelocity, FinFeedback
 from ucat_console.backend.devices.reporting import EventReporter
@@ -146,6 +152,8 @@ class DeviceRobotIO(RobotIO):
         #: from the console; this class never uses it
         self.rig: object | None = None
         self._dvl_events = EventReporter("dvl", self._on_event, wall_clock)
+        #: the plausibility checks of the readings (their events are in loop time already)
+        self.checks = Plausibility(config.plausibility, self._on_loop_event)
 
         def time_of(name: str) -> Callable[[], float] | None:
             return None if device_time is None else (lambda: device_time(name))
@@ -267,6 +275,8 @@ class DeviceRobotIO(RobotIO):
             last[key] = tl
             out.append(dataclasses.replace(r, t=tl))
         out.sort(key=_reading_time)
+        out = self.checks.filter(out)
+        self.checks.report(t)
         return out
 
     def truth(self) -> RobotTruth | None:
@@ -377,6 +387,10 @@ class DeviceRobotIO(RobotIO):
             event = dataclasses.replace(event, t=self.time.to_loop(event.t))
         else:
             event = dataclasses.replace(event, t=self._t)
+        self._on_loop_event(event)
+
+    def _on_loop_event(self, event: Event) -> None:
+        """An event stamped in loop time, to every sink."""
         with self._lock:
             self._backlog.append(event)
             sinks = self._sinks

@@ -10,7 +10,9 @@ format (``json_v3.1``, lines ending ``\\r\\n``). Commands are answered with
 ``source(t)`` (``t``: seconds since :meth:`start`) returns a :class:`DvlTruth` or None
 (no report now). Faults: ``silence`` sends nothing and answers nothing; ``corrupt`` sends
 broken JSON and bytes that are not UTF-8 in place of reports; ``invalid`` reports
-``velocity_valid: false`` (bottom lock lost) with altitude -1; ``slow`` delays responses
+``velocity_valid: false`` (bottom lock lost) with altitude -1; ``implausible`` reports a
+valid velocity the A50 never measures, or one the robot does not have
+(:meth:`DvlEmulator.set_implausible`, default 5 m/s forward); ``slow`` delays responses
 by ``slow_delay_s``.
 """
 
@@ -25,13 +27,15 @@ from dataclasses import dataclass
 from typing import Any, Callable
 
 from ucat_console.backend.devices.emulator_base import DelayedOutput, EmulatorThread, next_tick
-from ucat_console.backend.devices.faults import Fault, FaultSettings
+from ucat_console.backend.devices.faults import Fault, FaultSettings, numbers
 from ucat_console.backend.devices.lines import LineSplitter, Overlong
 from ucat_console.typedconf import Config, param
 
 FORMAT = "json_v3.1"
 _BEAM_TILT = math.radians(22.5)  # transducer tilt from the DVL's z axis
 _BEAM_AZIMUTHS = tuple(math.radians(a) for a in (45.0, 135.0, 225.0, 315.0))
+#: what the ``implausible`` fault reports unless told otherwise: 5 m/s forward
+IMPLAUSIBLE_VELOCITY = (5.0, 0.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -115,6 +119,12 @@ class DvlEmulator(EmulatorThread):
             "periodic_cycling_enabled": True,
         }
         self.commands: list[str] = []
+        self._implausible = IMPLAUSIBLE_VELOCITY
+
+    def set_implausible(self, velocity: object = None) -> None:
+        """The velocity (3 finite numbers, m/s, the DVL's frame) the ``implausible`` fault
+        reports with bottom lock; None: 5 m/s forward."""
+        self._implausible = IMPLAUSIBLE_VELOCITY if velocity is None else numbers("velocity", velocity, 3)
 
     # ------------------------------------------------------------ lifecycle
 
@@ -226,6 +236,8 @@ class DvlEmulator(EmulatorThread):
         self._last_velocity_t = now
         lock = truth.bottom_lock and not self.faults.active(Fault.INVALID)
         v = (truth.vx, truth.vy, truth.vz) if lock else (0.0, 0.0, 0.0)
+        if lock and self.faults.active(Fault.IMPLAUSIBLE):
+            v = self._implausible
         fom = truth.fom if lock else 2.707
         altitude = truth.altitude if lock else -1.0
         transducers = []

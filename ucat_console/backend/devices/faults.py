@@ -1,16 +1,20 @@
 """Fault injection shared by the device emulators.
 
 Every emulator (IMU, DVL, pressure ADC) can be told, on command, to misbehave the way a
-real device does: go silent, corrupt its bytes or checksums, send invalid data, or answer
-slowly. What each fault means for one device is written in that emulator's docstring:
+real device does: go silent, corrupt its bytes or checksums, send invalid data, send values
+the device could never measure, or answer slowly. What each fault means for one device is
+written in that emulator's docstring:
 
-========  =============================================================================
-silence   nothing is sent and commands are not answered (device unplugged or hung)
-corrupt   checksums / framing broken and garbage bytes inserted (noisy line)
-invalid   well-formed messages that carry invalid data (NaN samples, lost bottom lock,
-          broken current loop)
-slow      replies to commands (and, for streaming-only devices, samples) are delayed
-========  =============================================================================
+===========  ==========================================================================
+silence      nothing is sent and commands are not answered (device unplugged or hung)
+corrupt      checksums / framing broken and garbage bytes inserted (noisy line)
+invalid      well-formed messages that carry invalid data (NaN samples, lost bottom lock,
+             broken current loop)
+implausible  well-formed, finite messages whose values are impossible (a saturated
+             current, 10^6 g, a zero quaternion, a jump in depth), set by the
+             emulator's ``set_implausible``
+slow         replies to commands (and, for streaming-only devices, samples) are delayed
+===========  ==========================================================================
 
 An emulator holds a :class:`FaultSet` and exposes ``inject(fault, duration=None)`` and
 ``clear(fault=None)`` through :class:`FaultInjectable`.
@@ -18,6 +22,7 @@ An emulator holds a :class:`FaultSet` and exposes ``inject(fault, duration=None)
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from dataclasses import dataclass
@@ -33,6 +38,7 @@ class Fault(str, Enum):
     SILENCE = "silence"
     CORRUPT = "corrupt"
     INVALID = "invalid"
+    IMPLAUSIBLE = "implausible"
     SLOW = "slow"
 
 
@@ -45,6 +51,18 @@ def as_fault(fault: Fault | str) -> Fault:
     except ValueError:
         known = ", ".join(f.value for f in Fault)
         raise ValueError(f"fault: {fault!r} is not one of {known}") from None
+
+
+def numbers(name: str, value: object, n: int) -> tuple[float, ...]:
+    """``value`` as ``n`` finite numbers (a fault's values); ValueError naming ``name``."""
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or len(value) != n:  # type: ignore[arg-type]
+        raise ValueError(f"{name}: expected {n} numbers, got {value!r}")
+    out = []
+    for v in value:  # type: ignore[attr-defined]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise ValueError(f"{name}: expected {n} finite numbers, got {value!r}")
+        out.append(float(v))
+    return tuple(out)
 
 
 @dataclass(frozen=True)

@@ -20,7 +20,9 @@ does not carry is left out of the packet.
 
 Faults (:mod:`.faults`): ``silence`` sends nothing and answers nothing; ``corrupt`` breaks
 the checksum of outgoing packets and puts garbage bytes before them; ``invalid`` streams
-NaN accelerations; ``slow`` delays replies by ``slow_delay_s``.
+NaN accelerations; ``implausible`` streams finite values the sensor never measures in
+place of the sample's (:meth:`ImuEmulator.set_implausible`: an acceleration, a rate, a
+quaternion; default a yaw rate of 1000 rad/s); ``slow`` delays replies by ``slow_delay_s``.
 """
 
 from __future__ import annotations
@@ -32,12 +34,14 @@ from typing import Any, Callable
 
 from ucat_console.backend.devices import mip
 from ucat_console.backend.devices.emulator_base import DelayedOutput, EmulatorThread
-from ucat_console.backend.devices.faults import Fault, FaultSettings
+from ucat_console.backend.devices.faults import Fault, FaultSettings, numbers
 from ucat_console.backend.devices.pty_port import PtyPort
 from ucat_console.robot.units import GRAVITY
 from ucat_console.typedconf import Config, param
 
 _GARBAGE = b"\x00\x75\xff\x13\x65"  # includes a lone sync byte, to exercise resynchronisation
+#: what the ``implausible`` fault streams unless told otherwise: a yaw rate of 1000 rad/s
+IMPLAUSIBLE_GYRO = (0.0, 0.0, 1000.0)
 
 
 @dataclass(frozen=True)
@@ -82,6 +86,8 @@ class ImuEmulator(EmulatorThread):
         )
         self.decimation = config.power_up_decimation
         self.commands: list[tuple[int, int]] = []  # (descriptor set, command) received
+        # the fields the 'implausible' fault streams in place of the sample's
+        self._implausible: dict[int, tuple[float, ...]] = {mip.FIELD_GYRO: IMPLAUSIBLE_GYRO}
 
     @property
     def port(self) -> str:
@@ -95,6 +101,17 @@ class ImuEmulator(EmulatorThread):
     @property
     def streaming(self) -> bool:
         return self.stream_enabled and not self.idle and bool(self.message_format)
+
+    def set_implausible(
+        self, accel_g: object = None, gyro: object = None, quaternion: object = None,
+    ) -> None:
+        """What the ``implausible`` fault streams in place of the sample's values: ``accel_g``
+        (3 numbers, g), ``gyro`` (3, rad/s), ``quaternion`` (4, w first), each finite; none
+        given: a yaw rate of 1000 rad/s."""
+        given = {d: numbers(name, v, n) for d, name, v, n in (
+            (mip.FIELD_ACCEL, "accel_g", accel_g, 3), (mip.FIELD_GYRO, "gyro", gyro, 3),
+            (mip.FIELD_QUATERNION, "quaternion", quaternion, 4)) if v is not None}
+        self._implausible = given or {mip.FIELD_GYRO: IMPLAUSIBLE_GYRO}
 
     def _close(self) -> None:
         self._pty.close()
@@ -161,6 +178,8 @@ class ImuEmulator(EmulatorThread):
             mip.FIELD_QUATERNION: getattr(truth, "quaternion", None),
             mip.FIELD_EULER: getattr(truth, "euler", None),
         }
+        if self.faults.active(Fault.IMPLAUSIBLE):
+            values.update(self._implausible)
         fields = []
         for d in self.message_format:
             v = values.get(d)

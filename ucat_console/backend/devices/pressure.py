@@ -17,9 +17,13 @@ standard gravity and ``rho`` configured (997 kg/m^3 fresh water, 1029 salt water
 
 A current below ``loop_min_ma`` (3.8 mA) or above ``loop_max_ma`` (20.5 mA) means a
 broken or shorted loop: it is reported as a ``broken_loop`` Event (and ``recovered``
-when it ends) and never turned into a depth. Other Events (source ``"pressure"``):
-``malformed_line``, ``overlong_line``, ``silence``, ``port_error``, ``reconnected``,
-``zeroed``.
+when it ends) and never turned into a depth. A current within those but at or below
+4 mA or above 20 mA is outside the transducer's span (saturated,
+``plausibility.loop_current_problem``): it is dropped too, counted and reported as
+``implausible`` (``plausibility.DropCounter``: with the count, at once and then once a
+second), and never zeroed on. Other
+Events (source ``"pressure"``): ``malformed_line``, ``overlong_line``, ``silence``,
+``port_error``, ``reconnected``, ``zeroed``.
 """
 
 from __future__ import annotations
@@ -32,6 +36,7 @@ from dataclasses import dataclass
 from typing import Callable, Literal
 
 from ucat_console.backend.devices.lines import LineSplitter, Overlong
+from ucat_console.backend.devices.plausibility import DropCounter, loop_current_problem
 from ucat_console.robot.readings import DepthReading
 from ucat_console.robot.units import LOOP_MAX_MA, LOOP_MIN_MA, RHO_FRESH, current_to_pressure, pressure_to_depth
 from ucat_console.backend.devices.serial_link import BAUD_RATES
@@ -147,6 +152,9 @@ class PressureDriver(SerialReader[DepthReading]):
         self._zero_samples: list[float] | None = None
         self._zero_target = 0
         self._zero_done = threading.Event()
+        self._implausible = DropCounter(
+            lambda n, why: self.events.emit("implausible", f"{n} ADC {'line' if n == 1 else 'lines'} dropped "
+                                            f"as implausible: {why}", "error", dropped=n, reason=why))
 
     @property
     def surface_pressure_pa(self) -> float:
@@ -189,6 +197,7 @@ class PressureDriver(SerialReader[DepthReading]):
                 continue
             self._silence.received(now)
             self._current(item, now)
+        self._implausible.flush(self._clock())
 
     def _current(self, current_ma: float, now: float) -> None:
         cfg = self.config
@@ -202,10 +211,16 @@ class PressureDriver(SerialReader[DepthReading]):
         if broken:
             return
         p = current_to_pressure(current_ma, cfg.p_min_pa, cfg.span_pa)
+        depth = pressure_to_depth(p, self._surface, cfg.rho)
+        problem = loop_current_problem(current_ma, depth)
+        if problem:
+            self._implausible.note(1, problem, now)
+            return
+        self._implausible.passed()
         with self._lock:
             if self._zero_samples is not None and len(self._zero_samples) < self._zero_target:
                 self._zero_samples.append(p)
                 if len(self._zero_samples) >= self._zero_target:
                     self._zero_done.set()
-        reading = DepthReading(t=now, depth_m=pressure_to_depth(p, self._surface, cfg.rho), pressure_pa=p)
+        reading = DepthReading(t=now, depth_m=depth, pressure_pa=p)
         self._deliver(reading)

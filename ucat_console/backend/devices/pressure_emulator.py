@@ -6,7 +6,10 @@ surface, or None (no line now). The current follows the transducer scaling of a
 zero offset ``surface_offset_pa`` so the driver's surface zeroing has something to remove.
 
 Faults: ``silence`` sends nothing; ``corrupt`` sends garbled lines; ``invalid`` sends a
-broken-loop current (0 mA); ``slow`` delays every line by ``slow_delay_s``.
+broken-loop current (0 mA); ``implausible`` sends well-formed lines of a current the
+transducer never gives for a depth (default 20.4 mA, beyond its span), or of the depth a
+jump deeper than it is (:meth:`PressureEmulator.set_implausible`); ``slow`` delays every
+line by ``slow_delay_s``.
 """
 
 from __future__ import annotations
@@ -16,13 +19,15 @@ from dataclasses import dataclass
 from typing import Callable
 
 from ucat_console.backend.devices.emulator_base import DelayedOutput, EmulatorThread, next_tick
-from ucat_console.backend.devices.faults import Fault, FaultSettings
+from ucat_console.backend.devices.faults import Fault, FaultSettings, numbers
 from ucat_console.backend.devices.pressure import PressureConfig, format_adc_line
 from ucat_console.backend.devices.pty_port import PtyPort
 from ucat_console.robot.units import depth_to_pressure, pressure_to_current
 from ucat_console.typedconf import Config, param
 
 BROKEN_LOOP_MA = 0.0
+#: what the ``implausible`` fault sends unless told otherwise: above the 20 mA span
+IMPLAUSIBLE_MA = 20.4
 
 
 @dataclass(frozen=True)
@@ -57,6 +62,7 @@ class PressureEmulator(EmulatorThread):
         self._period = 1.0 / config.rate_hz
         self._next_line = 0.0
         self._lines = 0
+        self._implausible: tuple[float | None, float] = (IMPLAUSIBLE_MA, 0.0)  # (current, jump)
 
     @property
     def port(self) -> str:
@@ -67,6 +73,17 @@ class PressureEmulator(EmulatorThread):
         tr = self.transducer
         p = depth_to_pressure(depth_m, self.config.surface_offset_pa, tr.rho)
         return pressure_to_current(p, tr.p_min_pa, tr.span_pa)
+
+    def set_implausible(self, current_ma: float | None = None, jump_m: float | None = None) -> None:
+        """What the ``implausible`` fault sends: lines of ``current_ma`` (mA, finite), or
+        the depth ``jump_m`` (m) deeper than it is; neither: 20.4 mA."""
+        if current_ma is not None and jump_m is not None:
+            raise ValueError("current_ma/jump_m: give one of them, not both")
+        if jump_m is not None:
+            self._implausible = (None, numbers("jump_m", (jump_m,), 1)[0])
+        else:
+            current = IMPLAUSIBLE_MA if current_ma is None else numbers("current_ma", (current_ma,), 1)[0]
+            self._implausible = (current, 0.0)
 
     def _close(self) -> None:
         self._pty.close()
@@ -91,7 +108,13 @@ class PressureEmulator(EmulatorThread):
         depth = self._source(now - self._t0)
         if depth is None:
             return
-        current = BROKEN_LOOP_MA if self.faults.active(Fault.INVALID) else self.current_for_depth(depth)
+        if self.faults.active(Fault.INVALID):
+            current = BROKEN_LOOP_MA
+        elif self.faults.active(Fault.IMPLAUSIBLE):
+            fixed, jump = self._implausible
+            current = self.current_for_depth(depth + jump) if fixed is None else fixed
+        else:
+            current = self.current_for_depth(depth)
         line = format_adc_line(current)
         self._lines += 1
         if self.faults.active(Fault.CORRUPT) and self._lines % self.config.faults.corrupt_every == 0:

@@ -23,12 +23,13 @@ from ucat_console.telemetry.events import Event, EventSink
 log = logging.getLogger(__name__)
 
 #: what a device event says happened to a sensor's readings (the failsafes' labels): the
-#: codes the IMU, DVL and pressure drivers report, each once here
+#: codes the IMU, DVL and pressure drivers and the plausibility checks report, each once here
 READING_FAULTS = {
     "silence": "silent",
     "checksum": "garbled", "garbage": "garbled", "malformed": "garbled",  # IMU (MIP)
     "malformed_json": "garbled", "overlong_line": "garbled", "malformed_line": "garbled",  # DVL, ADC
     "invalid_data": "invalid", "broken_loop": "invalid", "bottom_lock_lost": "invalid",
+    "implausible": "implausible",  # readings dropped by the plausibility checks (plausibility.py)
     "port_error": "port error", "connect_failed": "unreachable",
 }
 

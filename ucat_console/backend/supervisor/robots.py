@@ -23,8 +23,10 @@ RobotFactory = Callable[[AppConfig, EventSink], tuple[RobotIO, Callable[[], None
 
 
 def sim_robot(cfg: AppConfig, events: EventSink) -> tuple[RobotIO, Callable[[], None]]:
-    """The in-process simulated U-CAT, level at ``console.sim_depth``."""
-    return SimRobotIO(cfg.plant, depth=cfg.console.sim_depth), lambda: None
+    """The in-process simulated U-CAT, level at ``console.sim_depth``; its readings' checks
+    report to ``events``."""
+    return SimRobotIO(cfg.plant, depth=cfg.console.sim_depth, plausibility=cfg.devices.plausibility,
+                      on_event=events), lambda: None
 
 
 def rig_robot(cfg: AppConfig, events: EventSink) -> tuple[RobotIO, Callable[[], None]]:
