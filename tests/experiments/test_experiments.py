@@ -96,12 +96,14 @@ def test_savings_only_where_both_runs_track() -> None:
     def row(mode: str, mae: float, power: float, lam: float | None) -> dict:
         return {"plant": "p", "v_ref": 0.2, "mode": mode, "lam_st": lam, "lam_d": lam, "power_est": power,
                 "power_true": power, "energy_per_metre": 5 * power, "energy_per_metre_true": 5 * power,
+                "power_electrical": 3 * power, "energy_per_metre_electrical": 15 * power,
                 "velocity_mae": mae, "st_mae": 0.1, "depth_mae": 0.01}
 
     rows = [row("baseline", 0.01, 0.10, None), row("mpc", 0.02, 0.08, 1.0), row("mpc", 0.12, 0.01, 2.0)]
     _add_savings(rows, ("plant", "v_ref"))
     assert rows[1]["comparable"] and rows[1]["saving_est"] == pytest.approx(20.0)
     assert rows[1]["saving_epm_true"] == pytest.approx(20.0)
+    assert rows[1]["saving_epm_el"] == pytest.approx(20.0) and rows[1]["saving_el"] == pytest.approx(20.0)
     # 90 % less power, but 0.12 m/s off the reference: no saving is quoted
     assert not rows[2]["comparable"] and math.isnan(rows[2]["saving_est"])
     text = sweep_table({"rows": rows})

@@ -19,9 +19,11 @@ Controllers (:data:`E7_CONTROLLERS`):
 * ``mpc_closed_nost``: the same without its St term (``lam_st = 0``), the ablation;
 * ``oracle``: plans with the plant's true thrust and power (``experiments.oracle``).
 
-Primary metric: true shaft energy per metre at matched tracking (DVL speed MAE <=
-:data:`MATCH_MAE` and true mean speed within :data:`MATCH_MEAN` of the reference). A
-comparison of controller A against B in a plant-speed case uses the seeds where both
+Primary metric (:data:`PRIMARY`): the battery's energy per metre (the drives' electrical
+input by the plant's drive model, ``robot.motor``) at matched tracking (DVL speed MAE <=
+:data:`MATCH_MAE` and true mean speed within :data:`MATCH_MEAN` of the reference); the shaft's
+energy per metre (:data:`SECONDARY`) is reported beside it, with the rules applied to it too.
+A comparison of controller A against B in a plant-speed case uses the seeds where both
 match; its saving is ``100 (1 - mean E_A / mean E_B)`` with a paired bootstrap 95 %
 interval over those seeds (:func:`paired_saving`); fewer than :data:`MIN_PAIRS` pairs: not
 comparable. The decision rules (:func:`decisions`) are the declaration's.
@@ -48,6 +50,9 @@ from ucat_console.experiments.efficiency_curves import (
 )
 from ucat_console.experiments.scenario import Scenario, plant_assumptions, run_scenario
 
+#: the energy per metre the decision rules read, and the one reported beside it
+PRIMARY = "energy_per_metre_electrical"
+SECONDARY = "energy_per_metre_true"
 E7_CONTROLLERS = ("baseline_2hz", "baseline_best", "mpc_paper_id", "mpc_closed_id", "mpc_closed_nost", "oracle")
 E7_SEEDS = 10
 HELD_OUT_SEED = 1000
@@ -120,7 +125,9 @@ COMPARISONS = (("mpc_closed_id", "mpc_closed_nost"), ("mpc_closed_id", "baseline
                ("oracle", "baseline_best"), ("baseline_2hz", "baseline_best"), ("mpc_closed_id", "oracle"))
 
 
-def compare(runs: list[dict[str, Any]], plant: str, v: float) -> list[dict[str, Any]]:
+def compare(runs: list[dict[str, Any]], plant: str, v: float, key: str = PRIMARY) -> list[dict[str, Any]]:
+    """Every comparison of :data:`COMPARISONS` in one plant-speed case, on the energy per metre
+    ``key``."""
     by = {}
     for r in runs:
         s = r["scenario"]
@@ -130,8 +137,7 @@ def compare(runs: list[dict[str, Any]], plant: str, v: float) -> list[dict[str, 
     for a, b in COMPARISONS:
         seeds = sorted(k[1] for k in by if k[0] == a and (b, k[1]) in by
                        and matched(by[k]) and matched(by[(b, k[1])]))
-        res = paired_saving([by[(a, s)]["energy_per_metre_true"] for s in seeds],
-                            [by[(b, s)]["energy_per_metre_true"] for s in seeds])
+        res = paired_saving([by[(a, s)][key] for s in seeds], [by[(b, s)][key] for s in seeds])
         out.append({"plant": plant, "v_ref": v, "a": a, "b": b, **res})
     return out
 
@@ -172,13 +178,13 @@ def decisions(comparisons: list[dict[str, Any]], peaks: dict[tuple[str, float], 
 
 
 def _tune(runs: list[dict[str, Any]]) -> dict[tuple[str, float], float]:
-    """Per (plant, speed): the tuning frequency with the least true energy per metre among
-    the held-out runs that match; 2 Hz where none matches."""
+    """Per (plant, speed): the tuning frequency with the least energy per metre (:data:`PRIMARY`)
+    among the held-out runs that match; 2 Hz where none matches."""
     best: dict[tuple[str, float], tuple[float, float]] = {}
     for r in runs:
         s = r["scenario"]
         key = (s["plant"], s["v_ref"])
-        e = r["energy_per_metre_true"]
+        e = r[PRIMARY]
         if matched(r) and not math.isnan(e) and (key not in best or e < best[key][1]):
             best[key] = (s["baseline"]["frequency"], e)
     return {k: v[0] for k, v in best.items()}
@@ -209,13 +215,15 @@ def run_e7(client: Any, quick: bool, seed: int, progress: bool = True, n_seeds: 
     runs = run_all(client, run_scenario, scenarios, "E7 runs", progress)
     _label(runs, ("experiment", "controller"))
     comparisons = [c for p in plants for v in speeds for c in compare(runs, p, v)]
+    shaft = [c for p in plants for v in speeds for c in compare(runs, p, v, SECONDARY)]
     rows = []
     for r in runs:
         s = r["scenario"]
         rows.append({"plant": s["plant"], "v_ref": s["v_ref"], "controller": s["controller"], "seed": s["seed"],
                      "frequency": s["baseline"]["frequency"] if s["controller"].startswith("baseline") else None,
                      "matched": matched(r), "velocity_mean": r["velocity_mean"], "velocity_mae": r["velocity_mae"],
-                     "energy_per_metre_true": r["energy_per_metre_true"], "power_true": r["power_true"],
+                     PRIMARY: r[PRIMARY], "power_electrical": r["power_electrical"],
+                     SECONDARY: r[SECONDARY], "power_true": r["power_true"],
                      "st_in_range": r["st_in_range"], "stroke": r["stroke"], "rate": r["rate"]})
     settle, window = e4_timing(quick)
     mpc, body = e4r_settings()["sim_tuned"]
@@ -235,18 +243,28 @@ def run_e7(client: Any, quick: bool, seed: int, progress: bool = True, n_seeds: 
         "rows": rows,
         "comparisons": comparisons,
         "decisions": decisions(comparisons, peaks),
+        "comparisons_shaft": shaft,
+        "decisions_shaft": decisions(shaft, peaks),
     }
 
 
 def findings(res: dict[str, Any]) -> list[str]:
-    """The decision rules' outcomes, as declared, in words."""
-    d = res["decisions"]
-    r1, r2, r3 = d["rule1"], d["rule2"], d["rule3"]
+    """The decision rules' outcomes, as declared, in words: on the battery's energy per metre,
+    then on the shaft's."""
     p = res["protocol"]
     out = [f"Plants hash {p['plant_hash']} (declared: {p['declared_hash']})"
            + ("" if p["plant_hash"] == p["declared_hash"] else " (a subset of the declared plants: quick run)") + "."]
     if p.get("reduced"):
         out.append(f"Reduced design as declared: seeds {', '.join(str(s) for s in p['seeds'])} of the 10.")
+    out += [f"On the battery's energy per metre (primary): {s}" for s in _rules(res["decisions"], p)]
+    if "decisions_shaft" in res:
+        out += [f"On the shaft's energy per metre: {s}" for s in _rules(res["decisions_shaft"], p)]
+    return out
+
+
+def _rules(d: dict[str, Any], p: dict[str, Any]) -> list[str]:
+    r1, r2, r3 = d["rule1"], d["rule2"], d["rule3"]
+    out = []
     out.append(f"Rule 1 (St-awareness pays: closed-stroke MPC >= {p['st_pays_pct']:g} % below its no-St ablation, "
                f"interval above zero, and below the best-tuned baseline, interval above zero): holds in "
                f"{r1['pays_in']} of {r1['flow_cases']} plate cases ({r1['comparable']} comparable): "

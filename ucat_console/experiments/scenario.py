@@ -16,9 +16,11 @@ the shipped ``sim-tuned``'s in E4R's second setting) and ``plant`` one of
 :data:`PLANT_VARIANTS`, a family member ``scale<G>_<model>`` (:func:`family_hydro`) or a
 profile-drag plant ``plate_cd<C_D0>`` (:func:`cd0_hydro`).
 
-Energy per metre: the mechanical energy spent over the window divided by the distance the
-hull travelled through the water in it (true surge integrated), for the estimate
-(``energy_per_metre``) and for the plant's shaft energy (``energy_per_metre_true``).
+Energy per metre: the energy spent over the window divided by the distance the hull
+travelled through the water in it (true surge integrated): the battery's (the drives'
+electrical input by the plant's drive model, ``energy_per_metre_electrical``, the
+experiments' primary figure), the plant's shaft energy (``energy_per_metre_true``) and the
+encoder estimate's (``energy_per_metre``).
 """
 
 from __future__ import annotations
@@ -194,7 +196,7 @@ class _Recorder:
                 self.energy.append((t, m.energy))
                 tr = self.loop.truth()
                 self.truth.append((t, tr.velocity[0], tr.depth, tr.velocity[5], sum(tr.fin_energy),
-                                   sum(abs(s - 0.3) for s in tr.fin_strouhal) / 4.0))
+                                   sum(abs(s - 0.3) for s in tr.fin_strouhal) / 4.0, sum(tr.fin_battery_energy)))
                 self.fin_angles.append(tr.fin_angles)
             if self.trace_rate > 0.0 and t + 1e-9 >= self._next_trace:
                 self._next_trace += 1.0 / self.trace_rate
@@ -269,6 +271,7 @@ def summarise(sc: Scenario, rec: _Recorder, loop: ClosedLoop) -> dict[str, Any]:
     span = energy[-1, 0] - energy[0, 0]
     power_est = float((energy[-1, 1] - energy[0, 1]) / span)
     power_true = float((truth[-1, 4] - truth[0, 4]) / span)
+    power_electrical = float((truth[-1, 6] - truth[0, 6]) / span)
     dvl = np.asarray(rec.dvl_v)
     st = np.asarray(rec.plan_st)
     u_true = truth[:, 1]
@@ -277,8 +280,10 @@ def summarise(sc: Scenario, rec: _Recorder, loop: ClosedLoop) -> dict[str, Any]:
         "scenario": _scenario_dict(sc),
         "power_est": power_est,
         "power_true": power_true,
+        "power_electrical": power_electrical,
         "energy_per_metre": power_est * span / distance if distance > 0.0 else math.nan,
         "energy_per_metre_true": power_true * span / distance if distance > 0.0 else math.nan,
+        "energy_per_metre_electrical": power_electrical * span / distance if distance > 0.0 else math.nan,
         "velocity_mean": float(u_true.mean()),
         "velocity_mae": float(np.abs(dvl - sc.v_ref).mean()) if dvl.size else math.nan,
         "velocity_mae_true": float(np.abs(u_true - sc.v_ref).mean()),

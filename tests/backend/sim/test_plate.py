@@ -31,7 +31,7 @@ PF = _pf()
 
 
 def test_a_fin_at_rest_in_still_water_feels_nothing() -> None:
-    assert plate.fin_load(0.4, 0.0, 0.0, 0.0, 0.0, 1e-4, 1e-3, PF) == (0.0, 0.0, 0.0, 0.0)
+    assert plate.fin_load(0.4, 0.0, 0.0, 0.0, 0.0, 1e-4, 1e-3, PF) == (0.0, 0.0, 0.0, 0.0, 0.0)
 
 
 def test_still_water_force_by_hand() -> None:
@@ -64,7 +64,7 @@ def _cycle(pf: np.ndarray, centre: float, amplitude: float, rate: float, ux: flo
         target = centre + amplitude if k % 2 == 0 else centre - amplitude
         while True:
             th, om, al = servo_step(th, om, target, rate, acceleration, 10.0, dt)
-            fx, fy, p, useful = plate.fin_load(th, om, al, ux, uy, 2.8e-5, dt, pf)
+            fx, fy, _, p, useful = plate.fin_load(th, om, al, ux, uy, 2.8e-5, dt, pf)
             null = pf[plate.P_NULL] > 0.5
             moment = plate.plate_force(th, om, 0.0 if null else ux, 0.0 if null else uy, pf)[2]
             raw = ((2.8e-5 + pf[plate.P_ADDED_I]) * al * (om - 0.5 * al * dt) - moment * om
@@ -150,8 +150,8 @@ def test_the_null_plant_ignores_the_flow_and_pays_for_its_thrust() -> None:
         still = plate.fin_load(*args, 0.0, 0.0, 1e-4, 1e-3, null)
         moving = plate.fin_load(*args, 0.3, 0.1, 1e-4, 1e-3, null)
         assert moving[:2] == still[:2]
-        assert moving[3] == pytest.approx(-(still[0] * 0.3 + still[1] * 0.1))
-        assert moving[2] == pytest.approx(max(0.0, still[2] + moving[3]) if still[2] > 0 else moving[2])
+        assert moving[4] == pytest.approx(-(still[0] * 0.3 + still[1] * 0.1))
+        assert moving[2] == pytest.approx(still[2] + moving[4] / args[1])  # the thrust's work as a torque
 
 
 def test_at_a_given_force_and_speed_the_null_plant_costs_the_same_at_any_frequency() -> None:

@@ -1,4 +1,4 @@
-"""Where the fins' forces meet the hull: the hydro parameter vector, the fin-to-body map, the
+"""Where the fins' forces meet the hull: the fins' parameter vector, the fin-to-body map, the
 flow past each fin and each fin's recorded Strouhal number.
 
 The force of a fin in the water is the plate's (:mod:`ucat_console.backend.sim.plate`).
@@ -19,8 +19,9 @@ import numpy as np
 from numba import njit
 
 from ucat_console.backend.sim.params import FinGeometryConfig, FinHydroConfig
-from ucat_console.backend.sim.plate import plate_params
+from ucat_console.backend.sim.plate import NP, plate_params
 from ucat_console.robot.fins import N_FINS, fin_signs
+from ucat_console.robot.motor import FinMotor
 
 # hydro parameter vector layout
 H_LF = 0
@@ -32,11 +33,13 @@ H_ARM_R = 5
 H_ARM_P = 6
 H_ARM_Y = 7
 H_PLATE = 8  # the plate's entries (``plate.P_*``) start here
-NPH = H_PLATE + 11
+H_MOTOR = H_PLATE + NP  # the drive's (``FinMotor.constants()``) from here
+NPH = H_MOTOR + 8
 
 
-def hydro_params(hydro: FinHydroConfig, geometry: FinGeometryConfig) -> np.ndarray:
-    """The hydro parameter vector read by the compiled functions (layout ``H_*``)."""
+def hydro_params(hydro: FinHydroConfig, geometry: FinGeometryConfig, motor: FinMotor = FinMotor()) -> np.ndarray:
+    """The fins' parameter vector read by the compiled functions (layout ``H_*``): their
+    hydrodynamics, where they sit, and their drives."""
     c = hydro.resolved()
     ph = np.zeros(NPH)
     ph[H_LF] = c.fin_length
@@ -48,8 +51,9 @@ def hydro_params(hydro: FinHydroConfig, geometry: FinGeometryConfig) -> np.ndarr
     ph[H_ARM_R] = geometry.arm_roll
     ph[H_ARM_P] = geometry.arm_pitch
     ph[H_ARM_Y] = geometry.arm_yaw
-    ph[H_PLATE:] = plate_params(c.rho, c.area, c.r_c, c.c_d, c.c_l, hydro.c_d0, hydro.lift_ratio,
-                                hydro.added_mass, hydro.strips, hydro.model == "still_water")
+    ph[H_PLATE:H_MOTOR] = plate_params(c.rho, c.area, c.r_c, c.c_d, c.c_l, hydro.c_d0, hydro.lift_ratio,
+                                       hydro.added_mass, hydro.strips, hydro.model == "still_water")
+    ph[H_MOTOR:] = motor.constants()
     return ph
 
 

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from ucat_console.robot import geometry as G
 from ucat_console.robot import hull as H
 from ucat_console.robot.geometry import Geometry
+from ucat_console.robot.motor import FinMotor
 from ucat_console.robot.servo import FIN_ACCELERATION, FIN_MAX_RATE
 from ucat_console.robot.units import RHO_FRESH, DriveUnits
 from ucat_console.typedconf import Config, param, require_below
@@ -260,6 +261,7 @@ class PlantConfig(Config):
     fins: FinGeometryConfig = FinGeometryConfig()
     hydro: FinHydroConfig = FinHydroConfig()
     servo: ServoConfig = ServoConfig()
+    motor: FinMotor = FinMotor()  # each fin drive's motor, gearhead and bridge (robot.motor)
     sensors: SensorsConfig = SensorsConfig()
     dt: float = param(0.001, lo=1e-5, hi=0.001, unit="s", doc="physics time step (1 kHz or finer)")
     seed: int = param(0, lo=0, hi=2**63 - 1, doc="seed of the sensor noise")

@@ -6,9 +6,10 @@ it, :func:`advance_steps` is the functional core: one compiled call runs many ph
 
 1. every fin servo moves one step along its profile (``servo``) and the fin's mean |rate|
    (its recorded Strouhal number) is updated;
-2. each fin's force, shaft power and power into the hull follow from its angle, rate and
-   acceleration and the flow past it (``plate``, ``fin_hydro.fin_flow``), and its force adds
-   its wrench (``fin_hydro``);
+2. each fin's force, shaft torque and power, and power into the hull follow from its angle,
+   rate and acceleration and the flow past it (``plate``, ``fin_hydro.fin_flow``); its drive's
+   motor current and the battery power it draws from the shaft's torque (``robot.motor``);
+   its force adds its wrench (``fin_hydro``);
 3. the hull takes one semi-implicit Euler step (``vehicle``).
 
 The plant never reads the controller's parameters; it has its own (``params``).
@@ -24,6 +25,7 @@ import numpy as np
 from numba import njit
 
 from ucat_console.backend.sim.fin_hydro import (
+    H_MOTOR,
     H_PLATE,
     H_TAU,
     add_fin_wrench,
@@ -49,6 +51,7 @@ from ucat_console.backend.sim.vehicle import (
 )
 from ucat_console.robot import reading_rows as rr
 from ucat_console.robot.fins import N_FINS
+from ucat_console.robot.motor import battery_power, motor_current
 from ucat_console.robot.readings import Reading
 from ucat_console.robot.rotations import euler_from_quaternion, quat_to_rot, quaternion_from_euler
 from ucat_console.robot.servo import encoder_reading, servo_step
@@ -69,7 +72,10 @@ F_ENERGY = 9  # shaft energy since reset (J)
 F_IMPULSE_X = 10  # time integral of the fin-frame force f_x since reset (N s)
 F_IMPULSE_Y = 11  # and of f_y
 F_WORK = 12  # work the fin did on the hull since reset (J)
-NF = 13
+F_CURRENT = 13  # last motor current of its drive (A)
+F_BATTERY = 14  # last battery power of its drive (W)
+F_BATTERY_ENERGY = 15  # battery energy of its drive since reset (J)
+NF = 16
 
 # command layout: one row per fin
 C_TARGET = 0
@@ -112,7 +118,9 @@ def advance_steps(
     nuc = np.empty(3)
     nu_r = np.empty(6)
     k_rate = dt / ph[H_TAU]
-    pf = ph[H_PLATE:]
+    pf = ph[H_PLATE:H_MOTOR]
+    k_t, r_m, i_0, j_r = ph[H_MOTOR], ph[H_MOTOR + 1], ph[H_MOTOR + 2], ph[H_MOTOR + 3]
+    n_g, eta_g, eta_b, p_q = ph[H_MOTOR + 4], ph[H_MOTOR + 5], ph[H_MOTOR + 6], ph[H_MOTOR + 7]
     for _ in range(n_steps):
         # 1. servos, mean |rate|
         for i in range(4):
@@ -134,8 +142,14 @@ def advance_steps(
             nu_r[j] -= nuc[j]
         for i in range(4):
             ux, uy = fin_flow(nu_r, signs[i, 0], signs[i, 1], signs[i, 2], ph)
-            fx, fy, p, useful = fin_load(xf_out[i, F_THETA], xf_out[i, F_OMEGA], xf_out[i, F_ALPHA], ux, uy,
-                                         fin_inertia, dt, pf)
+            om = xf_out[i, F_OMEGA]
+            al = xf_out[i, F_ALPHA]
+            fx, fy, torque, p, useful = fin_load(xf_out[i, F_THETA], om, al, ux, uy, fin_inertia, dt, pf)
+            current = motor_current(torque, om, al, k_t, i_0, j_r, n_g, eta_g)
+            battery = battery_power(current, om, k_t, r_m, n_g, eta_b, p_q)
+            xf_out[i, F_CURRENT] = current
+            xf_out[i, F_BATTERY] = battery
+            xf_out[i, F_BATTERY_ENERGY] += battery * dt
             xf_out[i, F_FX] = fx
             xf_out[i, F_FY] = fy
             xf_out[i, F_POWER] = p
@@ -210,7 +224,7 @@ class Plant:
         self._mats = np.stack([self._mrb, self._ma, self._minv])
         self._tau_ext = (0.0,) * 6
         self._pv = vehicle_params(c.vehicle, self._tau_ext)
-        self._ph = hydro_params(c.hydro, c.fins)
+        self._ph = hydro_params(c.hydro, c.fins, c.motor)
         self._signs = fin_sign_table()
         self._acc = float(c.servo.acceleration)
         self._max_rate = float(c.servo.max_rate)
@@ -401,6 +415,15 @@ class Plant:
     def fin_energy(self) -> tuple[float, ...]:
         """True shaft energy per fin since reset (J), no regeneration (``plate.fin_load``)."""
         return tuple(float(x) for x in self._xf[:, F_ENERGY])
+
+    def fin_currents(self) -> tuple[float, ...]:
+        """Each fin drive's motor current in the last step (A; ``robot.motor``)."""
+        return tuple(float(x) for x in self._xf[:, F_CURRENT])
+
+    def fin_battery_energy(self) -> tuple[float, ...]:
+        """Battery energy each fin drive drew since reset (J; ``robot.motor``): never less than
+        its shaft energy."""
+        return tuple(float(x) for x in self._xf[:, F_BATTERY_ENERGY])
 
     def fin_work(self) -> tuple[float, ...]:
         """Work each fin did on the hull since reset (J): never more than its shaft energy

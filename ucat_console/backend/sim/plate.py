@@ -175,9 +175,10 @@ def plate_force(theta: float, omega: float, ux: float, uy: float, pf: np.ndarray
 
 @njit(cache=True)
 def fin_load(theta: float, omega: float, alpha: float, ux: float, uy: float, fin_inertia: float, dt: float,
-             pf: np.ndarray) -> tuple[float, float, float, float]:
-    """One fin's (f_x, f_y) on the hull (fin frame, N), its shaft power (W, no regeneration)
-    and the power it delivers to the hull (W), at the end of a step of ``dt`` in which the fin
+             pf: np.ndarray) -> tuple[float, float, float, float, float]:
+    """One fin's (f_x, f_y) on the hull (fin frame, N), the torque its shaft gives (N m), its
+    shaft power (W, no regeneration) and the power it delivers to the hull (W), at the end of
+    a step of ``dt`` in which the fin
     reached angle ``theta`` and rate ``omega`` at the constant angular acceleration ``alpha``,
     with the water passing the hinge at ``(ux, uy)`` (module docstring; ``pf`` the plate
     entries). The inertia's power is taken at the step's mean rate, so that over the step it
@@ -189,7 +190,11 @@ def fin_load(theta: float, omega: float, alpha: float, ux: float, uy: float, fin
     else:
         fx, fy, moment = plate_force(theta, omega, ux, uy, pf)
     useful = -(fx * ux + fy * uy)  # f . v, v = -(ux, uy) the hinge's velocity through the water
-    power = (fin_inertia + pf[P_ADDED_I]) * alpha * (omega - 0.5 * alpha * dt) - moment * omega
+    inertia = fin_inertia + pf[P_ADDED_I]
+    torque = inertia * alpha - moment
+    power = inertia * alpha * (omega - 0.5 * alpha * dt) - moment * omega
     if null:
         power += useful
-    return fx, fy, max(0.0, power), useful
+        if omega != 0.0:  # the null plant's thrust work reaches the shaft as a torque
+            torque += useful / omega
+    return fx, fy, torque, max(0.0, power), useful
