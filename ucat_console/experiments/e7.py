@@ -12,12 +12,12 @@ Controllers (:data:`E7_CONTROLLERS`):
 * ``baseline_2hz``: the paper's fixed-frequency baseline at 2 Hz (fin-model inverse with
   the identified coefficients);
 * ``baseline_best``: the same at the frequency of :data:`TUNING_FREQUENCIES` with the
-  least true energy per metre among those that track, chosen per plant and speed on a
+  least battery energy per metre among those that track, chosen per plant and speed on a
   held-out seed (:data:`HELD_OUT_SEED` + base seed) before the measured runs;
 * ``mpc_paper_id``: the paper's MPC (its formulation) with the identified model;
 * ``mpc_closed_id``: the closed-stroke MPC with the identified model;
 * ``mpc_closed_nost``: the same without its St term (``lam_st = 0``), the ablation;
-* ``oracle``: plans with the plant's true thrust and power (``experiments.oracle``).
+* ``oracle``: plans with the plant's true force and battery power (``experiments.oracle``).
 
 Primary metric (:data:`PRIMARY`): the battery's energy per metre (the drives' electrical
 input by the plant's drive model, ``robot.motor``) at matched tracking (DVL speed MAE <=

@@ -1,4 +1,4 @@
-"""E7's oracle: a fin planner that plans with the plant's true thrust and power.
+"""E7's oracle: a fin planner that plans with the plant's true force and battery power.
 
 The upper bound of what planning can save on a plant: it knows what the controllers must
 identify. Before a run it measures, on the plant itself (``fin_rig.FinRig``: the plant's
