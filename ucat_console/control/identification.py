@@ -2,8 +2,9 @@
 or the simulated fin's plate model).
 
 Data: each fin's encoder angle and rate (``FinState``), the DVL's forward speed, the IMU's
-attitude and yaw rate; and from the configuration the hull's surge damping (``X_u``,
-``X_uu``), its mass and added mass (``m - X_udot``) and the fins' mounting angle.
+attitude and yaw rate (the plate fit: the DVL's three velocities and the IMU's three rates);
+and from the configuration the hull's surge damping (``X_u``, ``X_uu``), its mass and added
+mass (``m - X_udot``) and where the fins sit (mounting angle, arms).
 
 Model. The controller's quasi-steady fin model (control.md section 1) made instantaneous,
 as the fin sweeps: at angle theta and rate w in a stroke that began at theta_s,
@@ -34,12 +35,13 @@ recording that cannot tell them apart (the manoeuvre's several centres can) is r
 configured C_D and C_L).
 
 ``fit = "plate"`` fits the plant's own model instead (``control.plate_model``, the plate of
-docs/fin-plant.md): its thrust is linear in the profile drag C_D0, the normal force's C_D90
-and the rotational circulation's C_R, with the plate's lift held at ``lift_ratio`` of its
-normal force (``C_Lmax = lift_ratio (C_D0 + C_D90)``); it reports the still-water model the
-plate is calibrated to, ``C_D = C_D0 + C_D90`` and C_L, and
-C_D0, with intervals by the delta method. The plate's line ``phi = atan2(C_D, C_L)`` is
-fitted with them (nonlinear least squares), and ``C_L = C_D / tan(phi)``.
+docs/fin-plant.md) in the flow past each fin that the DVL's velocity and the IMU's rates
+give (the hull's heave and pitch at the fins included: they change the thrust by up to a
+fifth). It is calibrated to the still-water model (C_D, C_L) as the plant's plate is: its
+normal force C_D = C_D0 + C_D90, its lift held at ``lift_ratio`` of it (C_Lmax =
+``lift_ratio`` C_D), its rotational circulation C_R = 2 sqrt(C_D^2 + C_L^2) / 3 and its line
+at atan2(C_D, C_L) from the fin's; so the fit is (C_D, C_L, C_D0) by nonlinear least squares
+on the same windows, with intervals from the Jacobian as above.
 
 scipy.optimize is imported inside :func:`identify` only (the console's run path does not
 load it).
@@ -54,7 +56,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ucat_console.control.plate_model import Plate, plate_regressors
+from ucat_console.control.plate_model import FinMount, Plate, hinge_flow, plate_regressors
 from ucat_console.control.params import ManoeuvreConfig, MpcConfig
 from ucat_console.typedconf import Config, param
 
@@ -87,7 +89,12 @@ class Hull:
     mass: float  # m - X_udot, kg
     x_u: float  # N s/m
     x_uu: float  # N s2/m2
-    mounting_angle: float  # rad, the fin plane's horizontal axis from the body x axis
+    mount: FinMount  # where the fins sit (the plate fit's flow past each fin)
+
+    @property
+    def mounting_angle(self) -> float:
+        """The fin plane's horizontal axis from the body x axis (rad)."""
+        return self.mount.angle
 
     def drag(self, u: ArrayLike) -> NDArray[np.float64]:
         u = np.asarray(u, dtype=float)
@@ -105,15 +112,20 @@ class FinTrack:
 
 @dataclass(frozen=True)
 class Measurements:
-    """What the fit reads: fin tracks, DVL forward speed, IMU attitude and yaw rate."""
+    """What the fit reads: fin tracks, the DVL's velocity, the IMU's attitude and rates (body
+    frame; the plate fit reads the lateral and vertical ones for the flow past the fins)."""
 
     fins: tuple[FinTrack, ...]
     dvl_t: NDArray[np.float64]
     dvl_u: NDArray[np.float64]  # valid reports only, m/s
+    dvl_v: NDArray[np.float64]
+    dvl_w: NDArray[np.float64]
     imu_t: NDArray[np.float64]
     imu_roll: NDArray[np.float64]  # rad
     imu_pitch: NDArray[np.float64]
-    imu_yaw_rate: NDArray[np.float64]  # rad/s
+    imu_roll_rate: NDArray[np.float64]  # rad/s
+    imu_pitch_rate: NDArray[np.float64]
+    imu_yaw_rate: NDArray[np.float64]
 
 
 @dataclass(frozen=True)
@@ -189,16 +201,19 @@ def thrust_regressors(track: FinTrack, mpc: MpcConfig, hull: Hull) -> tuple[NDAr
     return q * np.cos(2.0 * th - th_s), -q * np.sin(th_s)
 
 
-def _plate(track: FinTrack, m: Measurements, mpc: MpcConfig, hull: Hull, cfg: IdentifyConfig,
+def _plate(fin: int, track: FinTrack, m: Measurements, mpc: MpcConfig, hull: Hull, cfg: IdentifyConfig,
            phi: float) -> tuple[NDArray, NDArray, NDArray]:
     """The plate fit's regressors per sample (zeros for the other fits): the thrust per unit of
-    C_D0, C_D90 and C_R at the DVL speed, the lift held at ``lift_ratio`` of the normal force."""
+    C_D0, C_D90 and C_R in the flow the DVL's velocity and the IMU's rates make past the fin,
+    the lift held at ``lift_ratio`` of the normal force."""
     if cfg.fit != "plate":
         z = np.zeros(track.t.size)
         return z, z, z
-    speed = np.interp(track.t, m.dvl_t, m.dvl_u)
+    body = [np.interp(track.t, m.dvl_t, x) for x in (m.dvl_u, m.dvl_v, m.dvl_w)]
+    body += [np.interp(track.t, m.imu_t, x) for x in (m.imu_roll_rate, m.imu_pitch_rate, m.imu_yaw_rate)]
+    ux, uy = hinge_flow(fin, hull.mount, *body)
     plate = Plate(mpc.rho, mpc.fin_area, mpc.r_c, phi, cfg.plate_strips)
-    c0, c90, cl, cr = plate_regressors(track.angle, track.rate, speed, plate, hull.mounting_angle)
+    c0, c90, cl, cr = plate_regressors(track.angle, track.rate, ux, uy, plate, hull.mounting_angle)
     return c0 + cfg.lift_ratio * cl, c90 + cfg.lift_ratio * cl, cr
 
 
@@ -218,7 +233,8 @@ def windows(m: Measurements, mpc: MpcConfig, hull: Hull, cfg: IdentifyConfig,
     if m.dvl_t.size < cfg.min_dvl:
         raise ValueError(f"sensors/dvl: {m.dvl_t.size} valid DVL reports; identification needs the "
                          "forward speed (at least one window's worth)")
-    regs = [(f.t, *thrust_regressors(f, mpc, hull), *_plate(f, m, mpc, hull, cfg, phi)) for f in m.fins]
+    regs = [(f.t, *thrust_regressors(f, mpc, hull), *_plate(i, f, m, mpc, hull, cfg, phi))
+            for i, f in enumerate(m.fins)]
     t_lo = max(f.t[0] for f in m.fins)
     t_hi = min(f.t[-1] for f in m.fins)
     n = int((t_hi - t_lo) // cfg.window_s)
@@ -267,13 +283,12 @@ def identify(recordings: Sequence[Measurements], mpc: MpcConfig, hull: Hull,
     return _fit(_usable(recordings, mpc, hull, cfg), mpc, hull, cfg)
 
 
-def _usable(recordings: Sequence[Measurements], mpc: MpcConfig, hull: Hull, cfg: IdentifyConfig,
-            phi: float | None = None) -> list[Window]:
+def _usable(recordings: Sequence[Measurements], mpc: MpcConfig, hull: Hull, cfg: IdentifyConfig) -> list[Window]:
     """Every recording's windows; ValueError when none is usable or none is steady."""
     ws: list[Window] = []
     why: dict[str, int] = {}
     for m in recordings:
-        w, left = windows(m, mpc, hull, cfg, phi)
+        w, left = windows(m, mpc, hull, cfg)
         ws += w
         for k, v in left.items():
             why[k] = why.get(k, 0) + v
@@ -342,55 +357,44 @@ def _fit(ws: list[Window], mpc: MpcConfig, hull: Hull, cfg: IdentifyConfig) -> I
 
 def _fit_plate(recordings: Sequence[Measurements], mpc: MpcConfig, hull: Hull,
                cfg: IdentifyConfig) -> Identification:
-    """The plate fit (module docstring): (C_D0, C_D90, C_R) and the plate's line phi by
-    nonlinear least squares on the windows' force balance; C_D = C_D0 + C_D90 and C_L =
-    C_D / tan(phi), intervals by the delta method."""
+    """The plate fit (module docstring): (C_D, C_L, C_D0) by nonlinear least squares on the
+    windows' force balance, the plate calibrated to (C_D, C_L) as the plant's is."""
     import scipy.optimize
     import scipy.stats
 
-    phi0 = math.atan2(mpc.c_d, mpc.c_l)
-    per_rec = [(m, windows(m, mpc, hull, cfg, phi0)[0]) for m in recordings]
-    ws = _usable(recordings, mpc, hull, cfg, phi0)  # the same windows, with the checks' refusals
+    ws = _usable(recordings, mpc, hull, cfg)  # the windows, with the checks' refusals
+    if len(ws) <= 3:
+        raise ValueError(f"{len(ws)} usable windows for 3 coefficients: the recording is too short")
     y = np.array([w.drag + hull.mass * w.accel for w in ws])
 
-    def basis(phi: float) -> NDArray:
-        rows = [windows(m, mpc, hull, cfg, phi)[0] for m, _ in per_rec]
-        return np.array([w.plate for r in rows for w in r])
+    def at(x: NDArray) -> tuple[list[Window], NDArray]:
+        """The windows with the plate regressors of the line of (C_D, C_L), and the thrust."""
+        c_d, c_l, c_d0 = (float(v) for v in x)
+        rows = [w for m in recordings for w in windows(m, mpc, hull, cfg, math.atan2(c_d, c_l))[0]]
+        coef = np.array([c_d0, c_d - c_d0, 2.0 * math.hypot(c_d, c_l) / 3.0])  # C_D0, C_D90, C_R
+        return rows, np.array([w.plate for w in rows]) @ coef
 
-    def residual(x: NDArray) -> NDArray:
-        return basis(float(x[3])) @ x[:3] - y
-
-    if len(ws) <= 4:
-        raise ValueError(f"{len(ws)} usable windows for 4 coefficients: the recording is too short")
-    x0 = np.array([0.05, max(mpc.c_d - 0.05, 0.01), 2.0 * math.hypot(mpc.c_d, mpc.c_l) / 3.0, phi0])
-    res = scipy.optimize.least_squares(residual, x0, bounds=([0.0, 0.0, 0.0, 0.01], [np.inf, np.inf, np.inf, 1.56]),
-                                       method="trf", x_scale=[0.1, 1.0, 1.0, 0.1])
-    r = res.fun
-    dof = len(ws) - 4
+    x0 = np.array([max(mpc.c_d, 0.1), max(mpc.c_l, 0.05), 0.05])  # from the configured model
+    res = scipy.optimize.least_squares(lambda x: at(x)[1] - y, x0, bounds=(1e-9, np.inf), method="trf",
+                                       x_scale=[x0[0], x0[1], 0.1])
     jtj = res.jac.T @ res.jac
     if np.linalg.cond(jtj) > 1e10:
         raise ValueError("the recording does not tell the plate's coefficients apart (strokes about one centre, "
                          "at one speed); run the identification manoeuvre")
-    cov = float(r @ r) / dof * np.linalg.inv(jtj)
-    t975 = scipy.stats.t.ppf(0.975, dof)
-    c_d0, c_d90, _, phi = (float(v) for v in res.x)
-    c_d = c_d0 + c_d90
-    c_l = c_d / math.tan(phi)
-    j_d = np.array([1.0, 1.0, 0.0, 0.0])
-    j_l = np.array([1.0 / math.tan(phi), 1.0 / math.tan(phi), 0.0, -c_d / math.sin(phi) ** 2])
-    c_d_ci = float(t975 * math.sqrt(j_d @ cov @ j_d))
-    c_l_ci = float(t975 * math.sqrt(j_l @ cov @ j_l))
-    c_d0_ci = float(t975 * math.sqrt(cov[0, 0]))
-    thrust = r + y
+    r = res.fun
+    dof = len(ws) - 3
+    half = scipy.stats.t.ppf(0.975, dof) * np.sqrt(np.diag(float(r @ r) / dof * np.linalg.inv(jtj)))
+    c_d, c_l, c_d0 = (float(v) for v in res.x)
+    rows, thrust = at(res.x)
     fitted = tuple(
         Window(w.t0, w.t1, w.speed, w.accel, w.drag, w.a, w.b, w.steady, thrust=float(th), plate=w.plate,
                residual=float(th - yy))
-        for w, th, yy in zip(ws, thrust, y)
+        for w, th, yy in zip(rows, thrust, y)
     )
     scale = c_d / mpc.c_d if mpc.c_d > 0.0 else math.nan
-    scale_ci = c_d_ci / mpc.c_d if mpc.c_d > 0.0 else math.nan
-    return Identification("plate", c_d, c_l, c_d_ci, c_l_ci, scale, scale_ci, fitted,
-                          float(np.sqrt(np.mean(r * r))), hull.mass, c_d0, c_d0_ci)
+    scale_ci = float(half[0]) / mpc.c_d if mpc.c_d > 0.0 else math.nan
+    return Identification("plate", c_d, c_l, float(half[0]), float(half[1]), scale, scale_ci, fitted,
+                          float(np.sqrt(np.mean(r * r))), hull.mass, c_d0, float(half[2]))
 
 
 @dataclass(frozen=True)
