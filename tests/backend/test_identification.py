@@ -61,12 +61,12 @@ def record_manoeuvre(cfg: AppConfig, directory: Path) -> Path:
 ])
 def test_manoeuvre_recording_recovers_the_plants_coefficients(tmp_path: Path, plant, c_d, c_l) -> None:
     """The quasi-steady model is not the plate (each stroke of the plate pushes across its line
-    in turn, the model's along the cycle's): its fit is the model nearest the plant, within a
-    quarter of the calibration."""
+    in turn, the model's along the cycle's): its fit is the model nearest the plant, C_D and
+    C_L 11 % and 13 % above the calibration (measured; asserted within 20 %)."""
     path = record_manoeuvre(app_config(plant), tmp_path)
     rep = identify_sessions([path.name], tmp_path)
     r = rep.result
-    assert r.c_d == pytest.approx(c_d, rel=0.30) and r.c_l == pytest.approx(c_l, rel=0.30)
+    assert r.c_d == pytest.approx(c_d, rel=0.20) and r.c_l == pytest.approx(c_l, rel=0.20)
     assert r.steady_windows >= 5 and 0.0 < r.c_d_ci < 0.2 * c_d
     assert "recorded" in rep.config_source  # the hull came from the recording's configuration
     fragment = tmp_path / "identified.toml"

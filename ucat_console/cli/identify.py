@@ -1,9 +1,9 @@
 """``ucat-console identify SESSION...``: the fin model identified from recordings.
 
 Fits the controller's C_D and C_L (or ``--fit scale``: one factor on both; ``--fit plate``:
-the simulated fin's plate model, ``control.plate_model``: C_D, C_L and the profile drag C_D0) to the recorded
-encoder angles and rates, DVL speed and IMU of the sessions (ids or part files), with the
-hull's damping and added mass from ``--config`` (default: the configuration the first
+the simulated fin's plate model, ``control.plate_model``: C_D, C_L and the profile drag C_D0)
+to the recorded encoder angles and rates, DVL velocity and IMU of the sessions (ids or part
+files), with the hull's damping and added mass from ``--config`` (default: the configuration the first
 session recorded), prints the coefficients with 95 % intervals and writes, into ``--out``,
 ``identified.toml`` (the ``[mpc]`` fragment to load), ``identify.json`` (every window) and
 ``residuals.png`` (with the ``experiments`` extra).
