@@ -155,7 +155,7 @@ def _e3(res: dict[str, Any]) -> str:
                    "equal rates has w <= 2 V St_high / L_f, where the model's largest mean force is F_max; over "
                    "the grid no such plan can have a mean force error below mean(max(0, |f*| - F_max)). The "
                    "bounds are for equal-rate pairs only: a slow and a fast stroke whose cycle St (eq 10) lies in "
-                   "the corridor make more (docs/experiments/findings.md):\n\n")
+                   "the corridor make more (docs/findings.md):\n\n")
         out.append(table(["V (m/s)", "w at St 0.35 (rad/s)", "F_max, d_2 = -d_1 (N)", "F_max, equal rates, any strokes (N)",
                           "grid mean |f*| (N)", "least mean force error in the corridor (N)"],
                          [[num(r["v"], 1), num(r["w_max_in_corridor"], 2), num(r["f_max_symmetric"], 3),
