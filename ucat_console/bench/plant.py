@@ -186,7 +186,7 @@ def efficiency_figure(res: dict[str, Any], path: Path) -> Path:
     ax.legend(fontsize=7, loc="upper right")
     fig.tight_layout()
     path.mkdir(parents=True, exist_ok=True)
-    out = path / "efficiency.png"
+    out = path / "fin-efficiency.png"
     fig.savefig(out, dpi=110)
     plt.close(fig)
     return out

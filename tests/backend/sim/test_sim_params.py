@@ -1,4 +1,4 @@
-"""Plant configuration: defaults from plant.md, validation, TOML, fin numbering, soft-fin gain."""
+"""Plant configuration: defaults from plant.md, validation, TOML, fin numbering, the fin model."""
 
 from __future__ import annotations
 
