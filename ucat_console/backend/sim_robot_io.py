@@ -13,7 +13,10 @@ electrical input becomes an ``ElectricalPower`` message handed to each sink adde
 :meth:`SimRobotIO.add_telemetry_sink` as ``(channel, message)``, as the device robot hands the
 EPOS2s' (the supervisor publishes it on ``power/electrical``): each drive's battery power is
 its mean since the last message, from the plant's drive model (``robot.motor``) integrated
-at every physics step, and its current the motor current at the message's time. (A real
+at every physics step, and its current the motor current at the message's time. A message is
+handed on at the robot's next step, after the loop has published the readings of the step
+that made it, so that the stream stays in time order (the plant runs ahead of the readings
+the loop has taken). (A real
 drive's figure is made from its averaged current, ``drive_power``; the simulator knows the
 battery's exact view.)
 
@@ -102,6 +105,7 @@ class SimRobotIO(RobotIO):
         self.checks = Plausibility(plausibility, on_event)
         self._telemetry_sinks: tuple[Callable[[str, Any], None], ...] = ()
         self._last_electrical: tuple[float, tuple[float, ...]] | None = None  # (time, battery energy)
+        self._electrical_due: ElectricalPower | None = None  # made at the last step, handed on at the next
 
     @property
     def runs_core(self) -> bool:  # type: ignore[override]
@@ -122,8 +126,16 @@ class SimRobotIO(RobotIO):
 
         return remove
 
+    def _hand_on_electrical(self) -> None:
+        """The message the last step made, if any, to every sink."""
+        msg, self._electrical_due = self._electrical_due, None
+        if msg is not None:
+            for sink in self._telemetry_sinks:
+                sink(POWER_ELECTRICAL, msg)
+
     def _report_electrical(self) -> None:
-        """The drives' electrical input since the last message, when one is due."""
+        """The drives' electrical input since the last message, when one is due (handed on
+        at the next step)."""
         p = self.plant
         if not self._telemetry_sinks:
             return
@@ -138,15 +150,14 @@ class SimRobotIO(RobotIO):
         self._last_electrical = (t, energy)
         per_fin = tuple((e - e0) / span for e, e0 in zip(energy, last[1]))
         volts = (p.cfg.motor.supply_voltage,) * len(per_fin)
-        msg = ElectricalPower(t, p.fin_currents(), volts, per_fin, math.fsum(per_fin))  # type: ignore[arg-type]
-        for sink in self._telemetry_sinks:
-            sink(POWER_ELECTRICAL, msg)
+        self._electrical_due = ElectricalPower(t, p.fin_currents(), volts, per_fin, math.fsum(per_fin))  # type: ignore[arg-type]
 
     def run_core(self, core: LoopCore) -> int:
         plant = self.plant
         sensors = plant.sensors
         arrays = core.arrays() + plant.kernel_arrays()
         checks = self.checks
+        self._hand_on_electrical()
         while True:
             st = run_core_on_plant(*arrays, *sensors.kernel_arrays(), checks.limits, checks.state)
             if st != NEED_NOISE:
@@ -162,6 +173,7 @@ class SimRobotIO(RobotIO):
         return self.plant.next_sensor_time()
 
     def advance_to(self, t: float) -> list[Reading]:
+        self._hand_on_electrical()
         readings = self.checks.filter(self.plant.advance_and_sample(t))
         self.checks.report(t)
         self._report_electrical()
