@@ -55,16 +55,18 @@ def record_manoeuvre(cfg: AppConfig, directory: Path) -> Path:
 
 
 @pytest.mark.parametrize("plant, c_d, c_l", [
-    # the plant's own model: quasi-steady, no thrust gain, coefficients unlike the paper's
-    (FinHydroConfig(coefficients="custom", custom=FinCoefficients(c_d=2.0, c_l=0.6), wake="quasi_steady"), 2.0, 0.6),
-    # the soft fin without the wake: effective coefficients are the gain times the paper's
-    (FinHydroConfig(coefficients="soft_fin", wake="quasi_steady"), 4.6 * 0.7, 4.6 * 0.25),
+    # the still-water null plant calibrated to coefficients unlike the paper's (its forces do
+    # not change with speed, as the quasi-steady model's)
+    (FinHydroConfig(model="still_water", coefficients="custom", custom=FinCoefficients(c_d=2.0, c_l=0.6)), 2.0, 0.6),
 ])
 def test_manoeuvre_recording_recovers_the_plants_coefficients(tmp_path: Path, plant, c_d, c_l) -> None:
+    """The quasi-steady model is not the plate (each stroke of the plate pushes across its line
+    in turn, the model's along the cycle's): its fit is the model nearest the plant, C_D and
+    C_L 11 % and 13 % above the calibration (measured; asserted within 20 %)."""
     path = record_manoeuvre(app_config(plant), tmp_path)
     rep = identify_sessions([path.name], tmp_path)
     r = rep.result
-    assert r.c_d == pytest.approx(c_d, rel=0.10) and r.c_l == pytest.approx(c_l, rel=0.10)
+    assert r.c_d == pytest.approx(c_d, rel=0.20) and r.c_l == pytest.approx(c_l, rel=0.20)
     assert r.steady_windows >= 5 and 0.0 < r.c_d_ci < 0.2 * c_d
     assert "recorded" in rep.config_source  # the hull came from the recording's configuration
     fragment = tmp_path / "identified.toml"
@@ -158,47 +160,59 @@ def test_the_trim_needs_a_hover(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
-def test_the_inflow_fit_recovers_the_foil_plants_coefficients(tmp_path: Path, capsys) -> None:
-    """The foil plant (gain 1, still-water C_D and C_L three times the paper's, profile drag
-    0.3): the inflow fit recovers all three within 10 %; the quasi-steady fit, which has no
-    stream term, cannot (it is the model E7's identified controllers plan with)."""
+@pytest.mark.parametrize("c_d, c_l, c_d0", [(0.7, 0.25, 0.1), (2.1, 0.75, 0.3)])
+def test_the_plate_fit_recovers_the_plates_coefficients(tmp_path: Path, capsys, c_d, c_l, c_d0) -> None:
+    """Plates calibrated to the paper's C_D and C_L with profile drag 0.1, and to three times
+    them with 0.3, each recording the identification manoeuvre: the plate fit recovers C_D
+    and C_L within 4 % (measured; asserted 8 %), C_D0 0.04 high and 0.06 low (asserted 0.1),
+    with the intervals of the table in control/plate_model.py. The quasi-steady fit, which
+    has no flow past the fins, leaves 3.4-3.6 times the residual (asserted twice)."""
     from ucat_console.control.identification import IdentifyConfig
 
-    plant = FinHydroConfig(coefficients="custom", custom=FinCoefficients(c_d=2.1, c_l=0.75),
-                           wake="foil_inflow", foil_cd0=0.3)
+    plant = FinHydroConfig(coefficients="custom", custom=FinCoefficients(c_d=c_d, c_l=c_l), c_d0=c_d0)
     path = record_manoeuvre(app_config(plant), tmp_path)
-    r = identify_sessions([path.name], tmp_path, cfg=IdentifyConfig(fit="inflow")).result
-    assert r.c_d == pytest.approx(2.1, rel=0.10) and r.c_l == pytest.approx(0.75, rel=0.10)
-    assert r.c_d0 == pytest.approx(0.3, rel=0.10)
-    assert 0.0 < r.c_d0_ci < 0.3 and 0.0 < r.c_d_ci < 0.2 * 2.1
+    r = identify_sessions([path.name], tmp_path, cfg=IdentifyConfig(fit="plate")).result
+    assert r.c_d == pytest.approx(c_d, rel=0.08) and r.c_l == pytest.approx(c_l, rel=0.08)
+    assert r.c_d0 == pytest.approx(c_d0, abs=0.1)
+    assert 0.0 < r.c_d_ci < 0.15 * c_d and 0.0 < r.c_l_ci < 0.15 * c_l and 0.0 < r.c_d0_ci < 0.15
     assert "c_d0" in r.toml_fragment()
     plain = identify_sessions([path.name], tmp_path).result
-    assert abs(plain.c_d / 2.1 - 1.0) > 0.2 and plain.rms_residual > 2.0 * r.rms_residual
-    # the command line fits the same and prints the stream's coefficient
+    assert plain.rms_residual > 2.0 * r.rms_residual
+    # the command line fits the same and prints the plate's profile drag
     out = tmp_path / "out"
-    assert main(["identify", path.name, "--dir", str(tmp_path), "--out", str(out), "--fit", "inflow"]) == 0
+    assert main(["identify", path.name, "--dir", str(tmp_path), "--out", str(out), "--fit", "plate"]) == 0
     assert "c_d0 = " in capsys.readouterr().out
     doc = json.loads((out / "identify.json").read_text())
     assert doc["result"]["c_d0"] == pytest.approx(r.c_d0, rel=1e-9)
 
 
-def test_the_controllers_inflow_model_is_the_plants() -> None:
-    """control.inflow_model's regressors give the thrust the plant's foil strips add."""
+def test_the_controllers_plate_model_is_the_plants() -> None:
+    """control.plate_model's regressors give the plant's own forward thrust (the added mass
+    left out, as on the hull), in the flow the hull's motion makes past each fin."""
     import numpy as np
 
-    from ucat_console.backend.sim import foil
-    from ucat_console.backend.sim.fin_hydro import H_COS_A, hydro_params
+    from ucat_console.backend.sim import plate
+    from ucat_console.backend.sim.fin_hydro import H_COS_A, H_MOTOR, H_PLATE, fin_flow, fin_sign_table, hydro_params
     from ucat_console.backend.sim.params import FinGeometryConfig
-    from ucat_console.control.inflow_model import Plate, stream_regressors
+    from ucat_console.control.plate_model import FinMount, Plate, hinge_flow, plate_regressors
 
     geom = FinGeometryConfig()
-    hydro = FinHydroConfig(coefficients="soft_fin", wake="foil_inflow", foil_cd0=0.07)
+    hydro = FinHydroConfig(coefficients="custom", custom=FinCoefficients(c_d=1.3, c_l=0.4), c_d0=0.07)
     ph = hydro_params(hydro, geom)
+    pf = ph[H_PLATE:H_MOTOR]
     rng = np.random.default_rng(5)
-    th, w, u = rng.uniform(-3, 3, 200), rng.uniform(-6, 6, 200), rng.uniform(0, 0.5, 200)
-    mount = math.radians(geom.mounting_angle_deg)
+    n = 200
+    th, w = rng.uniform(-3, 3, n), rng.uniform(-6, 6, n)
+    nu = np.column_stack([rng.uniform(-0.1, 0.5, n), *(rng.uniform(-0.1, 0.1, (5, n)))])  # u, v, w, p, q, r
+    mount = FinMount(math.radians(geom.mounting_angle_deg), geom.arm_roll, geom.arm_pitch, geom.arm_yaw)
     c = hydro.resolved()
-    c0, c90, cl = stream_regressors(th, w, u, Plate(c.rho, c.area, c.r_c, c.c_d, c.c_l, hydro.foil_strips), mount)
-    ours = 0.07 * c0 + hydro.foil_cd90 * c90 + hydro.foil_cl_max * cl
-    plant = [-foil.stream_force(a, b, v * ph[H_COS_A], ph[foil.H_FOIL:])[0] * ph[H_COS_A] for a, b, v in zip(th, w, u)]
-    assert np.allclose(ours, plant, rtol=1e-9, atol=1e-12)
+    model = Plate(c.rho, c.area, c.r_c, math.atan2(c.c_d, c.c_l), hydro.strips)
+    c_r = 2.0 * math.hypot(c.c_l, c.c_d) / 3.0
+    for fin, signs in enumerate(fin_sign_table()):
+        ux, uy = hinge_flow(fin, mount, *nu.T)
+        flows = [fin_flow(row.copy(), *signs, ph) for row in nu]
+        assert np.allclose(np.column_stack([ux, uy]), flows, rtol=1e-12, atol=1e-15)
+        regs = plate_regressors(th, w, ux, uy, model, mount.angle)
+        ours = sum(k * r for k, r in zip((0.07, c.c_d - 0.07, hydro.lift_ratio * c.c_d, c_r), regs))
+        theirs = [-plate.plate_force(a, b, fx, fy, pf)[0] * ph[H_COS_A] for a, b, (fx, fy) in zip(th, w, flows)]
+        assert np.allclose(ours, theirs, rtol=1e-9, atol=1e-12)

@@ -11,7 +11,7 @@ import pytest
 
 from ucat_console.cli import main
 from ucat_console.experiments import e7
-from ucat_console.experiments.foil_curves import e7_plants, plant_hash
+from ucat_console.experiments.efficiency_curves import e7_plants, plant_hash
 
 DECLARATION = Path(__file__).resolve().parents[2] / "docs" / "experiments" / "e7-declaration.md"
 
@@ -27,10 +27,10 @@ def test_the_plants_are_the_declared_ones() -> None:
 
 
 def test_a_changed_plant_changes_the_hash(monkeypatch: pytest.MonkeyPatch) -> None:
-    from ucat_console.experiments import foil_curves
+    from ucat_console.experiments import efficiency_curves
 
-    monkeypatch.setattr(foil_curves, "E7_FOIL_CD0", (0.02, 0.1, 0.31))
-    assert plant_hash(foil_curves.e7_plants()) != declared_hash()
+    monkeypatch.setattr(efficiency_curves, "E7_CD0", (0.02, 0.05, 0.31))
+    assert plant_hash(efficiency_curves.e7_plants()) != declared_hash()
 
 
 def test_paired_saving_and_its_interval() -> None:
@@ -52,21 +52,21 @@ def _cmp(plant: str, v: float, a: str, b: str, saving: float, lo: float, hi: flo
 def test_decision_rules() -> None:
     st, best = ("mpc_closed_id", "mpc_closed_nost"), ("mpc_closed_id", "baseline_best")
     comps = [
-        _cmp("foil_cd0.1", 0.2, *st, 8.0, 2.0, 12.0), _cmp("foil_cd0.1", 0.2, *best, 3.0, 0.5, 6.0),  # pays
-        _cmp("foil_cd0.02", 0.2, *st, 6.0, -1.0, 12.0), _cmp("foil_cd0.02", 0.2, *best, 3.0, 0.5, 6.0),  # CI has 0
-        _cmp("foil_cd0.3", 0.2, *st, 9.0, 4.0, 14.0), _cmp("foil_cd0.3", 0.2, *best, -2.0, -4.0, 1.0),  # loses to baseline
-        _cmp("quasi_steady", 0.2, *st, 2.0, -1.0, 5.0), _cmp("quasi_steady", 0.2, *best, 1.0, -1.0, 3.0),
+        _cmp("plate_cd0.1", 0.2, *st, 8.0, 2.0, 12.0), _cmp("plate_cd0.1", 0.2, *best, 3.0, 0.5, 6.0),  # pays
+        _cmp("plate_cd0.02", 0.2, *st, 6.0, -1.0, 12.0), _cmp("plate_cd0.02", 0.2, *best, 3.0, 0.5, 6.0),  # CI has 0
+        _cmp("plate_cd0.3", 0.2, *st, 9.0, 4.0, 14.0), _cmp("plate_cd0.3", 0.2, *best, -2.0, -4.0, 1.0),  # loses to baseline
+        _cmp("still_water", 0.2, *st, 2.0, -1.0, 5.0), _cmp("still_water", 0.2, *best, 1.0, -1.0, 3.0),
     ]
-    peaks = {("foil_cd0.1", 0.2): 0.30, ("foil_cd0.02", 0.2): 0.20, ("foil_cd0.3", 0.2): 0.40,
-             ("quasi_steady", 0.2): 0.05}
+    peaks = {("plate_cd0.1", 0.2): 0.30, ("plate_cd0.02", 0.2): 0.20, ("plate_cd0.3", 0.2): 0.40,
+             ("still_water", 0.2): 0.05}
     d = e7.decisions(comps, peaks)
     pays = {c["plant"]: c["pays"] for c in d["cases"]}
-    assert pays == {"foil_cd0.1": True, "foil_cd0.02": False, "foil_cd0.3": False, "quasi_steady": False}
+    assert pays == {"plate_cd0.1": True, "plate_cd0.02": False, "plate_cd0.3": False, "still_water": False}
     assert d["rule1"]["pays_in"] == 1 and not d["rule1"]["verdict"]  # 1 of 3: not a majority
     assert d["rule2"]["inside_mean"] == pytest.approx(8.0) and d["rule2"]["outside_mean"] == pytest.approx(7.5)
     assert d["rule2"]["verdict"]
     assert d["rule3"]["verdict"]  # |2 %| < 3 %
-    comps[6] = _cmp("quasi_steady", 0.2, *st, -3.5, -6.0, -1.0)
+    comps[6] = _cmp("still_water", 0.2, *st, -3.5, -6.0, -1.0)
     assert not e7.decisions(comps, peaks)["rule3"]["verdict"]
 
 

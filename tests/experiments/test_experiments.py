@@ -11,7 +11,7 @@ import pytest
 
 from ucat_console.cli import main
 from ucat_console.experiments.report import num, render
-from ucat_console.experiments.runner import clean_json, parse_names
+from ucat_console.experiments.runner import _e6_findings, clean_json, parse_names
 
 _NUMBER = re.compile(r"^-?\d+(\.\d+)?$")
 
@@ -96,12 +96,14 @@ def test_savings_only_where_both_runs_track() -> None:
     def row(mode: str, mae: float, power: float, lam: float | None) -> dict:
         return {"plant": "p", "v_ref": 0.2, "mode": mode, "lam_st": lam, "lam_d": lam, "power_est": power,
                 "power_true": power, "energy_per_metre": 5 * power, "energy_per_metre_true": 5 * power,
+                "power_electrical": 3 * power, "energy_per_metre_electrical": 15 * power,
                 "velocity_mae": mae, "st_mae": 0.1, "depth_mae": 0.01}
 
     rows = [row("baseline", 0.01, 0.10, None), row("mpc", 0.02, 0.08, 1.0), row("mpc", 0.12, 0.01, 2.0)]
     _add_savings(rows, ("plant", "v_ref"))
     assert rows[1]["comparable"] and rows[1]["saving_est"] == pytest.approx(20.0)
     assert rows[1]["saving_epm_true"] == pytest.approx(20.0)
+    assert rows[1]["saving_epm_el"] == pytest.approx(20.0) and rows[1]["saving_el"] == pytest.approx(20.0)
     # 90 % less power, but 0.12 m/s off the reference: no saving is quoted
     assert not rows[2]["comparable"] and math.isnan(rows[2]["saving_est"])
     text = sweep_table({"rows": rows})
@@ -111,6 +113,28 @@ def test_savings_only_where_both_runs_track() -> None:
     rows = [row("baseline", 0.05, 0.10, None), row("mpc", 0.01, 0.08, 1.0)]
     _add_savings(rows, ("plant", "v_ref"))
     assert not rows[1]["comparable"] and "not comparable" in sweep_table({"rows": rows})
+
+
+def _e6_row(plant: str, v: float, saving: float, *, out: bool = True, comparable: bool = True) -> dict:
+    return {"plant": plant, "v_ref": v, "controller": "mpc_closed_id", "baseline_out_of_corridor": out,
+            "comparable": comparable, "tracks": comparable, "saving_epm_el": saving, "saving_epm_true": saving}
+
+
+def test_e6_findings_count_the_target_by_fin_model_and_say_when_the_null_plant_meets_it() -> None:
+    res = {"protocol": {"target_pct": 10.0}, "target": {"cases": 5, "comparable": 4, "met": 2},
+           "identified": [{"plant": "scale1_plate", "model": "plate"},
+                          {"plant": "scale1_still_water", "model": "still_water"}],
+           "rows": [_e6_row("scale1_plate", 0.1, 12.0), _e6_row("scale1_plate", 0.2, 5.0),
+                    _e6_row("scale1_plate", 0.3, 30.0, comparable=False),
+                    _e6_row("scale1_still_water", 0.1, 15.0), _e6_row("scale1_still_water", 0.2, 2.0),
+                    _e6_row("scale1_still_water", 0.3, 40.0, out=False)]}
+    text = "\n".join(_e6_findings(res))
+    assert ("Fin model `plate`: the baseline leaves the corridor in 3 cases, 2 comparable, the target met in 1 "
+            "(scale1_plate at 0.1 m/s: 12.0 %).") in text
+    assert "Fin model `still_water`: the baseline leaves the corridor in 2 cases, 2 comparable, the target met in 1" in text
+    assert "null plant" in text  # met as often where St cannot matter
+    res["rows"][3]["saving_epm_el"] = 9.9
+    assert "null plant" not in "\n".join(_e6_findings(res))
 
 
 def test_unknown_experiment_and_impossible_setpoints_exit_non_zero(tmp_path: Path,

@@ -1,5 +1,6 @@
 """The live efficiency figures in headless Chromium at 1280x800: in view without scrolling
-with the power chart, each stroke's St coloured by its corridor."""
+with the power chart, each stroke's St coloured by its corridor, the power the battery's
+(the simulated drives' electrical input) with the mechanical estimate below it."""
 
 from __future__ import annotations
 
@@ -42,7 +43,12 @@ def test_live_figures_are_in_view_and_coloured_by_the_corridor(browser: Browser,
     title = page.get_by_text("Power (W) and energy per metre (J/m)")
     box = title.bounding_box()
     assert box is not None and box["y"] + box["height"] <= 800
-    wait_for(lambda: "P –" not in page.locator(".ucat-power").inner_text(), what="a power figure")
+    wait_for(lambda: page.locator(".ucat-power").inner_text() not in ("", "–"), what="a power figure")
+    used = page.locator("tr.ucat-used")
+    assert used.get_attribute("data-source") == "electrical"
+    assert used.inner_text().startswith("▸ electrical (battery)")
+    assert "mechanical (shaft estimate)" in page.locator('tr.ucat-source[data-source="mechanical"]').inner_text()
+    wait_for(lambda: page.evaluate(IN_VIEW, ".ucat-robot-power"), what="both powers in view")
     strokes = page.evaluate("""() => [...document.querySelectorAll('.ucat-st')].map(e => ({
         text: e.innerText, title: e.title, cls: e.className, colour: getComputedStyle(e).backgroundColor}))""")
     assert len(strokes) == 8

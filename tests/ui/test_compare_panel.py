@@ -15,7 +15,8 @@ from synthetic_run import run_items  # noqa: E402
 
 from ucat_console.backend.review.metrics import MetricsConfig  # noqa: E402
 from ucat_console.telemetry.events import Event  # noqa: E402
-from ucat_console.ui.compare_panel import NONE, ComparePanel  # noqa: E402
+from ucat_console.ui.compare_panel import NONE, ComparePanel, page_table  # noqa: E402
+from ucat_console.ui.markdown import esc  # noqa: E402
 from ucat_console.ui.session_list import SessionList  # noqa: E402
 
 SLOW, FAST = "20231114-221320-slow", "20231114-221500-fast"
@@ -46,6 +47,8 @@ def test_two_sessions_compared_with_the_table_the_overlay_and_the_downloads(pane
     assert [r.label for r in rows] == [SLOW, FAST]
     assert rows[1].figures["energy_per_metre"].value == pytest.approx(32.0)
     assert "**not comparable**" in panel.table.content and "| 20 \\[" in panel.table.content
+    # recordings without electrical readings: the estimate's figures, labelled so
+    assert panel.table.content.startswith(esc("Power: mechanical (shaft estimate): no electrical readings"))
     assert panel.image.visible and panel.image.image.shape[2] == 3
     name, data = panel._downloads["CSV"]
     assert name == "compare.csv" and b"energy_per_metre" in data
@@ -71,3 +74,13 @@ def test_what_a_page_sends_is_checked_and_refused_naming_it(panel, chosen, segme
 def test_one_session_cut_into_segments(panel):
     rows = panel.run([SLOW, NONE, NONE, NONE], "marker", "start")
     assert len(rows) == 2 and rows[1].label.endswith("(marker: go)")
+
+
+def test_the_table_says_its_power_is_the_batterys(tmp_path: Path):
+    from ucat_console.backend.review import compare
+
+    record(tmp_path, run_items(battery_from=0.0), label="a", wall_time=1_700_000_000.0)
+    run = compare.load_run("20231114-221320-a", tmp_path)
+    rows = compare.table(compare.windows(run), MetricsConfig(resamples=50))
+    text = page_table(rows)
+    assert text.startswith(esc("Power: electrical (battery)")) and "| 60 " in text  # 12 W at 0.2 m/s

@@ -10,7 +10,7 @@ import types
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "backend" / "sessions"))
-from synthetic_run import run_items  # noqa: E402
+from synthetic_run import BATTERY, run_items  # noqa: E402
 
 from ucat_console.backend.review.metrics import MetricsConfig  # noqa: E402
 from ucat_console.robot.look import FIN_COLOURS, hex_colour  # noqa: E402
@@ -43,22 +43,46 @@ def test_the_panel_shows_each_fins_strokes_coloured_and_the_robots_figures():
             assert re.search(rf'class="ucat-st {where}" data-fin="{fin}" data-stroke="{stroke}"'
                              rf'[^>]*background:{colour}[^>]*>{value}<', html)
         assert f"background:{hex_colour(FIN_COLOURS[fin])}" in html
-    assert "P 4.00 W" in html and "20.0 J/m" in html and "CoT 0.91 J/(kg m)" in html
+    # no electrical readings: the estimate's figures, and the battery's row says why
+    assert _source_row(html, "mechanical", used=True) == ["▸ mechanical (shaft estimate)", "4.00", "20.0", "0.91"]
+    assert _source_row(html, "electrical", used=False) == ["electrical (battery)", "no readings"]
     assert "depth 0.050 m" in html
     panel.reset()
     assert "no telemetry yet" in panel.html.content
 
 
+def _source_row(html: str, source: str, used: bool) -> list[str]:
+    """The texts of the cells of the robot's row of ``source`` (asserting whether it is the one used)."""
+    m = re.search(rf'<tr class="ucat-source( ucat-used)?" data-source="{source}"[^>]*>(.*?)</tr>', html)
+    assert m is not None and bool(m.group(1)) == used, html
+    return [re.sub(r"<[^>]+>", "", c) for c in re.findall(r"<td[^>]*>(.*?)</td>", m.group(2))]
+
+
+def test_the_battery_power_is_shown_first_with_the_estimate_below_it():
+    panel, stream = _panel()
+    for channel, m in run_items(battery_from=0.0):
+        stream.publish(channel, m)
+    panel.refresh()
+    html = panel.html.content
+    # the drives' 12 W at 0.2 m/s: 60 J/m, 60 / 22 J/(kg m); the estimate's 4 W below
+    assert _source_row(html, "electrical", used=True) == ["▸ electrical (battery)", "12.00", "60.0", "2.73"]
+    assert _source_row(html, "mechanical", used=False) == ["mechanical (shaft estimate)", "4.00", "20.0", "0.91"]
+    powers = re.findall(r'class="ucat-fin-power">([^<]*)<', html)
+    assert powers == [f"{p:.2f}" for p in BATTERY]
+
+
 def test_the_effects_list_shows_before_and_after_and_what_is_still_pending():
     from ucat_console.backend.review.effects import Effect
+    from ucat_console.ui.markdown import esc
     from ucat_console.ui.metrics_panel import effects_markdown
 
     done = Effect(10.0, "tuning", "client 1: mpc.lam_st 5 -> 2", {}, 20.0, {"power": 4.0, "energy_per_metre": 20.0,
                   "speed_mae": 0.02, "st_in": 50.0}, {"power": 3.0, "energy_per_metre": 15.0, "speed_mae": None,
-                                                      "st_in": 80.0})
+                                                      "st_in": 80.0}, "electrical", "electrical (battery)")
     pending = Effect(30.0, "mode", "controller mpc -> baseline", {}, 40.0, {"power": 3.0})
     md = effects_markdown([pending, done], now=34.0)
-    assert "4.00 → 3.00 W" in md and "20.0 → 15.0 J/m" in md and "50 → 80 % St in corridor" in md
+    assert esc("electrical (battery): 4.00 → 3.00 W") in md and "20.0 → 15.0 J/m" in md
+    assert "50 → 80 % St in corridor" in md
     assert "0.020 → – m/s" in md
     assert "3.00 → … W" in md and "fills in 6 s" in md
     assert md.index("controller mpc") < md.index("lam")  # newest first
@@ -69,10 +93,10 @@ def test_a_seek_back_starts_the_figures_afresh():
     for channel, m in run_items():
         stream.publish(channel, m)
     panel.refresh()
-    assert "P 4.00 W" in panel.html.content
+    assert _source_row(panel.html.content, "mechanical", used=True)[1] == "4.00"
     # the review seeks back to 2 s and plays a run of twice the power from there
     for channel, m in run_items(scale=2.0):
         if m.t >= 2.0:
             stream.publish(channel, m)
     panel.refresh()
-    assert "P 8.00 W" in panel.html.content
+    assert _source_row(panel.html.content, "mechanical", used=True)[1] == "8.00"

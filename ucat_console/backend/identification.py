@@ -36,6 +36,7 @@ from ucat_console.control.identification import (
     hover_trim,
     identify,
 )
+from ucat_console.control.plate_model import FinMount
 from ucat_console.robot.readings import ImuReading
 from ucat_console.robot.rotations import euler_from_quaternion
 from ucat_console.telemetry import channels as ch
@@ -43,9 +44,9 @@ from ucat_console.telemetry import channels as ch
 
 def hull_of(cfg: AppConfig) -> Hull:
     """The hull in surge and the fin mounting from a configuration's plant description."""
-    v = cfg.plant.vehicle
+    v, f = cfg.plant.vehicle, cfg.plant.fins
     return Hull(mass=v.mass - v.x_udot, x_u=v.x_u, x_uu=v.x_uu,
-                mounting_angle=math.radians(cfg.plant.fins.mounting_angle_deg))
+                mount=FinMount(math.radians(f.mounting_angle_deg), f.arm_roll, f.arm_pitch, f.arm_yaw))
 
 
 def recorded_app_config(source: SessionSource, name: str) -> AppConfig | None:
@@ -75,12 +76,14 @@ def measurements(source: SessionSource, name: str) -> Measurements:
         data[c].append(m)
     tracks = tuple(FinTrack(np.array([m.t for m in ms]), np.array([m.angle for m in ms]),
                             np.array([m.rate for m in ms])) for ms in (data[c] for c in fins))
-    dvl = [m for m in data[ch.DVL] if m.valid and math.isfinite(m.vx)]
+    dvl = [m for m in data[ch.DVL] if m.valid and math.isfinite(m.vx) and math.isfinite(m.vy) and math.isfinite(m.vz)]
     imu = data[ch.IMU]
     att = np.array([_roll_pitch(m) for m in imu]).reshape(-1, 2)
     return Measurements(
         fins=tracks, dvl_t=np.array([m.t for m in dvl]), dvl_u=np.array([m.vx for m in dvl]),
+        dvl_v=np.array([m.vy for m in dvl]), dvl_w=np.array([m.vz for m in dvl]),
         imu_t=np.array([m.t for m in imu]), imu_roll=att[:, 0], imu_pitch=att[:, 1],
+        imu_roll_rate=np.array([m.gyro[0] for m in imu]), imu_pitch_rate=np.array([m.gyro[1] for m in imu]),
         imu_yaw_rate=np.array([m.gyro[2] for m in imu]),
     )
 

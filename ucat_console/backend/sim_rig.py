@@ -51,7 +51,7 @@ from ucat_console.backend.sim_robot_io import SimRobotIO
 from ucat_console.robot.interface import RobotTruth
 from ucat_console.robot.units import GRAVITY
 from ucat_console.backend.sim.params import PlantConfig
-from ucat_console.backend.sim.plant import F_POWER
+from ucat_console.backend.sim.plant import F_CURRENT
 from ucat_console.telemetry.events import Event, EventSink, ignore_events
 
 log = logging.getLogger(__name__)
@@ -97,11 +97,11 @@ class PlantFinServo:
             p = self._rig.plant
             return p.fin_angles()[self.fin], p.fin_rates()[self.fin]
 
-    def shaft_power(self) -> float:
-        """The fin's true shaft power (W) in the plant's last step (no regeneration): what
-        the emulated drive's motor current is made from."""
+    def current(self) -> float:
+        """The fin drive's motor current (A) in the plant's last step (``robot.motor``): what
+        the emulated drive reports."""
         with self._rig.plant_lock:
-            return float(self._rig.plant.state_arrays()[1][self.fin, F_POWER])
+            return float(self._rig.plant.state_arrays()[1][self.fin, F_CURRENT])
 
     def step(self, dt: float) -> None:
         """Nothing: the rig's thread steps the whole plant."""
@@ -153,6 +153,7 @@ class SimRig:
             emu_cfg = Epos2EmulatorConfig(
                 units=cfg.epos2.units, max_rate=self.plant.cfg.servo.max_rate,
                 servo_acceleration=self.plant.cfg.servo.acceleration, tick_period=rig.tick_period_s,
+                supply_voltage=self.plant.cfg.motor.supply_voltage,
             )
             self.nodes = start_emulated_nodes(
                 channel, cfg.epos2.node_ids, lambda node: PlantFinServo(self, self.fin_of_node[node]),
@@ -173,8 +174,9 @@ class SimRig:
         host, port = self.dvl.address
         log.info("simulated rig: CAN %r, IMU %s, DVL %s:%d, pressure %s",
                  channel, self.imu.port, host, port, self.pressure.port)
+        # the emulated drives run the plant's motors: the console reads their current with them
         return cfg.replace(
-            epos2=cfg.epos2.replace(interface="virtual", channel=channel,
+            epos2=cfg.epos2.replace(interface="virtual", channel=channel, motor=self.plant.cfg.motor,
                                     sdo_timeout=max(cfg.epos2.sdo_timeout, cfg.rig.sdo_timeout_s)),
             imu=cfg.imu.replace(port=self.imu.port),
             dvl=cfg.dvl.replace(host=host, port=port),

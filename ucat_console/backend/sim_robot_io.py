@@ -8,6 +8,18 @@ sensors sample into the core's rows, with no Python in between, until the core h
 something for the loop to do (``SimRobotIO.run_core``). The loop's trajectory is the same as
 when it drives the plant through :meth:`SimRobotIO.advance_to`, one event at a time.
 
+Telemetry. About every :data:`ELECTRICAL_PERIOD` of plant time the simulated drives'
+electrical input becomes an ``ElectricalPower`` message handed to each sink added with
+:meth:`SimRobotIO.add_telemetry_sink` as ``(channel, message)``, as the device robot hands the
+EPOS2s' (the supervisor publishes it on ``power/electrical``): each drive's battery power is
+its mean since the last message, from the plant's drive model (``robot.motor``) integrated
+at every physics step, and its current the motor current at the message's time. A message is
+handed on at the robot's next step, after the loop has published the readings of the step
+that made it, so that the stream stays in time order (the plant runs ahead of the readings
+the loop has taken). (A real
+drive's figure is made from its averaged current, ``drive_power``; the simulator knows the
+battery's exact view.)
+
 The plant's readings pass the plausibility checks (``devices.plausibility``) on either
 path, in the compiled call too: an implausible one never reaches the core, and is reported
 as an Event ``implausible`` (loop time) to ``on_event``. The plant's sensors keep their
@@ -18,6 +30,7 @@ readings plausible (noise included); a subclass that changes the readings runs t
 from __future__ import annotations
 
 import math
+from typing import Any, Callable
 
 from numba import njit
 
@@ -28,8 +41,13 @@ from ucat_console.backend.sim.sensors import S_DVL_ROW, S_IMU_ROW, S_NEXT, S_P_R
 from ucat_console.control.loop_core import C_NROWS, C_ROWS_PENDING, C_T_NEXT, C_T_ROBOT, READINGS, LoopCore, core_step
 from ucat_console.robot.interface import RobotIO, RobotTruth
 from ucat_console.robot.readings import Reading
+from ucat_console.telemetry.channels import POWER_ELECTRICAL
 from ucat_console.telemetry.events import EventSink
+from ucat_console.telemetry.messages import ElectricalPower
 
+#: how often the simulated drives' electrical input is reported (s): the drives' default
+#: reading period (``Epos2Config.electrical_period_ms``)
+ELECTRICAL_PERIOD = 0.1
 #: what :func:`run_core_on_plant` returns besides the core's own statuses
 NEED_NOISE = -1  # a noise block is used up: new blocks, then call again
 DIVERGED = -2  # the plant's state is no longer finite
@@ -85,6 +103,9 @@ class SimRobotIO(RobotIO):
         )
         #: the plausibility checks of the readings
         self.checks = Plausibility(plausibility, on_event)
+        self._telemetry_sinks: tuple[Callable[[str, Any], None], ...] = ()
+        self._last_electrical: tuple[float, tuple[float, ...]] | None = None  # (time, battery energy)
+        self._electrical_due: ElectricalPower | None = None  # made at the last step, handed on at the next
 
     @property
     def runs_core(self) -> bool:  # type: ignore[override]
@@ -95,11 +116,48 @@ class SimRobotIO(RobotIO):
     def command_fin(self, fin: int, target_rad: float, profile_velocity_rad_s: float) -> None:
         self.plant.command_fin(fin, target_rad, profile_velocity_rad_s)
 
+    def add_telemetry_sink(self, sink: Callable[[str, Any], None]) -> Callable[[], None]:
+        """``sink(channel, message)`` for the simulated drives' electrical input (module
+        docstring); returns the function that removes it."""
+        self._telemetry_sinks = self._telemetry_sinks + (sink,)
+
+        def remove() -> None:
+            self._telemetry_sinks = tuple(s for s in self._telemetry_sinks if s is not sink)
+
+        return remove
+
+    def _hand_on_electrical(self) -> None:
+        """The message the last step made, if any, to every sink."""
+        msg, self._electrical_due = self._electrical_due, None
+        if msg is not None:
+            for sink in self._telemetry_sinks:
+                sink(POWER_ELECTRICAL, msg)
+
+    def _report_electrical(self) -> None:
+        """The drives' electrical input since the last message, when one is due (handed on
+        at the next step)."""
+        p = self.plant
+        if not self._telemetry_sinks:
+            return
+        t, energy = p.time, p.fin_battery_energy()
+        last = self._last_electrical
+        if last is None or t < last[0]:  # the first, or the plant was reset
+            self._last_electrical = (t, energy)
+            return
+        span = t - last[0]
+        if span + 1e-9 < ELECTRICAL_PERIOD:
+            return
+        self._last_electrical = (t, energy)
+        per_fin = tuple((e - e0) / span for e, e0 in zip(energy, last[1]))
+        volts = (p.cfg.motor.supply_voltage,) * len(per_fin)
+        self._electrical_due = ElectricalPower(t, p.fin_currents(), volts, per_fin, math.fsum(per_fin))  # type: ignore[arg-type]
+
     def run_core(self, core: LoopCore) -> int:
         plant = self.plant
         sensors = plant.sensors
         arrays = core.arrays() + plant.kernel_arrays()
         checks = self.checks
+        self._hand_on_electrical()
         while True:
             st = run_core_on_plant(*arrays, *sensors.kernel_arrays(), checks.limits, checks.state)
             if st != NEED_NOISE:
@@ -108,14 +166,17 @@ class SimRobotIO(RobotIO):
         checks.report(plant.time)
         if st == DIVERGED:
             raise plant.diverged()
+        self._report_electrical()
         return st
 
     def next_reading_time(self) -> float:
         return self.plant.next_sensor_time()
 
     def advance_to(self, t: float) -> list[Reading]:
+        self._hand_on_electrical()
         readings = self.checks.filter(self.plant.advance_and_sample(t))
         self.checks.report(t)
+        self._report_electrical()
         return readings
 
     def truth(self) -> RobotTruth:
@@ -132,4 +193,5 @@ class SimRobotIO(RobotIO):
             fin_strouhal=p.fin_strouhal(),
             fin_energy=p.fin_energy(),
             fin_impulse=p.fin_impulse(),
+            fin_battery_energy=p.fin_battery_energy(),
         )

@@ -1,6 +1,6 @@
 """``ucat-console bench tracking``: does the robot go where it is sent, in every mode?
 
-Manoeuvres on the simulated U-CAT (the ``strouhal_wake`` plant, the configuration given,
+Manoeuvres on the simulated U-CAT (the default plate plant, the configuration given,
 the shipped ``sim-tuned`` by default: what ``scripts/run.sh`` starts the console with), each
 run headless in every fin controller (:data:`MODES`: the baseline, the MPC, the MPC with the
 rear pair synchronised, and the MPC's closed-stroke formulation):
@@ -24,7 +24,7 @@ the robot can know, the telemetry channel), and by the simulator's true force (t
 force integrated over the cycle). The figures: median direction error and the share of
 cycles more than 90 degrees off, and the executed against the planned cycle duration.
 
-The goals are the tracking issue's (:data:`GOALS`); each figure is printed with its goal
+The goals (:data:`GOALS`); each figure is printed with its goal
 and whether it is met. ``--json`` writes everything, ``--plots DIR`` the step responses and
 the turns as PNG (matplotlib, the ``experiments`` extra).
 """
@@ -124,13 +124,13 @@ def run_manoeuvre(app: Any, mode: str, formulation: str, m: Manoeuvre, seed: int
     from ucat_console.backend.sim_robot_io import SimRobotIO
     from ucat_console.control.allocation import BodySetpoints
     from ucat_console.control.fin_cycle import direction_error
-    from ucat_console.experiments.scenario import START_FIN_ANGLE, plant_config
+    from ucat_console.experiments.scenario import DEFAULT_PLANT, START_FIN_ANGLE, plant_config
     from ucat_console.telemetry import channels as ch
     from ucat_console.telemetry.stream import TelemetryStream
 
     cfg = app.loop.replace(mode=mode, planner_seed=seed, mpc=app.mpc.replace(formulation=formulation))
     z0 = m.depth if m.start_depth is None else m.start_depth
-    io = SimRobotIO(plant_config("strouhal_wake", seed, m.current), depth=z0, velocity=m.start_velocity)
+    io = SimRobotIO(plant_config(DEFAULT_PLANT, seed, m.current), depth=z0, velocity=m.start_velocity)
     io.plant.reset(position_ned=(0.0, 0.0, z0), body_velocity=(m.start_velocity, 0.0, 0.0, 0.0, 0.0, 0.0),
                    fin_angles=(START_FIN_ANGLE,) * 4, seed=seed)
     stream = TelemetryStream(validate=False)

@@ -1,9 +1,9 @@
 """``ucat-console identify SESSION...``: the fin model identified from recordings.
 
-Fits the controller's C_D and C_L (or ``--fit scale``: one factor on both; ``--fit inflow``:
-C_D, C_L and the profile drag C_D0 of the foil model, ``control.inflow_model``) to the recorded
-encoder angles and rates, DVL speed and IMU of the sessions (ids or part files), with the
-hull's damping and added mass from ``--config`` (default: the configuration the first
+Fits the controller's C_D and C_L (or ``--fit scale``: one factor on both; ``--fit plate``:
+the simulated fin's plate model, ``control.plate_model``: C_D, C_L and the profile drag C_D0)
+to the recorded encoder angles and rates, DVL velocity and IMU of the sessions (ids or part
+files), with the hull's damping and added mass from ``--config`` (default: the configuration the first
 session recorded), prints the coefficients with 95 % intervals and writes, into ``--out``,
 ``identified.toml`` (the ``[mpc]`` fragment to load), ``identify.json`` (every window) and
 ``residuals.png`` (with the ``experiments`` extra).
@@ -37,8 +37,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--realtime", action="store_true", help="with --run on the simulated robot: real time")
     p.add_argument("--config", default=None, metavar="NAME|FILE",
                    help="configuration (a shipped one's name or a TOML file): the hull, the model to start from, the robot for --run")
-    p.add_argument("--fit", choices=("coefficients", "scale", "inflow"), default="coefficients",
-                   help="fit C_D and C_L, one scale of the configured pair, or C_D, C_L and the stream's profile drag C_D0 (inflow: the foil model, docs/foil-plant.md)")
+    p.add_argument("--fit", choices=("coefficients", "scale", "plate"), default="coefficients",
+                   help="fit C_D and C_L, one scale of the configured pair, or the plate model's C_D, C_L and profile "
+                   "drag C_D0 (plate: the simulated fin, docs/fin-plant.md)")
     p.add_argument("--window", type=float, default=None, metavar="S", help="force-balance window (s)")
     p.add_argument("--dir", type=Path, default=None,
                    help="sessions directory (default: $UCAT_CONSOLE_SESSIONS, else the user's "
@@ -114,8 +115,8 @@ def run(args: argparse.Namespace) -> int:
     print(f"identified from {len(rep.sessions)} session(s), hull from {rep.config_source}: "
           f"{len(r.windows)} windows ({r.steady_windows} steady), rms residual {r.rms_residual:.4f} N")
     print(f"  c_d = {r.c_d:.4f} +- {r.c_d_ci:.4f}   c_l = {r.c_l:.4f} +- {r.c_l_ci:.4f}   (95 %)")
-    if r.fit == "inflow":
-        print(f"  stream: c_d0 = {r.c_d0:.4f} +- {r.c_d0_ci:.4f}   (95 %; the plate's C_D90 and C_Lmax held)")
+    if r.fit == "plate":
+        print(f"  plate: c_d0 = {r.c_d0:.4f} +- {r.c_d0_ci:.4f}   (95 %; the plate's lift held at its ratio)")
     if importlib.util.find_spec("matplotlib") is not None:
         print(f"wrote {residual_plots(r, args.out / 'residuals.png')}")
     else:

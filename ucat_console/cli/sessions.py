@@ -211,6 +211,7 @@ def run_compare(args: argparse.Namespace) -> int:
         wins += compare.windows(run, args.segments, args.align)
     rows = compare.table(wins, cfg)
     paths = export.write_all(rows, wins, cfg, args.out)
+    print(f"power: {rows[0].source_label}")
     for r in rows:
         flag = f"  NOT COMPARABLE: {r.not_comparable}" if r.not_comparable else ""
         print(f"{r.label:<40} power {export.cell(r, 'power'):<26} J/m {export.cell(r, 'energy_per_metre'):<26}"

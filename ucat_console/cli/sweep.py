@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ucat_console.experiments.scenario import PLANT_VARIANTS
+from ucat_console.experiments.scenario import DEFAULT_PLANT, PLANT_VARIANTS
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -19,7 +19,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="reference velocities (m/s)")
     p.add_argument("--seeds", type=int, default=2, help="runs per point (seeds S..S+n-1)")
     p.add_argument("--seed", type=int, default=0, help="first seed")
-    p.add_argument("--plant", choices=tuple(PLANT_VARIANTS), default="strouhal_wake")
+    p.add_argument("--plant", choices=tuple(PLANT_VARIANTS), default=DEFAULT_PLANT)
     p.add_argument("--formulation", choices=("paper", "closed_stroke"), default="paper",
                    help="the MPC's cost formulation")
     p.add_argument("--quick", action="store_true", help="short runs")

@@ -14,9 +14,15 @@ the MPC's cycles last 1.1-1.2 s (median) at 0.2 m/s, 1.7-1.9 s at 0.1 m/s, the b
 0.5 s (``bench tracking``); a loop designed for the longer delay stays stable with the
 shorter one, while one designed for the baseline's delay rings with the MPC's.
 
-Each loop is designed for the closed-loop bandwidth ``w_b = 1 / (k tau)`` (``k =
-BodyConfig.bandwidth_factor``, 4 by default): at ``w_b`` the delay costs ``1/k`` rad (14
-degrees) of phase, so the delay does not make the loop ring or limit-cycle.
+Each loop is designed for the closed-loop bandwidth ``w_b = 1 / (k tau)`` (``k`` = 4 by
+default, ``control.params.DESIGN_FACTOR``): at ``w_b`` the delay costs ``1/k`` rad (14
+degrees) of phase, so the delay does not make the loop ring or limit-cycle. The heading
+loop is faster, ``k`` = :data:`HEADING_FACTOR` (2.3: 0.35 rad/s, 25 degrees of the delay's
+phase): the fins' cycles make yaw moments the body layer does not model (each stroke of the
+simulated fin pushes across its cycle's direction in turn, and uneven or open cycles turn
+their force by up to 20 degrees), and the 0.2 rad/s loop let them turn the robot 5-8 degrees
+going straight under the paper's MPC (``bench tracking``). Faster still rings: at 0.4-0.5
+rad/s the rear-synchronised MPC swings 20-27 degrees after a 0.25 N m push of 2 s.
 
 * Position loops (depth, heading), ``u = kp e - kd x' + ki int e``: when the hull damps the
   axis enough by itself (``D >= 2 M w_b``: heave) the loop is proportional, with the slower
@@ -36,11 +42,15 @@ degrees) of phase, so the delay does not make the loop ring or limit-cycle.
   the robot (going straight under the paper's MPC the heading wandered up to 8 degrees).
 * The position loops' integrals (buoyancy, trim, a steady moment) have their zero at
   ``w_b / 8``: ``ki = kp w_b / 8`` (closer to the bandwidth, the integral winds up while a
-  push holds the robot off and overshoots by a third on its way back).
+  push holds the robot off and overshoots on its way back); the depth loop's at ``3 w_b / 8``
+  (:data:`DEPTH_INTEGRAL_ZERO`): at speed the fins leave a steady heave force the model does
+  not predict (the stream's lift on a plate turned for heave), which the slower integral
+  took a minute to find (3-7 cm off 45 s after a 1 m step; 2-5 cm at 3/8, overshoot under
+  5 %; at 6/8 the MPC's depth overshoots 5-7 %).
 
-With the defaults (eeUVsim's hull, 1.25 s, k = 4: ``w_b`` = 0.2 rad/s) the depth loop is
-kp 5.16 N/m, ki 0.129 N/(m s); the heading loop kp 0.120 N m/rad, kd 0.890 N m s/rad,
-ki 0.003 N m/(rad s); the velocity loop kp 17.1 N s/m, ki 2.48 N/m
+With the defaults (eeUVsim's hull, 1.25 s, k = 4: ``w_b`` = 0.2 rad/s; the heading's 0.35
+rad/s) the depth loop is kp 5.16 N/m, ki 0.387 N/(m s); the heading loop kp 0.364 N m/rad,
+kd 1.78 N m s/rad, ki 0.016 N m/(rad s); the velocity loop kp 17.1 N s/m, ki 2.48 N/m
 (:func:`designed_gains`; ``docs/control.md`` works them through).
 """
 
@@ -89,8 +99,11 @@ class HullModel(Config):
 SPEED_FILTER_CORNER = 5.0
 #: the speed the surge is linearised about (m/s): the middle of the paper's 0.1-0.4 m/s
 DESIGN_SPEED = 0.2
-#: the position loops' integral zero, as a fraction of the bandwidth
+#: the position loops' integral zero, as a fraction of the bandwidth; the depth loop's
 INTEGRAL_ZERO = 1.0 / 8.0
+DEPTH_INTEGRAL_ZERO = 3.0 / 8.0
+#: the heading loop's bandwidth factor (the others': the caller's)
+HEADING_FACTOR = 2.3
 
 
 @dataclass(frozen=True)
@@ -100,14 +113,16 @@ class AxisGains:
     kd: float
 
 
-def position_gains(mass: float, damping: float, bandwidth: float) -> AxisGains:
-    """Gains of a position loop on ``mass x'' + damping x' = u`` (module docstring)."""
+def position_gains(mass: float, damping: float, bandwidth: float,
+                   integral_zero: float = INTEGRAL_ZERO) -> AxisGains:
+    """Gains of a position loop on ``mass x'' + damping x' = u`` (module docstring), its
+    integral's zero at ``integral_zero`` times the bandwidth."""
     w = bandwidth
     if damping >= 2.0 * mass * w:
         kp, kd = damping * w - mass * w * w, 0.0
     else:
         kp, kd = mass * w * w, 2.0 * mass * w - damping
-    return AxisGains(kp=kp, ki=kp * w * INTEGRAL_ZERO, kd=kd)
+    return AxisGains(kp=kp, ki=kp * w * integral_zero, kd=kd)
 
 
 def velocity_gains(mass: float, damping: float, bandwidth: float) -> AxisGains:
@@ -125,13 +140,14 @@ def speed_filter(delay: float, factor: float) -> float:
 
 def designed_gains(hull: HullModel, delay: float, factor: float) -> dict[str, AxisGains]:
     """The three loops' gains ("velocity", "depth", "heading") for an actuation ``delay``
-    (s) and bandwidth ``factor`` k (module docstring)."""
+    (s) and bandwidth ``factor`` k, the heading loop's at :data:`HEADING_FACTOR` (module
+    docstring)."""
     if not delay > 0.0 or not factor > 0.0:
         raise ValueError(f"delay, factor: expected > 0, got {delay!r}, {factor!r}")
     w = 1.0 / (factor * delay)
     surge_d = hull.surge_damping + 2.0 * hull.surge_damping_quad * DESIGN_SPEED
     return {
         "velocity": velocity_gains(hull.surge_mass, surge_d, w),
-        "depth": position_gains(hull.heave_mass, hull.heave_damping, w),
-        "heading": position_gains(hull.yaw_inertia, hull.yaw_damping, w),
+        "depth": position_gains(hull.heave_mass, hull.heave_damping, w, DEPTH_INTEGRAL_ZERO),
+        "heading": position_gains(hull.yaw_inertia, hull.yaw_damping, 1.0 / (HEADING_FACTOR * delay)),
     }

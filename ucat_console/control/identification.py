@@ -1,8 +1,10 @@
-"""The fin model identified from what the robot measures: C_D and C_L (or one scale of both).
+"""The fin model identified from what the robot measures: C_D and C_L (or one scale of both,
+or the simulated fin's plate model).
 
 Data: each fin's encoder angle and rate (``FinState``), the DVL's forward speed, the IMU's
-attitude and yaw rate; and from the configuration the hull's surge damping (``X_u``,
-``X_uu``), its mass and added mass (``m - X_udot``) and the fins' mounting angle.
+attitude and yaw rate (the plate fit: the DVL's three velocities and the IMU's three rates);
+and from the configuration the hull's surge damping (``X_u``, ``X_uu``), its mass and added
+mass (``m - X_udot``) and where the fins sit (mounting angle, arms).
 
 Model. The controller's quasi-steady fin model (control.md section 1) made instantaneous,
 as the fin sweeps: at angle theta and rate w in a stroke that began at theta_s,
@@ -32,6 +34,15 @@ recording that cannot tell them apart (the manoeuvre's several centres can) is r
 ``fit = "coefficients"`` and can be fitted with ``fit = "scale"`` (one factor on the
 configured C_D and C_L).
 
+``fit = "plate"`` fits the plant's own model instead (``control.plate_model``, the plate of
+docs/fin-plant.md) in the flow past each fin that the DVL's velocity and the IMU's rates
+give (the hull's heave and pitch at the fins included: they change the thrust by up to a
+fifth). It is calibrated to the still-water model (C_D, C_L) as the plant's plate is: its
+normal force C_D = C_D0 + C_D90, its lift held at ``lift_ratio`` of it (C_Lmax =
+``lift_ratio`` C_D), its rotational circulation C_R = 2 sqrt(C_D^2 + C_L^2) / 3 and its line
+at atan2(C_D, C_L) from the fin's; so the fit is (C_D, C_L, C_D0) by nonlinear least squares
+on the same windows, with intervals from the Jacobian as above.
+
 scipy.optimize is imported inside :func:`identify` only (the console's run path does not
 load it).
 """
@@ -45,11 +56,11 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ucat_console.control.inflow_model import Plate, stream_regressors
+from ucat_console.control.plate_model import FinMount, Plate, hinge_flow, plate_regressors
 from ucat_console.control.params import ManoeuvreConfig, MpcConfig
 from ucat_console.typedconf import Config, param
 
-FITS = ("coefficients", "scale", "inflow")
+FITS = ("coefficients", "scale", "plate")
 
 
 @dataclass(frozen=True)
@@ -57,7 +68,7 @@ class IdentifyConfig(Config):
     """How a recording is cut into windows and which windows count."""
 
     fit: str = param("coefficients", choices=FITS,
-                     doc="fit C_D and C_L, one scale of both, or C_D, C_L and the stream's profile drag C_D0 (inflow)")
+                     doc="fit C_D and C_L, one scale of both, or the plate model's C_D, C_L and profile drag C_D0 (plate)")
     window_s: float = param(5.0, lo=0.5, hi=120.0, unit="s", doc="length of a force-balance window")
     steady_share: float = param(
         0.1, lo=0.0, hi=1.0, lo_open=True, doc="a window is steady when M du/dt is at most this share of the drag"
@@ -66,9 +77,9 @@ class IdentifyConfig(Config):
     max_tilt: float = param(10.0, lo=0.0, hi=90.0, lo_open=True, unit="deg", doc="largest roll or pitch")
     max_yaw_rate: float = param(0.1, lo=0.0, hi=10.0, lo_open=True, unit="rad/s", doc="largest mean |yaw rate|")
     min_dvl: int = param(8, lo=3, hi=10_000, doc="valid DVL reports a window needs")
-    plate_cl_max: float = param(1.2, lo=0.0, hi=5.0, doc="inflow: the plate's largest lift C_Lmax (held)")
-    plate_cd90: float = param(2.0, lo=0.0, hi=5.0, doc="inflow: the plate's drag across the flow C_D90 (held)")
-    plate_strips: int = param(8, lo=1, hi=64, doc="inflow: blade-element strips")
+    lift_ratio: float = param(0.6, lo=0.0, hi=2.0,
+                              doc="plate: the plate's largest lift over its normal force, C_Lmax / C_N (held)")
+    plate_strips: int = param(8, lo=1, hi=64, doc="plate: blade-element strips")
 
 
 @dataclass(frozen=True)
@@ -78,7 +89,12 @@ class Hull:
     mass: float  # m - X_udot, kg
     x_u: float  # N s/m
     x_uu: float  # N s2/m2
-    mounting_angle: float  # rad, the fin plane's horizontal axis from the body x axis
+    mount: FinMount  # where the fins sit (the plate fit's flow past each fin)
+
+    @property
+    def mounting_angle(self) -> float:
+        """The fin plane's horizontal axis from the body x axis (rad)."""
+        return self.mount.angle
 
     def drag(self, u: ArrayLike) -> NDArray[np.float64]:
         u = np.asarray(u, dtype=float)
@@ -96,15 +112,20 @@ class FinTrack:
 
 @dataclass(frozen=True)
 class Measurements:
-    """What the fit reads: fin tracks, DVL forward speed, IMU attitude and yaw rate."""
+    """What the fit reads: fin tracks, the DVL's velocity, the IMU's attitude and rates (body
+    frame; the plate fit reads the lateral and vertical ones for the flow past the fins)."""
 
     fins: tuple[FinTrack, ...]
     dvl_t: NDArray[np.float64]
     dvl_u: NDArray[np.float64]  # valid reports only, m/s
+    dvl_v: NDArray[np.float64]
+    dvl_w: NDArray[np.float64]
     imu_t: NDArray[np.float64]
     imu_roll: NDArray[np.float64]  # rad
     imu_pitch: NDArray[np.float64]
-    imu_yaw_rate: NDArray[np.float64]  # rad/s
+    imu_roll_rate: NDArray[np.float64]  # rad/s
+    imu_pitch_rate: NDArray[np.float64]
+    imu_yaw_rate: NDArray[np.float64]
 
 
 @dataclass(frozen=True)
@@ -120,8 +141,8 @@ class Window:
     b: float  # of C_D
     steady: bool
     thrust: float = math.nan  # the fitted model's mean thrust
-    c0: float = 0.0  # inflow: mean stream-thrust regressor of C_D0
-    held: float = 0.0  # inflow: mean stream thrust of the held C_D90 and C_Lmax (N)
+    #: plate: mean thrust regressors of C_D0, C_D90 and C_R (the lift held at its ratio)
+    plate: tuple[float, float, float] = (0.0, 0.0, 0.0)
     residual: float = math.nan  # thrust - (drag + M accel)
 
 
@@ -139,7 +160,7 @@ class Identification:
     windows: tuple[Window, ...]
     rms_residual: float  # N
     mass: float  # the hull's M used, kg
-    c_d0: float = math.nan  # fit "inflow": the stream's profile drag C_D0
+    c_d0: float = math.nan  # fit "plate": the plate's profile drag C_D0
     c_d0_ci: float = math.nan
 
     @property
@@ -153,9 +174,9 @@ class Identification:
                  f"# fit {self.fit}: {len(self.windows)} windows ({self.steady_windows} steady), "
                  f"rms residual {self.rms_residual:.4f} N; 95 % intervals:",
                  f"# c_d {self.c_d:.4f} +- {self.c_d_ci:.4f}, c_l {self.c_l:.4f} +- {self.c_l_ci:.4f}"]
-        if self.fit == "inflow":
-            lines.append(f"# inflow: profile drag c_d0 {self.c_d0:.4f} +- {self.c_d0_ci:.4f} (the plate's "
-                         "C_D90 and C_Lmax held)")
+        if self.fit == "plate":
+            lines.append(f"# plate: profile drag c_d0 {self.c_d0:.4f} +- {self.c_d0_ci:.4f} (the plate's lift "
+                         "held at its ratio to the normal force)")
         lines += ["[mpc]", f"c_d = {self.c_d:.6g}", f"c_l = {self.c_l:.6g}", ""]
         return "\n".join(lines)
 
@@ -180,17 +201,20 @@ def thrust_regressors(track: FinTrack, mpc: MpcConfig, hull: Hull) -> tuple[NDAr
     return q * np.cos(2.0 * th - th_s), -q * np.sin(th_s)
 
 
-def _stream(track: FinTrack, m: Measurements, mpc: MpcConfig, hull: Hull,
-            cfg: IdentifyConfig) -> tuple[NDArray, NDArray]:
-    """(c_0, held) per sample for the inflow fit (zeros for the others): the stream's thrust
-    regressor of C_D0 and the stream thrust of the held C_D90 and C_Lmax, at the DVL speed."""
-    if cfg.fit != "inflow":
+def _plate(fin: int, track: FinTrack, m: Measurements, mpc: MpcConfig, hull: Hull, cfg: IdentifyConfig,
+           phi: float) -> tuple[NDArray, NDArray, NDArray]:
+    """The plate fit's regressors per sample (zeros for the other fits): the thrust per unit of
+    C_D0, C_D90 and C_R in the flow the DVL's velocity and the IMU's rates make past the fin,
+    the lift held at ``lift_ratio`` of the normal force."""
+    if cfg.fit != "plate":
         z = np.zeros(track.t.size)
-        return z, z
-    speed = np.interp(track.t, m.dvl_t, m.dvl_u)
-    plate = Plate(mpc.rho, mpc.fin_area, mpc.r_c, mpc.c_d, mpc.c_l, cfg.plate_strips)
-    c0, c90, cl = stream_regressors(track.angle, track.rate, speed, plate, hull.mounting_angle)
-    return c0, cfg.plate_cd90 * c90 + cfg.plate_cl_max * cl
+        return z, z, z
+    body = [np.interp(track.t, m.dvl_t, x) for x in (m.dvl_u, m.dvl_v, m.dvl_w)]
+    body += [np.interp(track.t, m.imu_t, x) for x in (m.imu_roll_rate, m.imu_pitch_rate, m.imu_yaw_rate)]
+    ux, uy = hinge_flow(fin, hull.mount, *body)
+    plate = Plate(mpc.rho, mpc.fin_area, mpc.r_c, phi, cfg.plate_strips)
+    c0, c90, cl, cr = plate_regressors(track.angle, track.rate, ux, uy, plate, hull.mounting_angle)
+    return c0 + cfg.lift_ratio * cl, c90 + cfg.lift_ratio * cl, cr
 
 
 def _slope(t: NDArray, u: NDArray) -> float:
@@ -198,15 +222,19 @@ def _slope(t: NDArray, u: NDArray) -> float:
     return float((tc * (u - u.mean())).sum() / (tc * tc).sum())
 
 
-def windows(m: Measurements, mpc: MpcConfig, hull: Hull, cfg: IdentifyConfig) -> tuple[list[Window], dict[str, int]]:
-    """The usable windows and, for a refusal's message, how many each check left out."""
+def windows(m: Measurements, mpc: MpcConfig, hull: Hull, cfg: IdentifyConfig,
+            phi: float | None = None) -> tuple[list[Window], dict[str, int]]:
+    """The usable windows and, for a refusal's message, how many each check left out
+    (``phi``: the plate fit's line, default the configured model's)."""
+    phi = math.atan2(mpc.c_d, mpc.c_l) if phi is None else phi
     if not m.fins or any(f.t.size < 3 for f in m.fins):
         raise ValueError("fin channels: no encoder samples (fin/<i>/state): identification needs "
                          "every fin's measured angle and rate")
     if m.dvl_t.size < cfg.min_dvl:
         raise ValueError(f"sensors/dvl: {m.dvl_t.size} valid DVL reports; identification needs the "
                          "forward speed (at least one window's worth)")
-    regs = [(f.t, *thrust_regressors(f, mpc, hull), *_stream(f, m, mpc, hull, cfg)) for f in m.fins]
+    regs = [(f.t, *thrust_regressors(f, mpc, hull), *_plate(i, f, m, mpc, hull, cfg, phi))
+            for i, f in enumerate(m.fins)]
     t_lo = max(f.t[0] for f in m.fins)
     t_hi = min(f.t[-1] for f in m.fins)
     n = int((t_hi - t_lo) // cfg.window_s)
@@ -232,15 +260,16 @@ def windows(m: Measurements, mpc: MpcConfig, hull: Hull, cfg: IdentifyConfig) ->
         u = m.dvl_u[sel]
         accel = _slope(m.dvl_t[sel], u)
         drag = float(hull.drag(u).mean())
-        a = b = c0 = held = 0.0
-        for t, ra, rb, r0, rh in regs:
+        a = b = 0.0
+        plate = np.zeros(3)
+        for t, ra, rb, *rp in regs:
             s = (t >= t0) & (t < t1)
             a += float(ra[s].mean())
             b += float(rb[s].mean())
-            c0 += float(r0[s].mean())
-            held += float(rh[s].mean())
+            plate += [float(r[s].mean()) for r in rp]
         steady = drag > 0.0 and abs(hull.mass * accel) <= cfg.steady_share * drag
-        out.append(Window(t0, t1, float(u.mean()), accel, drag, a, b, bool(steady), c0=c0, held=held))
+        out.append(Window(t0, t1, float(u.mean()), accel, drag, a, b, bool(steady),
+                          plate=(float(plate[0]), float(plate[1]), float(plate[2]))))
     return out, why
 
 
@@ -248,10 +277,14 @@ def identify(recordings: Sequence[Measurements], mpc: MpcConfig, hull: Hull,
              cfg: IdentifyConfig | None = None) -> Identification:
     """Fit the fin coefficients to the windows of every recording (module docstring);
     ValueError naming why the recordings are refused."""
-    import scipy.optimize
-    import scipy.stats
-
     cfg = cfg or IdentifyConfig()
+    if cfg.fit == "plate":
+        return _fit_plate(recordings, mpc, hull, cfg)
+    return _fit(_usable(recordings, mpc, hull, cfg), mpc, hull, cfg)
+
+
+def _usable(recordings: Sequence[Measurements], mpc: MpcConfig, hull: Hull, cfg: IdentifyConfig) -> list[Window]:
+    """Every recording's windows; ValueError when none is usable or none is steady."""
     ws: list[Window] = []
     why: dict[str, int] = {}
     for m in recordings:
@@ -263,23 +296,26 @@ def identify(recordings: Sequence[Measurements], mpc: MpcConfig, hull: Hull,
     if not ws:
         raise ValueError(f"no usable window of {cfg.window_s:g} s (left out: {left_out or 'none: too short'}); "
                          "identification needs the fins beating while the DVL reports, level and not turning")
-    steady = [w for w in ws if w.steady]
-    if not steady:
+    if not any(w.steady for w in ws):
         shares = [abs(hull.mass * w.accel) / w.drag if w.drag > 0.0 else math.inf for w in ws]
         raise ValueError(
             f"no steady segment: in each of the {len(ws)} usable windows of {cfg.window_s:g} s the hull "
             f"was still accelerating (M du/dt {100 * min(shares):.0f}-{100 * max(shares):.0f} % of the drag, "
             f"more than {100 * cfg.steady_share:g} %): record strokes held long enough for the speed to settle "
             f"(the identification manoeuvre holds each for {ManoeuvreConfig().step_s:g} s)")
+    return ws
+
+
+def _fit(ws: list[Window], mpc: MpcConfig, hull: Hull, cfg: IdentifyConfig) -> Identification:
+    import scipy.optimize
+    import scipy.stats
+
     a = np.array([w.a for w in ws])
     b = np.array([w.b for w in ws])
-    y = np.array([w.drag + hull.mass * w.accel - w.held for w in ws])
+    y = np.array([w.drag + hull.mass * w.accel for w in ws])
     if cfg.fit == "coefficients":
         basis = np.column_stack([b, a])  # columns: C_D, C_L
         x0 = np.array([mpc.c_d, mpc.c_l])
-    elif cfg.fit == "inflow":
-        basis = np.column_stack([b, a, [w.c0 for w in ws]])  # columns: C_D, C_L, C_D0
-        x0 = np.array([mpc.c_d, mpc.c_l, 0.05])
     else:
         basis = (mpc.c_d * b + mpc.c_l * a)[:, None]
         x0 = np.array([1.0])
@@ -288,36 +324,77 @@ def identify(recordings: Sequence[Measurements], mpc: MpcConfig, hull: Hull,
         raise ValueError(f"{len(ws)} usable windows for {p} coefficients: the recording is too short")
     gram = basis.T @ basis
     if cfg.fit != "scale" and np.linalg.cond(gram) > 1e8:
-        raise ValueError("the recording does not tell C_L from C_D (every window pushes with the same "
-                         "combination of the two: strokes about one centre); run the identification "
-                         "manoeuvre, or fit one scale of both (fit = 'scale')")
+        raise ValueError("the recording does not tell the coefficients apart (every window pushes with the "
+                         "same combination: strokes about one centre); run the identification manoeuvre, or "
+                         "fit one scale of both (fit = 'scale')")
     res = scipy.optimize.least_squares(lambda x: basis @ x - y, x0, bounds=(0.0, np.inf), method="trf")
     r = res.fun
     dof = len(ws) - p
     s2 = float(r @ r) / dof
     cov = s2 * np.linalg.inv(res.jac.T @ res.jac)
-    half = scipy.stats.t.ppf(0.975, dof) * np.sqrt(np.diag(cov))
+    t975 = scipy.stats.t.ppf(0.975, dof)
+    half = t975 * np.sqrt(np.diag(cov))
     c_d0 = c_d0_ci = math.nan
-    if cfg.fit == "inflow":
-        c_d0, c_d0_ci = float(res.x[2]), float(half[2])
-    if cfg.fit != "scale":
+    if cfg.fit == "coefficients":
         c_d, c_l = float(res.x[0]), float(res.x[1])
         c_d_ci, c_l_ci = float(half[0]), float(half[1])
         scale = c_d / mpc.c_d if mpc.c_d > 0.0 else math.nan
         scale_ci = c_d_ci / mpc.c_d if mpc.c_d > 0.0 else math.nan
+        thrust = c_l * a + c_d * b
     else:
         scale, scale_ci = float(res.x[0]), float(half[0])
         c_d, c_l = scale * mpc.c_d, scale * mpc.c_l
         c_d_ci, c_l_ci = scale_ci * mpc.c_d, scale_ci * mpc.c_l
-    stream = 0.0 if math.isnan(c_d0) else c_d0
+        thrust = c_l * a + c_d * b
     fitted = tuple(
-        Window(w.t0, w.t1, w.speed, w.accel, w.drag, w.a, w.b, w.steady,
-               thrust=c_l * w.a + c_d * w.b + stream * w.c0 + w.held,
-               residual=c_l * w.a + c_d * w.b + stream * w.c0 - yy, c0=w.c0, held=w.held)
-        for w, yy in zip(ws, y)
+        Window(w.t0, w.t1, w.speed, w.accel, w.drag, w.a, w.b, w.steady, thrust=float(th),
+               plate=w.plate, residual=float(th - yy))
+        for w, th, yy in zip(ws, thrust, y)
     )
     return Identification(cfg.fit, c_d, c_l, c_d_ci, c_l_ci, scale, scale_ci, fitted,
                           float(np.sqrt(np.mean(r * r))), hull.mass, c_d0, c_d0_ci)
+
+
+def _fit_plate(recordings: Sequence[Measurements], mpc: MpcConfig, hull: Hull,
+               cfg: IdentifyConfig) -> Identification:
+    """The plate fit (module docstring): (C_D, C_L, C_D0) by nonlinear least squares on the
+    windows' force balance, the plate calibrated to (C_D, C_L) as the plant's is."""
+    import scipy.optimize
+    import scipy.stats
+
+    ws = _usable(recordings, mpc, hull, cfg)  # the windows, with the checks' refusals
+    if len(ws) <= 3:
+        raise ValueError(f"{len(ws)} usable windows for 3 coefficients: the recording is too short")
+    y = np.array([w.drag + hull.mass * w.accel for w in ws])
+
+    def at(x: NDArray) -> tuple[list[Window], NDArray]:
+        """The windows with the plate regressors of the line of (C_D, C_L), and the thrust."""
+        c_d, c_l, c_d0 = (float(v) for v in x)
+        rows = [w for m in recordings for w in windows(m, mpc, hull, cfg, math.atan2(c_d, c_l))[0]]
+        coef = np.array([c_d0, c_d - c_d0, 2.0 * math.hypot(c_d, c_l) / 3.0])  # C_D0, C_D90, C_R
+        return rows, np.array([w.plate for w in rows]) @ coef
+
+    x0 = np.array([max(mpc.c_d, 0.1), max(mpc.c_l, 0.05), 0.05])  # from the configured model
+    res = scipy.optimize.least_squares(lambda x: at(x)[1] - y, x0, bounds=(1e-9, np.inf), method="trf",
+                                       x_scale=[x0[0], x0[1], 0.1])
+    jtj = res.jac.T @ res.jac
+    if np.linalg.cond(jtj) > 1e10:
+        raise ValueError("the recording does not tell the plate's coefficients apart (strokes about one centre, "
+                         "at one speed); run the identification manoeuvre")
+    r = res.fun
+    dof = len(ws) - 3
+    half = scipy.stats.t.ppf(0.975, dof) * np.sqrt(np.diag(float(r @ r) / dof * np.linalg.inv(jtj)))
+    c_d, c_l, c_d0 = (float(v) for v in res.x)
+    rows, thrust = at(res.x)
+    fitted = tuple(
+        Window(w.t0, w.t1, w.speed, w.accel, w.drag, w.a, w.b, w.steady, thrust=float(th), plate=w.plate,
+               residual=float(th - yy))
+        for w, th, yy in zip(rows, thrust, y)
+    )
+    scale = c_d / mpc.c_d if mpc.c_d > 0.0 else math.nan
+    scale_ci = float(half[0]) / mpc.c_d if mpc.c_d > 0.0 else math.nan
+    return Identification("plate", c_d, c_l, float(half[0]), float(half[1]), scale, scale_ci, fitted,
+                          float(np.sqrt(np.mean(r * r))), hull.mass, c_d0, float(half[2]))
 
 
 @dataclass(frozen=True)

@@ -23,7 +23,9 @@ import numpy as np
 from ucat_console.control.params import PAPER_BASELINE, PAPER_BODY, BaselineConfig, BodyConfig, MpcConfig
 from ucat_console.experiments import paper
 from ucat_console.experiments.distributed import run_all
+from ucat_console.backend.sim.params import PAPER_COEFFICIENTS
 from ucat_console.experiments.scenario import (
+    DEFAULT_PLANT,
     PLANT_VARIANTS,
     Scenario,
     family_name,
@@ -42,9 +44,10 @@ REACHED_SHARE = 0.9
 TRACKING_MAE = 0.03
 E5_CURRENT = (0.03, 0.02, 0.0)
 E5_START_DEPTH = 0.5
-E5_WAKES = ("strouhal_wake", "quasi_steady")
+E5_PLANTS = ("plate", "still_water")
 
-METRICS = ("power_est", "power_true", "energy_per_metre", "energy_per_metre_true",
+METRICS = ("power_est", "power_true", "power_electrical", "energy_per_metre", "energy_per_metre_true",
+           "energy_per_metre_electrical",
            "velocity_mean", "velocity_mae", "velocity_mae_true",
            "depth_mae", "st_mae", "st_plant_mae", "st_in_range", "force_error", "late_plans",
            "plan_overruns", "stroke", "rate", "opening", "winding")
@@ -66,7 +69,7 @@ def e4_scenarios(quick: bool, seed: int, speeds: Sequence[float] | None = None,
         for v in speeds:
             for ctrl in CONTROLLERS:
                 for s in seeds:
-                    trace = 5.0 if (variant == "strouhal_wake" and v == trace_v and s == seed) else 0.0
+                    trace = 5.0 if (variant == DEFAULT_PLANT and v == trace_v and s == seed) else 0.0
                     out.append(Scenario(mode=ctrl, v_ref=v, depth=depth, seed=s, plant=variant,
                                         settle_s=settle, window_s=window, trace_rate=trace,
                                         body=shipped_body(), tag="E4"))
@@ -108,15 +111,17 @@ def _saving(base: float, value: float) -> float:
 
 
 def _add_savings(rows: list[dict[str, Any]], group: Sequence[str]) -> None:
-    """saving_est / saving_true (% of mean power) and saving_epm / saving_epm_true (% of
-    energy per metre) of each row against the baseline row of its group, where both track."""
+    """saving_est / saving_true / saving_el (% of mean power: estimate, shaft, battery) and
+    saving_epm / saving_epm_true / saving_epm_el (% of energy per metre) of each row against
+    the baseline row of its group, where both track."""
     base = {tuple(r[k] for k in group): r for r in rows if r["mode"] == "baseline"}
     for r in rows:
         b = base.get(tuple(r[k] for k in group))
         r["tracks"] = tracks(r)
         r["comparable"] = bool(b is not None and tracks(b) and tracks(r))
-        pairs = (("est", "power_est"), ("true", "power_true"), ("epm", "energy_per_metre"),
-                 ("epm_true", "energy_per_metre_true"))
+        pairs = (("est", "power_est"), ("true", "power_true"), ("el", "power_electrical"),
+                 ("epm", "energy_per_metre"), ("epm_true", "energy_per_metre_true"),
+                 ("epm_el", "energy_per_metre_electrical"))
         for kind, key in pairs:
             r[f"saving_{kind}"] = _saving(b[key], r[key]) if r["comparable"] else math.nan
 
@@ -277,8 +282,8 @@ def run_e4r(client: Any, quick: bool, seed: int, speeds: Sequence[float] | None 
 
 # ---------------------------------------------------------------------------- E6
 #: E6's plant family (declared before it was run: docs/experiments/e6-declaration.md)
-E6_GAINS = (1.0, 2.3, 4.6, 9.2)
-E6_WAKES = ("strouhal_wake", "quasi_steady")
+E6_SCALES = (1.0, 2.3, 4.6, 9.2)
+E6_MODELS = ("plate", "still_water")
 E6_SPEEDS = (0.1, 0.2, 0.3)
 #: baseline (eq 19 with the paper's C_D); the same with the identified C_D; the shipped MPC
 #: (paper formulation, the paper's model); the same with the identified model; the
@@ -291,8 +296,8 @@ E6_CORRIDOR_SHARE = 0.5
 
 
 def e6_plants(quick: bool) -> list[str]:
-    gains = (1.0, 4.6) if quick else E6_GAINS
-    return [family_name(g, w) for g in gains for w in E6_WAKES]
+    scales = (1.0, 4.6) if quick else E6_SCALES
+    return [family_name(g, m) for g in scales for m in E6_MODELS]
 
 
 def identify_plant(plant: str, seed: int, quick: bool) -> dict[str, Any]:
@@ -373,10 +378,10 @@ def run_e6(client: Any, quick: bool, seed: int, progress: bool = True) -> dict[s
         r["baseline_out_of_corridor"] = bool(b["st_in_range"] < E6_CORRIDOR_SHARE)
     for p in plants:
         h = hydro_of(p)
-        identified[p]["thrust_gain"] = h.custom.thrust_gain
-        identified[p]["wake"] = h.wake
+        identified[p]["scale"] = h.custom.c_d / PAPER_COEFFICIENTS.c_d
+        identified[p]["model"] = h.model
     target_rows = [r for r in rows if r["controller"] == "mpc_closed_id" and r["baseline_out_of_corridor"]]
-    met = [r for r in target_rows if r["comparable"] and r["saving_epm_true"] >= E6_TARGET_PCT]
+    met = [r for r in target_rows if r["comparable"] and r["saving_epm_el"] >= E6_TARGET_PCT]
     settle, window = e4_timing(quick)
     return {
         "protocol": {"plants": plants, "speeds": sorted({s.v_ref for s in scenarios}),
@@ -401,7 +406,7 @@ def e5_scenarios(quick: bool, seed: int, depth: float = 3.0) -> list[Scenario]:
     mpc, body = e4r_settings()["sim_tuned"]
     out = [Scenario(mode="mpc_sync", v_ref=0.2, depth=depth, yaw_rate=0.1, seed=seed, plant=w, mpc=mpc, body=body,
                     settle_s=half, window_s=half, start_depth=E5_START_DEPTH, start_velocity=0.2,
-                    current=E5_CURRENT, trace_rate=2.0, tag="E5") for w in E5_WAKES]
+                    current=E5_CURRENT, trace_rate=2.0, tag="E5") for w in E5_PLANTS]
     for sc in out:
         sc.check()
     return out
@@ -446,7 +451,7 @@ def run_e5(client: Any, quick: bool, seed: int, depth: float = 3.0,
         "protocol": {"depth": depth, "v_ref": s0.v_ref, "yaw_rate": s0.yaw_rate, "mode": s0.mode,
                      "duration_s": s0.settle_s + s0.window_s, "measured_from_s": s0.settle_s,
                      "start_depth": E5_START_DEPTH, "current_ned": list(E5_CURRENT), "seed": seed},
-        "plants": {w: plant_assumptions(w) for w in E5_WAKES},
+        "plants": {w: plant_assumptions(w) for w in E5_PLANTS},
         "rows": rows,
         "claims": claims,
     }
@@ -455,7 +460,7 @@ def run_e5(client: Any, quick: bool, seed: int, depth: float = 3.0,
 
 # ---------------------------------------------------------------------------- sweep
 def sweep_scenarios(lam_st: Sequence[float], lam_d: Sequence[float], speeds: Sequence[float],
-                    seeds: Sequence[int], quick: bool, plant: str = "strouhal_wake",
+                    seeds: Sequence[int], quick: bool, plant: str = DEFAULT_PLANT,
                     formulation: str = "paper") -> list[Scenario]:
     settle, window = e4_timing(quick)
     out = []
@@ -474,7 +479,7 @@ def sweep_scenarios(lam_st: Sequence[float], lam_d: Sequence[float], speeds: Seq
 
 
 def run_sweep(client: Any, lam_st: Sequence[float], lam_d: Sequence[float], speeds: Sequence[float],
-              seeds: Sequence[int], quick: bool, plant: str = "strouhal_wake",
+              seeds: Sequence[int], quick: bool, plant: str = DEFAULT_PLANT,
               progress: bool = True, formulation: str = "paper") -> dict[str, Any]:
     scenarios = sweep_scenarios(lam_st, lam_d, speeds, seeds, quick, plant, formulation)
     runs = run_all(client, run_scenario, scenarios, "sweep runs", progress)

@@ -1,9 +1,10 @@
 """E7: does St-awareness save energy on a plant whose efficiency depends on the flow?
 
 Declared before it was run (docs/experiments/e7-declaration.md, which prints the plants'
-hash, :func:`~ucat_console.experiments.foil_curves.plant_hash`). Plants: the foil family
-(``foil_inflow`` over the profile drag C_D0, :data:`~ucat_console.experiments.foil_curves.E7_FOIL_CD0`)
-and the null plant (the soft fin's quasi-steady model, whose force ignores the flow).
+hash, :func:`~ucat_console.experiments.efficiency_curves.plant_hash`). Plants: the plate
+over the profile drag C_D0 (:data:`~ucat_console.experiments.efficiency_curves.E7_CD0`) and
+the null plant (``still_water``: the plate as if in still water, the thrust's work paid
+through the shaft, so that how a force is made costs the same at any St).
 Every run starts from rest, with the shipped sim-tuned's MPC weights and body layer.
 
 Controllers (:data:`E7_CONTROLLERS`):
@@ -11,16 +12,18 @@ Controllers (:data:`E7_CONTROLLERS`):
 * ``baseline_2hz``: the paper's fixed-frequency baseline at 2 Hz (fin-model inverse with
   the identified coefficients);
 * ``baseline_best``: the same at the frequency of :data:`TUNING_FREQUENCIES` with the
-  least true energy per metre among those that track, chosen per plant and speed on a
+  least battery energy per metre among those that track, chosen per plant and speed on a
   held-out seed (:data:`HELD_OUT_SEED` + base seed) before the measured runs;
 * ``mpc_paper_id``: the paper's MPC (its formulation) with the identified model;
 * ``mpc_closed_id``: the closed-stroke MPC with the identified model;
 * ``mpc_closed_nost``: the same without its St term (``lam_st = 0``), the ablation;
-* ``oracle``: plans with the plant's true thrust and power (``experiments.oracle``).
+* ``oracle``: plans with the plant's true force and battery power (``experiments.oracle``).
 
-Primary metric: true shaft energy per metre at matched tracking (DVL speed MAE <=
-:data:`MATCH_MAE` and true mean speed within :data:`MATCH_MEAN` of the reference). A
-comparison of controller A against B in a plant-speed case uses the seeds where both
+Primary metric (:data:`PRIMARY`): the battery's energy per metre (the drives' electrical
+input by the plant's drive model, ``robot.motor``) at matched tracking (DVL speed MAE <=
+:data:`MATCH_MAE` and true mean speed within :data:`MATCH_MEAN` of the reference); the shaft's
+energy per metre (:data:`SECONDARY`) is reported beside it, with the rules applied to it too.
+A comparison of controller A against B in a plant-speed case uses the seeds where both
 match; its saving is ``100 (1 - mean E_A / mean E_B)`` with a paired bootstrap 95 %
 interval over those seeds (:func:`paired_saving`); fewer than :data:`MIN_PAIRS` pairs: not
 comparable. The decision rules (:func:`decisions`) are the declaration's.
@@ -37,7 +40,7 @@ import numpy as np
 from ucat_console.control.params import BaselineConfig
 from ucat_console.experiments.closed_loop_runs import _label, e4_timing, e4r_settings, identify_plant
 from ucat_console.experiments.distributed import run_all
-from ucat_console.experiments.foil_curves import (
+from ucat_console.experiments.efficiency_curves import (
     CORRIDOR,
     E7_SPEEDS,
     NULL_PLANT,
@@ -47,6 +50,9 @@ from ucat_console.experiments.foil_curves import (
 )
 from ucat_console.experiments.scenario import Scenario, plant_assumptions, run_scenario
 
+#: the energy per metre the decision rules read, and the one reported beside it
+PRIMARY = "energy_per_metre_electrical"
+SECONDARY = "energy_per_metre_true"
 E7_CONTROLLERS = ("baseline_2hz", "baseline_best", "mpc_paper_id", "mpc_closed_id", "mpc_closed_nost", "oracle")
 E7_SEEDS = 10
 HELD_OUT_SEED = 1000
@@ -65,7 +71,7 @@ def e7_design(quick: bool, seed: int, n_seeds: int | None = None) -> dict[str, A
     if n_seeds is not None and not 1 <= n_seeds <= E7_SEEDS:
         raise ValueError(f"--seeds: {n_seeds} is not in 1..{E7_SEEDS}")
     if quick:
-        return {"plants": ["foil_cd0.1", NULL_PLANT], "speeds": [0.2], "seeds": [seed, seed + 1],
+        return {"plants": ["plate_cd0.05", NULL_PLANT], "speeds": [0.2], "seeds": [seed, seed + 1],
                 "frequencies": [1.0, 2.0], "held_out": HELD_OUT_SEED + seed}
     n = E7_SEEDS if n_seeds is None else n_seeds
     return {"plants": e7_plants(), "speeds": list(E7_SPEEDS), "seeds": [seed + k for k in range(n)],
@@ -119,7 +125,9 @@ COMPARISONS = (("mpc_closed_id", "mpc_closed_nost"), ("mpc_closed_id", "baseline
                ("oracle", "baseline_best"), ("baseline_2hz", "baseline_best"), ("mpc_closed_id", "oracle"))
 
 
-def compare(runs: list[dict[str, Any]], plant: str, v: float) -> list[dict[str, Any]]:
+def compare(runs: list[dict[str, Any]], plant: str, v: float, key: str = PRIMARY) -> list[dict[str, Any]]:
+    """Every comparison of :data:`COMPARISONS` in one plant-speed case, on the energy per metre
+    ``key``."""
     by = {}
     for r in runs:
         s = r["scenario"]
@@ -129,8 +137,7 @@ def compare(runs: list[dict[str, Any]], plant: str, v: float) -> list[dict[str, 
     for a, b in COMPARISONS:
         seeds = sorted(k[1] for k in by if k[0] == a and (b, k[1]) in by
                        and matched(by[k]) and matched(by[(b, k[1])]))
-        res = paired_saving([by[(a, s)]["energy_per_metre_true"] for s in seeds],
-                            [by[(b, s)]["energy_per_metre_true"] for s in seeds])
+        res = paired_saving([by[(a, s)][key] for s in seeds], [by[(b, s)][key] for s in seeds])
         out.append({"plant": plant, "v_ref": v, "a": a, "b": b, **res})
     return out
 
@@ -149,16 +156,16 @@ def decisions(comparisons: list[dict[str, Any]], peaks: dict[tuple[str, float], 
                       "comparable": bool(c["comparable"] and b["comparable"]), "pays": pays,
                       "peak_st": peaks.get(key, math.nan),
                       "peak_in_corridor": bool(CORRIDOR[0] <= peaks.get(key, math.nan) <= CORRIDOR[1])})
-    foil = [c for c in cases if c["plant"] != NULL_PLANT]
-    comp = [c for c in foil if not math.isnan(c["st_saving"])]
+    flow = [c for c in cases if c["plant"] != NULL_PLANT]
+    comp = [c for c in flow if not math.isnan(c["st_saving"])]
     inside = [c["st_saving"] for c in comp if c["peak_in_corridor"]]
     outside = [c["st_saving"] for c in comp if not c["peak_in_corridor"]]
     null = [c for c in cases if c["plant"] == NULL_PLANT]
     null_ok = [c for c in null if not math.isnan(c["st_saving"])]
-    rule1 = sum(c["pays"] for c in foil)
+    rule1 = sum(c["pays"] for c in flow)
     return {
         "cases": cases,
-        "rule1": {"pays_in": rule1, "foil_cases": len(foil), "comparable": len(comp),
+        "rule1": {"pays_in": rule1, "flow_cases": len(flow), "comparable": len(comp),
                   "verdict": bool(comp and rule1 * 2 > len(comp))},
         "rule2": {"inside_mean": float(np.mean(inside)) if inside else math.nan, "inside_n": len(inside),
                   "outside_mean": float(np.mean(outside)) if outside else math.nan, "outside_n": len(outside),
@@ -171,13 +178,13 @@ def decisions(comparisons: list[dict[str, Any]], peaks: dict[tuple[str, float], 
 
 
 def _tune(runs: list[dict[str, Any]]) -> dict[tuple[str, float], float]:
-    """Per (plant, speed): the tuning frequency with the least true energy per metre among
-    the held-out runs that match; 2 Hz where none matches."""
+    """Per (plant, speed): the tuning frequency with the least energy per metre (:data:`PRIMARY`)
+    among the held-out runs that match; 2 Hz where none matches."""
     best: dict[tuple[str, float], tuple[float, float]] = {}
     for r in runs:
         s = r["scenario"]
         key = (s["plant"], s["v_ref"])
-        e = r["energy_per_metre_true"]
+        e = r[PRIMARY]
         if matched(r) and not math.isnan(e) and (key not in best or e < best[key][1]):
             best[key] = (s["baseline"]["frequency"], e)
     return {k: v[0] for k, v in best.items()}
@@ -208,13 +215,15 @@ def run_e7(client: Any, quick: bool, seed: int, progress: bool = True, n_seeds: 
     runs = run_all(client, run_scenario, scenarios, "E7 runs", progress)
     _label(runs, ("experiment", "controller"))
     comparisons = [c for p in plants for v in speeds for c in compare(runs, p, v)]
+    shaft = [c for p in plants for v in speeds for c in compare(runs, p, v, SECONDARY)]
     rows = []
     for r in runs:
         s = r["scenario"]
         rows.append({"plant": s["plant"], "v_ref": s["v_ref"], "controller": s["controller"], "seed": s["seed"],
                      "frequency": s["baseline"]["frequency"] if s["controller"].startswith("baseline") else None,
                      "matched": matched(r), "velocity_mean": r["velocity_mean"], "velocity_mae": r["velocity_mae"],
-                     "energy_per_metre_true": r["energy_per_metre_true"], "power_true": r["power_true"],
+                     PRIMARY: r[PRIMARY], "power_electrical": r["power_electrical"],
+                     SECONDARY: r[SECONDARY], "power_true": r["power_true"],
                      "st_in_range": r["st_in_range"], "stroke": r["stroke"], "rate": r["rate"]})
     settle, window = e4_timing(quick)
     mpc, body = e4r_settings()["sim_tuned"]
@@ -234,22 +243,32 @@ def run_e7(client: Any, quick: bool, seed: int, progress: bool = True, n_seeds: 
         "rows": rows,
         "comparisons": comparisons,
         "decisions": decisions(comparisons, peaks),
+        "comparisons_shaft": shaft,
+        "decisions_shaft": decisions(shaft, peaks),
     }
 
 
 def findings(res: dict[str, Any]) -> list[str]:
-    """The decision rules' outcomes, as declared, in words."""
-    d = res["decisions"]
-    r1, r2, r3 = d["rule1"], d["rule2"], d["rule3"]
+    """The decision rules' outcomes, as declared, in words: on the battery's energy per metre,
+    then on the shaft's."""
     p = res["protocol"]
     out = [f"Plants hash {p['plant_hash']} (declared: {p['declared_hash']})"
            + ("" if p["plant_hash"] == p["declared_hash"] else " (a subset of the declared plants: quick run)") + "."]
     if p.get("reduced"):
         out.append(f"Reduced design as declared: seeds {', '.join(str(s) for s in p['seeds'])} of the 10.")
+    out += [f"On the battery's energy per metre (primary): {s}" for s in _rules(res["decisions"], p)]
+    if "decisions_shaft" in res:
+        out += [f"On the shaft's energy per metre: {s}" for s in _rules(res["decisions_shaft"], p)]
+    return out
+
+
+def _rules(d: dict[str, Any], p: dict[str, Any]) -> list[str]:
+    r1, r2, r3 = d["rule1"], d["rule2"], d["rule3"]
+    out = []
     out.append(f"Rule 1 (St-awareness pays: closed-stroke MPC >= {p['st_pays_pct']:g} % below its no-St ablation, "
                f"interval above zero, and below the best-tuned baseline, interval above zero): holds in "
-               f"{r1['pays_in']} of {r1['foil_cases']} foil cases ({r1['comparable']} comparable): "
-               + ("St-awareness pays." if r1["verdict"] else "St-awareness does not pay (not in a majority of the comparable foil cases)."))
+               f"{r1['pays_in']} of {r1['flow_cases']} plate cases ({r1['comparable']} comparable): "
+               + ("St-awareness pays." if r1["verdict"] else "St-awareness does not pay (not in a majority of the comparable plate cases)."))
     if r2["inside_n"] and r2["outside_n"]:
         out.append(f"Rule 2 (larger saving where the plant's peak lies in the corridor): mean St-term saving "
                    f"{r2['inside_mean']:.1f} % in {r2['inside_n']} cases with the peak inside, "

@@ -123,7 +123,7 @@ def e5_figure(traces: dict[str, Any], res: dict[str, Any], out: Path) -> str:
 
 
 def e4r_figure(res: dict[str, Any], out: Path) -> str:
-    """True energy per metre against the reference, per setting and plant (E4R)."""
+    """The battery's energy per metre against the reference, per setting and plant (E4R)."""
     settings, plants = res["protocol"]["settings"], list(res["plants"])
     fig, axes = plt.subplots(len(settings), len(plants), figsize=(4 * len(plants), 3.2 * len(settings)),
                              squeeze=False, sharex=True)
@@ -134,40 +134,40 @@ def e4r_figure(res: dict[str, Any], out: Path) -> str:
                 rows = [r for r in res["rows"] if r["settings"] == setting and r["plant"] == plant
                         and r["controller"] == ctrl]
                 v = [r["v_ref"] for r in rows]
-                ax.plot(v, [r["energy_per_metre_true"] for r in rows], "o-", label=ctrl,
+                ax.plot(v, [r["energy_per_metre_electrical"] for r in rows], "o-", label=ctrl,
                         color=MODE_COLOURS.get(ctrl))
                 for r in rows:
                     if not r["tracks"]:
-                        ax.plot(r["v_ref"], r["energy_per_metre_true"], "x", color="k")
+                        ax.plot(r["v_ref"], r["energy_per_metre_electrical"], "x", color="k")
             ax.set_yscale("log")
             ax.set_title(f"{setting}, {plant}", fontsize=8)
             ax.set_xlabel("reference (m/s)")
-            ax.set_ylabel("true energy per metre (J/m)")
+            ax.set_ylabel("battery energy per metre (J/m)")
     axes[0][0].legend(fontsize=7, title="x: not tracking", title_fontsize=7)
     return _save(fig, out / "e4r_energy_per_metre.png")
 
 
 def e6_figure(res: dict[str, Any], out: Path) -> str:
-    """True energy-per-metre saving against the thrust gain (E6): the closed-stroke MPC with
+    """The battery's energy-per-metre saving against the coefficients' scale (E6): the closed-stroke MPC with
     its identified model (solid) and eq 19 with the identified C_D (dotted), comparable
     cases only; savings below the axis are drawn on it (with their value)."""
     fig, axes = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
-    gains = {d["plant"]: d["thrust_gain"] for d in res["identified"]}
-    wakes = {d["plant"]: d["wake"] for d in res["identified"]}
+    gains = {d["plant"]: d["scale"] for d in res["identified"]}
+    wakes = {d["plant"]: d["model"] for d in res["identified"]}
     lo = -100.0
     colours = ("tab:blue", "tab:orange", "tab:green", "tab:red")
-    for ax, wake in zip(axes, ("strouhal_wake", "quasi_steady")):
+    for ax, wake in zip(axes, ("plate", "still_water")):
         for ctrl, style in (("mpc_closed_id", "o-"), ("baseline_id", "^:")):
             for v, colour in zip(res["protocol"]["speeds"], colours):
                 rows = sorted((r for r in res["rows"] if r["controller"] == ctrl and r["v_ref"] == v
                                and wakes[r["plant"]] == wake and r["comparable"]),
                               key=lambda r: gains[r["plant"]])
                 g = [gains[r["plant"]] for r in rows]
-                y = [max(lo, r["saving_epm_true"]) for r in rows]
+                y = [max(lo, r["saving_epm_el"]) for r in rows]
                 ax.plot(g, y, style, color=colour, label=f"{ctrl} {v:g} m/s", ms=5)
                 for r, gg, yy in zip(rows, g, y):
-                    if r["saving_epm_true"] < lo:
-                        ax.annotate(f"{r['saving_epm_true']:.0f}", (gg, yy), fontsize=6,
+                    if r["saving_epm_el"] < lo:
+                        ax.annotate(f"{r['saving_epm_el']:.0f}", (gg, yy), fontsize=6,
                                     xytext=(3, 3), textcoords="offset points")
         ax.axhline(res["protocol"]["target_pct"], color="tab:red", lw=0.8, ls="--")
         ax.axhline(0.0, color="k", lw=0.6)
@@ -175,9 +175,9 @@ def e6_figure(res: dict[str, Any], out: Path) -> str:
         ax.set_xlim(0.8 * min(gains.values()), 1.25 * max(gains.values()))
         ax.set_xticks(sorted(set(gains.values())), [f"{g:g}" for g in sorted(set(gains.values()))])
         ax.set_ylim(lo - 8.0, 70.0)
-        ax.set_xlabel("soft-fin thrust gain G")
+        ax.set_xlabel("scale G of the fin's coefficients")
         ax.set_title(f"{wake} (dashed: the {res['protocol']['target_pct']:g} % target)", fontsize=9)
-    axes[0].set_ylabel("true energy per metre saved vs baseline (%)")
+    axes[0].set_ylabel("battery energy per metre saved vs baseline (%)")
     axes[1].legend(fontsize=6, ncol=2)
     return _save(fig, out / "e6_saving_vs_gain.png")
 

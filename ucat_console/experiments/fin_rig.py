@@ -1,12 +1,13 @@
 """One fin of the plant beating at a held hull speed: what its strokes and cycles make and cost.
 
-The open-loop view of the plant the foil experiment (E7) declares before it runs: a fin
+The open-loop view of the plant the efficiency experiment (E7) declares before it runs: a fin
 driven through the plant's own servo profile (``robot.servo``) and hydrodynamics
-(``fin_hydro``, ``foil``), the hull held at a surge speed through the water, with no body
+(``plate``), the hull held at a surge speed through the water, with no body
 dynamics. :func:`stroke` runs one stroke from rest to rest; :func:`cycle` runs symmetric
 stroke pairs about a centre until they repeat and measures the last ones. Both return the
-mean fin-frame force (N), the mean true shaft power (W, no regeneration) and the duration
-(s), the same quantities the plant integrates in a closed-loop run.
+mean fin-frame force (N), the mean true shaft power (W, no regeneration), the duration (s)
+and the mean battery power of the fin's drive (W, ``robot.motor``), the same quantities the
+plant integrates in a closed-loop run.
 """
 
 from __future__ import annotations
@@ -17,18 +18,11 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ucat_console.backend.sim.fin_hydro import (
-    H_COS_A,
-    H_FOIL,
-    H_TAU,
-    drag_torque_coefficient,
-    fin_force,
-    fin_strouhal,
-    hydro_params,
-)
-from ucat_console.backend.sim.foil import P_ON, foil_fin
+from ucat_console.backend.sim.fin_hydro import H_COS_A, H_MOTOR, H_PLATE, hydro_params
 from ucat_console.backend.sim.params import PlantConfig
+from ucat_console.backend.sim.plate import fin_load
 from ucat_console.control.stroke_timing import mean_rate_limit, profile_velocity
+from ucat_console.robot.motor import battery_power, motor_current
 from ucat_console.robot.servo import servo_step
 
 
@@ -39,6 +33,7 @@ class FinMeans(NamedTuple):
     fy: float  # N, fin frame (y_m up)
     power: float  # W, true shaft power
     duration: float  # s
+    electrical: float  # W, battery power of the fin's drive
 
     def thrust(self, cos_mount: float) -> float:
         """The forward force on the hull (N): ``-f_x cos(mounting angle)``."""
@@ -48,39 +43,32 @@ class FinMeans(NamedTuple):
 @njit(cache=True)
 def _run(ph, acc, vmax, inertia, dt, surge, start, targets, vel, n_skip, max_steps):
     """Drive the fin from rest at ``start`` through ``targets`` (each reached at rest before
-    the next is sent, at profile velocity ``vel``); integrate force and power over every
-    stroke after the first ``n_skip``. Returns (fx, fy, energy, time) sums."""
+    the next is sent, at profile velocity ``vel``); integrate force, shaft and battery
+    power over every stroke after the first ``n_skip``. Returns (fx, fy, shaft energy, time,
+    battery energy) sums."""
     theta = start
     omega = 0.0
-    theta_start = start
-    rate_mean = 0.0
-    k_rate = dt / ph[H_TAU]
-    k_drag = drag_torque_coefficient(ph)
-    foil_on = ph[H_FOIL + P_ON] > 0.5
+    pf = ph[H_PLATE:H_MOTOR]
+    k_t, r_m, i_0, j_r = ph[H_MOTOR], ph[H_MOTOR + 1], ph[H_MOTOR + 2], ph[H_MOTOR + 3]
+    n_g, eta_g, eta_b, p_q = ph[H_MOTOR + 4], ph[H_MOTOR + 5], ph[H_MOTOR + 6], ph[H_MOTOR + 7]
     flow = surge * ph[H_COS_A]
-    sx = sy = se = st_time = 0.0
+    sx = sy = se = st_time = sb = 0.0
     k = 0
     steps = 0
     while k < targets.shape[0] and steps < max_steps:
         steps += 1
-        th, om, al = servo_step(theta, omega, targets[k], vel, acc, vmax, dt)
-        if om == 0.0 or om * omega < 0.0:
-            theta_start = th
-        theta, omega = th, om
-        rate_mean += (abs(om) - rate_mean) * k_rate
-        if foil_on:
-            fx, fy, _, p = foil_fin(theta, omega, theta_start, al, flow, inertia, ph)
-        else:
-            fx, fy, _ = fin_force(theta, omega, theta_start, fin_strouhal(rate_mean, surge, ph), ph)
-            p = max(0.0, inertia * al * om + k_drag * abs(om) ** 3)
+        theta, omega, al = servo_step(theta, omega, targets[k], vel, acc, vmax, dt)
+        fx, fy, torque, p, _ = fin_load(theta, omega, al, flow, 0.0, inertia, dt, pf)
         if k >= n_skip:
+            current = motor_current(torque, omega, al, k_t, i_0, j_r, n_g, eta_g)
             sx += fx * dt
             sy += fy * dt
             se += p * dt
+            sb += battery_power(current, omega, k_t, r_m, n_g, eta_b, p_q) * dt
             st_time += dt
-        if om == 0.0 and theta == targets[k]:
+        if omega == 0.0 and theta == targets[k]:
             k += 1
-    return sx, sy, se, st_time
+    return sx, sy, se, st_time, sb
 
 
 class FinRig:
@@ -88,7 +76,7 @@ class FinRig:
 
     def __init__(self, plant: PlantConfig) -> None:
         self.plant = plant
-        self._ph = hydro_params(plant.hydro, plant.fins)
+        self._ph = hydro_params(plant.hydro, plant.fins, plant.motor)
         self._acc = float(plant.servo.acceleration)
         self._vmax = float(plant.servo.max_rate)
         self._inertia = float(plant.fins.fin_inertia)
@@ -102,11 +90,11 @@ class FinRig:
     def _means(self, surge: float, start: float, targets: np.ndarray, rate: float, n_skip: int) -> FinMeans:
         vel = profile_velocity(abs(targets[0] - start), rate, self._acc, self._vmax)
         budget = int(20.0 * targets.size * (abs(targets[0] - start) / max(rate, 1e-3) + 1.0) / self._dt)
-        sx, sy, se, t = _run(self._ph, self._acc, self._vmax, self._inertia, self._dt, float(surge),
-                             float(start), targets, vel, n_skip, budget)
+        sx, sy, se, t, sb = _run(self._ph, self._acc, self._vmax, self._inertia, self._dt, float(surge),
+                                 float(start), targets, vel, n_skip, budget)
         if t <= 0.0:
             raise ValueError(f"fin rig: the strokes from {start} did not finish (rate {rate})")
-        return FinMeans(sx / t, sy / t, se / t, t)
+        return FinMeans(sx / t, sy / t, se / t, t, sb / t)
 
     def stroke(self, surge: float, start: float, d: float, rate: float) -> FinMeans:
         """One stroke of ``d`` rad from rest at ``start``, timed for the mean ``rate`` (rad/s;

@@ -1,15 +1,15 @@
-"""E7's oracle: a fin planner that plans with the plant's true thrust and power.
+"""E7's oracle: a fin planner that plans with the plant's true force and battery power.
 
 The upper bound of what planning can save on a plant: it knows what the controllers must
 identify. Before a run it measures, on the plant itself (``fin_rig.FinRig``: the plant's
-servo and hydrodynamics, the hull held at a speed), the mean fin-frame force and true shaft
-power of symmetric stroke pairs over a grid of hull speeds, centres, amplitudes and mean
+servo and hydrodynamics, the hull held at a speed), the mean fin-frame force and the battery
+power of its drive (``robot.motor``) for symmetric stroke pairs over a grid of hull speeds, centres, amplitudes and mean
 rates (:func:`oracle_table`, cached per process). Each plan picks the grid cycle at the
 measured speed (linear between the two nearest grid speeds) that minimises
 
     J = lam_f (|f_x - f_x*| + |f_y - f_y*|) + lam_e P,
 
-the closed-stroke MPC's force and energy weights on the true force and the true power
+the closed-stroke MPC's force and energy weights on the true force and the battery's power
 (no Strouhal term: nothing here needs one), and executes it as the baseline does: the
 first stroke to the extreme of the cycle farther from the fin, the second to the other.
 """
@@ -25,7 +25,7 @@ import numpy as np
 from ucat_console.control.baseline import wrap_angle
 from ucat_console.control.mpc import FinMpc
 from ucat_console.control.params import MpcConfig
-from ucat_console.experiments.fin_rig import FinRig
+from ucat_console.experiments.fin_rig import FinMeans, FinRig
 from ucat_console.experiments.scenario import plant_config
 from ucat_console.telemetry.messages import FinPlan
 
@@ -39,9 +39,13 @@ ORACLE_RATES = (0.5, 0.8, 1.2, 1.8, 2.6, 3.6, 5.0, 7.0)
 RATE_SPLIT = 4
 
 
+def _force_and_battery(m: FinMeans) -> tuple[float, float, float]:
+    return m.fx, m.fy, m.electrical
+
+
 @functools.lru_cache(maxsize=8)
 def oracle_table(plant: str) -> tuple[np.ndarray, np.ndarray]:
-    """(cycles (n, 3): centre, amplitude, rate; values (speeds, n, 3): f_x, f_y, power) of
+    """(cycles (n, 3): centre, amplitude, rate; values (speeds, n, 3): f_x, f_y, battery power) of
     ``plant`` (module docstring): the measured grid, each rate interval split in
     :data:`RATE_SPLIT` (force and power linear in between)."""
     rig = FinRig(plant_config(plant, 0))
@@ -49,7 +53,7 @@ def oracle_table(plant: str) -> tuple[np.ndarray, np.ndarray]:
     for c in ORACLE_CENTRES:
         for a in ORACLE_AMPLITUDES:
             rates = [w for w in ORACLE_RATES if w <= rig.mean_rate_limit(2.0 * a)]
-            m = np.array([[tuple(rig.cycle(v, c, a, w, cycles=2, measured=1))[:3] for w in rates]
+            m = np.array([[_force_and_battery(rig.cycle(v, c, a, w, cycles=2, measured=1)) for w in rates]
                           for v in ORACLE_SPEEDS])  # (speeds, rates, 3)
             for k in range(len(rates)):
                 for s in range(RATE_SPLIT if k + 1 < len(rates) else 1):

@@ -17,7 +17,7 @@ TITLES = {
     "E4": "E4: closed loop, power and tracking (paper Table V, Fig. 7)",
     "E4R": "E4R: E4 from rest, the paper's settings and the shipped sim-tuned",
     "E6": "E6: where St-awareness pays: a family of plants, each with its identified model",
-    "E7": "E7: St-awareness on foil plants whose efficiency depends on the flow (declared)",
+    "E7": "E7: St-awareness on plants whose efficiency depends on the flow (declared)",
     "E5": "E5: field-style circle at 3 m with a current (paper Fig. 8)",
     "sweep": "Weight sweep over the E4 protocol",
 }
@@ -155,7 +155,7 @@ def _e3(res: dict[str, Any]) -> str:
                    "equal rates has w <= 2 V St_high / L_f, where the model's largest mean force is F_max; over "
                    "the grid no such plan can have a mean force error below mean(max(0, |f*| - F_max)). The "
                    "bounds are for equal-rate pairs only: a slow and a fast stroke whose cycle St (eq 10) lies in "
-                   "the corridor make more (docs/experiments/findings.md):\n\n")
+                   "the corridor make more (docs/findings.md):\n\n")
         out.append(table(["V (m/s)", "w at St 0.35 (rad/s)", "F_max, d_2 = -d_1 (N)", "F_max, equal rates, any strokes (N)",
                           "grid mean |f*| (N)", "least mean force error in the corridor (N)"],
                          [[num(r["v"], 1), num(r["w_max_in_corridor"], 2), num(r["f_max_symmetric"], 3),
@@ -166,12 +166,12 @@ def _e3(res: dict[str, Any]) -> str:
 
 
 def _plants(plants: dict[str, Any]) -> str:
-    rows = [[name, a["wake"], a["coefficients"], num(a["rho"], 1), num(a["c_d"], 3), num(a["c_l"], 3),
-             num(a["area"], 3), num(a["r_c"], 3), num(a["fin_length"], 3), num(a["thrust_gain"], 2),
-             num(a["st_peak"], 2), num(a["sigma_low"], 2), num(a["sigma_high"], 2), num(a["wake_floor"], 2)]
+    rows = [[name, a["model"], a["coefficients"], num(a["rho"], 1), num(a["c_d"], 3), num(a["c_l"], 3),
+             num(a["area"], 3), num(a["r_c"], 3), num(a["fin_length"], 3), num(a["c_d0"], 3),
+             num(a["lift_ratio"], 2), num(a["added_mass"], 2), str(a["strips"])]
             for name, a in plants.items()]
-    return table(["plant", "wake", "coefficients", "rho", "C_D", "C_L", "A_f", "r_c", "L_f", "thrust gain",
-                  "wake St peak", "sigma low", "sigma high", "wake floor"], rows)
+    return table(["plant", "fin model", "calibrated to", "rho", "C_D", "C_L", "A_f", "r_c", "L_f", "C_D0",
+                  "C_Lmax / C_N", "added mass", "strips"], rows)
 
 
 def _e4(res: dict[str, Any]) -> str:
@@ -180,7 +180,8 @@ def _e4(res: dict[str, Any]) -> str:
            f"controllers {', '.join(p['controllers'])}, seeds {', '.join(str(s) for s in p['seeds'])}; "
            f"each run starts cruising at its reference, settles {p['settle_s']:g} s and is measured over "
            f"{p['window_s']:g} s. Power is the encoder-based estimate of control.md section 9 (the paper's "
-           f"method); true power is the plant's shaft power. Savings are against the baseline at the same "
+           f"method); shaft power is the plant's, battery power the drives' electrical input by the plant's drive "
+           f"model (docs/power.md). Savings are against the baseline at the same "
            f"reference, where both track (velocity MAE <= {p.get('tracking_mae', 0.03):g} m/s; else not "
            f"comparable); reached: mean speed >= {p['reached_share']:g} of the reference.\n\n"
            "Plant assumptions:\n\n", _plants(res["plants"]), "\n"]
@@ -189,13 +190,15 @@ def _e4(res: dict[str, Any]) -> str:
         rows = []
         for r in (r for r in res["rows"] if r["plant"] == plant):
             rows.append([num(r["v_ref"], 1), r["mode"], num(r["paper_power"], 3), num(r["power_est"], 4),
-                         num(r["power_est_sd"], 4), num(r["power_true"], 4), num(r["paper_saving"], 1),
-                         saving(r, "saving_est"), saving(r, "saving_true"), num(r["paper_velocity_mae"], 4),
+                         num(r["power_est_sd"], 4), num(r["power_true"], 4), num(r["power_electrical"], 3),
+                         num(r["paper_saving"], 1), saving(r, "saving_est"), saving(r, "saving_true"),
+                         saving(r, "saving_el"), num(r["paper_velocity_mae"], 4),
                          num(r["velocity_mae"], 4), num(r["velocity_mean"], 3), yes_no(r["reached"]),
                          num(r["paper_st_mae"], 4), num(r["st_mae"], 4), num(r["st_plant_mae"], 4),
                          num(r["depth_mae"], 4), num(r["late_plans"], 1)])
         out.append(table(["v_ref (m/s)", "controller", "paper power (W)", "ours power (W)", "sd (W)",
-                          "ours true power (W)", "paper saving %", "ours saving %", "ours true saving %",
+                          "ours shaft (W)", "ours battery (W)", "paper saving %", "ours saving %",
+                          "ours shaft saving %", "ours battery saving %",
                           "paper vel MAE", "ours vel MAE", "mean speed", "reached", "paper St MAE",
                           "ours St MAE (plans)", "ours St MAE (plant)", "depth MAE (m)", "late plans"], rows))
         out.append("\n" + _claims(res["claims"][plant]))
@@ -214,8 +217,8 @@ def _e4r(res: dict[str, Any]) -> str:
            f"lam_st {t['lam_st']:g}, lam_d {t['lam_d']:g}, centre_rate {t.get('centre_rate', 0):g} rad/s; "
            f"the {t.get('body_layer', 'paper')} body layer, thrust gain {t.get('thrust_gain', 1):g}, velocity "
            f"loop kp {t['velocity_kp']:g} ki {t['velocity_ki']:g}; the fin-model baseline). "
-           f"Power is the estimate (control.md section 9), true power the plant's shaft power, J/m the true "
-           f"energy per metre; savings where both track (velocity MAE <= {p['tracking_mae']:g} m/s).\n\n"]
+           f"Power is the estimate (control.md section 9), shaft power the plant's, battery the drives' "
+           f"electrical input (docs/power.md), J/m the battery's energy per metre; savings where both track (velocity MAE <= {p['tracking_mae']:g} m/s).\n\n"]
     for setting in p["settings"]:
         for plant in res["plants"]:
             rows = [r for r in res["rows"] if r["settings"] == setting and r["plant"] == plant]
@@ -223,12 +226,14 @@ def _e4r(res: dict[str, Any]) -> str:
                 continue
             out.append(f"\nSettings `{setting}`, plant `{plant}`:\n\n")
             out.append(table(
-                ["v_ref (m/s)", "controller", "mean v", "vel MAE", "power (W)", "true power (W)",
-                 "true J/m", "saving %", "true J/m saving %", "St MAE (plans)", "St MAE (plant)",
+                ["v_ref (m/s)", "controller", "mean v", "vel MAE", "power (W)", "shaft (W)", "battery (W)",
+                 "battery J/m", "saving %", "battery J/m saving %", "shaft J/m saving %", "St MAE (plans)",
+                 "St MAE (plant)",
                  "stroke (rad)", "rate (rad/s)", "opening (rad)", "winding (rad/min)"],
                 [[num(r["v_ref"], 1), r["controller"], num(r["velocity_mean"], 3), num(r["velocity_mae"], 3),
-                  num(r["power_est"], 3), num(r["power_true"], 3), num(r["energy_per_metre_true"], 3),
-                  saving(r, "saving_est"), saving(r, "saving_epm_true"), num(r["st_mae"], 3),
+                  num(r["power_est"], 3), num(r["power_true"], 3), num(r["power_electrical"], 3),
+                  num(r["energy_per_metre_electrical"], 3), saving(r, "saving_est"), saving(r, "saving_epm_el"),
+                  saving(r, "saving_epm_true"), num(r["st_mae"], 3),
                   num(r["st_plant_mae"], 3), num(r["stroke"], 2), num(r["rate"], 2), num(r["opening"], 3),
                   num(r["winding"], 1)] for r in rows]))
     return "".join(out)
@@ -237,8 +242,9 @@ def _e4r(res: dict[str, Any]) -> str:
 def _e6(res: dict[str, Any]) -> str:
     p = res["protocol"]
     t = p["settings"]
-    out = [f"Declared before it was run (docs/experiments/e6-declaration.md). Plants: the paper's fin "
-           f"coefficients with a soft-fin thrust gain G, each with and without the Strouhal wake "
+    out = [f"Declared before it was run (docs/experiments/e6-declaration.md). Plants: the plate "
+           f"calibrated to the paper's fin coefficients times a scale G (G times the thrust per w^2, paid with G "
+           f"times the shaft's load), each as the plate in the flow and as the still-water null plant "
            f"({', '.join(p['plants'])}). Each plant's model is identified first from its own recorded "
            f"identification manoeuvre (`ucat-console identify`'s path). Runs from rest at "
            f"{', '.join(str(v) for v in p['speeds'])} m/s, seeds {', '.join(str(s) for s in p['seeds'])}, "
@@ -250,21 +256,22 @@ def _e6(res: dict[str, Any]) -> str:
            f"Controllers: baseline (the fin-model inverse with the paper's coefficients; savings are against "
            f"it), baseline_id (the same with the identified ones), mpc (the paper's formulation and model), "
            f"mpc_id (the paper's formulation, identified model), mpc_closed_id (closed strokes, identified model). "
-           f"Savings of true energy per metre (shaft energy over distance) against the baseline where both "
+           f"Savings of the battery's energy per metre (and the shaft's beside it) against the baseline where both "
            f"track (vel MAE <= {p['tracking_mae']:g} m/s); the baseline leaves the corridor where fewer than "
            f"{100 * p['corridor_share']:g} % of its plans have St in [0.25, 0.35].\n\n",
            "Identified models:\n\n",
-           table(["plant", "thrust gain", "wake", "C_D", "+-", "C_L", "+-", "windows", "steady", "rms (N)"],
-                 [[d["plant"], num(d["thrust_gain"], 1), d["wake"], num(d["c_d"], 3), num(d["c_d_ci"], 3),
+           table(["plant", "scale", "fin model", "C_D", "+-", "C_L", "+-", "windows", "steady", "rms (N)"],
+                 [[d["plant"], num(d["scale"], 1), d["model"], num(d["c_d"], 3), num(d["c_d_ci"], 3),
                    num(d["c_l"], 3), num(d["c_l_ci"], 3), str(d["windows"]), str(d["steady_windows"]),
                    num(d["rms_residual"], 3)] for d in res["identified"]]),
            "\nRuns:\n\n"]
     out.append(table(
-        ["plant", "v_ref (m/s)", "controller", "mean v", "vel MAE", "true power (W)", "true J/m",
-         "J/m saving %", "St in range (share)", "baseline out of corridor", "stroke (rad)", "rate (rad/s)",
+        ["plant", "v_ref (m/s)", "controller", "mean v", "vel MAE", "battery (W)", "battery J/m",
+         "battery J/m saving %", "shaft J/m saving %", "St in range (share)", "baseline out of corridor", "stroke (rad)", "rate (rad/s)",
          "opening (rad)"],
         [[r["plant"], num(r["v_ref"], 1), r["controller"], num(r["velocity_mean"], 3), num(r["velocity_mae"], 3),
-          num(r["power_true"], 4), num(r["energy_per_metre_true"], 3), saving(r, "saving_epm_true"),
+          num(r["power_electrical"], 3), num(r["energy_per_metre_electrical"], 3), saving(r, "saving_epm_el"),
+          saving(r, "saving_epm_true"),
           num(r["st_in_range"], 3), yes_no(r["baseline_out_of_corridor"]), num(r["stroke"], 2),
           num(r["rate"], 2), num(r["opening"], 3)] for r in res["rows"]]))
     return "".join(out)
@@ -323,8 +330,9 @@ def _e7(res: dict[str, Any]) -> str:
            f"{p['lam_e']:g}); best fixed frequency tuned on seed {p['held_out']} over "
            f"{', '.join(f'{f:g}' for f in p['frequencies'])} Hz. Matched tracking: DVL speed MAE <= "
            f"{p['match_mae']:g} m/s and true mean speed within {p['match_mean']:g} m/s of the reference. "
-           f"Savings of true shaft energy per metre, A against B, over the seeds where both match, "
-           f"with paired bootstrap 95 % intervals ({p['bootstrap']} resamples); (n) = pairs.\n\n",
+           f"Savings of the battery's energy per metre (the primary figure; the shaft's beside it), A against "
+           f"B, over the seeds where both match, with paired bootstrap 95 % intervals ({p['bootstrap']} "
+           f"resamples); (n) = pairs.\n\n",
            "Open-loop curves (declared):\n\n",
            table(["plant", "v (m/s)", "peak St", "peak eta", "St that makes the thrust", "thrust per fin (N)"],
                  [[c["plant"], num(c["v"], 1), num(c["peak_st"], 2), num(c["peak_eta"], 3),
@@ -346,8 +354,9 @@ def _e7(res: dict[str, Any]) -> str:
                    "n/a" if c["vs_best"] is None else f"{c['vs_best']:.1f} [{c['vs_best_lo']:.1f}, {c['vs_best_hi']:.1f}]",
                    yes_no(c["pays"])] for c in res["decisions"]["cases"]]),
            "\nEvery comparison (saving % [95 % CI] (pairs)):\n\n",
-           table(["plant", "v (m/s)", "A", "B", "saving of A against B"],
-                 [[c["plant"], num(c["v_ref"], 1), c["a"], c["b"], _ci(c)] for c in res["comparisons"]]),
+           table(["plant", "v (m/s)", "A", "B", "saving of A against B: battery", "shaft"],
+                 [[c["plant"], num(c["v_ref"], 1), c["a"], c["b"], _ci(c), _ci(s)]
+                  for c, s in zip(res["comparisons"], res.get("comparisons_shaft", res["comparisons"]))]),
            "\nEvery run is in e7_runs.csv; per case (mean over seeds; matched = runs that match):\n\n"]
     groups: dict[tuple, list[dict[str, Any]]] = {}
     for r in res["rows"]:
@@ -357,10 +366,11 @@ def _e7(res: dict[str, Any]) -> str:
         vals = [r[k] for r in rs if r[k] is not None]
         return sum(vals) / len(vals) if vals else float("nan")
 
-    out.append(table(["plant", "v (m/s)", "controller", "matched", "mean v", "vel MAE", "true J/m", "true W",
-                      "St in range", "stroke (rad)", "rate (rad/s)"],
+    out.append(table(["plant", "v (m/s)", "controller", "matched", "mean v", "vel MAE", "battery J/m", "battery W",
+                      "shaft J/m", "shaft W", "St in range", "stroke (rad)", "rate (rad/s)"],
                      [[k[0], num(k[1], 1), k[2], f"{sum(r['matched'] for r in rs)}/{len(rs)}",
                        num(mean(rs, "velocity_mean"), 3), num(mean(rs, "velocity_mae"), 3),
+                       num(mean(rs, "energy_per_metre_electrical"), 3), num(mean(rs, "power_electrical"), 3),
                        num(mean(rs, "energy_per_metre_true"), 3), num(mean(rs, "power_true"), 4),
                        num(mean(rs, "st_in_range"), 2), num(mean(rs, "stroke"), 2), num(mean(rs, "rate"), 2)]
                       for k, rs in groups.items()]))

@@ -13,11 +13,14 @@ model (the baseline's oscillation centre for a pure thrust demand). The runs mea
 cruising, as the paper does after settling; ``start_velocity = 0`` starts them from rest
 (E4R and E6). ``body`` is the body-frame layer (the paper's PIDs by default,
 the shipped ``sim-tuned``'s in E4R's second setting) and ``plant`` one of
-:data:`PLANT_VARIANTS` or a family member ``gain<G>_<wake>`` (:func:`family_hydro`).
+:data:`PLANT_VARIANTS`, a family member ``scale<G>_<model>`` (:func:`family_hydro`) or a
+profile-drag plant ``plate_cd<C_D0>`` (:func:`cd0_hydro`).
 
-Energy per metre: the mechanical energy spent over the window divided by the distance the
-hull travelled through the water in it (true surge integrated), for the estimate
-(``energy_per_metre``) and for the plant's shaft energy (``energy_per_metre_true``).
+Energy per metre: the energy spent over the window divided by the distance the hull
+travelled through the water in it (true surge integrated): the battery's (the drives'
+electrical input by the plant's drive model, ``energy_per_metre_electrical``, the
+experiments' primary figure), the plant's shaft energy (``energy_per_metre_true``) and the
+encoder estimate's (``energy_per_metre``).
 """
 
 from __future__ import annotations
@@ -32,8 +35,8 @@ from ucat_console.backend.loop.closed_loop import ClosedLoop, check_setpoints
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.backend.sim_robot_io import SimRobotIO
 from ucat_console.backend.sim.params import (
-    WAKE_OPTIONS,
-    FinCoefficients,
+    FIN_MODELS,
+    PAPER_COEFFICIENTS,
     FinHydroConfig,
     PlantConfig,
     VehicleConfig,
@@ -44,61 +47,66 @@ from ucat_console.control.params import BaselineConfig, BodyConfig, MpcConfig
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.stream import TelemetryStream
 
-#: plant assumptions the experiments run under (plant.md): the soft-fin coefficients with
-#: the Strouhal wake (default) or without it, and eeUVsim's coefficients (model mismatch)
+#: plant assumptions the experiments run under (plant.md; docs/fin-plant.md): the plate
+#: calibrated to the paper's identified fin (the default), the still-water null plant, and
+#: the plate calibrated to eeUVsim's coefficients while the controller keeps the paper's
 PLANT_VARIANTS: dict[str, FinHydroConfig] = {
-    "strouhal_wake": FinHydroConfig(coefficients="soft_fin", wake="strouhal_wake"),
-    "quasi_steady": FinHydroConfig(coefficients="soft_fin", wake="quasi_steady"),
-    "eeuvsim": FinHydroConfig(coefficients="eeuvsim", wake="strouhal_wake"),
+    "plate": FinHydroConfig(),
+    "still_water": FinHydroConfig(model="still_water"),
+    "eeuvsim": FinHydroConfig(coefficients="eeuvsim"),
 }
+#: the default plant variant (the shipped configurations' plant)
+DEFAULT_PLANT = "plate"
 
 #: fin angle (rad) at the start of every run: the centre of a forward-thrust stroke pair
 START_FIN_ANGLE = BaselinePlanner(MpcConfig(), BaselineConfig()).centre(-1.0, 0.0, 0.0)
 
 
-def family_name(gain: float, wake: str) -> str:
-    """The name of a member of E6's plant family: ``gain4.6_strouhal_wake``."""
-    return f"gain{gain:g}_{wake}"
+def family_name(scale: float, model: str) -> str:
+    """The name of a member of E6's plant family: ``scale4.6_plate``."""
+    return f"scale{scale:g}_{model}"
 
 
 def family_hydro(name: str) -> FinHydroConfig | None:
-    """The hydrodynamics of a family member ``gain<G>_<wake>`` (the paper's coefficients, a
-    soft-fin thrust gain G); None if ``name`` is not of that form."""
-    if not name.startswith("gain") or "_" not in name:
+    """The hydrodynamics of a family member ``scale<G>_<model>`` (the paper's coefficients
+    times G: G times the thrust per w^2, paid with G times the shaft's load); None if
+    ``name`` is not of that form."""
+    if not name.startswith("scale") or "_" not in name:
         return None
-    gain, _, wake = name[4:].partition("_")
+    scale, _, model = name[5:].partition("_")
     try:
-        g = float(gain)
+        g = float(scale)
     except ValueError:
         return None
-    if wake not in WAKE_OPTIONS:
+    if model not in FIN_MODELS or not 0.0 < g <= 20.0:
         return None
-    return FinHydroConfig(coefficients="custom", custom=FinCoefficients(thrust_gain=g), wake=wake)
+    return FinHydroConfig(model=model, coefficients="custom", custom=PAPER_COEFFICIENTS.scaled(g))
 
 
-def foil_name(cd0: float) -> str:
-    """The name of a foil plant (E7): ``foil_cd0.1`` (soft-fin coefficients, ``foil_inflow``
-    with the profile drag C_D0)."""
-    return f"foil_cd{cd0:g}"
+def cd0_name(cd0: float) -> str:
+    """The name of a profile-drag plant (E7): ``plate_cd0.1`` (the default plate with the
+    profile drag C_D0)."""
+    return f"plate_cd{cd0:g}"
 
 
-def foil_hydro(name: str) -> FinHydroConfig | None:
-    """The hydrodynamics of a foil plant ``foil_cd<C_D0>``; None if ``name`` is not of that form."""
-    if not name.startswith("foil_cd"):
+def cd0_hydro(name: str) -> FinHydroConfig | None:
+    """The hydrodynamics of a plant ``plate_cd<C_D0>``; None if ``name`` is not of that form."""
+    if not name.startswith("plate_cd"):
         return None
     try:
-        cd0 = float(name[len("foil_cd"):])
+        cd0 = float(name[len("plate_cd"):])
     except ValueError:
         return None
-    return FinHydroConfig(coefficients="soft_fin", wake="foil_inflow", foil_cd0=cd0)
+    return FinHydroConfig(c_d0=cd0)
 
 
 def hydro_of(variant: str) -> FinHydroConfig:
-    """A named variant's, a family member's or a foil plant's hydrodynamics, or ValueError naming it."""
-    h = PLANT_VARIANTS.get(variant) or family_hydro(variant) or foil_hydro(variant)
+    """A named variant's, a family member's or a profile-drag plant's hydrodynamics, or
+    ValueError naming it."""
+    h = PLANT_VARIANTS.get(variant) or family_hydro(variant) or cd0_hydro(variant)
     if h is None:
         raise ValueError(f"plant: {variant!r} is not one of {', '.join(PLANT_VARIANTS)}, "
-                         "gain<G>_strouhal_wake / gain<G>_quasi_steady or foil_cd<C_D0>")
+                         "scale<G>_plate / scale<G>_still_water or plate_cd<C_D0>")
     return h
 
 
@@ -108,16 +116,14 @@ def plant_config(variant: str, seed: int, current: tuple[float, float, float] = 
 
 
 def plant_assumptions(variant: str) -> dict[str, Any]:
-    """What the report states about a plant variant: wake, coefficients, gain, wake shape."""
+    """What the report states about a plant variant: its fin model, the still-water
+    coefficients it is calibrated to and the plate's own parameters."""
     h = hydro_of(variant)
     c = h.resolved()
     return {
-        "variant": variant, "wake": h.wake, "coefficients": h.coefficients, "rho": c.rho,
+        "variant": variant, "model": h.model, "coefficients": h.coefficients, "rho": c.rho,
         "c_d": c.c_d, "c_l": c.c_l, "area": c.area, "r_c": c.r_c, "fin_length": c.fin_length,
-        "thrust_gain": c.thrust_gain, "st_peak": h.st_peak, "sigma_low": h.sigma_low,
-        "sigma_high": h.sigma_high, "wake_floor": h.floor,
-        **({"foil_cd0": h.foil_cd0, "foil_cd90": h.foil_cd90, "foil_cl_max": h.foil_cl_max,
-            "foil_strips": h.foil_strips, "foil_added_mass": h.foil_added_mass} if h.wake == "foil_inflow" else {}),
+        "c_d0": h.c_d0, "lift_ratio": h.lift_ratio, "added_mass": h.added_mass, "strips": h.strips,
     }
 
 
@@ -130,7 +136,7 @@ class Scenario:
     depth: float = 1.0
     yaw_rate: float = 0.0
     seed: int = 0
-    plant: str = "strouhal_wake"
+    plant: str = DEFAULT_PLANT
     settle_s: float = 30.0
     window_s: float = 60.0
     start_depth: float | None = None  # default: the depth setpoint
@@ -190,7 +196,7 @@ class _Recorder:
                 self.energy.append((t, m.energy))
                 tr = self.loop.truth()
                 self.truth.append((t, tr.velocity[0], tr.depth, tr.velocity[5], sum(tr.fin_energy),
-                                   sum(abs(s - 0.3) for s in tr.fin_strouhal) / 4.0))
+                                   sum(abs(s - 0.3) for s in tr.fin_strouhal) / 4.0, sum(tr.fin_battery_energy)))
                 self.fin_angles.append(tr.fin_angles)
             if self.trace_rate > 0.0 and t + 1e-9 >= self._next_trace:
                 self._next_trace += 1.0 / self.trace_rate
@@ -265,6 +271,7 @@ def summarise(sc: Scenario, rec: _Recorder, loop: ClosedLoop) -> dict[str, Any]:
     span = energy[-1, 0] - energy[0, 0]
     power_est = float((energy[-1, 1] - energy[0, 1]) / span)
     power_true = float((truth[-1, 4] - truth[0, 4]) / span)
+    power_electrical = float((truth[-1, 6] - truth[0, 6]) / span)
     dvl = np.asarray(rec.dvl_v)
     st = np.asarray(rec.plan_st)
     u_true = truth[:, 1]
@@ -273,8 +280,10 @@ def summarise(sc: Scenario, rec: _Recorder, loop: ClosedLoop) -> dict[str, Any]:
         "scenario": _scenario_dict(sc),
         "power_est": power_est,
         "power_true": power_true,
+        "power_electrical": power_electrical,
         "energy_per_metre": power_est * span / distance if distance > 0.0 else math.nan,
         "energy_per_metre_true": power_true * span / distance if distance > 0.0 else math.nan,
+        "energy_per_metre_electrical": power_electrical * span / distance if distance > 0.0 else math.nan,
         "velocity_mean": float(u_true.mean()),
         "velocity_mae": float(np.abs(dvl - sc.v_ref).mean()) if dvl.size else math.nan,
         "velocity_mae_true": float(np.abs(u_true - sc.v_ref).mean()),

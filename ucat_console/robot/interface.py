@@ -57,6 +57,8 @@ class RobotTruth:
     fin_energy: tuple[float, ...]  # true shaft energy since start, J
     #: each fin's fin-frame force (f_x, f_y) integrated since start, N s (the simulator's)
     fin_impulse: tuple[tuple[float, float], ...] = ()
+    #: battery energy each fin drive drew since start, J (the simulator's drive model)
+    fin_battery_energy: tuple[float, ...] = ()
 
     @property
     def depth(self) -> float:

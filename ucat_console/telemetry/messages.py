@@ -194,16 +194,18 @@ class Power:
 
 @dataclass(frozen=True)
 class ElectricalPower:
-    """The fin drives' electrical input as the EPOS2s measure it (robots with drives only),
-    beside the encoder estimate of :class:`Power`: the motor current each drive averages
-    (0x2027) times the supply voltage at its power stage (0x2200 sub 1). NaN for a drive
-    that did not answer (and in ``total`` then)."""
+    """The fin drives' electrical input, beside the encoder estimate of :class:`Power`: the
+    motor current each drive averages (the EPOS2's 0x2027, or the simulated drive's), the
+    supply voltage at its power stage (0x2200 sub 1), and the battery power it draws, from its
+    current and the fin's rate through its motor, gearhead and bridge plus its own consumption
+    (``robot.motor``, ``backend.drive_power``). NaN for a drive that did not answer (and in
+    ``total`` then)."""
 
     t: Time
     current: Annotated[Vec4, Doc("motor current averaged by each drive, by fin index", "A")]
     voltage: Annotated[Vec4, Doc("supply voltage at each drive, by fin index", "V")]
-    per_fin: Annotated[Vec4, Doc("|current| x voltage of each drive, by fin index", "W")]
-    total: Annotated[float, Doc("sum over the drives", "W")]
+    per_fin: Annotated[Vec4, Doc("battery power each drive draws, by fin index", "W")]
+    total: Annotated[float, Doc("battery power of the four drives", "W")]
 
 
 @dataclass(frozen=True)

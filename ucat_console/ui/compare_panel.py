@@ -19,7 +19,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from ucat_console.backend.review import compare, export
-from ucat_console.backend.review.metrics import MetricsConfig, TableRow
+from ucat_console.backend.review.metrics import LABELS, MECHANICAL, MetricsConfig, TableRow
 from ucat_console.ui.markdown import esc, within
 
 log = logging.getLogger(__name__)
@@ -36,8 +36,11 @@ PAGE_COLUMNS = ("power", "energy_per_metre", "cost_of_transport", "speed_mae", "
 
 
 def page_table(rows: Sequence[TableRow]) -> str:
+    """The table in Markdown, after a line saying which power its P, J/m and CoT are of."""
     heads = ("P (W)", "J/m", "CoT", "speed MAE", "St MAE", "St in %")
-    out = ["| run | " + " | ".join(heads) + " |", "|---" * (len(heads) + 1) + "|"]
+    source = rows[0].source_label if rows else "–"
+    out = [esc(f"Power: {source}. The downloads have the {LABELS[MECHANICAL]} figures too."), "",
+           "| run | " + " | ".join(heads) + " |", "|---" * (len(heads) + 1) + "|"]
     for r in rows:
         flag = f" **not comparable**: {esc(r.not_comparable)}" if r.not_comparable else ""
         out.append(f"| {esc(r.label)}{flag} | " + " | ".join(esc(export.cell(r, k)) for k in PAGE_COLUMNS) + " |")

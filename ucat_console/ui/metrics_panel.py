@@ -1,6 +1,9 @@
 """Efficiency as numbers: each fin's St of its latest two strokes (coloured in or out of its
 corridor), power, cycle opening and winding; the robot's power, energy per metre, cost of
-transport and tracking errors over a window (docs/review.md).
+transport and tracking errors over a window (docs/review.md). The power is the battery's
+(electrical) where the drives report it, the mechanical estimate's below it; without
+electrical readings the battery's row says so and the estimate's is used (marked ▸, as are
+the fins' powers).
 
 :class:`MetricsPanel` subscribes to a telemetry stream (the live one, or a review's) and
 keeps the messages of the last window in a :class:`~ucat_console.backend.review.metrics.RunData`
@@ -11,13 +14,24 @@ the same colours).
 
 from __future__ import annotations
 
+import html
 import math
 import threading
 from dataclasses import replace
 from typing import Any, Callable
 
 from ucat_console.backend.review.effects import Effect, summary
-from ucat_console.backend.review.metrics import CHANNELS, MetricsConfig, RunData, fins_now, robot_now
+from ucat_console.backend.review.metrics import (
+    CHANNELS,
+    ELECTRICAL,
+    LABELS,
+    MECHANICAL,
+    MetricsConfig,
+    RobotNow,
+    RunData,
+    fins_now,
+    robot_now,
+)
 from ucat_console.telemetry.stream import TelemetryStream
 from ucat_console.ui.markdown import esc
 from ucat_console.ui.plots import FIN_COLOURS
@@ -36,9 +50,39 @@ def _num(x: float, fmt: str) -> str:
     return format(x, fmt) if math.isfinite(x) else "–"
 
 
+_CELL = "padding:1px 4px;text-align:right;white-space:nowrap"
+
+
+def _power_rows(r: RobotNow) -> str:
+    """The robot's power, energy per metre and cost of transport: a row for the battery's, one
+    for the estimate's; the one the figures use first, marked ▸ and bold (its cells classed
+    ``ucat-power``, ``ucat-epm``, ``ucat-cot``)."""
+    left = f"{_CELL};text-align:left"
+    used_values = (r.power, r.energy_per_metre, r.cost_of_transport)
+    mech_values = (r.mech_power, r.mech_energy_per_metre, r.mech_cost_of_transport)
+    rows = []
+    for source in (r.source, MECHANICAL if r.source == ELECTRICAL else ELECTRICAL):
+        used = source == r.source
+        if used or source == MECHANICAL:
+            values = used_values if used else mech_values
+            classes = ("ucat-power", "ucat-epm", "ucat-cot") if used else ("", "", "")
+            cells = "".join(f'<td style="{_CELL}" class="{c}">{_num(v, f)}</td>'
+                            for c, v, f in zip(classes, values, (".2f", ".1f", ".2f")))
+        else:  # the battery's, not used: the window holds no electrical readings
+            cells = f'<td style="{left}" colspan="3" class="ucat-none">no readings</td>'
+        title = r.source_label if used else LABELS[source]
+        rows.append(f'<tr class="ucat-source{" ucat-used" if used else ""}" data-source="{source}" '
+                    f'style="{"font-weight:bold" if used else "opacity:.7"}" title="{html.escape(title)}">'
+                    f'<td style="{left}">{"▸ " if used else ""}{LABELS[source]}</td>{cells}</tr>')
+    head = "".join(f'<th style="{_CELL}">{h}</th>' for h in ("P (W)", "J/m", "CoT (J/(kg m))"))
+    return (f'<table class="ucat-robot-power" style="border-collapse:collapse;margin-top:2px">'
+            f'<tr><th style="{left};font-weight:normal;opacity:.7">over {r.window:g} s</th>{head}</tr>'
+            f'{"".join(rows)}</table>')
+
+
 def render(data: RunData, t: float, cfg: MetricsConfig) -> str:
     """The panel's HTML for time ``t`` (the latest message)."""
-    cell = "padding:1px 4px;text-align:right;white-space:nowrap"
+    cell = _CELL
     rows = []
     for f in fins_now(data, t, cfg):
         sts = []
@@ -57,14 +101,11 @@ def render(data: RunData, t: float, cfg: MetricsConfig) -> str:
             f'<td style="{cell}">{_num(f.opening, ".2f")}</td>'
             f'<td style="{cell}">{_num(f.winding, ".1f")}</td></tr>')
     r = robot_now(data, t, cfg)
-    head = "".join(f'<th style="{cell}">{h}</th>' for h in
-                   ("fin", "St (strokes)", "P (W)", "open (rad)", "wind (rad/min)"))
+    head = "".join(f'<th style="{cell}"{attr}>{h}</th>' for h, attr in
+                   (("fin", ""), ("St (strokes)", ""), ("P (W)", f' title="{html.escape(r.source_label)}"'),
+                    ("open (rad)", ""), ("wind (rad/min)", "")))
     robot = (
-        f'<div class="ucat-robot" style="margin-top:2px">'
-        f'<b class="ucat-power">P {_num(r.power, ".2f")} W</b> · '
-        f'<span class="ucat-epm">{_num(r.energy_per_metre, ".1f")} J/m</span> · '
-        f'<span class="ucat-cot">CoT {_num(r.cost_of_transport, ".2f")} J/(kg m)</span> '
-        f'<span style="opacity:.7">over {cfg.window:g} s</span><br>'
+        f'<div class="ucat-robot">{_power_rows(r)}'
         f'errors: speed {_num(r.speed_mae, ".3f")} m/s · depth {_num(r.depth_mae, ".3f")} m · '
         f'heading {_num(math.degrees(r.heading_mae) if math.isfinite(r.heading_mae) else math.nan, ".1f")}°'
         f'</div>')

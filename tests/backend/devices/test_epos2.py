@@ -493,10 +493,9 @@ def test_drive_without_event_timer_falls_back_to_on_change_feedback():
 
 # ------------------------------------------------------------------------------ electrical input
 class _LoadedServo:
-    """A still servo with a fixed shaft power (W) or motor current (A)."""
+    """A still servo with a fixed motor current (A), or none it knows."""
 
-    def __init__(self, watts: float = 0.0, amps: float | None = None) -> None:
-        self.watts = watts
+    def __init__(self, amps: float | None = None) -> None:
         if amps is not None:
             self.current = lambda: amps
 
@@ -508,9 +507,6 @@ class _LoadedServo:
 
     def step(self, dt: float) -> None:
         pass
-
-    def shaft_power(self) -> float:
-        return self.watts
 
 
 def _sdo_upload(bus: can.BusABC, node: int, index: int, sub: int) -> bytes:
@@ -559,20 +555,21 @@ def test_current_and_voltage_frames_are_the_epos2s_and_the_driver_reads_them():
         emulators.close()
 
 
-def test_emulated_current_is_the_shaft_power_through_the_drive_and_none_without_power_stage():
-    """I = I_0 + P / (eta V): 33.6 W at 24 V and 70 % is 2 A above the 0.05 A no-load
-    current; 0 A with the power stage off."""
+def test_emulated_current_is_the_servo_s_or_the_no_load_current_and_none_without_power_stage():
+    """A servo that knows its motor's current (the simulated rig's plant) gives it; one that
+    does not leaves the no-load current (0.05 A); 0 A with the power stage off."""
     channel = _channel("shaft")
-    group = start_emulated_nodes(channel, (21,), lambda node: _LoadedServo(watts=33.6),
+    group = start_emulated_nodes(channel, (21, 22), lambda node: _LoadedServo(amps=2.05 if node == 21 else None),
                                  config=Epos2EmulatorConfig(units=UNITS), run_thread=False)
     try:
-        emu = group[21]
+        emu, idle = group[21], group[22]
         group.tick(0.0)
         assert emu.motor_current() == 0.0
         assert emu.value(0x6078) == 0
-        emu._state = cia402.OPERATION_ENABLED  # the state machine itself is tested elsewhere
+        emu._state = idle._state = cia402.OPERATION_ENABLED  # the state machine itself is tested elsewhere
         assert emu.motor_current() == pytest.approx(2.05)
         assert emu.value(0x6078) == 2050
+        assert idle.motor_current() == pytest.approx(0.05)
         for k in range(1, 201):  # 0.2 s of 1 ms ticks: 20 time constants
             group.tick(k * 1e-3)
         assert emu.value(0x2027) == 2050

@@ -17,7 +17,12 @@ acceleration went from standard gravities to m/s^2: every other channel stayed t
 rtol 1e-9, and the IMU's acceleration is the former one times 9.80665 to rtol 1e-9. They
 were written again when the designed layer's velocity loop began to close on the low-passed
 DVL speed (``BodyConfig.speed_filter``), which changes every trajectory by design: with
-the low-pass set to 0 the run gave the former fixtures to rtol 1e-9.
+the low-pass set to 0 the run gave the former fixtures to rtol 1e-9. They were written again
+when the simulated fins became the energy-conserving plate (``backend/sim/plate.py``, with
+``sim-tuned``'s thrust gain identified on it), which changes every trajectory by design: the
+plant's forces changed, not the controller. They were written again when the designed heading
+loop's bandwidth rose to 0.5 rad/s and the depth loop's integral zero to 3/8 of its
+bandwidth (``control.body_design``), which changes every trajectory by design.
 
 Each scenario starts the simulated U-CAT at 1 m depth surging at 0.2 m/s with the
 configuration of the shipped ``sim-tuned``, runs one mode with a velocity, depth and yaw

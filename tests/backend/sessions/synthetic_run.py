@@ -10,6 +10,7 @@ from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.messages import (
     BodyState,
     BodyTracking,
+    ElectricalPower,
     FinCycle,
     FinPlan,
     FinState,
@@ -18,13 +19,17 @@ from ucat_console.telemetry.messages import (
 )
 
 PER_FIN = (0.5, 1.0, 1.5, 1.0)  # W: 4 W in all
+BATTERY = (2.0, 3.0, 4.0, 3.0)  # W: 12 W in all (the drives' electrical input, when recorded)
 MASS = 22.0
 
 
 def run_items(duration: float = 20.0, scale: float = 1.0, speed: float = 0.2,
-              events: tuple[Event, ...] = (), cycle_scale: Any = None) -> list[tuple[str, Any]]:
+              events: tuple[Event, ...] = (), cycle_scale: Any = None,
+              battery_from: float | None = None) -> list[tuple[str, Any]]:
     """Messages of a run from t=0: power sampled at 10 Hz (fin i: ``scale * PER_FIN[i]``,
-    or ``cycle_scale(k)`` times it in cycle k), distance ``speed * t``; tracking errors
+    or ``cycle_scale(k)`` times it in cycle k), distance ``speed * t``; with ``battery_from``
+    the drives' electrical input from that time at 10 Hz too (fin i: ``BATTERY[i]`` times
+    the same scale), none without; tracking errors
     +0.01/-0.03 m/s in turn (MAE 0.02), depth 0.05 m, heading -0.1 rad; each fin a stroke
     every 0.5 s, St 0.30 and 0.40 in turn (corridor 0.25..0.35, optimum 0.30); fin 0 ends a
     cycle every second; plans with opening |0.5 - 0.4| = 0.1 rad; fin angles 0.01 t rad."""
@@ -37,6 +42,9 @@ def run_items(duration: float = 20.0, scale: float = 1.0, speed: float = 0.2,
         per = tuple(s * p for p in PER_FIN)
         items.append((C.POWER, Power(t, per, sum(per), sum(per), energy, speed * t, float("nan"))))
         energy += 0.1 * sum(per)
+        if battery_from is not None and t >= battery_from - 1e-9:
+            bat = tuple(s * b for b in BATTERY)
+            items.append((C.POWER_ELECTRICAL, ElectricalPower(t, (1.0,) * 4, (24.0,) * 4, bat, sum(bat))))
         items.append((C.BODY_TRACKING, BodyTracking(t, True, speed, 1.0, 0.0, 0.0,
                                                     0.01 if k % 2 == 0 else -0.03, 0.05, -0.1)))
         items.append((C.BODY_STATE, BodyState(t, (speed * t, 0.0, 1.0), (1.0, 0.0, 0.0, 0.0),

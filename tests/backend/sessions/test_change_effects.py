@@ -47,6 +47,43 @@ def test_the_figures_before_a_change_at_once_and_after_it_when_its_window_passed
     assert fx.check(30.0) == []  # once
 
 
+def _effect(battery_from: float) -> tuple[Event, Event]:
+    """A change at 10 s doubling the power, its effect published at 15 s."""
+    stream = TelemetryStream()
+    published: list[Event] = []
+    fx = ChangeEffects(MetricsConfig(before=5.0, after=5.0), published.append)
+    stream.subscribe(fx.on_message, fx.channels)
+    change = Event(10.0, "loop", "tuning", "mpc.lam_st 5 -> 2", "info", {"block": "mpc"})
+    for channel, m in run_items(cycle_scale=lambda k: 1.0 if k < 10 else 2.0, events=(change,),
+                                battery_from=battery_from):
+        stream.publish(channel, m)
+        if m.t <= 12.0:
+            fx.check(m.t)
+    fx.check(15.0)
+    [ev] = published
+    return ev, change
+
+
+def test_a_changes_effect_is_of_the_battery_power_when_both_windows_have_it():
+    ev, _ = _effect(battery_from=0.0)
+    assert ev.data["power_source"] == "electrical (battery)"
+    # 12 W of the battery before, 24 W after; the estimate's 4 and 8 W beside them
+    assert ev.data["before"]["power"] == pytest.approx((12.0 * 4.9 + 0.5 * (12.0 + 24.0) * 0.1) / 5.0)
+    assert ev.data["after"]["power"] == pytest.approx(24.0)
+    assert ev.data["after"]["energy_per_metre"] == pytest.approx(120.0)
+    assert ev.data["after"]["mech_power"] == pytest.approx(8.0)
+    assert "electrical (battery): " in ev.message and "24.00 W" in ev.message
+
+
+def test_a_changes_effect_compares_the_estimates_when_a_window_has_no_electrical_readings():
+    # the drives report from 12 s: the window before the change has none
+    ev, _ = _effect(battery_from=12.0)
+    assert ev.data["power_source"] == "mechanical (shaft estimate): electrical readings not in both windows"
+    assert ev.data["before"]["power"] == pytest.approx((4.0 * 4.9 + 0.5 * (4.0 + 8.0) * 0.1) / 5.0)
+    assert ev.data["after"]["power"] == pytest.approx(8.0)
+    assert "mechanical (shaft estimate)" in ev.message
+
+
 def test_the_supervisor_records_each_tuning_changes_effect(tmp_path: Path):
     from ucat_console.backend.access import LOCAL
 
@@ -68,6 +105,9 @@ def test_the_supervisor_records_each_tuning_changes_effect(tmp_path: Path):
         recorded = [m for _, m in r.messages([C.EVENTS]) if m.code == "effect"]
     assert len(recorded) == 1 and recorded[0].data["code"] == "tuning"
     assert recorded[0].data["before"].keys() == recorded[0].data["after"].keys()
+    # the in-process simulator's drives report their electrical input: the battery's figures
+    assert recorded[0].data["power_source"] == "electrical (battery)"
+    assert recorded[0].data["after"]["power"] > recorded[0].data["after"]["mech_power"] > 0.0
 
 
 def test_undo_puts_the_latest_tuning_change_back_in_one_step_and_only_for_the_pilot(tmp_path: Path):

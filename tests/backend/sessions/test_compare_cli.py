@@ -74,3 +74,37 @@ def test_compare_refuses_a_file_that_is_not_a_session_naming_it(sessions, tmp_pa
     assert not (out / "compare.md").exists()
     assert main(["sessions", "compare", a.name, "--out", str(out), "--dir", str(sessions)]) == 2
     assert "needs --segments" in capsys.readouterr().err
+
+
+def test_compare_is_of_the_battery_power_with_the_estimate_beside_it(sessions, tmp_path, capsys):
+    [a] = record(sessions, run_items(battery_from=0.0), label="slow", wall_time=1_700_000_000.0)
+    [b] = record(sessions, run_items(scale=2.0, speed=0.25, battery_from=0.0), label="fast",
+                 wall_time=1_700_000_100.0)
+    out = tmp_path / "cmp"
+    assert main(["sessions", "compare", a.name, b.name, "--out", str(out), "--dir", str(sessions)]) == 0
+    assert "power: electrical (battery)" in capsys.readouterr().out
+    rows = _rows(out / "compare.csv")
+    sa, sb = "20231114-221320-slow", "20231114-221500-fast"
+    # the drives' 12 W at 0.2 m/s and 24 W at 0.25 m/s; the estimate's 4 and 8 W beside them
+    assert float(rows[(sa, "energy_per_metre")]["value"]) == pytest.approx(60.0)
+    assert float(rows[(sb, "energy_per_metre")]["value"]) == pytest.approx(96.0)
+    assert float(rows[(sb, "mech_energy_per_metre")]["value"]) == pytest.approx(32.0)
+    assert rows[(sb, "power")]["power_source"] == "electrical (battery)"
+    assert rows[(sb, "mech_power")]["power_source"] == "mechanical (shaft estimate)"
+    assert rows[(sb, "speed")]["power_source"] == ""
+    md = (out / "compare.md").read_text()
+    assert "Power: electrical (battery)" in md and "96 " in md
+
+
+def test_compare_with_a_run_without_electrical_readings_is_of_the_estimates_labelled_so(sessions, tmp_path, capsys):
+    [a] = record(sessions, run_items(), label="old", wall_time=1_700_000_000.0)
+    [b] = record(sessions, run_items(battery_from=0.0), label="new", wall_time=1_700_000_100.0)
+    out = tmp_path / "cmp"
+    assert main(["sessions", "compare", a.name, b.name, "--out", str(out), "--dir", str(sessions)]) == 0
+    label = "mechanical (shaft estimate): no electrical readings in 20231114-221320-old"
+    assert f"power: {label}" in capsys.readouterr().out
+    rows = _rows(out / "compare.csv")
+    # like with like: both runs' estimate (4 W at 0.2 m/s), not one run's battery against the other's estimate
+    for s in ("20231114-221320-old", "20231114-221500-new"):
+        assert float(rows[(s, "energy_per_metre")]["value"]) == pytest.approx(20.0)
+        assert rows[(s, "power")]["power_source"] == label

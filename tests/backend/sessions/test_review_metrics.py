@@ -6,10 +6,20 @@ import math
 
 import pytest
 from session_helpers import record
-from synthetic_run import MASS, PER_FIN, run_items
+from synthetic_run import BATTERY, MASS, PER_FIN, run_items
 
 from ucat_console.backend.review.compare import load_run
-from ucat_console.backend.review.metrics import MetricsConfig, RunData, fins_now, robot_now, table_row
+from ucat_console.backend.review.metrics import (
+    ELECTRICAL,
+    MECHANICAL,
+    MetricsConfig,
+    RunData,
+    fins_now,
+    robot_now,
+    table_row,
+    window_figures,
+)
+from ucat_console.telemetry import channels as C
 
 CFG = MetricsConfig(mass=MASS, resamples=400)
 
@@ -107,3 +117,59 @@ def test_live_figures_per_fin_and_of_the_robot():
     assert (r.speed_mae, r.depth_mae, r.heading_mae) == pytest.approx(((50 * 0.01 + 51 * 0.03) / 101, 0.05, 0.1))
     d.drop_before(15.0)  # a live view keeps its window only
     assert robot_now(d, 19.9, MetricsConfig(window=4.0, mass=MASS)).power == pytest.approx(4.0)
+
+
+def test_the_battery_power_is_the_default_and_the_encoders_estimate_is_beside_it(sessions):
+    [path] = record(sessions, run_items(battery_from=0.0), label="battery")
+    run = load_run(path, sessions)
+    row = table_row(run.data, run.start, run.end, CFG)
+    f = {k: e.value for k, e in row.figures.items()}
+    assert (row.source, row.source_label) == (ELECTRICAL, "electrical (battery)")
+    # the drives draw 12 W at 0.2 m/s: 60 J per metre; the encoders' estimate 4 W beside it
+    assert (f["power"], f["energy_per_metre"], f["cost_of_transport"]) == pytest.approx((12.0, 60.0, 60.0 / MASS))
+    assert (f["mech_power"], f["mech_energy_per_metre"], f["mech_cost_of_transport"]) == pytest.approx(
+        (4.0, 20.0, 20.0 / MASS))
+    for i in range(4):
+        assert (f[f"power_{i}"], f[f"mech_power_{i}"]) == pytest.approx((BATTERY[i], PER_FIN[i]))
+    assert f["speed"] == pytest.approx(0.2)  # the distance is the same whichever power
+    r = robot_now(run.data, run.end, MetricsConfig(window=10.0, mass=MASS))
+    assert r.source_label == "electrical (battery)"
+    assert (r.power, r.energy_per_metre, r.mech_power, r.mech_energy_per_metre) == pytest.approx(
+        (12.0, 60.0, 4.0, 20.0))
+    assert [fin.power for fin in fins_now(run.data, run.end, CFG)] == pytest.approx(list(BATTERY))
+
+
+def test_without_electrical_readings_the_figures_are_the_estimate_labelled_so():
+    d = _data()
+    row = table_row(d, 0.0, 19.9, CFG)
+    assert row.source == MECHANICAL
+    assert row.source_label == "mechanical (shaft estimate): no electrical readings"
+    assert row.figures["power"].value == pytest.approx(4.0) == row.figures["mech_power"].value
+    r = robot_now(d, 19.9, CFG)
+    assert r.source_label == row.source_label and r.power == pytest.approx(4.0)
+    # asked for the battery's figures where there are none: NaN, never zero
+    f = window_figures(d, 0.0, 19.9, MASS, source=ELECTRICAL)
+    assert math.isnan(f["power"]) and math.isnan(f["energy_per_metre"]) and math.isnan(f["power_0"])
+    assert f["mech_power"] == pytest.approx(4.0)
+
+
+def test_electrical_readings_from_partway_count_over_the_stretch_they_cover():
+    d = _data(battery_from=10.0)  # the drives report from 10 s (the real robot's start)
+    row = table_row(d, 0.0, 19.9, CFG)
+    assert row.source == ELECTRICAL
+    # over 10..19.9 s: 12 W and the 0.2 m/s of that stretch, not diluted by the 10 s before it
+    assert (row.figures["power"].value, row.figures["energy_per_metre"].value) == pytest.approx((12.0, 60.0))
+    assert row.figures["mech_energy_per_metre"].value == pytest.approx(20.0)
+    before = table_row(d, 0.0, 9.5, CFG)
+    assert before.source == MECHANICAL and before.figures["power"].value == pytest.approx(4.0)
+
+
+def test_a_drive_that_did_not_answer_is_skipped_not_counted_zero():
+    d = RunData()
+    for channel, m in run_items(battery_from=0.0):
+        if channel == C.POWER_ELECTRICAL and 5.0 <= m.t < 10.0:  # fin 2's drive silent for 5 s
+            per = (m.per_fin[0], m.per_fin[1], math.nan, m.per_fin[3])
+            m = type(m)(m.t, m.current, m.voltage, per, math.nan)
+        d.feed(channel, m)
+    f = window_figures(d, 0.0, 19.9, MASS)
+    assert f["power"] == pytest.approx(12.0) and f["power_2"] == pytest.approx(BATTERY[2])

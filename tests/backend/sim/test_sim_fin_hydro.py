@@ -1,4 +1,5 @@
-"""Fin hydrodynamics: quasi-steady force, stroke mean, wake factor, body wrench."""
+"""Where the fins meet the hull: the recorded Strouhal number, the body wrench and the flow
+past each fin (its transpose)."""
 
 from __future__ import annotations
 
@@ -9,98 +10,15 @@ import pytest
 
 from ucat_console.backend.sim.fin_hydro import (
     add_fin_wrench,
-    fin_force,
+    fin_flow,
     fin_sign_table,
     fin_strouhal,
     hydro_params,
-    wake_factor,
 )
 from ucat_console.backend.sim.params import FinGeometryConfig, FinHydroConfig
-from ucat_console.robot.servo import servo_step
 
 GEOM = FinGeometryConfig()
-PAPER_QS = hydro_params(FinHydroConfig(coefficients="paper", wake="quasi_steady"), GEOM)
-SOFT_QS = hydro_params(FinHydroConfig(coefficients="soft_fin", wake="quasi_steady"), GEOM)
-SOFT_WAKE = hydro_params(FinHydroConfig(coefficients="soft_fin", wake="strouhal_wake"), GEOM)
-
-
-@pytest.mark.parametrize("ph", [PAPER_QS, SOFT_QS, SOFT_WAKE])
-@pytest.mark.parametrize(("theta", "theta_s", "st"), [(0.0, 0.0, 0.3), (0.7, -0.4, 1.5), (-1.2, 0.1, 0.0)])
-def test_zero_rate_gives_zero_force(ph: np.ndarray, theta: float, theta_s: float, st: float) -> None:
-    fx, fy, _ = fin_force(theta, 0.0, theta_s, st, ph)
-    assert fx == 0.0 and fy == 0.0
-
-
-def test_force_at_a_point_by_hand() -> None:
-    # w = 3: v = 0.3, q = 0.5*1000*0.02*0.09 = 0.9; L = 0.225, D = 0.63; at thr = theta = 0
-    fx, fy, scale = fin_force(0.0, 3.0, 0.0, 0.3, PAPER_QS)
-    assert (fx, fy, scale) == pytest.approx((-0.225, -0.63, 1.0))
-    # soft-fin gain scales only the forward (f_x < 0) part
-    fx, fy, scale = fin_force(0.0, 3.0, 0.0, 0.3, SOFT_QS)
-    assert (fx, fy, scale) == pytest.approx((-0.225 * 4.6, -0.63, 4.6))
-    # rotated by theta = pi/2: (f_x, f_y) = (-fyl, fxl) = (0.63, -0.225): backward, not scaled
-    fx, fy, _ = fin_force(math.pi / 2, 3.0, math.pi / 2, 0.3, SOFT_QS)
-    assert (fx, fy) == pytest.approx((0.63, -0.225))
-
-
-def _stroke_mean(theta0: float, d: float, vel: float, ph: np.ndarray) -> tuple[np.ndarray, float]:
-    th, om, f, t = theta0, 0.0, np.zeros(2), 0.0
-    while True:
-        th, om, _ = servo_step(th, om, theta0 + d, vel, 64.0, 10.0, 0.001)
-        t += 0.001
-        fx, fy, _ = fin_force(th, om, theta0, 0.3, ph)
-        f += (fx, fy)
-        if om == 0.0:
-            return f * 0.001 / t, t
-
-
-@pytest.mark.parametrize(("theta0", "d", "vel"), [(-0.6, 0.6, 3.0), (0.0, -0.6, 3.0), (-1.0, 1.2, 4.0)])
-def test_stroke_mean_follows_the_controller_form(theta0: float, d: float, vel: float) -> None:
-    """Over a servo stroke the plant's force averages to the (d, w) model of control.md s.1."""
-    f, t = _stroke_mean(theta0, d, vel, PAPER_QS)
-    w = abs(d) / t
-    q = 0.5 * 1000 * 0.020 * (0.10 * w) ** 2
-    lift, drag = 0.25 * q, 0.70 * q
-    thr, thm = d / 2, theta0 + d / 2
-    fxl = -lift * math.cos(thr) - drag * math.sin(thr)
-    fyl = -lift * math.sin(thr) - drag * math.cos(thr)
-    ref = np.array([math.cos(thm) * fxl - math.sin(thm) * fyl, math.sin(thm) * fxl + math.cos(thm) * fyl])
-    # the trapezoid's mean w^2 exceeds (mean w)^2, so the plant is somewhat stronger
-    assert 1.0 < np.linalg.norm(f) / np.linalg.norm(ref) < 1.25
-    angle = math.atan2(f[1], f[0]) - math.atan2(ref[1], ref[0])
-    assert abs(angle) < 0.1
-
-
-def test_stroke_below_neutral_makes_thrust() -> None:
-    """A stroke centred 0.3 rad below neutral has f_x < 0: forward propulsion."""
-    for d in (0.6, -0.6):
-        theta0 = -0.3 - d / 2
-        f, _ = _stroke_mean(theta0, d, 3.0, SOFT_WAKE)
-        assert f[0] < 0.0
-
-
-def test_wake_factor_peak_and_asymmetry() -> None:
-    c = FinHydroConfig()
-    st = np.linspace(0.0, 2.0, 20001)
-    w = np.array([wake_factor(s, c.st_peak, c.sigma_low, c.sigma_high, c.floor) for s in st])
-    peak = st[np.argmax(w)]
-    assert 0.25 <= peak <= 0.35
-    assert w.max() == pytest.approx(1.0)
-    for delta in (0.02, 0.05, 0.1, 0.2):
-        below = wake_factor(peak - delta, c.st_peak, c.sigma_low, c.sigma_high, c.floor)
-        above = wake_factor(peak + delta, c.st_peak, c.sigma_low, c.sigma_high, c.floor)
-        assert below < above  # falls faster below the peak
-    assert w[-1] == pytest.approx(c.floor, abs=1e-6)
-    # split Gaussian by hand: W(0.15) = 0.25 + 0.75 exp(-0.5 (0.15/0.08)^2)
-    assert wake_factor(0.15, 0.30, 0.08, 0.20, 0.25) == pytest.approx(0.25 + 0.75 * math.exp(-0.5 * (0.15 / 0.08) ** 2))
-
-
-def test_wake_scales_thrust_with_strouhal_only_in_strouhal_wake() -> None:
-    near, far = 0.3, 1.5
-    fx_near, _, s_near = fin_force(0.0, 3.0, 0.0, near, SOFT_WAKE)
-    fx_far, _, s_far = fin_force(0.0, 3.0, 0.0, far, SOFT_WAKE)
-    assert s_near == pytest.approx(4.6) and fx_near < fx_far < 0.0
-    assert fin_force(0.0, 3.0, 0.0, near, SOFT_QS) == fin_force(0.0, 3.0, 0.0, far, SOFT_QS)
+PAPER_QS = hydro_params(FinHydroConfig(), GEOM)
 
 
 def test_fin_strouhal_number() -> None:
@@ -137,3 +55,29 @@ def test_equal_fins_give_pure_surge_and_heave() -> None:
     for i in range(4):
         add_fin_wrench(-0.5, 0.2, *signs[i], PAPER_QS, tau)
     assert tau == pytest.approx([4 * 0.5 * math.cos(math.radians(30)), 0.0, -0.8, 0.0, 0.0, 0.0], abs=1e-12)
+
+
+def test_the_flow_past_a_fin_is_the_transpose_of_its_wrench() -> None:
+    """The power a fin's force puts into the hull, tau . nu, equals its force times its
+    hinge's velocity through the water, f . v with v = -(flow): no power is lost or made
+    between the fin and the hull."""
+    rng = np.random.default_rng(3)
+    signs = fin_sign_table()
+    for _ in range(200):
+        i = int(rng.integers(4))
+        f = rng.normal(size=2)
+        nu = rng.normal(size=6)
+        tau = np.zeros(6)
+        add_fin_wrench(f[0], f[1], *signs[i], PAPER_QS, tau)
+        ux, uy = fin_flow(nu, *signs[i], PAPER_QS)
+        assert float(tau @ nu) == pytest.approx(-(f[0] * ux + f[1] * uy), abs=1e-12)
+
+
+def test_surging_forward_the_water_passes_every_fin_rearwards() -> None:
+    signs = fin_sign_table()
+    for i in range(4):
+        ux, uy = fin_flow(np.array([0.3, 0.0, 0.0, 0.0, 0.0, 0.0]), *signs[i], PAPER_QS)
+        assert ux == pytest.approx(0.3 * math.cos(math.radians(30))) and uy == 0.0
+        # diving (w > 0, body z down): the water passes the fin upwards (y_m up)
+        ux, uy = fin_flow(np.array([0.0, 0.0, 0.1, 0.0, 0.0, 0.0]), *signs[i], PAPER_QS)
+        assert ux == 0.0 and uy == pytest.approx(0.1)

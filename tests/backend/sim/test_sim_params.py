@@ -1,4 +1,4 @@
-"""Plant configuration: defaults from plant.md, validation, TOML, fin numbering, soft-fin gain."""
+"""Plant configuration: defaults from plant.md, validation, TOML, fin numbering, the fin model."""
 
 from __future__ import annotations
 
@@ -36,7 +36,7 @@ def test_defaults_follow_the_spec_table() -> None:
     assert c.sensors.dvl.rate == 8.0
     assert c.sensors.imu.rate == 100.0
     assert c.dt == 0.001
-    assert c.hydro.wake == "strouhal_wake"
+    assert (c.hydro.model, c.hydro.coefficients) == ("plate", "paper")
 
 
 def test_coefficient_sets() -> None:
@@ -49,15 +49,12 @@ def test_coefficient_sets() -> None:
     assert custom.resolved().c_l == 0.5
 
 
-def test_soft_fin_gain_lies_where_the_hull_drag_check_puts_it() -> None:
-    # Four fins at St 0.3 (w = 6 V), full stroke (cos 0.6), mounting 30 deg, paper coefficients:
-    # forward force 4 cos30 cos0.6 * 0.5*1000*0.02*0.1^2 * sqrt(0.25^2+0.7^2) * 36 V^2.
-    per_v2 = 4 * math.cos(math.radians(30)) * math.cos(0.6) * 0.1 * math.hypot(0.25, 0.70) * 36
-    needed = {v: (6.542 * v + 2.98 * v * v) / (per_v2 * v * v) for v in (0.1, 0.2, 0.3, 0.4)}
-    gain = FinHydroConfig(coefficients="soft_fin").resolved().thrust_gain
-    assert needed[0.4] < gain < needed[0.1]
-    assert gain == pytest.approx(needed[0.2], rel=0.02)
-    assert gain == pytest.approx(3.2 / 0.70, rel=0.01)  # eeUVsim's drag-coefficient ratio
+def test_a_scaled_fin_scales_both_coefficients() -> None:
+    """E6's family: G times the thrust per w^2 comes with G times the normal force (the shaft's
+    load), never thrust alone."""
+    s = PAPER_COEFFICIENTS.scaled(4.6)
+    assert (s.c_d, s.c_l) == pytest.approx((0.70 * 4.6, 0.25 * 4.6))
+    assert (s.area, s.r_c, s.rho) == (PAPER_COEFFICIENTS.area, PAPER_COEFFICIENTS.r_c, PAPER_COEFFICIENTS.rho)
 
 
 def test_paper_fin_mapping_puts_paper_front_pair_on_the_front_fins() -> None:
@@ -87,10 +84,10 @@ def test_fin_plane_axes_point_rearwards_and_up() -> None:
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [
-        ({"sigma_low": 0.3, "sigma_high": 0.2}, "sigma_low/sigma_high"),
-        ({"st_peak": 0.4}, "st_peak"),
-        ({"wake": "vortex"}, "wake"),
-        ({"coefficients": "rigid"}, "coefficients"),
+        ({"c_d0": 0.8}, "c_d0"),
+        ({"lift_ratio": -0.1}, "lift_ratio"),
+        ({"model": "vortex"}, "model"),
+        ({"coefficients": "soft_fin"}, "coefficients"),
     ],
 )
 def test_bad_hydro_config_is_named(kwargs: dict, match: str) -> None:
@@ -108,14 +105,14 @@ def test_bad_vehicle_vectors_are_named() -> None:
 def test_toml_round_trip(tmp_path: Path) -> None:
     c = PlantConfig(
         vehicle=VehicleConfig(current_ned=(0.1, -0.05, 0.0)),
-        hydro=FinHydroConfig(coefficients="eeuvsim", wake="quasi_steady"),
+        hydro=FinHydroConfig(coefficients="eeuvsim", model="still_water", c_d0=0.1),
         seed=7,
     )
     path = tmp_path / "plant.toml"
     path.write_text(c.to_toml())
     assert PlantConfig.from_toml(path) == c
-    path.write_text("[hydro]\nwake = 'vortex'\n")
-    with pytest.raises(ValueError, match="hydro.wake"):
+    path.write_text("[hydro]\nmodel = 'vortex'\n")
+    with pytest.raises(ValueError, match="hydro.model"):
         PlantConfig.from_toml(path)
 
 

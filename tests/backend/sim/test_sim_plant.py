@@ -121,16 +121,15 @@ def _swim(cfg: PlantConfig, seconds: float = 6.0) -> Plant:
 
 
 def test_beating_fins_with_forward_thrust_drive_the_hull_forward() -> None:
-    qs = _swim(PlantConfig(hydro=FinHydroConfig(wake="quasi_steady")))
-    u, v, _, _, _, r = qs.body_velocity()
+    plant = _swim(PlantConfig())
+    u, v, _, _, _, r = plant.body_velocity()
     assert u > 0.05
     assert abs(v) < 1e-6 and abs(r) < 1e-6  # four equal fins: no sway, no yaw
-    pos, _ = qs.pose()
+    pos, _ = plant.pose()
     assert pos[0] > 0.1
-    wake = _swim(PlantConfig(hydro=FinHydroConfig(wake="strouhal_wake")))
-    assert 0.0 < wake.body_velocity()[0] < u  # the wake factor is at most 1
-    assert all(0.25 * 4.6 <= f <= 4.6 for f in wake.fin_thrust_factor())
-    assert all(s > 0.0 for s in wake.fin_strouhal())
+    assert all(s > 0.0 for s in plant.fin_strouhal())
+    # the null plant's fins ignore the stream: no profile drag, no loss of thrust with speed
+    assert _swim(PlantConfig(hydro=FinHydroConfig(model="still_water"))).body_velocity()[0] > u
 
 
 def test_reset_restores_the_initial_state() -> None:

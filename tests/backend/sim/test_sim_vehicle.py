@@ -1,4 +1,5 @@
-"""The 6-DOF hull: rest, damping-limited speed, restoring moment, current, disturbance."""
+"""The 6-DOF hull: rest, damping-limited speed, restoring moment, current, disturbance (the
+fins held along the stream, where they add no force)."""
 
 from __future__ import annotations
 
@@ -7,12 +8,23 @@ import math
 import numpy as np
 import pytest
 
-from ucat_console.backend.sim.params import PlantConfig, VehicleConfig
+from ucat_console.backend.sim.params import FinHydroConfig, PlantConfig, VehicleConfig
 from ucat_console.backend.sim.plant import Plant
+from ucat_console.backend.sim.plate import plate_angle
 from ucat_console.backend.sim.vehicle import vehicle_matrices
 from ucat_console.robot.rotations import euler_from_quaternion, quaternion_from_euler
 
 G0 = 9.80665
+
+
+def _hull_only() -> Plant:
+    """A plant whose fins trail in the stream without profile drag: no force from them, so
+    the hull's own dynamics show."""
+    p = Plant(PlantConfig(hydro=FinHydroConfig(c_d0=0.0)))
+    return p
+
+
+TRAILING = (-plate_angle(0.70, 0.25),) * 4  # the plates' line along the stream
 
 
 def _terminal_speed(force: float) -> float:
@@ -33,8 +45,8 @@ def test_at_rest_stays_at_rest_for_20_s() -> None:
 
 @pytest.mark.parametrize("force", [1.0, 2.0])
 def test_constant_body_force_reaches_the_damping_speed(force: float) -> None:
-    p = Plant()
-    p.reset(position_ned=(0.0, 0.0, 1.0))
+    p = _hull_only()
+    p.reset(position_ned=(0.0, 0.0, 1.0), fin_angles=TRAILING)
     p.set_body_wrench(force=(force, 0.0, 0.0))
     p.advance(60.0)  # about 8 time constants of (m + 40 kg) / damping
     u, v, w, pr, qr, rr = p.body_velocity()
@@ -112,9 +124,9 @@ def test_hull_drifts_with_a_constant_current() -> None:
 
 
 def test_disturbance_force_is_resolved_from_ned() -> None:
-    cfg = PlantConfig(vehicle=VehicleConfig(disturbance_ned=(0.0, 2.0, 0.0)))
+    cfg = PlantConfig(vehicle=VehicleConfig(disturbance_ned=(0.0, 2.0, 0.0)), hydro=FinHydroConfig(c_d0=0.0))
     p = Plant(cfg)
-    p.reset(position_ned=(0.0, 0.0, 1.0), euler=(0.0, 0.0, math.pi / 2))  # east = body forward
+    p.reset(position_ned=(0.0, 0.0, 1.0), euler=(0.0, 0.0, math.pi / 2), fin_angles=TRAILING)  # east = forward
     p.advance(60.0)
     assert p.body_velocity()[0] == pytest.approx(_terminal_speed(2.0), rel=2e-3)
 

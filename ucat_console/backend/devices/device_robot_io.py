@@ -32,8 +32,10 @@ dropped, counted and reported as an Event ``implausible`` of its sensor (stamped
 time).
 
 Telemetry. The drives' electrical input (each EPOS2's averaged motor current and supply
-voltage, read every ``epos2.electrical_period_ms``) becomes an
-:class:`~ucat_console.telemetry.messages.ElectricalPower` message stamped in loop time, handed
+voltage, read every ``epos2.electrical_period_ms``), with each fin's last encoder rate and the
+drives' motor (``epos2.motor``), becomes an
+:class:`~ucat_console.telemetry.messages.ElectricalPower` message (``drive_power``: the battery
+power each drive draws) stamped in loop time, handed
 to each sink added with :meth:`DeviceRobotIO.add_telemetry_sink` as ``(channel, message)``
 (the supervisor publishes it on its stream, channel ``power/electrical``).
 """
@@ -59,12 +61,12 @@ from ucat_console.backend.devices.pressure import PressureDriver
 from ucat_console.robot.readings import DvlPosition, DvlVelocity, FinFeedback
 from ucat_console.backend.devices.reporting import EventReporter
 from ucat_console.backend.devices.serial_link import SERIAL_ERRORS, open_serial
+from ucat_console.backend.drive_power import electrical_power
 from ucat_console.robot.interface import RobotIO, RobotTruth
 from ucat_console.robot.fins import N_FINS
 from ucat_console.robot.readings import DriveElectrical, Reading
 from ucat_console.telemetry.channels import POWER_ELECTRICAL
 from ucat_console.telemetry.events import Event, EventSink
-from ucat_console.telemetry.messages import ElectricalPower
 
 TelemetrySink = Callable[[str, Any], None]
 
@@ -147,6 +149,7 @@ class DeviceRobotIO(RobotIO):
         self._telemetry_sinks: tuple[TelemetrySink, ...] = ()
         self._backlog: collections.deque[Event] = collections.deque(maxlen=EVENT_BACKLOG)
         self._dvl_invalid_run = 0
+        self._fin_rates = [math.nan] * N_FINS  # each fin's last encoder rate (rad/s)
         self.last_dvl_position: DvlPosition | None = None
         #: the simulated rig behind the drivers (robot = sim-devices), for fault injection
         #: from the console; this class never uses it
@@ -365,13 +368,12 @@ class DeviceRobotIO(RobotIO):
                 stamps.append(r.t)
         if not stamps:
             return  # no drive answered: each one's event says so
-        per_fin = [abs(i) * v for i, v in zip(current, voltage)]
         wall = max(stamps)
         t = self.time.to_loop(wall) if self.time.anchored else self._t
-        msg = ElectricalPower(t, tuple(current), tuple(voltage), tuple(per_fin),  # type: ignore[arg-type]
-                              math.fsum(per_fin))
         with self._lock:
             sinks = self._telemetry_sinks
+            rates = list(self._fin_rates)
+        msg = electrical_power(t, current, voltage, rates, self.config.epos2.motor)
         for sink in sinks:
             try:
                 sink(POWER_ELECTRICAL, msg)
@@ -401,6 +403,8 @@ class DeviceRobotIO(RobotIO):
     def _on_reading(self, reading: Reading) -> None:
         with self._lock:
             self._pending.append(reading)
+            if isinstance(reading, FinFeedback) and 0 <= reading.fin < N_FINS:
+                self._fin_rates[reading.fin] = reading.velocity_rad_s
 
     def _on_dvl_velocity(self, v: DvlVelocity) -> None:
         if v.valid:

@@ -77,6 +77,7 @@ from ucat_console.backend.devices.canbus import BITRATES, INTERFACES, arrival_ti
 from ucat_console.robot.readings import DriveElectrical, FinFeedback
 from ucat_console.backend.devices.reporting import EventReporter
 from ucat_console.robot.servo import FIN_ACCELERATION
+from ucat_console.robot.motor import FinMotor
 from ucat_console.robot.units import DriveUnits
 from ucat_console.telemetry.events import EventSink
 from ucat_console.typedconf import Config, param
@@ -163,6 +164,7 @@ class Epos2Config(Config):
     setpoint_ack_timeout: float = param(
         0.1, lo=0.005, hi=5.0, unit="s", doc="wait for set-point acknowledge (statusword bit 12)"
     )
+    motor: FinMotor = FinMotor()  # the drives' motor, gearhead and bridge (battery power; robot.motor)
     electrical_period_ms: int = param(
         100, lo=0, hi=60_000, unit="ms",
         doc="read each drive's averaged motor current (0x2027) and supply voltage (0x2200 sub 1) "

@@ -17,12 +17,11 @@ in-process ``virtual`` interface). It implements what the driver relies on:
 * Motion through a pluggable servo (:class:`Servo`); :class:`TrapezoidalServo` is the
   standalone default (acceleration limit, maximum rate, encoder quantisation).
 * The drive's electrical input (maxon's objects): the motor current 0x6078 and its average
-  0x2027 (mA) and the supply voltage 0x2200 sub 1 (0.1 V). The current follows from the
-  servo's shaft power (``shaft_power()``, W, when the servo has it) through the drive's
-  efficiency, plus its no-load current while the power stage is on:
-  ``I = I_0 + max(0, P_shaft) / (eta V)``, so that ``I V`` is the electrical input; a
-  servo with ``current()`` gives the current itself. The average is a first-order filter
-  of the current over the ticks (time constant ``current_average_s``).
+  0x2027 (mA) and the supply voltage 0x2200 sub 1 (0.1 V). A servo with ``current()``
+  gives the motor current itself (the simulated rig's: the plant's drive model,
+  ``robot.motor``); otherwise the motor draws its no-load current while the power stage is
+  on. The average is a first-order filter of the current over the ticks (time constant
+  ``current_average_s``).
 * Fault injection: :meth:`Epos2Emulator.inject_emcy`, ``stop_heartbeat``/``resume_heartbeat``,
   ``silence``/``unsilence`` and ``slow_replies``.
 
@@ -82,9 +81,8 @@ class Servo(Protocol):
     """A fin servo in profile-position mode, in fin units (rad, rad/s).
 
     Optional extras the emulator uses when present: ``set_acceleration(acc, dec)`` (rad/s2,
-    from 0x6083/0x6084/0x6085), ``shaft_power() -> float`` (W at the fin, from which the
-    emulator makes the motor current) and ``current() -> float`` (A, the motor current
-    itself, for 0x6078 and 0x2027).
+    from 0x6083/0x6084/0x6085) and ``current() -> float`` (A, the motor current, for 0x6078
+    and 0x2027).
     """
 
     def command(self, target_rad: float, profile_velocity_rad_s: float) -> None: ...
@@ -184,10 +182,6 @@ class Epos2EmulatorConfig(Config):
     supply_voltage: float = param(
         24.0, lo=0.0, hi=70.0, lo_open=True, unit="V",
         doc="supply voltage at the power stage the node reports (0x2200 sub 1)",
-    )
-    drive_efficiency: float = param(
-        0.7, lo=0.0, hi=1.0, lo_open=True,
-        doc="shaft power over electrical input above no load (motor, gearhead and bridge)",
     )
     no_load_current: float = param(
         0.05, lo=0.0, hi=10.0, unit="A", doc="motor current while the power stage is on and the shaft idle"
@@ -659,17 +653,14 @@ class Epos2Emulator:
         self.network.send_due(now)
 
     def motor_current(self) -> float:
-        """The motor current (A) now: the servo's own, or the no-load current plus the shaft
-        power over the drive's efficiency and supply voltage; 0 with the power stage off."""
+        """The motor current (A) now: the servo's own, or the no-load current; 0 with the
+        power stage off."""
         if self._state not in _POWERED:
             return 0.0
         current = getattr(self.servo, "current", None)
         if callable(current):
             return float(current())
-        power = getattr(self.servo, "shaft_power", None)
-        watts = max(0.0, float(power())) if callable(power) else 0.0
-        cfg = self.config
-        return cfg.no_load_current + watts / (cfg.drive_efficiency * cfg.supply_voltage)
+        return self.config.no_load_current
 
     def tick(self, now: float) -> None:
         """Advance the node to ``now`` (seconds): its heartbeat if due, the servo, the TPDOs

@@ -4,6 +4,10 @@ aligned at an event, and their Table V rows (docs/review.md).
 A segment runs from one cutting event (a marker, a mode, tuning or setpoint change: the
 codes asked for) to the next, or to the run's start or end. Times shown are session time:
 seconds from the session's first message, the one time base of review.
+
+Every row's power figures are of one source (:func:`power_source`): the battery's when every
+run or segment has electrical readings, else the mechanical estimate's, labelled with the
+ones that have none, so a run is never weighed by its battery against another's estimate.
 """
 
 from __future__ import annotations
@@ -12,7 +16,18 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable, Sequence
 
-from ucat_console.backend.review.metrics import TABLE_CHANNELS, MetricsConfig, RunData, TableRow, flag_rows, table_row
+from ucat_console.backend.review.metrics import (
+    ELECTRICAL,
+    MECHANICAL,
+    NO_ELECTRICAL,
+    TABLE_CHANNELS,
+    MetricsConfig,
+    RunData,
+    TableRow,
+    flag_rows,
+    table_row,
+)
+from ucat_console.backend.review.metrics import power_source as window_source
 from ucat_console.backend.sessions.reader import SessionParts
 from ucat_console.telemetry.channels import EVENTS
 from ucat_console.telemetry.events import Event
@@ -50,8 +65,6 @@ class Window:
     t0: float
     t1: float
     zero: float
-
-
 
 
 def read_run(session: SessionParts, name: str | None = None, max_messages: int | None = None) -> Run:
@@ -113,11 +126,21 @@ def windows(run: Run, segment_codes: Sequence[str] = (), align: str | None = Non
     return out
 
 
+def power_source(wins: Sequence[Window]) -> tuple[str, str]:
+    """The power every window's figures are of (module docstring), and why it is the
+    estimate ("" for the battery's)."""
+    missing = [w.label for w in wins if window_source(w.run.data, w.t0, w.t1) != ELECTRICAL]
+    if not missing:
+        return ELECTRICAL, ""
+    return MECHANICAL, NO_ELECTRICAL if len(missing) == len(wins) else f"{NO_ELECTRICAL} in {', '.join(missing)}"
+
+
 def table(wins: Sequence[Window], cfg: MetricsConfig) -> list[TableRow]:
-    """Table V rows of the windows, each flagged against the first."""
-    rows = []
+    """Table V rows of the windows, each flagged against the first, their power of one source."""
     for w in wins:
         if len(w.run.data.power) == 0:
             raise ValueError(f"{w.run.name}: the session has no power messages: its efficiency cannot be computed")
-        rows.append(table_row(w.run.data, w.t0, w.t1, cfg, w.label, closed=w.t1 >= w.run.end))
+    source, why = power_source(wins)
+    rows = [table_row(w.run.data, w.t0, w.t1, cfg, w.label, closed=w.t1 >= w.run.end, source=source, source_why=why)
+            for w in wins]
     return flag_rows(rows, cfg)

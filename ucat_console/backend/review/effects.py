@@ -8,7 +8,10 @@ thread). :meth:`ChangeEffects.check`, called by the supervisor between chunks of
 ``after`` seconds of stream time have passed, and publishes the completed entry as an
 Event (source ``"review"``, code ``"effect"``) on the stream, so the session records it and
 review shows it. Figures are those of :func:`~ucat_console.backend.review.metrics.window_figures`;
-NaN is written as null (an event's data is JSON).
+NaN is written as null (an event's data is JSON). The power figures of both windows are of
+one source, the battery's when both have electrical readings, else the mechanical
+estimate's (its label says so: ``power_source`` in the event's data); the estimate's are
+beside them (``mech_*``).
 """
 
 from __future__ import annotations
@@ -18,21 +21,34 @@ import threading
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-from ucat_console.backend.review.metrics import TABLE_CHANNELS, MetricsConfig, RunData, window_figures
+from ucat_console.backend.review.metrics import (
+    ELECTRICAL,
+    MECHANICAL,
+    TABLE_CHANNELS,
+    MetricsConfig,
+    RunData,
+    default_label,
+    power_source,
+    source_label,
+    window_figures,
+)
 from ucat_console.telemetry.channels import EVENTS
 from ucat_console.telemetry.events import Event
 
 #: the changes whose effect is measured (event codes)
 CHANGE_CODES = ("tuning", "mode", "setpoints")
 #: the figures an entry carries
-EFFECT_FIGURES = ("power", "energy_per_metre", "cost_of_transport", "speed", "speed_mae", "depth_mae",
-                  "heading_mae", "st_mae", "st_in")
+EFFECT_FIGURES = ("power", "energy_per_metre", "cost_of_transport", "mech_power", "mech_energy_per_metre",
+                  "mech_cost_of_transport", "speed", "speed_mae", "depth_mae", "heading_mae", "st_mae", "st_in")
+#: why an effect's figures are the estimate's when the battery's were in one window only
+NOT_IN_BOTH = "electrical readings not in both windows"
 _KEEP = 50
 
 
 @dataclass
 class Effect:
-    """One change and the figures before and after it (``after`` None until its window passed)."""
+    """One change and the figures before and after it (``after`` None until its window
+    passed); the power figures of ``source``, labelled ``source_label``."""
 
     t: float
     code: str
@@ -41,6 +57,8 @@ class Effect:
     due: float  # stream time when the after-window has passed
     before: dict[str, float | None] = field(default_factory=dict)
     after: dict[str, float | None] | None = None
+    source: str = MECHANICAL
+    source_label: str = ""
 
 
 def _json(figures: dict[str, float]) -> dict[str, float | None]:
@@ -79,9 +97,16 @@ class ChangeEffects:
         with self._lock:
             for e in self._pending:
                 if not e.before:
-                    e.before = _json(window_figures(self._data, e.t - cfg.before, e.t, cfg.mass, closed=False))
+                    e.source = power_source(self._data, e.t - cfg.before, e.t)
+                    e.source_label = default_label(e.source)
+                    e.before = self._figures(e, e.t - cfg.before, e.t, closed=False)
                 if now >= e.due:
-                    e.after = _json(window_figures(self._data, e.t, e.t + cfg.after, cfg.mass))
+                    if power_source(self._data, e.t, e.due) != e.source:  # like with like: the estimate's
+                        e.source_label = source_label(MECHANICAL, NOT_IN_BOTH)
+                        if e.source == ELECTRICAL:
+                            e.source = MECHANICAL
+                            e.before = self._figures(e, e.t - cfg.before, e.t, closed=False)
+                    e.after = self._figures(e, e.t, e.due)
                     done.append(e)
             if done:
                 self._pending = [e for e in self._pending if e.after is None]
@@ -93,8 +118,13 @@ class ChangeEffects:
         for e in done:
             self._publish(Event(now, "review", "effect", f"{e.message}: {summary(e)}", "info",
                                 {"change_t": e.t, "code": e.code, "change": e.data, "before": e.before,
-                                 "after": e.after, "before_s": cfg.before, "after_s": cfg.after}))
+                                 "after": e.after, "power_source": e.source_label, "before_s": cfg.before,
+                                 "after_s": cfg.after}))
         return done
+
+    def _figures(self, e: Effect, t0: float, t1: float, closed: bool = True) -> dict[str, float | None]:
+        """The figures of ``[t0, t1]``, the power of ``e``'s source."""
+        return _json(window_figures(self._data, t0, t1, self.cfg.mass, closed=closed, source=e.source))
 
     def entries(self) -> list[Effect]:
         """The latest changes, newest first (pending ones without ``after``)."""
@@ -107,10 +137,14 @@ def _fmt(v: float | None, f: str) -> str:
 
 
 def summary(e: Effect) -> str:
-    """``4.00 → 3.50 W, 20.0 → 17.5 J/m, ...`` (before → after)."""
+    """``electrical (battery): 4.00 → 3.50 W, 20.0 → 17.5 J/m; ...`` (before → after; the
+    power's source first)."""
     a = e.after or {}
-    parts = []
-    for key, f, unit in (("power", ".2f", " W"), ("energy_per_metre", ".1f", " J/m"),
-                         ("speed_mae", ".3f", " m/s speed MAE"), ("st_in", ".0f", " % St in corridor")):
-        parts.append(f"{_fmt(e.before.get(key), f)} → {_fmt(a.get(key), f) if e.after else '…'}{unit}")
-    return ", ".join(parts)
+
+    def parts(keys: tuple[tuple[str, str, str], ...]) -> str:
+        return ", ".join(f"{_fmt(e.before.get(key), f)} → {_fmt(a.get(key), f) if e.after else '…'}{unit}"
+                         for key, f, unit in keys)
+
+    power = parts((("power", ".2f", " W"), ("energy_per_metre", ".1f", " J/m")))
+    rest = parts((("speed_mae", ".3f", " m/s speed MAE"), ("st_in", ".0f", " % St in corridor")))
+    return f"{e.source_label + ': ' if e.source_label else ''}{power}; {rest}"

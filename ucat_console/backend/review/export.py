@@ -1,5 +1,6 @@
 """A comparison written out: Markdown (Table V form), CSV (one row per figure) and a PNG of
-the runs overlaid (matplotlib, Agg: no display needed)."""
+the runs overlaid (matplotlib, Agg: no display needed); each says which power its power
+figures are of (the rows' source: the battery's, or the mechanical estimate's)."""
 
 from __future__ import annotations
 
@@ -11,13 +12,22 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ucat_console.backend.review.compare import Window
-from ucat_console.backend.review.metrics import FIGURES, MetricsConfig, TableRow
+from ucat_console.backend.review.compare import Window, power_source
+from ucat_console.backend.review.metrics import (
+    ELECTRICAL,
+    FIGURES,
+    LABELS,
+    MECHANICAL,
+    POWER_FIGURES,
+    MetricsConfig,
+    TableRow,
+    source_label,
+)
 from ucat_console.robot.fins import N_FINS
 
 #: the robot table's columns, then each fin's
-ROBOT_COLUMNS = ("power", "energy_per_metre", "cost_of_transport", "speed", "speed_mae", "depth_mae",
-                 "heading_mae", "st_mae", "st_in")
+ROBOT_COLUMNS = ("power", "energy_per_metre", "cost_of_transport", "mech_power", "mech_energy_per_metre",
+                 "mech_cost_of_transport", "speed", "speed_mae", "depth_mae", "heading_mae", "st_mae", "st_in")
 FIN_COLUMNS = ("power", "st_mae", "st_in")
 
 
@@ -49,6 +59,8 @@ def markdown(rows: Sequence[TableRow], wins: Sequence[Window], cfg: MetricsConfi
         f"A row is *not comparable* with the first when its mean speed differs by more than "
         f"{cfg.speed_bound:g} m/s, its speed MAE by more than {cfg.speed_mae_bound:g} m/s or its depth MAE "
         f"by more than {cfg.depth_mae_bound:g} m.", "",
+        f"Power: {_md_text(rows[0].source_label) if rows else '–'} (mean power, energy per metre, cost of "
+        f"transport and each fin's power); the {LABELS[MECHANICAL]} beside it.", "",
         *head(["window", "cycles", *ROBOT_COLUMNS, "comparable"],
               ["window (s)", "cycles", *(f"{FIGURES[k][0]} ({FIGURES[k][1]})" for k in ROBOT_COLUMNS),
                "comparable"]),
@@ -68,27 +80,31 @@ def markdown(rows: Sequence[TableRow], wins: Sequence[Window], cfg: MetricsConfi
 
 def csv_text(rows: Sequence[TableRow], wins: Sequence[Window]) -> str:
     """One line per row and figure: label, session, window (session s), figure, unit, value,
-    interval, and why the row is not comparable ("" when it is)."""
+    interval, why the row is not comparable ("" when it is), and which power a power figure
+    is of ("" for the others)."""
     buf = io.StringIO()
     w = csv.writer(buf)
     w.writerow(["label", "session", "t0", "t1", "cycles", "figure", "unit", "value", "lo", "hi",
-                "not_comparable"])
+                "not_comparable", "power_source"])
     for r, win in zip(rows, wins):
         for key, est in r.figures.items():
+            source = r.source_label if key in POWER_FIGURES else LABELS[MECHANICAL] if key.startswith("mech_") else ""
             w.writerow([r.label, win.run.name, f"{r.t0 - win.run.origin:.3f}", f"{r.t1 - win.run.origin:.3f}",
                         r.cycles, key, FIGURES[key][1], repr(est.value), repr(est.lo), repr(est.hi),
-                        r.not_comparable])
+                        r.not_comparable, source])
     return buf.getvalue()
 
 
 def overlay_figure(wins: Sequence[Window]) -> Any:
-    """A matplotlib figure of speed, depth, total power and each stroke's St over time from
-    each window's zero (its alignment event), one colour per window (close it when done)."""
+    """A matplotlib figure of speed, depth, total power (of the windows' source, as the
+    table's) and each stroke's St over time from each window's zero (its alignment event),
+    one colour per window (close it when done)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    source, why = power_source(wins)
     fig, axes = plt.subplots(4, 1, figsize=(10, 9), sharex=True)
     band = False
     for k, w in enumerate(wins):
@@ -98,8 +114,8 @@ def overlay_figure(wins: Sequence[Window]) -> Any:
         sel = (sp[:, 0] >= w.t0) & (sp[:, 0] <= w.t1)
         axes[0].plot(sp[sel, 0] - w.zero, sp[sel, 1], color=colour, lw=1, label=w.label)
         axes[1].plot(sp[sel, 0] - w.zero, sp[sel, 2], color=colour, lw=1)
-        p = d.power.array()
-        sel = (p[:, 0] >= w.t0) & (p[:, 0] <= w.t1)
+        p = (d.electrical if source == ELECTRICAL else d.power).array()
+        sel = (p[:, 0] >= w.t0) & (p[:, 0] <= w.t1) & np.isfinite(p[:, 1])
         axes[2].plot(p[sel, 0] - w.zero, p[sel, 1], color=colour, lw=1)
         for s in d.strokes:
             a = s.array()
@@ -113,6 +129,7 @@ def overlay_figure(wins: Sequence[Window]) -> Any:
     axes[1].set_ylabel("depth (m)")
     axes[1].invert_yaxis()
     axes[2].set_ylabel("power (W)")
+    axes[2].set_title(f"power: {source_label(source, why)}", fontsize=9)
     axes[3].set_ylabel("St per stroke")
     axes[3].set_xlabel("time from each window's alignment (s)")
     axes[0].legend(fontsize=7, loc="best")

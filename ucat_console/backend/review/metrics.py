@@ -4,16 +4,23 @@
 in time order, from the live stream or a session file); the functions below compute over
 a time window ``[t0, t1]`` on the stream's clock. Nothing here reads a clock or a file.
 
-Definitions (issue 30; the paper's Table V):
+Definitions (the paper's Table V):
 
-* energy: the integral of the total fin power (``power.total``, trapezoidal rule; the
-  cumulative integral is interpolated at the window's ends, so windows add up exactly);
-  per fin the same with ``power.per_fin``;
-* mean power: energy / window length (W), per fin and total;
+* power: the battery's by default, the fin drives' electrical input (``power/electrical``,
+  :data:`ELECTRICAL`); where a window has no electrical readings (a recording made before
+  the drives reported, a drive that did not answer) the encoders' mechanical estimate
+  (``power``, :data:`MECHANICAL`) with a label saying so (:func:`source_label`). The
+  estimate's figures are always beside them (``mech_*``);
+* energy: the integral of the total power (trapezoidal rule over its finite samples: a
+  reading a drive did not answer is skipped, never counted zero; the cumulative integral is
+  interpolated at the window's ends, so windows add up exactly); per fin the same with
+  ``per_fin``;
+* mean power: energy / the part of the window the power's samples cover (W), per fin and
+  total;
 * distance: the increase of ``power.distance`` (metres travelled while the fins are driven);
   a drop (the loop restarted its count) counts as a new start, never as negative distance;
-* energy per metre: energy / distance (J/m); cost of transport: energy / (mass distance)
-  (J/(kg m)); mean speed: distance / window length;
+* energy per metre: energy / the distance over the same stretch (J/m); cost of transport:
+  energy / (mass distance) (J/(kg m)); mean speed: distance / window length;
 * tracking errors: mean |error| of ``body/tracking``'s speed, depth and heading errors over
   the samples in the window while the fins are driven (NaN samples skipped);
 * St: each stroke's ``fin/<i>/strouhal`` as it starts: St MAE = mean |St - St_opt| and the
@@ -98,10 +105,29 @@ class _Series:
             self._cache = None
 
 
+#: the power the figures are of: the battery's (the fin drives' electrical input) by
+#: default, or the encoders' mechanical estimate
+ELECTRICAL = "electrical"
+MECHANICAL = "mechanical"
+LABELS = {ELECTRICAL: "electrical (battery)", MECHANICAL: "mechanical (shaft estimate)"}
+#: why a window's figures are the estimate when nothing else is said
+NO_ELECTRICAL = "no electrical readings"
+
+
+def source_label(source: str, why: str = "") -> str:
+    """``electrical (battery)``, or ``mechanical (shaft estimate): <why>``."""
+    return LABELS[source] + (f": {why}" if why else "")
+
+
+def default_label(source: str) -> str:
+    """The label of a window's own source: the estimate's is the fallback (no electrical readings)."""
+    return source_label(source, NO_ELECTRICAL if source == MECHANICAL else "")
+
+
 #: the channels the table's figures read (no fin states: the winding, a live figure only,
 #: is not in the table, and they are the most numerous messages)
 TABLE_CHANNELS: tuple[str, ...] = (
-    ch.POWER, ch.BODY_TRACKING, ch.BODY_STATE,
+    ch.POWER, ch.POWER_ELECTRICAL, ch.BODY_TRACKING, ch.BODY_STATE,
     *(f(i) for f in (ch.fin_strouhal, ch.fin_cycle, ch.fin_plan) for i in range(N_FINS)),
 )
 #: the channels every figure reads
@@ -113,6 +139,7 @@ class RunData:
     """The messages of one run that its figures need, as columns (see the module docstring)."""
 
     power: _Series = field(default_factory=lambda: _Series("t", "total", "p0", "p1", "p2", "p3", "distance"))
+    electrical: _Series = field(default_factory=lambda: _Series("t", "total", "p0", "p1", "p2", "p3"))
     tracking: _Series = field(default_factory=lambda: _Series("t", "driving", "speed", "depth", "heading"))
     speed: _Series = field(default_factory=lambda: _Series("t", "u", "depth"))
     strokes: list[_Series] = field(default_factory=lambda: [
@@ -125,6 +152,8 @@ class RunData:
         """Take one message (any channel; those not needed are ignored)."""
         if channel == ch.POWER:
             self.power.add(m.t, m.total, *m.per_fin, m.distance)
+        elif channel == ch.POWER_ELECTRICAL:
+            self.electrical.add(m.t, m.total, *m.per_fin)
         elif channel == ch.BODY_TRACKING:
             self.tracking.add(m.t, float(m.driving), m.speed_error, m.depth_error, m.heading_error)
         elif channel == ch.BODY_STATE:
@@ -144,7 +173,8 @@ class RunData:
                 self.angles[fin].add(m.t, m.angle)
 
     def series(self) -> list[_Series]:
-        return [self.power, self.tracking, self.speed, *self.strokes, *self.cycles, *self.plans, *self.angles]
+        return [self.power, self.electrical, self.tracking, self.speed,
+                *self.strokes, *self.cycles, *self.plans, *self.angles]
 
     def drop_before(self, t: float) -> None:
         """Forget what is older than ``t`` (a live view keeps only its window)."""
@@ -179,7 +209,8 @@ class Stroke:
 @dataclass(frozen=True)
 class FinNow:
     """One fin's figures now: its latest two strokes (a cycle's both strokes, latest last),
-    its mean power over the window, the opening of its latest plan and its winding."""
+    its mean power over the window (of the robot's ``source``), the opening of its latest
+    plan and its winding."""
 
     fin: int
     strokes: tuple[Stroke, ...]
@@ -190,7 +221,8 @@ class FinNow:
 
 @dataclass(frozen=True)
 class RobotNow:
-    """The robot's figures over the window."""
+    """The robot's figures over the window: power, energy per metre and cost of transport of
+    ``source`` (its label ``source_label``), the mechanical estimate's beside them."""
 
     window: float
     power: float
@@ -199,6 +231,11 @@ class RobotNow:
     speed_mae: float
     depth_mae: float
     heading_mae: float
+    source: str = MECHANICAL
+    source_label: str = ""
+    mech_power: float = math.nan
+    mech_energy_per_metre: float = math.nan
+    mech_cost_of_transport: float = math.nan
 
 
 def _cumulative(t: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -225,31 +262,62 @@ def _at(t: NDArray[np.float64], c: NDArray[np.float64], x: NDArray[np.float64] |
     return np.interp(x, t, c) if t.size else np.zeros_like(np.asarray(x, dtype=float))
 
 
-class _Sums:
-    """Each figure's numerator and denominator per interval (cycle) of a window."""
+def _finite_span(s: _Series) -> tuple[float, float] | None:
+    """The first and last time of a power series' finite totals (None: fewer than two)."""
+    a = s.array()
+    t = a[np.isfinite(a[:, 1]), 0] if len(s) else np.empty(0)
+    return (float(t[0]), float(t[-1])) if t.size > 1 else None
 
-    def __init__(self, data: RunData, edges: NDArray[np.float64], mass: float, closed: bool = True) -> None:
+
+def power_source(data: RunData, t0: float, t1: float) -> str:
+    """:data:`ELECTRICAL` when the electrical readings cover some of ``[t0, t1]``, else
+    :data:`MECHANICAL`."""
+    span = _finite_span(data.electrical)
+    return ELECTRICAL if span is not None and min(t1, span[1]) > max(t0, span[0]) else MECHANICAL
+
+
+def _energy(t: NDArray[np.float64], y: NDArray[np.float64],
+            edges: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Per interval of ``edges``: the energy of power ``y`` over its finite samples, the time
+    they cover, and the edges clipped to their span (no samples: NaN energy, no time)."""
+    ok = np.isfinite(y)
+    t, y = t[ok], y[ok]
+    if t.size < 2:
+        return np.full(edges.size - 1, math.nan), np.zeros(edges.size - 1), edges
+    span = np.clip(edges, t[0], t[-1])
+    return np.diff(_at(t, _cumulative(t, y), edges)), np.diff(span), span
+
+
+class _Sums:
+    """Each figure's numerator and denominator per interval (cycle) of a window; the power
+    figures of ``source`` (:data:`ELECTRICAL` or :data:`MECHANICAL`), the mechanical
+    estimate's as ``mech_*``."""
+
+    def __init__(self, data: RunData, edges: NDArray[np.float64], mass: float, closed: bool = True,
+                 source: str = ELECTRICAL) -> None:
+        if source not in LABELS:
+            raise ValueError(f"power source {source!r} is not one of {', '.join(LABELS)}")
         self.edges = edges
         self.closed = closed
         n = edges.size - 1
         p = data.power.array()
         t = p[:, 0]
-        energy = _at(t, _cumulative(t, p[:, 1]), edges)
-        fin_energy = [_at(t, _cumulative(t, p[:, 2 + i]), edges) for i in range(N_FINS)]
-        dist = _at(t, _restarting(p[:, 6]), edges)
-        dt = np.diff(edges)
+        distance = _restarting(p[:, 6])
         # within the power samples' span only: no extrapolated zero power outside it
         covered = np.diff(np.clip(edges, t[0], t[-1])) if t.size else np.zeros(n)
         self.num: dict[str, NDArray[np.float64]] = {}
         self.den: dict[str, NDArray[np.float64]] = {}
-        e, d = np.diff(energy), np.diff(dist)
-        self._set("power", e, covered)
-        for i in range(N_FINS):
-            self._set(f"power_{i}", np.diff(fin_energy[i]), covered)
-        self._set("energy_per_metre", e, d)
-        self._set("cost_of_transport", e / mass, d)
-        self._set("speed", d, covered)
-        self.duration = dt
+        self._set("speed", np.diff(_at(t, distance, edges)), covered)
+        self.duration = np.diff(edges)
+        for prefix, src in (("", source), ("mech_", MECHANICAL)):
+            a = (data.electrical if src == ELECTRICAL else data.power).array()
+            e, cover, span = _energy(a[:, 0], a[:, 1], edges)
+            d = np.diff(_at(t, distance, span))  # the distance over the stretch the power covers
+            self._set(f"{prefix}power", e, cover)
+            self._set(f"{prefix}energy_per_metre", e, d)
+            self._set(f"{prefix}cost_of_transport", e / mass, d)
+            for i in range(N_FINS):
+                self._set(f"{prefix}power_{i}", *_energy(a[:, 0], a[:, 2 + i], edges)[:2])
         tr = data.tracking.array()
         for k, name in ((2, "speed_mae"), (3, "depth_mae"), (4, "heading_mae")):
             ok = (tr[:, 1] != 0.0) & np.isfinite(tr[:, k])
@@ -297,29 +365,36 @@ def _window_edges(data: RunData, t0: float, t1: float) -> tuple[NDArray[np.float
     return np.concatenate(([t0], best, [t1])), max(best.size - 1, 0)
 
 
-def window_figures(data: RunData, t0: float, t1: float, mass: float, closed: bool = True) -> dict[str, float]:
-    """Every figure of :data:`FIGURES` over ``[t0, t1]`` (no intervals); NaN where none."""
+def window_figures(data: RunData, t0: float, t1: float, mass: float, closed: bool = True,
+                   source: str | None = None) -> dict[str, float]:
+    """Every figure of :data:`FIGURES` over ``[t0, t1]`` (no intervals), the power figures of
+    ``source`` (None: :func:`power_source`); NaN where none."""
     if len(data.power) == 0:
         return {k: math.nan for k in FIGURES}
-    s = _Sums(data, np.array([t0, t1]), mass, closed)
+    s = _Sums(data, np.array([t0, t1]), mass, closed, source or power_source(data, t0, t1))
     return {k: s.value(k) * (100.0 if k in _PERCENT else 1.0) for k in FIGURES}
 
 
 def robot_now(data: RunData, t1: float, cfg: MetricsConfig) -> RobotNow:
-    """The robot's figures over ``[t1 - cfg.window, t1]``."""
+    """The robot's figures over ``[t1 - cfg.window, t1]``, of the battery's power where
+    there are electrical readings, else of the estimate, labelled so."""
     t0 = t1 - cfg.window
     if len(data.power) == 0:
         nan = math.nan
         return RobotNow(cfg.window, nan, nan, nan, nan, nan, nan)
-    s = _Sums(data, np.array([t0, t1]), cfg.mass)
+    source = power_source(data, t0, t1)
+    s = _Sums(data, np.array([t0, t1]), cfg.mass, source=source)
     return RobotNow(cfg.window, s.value("power"), s.value("energy_per_metre"), s.value("cost_of_transport"),
-                    s.value("speed_mae"), s.value("depth_mae"), s.value("heading_mae"))
+                    s.value("speed_mae"), s.value("depth_mae"), s.value("heading_mae"), source,
+                    default_label(source), s.value("mech_power"), s.value("mech_energy_per_metre"),
+                    s.value("mech_cost_of_transport"))
 
 
 def fins_now(data: RunData, t1: float, cfg: MetricsConfig) -> list[FinNow]:
-    """Each fin's figures now (see :class:`FinNow`); its power over ``cfg.window``."""
+    """Each fin's figures now (see :class:`FinNow`); its power over ``cfg.window``, of the
+    same source as :func:`robot_now`'s."""
     t0 = t1 - cfg.window
-    s = _Sums(data, np.array([t0, t1]), cfg.mass) if len(data.power) else None
+    s = _Sums(data, np.array([t0, t1]), cfg.mass, source=power_source(data, t0, t1)) if len(data.power) else None
     out = []
     for i in range(N_FINS):
         st = data.strokes[i].array()
@@ -338,11 +413,15 @@ def fins_now(data: RunData, t1: float, cfg: MetricsConfig) -> list[FinNow]:
 
 # ---- Table V -------------------------------------------------------------------------------------
 
-#: Table V's figures: key -> (heading, unit); per fin: ``power_<i>``, ``st_mae_<i>``, ``st_in_<i>``
+#: Table V's figures: key -> (heading, unit); per fin: ``power_<i>``, ``st_mae_<i>``, ``st_in_<i>``;
+#: the power figures are of the row's source, the ``mech_*`` ones the mechanical estimate's
 FIGURES: dict[str, tuple[str, str]] = {
     "power": ("mean power", "W"),
     "energy_per_metre": ("energy per metre", "J/m"),
     "cost_of_transport": ("cost of transport", "J/(kg m)"),
+    "mech_power": ("mechanical power (shaft estimate)", "W"),
+    "mech_energy_per_metre": ("mechanical energy per metre (shaft estimate)", "J/m"),
+    "mech_cost_of_transport": ("mechanical cost of transport (shaft estimate)", "J/(kg m)"),
     "speed": ("mean speed", "m/s"),
     "speed_mae": ("speed MAE", "m/s"),
     "depth_mae": ("depth MAE", "m"),
@@ -350,10 +429,13 @@ FIGURES: dict[str, tuple[str, str]] = {
     "st_mae": ("St MAE", "1"),
     "st_in": ("St in corridor", "%"),
     **{f"power_{i}": (f"fin {i} power", "W") for i in range(N_FINS)},
+    **{f"mech_power_{i}": (f"fin {i} mechanical power (shaft estimate)", "W") for i in range(N_FINS)},
     **{f"st_mae_{i}": (f"fin {i} St MAE", "1") for i in range(N_FINS)},
     **{f"st_in_{i}": (f"fin {i} St in corridor", "%") for i in range(N_FINS)},
 }
 _PERCENT = {k for k, (_, unit) in FIGURES.items() if unit == "%"}
+#: the figures of the row's power source (the rest do not depend on it)
+POWER_FIGURES = ("power", "energy_per_metre", "cost_of_transport", *(f"power_{i}" for i in range(N_FINS)))
 
 
 @dataclass(frozen=True)
@@ -367,7 +449,8 @@ class Estimate:
 
 @dataclass(frozen=True)
 class TableRow:
-    """One run's or segment's Table V figures over ``[t0, t1]``."""
+    """One run's or segment's Table V figures over ``[t0, t1]``; the power figures
+    (:data:`POWER_FIGURES`) are of ``source``, labelled ``source_label``."""
 
     label: str
     t0: float
@@ -375,19 +458,25 @@ class TableRow:
     cycles: int
     figures: dict[str, Estimate]
     not_comparable: str = ""  # why it is not comparable with the reference row ("" when it is)
+    source: str = MECHANICAL
+    source_label: str = ""
 
 
 def table_row(data: RunData, t0: float, t1: float, cfg: MetricsConfig, label: str = "",
-              closed: bool = True) -> TableRow:
+              closed: bool = True, source: str | None = None, source_why: str = "") -> TableRow:
     """Table V's figures of ``[t0, t1]`` (``closed`` False: ``[t0, t1)``, so that a stroke
     or sample at a segment's end counts in the next segment only) with bootstrap intervals
-    over cycles."""
+    over cycles; the power figures of ``source``, ``source_why`` saying why it is the
+    estimate (None: :func:`power_source`, labelled by :func:`default_label`)."""
     if not t1 > t0:
         raise ValueError(f"{label or 'window'}: empty time window [{t0:g}, {t1:g}]")
     if len(data.power) == 0:
         raise ValueError(f"{label or 'window'}: no power messages: its efficiency cannot be computed")
+    if source is None:
+        source = power_source(data, t0, t1)
+        source_why = NO_ELECTRICAL if source == MECHANICAL else ""
     edges, cycles = _window_edges(data, t0, t1)
-    s = _Sums(data, edges, cfg.mass, closed)
+    s = _Sums(data, edges, cfg.mass, closed, source)
     # the bootstrap resamples the whole cycles (the remainders at the window's ends stay in)
     inner = np.arange(1, edges.size - 2)
     outer = np.setdiff1d(np.arange(edges.size - 1), inner)
@@ -410,7 +499,7 @@ def table_row(data: RunData, t0: float, t1: float, cfg: MetricsConfig, label: st
             if r.size:
                 lo, hi = (float(x) for x in np.quantile(r, [alpha, 1.0 - alpha]))
         figures[name] = Estimate(v, lo, hi)
-    return TableRow(label, t0, t1, cycles, figures)
+    return TableRow(label, t0, t1, cycles, figures, source=source, source_label=source_label(source, source_why))
 
 
 def comparable(row: TableRow, reference: TableRow, cfg: MetricsConfig) -> str:

@@ -20,13 +20,15 @@ from dataclasses import dataclass
 from ucat_console.robot import geometry as G
 from ucat_console.robot import hull as H
 from ucat_console.robot.geometry import Geometry
+from ucat_console.robot.motor import FinMotor
 from ucat_console.robot.servo import FIN_ACCELERATION, FIN_MAX_RATE
 from ucat_console.robot.units import RHO_FRESH, DriveUnits
 from ucat_console.typedconf import Config, param, require_below
 
 #: Names of the fin coefficient sets (see :class:`FinHydroConfig`).
-COEFFICIENT_SETS = ("paper", "eeuvsim", "soft_fin", "custom")
-WAKE_OPTIONS = ("quasi_steady", "strouhal_wake", "foil_inflow")
+COEFFICIENT_SETS = ("paper", "eeuvsim", "custom")
+#: the plant's fin models: the plate in the flow, and the still-water null plant
+FIN_MODELS = ("plate", "still_water")
 
 
 def _check_vec3(name: str, value: tuple[float, ...]) -> None:
@@ -114,73 +116,76 @@ class FinGeometryConfig(Config):
 
 @dataclass(frozen=True)
 class FinCoefficients(Config):
-    """One quasi-steady coefficient set: v = r_c |w|, D = rho C_D A v^2 / 2, L = rho C_L A v^2 / 2."""
+    """A fin's still-water model, of the controller's quasi-steady form: a stroke at rate w
+    makes drag ``rho C_D A v^2 / 2`` and lift ``rho C_L A v^2 / 2`` at ``v = r_c |w|``. The
+    plant's plate is calibrated to it (``backend/sim/plate.py``): at zero speed it makes this
+    model's mean force, and in a stream what its physics gives."""
 
     rho: float = param(1000.0, lo=1.0, hi=2000.0, lo_open=True, unit="kg/m3", doc="water density")
-    c_d: float = param(0.70, lo=0.0, hi=20.0, doc="drag coefficient C_D")
+    c_d: float = param(0.70, lo=0.0, hi=20.0, lo_open=True, doc="drag coefficient C_D (the plate's normal force)")
     c_l: float = param(0.25, lo=0.0, hi=20.0, doc="lift coefficient C_L")
     area: float = param(0.020, lo=0.0, hi=1.0, lo_open=True, unit="m2", doc="fin planform area A_f")
     r_c: float = param(0.10, lo=0.0, hi=2.0, lo_open=True, unit="m", doc="radius of gyration r_c")
     fin_length: float = param(G.FIN_LENGTH, lo=0.0, hi=2.0, lo_open=True, unit="m", doc="fin length L_f (Strouhal)")
-    thrust_gain: float = param(
-        1.0, lo=0.0, hi=100.0, lo_open=True, doc="thrust multiplier over the quasi-steady model"
-    )
+
+    def scaled(self, factor: float) -> FinCoefficients:
+        """The same fin with ``factor`` times the coefficients: ``factor`` times the thrust per
+        w^2, paid with ``factor`` times the shaft's load (E6's plant family)."""
+        return self.replace(c_d=self.c_d * factor, c_l=self.c_l * factor)
 
 
-#: The paper's coefficients (its Table I), as the controller uses them.
+#: The paper's coefficients (its Table I), identified on the U-CAT's fin in still water: the
+#: default plant's calibration, and the controller's model.
 PAPER_COEFFICIENTS = FinCoefficients()
 #: eeUVsim's lift/drag values (model-mismatch case). A_f and r_c are not part of that set;
 #: the paper's values are kept so only the coefficients, the length and rho differ.
 EEUVSIM_COEFFICIENTS = FinCoefficients(rho=997.0, c_d=3.2, c_l=1.65, fin_length=0.18)
-#: Soft fins for the ``strouhal_wake`` plant: the paper's coefficients with a thrust gain of
-#: 4.6, fixed before any run; the check and the literature behind it are in the module
-#: docstring of ``ucat_console.backend.sim.fin_hydro``.
-SOFT_FIN_COEFFICIENTS = FinCoefficients(thrust_gain=4.6)
 
 _PRESETS = {
     "paper": PAPER_COEFFICIENTS,
     "eeuvsim": EEUVSIM_COEFFICIENTS,
-    "soft_fin": SOFT_FIN_COEFFICIENTS,
 }
 
 
 @dataclass(frozen=True)
 class FinHydroConfig(Config):
-    """Fin hydrodynamics in the plant (plant.md): coefficient set and wake option.
+    """The fins in the water (plant.md; docs/fin-plant.md): a plate hinged at its leading
+    edge whose forces conserve energy (:mod:`ucat_console.backend.sim.plate`), calibrated to a
+    still-water coefficient set.
 
-    The wake factor (``strouhal_wake``) is a split Gaussian in the fin's current Strouhal
-    number with a floor; see :func:`ucat_console.backend.sim.fin_hydro.wake_factor`.
-    ``foil_inflow`` leaves the still-water force as it is and adds what the flow past the
-    hull changes, by blade-element strips of a flat plate (``foil_*`` fields;
-    :mod:`ucat_console.backend.sim.foil`, docs/foil-plant.md).
+    ``plate`` is the plant: its forces from the fin's motion through the water the hull moves
+    through. ``still_water`` is the null plant of the experiments: the same plate as if the
+    hull stood still, the work its force does on the hull paid through the shaft, so that how
+    a force is made (the stroke's frequency, its Strouhal number) costs nothing more or less
+    at any speed.
     """
 
-    coefficients: str = param("soft_fin", choices=COEFFICIENT_SETS, doc="fin coefficient set")
+    model: str = param("plate", choices=FIN_MODELS, doc="plate: the fin in the flow; still_water: the null plant")
+    coefficients: str = param("paper", choices=COEFFICIENT_SETS,
+                              doc="the still-water model the plate is calibrated to")
     custom: FinCoefficients = FinCoefficients()
-    wake: str = param("strouhal_wake", choices=WAKE_OPTIONS, doc="wake option")
-    st_peak: float = param(0.30, lo=0.25, hi=0.35, doc="Strouhal number of the wake factor's peak")
-    sigma_low: float = param(0.08, lo=0.005, hi=1.0, doc="width of the wake factor below the peak")
-    sigma_high: float = param(0.20, lo=0.005, hi=2.0, doc="width of the wake factor above the peak")
-    floor: float = param(0.25, lo=0.0, hi=1.0, doc="wake factor far from the peak")
-    v_floor: float = param(0.05, lo=0.001, hi=5.0, unit="m/s", doc="speed floor for the fin's Strouhal number")
+    c_d0: float = param(
+        0.05, lo=0.0, hi=2.0,
+        doc="the plate's profile drag C_D0 (flow along it); part of its normal force C_D",
+    )
+    lift_ratio: float = param(
+        0.6, lo=0.0, hi=2.0,
+        doc="the plate's largest lift over its normal force, C_Lmax / C_N (Wang et al. 2004: 1.2 / 2.0)",
+    )
+    added_mass: float = param(
+        1.0, lo=0.0, hi=2.0, doc="share of the plate's strip-theory added inertia on the shaft"
+    )
+    strips: int = param(8, lo=1, hi=64, doc="blade-element strips along the plate")
+    v_floor: float = param(0.05, lo=0.001, hi=5.0, unit="m/s",
+                           doc="speed floor of each fin's recorded Strouhal number (the plant never reads it)")
     tau_rate: float = param(
-        0.3, lo=0.001, hi=10.0, unit="s", doc="time constant of the fin's mean |rate| (wake memory)"
-    )
-    foil_cd0: float = param(0.05, lo=0.0, hi=2.0, doc="foil_inflow: the plate's profile drag C_D0")
-    foil_cd90: float = param(
-        2.0, lo=0.0, hi=5.0, lo_open=True, doc="foil_inflow: the plate's drag across the flow, C_D0 + C_D90 at 90 deg"
-    )
-    foil_cl_max: float = param(
-        1.2, lo=0.0, hi=5.0, doc="foil_inflow: the plate's largest lift, C_L = C_Lmax sin(2 alpha)"
-    )
-    foil_strips: int = param(8, lo=1, hi=64, doc="foil_inflow: blade-element strips along the plate")
-    foil_added_mass: float = param(
-        1.0, lo=0.0, hi=2.0, doc="foil_inflow: share of the plate's strip-theory added inertia on the shaft"
+        0.3, lo=0.001, hi=10.0, unit="s", doc="time constant of each fin's mean |rate| for its recorded Strouhal number"
     )
 
     def _check(self) -> None:
-        require_below(self, "sigma_low", "sigma_high",
-                      "the wake factor must fall faster below its peak than above")
+        c = self.resolved()
+        if self.c_d0 > c.c_d:
+            raise ValueError(f"c_d0: the profile drag {self.c_d0} exceeds the plate's normal force C_D {c.c_d}")
 
     def resolved(self) -> FinCoefficients:
         """The coefficient set in use."""
@@ -256,6 +261,7 @@ class PlantConfig(Config):
     fins: FinGeometryConfig = FinGeometryConfig()
     hydro: FinHydroConfig = FinHydroConfig()
     servo: ServoConfig = ServoConfig()
+    motor: FinMotor = FinMotor()  # each fin drive's motor, gearhead and bridge (robot.motor)
     sensors: SensorsConfig = SensorsConfig()
     dt: float = param(0.001, lo=1e-5, hi=0.001, unit="s", doc="physics time step (1 kHz or finer)")
     seed: int = param(0, lo=0, hi=2**63 - 1, doc="seed of the sensor noise")

@@ -4,11 +4,12 @@
 it, :func:`advance_steps` is the functional core: one compiled call runs many physics steps
 (state arrays in, state arrays out, nothing allocated in the loop). Each step:
 
-1. every fin servo moves one step along its profile (``servo``), the fin's stroke start,
-   mean |rate| and true shaft power are updated (with the ``foil_inflow`` option the power
-   in step 2, as it depends on the flow);
-2. each fin's force follows from its angle and rate (``fin_hydro``; with ``foil_inflow``
-   also from the flow past the hull, ``foil``) and adds its wrench;
+1. every fin servo moves one step along its profile (``servo``) and the fin's mean |rate|
+   (its recorded Strouhal number) is updated;
+2. each fin's force, shaft torque and power, and power into the hull follow from its angle,
+   rate and acceleration and the flow past it (``plate``, ``fin_hydro.fin_flow``); its drive's
+   motor current and the battery power it draws from the shaft's torque (``robot.motor``);
+   its force adds its wrench (``fin_hydro``);
 3. the hull takes one semi-implicit Euler step (``vehicle``).
 
 The plant never reads the controller's parameters; it has its own (``params``).
@@ -24,19 +25,17 @@ import numpy as np
 from numba import njit
 
 from ucat_console.backend.sim.fin_hydro import (
-    H_COS_A,
-    H_FOIL,
+    H_MOTOR,
+    H_PLATE,
     H_TAU,
     add_fin_wrench,
-    drag_torque_coefficient,
-    fin_force,
+    fin_flow,
     fin_sign_table,
     fin_strouhal,
     hydro_params,
 )
-from ucat_console.backend.sim.foil import P_ON as FOIL_ON
-from ucat_console.backend.sim.foil import foil_fin
 from ucat_console.backend.sim.params import PlantConfig
+from ucat_console.backend.sim.plate import fin_load
 from ucat_console.backend.sim.sensors import SensorSuite, sample_rows, sense
 from ucat_console.backend.sim.vehicle import (
     NU,
@@ -52,6 +51,7 @@ from ucat_console.backend.sim.vehicle import (
 )
 from ucat_console.robot import reading_rows as rr
 from ucat_console.robot.fins import N_FINS
+from ucat_console.robot.motor import battery_power, motor_current
 from ucat_console.robot.readings import Reading
 from ucat_console.robot.rotations import euler_from_quaternion, quat_to_rot, quaternion_from_euler
 from ucat_console.robot.servo import encoder_reading, servo_step
@@ -61,18 +61,21 @@ log = logging.getLogger(__name__)
 # fin state layout: one row per fin
 F_THETA = 0  # angle (rad)
 F_OMEGA = 1  # rate (rad/s)
-F_THETA_START = 2  # angle where the current stroke began
-F_RATE_MEAN = 3  # filtered |rate| (Strouhal)
-F_FX = 4  # last fin-frame force f_x (N)
-F_FY = 5  # last fin-frame force f_y (N)
-F_ST = 6  # last Strouhal number
-F_THRUST_FACTOR = 7  # last thrust factor (gain x wake)
-F_ALPHA = 8  # last angular acceleration (rad/s2)
-F_POWER = 9  # last true shaft power (W), no regeneration
-F_ENERGY = 10  # shaft energy since reset (J)
-F_IMPULSE_X = 11  # time integral of the fin-frame force f_x since reset (N s)
-F_IMPULSE_Y = 12  # and of f_y
-NF = 13
+F_RATE_MEAN = 2  # filtered |rate| (Strouhal)
+F_FX = 3  # last fin-frame force f_x (N)
+F_FY = 4  # last fin-frame force f_y (N)
+F_ST = 5  # last Strouhal number
+F_USEFUL = 6  # last power the fin delivered to the hull (W)
+F_ALPHA = 7  # last angular acceleration (rad/s2)
+F_POWER = 8  # last true shaft power (W), no regeneration
+F_ENERGY = 9  # shaft energy since reset (J)
+F_IMPULSE_X = 10  # time integral of the fin-frame force f_x since reset (N s)
+F_IMPULSE_Y = 11  # and of f_y
+F_WORK = 12  # work the fin did on the hull since reset (J)
+F_CURRENT = 13  # last motor current of its drive (A)
+F_BATTERY = 14  # last battery power of its drive (W)
+F_BATTERY_ENERGY = 15  # battery energy of its drive since reset (J)
+NF = 16
 
 # command layout: one row per fin
 C_TARGET = 0
@@ -113,52 +116,49 @@ def advance_steps(
     work = np.empty(NWORK)
     tau = np.empty(6)
     nuc = np.empty(3)
+    nu_r = np.empty(6)
     k_rate = dt / ph[H_TAU]
-    k_drag = drag_torque_coefficient(ph)
-    foil_on = ph[H_FOIL + FOIL_ON] > 0.5
+    pf = ph[H_PLATE:H_MOTOR]
+    k_t, r_m, i_0, j_r = ph[H_MOTOR], ph[H_MOTOR + 1], ph[H_MOTOR + 2], ph[H_MOTOR + 3]
+    n_g, eta_g, eta_b, p_q = ph[H_MOTOR + 4], ph[H_MOTOR + 5], ph[H_MOTOR + 6], ph[H_MOTOR + 7]
     for _ in range(n_steps):
-        # 1. servos, stroke tracking, mean |rate|, shaft power
+        # 1. servos, mean |rate|
         for i in range(4):
-            th0 = xf_out[i, F_THETA]
-            om0 = xf_out[i, F_OMEGA]
             th, om, al = servo_step(
-                th0, om0, cmd[i, C_TARGET], cmd[i, C_PROFILE_VELOCITY], acceleration, max_rate, dt
+                xf_out[i, F_THETA], xf_out[i, F_OMEGA], cmd[i, C_TARGET], cmd[i, C_PROFILE_VELOCITY],
+                acceleration, max_rate, dt,
             )
             xf_out[i, F_THETA] = th
             xf_out[i, F_OMEGA] = om
             xf_out[i, F_ALPHA] = al
-            if om == 0.0 or om * om0 < 0.0:
-                xf_out[i, F_THETA_START] = th
             xf_out[i, F_RATE_MEAN] += (abs(om) - xf_out[i, F_RATE_MEAN]) * k_rate
-            if not foil_on:
-                p = fin_inertia * al * om + k_drag * abs(om) ** 3
-                if p < 0.0:
-                    p = 0.0
-                xf_out[i, F_POWER] = p
-                xf_out[i, F_ENERGY] += p * dt
-        # 2. fin forces -> body wrench
+        # 2. fin forces and powers -> body wrench
         quat_to_rot(xv_out[QUAT : QUAT + 4], r)
         body_current(r, pv, nuc)
-        surge_rel = xv_out[NU] - nuc[0]
         for j in range(6):
+            nu_r[j] = xv_out[NU + j]
             tau[j] = 0.0
+        for j in range(3):
+            nu_r[j] -= nuc[j]
         for i in range(4):
-            st = fin_strouhal(xf_out[i, F_RATE_MEAN], surge_rel, ph)  # recorded; the foil never reads it
-            if foil_on:
-                fx, fy, scale, p = foil_fin(xf_out[i, F_THETA], xf_out[i, F_OMEGA], xf_out[i, F_THETA_START],
-                                            xf_out[i, F_ALPHA], surge_rel * ph[H_COS_A], fin_inertia, ph)
-                xf_out[i, F_POWER] = p
-                xf_out[i, F_ENERGY] += p * dt
-            else:
-                fx, fy, scale = fin_force(
-                    xf_out[i, F_THETA], xf_out[i, F_OMEGA], xf_out[i, F_THETA_START], st, ph
-                )
+            ux, uy = fin_flow(nu_r, signs[i, 0], signs[i, 1], signs[i, 2], ph)
+            om = xf_out[i, F_OMEGA]
+            al = xf_out[i, F_ALPHA]
+            fx, fy, torque, p, useful = fin_load(xf_out[i, F_THETA], om, al, ux, uy, fin_inertia, dt, pf)
+            current = motor_current(torque, om, al, k_t, i_0, j_r, n_g, eta_g)
+            battery = battery_power(current, om, k_t, r_m, n_g, eta_b, p_q)
+            xf_out[i, F_CURRENT] = current
+            xf_out[i, F_BATTERY] = battery
+            xf_out[i, F_BATTERY_ENERGY] += battery * dt
             xf_out[i, F_FX] = fx
             xf_out[i, F_FY] = fy
+            xf_out[i, F_POWER] = p
+            xf_out[i, F_ENERGY] += p * dt
+            xf_out[i, F_USEFUL] = useful
+            xf_out[i, F_WORK] += useful * dt
             xf_out[i, F_IMPULSE_X] += fx * dt
             xf_out[i, F_IMPULSE_Y] += fy * dt
-            xf_out[i, F_ST] = st
-            xf_out[i, F_THRUST_FACTOR] = scale
+            xf_out[i, F_ST] = fin_strouhal(xf_out[i, F_RATE_MEAN], nu_r[0], ph)  # recorded; no force reads it
             add_fin_wrench(fx, fy, signs[i, 0], signs[i, 1], signs[i, 2], ph, tau)
         # 3. hull
         vehicle_step(xv_out, tau, mrb, ma, minv, pv, dt, r, nuc, work)
@@ -224,7 +224,7 @@ class Plant:
         self._mats = np.stack([self._mrb, self._ma, self._minv])
         self._tau_ext = (0.0,) * 6
         self._pv = vehicle_params(c.vehicle, self._tau_ext)
-        self._ph = hydro_params(c.hydro, c.fins)
+        self._ph = hydro_params(c.hydro, c.fins, c.motor)
         self._signs = fin_sign_table()
         self._acc = float(c.servo.acceleration)
         self._max_rate = float(c.servo.max_rate)
@@ -275,7 +275,6 @@ class Plant:
         angles = _finite("fin_angles", fin_angles, N_FINS)
         self._xf[:, :] = 0.0
         self._xf[:, F_THETA] = angles
-        self._xf[:, F_THETA_START] = angles
         self._cmd[:, C_TARGET] = angles
         self._cmd[:, C_PROFILE_VELOCITY] = self._cfg.servo.max_rate
         self._step_count[0] = 0
@@ -413,13 +412,23 @@ class Plant:
     def fin_strouhal(self) -> tuple[float, ...]:
         return tuple(float(x) for x in self._xf[:, F_ST])
 
-    def fin_thrust_factor(self) -> tuple[float, ...]:
-        """Thrust gain x wake factor applied to each fin's forward force in the last step."""
-        return tuple(float(x) for x in self._xf[:, F_THRUST_FACTOR])
-
     def fin_energy(self) -> tuple[float, ...]:
-        """True shaft energy per fin since reset (J): I alpha w + drag power, no regeneration."""
+        """True shaft energy per fin since reset (J), no regeneration (``plate.fin_load``)."""
         return tuple(float(x) for x in self._xf[:, F_ENERGY])
+
+    def fin_currents(self) -> tuple[float, ...]:
+        """Each fin drive's motor current in the last step (A; ``robot.motor``)."""
+        return tuple(float(x) for x in self._xf[:, F_CURRENT])
+
+    def fin_battery_energy(self) -> tuple[float, ...]:
+        """Battery energy each fin drive drew since reset (J; ``robot.motor``): never less than
+        its shaft energy."""
+        return tuple(float(x) for x in self._xf[:, F_BATTERY_ENERGY])
+
+    def fin_work(self) -> tuple[float, ...]:
+        """Work each fin did on the hull since reset (J): never more than its shaft energy
+        over whole cycles."""
+        return tuple(float(x) for x in self._xf[:, F_WORK])
 
     def fin_impulse(self) -> tuple[tuple[float, float], ...]:
         """Each fin's fin-frame force (f_x, f_y) integrated since the reset (N s): the

@@ -4,7 +4,7 @@ For each plant and hull speed V, one fin of the plant (:class:`~ucat_console.exp
 beats symmetric stroke pairs about the centre that pushes the hull forward
 (``scenario.START_FIN_ANGLE``) at amplitudes :data:`AMPLITUDES` and mean rates w. The
 experiment (not the plant) labels each beat with its per-fin Strouhal number
-``St = w L_f / (2 V)`` (a closed stroke pair, the issue's definition) and measures
+``St = w L_f / (2 V)`` (a closed stroke pair) and measures
 
     efficiency  eta = T V / P,   T = the fin's forward force on the hull, P = its true shaft power;
 
@@ -31,10 +31,10 @@ from ucat_console.experiments.fin_rig import FinRig
 from ucat_console.experiments.scenario import START_FIN_ANGLE, plant_config
 from ucat_console.typedconf import to_dict
 
-#: E7's plants: the foil family over the profile drag C_D0 and the null plant (no flow
-#: dependence: the soft fin's quasi-steady model)
-E7_FOIL_CD0 = (0.02, 0.1, 0.3)
-NULL_PLANT = "quasi_steady"
+#: E7's plants: the plate over the profile drag C_D0 and the null plant (the plate as if
+#: in still water, the thrust's work paid through the shaft)
+E7_CD0 = (0.02, 0.05, 0.3)
+NULL_PLANT = "still_water"
 #: E7's speeds (m/s)
 E7_SPEEDS = (0.1, 0.2, 0.3, 0.4)
 #: amplitudes (rad, half the stroke) and per-fin St grid of the open-loop sweep
@@ -45,9 +45,9 @@ CORRIDOR = (0.25, 0.35)
 
 
 def e7_plants() -> list[str]:
-    from ucat_console.experiments.scenario import foil_name
+    from ucat_console.experiments.scenario import cd0_name
 
-    return [foil_name(c) for c in E7_FOIL_CD0] + [NULL_PLANT]
+    return [cd0_name(c) for c in E7_CD0] + [NULL_PLANT]
 
 
 def plant_hash(plants: list[str]) -> str:
