@@ -22,6 +22,16 @@ a crowd of pages, measured against ``ucat-console run`` on the simulated robot.
   DISARM: the disarm delay is from sending the press to the supervisor disarmed. Also the
   plans that missed their hand-over (``plan_overruns``) during the spam, against as long
   without it. The goal: within 0.5 s.
+* **Pilot's link dropped while a request waits**: the pilot (a raw page) flies, armed at
+  0.2 m/s; another raw page asks it for control with the token and sits idle; then the
+  pilot's page stops reading and answering (a dropped link, TCP left open). Who flies once
+  the console has seen the pilot gone (nobody: a request never takes control by waiting),
+  whether the ``pilot_gone`` failsafe triggered, and the time from the drop to its hold.
+  Then the operator comes back on a new page with the token: the time from sending the
+  token to the page showing it flies, and from its DISARM press to the robot disarmed.
+* **Hand-over**: a new raw page asks the pilot for control; the pilot presses *Hand over*.
+  The time from that press to the new pilot's page showing it flies, and to its first
+  command (a velocity, applied with *Apply setpoints*) in force in the supervisor.
 * **Slow link**: the pilot's raw page reads 50 kB/s (``--slow-rate``) while the robot swims
   and the live view sends at its configured rates: whether it stays the pilot for
   ``--slow-seconds`` s, its heartbeats' round trips (the console's own measure) and whether
@@ -417,14 +427,142 @@ def slow_link(rate: float = 50_000.0, seconds: float = 60.0) -> dict[str, Any]:
             "gone_events": gone}
 
 
-PARTS = ("frozen", "takeover", "crowd", "link-loss", "spam", "slow-link")
+def _event_time(events: list, after: int, source: str, code: str, timeout: float) -> float | None:
+    """The time (monotonic) of the first event ``source``/``code`` from event ``after`` on,
+    waiting up to ``timeout`` s for it (None: none came)."""
+    try:
+        return _wait(lambda: next((t for t, e in events[after:] if e.source == source and e.code == code), None),
+                     timeout, f"{source}/{code}")
+    except TimeoutError:
+        return None
+
+
+def pilot_drop(trials: int, pilot_gone: float) -> dict[str, Any]:
+    from ucat_console.backend.access import LOCAL
+    from ucat_console.bench.raw_page import RawPage
+
+    runs: list[dict[str, Any]] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        sup, app, events = _console(tmp, pilot_gone)
+        try:
+            for trial in range(trials):
+                a = _pilot(app, sup)
+                a_id = sup.access.pilot
+                _wait(lambda: not sup.safety.active(), 30.0, "the last trial's failsafe cleared")
+                sup.arm(LOCAL)
+                sup.set_setpoints(LOCAL, velocity=0.2)
+                _wait(lambda: sup._last_body is not None and sup._last_body.velocity[0] > 0.05, 60.0,
+                      "the robot swimming")
+                b = RawPage(app.url)
+                b.wait_for("Take control", timeout=120.0)
+                b.take_control(TOKEN)
+                b_id = _wait(lambda: sup.access.pending, 30.0, "the request for control")
+                n = len(events)
+                t0 = time.monotonic()
+                a.answer_heartbeats = False  # the pilot's link drops
+                a.stop_reading()
+                if _event_time(events, n, "access", "pilot_left", pilot_gone + 30.0) is None:
+                    raise TimeoutError("the console never saw the pilot's page gone")
+                pilot = sup.access.pilot
+                t_hold = _event_time(events, n, "failsafe", "pilot_gone", pilot_gone + 2.0)
+                try:
+                    held = t_hold is not None and _wait(lambda: sup.setpoints.velocity == 0.0, 5.0, "the hold")
+                except TimeoutError:
+                    held = False
+                run: dict[str, Any] = {
+                    "pilot_after": "nobody" if pilot is None else "the waiting page" if pilot == b_id
+                    else f"client {pilot}",
+                    "failsafe": t_hold is not None, "hold_s": None if t_hold is None else t_hold - t0,
+                    "held": held and sup.armed,
+                }
+                c = RawPage(app.url)  # the operator, back with the token
+                c.wait_for("Take control", timeout=120.0)
+                n = len(events)
+                t1 = time.monotonic()
+                c.take_control(TOKEN)
+                try:
+                    _wait(lambda: c.bar.get("you_pilot"), 10.0, "the returning operator's page flying")
+                except TimeoutError:
+                    run.update(control_s=None, disarm_s=None)
+                    sup.disarm(LOCAL)
+                else:
+                    t2 = time.monotonic()
+                    c.update(c.bar["disarm_uuid"], value=True)
+                    t3 = _event_time(events, n, "supervisor", "disarmed", 30.0)
+                    run.update(control_s=t2 - t1, disarm_s=None if t3 is None else t3 - t2)
+                runs.append(run)
+                log.info("pilot drop trial %d: %s", trial + 1, run)
+                _wait(lambda: not sup.armed, 30.0, "the robot disarmed")
+                if sup.access.pilot is not None:
+                    sup.release(sup.access.pilot)
+                for p in (a, b, c):
+                    p.close()
+                _wait(lambda: a_id not in sup.access.clients, 60.0, "the dropped page gone")
+        finally:
+            sup.stop()
+            app.stop()
+    done = [r for r in runs if r["hold_s"] is not None]
+    took = [r for r in runs if r["disarm_s"] is not None]
+    return {"trials": trials, "pilot_gone_timeout_s": pilot_gone,
+            "pilot_after": sorted({r["pilot_after"] for r in runs}),
+            "failsafe_triggered": sum(r["failsafe"] for r in runs), "held": sum(r["held"] for r in runs),
+            "hold_median_s": statistics.median(r["hold_s"] for r in done) if done else None,
+            "hold_max_s": max(r["hold_s"] for r in done) if done else None,
+            "control_median_s": statistics.median(r["control_s"] for r in took) if took else None,
+            "disarm_median_s": statistics.median(r["disarm_s"] for r in took) if took else None,
+            "disarm_max_s": max(r["disarm_s"] for r in took) if took else None,
+            "runs": runs}
+
+
+def handover(trials: int) -> dict[str, Any]:
+    from ucat_console.backend.access import LOCAL
+    from ucat_console.bench.raw_page import RawPage
+
+    to_page: list[float] = []
+    to_command: list[float] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        sup, app, events = _console(tmp, 2.0)
+        try:
+            pilot = _pilot(app, sup)
+            sup.arm(LOCAL)
+            sup.set_setpoints(LOCAL, velocity=0.1)
+            for trial in range(trials):
+                asker = RawPage(app.url)
+                asker.wait_for("Take control", timeout=120.0)
+                asker.take_control(TOKEN)
+                asker_id = _wait(lambda: sup.access.pending, 30.0, "the request for control")
+                accept = pilot.wait_for(f"Hand over to client {asker_id}", "GuiButtonMessage")
+                _wait(lambda: pilot.element(accept).get("visible"), 30.0, "the pilot's page showing the request")
+                velocity = 0.2 if trial % 2 == 0 else 0.1
+                t0 = time.monotonic()
+                pilot.update(accept, value=True)
+                _wait(lambda: asker.bar.get("you_pilot"), 30.0, "the new pilot's page flying")
+                to_page.append(time.monotonic() - t0)
+                asker.set_value("Velocity m/s", velocity)
+                asker.click("Apply setpoints")
+                _wait(lambda: sup.setpoints.velocity == velocity, 30.0, "the new pilot's setpoint in force")
+                to_command.append(time.monotonic() - t0)
+                log.info("hand-over trial %d: the new pilot's page after %.3f s, its command after %.3f s",
+                         trial + 1, to_page[-1], to_command[-1])
+                pilot.close()
+                pilot = asker
+            pilot.close()
+        finally:
+            sup.stop()
+            app.stop()
+    return {"trials": trials, "page_median_s": statistics.median(to_page), "page_max_s": max(to_page),
+            "command_median_s": statistics.median(to_command), "command_max_s": max(to_command),
+            "page_s": to_page, "command_s": to_command}
+
+
+PARTS = ("frozen", "takeover", "crowd", "link-loss", "spam", "slow-link", "drop", "handover")
 
 
 def measure(trials: int = 10, spam_trials: int = 10, rounds: int = 10, pages: int = 40,
             pilot_gone: float = 2.0, link_trials: int = 5, parts: tuple[str, ...] = PARTS,
             disarm_trials: int = 5, copies: int = 23, session_seconds: float = 60.0, spammers: int = 1,
             spam_rate: float = 20.0, spam_before: float = 5.0, slow_rate: float = 50_000.0,
-            slow_seconds: float = 60.0) -> dict[str, Any]:
+            slow_seconds: float = 60.0, drop_trials: int = 5, handover_trials: int = 10) -> dict[str, Any]:
     from ucat_console.bench.machine import machine_info
 
     out: dict[str, Any] = {"machine": machine_info(None), "load_before": os.getloadavg()[0]}
@@ -441,6 +579,10 @@ def measure(trials: int = 10, spam_trials: int = 10, rounds: int = 10, pages: in
                                                      spam_rate, spam_before)
     if "slow-link" in parts:
         out["slow_link"] = slow_link(slow_rate, slow_seconds)
+    if "drop" in parts:
+        out["pilot_drop"] = pilot_drop(drop_trials, pilot_gone)
+    if "handover" in parts:
+        out["handover"] = handover(handover_trials)
     out["load_after"] = os.getloadavg()[0]
     return out
 
@@ -482,13 +624,29 @@ def format_result(r: dict[str, Any]) -> str:
         lines.append(f"pilot reading {x['rate_bytes_s'] / 1e3:g} kB/s: "
                      f"{'stayed the pilot' if x['stayed_pilot'] else 'LOST the pilot'} for {x['pilot_for_s']:.0f} s "
                      f"(read {x['read_bytes_s'] / 1e3:.0f} kB/s); {rtt}; {shown}")
+    if "pilot_drop" in r:
+        x = r["pilot_drop"]
+        hold = (f"hold after median {x['hold_median_s']:.2f} s, max {x['hold_max_s']:.2f} s"
+                if x["hold_median_s"] is not None else "no hold")
+        back = (f"the token back in control after median {x['control_median_s'] * 1e3:.0f} ms, its DISARM "
+                f"applied after median {x['disarm_median_s'] * 1e3:.0f} ms, max {x['disarm_max_s'] * 1e3:.0f} ms"
+                if x["disarm_median_s"] is not None else "the token did NOT take control back")
+        lines.append(f"pilot's link dropped while a page waits for its hand-over ({x['trials']} trials, pilot_gone "
+                     f"timeout {x['pilot_gone_timeout_s']:g} s): pilot after: {', '.join(x['pilot_after'])}; "
+                     f"failsafe in {x['failsafe_triggered']} of {x['trials']}, {hold}; {back}")
+    if "handover" in r:
+        x = r["handover"]
+        lines.append(f"hand-over accepted ({x['trials']} trials): the new pilot's page flying after median "
+                     f"{x['page_median_s'] * 1e3:.0f} ms, its first command in force after median "
+                     f"{x['command_median_s'] * 1e3:.0f} ms, max {x['command_max_s'] * 1e3:.0f} ms")
     lines.append(f"load average {r['load_before']:.1f} before, {r['load_after']:.1f} after")
     return "\n".join(lines)
 
 
 def register_bench(kinds: argparse._SubParsersAction) -> None:
     p = kinds.add_parser("safety", help="frozen pilot detection, take-over under token spam, simultaneous pages, "
-                                        "link loss, DISARM under a viewer's spam, a pilot on a slow link")
+                                        "link loss, DISARM under a viewer's spam, a pilot on a slow link, the "
+                                        "pilot's link dropped while a page waits for control, a hand-over")
     p.add_argument("--trials", type=int, default=10, help="frozen-pilot trials (SIGSTOP on a Chromium page)")
     p.add_argument("--spam-trials", type=int, default=10, help="take-over trials under token spam")
     p.add_argument("--rounds", type=int, default=10, help="rounds of simultaneous connects")
@@ -504,13 +662,16 @@ def register_bench(kinds: argparse._SubParsersAction) -> None:
     p.add_argument("--spam-before", type=float, default=5.0, help="seconds of spam before each DISARM")
     p.add_argument("--slow-rate", type=float, default=50_000.0, help="the slow pilot's reading rate, bytes/s")
     p.add_argument("--slow-seconds", type=float, default=60.0, help="how long the slow pilot is watched, s")
+    p.add_argument("--drop-trials", type=int, default=5,
+                   help="trials of the pilot's link dropping while a page waits for its hand-over")
+    p.add_argument("--handover-trials", type=int, default=10, help="hand-overs accepted by the pilot")
     p.add_argument("--json", type=Path, default=None, help="write the results as JSON")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     for name in ("trials", "spam_trials", "rounds", "pages", "link_trials", "disarm_trials", "sessions",
-                 "spammers"):
+                 "spammers", "drop_trials", "handover_trials"):
         if getattr(args, name) < 1:
             raise ValueError(f"--{name.replace('_', '-')}: must be at least 1")
     for name in ("pilot_gone", "session_seconds", "spam_rate", "slow_rate", "slow_seconds"):
@@ -525,7 +686,8 @@ def run(args: argparse.Namespace) -> int:
     prepare_all("sim-tuned")
     r = measure(args.trials, args.spam_trials, args.rounds, args.pages, args.pilot_gone, args.link_trials,
                 tuple(args.parts), args.disarm_trials, args.sessions, args.session_seconds, args.spammers,
-                args.spam_rate, args.spam_before, args.slow_rate, args.slow_seconds)
+                args.spam_rate, args.spam_before, args.slow_rate, args.slow_seconds, args.drop_trials,
+                args.handover_trials)
     print(format_result(r))
     if args.json is not None:
         args.json.write_text(json.dumps(r, indent=1))
