@@ -629,7 +629,7 @@ def format_result(r: dict[str, Any]) -> str:
         hold = (f"hold after median {x['hold_median_s']:.2f} s, max {x['hold_max_s']:.2f} s"
                 if x["hold_median_s"] is not None else "no hold")
         back = (f"the token back in control after median {x['control_median_s'] * 1e3:.0f} ms, its DISARM "
-                f"applied after median {x['disarm_median_s'] * 1e3:.0f} ms, max {x['disarm_max_s'] * 1e3:.0f} ms"
+                f"applied after median {x['disarm_median_s'] * 1e3:.1f} ms, max {x['disarm_max_s'] * 1e3:.1f} ms"
                 if x["disarm_median_s"] is not None else "the token did NOT take control back")
         lines.append(f"pilot's link dropped while a page waits for its hand-over ({x['trials']} trials, pilot_gone "
                      f"timeout {x['pilot_gone_timeout_s']:g} s): pilot after: {', '.join(x['pilot_after'])}; "
