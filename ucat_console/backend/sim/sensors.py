@@ -13,8 +13,9 @@ one sensor's sampling does not shift another's noise.
   4-20 mA loop current (saturating at 3.8 and 20.5 mA, NAMUR NE 43), quantised by the ADC,
   and converted back to pressure and depth (the conversions of ``robot/units.py``, which the
   pressure driver uses too). A current pinned at either limit measures nothing (the robot
-  more than ``0.2 / 16`` of the span above the surface, or below the span): no reading
-  then, as the pressure driver hands on none (its ``loop_current_problem``).
+  more than 0.2/16 of the span above the surface, 0.32 m for the default 250 kPa, or deeper
+  than 16.5/16 of it): no reading then, as the pressure driver hands on none (its
+  ``loop_current_problem``).
 * IMU (3DM-CX5): gyro = body rate + constant bias + noise; accel in m/s^2 = the specific
   force a - g in the body frame (level and at rest: (0, 0, -g0)) plus the bias and noise,
   which are given in standard gravities g0 as the sensor's data sheet gives them; attitude
