@@ -523,11 +523,11 @@ class ControlPanel:
         listed = (recording, run is not None and run.finished)
         if force or listed != self._listed:  # a recording ended: it may be fitted (listed by the page jobs)
             self._listed = listed
-            jobs = getattr(self.app, "jobs", None)
-            if jobs is None:
+            submit = getattr(self.app, "submit_job", None)
+            if submit is None:
                 self.identify.list_sessions()
             else:
-                jobs.submit(self.cid, "list sessions to fit", self._list_sessions, coalesce=True)
+                submit(self.cid, "list sessions to fit", self._list_sessions, coalesce=True)
         self.identify.refresh(pilot)
 
     def _list_sessions(self) -> None:
