@@ -64,7 +64,8 @@ def test_the_page_connects_and_takes_control_through_a_slow_link(browser: Browse
         page = open_slow(browser, proxy.url)
         become_pilot(page)
         assert c.sup.access.pilot is not None
-        assert kept_token(page) == TOKEN  # in the tab's sessionStorage, for a reconnect
+        # kept in the tab's sessionStorage for a reconnect (once the bar's state says the page flies)
+        wait_for(lambda: kept_token(page) == TOKEN, timeout=30.0, what="the token kept")
         assert TOKEN not in page.url
         page.close()
     finally:
