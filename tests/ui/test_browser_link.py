@@ -28,9 +28,18 @@ pytestmark = [pytest.mark.browser, pytest.mark.slow]
 SLOW = 60_000
 
 
+#: the page's window has the focus, as the operator's has (a headless page has none): viser's
+#: client retried its socket only while focused, closing the one still opening each second
+FOCUSED = """
+document.hasFocus = () => true;
+setInterval(() => window.dispatchEvent(new Event("focus")), 500);
+"""
+
+
 def open_slow(browser: Browser, url: str) -> Page:
-    """A page on ``url`` at 1280x800, connected (its status bar shown)."""
+    """A page on ``url`` at 1280x800 whose window has the focus, connected (its status bar shown)."""
     page = browser.new_page(viewport={"width": 1280, "height": 800})
+    page.add_init_script(FOCUSED)
     page.goto(url, timeout=SLOW)
     expect(page.locator("#ucat-armed")).to_be_visible(timeout=SLOW)
     return page
