@@ -139,3 +139,27 @@ def test_a_kept_token_is_checked_again_and_forgotten_when_it_fails(browser: Brow
         wait_for(lambda: kept_token(page) is None, timeout=60.0, what="the refused token forgotten")
     finally:
         c.stop()
+
+
+def test_a_page_back_while_another_flies_does_not_ask_and_forgets_its_token(browser: Browser,
+                                                                            tmp_path: Path) -> None:
+    c = browser_console(tmp_path, pilot_gone=2.0)
+    proxy = DelayProxy(c.app.port, 0.0)
+    try:
+        first = open_slow(browser, proxy.url)
+        become_pilot(first)
+        wait_for(lambda: kept_token(first) == TOKEN, timeout=30.0, what="the token kept")
+        port = proxy.port
+        proxy.close()  # the first page's link is lost: it is gone, and nobody flies
+        wait_for(lambda: c.sup.access.pilot is None, timeout=30.0, what="the first page gone")
+        second = open_slow(browser, c.url)
+        become_pilot(second)
+        pilot = c.sup.access.pilot
+        proxy = DelayProxy(c.app.port, 0.0, port=port)  # the first page's link is back
+        expect(first.locator("#ucat-banner")).to_be_hidden(timeout=SLOW)
+        # it is a viewer now: it forgets the token and does not ask the pilot for control
+        wait_for(lambda: kept_token(first) is None, timeout=30.0, what="the token forgotten")
+        assert c.sup.access.pilot == pilot and c.sup.access.pending is None
+    finally:
+        proxy.close()
+        c.stop()

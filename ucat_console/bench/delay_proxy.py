@@ -1,7 +1,7 @@
 """A TCP proxy that delays what it carries: every chunk read from either side is written to
 the other ``delay`` s later, in order (a link with that latency each way and no bandwidth
 limit), the close of either side as well. It runs its own asyncio loop in a thread, listens
-on a free loopback port (:attr:`DelayProxy.port`) and connects each client to
+on a loopback port (``port``, or a free one: :attr:`DelayProxy.port`) and connects each client to
 ``127.0.0.1:target_port`` (the target may be down: the client's connection is then closed
 after the delay, as a refused one through a slow link)."""
 
@@ -13,10 +13,10 @@ from typing import Any
 
 
 class DelayProxy:
-    def __init__(self, target_port: int, delay: float) -> None:
+    def __init__(self, target_port: int, delay: float, port: int = 0) -> None:
         self.target_port = target_port
         self.delay = float(delay)
-        self.port = 0
+        self.port = port
         self._loop = asyncio.new_event_loop()
         self._server: Any = None
         self._tasks: set[asyncio.Task[Any]] = set()
@@ -35,7 +35,7 @@ class DelayProxy:
         asyncio.set_event_loop(self._loop)
 
         async def start() -> None:
-            self._server = await asyncio.start_server(self._client, "127.0.0.1", 0)
+            self._server = await asyncio.start_server(self._client, "127.0.0.1", self.port)
             self.port = self._server.sockets[0].getsockname()[1]
 
         self._loop.run_until_complete(start())

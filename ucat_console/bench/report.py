@@ -126,7 +126,9 @@ def _safety(d: dict[str, Any]) -> list[Row]:
                        "yes" if w["stayed_pilot"] else f"no (gone after {w['pilot_for_s']:.0f} s)", "yes", cmd))
     k = d.get("slow_connect")
     if k:
-        out.append(Row(f"a page through a {2 * k['delay_each_way_s']:g} s round trip: connected, median / max",
+        out.append(Row(f"a page through a {2 * k['delay_each_way_s']:g} s round trip: its socket open / its first "
+                       "state, median / max",
+                       f"{k['socket_median_s']:.1f} / {k['socket_max_s']:.1f} s, "
                        f"{k['connect_median_s']:.1f} / {k['connect_max_s']:.1f} s", "<= 10 s", cmd))
     x = d.get("slow_disarm")
     if x:

@@ -19,11 +19,11 @@ page does on its own:
 * **The pilot's token, for reconnects**: the token this page took control with is kept in
   the tab's ``sessionStorage`` (:data:`TOKEN_KEY`; never in the URL, never logged) while the
   page is the pilot. When the page comes back on a new connection (a lost link, the console
-  restarted) and nobody flies, it presents the token again, once, through its own token box
-  and *Take control*: the server checks it as any token (the guard's and the access rules'
-  guess budget and lock-outs). The page forgets it when control leaves it while connected
-  (released, handed over), and when the token sent again has not made it the pilot within
-  :data:`RESEND_GIVE_UP` s.
+  restarted, the tab reloaded) and nobody flies, it presents the token again, once, through
+  its own token box and *Take control*: the server checks it as any token (the guard's and
+  the access rules' guess budget and lock-outs). The page forgets it when another page flies
+  by then, when control leaves it while connected (released, handed over), and when the
+  token sent again has not made it the pilot within :data:`RESEND_GIVE_UP` s.
 * **Number boxes**: viser sends nothing for a number box left empty or holding text that is
   no number; on leaving such a box the page puts back the number it held.
 * **DISARM** (the bar's button, and the Esc key through the console's command) and the
@@ -235,21 +235,24 @@ INSTALL = r"""
     client.__ucatWatched = true;
   }
   u.token = (s) => {
-    if (u.tokenConnection !== u.connection) {  // a new connection: nothing sent on it yet
-      u.tokenConnection = u.connection; u.wasPilot = false; u.resent = 0;
-    }
     const token = kept.get();
+    if (u.tokenConnection !== u.connection) {  // the first state on a new connection (or a reload)
+      u.tokenConnection = u.connection; u.wasPilot = false; u.resent = 0;
+      if (token && !s.you_pilot) {
+        // back after a lost link or a restart: when nobody flies, the token again, checked as
+        // any; when another page flies, this one is a viewer now and forgets it
+        if (s.pilot === "none" && send(s.token_uuid, token) && send(s.take_uuid, true)) u.resent = Date.now();
+        else kept.drop();
+        return;
+      }
+    }
     if (s.you_pilot) {
       u.wasPilot = true;
       if (u.offered) { kept.set(u.offered); u.offered = null; }
     } else if (u.wasPilot) {  // control left this page while it stayed connected: released or handed over
       kept.drop(); u.wasPilot = false;
-    } else if (token && !u.resent && s.pilot === "none" && s.token_uuid && s.take_uuid) {
-      // back after a lost link or a restart, and nobody flies: the token again, checked as any
-      u.resent = Date.now();
-      if (!(send(s.token_uuid, token) && send(s.take_uuid, true))) u.resent = 0;
     } else if (token && u.resent && Date.now() - u.resent > RESEND_GIVE_UP_MS) {
-      kept.drop();  // not taken (a new token, or another page was first): asked once, not again
+      kept.drop();  // not taken (a new token, or another page was first): presented once, not again
     }
   };
   // ------------------------------------------------------------ number boxes
