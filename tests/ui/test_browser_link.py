@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any, Iterator
 
 import pytest
-from support import wait_for
+from support import Console, console_config, wait_for
 
 playwright_api = pytest.importorskip("playwright.sync_api")
 from browser_harness import ARTIFACTS, TOKEN, browser_console, take_control  # noqa: E402
@@ -127,8 +127,6 @@ def test_a_kept_token_is_checked_again_and_forgotten_when_it_fails(browser: Brow
     become_pilot(page)
     c.stop()
     expect(page.locator("#ucat-banner")).to_be_visible(timeout=SLOW)
-    from support import console_config, Console
-
     cfg = console_config("another-token", None, scene_rate=15.0, plot_rate=5.0, port=port)
     c = Console(cfg, tmp_path, serve=True)
     try:

@@ -167,7 +167,7 @@ def _load(d: dict[str, Any]) -> list[Row]:
 #: each benchmark's file (in ``benchmarks/``) and the rows made from it, in the table's order
 SOURCES: dict[str, Callable[[dict[str, Any]], list[Row]]] = {
     "mpc": _mpc, "sim": _sim, "compile": _compile, "sessions": _sessions, "ui": _ui,
-    "safety": _safety, "load": _load, "tracking": _tracking,
+    "safety": _safety, "link": _safety, "load": _load, "tracking": _tracking,
 }
 
 
