@@ -54,6 +54,8 @@ class DelayProxy:
                 writer.close()
                 return
             await asyncio.gather(self._pipe(reader, up_writer), self._pipe(up_reader, writer))
+        except asyncio.CancelledError:  # the proxy closed: its connections end with it
+            writer.close()
         finally:
             self._tasks.discard(task)
 

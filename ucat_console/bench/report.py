@@ -132,8 +132,9 @@ def _safety(d: dict[str, Any]) -> list[Row]:
                        f"{k['connect_median_s']:.1f} / {k['connect_max_s']:.1f} s", "<= 10 s", cmd))
     x = d.get("slow_disarm")
     if x:
-        out.append(Row(f"DISARM through a {2 * x['delay_each_way_s']:g} s round trip: applied, median / max",
-                       f"{x['disarm_median_s']:.2f} / {x['disarm_max_s']:.2f} s",
+        out.append(Row(f"DISARM through a {2 * x['delay_each_way_s']:g} s round trip ({x['applied']} of "
+                       f"{x['trials']} applied): median / max",
+                       f"{x['disarm_median_s']:.2f} / {x['disarm_max_s']:.2f} s" if x["applied"] else "none",
                        f"<= {x['delay_each_way_s'] + 0.5:g} s (the link's delay + 0.5 s)", cmd))
     r = d.get("restart")
     if r:

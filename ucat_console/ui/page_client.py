@@ -35,6 +35,8 @@ import zstandard
 
 import viser
 
+from ucat_console.backend.dependencies import UnsupportedVersion
+
 #: the viser versions whose client the pieces below were taken from
 PATCHED_FOR = ("1.1.1",)
 #: the first retry after a socket closed, and the longest wait between retries (s)
@@ -49,8 +51,9 @@ _VALUE = {c: i for i, c in enumerate(_ALPHABET)}
 _LOADER = re.compile(r'<script data-p="([^"]*)" data-ss="(\d+)" data-cs="(\d+)">')
 
 
-class PageClientChanged(RuntimeError):
-    """viser's shipped client no longer holds a piece of code the console replaces."""
+class PageClientChanged(UnsupportedVersion):
+    """viser's shipped client no longer holds a piece of code the console replaces (the
+    console stops at start with this error, as for an unsupported viser version)."""
 
 
 @dataclass(frozen=True)
