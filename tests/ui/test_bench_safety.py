@@ -55,3 +55,20 @@ def test_the_link_loss_measure_sees_the_pages_banner_after_the_console_stops() -
                           "crowd": {"broken_total": 0, "rounds": 1, "pages": 2},
                           "link_loss": r, "load_before": 1.0, "load_after": 1.0})
     assert f"banner after median {r['banner_median_s']:.2f} s" in text
+
+
+@pytest.mark.browser
+def test_the_slow_link_and_restart_measures_report_what_they_measured() -> None:
+    pytest.importorskip("playwright.sync_api")
+    from ucat_console.bench.safety import restarts, slow_connect, slow_disarm
+
+    c = slow_connect(0.3, 1)
+    assert 0 < c["loaded_median_s"] <= c["connect_median_s"] and c["socket_median_s"] <= c["connect_median_s"]
+    d = slow_disarm(0.3, 2)
+    assert d["applied"] + d["not_applied"] == 2 and len(d["disarm_s"]) == d["applied"]
+    assert all(t >= 0.3 for t in d["disarm_s"])  # at least the link's delay
+    r = restarts(2, 0)
+    assert r["back"] == 2 and r["from_up_max_s"] <= r["from_stop_max_s"]
+    text = format_result({"slow_connect": c, "slow_disarm": d, "restart": r, "load_before": 1.0,
+                          "load_after": 1.0})
+    assert "the pilot's page the pilot again 2 of 2 times" in text and "DISARM through 0.3 s" in text

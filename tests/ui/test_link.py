@@ -87,7 +87,34 @@ def test_a_request_out_for_longer_than_the_target_holds_the_telemetry_back() -> 
     assert link.room(link_mod.TARGET_RTT)
     assert not link.room(link_mod.TARGET_RTT + 0.01)  # the page is behind: nothing more
     assert link.answered(1, 0.6) and link.room(0.6)
-    assert link.budget < link_mod.START_BUDGET  # and a slow round trip shrinks the budget
+    link.probe(2, 1.0)
+    assert link.answered(2, 1.05)  # a quick round trip: the link's own latency is 0.05 s
+    link.sent(1000, 2.0)
+    link.probe(3, 2.0)
+    assert not link.room(2.0 + link_mod.TARGET_RTT + 0.01)
+    budget = link.budget
+    assert link.answered(3, 2.7) and link.budget < budget  # and a slow round trip shrinks the budget
+
+
+def test_a_link_slow_by_its_latency_alone_is_not_held_back() -> None:
+    # 0.6 s each way, ample bandwidth: a heartbeat request every 0.3 s, each answered 1.2 s
+    # later; the link's own latency is no queue, so telemetry goes on between the answers
+    link = PageLink(0.0)
+    answers: collections.deque[tuple[float, int]] = collections.deque()
+    held = 0
+    for step in range(400):  # 40 s in steps of 0.1 s
+        now = step * 0.1
+        while answers and answers[0][0] <= now + 1e-9:
+            link.answered(answers.popleft()[1], now)
+        if step % 3 == 0:
+            link.probe(step, now)
+            answers.append((now + 1.2, step))
+        if link.room(now):
+            link.sent(2000, now)
+        elif now > 5.0:  # after the first answers
+            held += 1
+    assert link.base_rtt == pytest.approx(1.2, abs=0.11) and link.rtt_limit == pytest.approx(2.4, abs=0.21)
+    assert held == 0 and not link.slow
 
 
 def test_a_link_held_back_most_of_the_time_is_slow_and_recovers_with_hysteresis() -> None:

@@ -124,6 +124,23 @@ def _safety(d: dict[str, Any]) -> list[Row]:
     if w:
         out.append(Row(f"a pilot reading {w['rate_bytes_s'] / 1000:g} kB/s for {w['seconds']:g} s: stays the pilot",
                        "yes" if w["stayed_pilot"] else f"no (gone after {w['pilot_for_s']:.0f} s)", "yes", cmd))
+    k = d.get("slow_connect")
+    if k:
+        out.append(Row(f"a page through a {2 * k['delay_each_way_s']:g} s round trip: its socket open / its first "
+                       "state, median / max",
+                       f"{k['socket_median_s']:.1f} / {k['socket_max_s']:.1f} s, "
+                       f"{k['connect_median_s']:.1f} / {k['connect_max_s']:.1f} s", "<= 10 s", cmd))
+    x = d.get("slow_disarm")
+    if x:
+        out.append(Row(f"DISARM through a {2 * x['delay_each_way_s']:g} s round trip ({x['applied']} of "
+                       f"{x['trials']} applied): median / max",
+                       f"{x['disarm_median_s']:.2f} / {x['disarm_max_s']:.2f} s" if x["applied"] else "none",
+                       f"<= {x['delay_each_way_s'] + 0.5:g} s (the link's delay + 0.5 s)", cmd))
+    r = d.get("restart")
+    if r:
+        out.append(Row(f"the pilot's page the pilot again after a restart under {r['spinners']} spinning processes "
+                       f"({r['back']} of {r['restarts']}): median / max from the console serving",
+                       f"{r['from_up_median_s']:.1f} / {r['from_up_max_s']:.1f} s", "<= 10 s", cmd))
     return out
 
 
@@ -158,7 +175,7 @@ def _pages(d: dict[str, Any]) -> list[Row]:
 #: each benchmark's file (in ``benchmarks/``) and the rows made from it, in the table's order
 SOURCES: dict[str, Callable[[dict[str, Any]], list[Row]]] = {
     "mpc": _mpc, "sim": _sim, "compile": _compile, "sessions": _sessions, "ui": _ui,
-    "safety": _safety, "pages": _pages, "load": _load, "tracking": _tracking,
+    "safety": _safety, "link": _safety, "pages": _pages, "load": _load, "tracking": _tracking,
 }
 
 

@@ -37,6 +37,20 @@ a crowd of pages, measured against ``ucat-console run`` on the simulated robot.
   ``--slow-seconds`` s, its heartbeats' round trips (the console's own measure) and whether
   its status bar says "link slow".
 
+* **Slow connect**: a headless Chromium page through a link that delays every chunk
+  ``--connect-delay`` s each way (1.0: a 2 s round trip; ``bench/delay_proxy.py``): from its
+  navigation to its HTML loaded, to its socket open and to the status bar's first state,
+  and from its *Take control* to the page flying. The goal: connected (the first state)
+  within 10 s through a 2 s round trip.
+* **Slow DISARM**: the pilot's Chromium page through ``--disarm-delay`` s each way, the robot
+  armed: from the click on the bar's DISARM (its event, by the page's wall clock) to the
+  supervisor disarmed; a press not applied within 20 s is counted (a page declared gone
+  under load has its DISARM refused). The goal: within the link's delay + 0.5 s.
+* **Restart**: the pilot's Chromium page while the console is stopped and started again on
+  the same port ``--restarts`` times, ``--spinners`` processes spinning throughout: from the
+  restarted console serving to the page the pilot again (its kept token, no reload). The
+  goal: within 10 s of every restart.
+
 Figures depend on the machine and its load (reported with them); they are for docs/performance.md,
 never test assertions.
 """
@@ -59,7 +73,7 @@ log = logging.getLogger(__name__)
 TOKEN = "safety-bench-token"
 
 
-def _console(tmp: str, pilot_gone: float) -> tuple[Any, Any, list]:
+def _console(tmp: str, pilot_gone: float, port: int = 0) -> tuple[Any, Any, list]:
     from ucat_console.backend.supervisor import Supervisor
     from ucat_console.config import AccessConfig, ConsoleConfig, FailsafeConfig, FailsafeRule, load_config
     from ucat_console.telemetry import channels as ch
@@ -67,7 +81,7 @@ def _console(tmp: str, pilot_gone: float) -> tuple[Any, Any, list]:
 
     cfg = load_config("sim-tuned").replace(
         access=AccessConfig(token=TOKEN),
-        console=ConsoleConfig(port=0, record_on_arm=False),
+        console=ConsoleConfig(port=port, record_on_arm=False),
         failsafe=FailsafeConfig(pilot_gone=FailsafeRule("hold", pilot_gone)),
     )
     sup = Supervisor(cfg, sessions_dir=tmp)
@@ -555,14 +569,183 @@ def handover(trials: int) -> dict[str, Any]:
             "page_s": to_page, "command_s": to_command}
 
 
-PARTS = ("frozen", "takeover", "crowd", "link-loss", "spam", "slow-link", "drop", "handover")
+def _chromium_page(browser: Any, url: str) -> Any:
+    """A page on ``url`` at 1280x800 whose status bar shows the console's state."""
+    page = browser.new_page(viewport={"width": 1280, "height": 800})
+    page.goto(url, timeout=120_000)
+    page.wait_for_function("() => window.__ucat && window.__ucat.state !== null", timeout=120_000)
+    return page
+
+
+def _take_control(page: Any) -> None:
+    box = page.locator("label", has_text="Pilot token").first.locator(
+        "xpath=ancestor::div[contains(@class, 'Flex-root')][1]").locator("input").first
+    box.fill(TOKEN)
+    page.get_by_role("button", name="Take control").click()
+
+
+_YOU_PILOT = "() => window.__ucat && window.__ucat.state && window.__ucat.state.you_pilot"
+
+
+def slow_connect(delay: float, trials: int) -> dict[str, Any]:
+    """A Chromium page through a link delaying every chunk ``delay`` s each way
+    (:class:`~ucat_console.bench.delay_proxy.DelayProxy`): from the page's navigation to its
+    HTML loaded, to its socket open (viser's client logs "Connected!") and to the status
+    bar's first state, and from its *Take control* to the page showing it flies."""
+    from playwright.sync_api import sync_playwright
+
+    from ucat_console.bench.delay_proxy import DelayProxy
+    from ucat_console.bench.ui import CHROMIUM, CHROMIUM_ARGS
+
+    loaded: list[float] = []
+    socket: list[float] = []
+    connect: list[float] = []
+    control: list[float] = []
+    with tempfile.TemporaryDirectory() as tmp, sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        sup, app, _ = _console(tmp, 2.0)
+        proxy = DelayProxy(app.port, delay)
+        try:
+            for trial in range(trials):
+                page = browser.new_page(viewport={"width": 1280, "height": 800})
+                opened: list[float] = []  # when viser's client logs its socket open
+                page.on("console", lambda m: opened.append(time.monotonic()) if m.text.startswith("Connected!") else None)
+                t0 = time.monotonic()
+                page.goto(proxy.url, timeout=120_000, wait_until="domcontentloaded")
+                loaded.append(time.monotonic() - t0)
+                page.wait_for_function("() => window.__ucat && window.__ucat.state !== null", timeout=120_000)
+                connect.append(time.monotonic() - t0)
+                socket.append(opened[0] - t0 if opened else connect[-1])
+                t1 = time.monotonic()
+                _take_control(page)
+                page.wait_for_function(_YOU_PILOT, timeout=120_000)
+                control.append(time.monotonic() - t1)
+                log.info("slow link %.1f s each way, trial %d: page loaded after %.1f s, socket open after %.1f s, "
+                         "first state after %.1f s, pilot %.1f s later", delay, trial + 1, loaded[-1], socket[-1],
+                         connect[-1], control[-1])
+                page.close()
+                _wait(lambda: sup.access.pilot is None, 30.0, "the closed page's control released")
+        finally:
+            proxy.close()
+            sup.stop()
+            app.stop()
+            browser.close()
+    return {"delay_each_way_s": delay, "trials": trials, "loaded_median_s": statistics.median(loaded),
+            "socket_median_s": statistics.median(socket), "socket_max_s": max(socket),
+            "connect_median_s": statistics.median(connect),
+            "connect_max_s": max(connect), "connect_s": connect, "control_median_s": statistics.median(control),
+            "control_max_s": max(control)}
+
+
+def slow_disarm(delay: float, trials: int) -> dict[str, Any]:
+    """The pilot's Chromium page through a link delaying every chunk ``delay`` s each way, the
+    robot armed: from the click on the bar's DISARM (its event in the page, by the page's
+    wall clock) to the supervisor disarmed."""
+    from playwright.sync_api import sync_playwright
+
+    from ucat_console.backend.access import LOCAL
+    from ucat_console.bench.delay_proxy import DelayProxy
+    from ucat_console.bench.ui import CHROMIUM, CHROMIUM_ARGS
+
+    times: list[float] = []
+    lost = 0
+    with tempfile.TemporaryDirectory() as tmp, sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        sup, app, _ = _console(tmp, 2.0)
+        proxy = DelayProxy(app.port, delay)
+        try:
+            page = _chromium_page(browser, proxy.url)
+            _take_control(page)
+            page.wait_for_function(_YOU_PILOT, timeout=120_000)
+            # the press's moment by the page's clock (the wall clock, as the bench's): the click's
+            # dispatch in a busy browser is not the link's
+            page.evaluate("() => document.getElementById('ucat-disarm').addEventListener('click', "
+                          "() => { window.__disarmAt = Date.now(); }, true)")
+            for trial in range(trials):
+                # the page shows the last trial's DISARM first: a button still enabled by an older
+                # state may turn off under the click
+                page.wait_for_function("() => document.getElementById('ucat-disarm').disabled", timeout=120_000)
+                sup.arm(LOCAL)
+                page.wait_for_function("() => !document.getElementById('ucat-disarm').disabled", timeout=120_000)
+                page.locator("#ucat-disarm").click()
+                try:
+                    _wait(lambda: not sup.armed, 20.0, "DISARM through the slow link")
+                except TimeoutError:  # refused or lost: counted, and the next trial starts afresh
+                    lost += 1
+                    log.warning("DISARM through %.1f s each way, trial %d: not applied", delay, trial + 1)
+                    sup.disarm(LOCAL)
+                    page.wait_for_function(_YOU_PILOT, timeout=120_000)  # back as the pilot (its kept token)
+                    continue
+                applied = time.time()
+                times.append(applied - page.evaluate("() => window.__disarmAt") / 1e3)
+                log.info("DISARM through %.1f s each way, trial %d: %.2f s", delay, trial + 1, times[-1])
+        finally:
+            proxy.close()
+            sup.stop()
+            app.stop()
+            browser.close()
+    return {"delay_each_way_s": delay, "trials": trials, "applied": len(times), "not_applied": lost,
+            "disarm_median_s": statistics.median(times) if times else None,
+            "disarm_max_s": max(times) if times else None, "disarm_s": times}
+
+
+def restarts(count: int, spinners: int) -> dict[str, Any]:
+    """The pilot's Chromium page while the console restarts ``count`` times on the same port,
+    ``spinners`` processes spinning meanwhile: the time from the restarted console serving
+    (and from the old one stopped) to the page the pilot again, by its kept token, without a
+    reload."""
+    import subprocess
+    import sys
+
+    from playwright.sync_api import sync_playwright
+
+    from ucat_console.bench.ui import CHROMIUM, CHROMIUM_ARGS
+
+    from_up: list[float] = []
+    from_stop: list[float] = []
+    hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(spinners)]
+    with tempfile.TemporaryDirectory() as tmp, sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        sup, app, _ = _console(tmp, 2.0)
+        port = app.port
+        try:
+            page = _chromium_page(browser, app.url)
+            _take_control(page)
+            page.wait_for_function(_YOU_PILOT, timeout=120_000)
+            for trial in range(count):
+                t_stop = time.monotonic()
+                sup.stop()
+                app.stop()
+                sup, app, _ = _console(tmp, 2.0, port)
+                t_up = time.monotonic()
+                _wait(lambda: sup.access.pilot is not None, 120.0, "the page back as the pilot")
+                from_up.append(time.monotonic() - t_up)
+                from_stop.append(time.monotonic() - t_stop)
+                log.info("restart %d: the page the pilot again %.1f s after the console served (%.1f s after "
+                         "the stop)", trial + 1, from_up[-1], from_stop[-1])
+        finally:
+            for h in hogs:
+                h.kill()
+                h.wait()
+            sup.stop()
+            app.stop()
+            browser.close()
+    return {"restarts": count, "spinners": spinners, "back": len(from_up),
+            "from_up_median_s": statistics.median(from_up), "from_up_max_s": max(from_up), "from_up_s": from_up,
+            "from_stop_median_s": statistics.median(from_stop), "from_stop_max_s": max(from_stop)}
+
+
+PARTS = ("frozen", "takeover", "crowd", "link-loss", "spam", "slow-link", "drop", "handover",
+         "slow-connect", "slow-disarm", "restart")
 
 
 def measure(trials: int = 10, spam_trials: int = 10, rounds: int = 10, pages: int = 40,
             pilot_gone: float = 2.0, link_trials: int = 5, parts: tuple[str, ...] = PARTS,
             disarm_trials: int = 5, copies: int = 23, session_seconds: float = 60.0, spammers: int = 1,
             spam_rate: float = 20.0, spam_before: float = 5.0, slow_rate: float = 50_000.0,
-            slow_seconds: float = 60.0, drop_trials: int = 5, handover_trials: int = 10) -> dict[str, Any]:
+            slow_seconds: float = 60.0, drop_trials: int = 5, handover_trials: int = 10,
+            connect_delay: float = 1.0, connect_trials: int = 3, disarm_delay: float = 0.6,
+            slow_disarm_trials: int = 5, restart_count: int = 10, spinners: int = 2) -> dict[str, Any]:
     from ucat_console.bench.machine import machine_info
 
     out: dict[str, Any] = {"machine": machine_info(None), "load_before": os.getloadavg()[0]}
@@ -583,6 +766,12 @@ def measure(trials: int = 10, spam_trials: int = 10, rounds: int = 10, pages: in
         out["pilot_drop"] = pilot_drop(drop_trials, pilot_gone)
     if "handover" in parts:
         out["handover"] = handover(handover_trials)
+    if "slow-connect" in parts:
+        out["slow_connect"] = slow_connect(connect_delay, connect_trials)
+    if "slow-disarm" in parts:
+        out["slow_disarm"] = slow_disarm(disarm_delay, slow_disarm_trials)
+    if "restart" in parts:
+        out["restart"] = restarts(restart_count, spinners)
     out["load_after"] = os.getloadavg()[0]
     return out
 
@@ -639,6 +828,25 @@ def format_result(r: dict[str, Any]) -> str:
         lines.append(f"hand-over accepted ({x['trials']} trials): the new pilot's page flying after median "
                      f"{x['page_median_s'] * 1e3:.0f} ms, its first command in force after median "
                      f"{x['command_median_s'] * 1e3:.0f} ms, max {x['command_max_s'] * 1e3:.0f} ms")
+    if "slow_connect" in r:
+        x = r["slow_connect"]
+        lines.append(f"a page through {x['delay_each_way_s']:g} s each way ({x['trials']} trials): loaded after median "
+                     f"{x['loaded_median_s']:.1f} s, its socket open after median {x['socket_median_s']:.1f} s, "
+                     f"max {x['socket_max_s']:.1f} s, its first state after median {x['connect_median_s']:.1f} s, "
+                     f"max {x['connect_max_s']:.1f} s; the pilot "
+                     f"{x['control_median_s']:.1f} s (median) after Take control")
+    if "slow_disarm" in r:
+        x = r["slow_disarm"]
+        applied = (f"after median {x['disarm_median_s']:.2f} s, max {x['disarm_max_s']:.2f} s"
+                   if x["applied"] else "")
+        lines.append(f"DISARM through {x['delay_each_way_s']:g} s each way: applied {x['applied']} of "
+                     f"{x['trials']} {applied}".rstrip())
+    if "restart" in r:
+        x = r["restart"]
+        lines.append(f"console restarted {x['restarts']} times under {x['spinners']} spinning processes: the "
+                     f"pilot's page the pilot again {x['back']} of {x['restarts']} times, after median "
+                     f"{x['from_up_median_s']:.1f} s, max {x['from_up_max_s']:.1f} s from the console serving "
+                     f"(median {x['from_stop_median_s']:.1f} s, max {x['from_stop_max_s']:.1f} s from the stop)")
     lines.append(f"load average {r['load_before']:.1f} before, {r['load_after']:.1f} after")
     return "\n".join(lines)
 
@@ -665,16 +873,27 @@ def register_bench(kinds: argparse._SubParsersAction) -> None:
     p.add_argument("--drop-trials", type=int, default=5,
                    help="trials of the pilot's link dropping while a page waits for its hand-over")
     p.add_argument("--handover-trials", type=int, default=10, help="hand-overs accepted by the pilot")
-    p.add_argument("--json", type=Path, default=None, help="write the results as JSON")
+    p.add_argument("--connect-delay", type=float, default=1.0,
+                   help="slow-connect: the link's delay each way, s (1.0: a 2 s round trip)")
+    p.add_argument("--connect-trials", type=int, default=3, help="slow-connect: pages connected")
+    p.add_argument("--disarm-delay", type=float, default=0.6, help="slow-disarm: the link's delay each way, s")
+    p.add_argument("--slow-disarm-trials", type=int, default=5, help="slow-disarm: DISARM presses")
+    p.add_argument("--restarts", type=int, default=10, help="restart: restarts of the console")
+    p.add_argument("--spinners", type=int, default=2, help="restart: processes spinning meanwhile")
+    p.add_argument("--json", type=Path, default=None,
+                   help="write the results as JSON")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     for name in ("trials", "spam_trials", "rounds", "pages", "link_trials", "disarm_trials", "sessions",
-                 "spammers", "drop_trials", "handover_trials"):
+                 "spammers", "drop_trials", "handover_trials", "connect_trials", "slow_disarm_trials", "restarts"):
         if getattr(args, name) < 1:
             raise ValueError(f"--{name.replace('_', '-')}: must be at least 1")
-    for name in ("pilot_gone", "session_seconds", "spam_rate", "slow_rate", "slow_seconds"):
+    if args.spinners < 0:
+        raise ValueError("--spinners: must not be negative")
+    for name in ("pilot_gone", "session_seconds", "spam_rate", "slow_rate", "slow_seconds", "connect_delay",
+                 "disarm_delay"):
         if not getattr(args, name) > 0:
             raise ValueError(f"--{name.replace('_', '-')}: must be a positive number")
     if not args.spam_rate <= 100.0:
@@ -687,7 +906,8 @@ def run(args: argparse.Namespace) -> int:
     r = measure(args.trials, args.spam_trials, args.rounds, args.pages, args.pilot_gone, args.link_trials,
                 tuple(args.parts), args.disarm_trials, args.sessions, args.session_seconds, args.spammers,
                 args.spam_rate, args.spam_before, args.slow_rate, args.slow_seconds, args.drop_trials,
-                args.handover_trials)
+                args.handover_trials, args.connect_delay, args.connect_trials, args.disarm_delay,
+                args.slow_disarm_trials, args.restarts, args.spinners)
     print(format_result(r))
     if args.json is not None:
         args.json.write_text(json.dumps(r, indent=1))

@@ -480,7 +480,8 @@ class ConsoleApp:
             try:
                 panel.show_events()
                 uuids = {f"{name}_uuid": viser_compat.handle_uuid(handle) for name, handle in
-                         (("disarm", panel.disarm), ("drive", panel.drive_input), ("theme", panel.theme_button))}
+                         (("disarm", panel.disarm), ("drive", panel.drive_input), ("theme", panel.theme_button),
+                          ("token", panel.token), ("take", panel.take))}
                 state = bar_state(sup, cid, dark=page.dark, uuids=uuids, loading=self.loading,
                                   link_slow=self.guard.link_slow(cid),
                                   review=review.reviewing if review is not None else "", console=self.run_id)

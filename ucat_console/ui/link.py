@@ -11,9 +11,15 @@ console sends a page more telemetry only while they are under the page's budget
 viser's buffers, the newest value of each kept), and its heartbeat waits behind at most its
 budget, so a slow link is not a silent page.
 
+* **Base round trip.** A link's own latency (a link 0.6 s each way: 1.2 s) is not a queue: a
+  round trip is late when it is longer than :data:`TARGET_RTT` or, where that is longer,
+  twice the least round trip the page has answered (``base_rtt``, over the whole
+  connection, so that a queue that never drains does not pass for latency; a link whose
+  latency grows later is treated as queued, its telemetry going after each answer, until
+  the page reconnects): :attr:`PageLink.rtt_limit`.
 * **Budget.** Adjusted at each answer by the request's round trip and by how much the
   budget held the telemetry back, to keep the round trips short and the budget no larger
-  than the page needs: one that took longer than :data:`TARGET_RTT` shrinks the budget by
+  than the page needs: one that was late shrinks the budget by
   :data:`SHRINK`; a quick one while the telemetry was held back at least
   :data:`GROW_HELD` of the last :data:`SLOW_WINDOW` s (the budget is what limits the page)
   grows it by the bytes it acknowledged (about doubling it each round trip); a quick one
@@ -21,7 +27,7 @@ budget, so a slow link is not a silent page.
   :data:`DECAY` down to :data:`START_BUDGET`, so a page on a fast link keeps little in
   flight (what a link that suddenly slows down has to drain). Always between
   :data:`MIN_BUDGET` and :data:`MAX_BUDGET`. And
-  while a request is out for longer than TARGET_RTT the page is behind: nothing more is
+  while a request is out for longer than that the page is behind: nothing more is
   sent until it answers. A page reading 50 kB/s settles at a few tens of kB in flight (a
   heartbeat reaches it within about half a second); a page whose answers come late for
   another reason than its link (a browser busy rendering) grows its budget while they
@@ -43,7 +49,8 @@ MIN_BUDGET = 16 * 1024
 #: the budget of a new page (bytes), and the most
 START_BUDGET = 32 * 1024
 MAX_BUDGET = 16 * 1024 * 1024
-#: the round trip a heartbeat request should take at most (s)
+#: the round trip a heartbeat request should take at most (s), or twice the link's base
+#: round trip (its latency, the least round trip answered) where that is longer
 TARGET_RTT = 0.5
 #: the budget's factor after a slow round trip, and after one with the budget not in use
 SHRINK = 0.7
@@ -69,6 +76,7 @@ class PageLink:
         self.answers = 0
         self.budget = START_BUDGET  # bytes the page may have in flight before telemetry is held back
         self._probes: dict[int, tuple[int, float]] = {}  # request -> (bytes sent with it, time)
+        self.base_rtt = 0.0  # the least round trip answered (0 before any answer)
         self._held: collections.deque[tuple[float, float]] = collections.deque()  # (from, to)
         self._held_since: float | None = None
         self.slow = False
@@ -95,14 +103,15 @@ class PageLink:
         acknowledged = max(0, read - self.read_bytes)
         self.read_bytes = max(self.read_bytes, read)
         self.rtt = max(0.0, now - t_sent)
-        self.answers += 1
         held = self.held_share(now)
-        if self.rtt > TARGET_RTT:
+        if self.rtt > self.rtt_limit:  # judged by the earlier answers' base (a first one's may be a queue)
             self.budget = max(MIN_BUDGET, int(self.budget * SHRINK))
         elif held >= GROW_HELD:
             self.budget = min(MAX_BUDGET, self.budget + acknowledged)
         elif held < DECAY_HELD:
             self.budget = max(min(self.budget, START_BUDGET), int(self.budget * DECAY))
+        self.base_rtt = self.rtt if self.answers == 0 else min(self.base_rtt, self.rtt)
+        self.answers += 1
         self._update(now)
         return True
 
@@ -117,9 +126,15 @@ class PageLink:
         """Requests sent and not answered."""
         return len(self._probes)
 
+    @property
+    def rtt_limit(self) -> float:
+        """The longest round trip that is not late: TARGET_RTT, or twice the base round trip."""
+        return max(TARGET_RTT, 2.0 * self.base_rtt)
+
     def late(self, now: float) -> bool:
-        """Whether a request has been out for longer than TARGET_RTT (the page is behind)."""
-        return any(now - t > TARGET_RTT for _, t in self._probes.values())
+        """Whether a request has been out for longer than :attr:`rtt_limit` (the page is behind)."""
+        limit = self.rtt_limit
+        return any(now - t > limit for _, t in self._probes.values())
 
     def room(self, now: float) -> bool:
         """Whether more telemetry may be sent at ``now``."""

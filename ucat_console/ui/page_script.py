@@ -16,6 +16,14 @@ page does on its own:
   from another run of the console (its ``console.id``) puts up a line saying it restarted.
 * **Link slow**: the server says when this page's link is too slow for the telemetry
   (:mod:`ucat_console.ui.link`); the bar then shows "LINK SLOW: updates thinned" in amber.
+* **The pilot's token, for reconnects**: the token this page took control with is kept in
+  the tab's ``sessionStorage`` (:data:`TOKEN_KEY`; never in the URL, never logged) while the
+  page is the pilot. When the page comes back on a new connection (a lost link, the console
+  restarted, the tab reloaded) and nobody flies, it presents the token again, once, through
+  its own token box and *Take control*: the server checks it as any token (the guard's and
+  the access rules' guess budget and lock-outs). The page forgets it when another page flies
+  by then, when control leaves it while connected (released, handed over), and when the
+  token sent again has not made it the pilot within :data:`RESEND_GIVE_UP` s.
 * **Number boxes**: viser sends nothing for a number box left empty or holding text that is
   no number; on leaving such a box the page puts back the number it held.
 * **DISARM** (the bar's button, and the Esc key through the console's command) and the
@@ -43,11 +51,16 @@ LINK_LOST_AFTER = 1.5
 DEAD_ZONE = 0.15
 #: the theme key in the browser's storage
 THEME_KEY = "ucat-theme"
+#: the key of the pilot's token in the page's sessionStorage (this tab only, never the URL)
+TOKEN_KEY = "ucat-pilot-token"
+#: a token sent again after a reconnect that has not made the page the pilot after this
+#: long (s) is forgotten (a new token after a restart, or another page took control first)
+RESEND_GIVE_UP = 10.0
 
 INSTALL = r"""
 (() => {
   if (window.__ucat) return;
-  const LOST_MS = %(lost_ms)d, DEAD = %(dead)f;
+  const LOST_MS = %(lost_ms)d, DEAD = %(dead)f, TOKEN_KEY = "%(token_key)s", RESEND_GIVE_UP_MS = %(give_up_ms)d;
   const u = window.__ucat = {state: null, last: 0, lost: false, pad: {sent: null, at: 0, active: false, polls: 0}};
   const css = document.createElement("style");
   css.textContent = `
@@ -189,6 +202,7 @@ INSTALL = r"""
       lights.append(w);
     }
     battery.textContent = s.battery;
+    u.token(s);
     disarm.disabled = !(s.armed && s.you_pilot);
     disarm.title = s.you_pilot ? "motors off now (key: Esc)"
       : "only the pilot can disarm: enter the pilot token under Pilot to take control";
@@ -196,6 +210,51 @@ INSTALL = r"""
     theme.textContent = s.dark ? "☀ light" : "☾ dark";
   };
   setInterval(() => { if (u.state && Date.now() - u.last > LOST_MS) showBanner(true); }, 250);
+  // ------------------------------------------------------------ the pilot's token, for reconnects
+  // viser's client assigns its sendMessage at each (re)connection: every message the page
+  // sends passes through watch(), and each assignment is a new connection.
+  const kept = {
+    get: () => { try { return sessionStorage.getItem(TOKEN_KEY); } catch (e) { return null; } },
+    set: (t) => { try { sessionStorage.setItem(TOKEN_KEY, t); } catch (e) {} },
+    drop: () => { try { sessionStorage.removeItem(TOKEN_KEY); } catch (e) {} },
+  };
+  u.connection = 0;
+  const watch = (msg) => {
+    const s = u.state;
+    if (!s || !msg || msg.type !== "GuiUpdateMessage" || !msg.updates) return;
+    if (msg.uuid === s.token_uuid) u.typed = msg.updates.value;
+    else if (msg.uuid === s.take_uuid && typeof u.typed === "string" && u.typed) u.offered = u.typed;
+  };
+  const client = %(viser_client)s;
+  if (client && !client.__ucatWatched) {
+    let wrapped = null;
+    const wrap = (f) => (typeof f === "function" ? (msg) => { watch(msg); return f(msg); } : f);
+    wrapped = wrap(client.sendMessage);
+    Object.defineProperty(client, "sendMessage", {configurable: true, get: () => wrapped,
+      set: (f) => { wrapped = wrap(f); u.connection += 1; }});
+    client.__ucatWatched = true;
+  }
+  u.token = (s) => {
+    const token = kept.get();
+    if (u.tokenConnection !== u.connection) {  // the first state on a new connection (or a reload)
+      u.tokenConnection = u.connection; u.wasPilot = false; u.resent = 0;
+      if (token && !s.you_pilot) {
+        // back after a lost link or a restart: when nobody flies, the token again, checked as
+        // any; when another page flies, this one is a viewer now and forgets it
+        if (s.pilot === "none" && send(s.token_uuid, token) && send(s.take_uuid, true)) u.resent = Date.now();
+        else kept.drop();
+        return;
+      }
+    }
+    if (s.you_pilot) {
+      u.wasPilot = true;
+      if (u.offered) { kept.set(u.offered); u.offered = null; }
+    } else if (u.wasPilot) {  // control left this page while it stayed connected: released or handed over
+      kept.drop(); u.wasPilot = false;
+    } else if (token && u.resent && Date.now() - u.resent > RESEND_GIVE_UP_MS) {
+      kept.drop();  // not taken (a new token, or another page was first): presented once, not again
+    }
+  };
   // ------------------------------------------------------------ number boxes
   // viser sends nothing for a number box left empty or holding no number ("abc"), so the box
   // would stay blank while the value in force is another: on leaving it, the box gets back
@@ -239,7 +298,8 @@ INSTALL = r"""
     if (u.pad.active) padSend(cmd);
   }, 100);
 })();
-""" % {"lost_ms": int(LINK_LOST_AFTER * 1000), "dead": DEAD_ZONE, "viser_client": PAGE_CLIENT}
+""" % {"lost_ms": int(LINK_LOST_AFTER * 1000), "dead": DEAD_ZONE, "viser_client": PAGE_CLIENT,
+       "token_key": TOKEN_KEY, "give_up_ms": int(RESEND_GIVE_UP * 1000)}
 
 
 def update_source(state: dict[str, Any]) -> str:

@@ -21,6 +21,9 @@ what a page is sent, so :func:`install` replaces names in viser's websocket modu
   one is refused, not a traceback that closes the connection), and not at all when it is
   one of the pilot's safety commands, which the guard runs on its own thread
   (``PageGuard.take_urgent``);
+* the page itself: ``/`` is served from :mod:`ucat_console.ui.page_client` (viser's client
+  with its reconnection patched: back-off retries that never close a handshake in
+  progress), not viser's file;
 * the per-page sender (:func:`_pacing_producer`): for such a server, a page is sent
   telemetry only while its link has room (``PageGuard.wait_room``,
   :mod:`ucat_console.ui.link`), and a page on a slow link gets its batches in parts,
@@ -60,10 +63,13 @@ import viser
 import viser.infra._async_message_buffer as vbuffer
 import viser.infra._infra as vinfra
 import viser._messages as vm
+from websockets.datastructures import Headers
 from websockets.exceptions import ConnectionClosed
+from websockets.http11 import Response
 from websockets.frames import CloseCode
 
 from ucat_console.backend.dependencies import require
+from ucat_console.ui import page_client
 
 #: the guard of the server being constructed (:func:`guarded_server`; under _PENDING_LOCK)
 _PENDING: list[Any] = []
@@ -77,6 +83,7 @@ def guarded_server(guard: Any, **kwargs: Any) -> viser.ViserServer:
     When the port asked for is taken, viser serves on the next free one: that server is
     guarded too (the caller checks the port it got: ``PageGuard.serve``)."""
     install()
+    page_client.index_bytes()  # made before the first page asks for it (and checked: PageClientChanged)
     with _PENDING_LOCK:  # viser's serve calls happen inside the constructor, in viser's thread
         _PENDING.append(guard)
         try:
@@ -114,6 +121,8 @@ def install() -> None:
                 refusal = guard.handshake_refusal(connection, request)
                 if refusal is not None:
                     return refusal
+            elif request.path.partition("?")[0] in ("/", "/index.html"):
+                return _page_response()
             return http(connection, request) if http is not None else None
 
         async def guarded_handler(connection: Any) -> None:
@@ -313,6 +322,15 @@ def _superseded(buffer: Any, message: Any) -> bool:
         return False
     newest = buffer.id_from_redundancy_key.get(message.redundancy_key())
     return newest is not None and buffer.message_from_id.get(newest) is not message
+
+
+def _page_response() -> Response:
+    """The page (viser's client with the console's patch of its reconnection,
+    :mod:`ucat_console.ui.page_client`), in place of the file viser would serve for ``/``."""
+    body = page_client.index_bytes()
+    headers = Headers({"Content-Type": "text/html; charset=utf-8", "Content-Length": str(len(body)),
+                       "Cache-Control": "no-store"})
+    return Response(200, "OK", headers, body)
 
 
 class _ModuleView:
