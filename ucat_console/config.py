@@ -222,6 +222,25 @@ class PilotGoneRule(FailsafeRule):
 
 
 @dataclass(frozen=True)
+class LoopWatchdogRule(FailsafeRule):
+    """The control loop's watchdog (a thread of its own): when the loop has not stepped for
+    ``timeout`` s it disarms, turning the drives off from its own thread. Only disarm or warn:
+    a hold or a surfacing needs the loop that is stuck. The default, 1 s, is four times the
+    loop's longest caught-up lag (``console.max_lag``, 0.25 s) and the IMU and depth
+    failsafes' timeout, which a stuck loop cannot evaluate."""
+
+    action: str = param("disarm", choices=("disarm", "warn"),
+                        doc="disarm: the drives off from the watchdog's thread; warn: show and record only")
+    timeout: float = param(1.0, lo=0.05, hi=60.0, unit="s",
+                           doc="how long the loop has not stepped before the watchdog acts")
+
+    def _check(self) -> None:
+        if self.escalate != "none":
+            raise ValueError(f"escalate: the loop watchdog acts once (disarm or warn); got {self.escalate!r}, "
+                             "allowed: none")
+
+
+@dataclass(frozen=True)
 class FailsafeConfig(Config):
     """Every failsafe; each is shown, recorded, and latched until its cause clears."""
 
@@ -237,6 +256,7 @@ class FailsafeConfig(Config):
     tracking: FailsafeRule = FailsafeRule("warn", 10.0)
     #: the recorder failed to write (a full disk): warn, or hold until the operator acts
     recording: FailsafeRule = FailsafeRule("warn", 0.0)
+    loop_watchdog: LoopWatchdogRule = LoopWatchdogRule()
     tracking_depth: float = param(
         0.2, lo=0.01, hi=100.0, unit="m", doc="tracking: depth further than this from its reference"
     )
@@ -248,7 +268,8 @@ class FailsafeConfig(Config):
     )
 
     #: the rules whose default acts on the robot (the others warn by default)
-    PROTECTIVE: ClassVar[tuple[str, ...]] = ("pilot_gone", "imu", "dvl", "depth", "motor", "planner_late")
+    PROTECTIVE: ClassVar[tuple[str, ...]] = ("pilot_gone", "imu", "dvl", "depth", "motor", "planner_late",
+                                              "loop_watchdog")
 
     def warn_only(self) -> tuple[str, ...]:
         """The protective rules configured only to warn: the console logs them at start and the

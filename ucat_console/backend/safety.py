@@ -40,6 +40,11 @@ Failsafes (``FailsafeConfig`` has one rule, action and timeout, for each):
   a full disk, a removed drive) and has not been started again or acknowledged since (an
   Event ``recorder``/``failure_cleared``). Warns by default (``hold`` keeps the robot where
   it is until the operator acts): what the robot does from then on is not recorded.
+* ``loop_watchdog``: the control loop has not stepped for ``timeout`` s (the supervisor's
+  :class:`~ucat_console.backend.supervisor.watchdog.LoopWatchdog`, a thread of its own).
+  It triggers at once, from the watchdog's thread (:meth:`SafetyMonitor.loop_stuck`: the
+  loop's thread, which calls :meth:`SafetyMonitor.check`, is the one stuck), and clears at
+  the first check after the loop steps again (:meth:`SafetyMonitor.loop_resumed`).
 
 Times are the supervisor's clock (the loop's time). A valid sensor reading counts at its
 own time ``t`` (the robot stamps readings with the loop's time; one more than a minute away
@@ -65,7 +70,8 @@ from ucat_console.telemetry.events import Event
 log = logging.getLogger(__name__)
 
 #: every failsafe, in display order
-FAILSAFES = ("pilot_gone", "imu", "dvl", "depth", "motor", "planner_late", "tracking", "recording")
+FAILSAFES = ("pilot_gone", "imu", "dvl", "depth", "motor", "planner_late", "tracking", "recording",
+             "loop_watchdog")
 SENSORS = ("imu", "dvl", "depth")
 #: motor controller event codes that start a fault (a ``quick_stop`` event is the other
 #: drives' safe-state reaction to one of these, which the failsafe already counts)
@@ -186,6 +192,7 @@ class SafetyMonitor:
         self._off_track: dict[str, tuple[float, float]] = {}  # axis -> (since, the last error)
         self._allocation: Any = None  # the last BodyAllocation
         self._recorder_failed: tuple[float, str] | None = None  # (since, why)
+        self._loop_stuck: str | None = None  # why, while the loop watchdog holds it stuck
         self._active: dict[str, float] = {}  # name -> since
         self._escalated: set[str] = set()  # active failsafes whose escalation acted
         self._cause: dict[str, str] = {n: "" for n in FAILSAFES}
@@ -294,6 +301,26 @@ class SafetyMonitor:
             self._had_pilot = False
             self._pilot_left = None
 
+    def loop_stuck(self, silent_for: float) -> Transition | None:
+        """The loop has not stepped for ``silent_for`` s (the watchdog's thread): the
+        ``loop_watchdog`` failsafe triggers now, at the last check's time; None when it is
+        active already."""
+        cause = f"the control loop has not stepped for {silent_for:.2f} s"
+        with self._lock:
+            self._loop_stuck = cause
+            self._cause["loop_watchdog"] = cause
+            if "loop_watchdog" in self._active:
+                return None
+            self._active["loop_watchdog"] = self._now
+            tr = Transition("loop_watchdog", True, self._now, self.cfg.loop_watchdog.action, cause)
+        log.error("failsafe loop_watchdog triggered: %s", cause)
+        return tr
+
+    def loop_resumed(self) -> None:
+        """The loop steps again: ``loop_watchdog`` clears at the next check."""
+        with self._lock:
+            self._loop_stuck = None
+
     # ------------------------------------------------------------------ evaluation
     def check(self, now: float) -> list[Transition]:
         """Evaluate every failsafe at ``now``; the ones that triggered or cleared."""
@@ -359,6 +386,8 @@ class SafetyMonitor:
         failed = self._recorder_failed
         if failed is not None and now - failed[0] >= cfg.recording.timeout:
             causes["recording"] = f"the recording stopped: {failed[1]}"
+        if self._loop_stuck is not None:
+            causes["loop_watchdog"] = self._loop_stuck
         return causes
 
     # ------------------------------------------------------------------ reading

@@ -17,7 +17,7 @@ from ucat_console.backend.safety import SENSORS
 
 #: the lights, in the bar's order: sensor or part -> label
 LIGHTS = {"imu": "IMU", "dvl": "DVL", "depth": "Depth", "drives": "Drives", "planner": "Planner",
-          "control": "Control", "recording": "Recording"}
+          "control": "Control", "recording": "Recording", "loop_watchdog": "Loop"}
 ACTIONS = {"hold": "stops and holds its depth", "surface": "stops and rises to the surface",
            "disarm": "turns its motors off", "warn": "goes on (warn only)"}
 
@@ -72,7 +72,17 @@ def lights(sup: Any, loading: str = "") -> list[Light]:
             "a fin then starts its stroke a little later)" if overruns else "")))
     out.append(control_light(safety, active))
     out.append(recording_light(sup))
+    rule = safety.rule("loop_watchdog")
+    out.append(failsafe_light(active, "loop_watchdog", f"stepping (watchdog after {rule.timeout:g} s: {rule.action})"))
     return out
+
+
+def failsafe_light(active: dict[str, Any], name: str, ok: str) -> Light:
+    """The light of a failsafe of its own: red with its cause while active, else green with ``ok``."""
+    if name in active:
+        return Light(LIGHTS[name], "warn" if active[name].action == "warn" else "bad",
+                     f"failsafe {name}: {active[name].cause}")
+    return Light(LIGHTS[name], "ok", ok)
 
 
 def recording_light(sup: Any) -> Light:
