@@ -257,6 +257,20 @@ class FailsafeConfig(Config):
     #: the recorder failed to write (a full disk): warn, or hold until the operator acts
     recording: FailsafeRule = FailsafeRule("warn", 0.0)
     loop_watchdog: LoopWatchdogRule = LoopWatchdogRule()
+    #: the robot deeper than max_depth: surface (a hold would keep it beyond the limit)
+    depth_limit: FailsafeRule = FailsafeRule("surface", 1.0)
+    max_depth: float = param(
+        55.0, lo=0.1, hi=10_000.0, unit="m",
+        doc="depth_limit: a measured depth deeper than this (the default: 10 % beyond the setpoints' envelope, "
+        "loop.max_depth 50 m; set the pool's depth less a margin)",
+    )
+    #: the DVL's altitude below min_altitude: surface (a hold keeps the robot at the floor)
+    altitude: FailsafeRule = FailsafeRule("surface", 1.0)
+    min_altitude: float = param(
+        0.5, lo=0.0, hi=100.0, unit="m",
+        doc="altitude: the DVL's distance to the floor shorter than this (0: off); an invalid altitude "
+        "(none, NaN, not above 0) is not counted",
+    )
     tracking_depth: float = param(
         0.2, lo=0.01, hi=100.0, unit="m", doc="tracking: depth further than this from its reference"
     )
@@ -269,7 +283,7 @@ class FailsafeConfig(Config):
 
     #: the rules whose default acts on the robot (the others warn by default)
     PROTECTIVE: ClassVar[tuple[str, ...]] = ("pilot_gone", "imu", "dvl", "depth", "motor", "planner_late",
-                                              "loop_watchdog")
+                                              "loop_watchdog", "depth_limit", "altitude")
 
     def warn_only(self) -> tuple[str, ...]:
         """The protective rules configured only to warn: the console logs them at start and the

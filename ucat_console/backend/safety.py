@@ -45,6 +45,11 @@ Failsafes (``FailsafeConfig`` has one rule, action and timeout, for each):
   It triggers at once, from the watchdog's thread (:meth:`SafetyMonitor.loop_stuck`: the
   loop's thread, which calls :meth:`SafetyMonitor.check`, is the one stuck), and clears at
   the first check after the loop steps again (:meth:`SafetyMonitor.loop_resumed`).
+* ``depth_limit``: every valid depth reading for ``timeout`` s deeper than ``max_depth``;
+  clears with a valid reading within it.
+* ``altitude``: every valid DVL altitude (finite, above 0: a report without one is not an
+  altitude of 0 and neither starts nor clears it) for ``timeout`` s shorter than
+  ``min_altitude``; clears with a valid altitude at least that long. Both surface by default.
 
 Times are the supervisor's clock (the loop's time). A valid sensor reading counts at its
 own time ``t`` (the robot stamps readings with the loop's time; one more than a minute away
@@ -71,7 +76,7 @@ log = logging.getLogger(__name__)
 
 #: every failsafe, in display order
 FAILSAFES = ("pilot_gone", "imu", "dvl", "depth", "motor", "planner_late", "tracking", "recording",
-             "loop_watchdog")
+             "loop_watchdog", "depth_limit", "altitude")
 SENSORS = ("imu", "dvl", "depth")
 #: motor controller event codes that start a fault (a ``quick_stop`` event is the other
 #: drives' safe-state reaction to one of these, which the failsafe already counts)
@@ -193,6 +198,10 @@ class SafetyMonitor:
         self._allocation: Any = None  # the last BodyAllocation
         self._recorder_failed: tuple[float, str] | None = None  # (since, why)
         self._loop_stuck: str | None = None  # why, while the loop watchdog holds it stuck
+        #: the last valid depth and altitude: (time, value)
+        self._depth: tuple[float, float] | None = None
+        self._altitude: tuple[float, float] | None = None
+        self._beyond: dict[str, tuple[float, float]] = {}  # depth_limit, altitude -> (since, the last value)
         self._active: dict[str, float] = {}  # name -> since
         self._escalated: set[str] = set()  # active failsafes whose escalation acted
         self._cause: dict[str, str] = {n: "" for n in FAILSAFES}
@@ -226,6 +235,9 @@ class SafetyMonitor:
                     # readings carry the loop's time; one off by more than a minute does not
                     if not (isinstance(t, (int, float)) and abs(t - now) <= _CLOCK_SLACK):
                         t = now
+                    if sensor == "depth":
+                        self._depth = (t, msg.depth_m)
+                        self._limit("depth_limit", msg.depth_m > self.cfg.max_depth, t, msg.depth_m)
                     if t > last_valid[sensor]:
                         last_valid[sensor] = t
                     k = kinds[sensor]
@@ -234,8 +246,22 @@ class SafetyMonitor:
                             del k[kind]
                 else:
                     _note(kinds[sensor], "invalid", 1, _stamp(msg.t, now))
+                if sensor == "dvl":
+                    alt = getattr(msg, "altitude", math.nan)
+                    if _finite(alt) and alt > 0.0:  # no altitude is not an altitude of 0
+                        t = _stamp(msg.t, now)
+                        self._altitude = (t, alt)
+                        self._limit("altitude", alt < self.cfg.min_altitude, t, alt)
         for ev in events:
             self.on_event(ev)
+
+    def _limit(self, name: str, beyond: bool, t: float, value: float) -> None:
+        """A reading beyond (or within) failsafe ``name``'s limit at ``t`` (the lock is held)."""
+        if beyond:
+            since = self._beyond[name][0] if name in self._beyond else t
+            self._beyond[name] = (since, value)
+        else:
+            self._beyond.pop(name, None)
 
     def _track(self, msg: Any) -> None:
         """A tracking message: each axis out of its band since when (the lock is held)."""
@@ -388,6 +414,14 @@ class SafetyMonitor:
             causes["recording"] = f"the recording stopped: {failed[1]}"
         if self._loop_stuck is not None:
             causes["loop_watchdog"] = self._loop_stuck
+        beyond = self._beyond
+        if "depth_limit" in beyond and now - beyond["depth_limit"][0] >= cfg.depth_limit.timeout:
+            since, depth = beyond["depth_limit"]
+            causes["depth_limit"] = f"depth {depth:.2f} m deeper than the limit {cfg.max_depth:g} m for {now - since:.1f} s"
+        if "altitude" in beyond and now - beyond["altitude"][0] >= cfg.altitude.timeout:
+            since, alt = beyond["altitude"]
+            causes["altitude"] = (f"altitude {alt:.2f} m above the floor, below the minimum {cfg.min_altitude:g} m, "
+                                  f"for {now - since:.1f} s")
         return causes
 
     # ------------------------------------------------------------------ reading
@@ -399,6 +433,11 @@ class SafetyMonitor:
         with self._lock:
             kinds = self._kinds[sensor]
             return max(0.0, now - self._last_valid[sensor]), fault_label(kinds) if kinds else ""
+
+    def envelope(self) -> tuple[tuple[float, float] | None, tuple[float, float] | None]:
+        """The last valid depth and DVL altitude, each (time, m), None before the first."""
+        with self._lock:
+            return self._depth, self._altitude
 
     def recent_late_plans(self) -> int:
         """Late plans within the planner_late window (at the last check)."""

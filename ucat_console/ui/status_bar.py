@@ -17,7 +17,8 @@ from ucat_console.backend.safety import SENSORS
 
 #: the lights, in the bar's order: sensor or part -> label
 LIGHTS = {"imu": "IMU", "dvl": "DVL", "depth": "Depth", "drives": "Drives", "planner": "Planner",
-          "control": "Control", "recording": "Recording", "loop_watchdog": "Loop"}
+          "control": "Control", "recording": "Recording", "loop_watchdog": "Loop",
+          "limits": "Limits"}
 ACTIONS = {"hold": "stops and holds its depth", "surface": "stops and rises to the surface",
            "disarm": "turns its motors off", "warn": "goes on (warn only)"}
 
@@ -74,7 +75,21 @@ def lights(sup: Any, loading: str = "") -> list[Light]:
     out.append(recording_light(sup))
     rule = safety.rule("loop_watchdog")
     out.append(failsafe_light(active, "loop_watchdog", f"stepping (watchdog after {rule.timeout:g} s: {rule.action})"))
+    out.append(limits_light(safety, active))
     return out
+
+
+def limits_light(safety: Any, active: dict[str, Any]) -> Light:
+    """The depth limit and the minimum altitude above the floor: the last depth and altitude."""
+    cfg = safety.cfg
+    on = [active[n] for n in ("depth_limit", "altitude") if n in active]
+    if on:
+        return Light(LIGHTS["limits"], "warn" if all(s.action == "warn" for s in on) else "bad",
+                     "; ".join(f"failsafe {s.name}: {s.cause}" for s in on))
+    depth, alt = safety.envelope()
+    return Light(LIGHTS["limits"], "ok", "; ".join([
+        (f"depth {depth[1]:.2f} m" if depth else "no depth yet") + f" (limit {cfg.max_depth:g} m)",
+        (f"altitude {alt[1]:.2f} m" if alt else "no altitude") + f" (minimum {cfg.min_altitude:g} m)"]))
 
 
 def failsafe_light(active: dict[str, Any], name: str, ok: str) -> Light:
