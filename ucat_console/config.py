@@ -271,6 +271,29 @@ class FailsafeConfig(Config):
         doc="altitude: the DVL's distance to the floor shorter than this (0: off); an invalid altitude "
         "(none, NaN, not above 0) is not counted",
     )
+    #: the battery: warn first (a sagging pack, most of its energy used), then surface while it
+    #: still drives the fins; 10 s, ArduSub's BATT_LOW_TIMER, so a stroke's sag does not trip it
+    battery_low: FailsafeRule = FailsafeRule("warn", 10.0)
+    battery_critical: FailsafeRule = FailsafeRule("surface", 10.0)
+    battery_low_voltage: float = param(
+        22.0, lo=0.0, hi=100.0, unit="V",
+        doc="battery_low: the lowest drive's supply voltage below this (a 24 V pack, 7 Li-ion cells at 3.15 V)",
+    )
+    battery_critical_voltage: float = param(
+        21.0, lo=0.0, hi=100.0, unit="V",
+        doc="battery_critical: the lowest drive's supply voltage below this (7 cells at 3.0 V, their cut-off)",
+    )
+    battery_capacity: float = param(
+        0.0, lo=0.0, hi=100_000.0, unit="Wh",
+        doc="the energy the pack gives the four drives (0: the energy used is not judged); "
+        "the drives' electrical input counts the fins only, not the computer and the sensors",
+    )
+    battery_low_reserve: float = param(
+        0.3, lo=0.0, hi=1.0, doc="battery_low: less than this fraction of battery_capacity left",
+    )
+    battery_critical_reserve: float = param(
+        0.15, lo=0.0, hi=1.0, doc="battery_critical: less than this fraction of battery_capacity left",
+    )
     tracking_depth: float = param(
         0.2, lo=0.01, hi=100.0, unit="m", doc="tracking: depth further than this from its reference"
     )
@@ -283,7 +306,15 @@ class FailsafeConfig(Config):
 
     #: the rules whose default acts on the robot (the others warn by default)
     PROTECTIVE: ClassVar[tuple[str, ...]] = ("pilot_gone", "imu", "dvl", "depth", "motor", "planner_late",
-                                              "loop_watchdog", "depth_limit", "altitude")
+                                              "loop_watchdog", "depth_limit", "altitude", "battery_critical")
+
+    def _check(self) -> None:
+        if self.battery_critical_voltage >= self.battery_low_voltage:
+            raise ValueError(f"battery_critical_voltage: {self.battery_critical_voltage:g} V must be below "
+                             f"battery_low_voltage {self.battery_low_voltage:g} V")
+        if self.battery_critical_reserve >= self.battery_low_reserve:
+            raise ValueError(f"battery_critical_reserve: {self.battery_critical_reserve:g} must be below "
+                             f"battery_low_reserve {self.battery_low_reserve:g}")
 
     def warn_only(self) -> tuple[str, ...]:
         """The protective rules configured only to warn: the console logs them at start and the

@@ -50,6 +50,13 @@ Failsafes (``FailsafeConfig`` has one rule, action and timeout, for each):
 * ``altitude``: every valid DVL altitude (finite, above 0: a report without one is not an
   altitude of 0 and neither starts nor clears it) for ``timeout`` s shorter than
   ``min_altitude``; clears with a valid altitude at least that long. Both surface by default.
+* ``battery_low`` (warns) / ``battery_critical`` (surfaces): from the drives' electrical
+  input (``power/electrical``): the lowest supply voltage of the drives that answered
+  below ``battery_low_voltage`` / ``battery_critical_voltage`` for ``timeout`` s (a NaN
+  voltage, a drive that did not answer, is left out, never a zero: that drive is the motor
+  failsafe's), or, with a ``battery_capacity``, the energy the drives drew since the start
+  leaving less than ``battery_low_reserve`` / ``battery_critical_reserve`` of it (at once;
+  it never comes back). A voltage back above the threshold clears it.
 
 Times are the supervisor's clock (the loop's time). A valid sensor reading counts at its
 own time ``t`` (the robot stamps readings with the loop's time; one more than a minute away
@@ -76,7 +83,7 @@ log = logging.getLogger(__name__)
 
 #: every failsafe, in display order
 FAILSAFES = ("pilot_gone", "imu", "dvl", "depth", "motor", "planner_late", "tracking", "recording",
-             "loop_watchdog", "depth_limit", "altitude")
+             "loop_watchdog", "depth_limit", "altitude", "battery_low", "battery_critical")
 SENSORS = ("imu", "dvl", "depth")
 #: motor controller event codes that start a fault (a ``quick_stop`` event is the other
 #: drives' safe-state reaction to one of these, which the failsafe already counts)
@@ -88,7 +95,12 @@ MOTOR_CLEARS: dict[str, frozenset[str]] = {
     "heartbeat_restored": frozenset({"heartbeat_lost"}),
 }
 #: the channels the monitor subscribes to
-CHANNELS = (ch.IMU, ch.DVL, ch.DEPTH, ch.EVENTS, ch.BODY_TRACKING, ch.BODY_ALLOCATION)
+CHANNELS = (ch.IMU, ch.DVL, ch.DEPTH, ch.EVENTS, ch.BODY_TRACKING, ch.BODY_ALLOCATION, ch.POWER_ELECTRICAL)
+#: the battery failsafes: (name, its voltage threshold, its reserve fraction)
+BATTERY = (("battery_low", "battery_low_voltage", "battery_low_reserve"),
+           ("battery_critical", "battery_critical_voltage", "battery_critical_reserve"))
+#: the longest gap between two electrical messages counted as drawing power (s)
+_ENERGY_GAP = 1.0
 #: the tracked axes: (name, the message's error field, the band's config field, unit)
 TRACKED = (("depth", "depth_error", "tracking_depth", "m"), ("speed", "speed_error", "tracking_speed", "m/s"),
            ("heading", "heading_error", "tracking_heading", "rad"))
@@ -201,7 +213,10 @@ class SafetyMonitor:
         #: the last valid depth and altitude: (time, value)
         self._depth: tuple[float, float] | None = None
         self._altitude: tuple[float, float] | None = None
-        self._beyond: dict[str, tuple[float, float]] = {}  # depth_limit, altitude -> (since, the last value)
+        self._beyond: dict[str, tuple[float, float]] = {}  # depth_limit, altitude, battery_* -> (since, the last value)
+        self._volts: tuple[float, float] | None = None  # the last lowest supply voltage: (time, V)
+        self._power: tuple[float, float] | None = None  # the last battery power: (time, W)
+        self._energy = 0.0  # J drawn by the drives since the start
         self._active: dict[str, float] = {}  # name -> since
         self._escalated: set[str] = set()  # active failsafes whose escalation acted
         self._cause: dict[str, str] = {n: "" for n in FAILSAFES}
@@ -230,6 +245,8 @@ class SafetyMonitor:
                         self._track(msg)
                     elif channel == ch.BODY_ALLOCATION:
                         self._allocation = msg
+                    elif channel == ch.POWER_ELECTRICAL:
+                        self._electrical(msg)
                 elif reading_valid(msg):
                     t = msg.t
                     # readings carry the loop's time; one off by more than a minute does not
@@ -262,6 +279,21 @@ class SafetyMonitor:
             self._beyond[name] = (since, value)
         else:
             self._beyond.pop(name, None)
+
+    def _electrical(self, msg: Any) -> None:
+        """The drives' electrical input: the lowest voltage, the energy (the lock is held)."""
+        t = _stamp(msg.t, self._now)
+        volts = [v for v in msg.voltage if _finite(v)]
+        if volts:  # a drive that did not answer (NaN) is left out, never a zero
+            low = min(volts)
+            self._volts = (t, low)
+            for name, threshold, _reserve in BATTERY:
+                self._limit(name, low < getattr(self.cfg, threshold), t, low)
+        watts = math.fsum(w for w in msg.per_fin if _finite(w))
+        last = self._power
+        if last is not None and 0.0 < t - last[0] <= _ENERGY_GAP:  # the mean power since the last message
+            self._energy += watts * (t - last[0])
+        self._power = (t, watts)
 
     def _track(self, msg: Any) -> None:
         """A tracking message: each axis out of its band since when (the lock is held)."""
@@ -422,6 +454,18 @@ class SafetyMonitor:
             since, alt = beyond["altitude"]
             causes["altitude"] = (f"altitude {alt:.2f} m above the floor, below the minimum {cfg.min_altitude:g} m, "
                                   f"for {now - since:.1f} s")
+        used = self._energy / 3600.0
+        for name, threshold, reserve in BATTERY:
+            why = []
+            if name in beyond and now - beyond[name][0] >= getattr(cfg, name).timeout:
+                since, volts = beyond[name]
+                why.append(f"the lowest drive supply {volts:.1f} V below {getattr(cfg, threshold):g} V "
+                           f"for {now - since:.0f} s")
+            cap, left = cfg.battery_capacity, getattr(cfg, reserve)
+            if cap > 0 and used >= (1.0 - left) * cap:
+                why.append(f"{used:.1f} Wh of {cap:g} Wh used, less than {left:.0%} left")
+            if why:
+                causes[name] = "battery: " + "; ".join(why)
         return causes
 
     # ------------------------------------------------------------------ reading
@@ -438,6 +482,12 @@ class SafetyMonitor:
         """The last valid depth and DVL altitude, each (time, m), None before the first."""
         with self._lock:
             return self._depth, self._altitude
+
+    def battery(self) -> tuple[tuple[float, float] | None, float]:
+        """(the last lowest drive supply voltage as (time, V), None before the first; the
+        energy the drives drew since the start, Wh)."""
+        with self._lock:
+            return self._volts, self._energy / 3600.0
 
     def recent_late_plans(self) -> int:
         """Late plans within the planner_late window (at the last check)."""

@@ -18,7 +18,7 @@ from ucat_console.backend.safety import SENSORS
 #: the lights, in the bar's order: sensor or part -> label
 LIGHTS = {"imu": "IMU", "dvl": "DVL", "depth": "Depth", "drives": "Drives", "planner": "Planner",
           "control": "Control", "recording": "Recording", "loop_watchdog": "Loop",
-          "limits": "Limits"}
+          "limits": "Limits", "battery": "Battery"}
 ACTIONS = {"hold": "stops and holds its depth", "surface": "stops and rises to the surface",
            "disarm": "turns its motors off", "warn": "goes on (warn only)"}
 
@@ -76,7 +76,28 @@ def lights(sup: Any, loading: str = "") -> list[Light]:
     rule = safety.rule("loop_watchdog")
     out.append(failsafe_light(active, "loop_watchdog", f"stepping (watchdog after {rule.timeout:g} s: {rule.action})"))
     out.append(limits_light(safety, active))
+    out.append(battery_light(safety, active, now))
     return out
+
+
+def battery_text(safety: Any, now: float) -> str:
+    """The bar's battery figure: the lowest drive supply voltage and the energy drawn."""
+    volts, used = safety.battery()
+    cap = safety.cfg.battery_capacity
+    energy = f"{used:.1f} of {cap:g} Wh used" if cap > 0 else f"{used:.1f} Wh used"
+    if volts is None:
+        return f"no supply voltage from the drives; {energy}"
+    return f"{volts[1]:.1f} V" + (f" ({now - volts[0]:.0f} s ago)" if now - volts[0] > 2.0 else "") + f"; {energy}"
+
+
+def battery_light(safety: Any, active: dict[str, Any], now: float) -> Light:
+    """The battery: red (or amber) with the cause while a battery failsafe is active."""
+    on = [active[n] for n in ("battery_critical", "battery_low") if n in active]
+    if on:
+        return Light(LIGHTS["battery"], "warn" if all(s.action == "warn" for s in on) else "bad",
+                     "; ".join(f"failsafe {s.name}: {s.cause}" for s in on))
+    volts, _used = safety.battery()
+    return Light(LIGHTS["battery"], "ok" if volts is not None else "off", battery_text(safety, now))
 
 
 def limits_light(safety: Any, active: dict[str, Any]) -> Light:
@@ -162,7 +183,7 @@ def bar_state(sup: Any, client: int | None, *, dark: bool, uuids: dict[str, str]
         "recording_failed": sup.recording.failed,
         "failsafes": list(sup.safety.active()) + ([f"loop stopped: {sup.fault}"] if sup.fault else []),
         "lights": [x.as_dict() for x in lights(sup, loading)],
-        "battery": "no battery sensor",
+        "battery": battery_text(sup.safety, sup.loop.time),
         "link_policy": link_policy(sup),
         "link_slow": bool(link_slow),
         "review": str(review),
