@@ -271,6 +271,8 @@ class FailsafeConfig(Config):
         doc="altitude: the DVL's distance to the floor shorter than this (0: off); an invalid altitude "
         "(none, NaN, not above 0) is not counted",
     )
+    #: water in the hull (devices.leak): surface at once, under control, while the electronics work
+    leak: FailsafeRule = FailsafeRule("surface", 0.0)
     #: the battery: warn first (a sagging pack, most of its energy used), then surface while it
     #: still drives the fins; 10 s, ArduSub's BATT_LOW_TIMER, so a stroke's sag does not trip it
     battery_low: FailsafeRule = FailsafeRule("warn", 10.0)
@@ -306,7 +308,7 @@ class FailsafeConfig(Config):
 
     #: the rules whose default acts on the robot (the others warn by default)
     PROTECTIVE: ClassVar[tuple[str, ...]] = ("pilot_gone", "imu", "dvl", "depth", "motor", "planner_late",
-                                              "loop_watchdog", "depth_limit", "altitude", "battery_critical")
+                                              "loop_watchdog", "depth_limit", "altitude", "battery_critical", "leak")
 
     def _check(self) -> None:
         if self.battery_critical_voltage >= self.battery_low_voltage:

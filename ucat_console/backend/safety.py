@@ -57,6 +57,9 @@ Failsafes (``FailsafeConfig`` has one rule, action and timeout, for each):
   failsafe's), or, with a ``battery_capacity``, the energy the drives drew since the start
   leaving less than ``battery_low_reserve`` / ``battery_critical_reserve`` of it (at once;
   it never comes back). A voltage back above the threshold clears it.
+* ``leak``: the leak detector (``devices.leak``, Events of source ``leak``) reported water
+  ``timeout`` s ago and not dry since; an unreadable detector is shown
+  (:meth:`SafetyMonitor.leak`), not counted as water.
 
 Times are the supervisor's clock (the loop's time). A valid sensor reading counts at its
 own time ``t`` (the robot stamps readings with the loop's time; one more than a minute away
@@ -83,7 +86,7 @@ log = logging.getLogger(__name__)
 
 #: every failsafe, in display order
 FAILSAFES = ("pilot_gone", "imu", "dvl", "depth", "motor", "planner_late", "tracking", "recording",
-             "loop_watchdog", "depth_limit", "altitude", "battery_low", "battery_critical")
+             "loop_watchdog", "depth_limit", "altitude", "battery_low", "battery_critical", "leak")
 SENSORS = ("imu", "dvl", "depth")
 #: motor controller event codes that start a fault (a ``quick_stop`` event is the other
 #: drives' safe-state reaction to one of these, which the failsafe already counts)
@@ -217,6 +220,8 @@ class SafetyMonitor:
         self._volts: tuple[float, float] | None = None  # the last lowest supply voltage: (time, V)
         self._power: tuple[float, float] | None = None  # the last battery power: (time, W)
         self._energy = 0.0  # J drawn by the drives since the start
+        self._water: tuple[float, str] | None = None  # the leak detector's water: (since, message)
+        self._leak_state = ""  # the leak detector's last report: water, dry, unreadable ("": none)
         self._active: dict[str, float] = {}  # name -> since
         self._escalated: set[str] = set()  # active failsafes whose escalation acted
         self._cause: dict[str, str] = {n: "" for n in FAILSAFES}
@@ -327,6 +332,12 @@ class SafetyMonitor:
                         faults.pop(code, None)
                 elif ev.code == "recovered" and isinstance(ev.data.get("fault"), str):
                     faults.pop(ev.data["fault"], None)
+            elif ev.source == "leak":
+                self._leak_state = ev.code
+                if ev.code == "water":
+                    self._water = self._water or (self._now, ev.message)
+                elif ev.code == "dry":
+                    self._water = None
             elif ev.source == "loop" and ev.code == "late_plan":
                 self._late.append(self._now)
             elif ev.source == "recorder" and ev.code == "write_failed":
@@ -454,6 +465,8 @@ class SafetyMonitor:
             since, alt = beyond["altitude"]
             causes["altitude"] = (f"altitude {alt:.2f} m above the floor, below the minimum {cfg.min_altitude:g} m, "
                                   f"for {now - since:.1f} s")
+        if self._water is not None and now - self._water[0] >= cfg.leak.timeout:
+            causes["leak"] = self._water[1]
         used = self._energy / 3600.0
         for name, threshold, reserve in BATTERY:
             why = []
@@ -488,6 +501,11 @@ class SafetyMonitor:
         energy the drives drew since the start, Wh)."""
         with self._lock:
             return self._volts, self._energy / 3600.0
+
+    def leak(self) -> str:
+        """The leak detector's last report: water, dry, unreadable; "" when none came."""
+        with self._lock:
+            return self._leak_state
 
     def recent_late_plans(self) -> int:
         """Late plans within the planner_late window (at the last check)."""

@@ -18,7 +18,8 @@ from ucat_console.backend.safety import SENSORS
 #: the lights, in the bar's order: sensor or part -> label
 LIGHTS = {"imu": "IMU", "dvl": "DVL", "depth": "Depth", "drives": "Drives", "planner": "Planner",
           "control": "Control", "recording": "Recording", "loop_watchdog": "Loop",
-          "limits": "Limits", "battery": "Battery"}
+          "limits": "Limits", "battery": "Battery",
+          "leak": "Leak"}
 ACTIONS = {"hold": "stops and holds its depth", "surface": "stops and rises to the surface",
            "disarm": "turns its motors off", "warn": "goes on (warn only)"}
 
@@ -77,7 +78,21 @@ def lights(sup: Any, loading: str = "") -> list[Light]:
     out.append(failsafe_light(active, "loop_watchdog", f"stepping (watchdog after {rule.timeout:g} s: {rule.action})"))
     out.append(limits_light(safety, active))
     out.append(battery_light(safety, active, now))
+    out.append(leak_light(sup, active))
     return out
+
+
+def leak_light(sup: Any, active: dict[str, Any]) -> Light:
+    """The leak detector: red with water, amber when unreadable, grey when there is none."""
+    if "leak" in active:
+        return failsafe_light(active, "leak", "")
+    if sup.leak is None:
+        return Light(LIGHTS["leak"], "off", "no leak detector (devices.leak.path)")
+    state = sup.safety.leak()
+    if state == "unreadable":
+        return Light(LIGHTS["leak"], "warn", f"leak detector {sup.leak.path} unreadable: a leak would not be seen")
+    return Light(LIGHTS["leak"], "ok" if state else "warn",
+                 f"dry ({sup.leak.path})" if state else "leak detector not read yet")
 
 
 def battery_text(safety: Any, now: float) -> str:

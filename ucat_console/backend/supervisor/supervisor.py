@@ -54,6 +54,7 @@ from typing import TYPE_CHECKING, Any, Callable, Mapping
 from ucat_console.backend import redaction
 from ucat_console.backend.access import LOCAL, AccessControl, AccessDenied, AccessState, Actor, actor_name
 from ucat_console.backend.arming import ArmingGate
+from ucat_console.backend.devices.leak import LeakEmulator, LeakInput
 from ucat_console.backend.loop.clock import Clock, PacedClock
 from ucat_console.backend.loop.closed_loop import PID_LOOPS, ClosedLoop
 from ucat_console.backend.loop.config import MODES
@@ -199,6 +200,14 @@ class Supervisor:
         if add_telemetry is not None:
             self._unsubs.append(add_telemetry(self.stream.publish))
         self.access.add_listener(self._on_access)
+        # the leak detector, read by the console on any robot; a simulated one's is emulated
+        leak = cfg.devices.leak
+        simulated = cfg.robot in ("sim", "sim-devices")
+        self.leak_emulator = LeakEmulator(leak.active_high) if simulated and not leak.path else None
+        path = leak.path or (str(self.leak_emulator.path) if self.leak_emulator is not None else "")
+        self.leak = LeakInput(leak, path, self.report_event, lambda: self.loop.time) if path else None
+        if self.leak is not None:
+            self.leak.start()
 
     # ================================================================== lifecycle
     @property
@@ -250,6 +259,10 @@ class Supervisor:
         finally:
             for unsub in self._unsubs:
                 unsub()
+            if self.leak is not None:
+                self.leak.stop()
+            if self.leak_emulator is not None:
+                self.leak_emulator.close()
             try:
                 self.loop.close()
             finally:
@@ -590,6 +603,19 @@ class Supervisor:
             raise CommandRefused(f"stall the loop: seconds {s:g} outside (0, 60]")
         self._unstall.clear()
         self.commands.post(lambda: self._unstall.wait(s))
+
+    def inject_leak(self, who: Actor, water: object) -> None:
+        """Fault injection on a simulated robot: water at the emulated leak detector, or dry."""
+        self.access.require_pilot(who, "leak")
+        if self.leak_emulator is None:
+            raise CommandRefused("leak: no emulated leak detector (only a simulated robot without "
+                                 "devices.leak.path has one)")
+        if not isinstance(water, bool):
+            raise CommandRefused(f"leak: expected true (water) or false (dry), got {water!r}")
+        self.leak_emulator.set(water)
+        self._publish_event("rig", "fault_injected" if water else "fault_cleared",
+                            f"leak detector: {'water' if water else 'dry'} injected", "info",
+                            {"device": "leak", "fault": "water", "water": water})
 
     def _on_failsafe(self, tr: Transition, at_once: bool = False) -> None:
         """Carry out a failsafe's action; ``at_once``: from a thread other than the loop's,
