@@ -273,6 +273,14 @@ class FailsafeConfig(Config):
     )
     #: water in the hull (devices.leak): surface at once, under control, while the electronics work
     leak: FailsafeRule = FailsafeRule("surface", 0.0)
+    #: the attitude estimate disagrees with the accelerometer, or the estimate stopped: hold
+    #: (stop; the depth is the pressure sensor's, the heading and speed loops are the estimate's)
+    estimate: FailsafeRule = FailsafeRule("hold", 2.0)
+    estimate_innovation: float = param(
+        0.2, lo=0.01, hi=3.15, unit="rad",
+        doc="estimate: the angle between the accelerometer's gravity and the attitude estimate's larger "
+        "than this (every reading taken at rest, |a| within 0.15 g of g0)",
+    )
     #: the battery: warn first (a sagging pack, most of its energy used), then surface while it
     #: still drives the fins; 10 s, ArduSub's BATT_LOW_TIMER, so a stroke's sag does not trip it
     battery_low: FailsafeRule = FailsafeRule("warn", 10.0)
@@ -308,7 +316,7 @@ class FailsafeConfig(Config):
 
     #: the rules whose default acts on the robot (the others warn by default)
     PROTECTIVE: ClassVar[tuple[str, ...]] = ("pilot_gone", "imu", "dvl", "depth", "motor", "planner_late",
-                                              "loop_watchdog", "depth_limit", "altitude", "battery_critical", "leak")
+                                              "loop_watchdog", "depth_limit", "altitude", "battery_critical", "leak", "estimate")
 
     def _check(self) -> None:
         if self.battery_critical_voltage >= self.battery_low_voltage:

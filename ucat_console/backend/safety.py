@@ -60,6 +60,13 @@ Failsafes (``FailsafeConfig`` has one rule, action and timeout, for each):
 * ``leak``: the leak detector (``devices.leak``, Events of source ``leak``) reported water
   ``timeout`` s ago and not dry since; an unreadable detector is shown
   (:meth:`SafetyMonitor.leak`), not counted as water.
+* ``estimate``: the attitude estimate (the body state's orientation) disagrees with the
+  accelerometer: every IMU reading taken at rest (the specific force within the EKF's
+  ``accel_gate`` of g0; the others measure no gravity and are skipped) for ``timeout`` s
+  further than ``estimate_innovation`` from the gravity direction the estimate predicts
+  (``control.estimation.gravity_innovation``, the EKF correction's innovation as an angle);
+  or the estimate stopped: no body state for ``timeout`` s since the last one. Clears with
+  a reading within the bound and a body state.
 
 Times are the supervisor's clock (the loop's time). A valid sensor reading counts at its
 own time ``t`` (the robot stamps readings with the loop's time; one more than a minute away
@@ -79,6 +86,7 @@ from typing import Any
 from ucat_console.backend.devices.reporting import READING_FAULTS
 from ucat_console.robot.readings import DepthReading, DvlVelocity, ImuReading
 from ucat_console.config import FailsafeConfig, FailsafeRule
+from ucat_console.control.estimation import AttitudeConfig, gravity_innovation
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event
 
@@ -86,7 +94,7 @@ log = logging.getLogger(__name__)
 
 #: every failsafe, in display order
 FAILSAFES = ("pilot_gone", "imu", "dvl", "depth", "motor", "planner_late", "tracking", "recording",
-             "loop_watchdog", "depth_limit", "altitude", "battery_low", "battery_critical", "leak")
+             "loop_watchdog", "depth_limit", "altitude", "battery_low", "battery_critical", "leak", "estimate")
 SENSORS = ("imu", "dvl", "depth")
 #: motor controller event codes that start a fault (a ``quick_stop`` event is the other
 #: drives' safe-state reaction to one of these, which the failsafe already counts)
@@ -98,7 +106,10 @@ MOTOR_CLEARS: dict[str, frozenset[str]] = {
     "heartbeat_restored": frozenset({"heartbeat_lost"}),
 }
 #: the channels the monitor subscribes to
-CHANNELS = (ch.IMU, ch.DVL, ch.DEPTH, ch.EVENTS, ch.BODY_TRACKING, ch.BODY_ALLOCATION, ch.POWER_ELECTRICAL)
+CHANNELS = (ch.IMU, ch.DVL, ch.DEPTH, ch.EVENTS, ch.BODY_TRACKING, ch.BODY_ALLOCATION, ch.POWER_ELECTRICAL,
+            ch.BODY_STATE)
+#: the specific force's largest departure from g0 at which it measures gravity's direction (g0)
+ACCEL_GATE = AttitudeConfig().accel_gate
 #: the battery failsafes: (name, its voltage threshold, its reserve fraction)
 BATTERY = (("battery_low", "battery_low_voltage", "battery_low_reserve"),
            ("battery_critical", "battery_critical_voltage", "battery_critical_reserve"))
@@ -222,6 +233,8 @@ class SafetyMonitor:
         self._energy = 0.0  # J drawn by the drives since the start
         self._water: tuple[float, str] | None = None  # the leak detector's water: (since, message)
         self._leak_state = ""  # the leak detector's last report: water, dry, unreadable ("": none)
+        self._estimate: tuple[float, Any] | None = None  # the last body state: (time, orientation)
+        self._innovation: tuple[float, float] | None = None  # the last finite innovation: (time, rad)
         self._active: dict[str, float] = {}  # name -> since
         self._escalated: set[str] = set()  # active failsafes whose escalation acted
         self._cause: dict[str, str] = {n: "" for n in FAILSAFES}
@@ -252,11 +265,18 @@ class SafetyMonitor:
                         self._allocation = msg
                     elif channel == ch.POWER_ELECTRICAL:
                         self._electrical(msg)
+                    elif channel == ch.BODY_STATE:
+                        self._estimate = (_stamp(msg.t, now), msg.orientation)
                 elif reading_valid(msg):
                     t = msg.t
                     # readings carry the loop's time; one off by more than a minute does not
                     if not (isinstance(t, (int, float)) and abs(t - now) <= _CLOCK_SLACK):
                         t = now
+                    if sensor == "imu" and self._estimate is not None:
+                        rad = gravity_innovation(self._estimate[1], msg.accel, ACCEL_GATE)
+                        if rad == rad:  # NaN: accelerating, no measurement of gravity
+                            self._innovation = (t, rad)
+                            self._limit("estimate", rad > self.cfg.estimate_innovation, t, rad)
                     if sensor == "depth":
                         self._depth = (t, msg.depth_m)
                         self._limit("depth_limit", msg.depth_m > self.cfg.max_depth, t, msg.depth_m)
@@ -467,6 +487,13 @@ class SafetyMonitor:
                                   f"for {now - since:.1f} s")
         if self._water is not None and now - self._water[0] >= cfg.leak.timeout:
             causes["leak"] = self._water[1]
+        est, timeout = self._estimate, cfg.estimate.timeout
+        if "estimate" in beyond and now - beyond["estimate"][0] >= timeout:
+            since, rad = beyond["estimate"]
+            causes["estimate"] = (f"the attitude estimate {rad:.2f} rad off the accelerometer's gravity "
+                                  f"(bound {cfg.estimate_innovation:g} rad) for {now - since:.1f} s")
+        elif est is not None and now - est[0] > timeout:
+            causes["estimate"] = f"no state estimate for {now - est[0]:.1f} s"
         used = self._energy / 3600.0
         for name, threshold, reserve in BATTERY:
             why = []
@@ -501,6 +528,12 @@ class SafetyMonitor:
         energy the drives drew since the start, Wh)."""
         with self._lock:
             return self._volts, self._energy / 3600.0
+
+    def estimate(self) -> tuple[tuple[float, float] | None, float | None]:
+        """(the last innovation taken at rest as (time, rad), None before the first; the last
+        body state's time, None before the first)."""
+        with self._lock:
+            return self._innovation, None if self._estimate is None else self._estimate[0]
 
     def leak(self) -> str:
         """The leak detector's last report: water, dry, unreadable; "" when none came."""

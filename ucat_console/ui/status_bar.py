@@ -19,7 +19,7 @@ from ucat_console.backend.safety import SENSORS
 LIGHTS = {"imu": "IMU", "dvl": "DVL", "depth": "Depth", "drives": "Drives", "planner": "Planner",
           "control": "Control", "recording": "Recording", "loop_watchdog": "Loop",
           "limits": "Limits", "battery": "Battery",
-          "leak": "Leak"}
+          "leak": "Leak", "estimate": "Estimate"}
 ACTIONS = {"hold": "stops and holds its depth", "surface": "stops and rises to the surface",
            "disarm": "turns its motors off", "warn": "goes on (warn only)"}
 
@@ -79,6 +79,11 @@ def lights(sup: Any, loading: str = "") -> list[Light]:
     out.append(limits_light(safety, active))
     out.append(battery_light(safety, active, now))
     out.append(leak_light(sup, active))
+    innovation, t_state = safety.estimate()
+    out.append(failsafe_light(active, "estimate", (
+        f"attitude {innovation[1]:.3f} rad off the accelerometer's gravity" if innovation else
+        "no attitude check at rest yet") + (f"; state {max(0.0, now - t_state):.2f} s old" if t_state is not None
+                                            else "; no state estimate yet")))
     return out
 
 
