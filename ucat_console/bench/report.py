@@ -124,6 +124,11 @@ def _safety(d: dict[str, Any]) -> list[Row]:
     if w:
         out.append(Row(f"a pilot reading {w['rate_bytes_s'] / 1000:g} kB/s for {w['seconds']:g} s: stays the pilot",
                        "yes" if w["stayed_pilot"] else f"no (gone after {w['pilot_for_s']:.0f} s)", "yes", cmd))
+    x = d.get("failsafes")
+    for name, f in (x or {}).get("triggers", {}).items():
+        out.append(Row(f"failsafe {name} ({f['action']}) on the emulated rig: detection to action beyond its "
+                       f"{f['timeout_s']:g} s timeout, p99 / max ({x['trials']} trials)",
+                       f"{f['p99_s'] * 1000:.0f} / {f['max_s'] * 1000:.0f} ms", "<= 100 ms", cmd))
     return out
 
 
