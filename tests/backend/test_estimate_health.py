@@ -69,13 +69,18 @@ def test_a_short_disagreement_does_not_trigger() -> None:
 
 def test_a_stopped_estimate_triggers_and_the_next_state_clears_it() -> None:
     mon = SafetyMonitor(FailsafeConfig(estimate=FailsafeRule("hold", 1.0)))
-    assert estimate(mon.check(5.0)) == []  # none yet: not started
-    mon.on_message(ch.BODY_STATE, body(5.0))
-    assert estimate(mon.check(6.0)) == []
-    assert estimate(mon.check(6.1)) == [True]
-    assert "no state estimate for 1.1 s" in next(s.cause for s in mon.states() if s.name == "estimate")
-    mon.on_message(ch.BODY_STATE, body(6.2))
-    assert estimate(mon.check(6.2)) == [False]
+    mon.on_message(ch.IMU, imu(0.5, AT_REST))
+    assert estimate(mon.check(0.5)) == []  # no estimate yet: not started
+    mon.on_message(ch.BODY_STATE, body(1.0))
+    assert estimate(mon.check(5.0)) == []  # no readings since: the loop is not stepping
+    mon.on_message(ch.IMU, imu(2.0, AT_REST))
+    assert estimate(mon.check(5.0)) == []
+    mon.on_message(ch.IMU, imu(2.1, AT_REST))
+    assert estimate(mon.check(5.0)) == [True]
+    assert "no state estimate for 1.1 s of IMU readings" in next(s.cause for s in mon.states()
+                                                                 if s.name == "estimate")
+    mon.on_message(ch.BODY_STATE, body(2.2))
+    assert estimate(mon.check(5.0)) == [False]
 
 
 @pytest.mark.slow

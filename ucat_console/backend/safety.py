@@ -65,8 +65,9 @@ Failsafes (``FailsafeConfig`` has one rule, action and timeout, for each):
   ``accel_gate`` of g0; the others measure no gravity and are skipped) for ``timeout`` s
   further than ``estimate_innovation`` from the gravity direction the estimate predicts
   (``control.estimation.gravity_innovation``, the EKF correction's innovation as an angle);
-  or the estimate stopped: no body state for ``timeout`` s since the last one. Clears with
-  a reading within the bound and a body state.
+  or the estimate stopped: IMU readings for ``timeout`` s past the last body state (a
+  stalled loop, whose readings and states resume together, is not one). Clears with a
+  reading within the bound and a body state.
 
 Times are the supervisor's clock (the loop's time). A valid sensor reading counts at its
 own time ``t`` (the robot stamps readings with the loop's time; one more than a minute away
@@ -492,8 +493,9 @@ class SafetyMonitor:
             since, rad = beyond["estimate"]
             causes["estimate"] = (f"the attitude estimate {rad:.2f} rad off the accelerometer's gravity "
                                   f"(bound {cfg.estimate_innovation:g} rad) for {now - since:.1f} s")
-        elif est is not None and now - est[0] > timeout:
-            causes["estimate"] = f"no state estimate for {now - est[0]:.1f} s"
+        elif est is not None and self._last_valid["imu"] - est[0] > timeout:  # readings come, no estimate
+            causes["estimate"] = (f"no state estimate for {self._last_valid['imu'] - est[0]:.1f} s "
+                                  "of IMU readings")
         used = self._energy / 3600.0
         for name, threshold, reserve in BATTERY:
             why = []
