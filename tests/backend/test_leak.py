@@ -1,6 +1,6 @@
 """The leak detector: its input read from a GPIO value file (water, dry, unreadable: never
 taken for dry), and water injected at the emulated detector of the in-process simulator and
-of the emulated rig, which surfaces the robot until it is dry again."""
+of the emulated rig (through its rig faults), which surfaces the robot until it is dry again."""
 
 from __future__ import annotations
 
@@ -85,12 +85,15 @@ def test_water_at_the_rigs_emulated_detector_surfaces_the_robot(tmp_path) -> Non
         assert sup.take_control(PILOT, TOKEN)
         wait_for(lambda: sup.loop.time > 1.0 and not sup.safety.active(), what="the rig running, no failsafe")
         sup.arm(PILOT)
-        sup.inject_leak(PILOT, True)
+        assert sup.rig_control.fault_tables()[0]["leak"] == ("water",)  # the Safety tab's rig faults
+        with pytest.raises(CommandRefused, match="only 'water'"):
+            sup.inject_fault(PILOT, "leak", "water", duration=2.0)
+        sup.inject_fault(PILOT, "leak", "water")
         wait_for(lambda: sup.safety.is_active("leak"), what="the leak failsafe")
         wait_for(lambda: c.event("failsafe", "leak"), what="its event")
         wait_for(lambda: sup.setpoints.depth == 0.0, what="the surfacing setpoints")
         _surfaced(sup, c.events)
-        sup.inject_leak(PILOT, False)
+        sup.clear_fault(PILOT, "leak")
         wait_for(lambda: not sup.safety.is_active("leak"), what="the failsafe clearing")
     finally:
         c.stop()

@@ -1,5 +1,6 @@
 """What the fixed status bar shows: armed state, mode, pilot, recording, failsafes, a light for
-each sensor, the drives and the planner, and the battery.
+each sensor, the drives, the planner, the control, the recording, the loop watchdog, the depth
+limits, the battery, the leak detector and the estimate, and the battery's figure.
 
 :func:`bar_state` builds it from the supervisor for one page (the pilot reads "you"); the
 page's script (:mod:`ucat_console.ui.page_script`) draws it. Lights are ``ok`` (green),
@@ -75,29 +76,43 @@ def lights(sup: Any, loading: str = "") -> list[Light]:
     out.append(control_light(safety, active))
     out.append(recording_light(sup))
     rule = safety.rule("loop_watchdog")
-    out.append(failsafe_light(active, "loop_watchdog", f"stepping (watchdog after {rule.timeout:g} s: {rule.action})"))
-    out.append(limits_light(safety, active))
-    out.append(battery_light(safety, active, now))
-    out.append(leak_light(sup, active))
+    out.append(failsafes_light(active, "loop_watchdog", ("loop_watchdog",), "ok",
+                               f"stepping (watchdog after {rule.timeout:g} s: {rule.action})"))
+    depth, alt = safety.envelope()
+    cfg = safety.cfg
+    out.append(failsafes_light(active, "limits", ("depth_limit", "altitude"), "ok", "; ".join([
+        (f"depth {depth[1]:.2f} m" if depth else "no depth yet") + f" (limit {cfg.max_depth:g} m)",
+        (f"altitude {alt[1]:.2f} m" if alt else "no altitude") + f" (minimum {cfg.min_altitude:g} m)"])))
+    volts, _used = safety.battery()
+    out.append(failsafes_light(active, "battery", ("battery_critical", "battery_low"),
+                               "ok" if volts is not None else "off", battery_text(safety, now)))
+    out.append(failsafes_light(active, "leak", ("leak",), *leak_state(sup)))
     innovation, t_state = safety.estimate()
-    out.append(failsafe_light(active, "estimate", (
+    out.append(failsafes_light(active, "estimate", ("estimate",), "ok", (
         f"attitude {innovation[1]:.3f} rad off the accelerometer's gravity" if innovation else
         "no attitude check at rest yet") + (f"; state {max(0.0, now - t_state):.2f} s old" if t_state is not None
                                             else "; no state estimate yet")))
     return out
 
 
-def leak_light(sup: Any, active: dict[str, Any]) -> Light:
-    """The leak detector: red with water, amber when unreadable, grey when there is none."""
-    if "leak" in active:
-        return failsafe_light(active, "leak", "")
+def failsafes_light(active: dict[str, Any], light: str, names: tuple[str, ...], state: str, why: str) -> Light:
+    """The light of failsafes of their own: red with their causes while one is active (amber
+    when all of those only warn), else ``state`` and ``why``."""
+    on = [active[n] for n in names if n in active]
+    if on:
+        return Light(LIGHTS[light], "warn" if all(s.action == "warn" for s in on) else "bad",
+                     "; ".join(f"failsafe {s.name}: {s.cause}" for s in on))
+    return Light(LIGHTS[light], state, why)
+
+
+def leak_state(sup: Any) -> tuple[str, str]:
+    """The leak detector's light and reason while its failsafe is not active."""
     if sup.leak is None:
-        return Light(LIGHTS["leak"], "off", "no leak detector (devices.leak.path)")
-    state = sup.safety.leak()
-    if state == "unreadable":
-        return Light(LIGHTS["leak"], "warn", f"leak detector {sup.leak.path} unreadable: a leak would not be seen")
-    return Light(LIGHTS["leak"], "ok" if state else "warn",
-                 f"dry ({sup.leak.path})" if state else "leak detector not read yet")
+        return "off", "no leak detector (devices.leak.path)"
+    return {"dry": ("ok", f"dry ({sup.leak.path})"),
+            "water": ("warn", f"water at {sup.leak.path} (failsafe after {sup.safety.rule('leak').timeout:g} s)"),
+            "unreadable": ("warn", f"leak detector {sup.leak.path} unreadable: a leak would not be seen"),
+            }.get(sup.safety.leak(), ("warn", "leak detector not read yet"))
 
 
 def battery_text(safety: Any, now: float) -> str:
@@ -108,37 +123,6 @@ def battery_text(safety: Any, now: float) -> str:
     if volts is None:
         return f"no supply voltage from the drives; {energy}"
     return f"{volts[1]:.1f} V" + (f" ({now - volts[0]:.0f} s ago)" if now - volts[0] > 2.0 else "") + f"; {energy}"
-
-
-def battery_light(safety: Any, active: dict[str, Any], now: float) -> Light:
-    """The battery: red (or amber) with the cause while a battery failsafe is active."""
-    on = [active[n] for n in ("battery_critical", "battery_low") if n in active]
-    if on:
-        return Light(LIGHTS["battery"], "warn" if all(s.action == "warn" for s in on) else "bad",
-                     "; ".join(f"failsafe {s.name}: {s.cause}" for s in on))
-    volts, _used = safety.battery()
-    return Light(LIGHTS["battery"], "ok" if volts is not None else "off", battery_text(safety, now))
-
-
-def limits_light(safety: Any, active: dict[str, Any]) -> Light:
-    """The depth limit and the minimum altitude above the floor: the last depth and altitude."""
-    cfg = safety.cfg
-    on = [active[n] for n in ("depth_limit", "altitude") if n in active]
-    if on:
-        return Light(LIGHTS["limits"], "warn" if all(s.action == "warn" for s in on) else "bad",
-                     "; ".join(f"failsafe {s.name}: {s.cause}" for s in on))
-    depth, alt = safety.envelope()
-    return Light(LIGHTS["limits"], "ok", "; ".join([
-        (f"depth {depth[1]:.2f} m" if depth else "no depth yet") + f" (limit {cfg.max_depth:g} m)",
-        (f"altitude {alt[1]:.2f} m" if alt else "no altitude") + f" (minimum {cfg.min_altitude:g} m)"]))
-
-
-def failsafe_light(active: dict[str, Any], name: str, ok: str) -> Light:
-    """The light of a failsafe of its own: red with its cause while active, else green with ``ok``."""
-    if name in active:
-        return Light(LIGHTS[name], "warn" if active[name].action == "warn" else "bad",
-                     f"failsafe {name}: {active[name].cause}")
-    return Light(LIGHTS[name], "ok", ok)
 
 
 def recording_light(sup: Any) -> Light:

@@ -171,9 +171,16 @@ class Supervisor:
             weights=self._weights, on_arm=cfg.console.record_on_arm, tail=cfg.console.record_tail,
             tail_max=cfg.console.record_tail_max, notify=self._notify,
         )
+        # the leak detector, read by the console on any robot; a simulated one's is emulated
+        leak = cfg.devices.leak
+        simulated = cfg.robot in ("sim", "sim-devices")
+        self.leak_emulator = LeakEmulator(leak.active_high) if simulated and not leak.path else None
+        path = leak.path or (str(self.leak_emulator.path) if self.leak_emulator is not None else "")
+        self.leak = LeakInput(leak, path, self.report_event, lambda: self.loop.time) if path else None
         self.rig_control = RigControl(RigHost(
             robot=cfg.robot, rig=self.rig, gate=self.gate, require_pilot=self.access.require_pilot,
             in_loop=self.commands.run, publish_event=self._publish_event, notify=self._notify,
+            leak=self._set_leak if self.leak_emulator is not None else None,
         ))
         #: what an identification manoeuvre uses: the operator's commands, checked as any
         self.manoeuvre_host = ManoeuvreHost(
@@ -200,13 +207,7 @@ class Supervisor:
         if add_telemetry is not None:
             self._unsubs.append(add_telemetry(self.stream.publish))
         self.access.add_listener(self._on_access)
-        # the leak detector, read by the console on any robot; a simulated one's is emulated
-        leak = cfg.devices.leak
-        simulated = cfg.robot in ("sim", "sim-devices")
-        self.leak_emulator = LeakEmulator(leak.active_high) if simulated and not leak.path else None
-        path = leak.path or (str(self.leak_emulator.path) if self.leak_emulator is not None else "")
-        self.leak = LeakInput(leak, path, self.report_event, lambda: self.loop.time) if path else None
-        if self.leak is not None:
+        if self.leak is not None:  # once the failsafes hear its events
             self.leak.start()
 
     # ================================================================== lifecycle
@@ -605,17 +606,22 @@ class Supervisor:
         self.commands.post(lambda: self._unstall.wait(s))
 
     def inject_leak(self, who: Actor, water: object) -> None:
-        """Fault injection on a simulated robot: water at the emulated leak detector, or dry."""
+        """Fault injection on a simulated robot: water at the emulated leak detector, or dry
+        (on the rig also ``inject_fault(who, "leak", "water")``, the Safety tab's rig faults)."""
         self.access.require_pilot(who, "leak")
         if self.leak_emulator is None:
             raise CommandRefused("leak: no emulated leak detector (only a simulated robot without "
                                  "devices.leak.path has one)")
         if not isinstance(water, bool):
             raise CommandRefused(f"leak: expected true (water) or false (dry), got {water!r}")
+        self._set_leak(water)
+
+    def _set_leak(self, water: bool) -> Event:
+        assert self.leak_emulator is not None
         self.leak_emulator.set(water)
-        self._publish_event("rig", "fault_injected" if water else "fault_cleared",
-                            f"leak detector: {'water' if water else 'dry'} injected", "info",
-                            {"device": "leak", "fault": "water", "water": water})
+        return self._publish_event("rig", "fault_injected" if water else "fault_cleared",
+                                   f"leak: {'water' if water else 'dry'} at the emulated detector", "info",
+                                   {"device": "leak", "fault": "water", "water": water})
 
     def _on_failsafe(self, tr: Transition, at_once: bool = False) -> None:
         """Carry out a failsafe's action; ``at_once``: from a thread other than the loop's,
