@@ -225,13 +225,14 @@ class PilotGoneRule(FailsafeRule):
 class LoopWatchdogRule(FailsafeRule):
     """The control loop's watchdog (a thread of its own): when the loop has not stepped for
     ``timeout`` s it disarms, turning the drives off from its own thread. Only disarm or warn:
-    a hold or a surfacing needs the loop that is stuck. The default, 1 s, is four times the
-    loop's longest caught-up lag (``console.max_lag``, 0.25 s) and the IMU and depth
-    failsafes' timeout, which a stuck loop cannot evaluate."""
+    a hold or a surfacing needs the loop that is stuck. The default, 2 s, is over eight times
+    the loop's longest caught-up lag (``console.max_lag``, 0.25 s) and half as long again as
+    the longest lag measured with the computer at twice its load goal (1.3 s, docs/safety.md);
+    the drives hold their last set-point meanwhile."""
 
     action: str = param("disarm", choices=("disarm", "warn"),
                         doc="disarm: the drives off from the watchdog's thread; warn: show and record only")
-    timeout: float = param(1.0, lo=0.05, hi=60.0, unit="s",
+    timeout: float = param(2.0, lo=0.05, hi=60.0, unit="s",
                            doc="how long the loop has not stepped before the watchdog acts")
 
     def _check(self) -> None:
@@ -256,7 +257,7 @@ class FailsafeConfig(Config):
     tracking: FailsafeRule = FailsafeRule("warn", 10.0)
     #: the recorder failed to write (a full disk): warn, or hold until the operator acts
     recording: FailsafeRule = FailsafeRule("warn", 0.0)
-    loop_watchdog: LoopWatchdogRule = LoopWatchdogRule()
+    loop_watchdog: LoopWatchdogRule = LoopWatchdogRule("disarm", 2.0)
     #: the robot deeper than max_depth: surface (a hold would keep it beyond the limit)
     depth_limit: FailsafeRule = FailsafeRule("surface", 1.0)
     max_depth: float = param(

@@ -34,7 +34,7 @@ a crowd of pages, measured against ``ucat-console run`` on the simulated robot.
   command (a velocity, applied with *Apply setpoints*) in force in the supervisor.
 * **Failsafe triggers** (``failsafes``): the emulated rig (``sim-devices``, the drivers on the
   device emulators) armed at 1 m; each new failsafe's cause is brought about ``--failsafe-trials``
-  times, each rule's timeout 1 s (the leak's 0 s): the loop's thread held
+  times, each rule's timeout 1 s (the leak's 0 s, the loop watchdog's its default, 2 s): the loop's thread held
   (``loop_watchdog``; the action: every emulated drive out of operation enabled), a dive to
   2 m past a 1.3 m depth limit (``depth_limit``) and, on a second rig with its floor at
   2.5 m, past a 1.2 m minimum altitude (``altitude``; from the first reading beyond the
@@ -597,8 +597,8 @@ def _readings(sup: Any, channel: str, beyond: Any) -> list[float]:
 
 
 def _failsafe_trials(sup: Any, name: str, trials: int, inject: Any, clear: Any, acted: Any,
-                     crossed: list[float] | None = None) -> list[float]:
-    """Detection to action (s beyond the rule's timeout) of ``trials`` causes of ``name``."""
+                     crossed: list[float] | None = None) -> tuple[float, list[float]]:
+    """(the rule's timeout, detection to action in s beyond it of ``trials`` causes of ``name``)."""
     from ucat_console.backend.supervisor import CommandRefused
 
     timeout = sup.safety.rule(name).timeout
@@ -624,7 +624,7 @@ def _failsafe_trials(sup: Any, name: str, trials: int, inject: Any, clear: Any, 
         log.info("%s trial %d: acted %.3f s after its cause (timeout %g s)", name, trial + 1, t_act - start, timeout)
         clear()
         _wait(lambda: not sup.safety.is_active(name), 120.0, f"the {name} failsafe clearing")
-    return out
+    return timeout, out
 
 
 def _percentile(xs: list[float], q: float) -> float:
@@ -643,7 +643,7 @@ def failsafe_triggers(trials: int) -> dict[str, Any]:
     rule = {"battery_low": FailsafeRule("warn", 1.0), "battery_critical": FailsafeRule("surface", 1.0),
             "estimate": FailsafeRule("hold", 1.0)}
     surfaced = (lambda sup: lambda: sup.setpoints.depth == 0.0)
-    result: dict[str, list[float]] = {}
+    result: dict[str, tuple[float, list[float]]] = {}
     with tempfile.TemporaryDirectory() as tmp:
         sup = _rig(tmp, max_depth=1.3, **rule)
         try:
@@ -678,9 +678,9 @@ def failsafe_triggers(trials: int) -> dict[str, Any]:
     actions = {"loop_watchdog": "disarm (the drives off)", "depth_limit": "surface", "altitude": "surface",
                "battery_critical": "surface", "leak": "surface", "estimate": "hold"}
     out: dict[str, Any] = {"trials": trials, "goal_s": 0.1, "triggers": {}}
-    for name, xs in result.items():
+    for name, (timeout, xs) in result.items():
         xs = sorted(xs)
-        out["triggers"][name] = {"action": actions[name], "timeout_s": 0.0 if name == "leak" else 1.0,
+        out["triggers"][name] = {"action": actions[name], "timeout_s": timeout,
                                  "median_s": statistics.median(xs), "p99_s": _percentile(xs, 0.99),
                                  "max_s": xs[-1]}
     return out

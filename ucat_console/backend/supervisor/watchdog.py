@@ -5,7 +5,11 @@ supervisor: at every wait of the paced loop and at the end of every chunk, many 
 second. The watchdog's thread looks every ``period`` s; when the last beat is more than
 ``timeout`` s old (the loop is stuck: a blocked call, a hung driver, an endless compiled
 step), it calls ``on_stuck(silent_for)`` once, from its own thread, since the loop's thread
-cannot act. The next beat calls ``on_resumed()`` (from the loop's thread).
+cannot act. The next beat calls ``on_resumed()`` (from the loop's thread). A look that
+comes more than half the timeout after the one before is only a fresh start: the watchdog's
+thread was held back too (a busy computer holds the whole process, not the loop alone), and
+the loop gets the chance to run that the watchdog just had; it acts at the next look, 20 ms
+on, if the loop has still not stepped.
 
 :meth:`check` is the decision alone, on the clock it is given (tests drive it with a fake
 one); the thread calls it with ``time.monotonic``.
@@ -38,6 +42,7 @@ class LoopWatchdog:
         self._on_stuck = on_stuck
         self._on_resumed = on_resumed
         self._last = clock()
+        self._looked = self._last  # the watchdog's last look
         self._lock = threading.Lock()
         self._tripped = False
         self._stop = threading.Event()
@@ -60,8 +65,9 @@ class LoopWatchdog:
         """At ``now``: how long the loop has been silent when that has just passed the
         timeout (``on_stuck`` was called), else None."""
         with self._lock:
+            held_back, self._looked = now - self._looked > self.timeout / 2, now
             silent = now - self._last
-            if self._tripped or silent <= self.timeout:
+            if self._tripped or silent <= self.timeout or held_back:
                 return None
             self._tripped = True
         try:
@@ -73,7 +79,7 @@ class LoopWatchdog:
     def start(self) -> None:
         if self._thread is not None:
             raise RuntimeError("the loop watchdog is already running")
-        self._last = self._clock()
+        self._last = self._looked = self._clock()
         self._thread = threading.Thread(target=self._run, name="loop-watchdog", daemon=True)
         self._thread.start()
 
