@@ -830,7 +830,8 @@ def run(args: argparse.Namespace) -> int:
     print(format_result(r))
     if args.json is not None:
         if set(args.parts) != set(PARTS) and args.json.exists():  # the other parts' results stay
-            r = {**json.loads(args.json.read_text()), **{k: v for k, v in r.items() if k != "machine"},
-                 **({"machine_" + "_".join(args.parts): r["machine"]})}
+            run_of = ("machine", "load_before", "load_after")  # this run's, kept beside the file's
+            r = {**json.loads(args.json.read_text()), **{k: v for k, v in r.items() if k not in run_of},
+                 **{f"{k}_{'_'.join(args.parts)}": r[k] for k in run_of}}
         args.json.write_text(json.dumps(r, indent=1))
     return 0
