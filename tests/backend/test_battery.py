@@ -15,7 +15,7 @@ from ucat_console.backend.safety import SafetyMonitor
 from ucat_console.config import FailsafeConfig, FailsafeRule, load_config
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.messages import ElectricalPower
-from ucat_console.ui.status_bar import bar_state, lights
+from ucat_console.ui.status_bar import bar_state, vehicle_parts
 
 TOKEN = "battery-token"
 PILOT = 1
@@ -73,7 +73,7 @@ def _surfaced(sup, events: list) -> None:
                   what="the battery_critical event")
     assert ev.data["action"] == "surface" and "battery: " in ev.data["cause"]
     assert sup.setpoints.depth == 0.0
-    assert next(x for x in lights(sup) if x.name == "Battery").state == "bad"
+    assert next(x for x in vehicle_parts(sup) if x.name == "Battery").state == "bad"
 
 
 def test_a_simulated_robot_that_uses_up_its_capacity_surfaces(tmp_path) -> None:
@@ -84,7 +84,7 @@ def test_a_simulated_robot_that_uses_up_its_capacity_surfaces(tmp_path) -> None:
     sup = c.sup
     try:
         sup.step(1.0)
-        assert next(x for x in lights(sup) if x.name == "Battery").state == "ok"
+        assert next(x for x in vehicle_parts(sup) if x.name == "Battery").state == "ok"
         sup.arm(LOCAL)
         sup.set_setpoints(LOCAL, velocity=0.2, depth=1.0)
         for _ in range(120):
@@ -115,7 +115,7 @@ def test_a_sagging_supply_injected_in_an_emulated_drive_surfaces_the_rig(tmp_pat
         sup.inject_fault(PILOT, "epos2", "low_voltage", fin=2, volts=20.0)
         _surfaced(sup, c.events)
         assert sup.safety.is_active("battery_low")
-        assert "20.0 V" in next(x for x in lights(sup) if x.name == "Battery").why
+        assert "20.0 V" in next(x for x in vehicle_parts(sup) if x.name == "Battery").why
         sup.clear_fault(PILOT, "epos2", "low_voltage")
         wait_for(lambda: not sup.safety.is_active("battery_critical"), what="the failsafe clearing")
     finally:

@@ -15,7 +15,7 @@ from ucat_console.backend.safety import SafetyMonitor
 from ucat_console.config import FailsafeConfig, FailsafeRule, load_config
 from ucat_console.robot.readings import DepthReading, DvlVelocity
 from ucat_console.telemetry import channels as ch
-from ucat_console.ui.status_bar import lights
+from ucat_console.ui.status_bar import vehicle_parts
 
 TOKEN = "limits-token"
 PILOT = 1
@@ -77,7 +77,7 @@ def _surfaced(sup, name: str, events: list) -> None:
     ev = next(e for e in events if e.source == "failsafe" and e.code == name)
     assert ev.data["action"] == "surface"
     assert sup.setpoints.depth == 0.0 and sup.armed
-    light = next(x for x in lights(sup) if x.name == "Limits")
+    light = next(x for x in vehicle_parts(sup) if x.name == "Limits")
     assert light.state == "bad" and f"failsafe {name}" in light.why
 
 
@@ -87,7 +87,7 @@ def test_the_simulated_robot_diving_past_a_limit_surfaces_until_it_is_back_withi
     sup = c.sup
     try:
         sup.step(1.0)
-        assert next(x for x in lights(sup) if x.name == "Limits").state == "ok"
+        assert next(x for x in vehicle_parts(sup) if x.name == "Limits").state == "ok"
         sup.arm(LOCAL)
         sup.set_setpoints(LOCAL, depth=2.0)
         for _ in range(120):

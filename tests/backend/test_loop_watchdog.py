@@ -11,7 +11,7 @@ from ucat_console.backend.devices import cia402
 from ucat_console.backend.supervisor import CommandRefused, Supervisor
 from ucat_console.backend.supervisor.watchdog import LoopWatchdog
 from ucat_console.config import FailsafeRule, LoopWatchdogRule, load_config
-from ucat_console.ui.status_bar import lights
+from ucat_console.ui.status_bar import lights, vehicle_parts
 
 TOKEN = "watchdog-token"
 PILOT = 1
@@ -64,7 +64,7 @@ def _console(tmp_path, base: str, **failsafes: FailsafeRule) -> Supervisor:
 
 
 def _light(sup: Supervisor, name: str):
-    return next(x for x in lights(sup) if x.name == name)
+    return next(x for x in vehicle_parts(sup) if x.name == name)
 
 
 @pytest.mark.slow
@@ -88,6 +88,8 @@ def test_a_stuck_loop_is_disarmed_by_the_watchdog_and_the_failsafe_clears_when_i
         wait_for(lambda: any(e.source == "supervisor" and e.code == "disarmed" for e in events),
                  what="the disarmed event")
         assert _light(sup, "Loop").state == "bad"
+        vehicle = next(x for x in lights(sup) if x.name == "Vehicle")  # the bar's one light for it
+        assert vehicle.state == "bad" and vehicle.why.startswith("Loop: failsafe loop_watchdog")
         with pytest.raises(CommandRefused, match="loop_watchdog"):
             sup.request_arm(PILOT)
         if rig is not None:  # the drives are off while the loop is still held
