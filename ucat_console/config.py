@@ -222,6 +222,26 @@ class PilotGoneRule(FailsafeRule):
 
 
 @dataclass(frozen=True)
+class LoopWatchdogRule(FailsafeRule):
+    """The control loop's watchdog (a thread of its own): when the loop has not stepped for
+    ``timeout`` s it disarms, turning the drives off from its own thread. Only disarm or warn:
+    a hold or a surfacing needs the loop that is stuck. The default, 2 s, is over eight times
+    the loop's longest caught-up lag (``console.max_lag``, 0.25 s) and half as long again as
+    the longest lag measured with the computer at twice its load goal (1.3 s, docs/safety.md);
+    the drives hold their last set-point meanwhile."""
+
+    action: str = param("disarm", choices=("disarm", "warn"),
+                        doc="disarm: the drives off from the watchdog's thread; warn: show and record only")
+    timeout: float = param(2.0, lo=0.05, hi=60.0, unit="s",
+                           doc="how long the loop has not stepped before the watchdog acts")
+
+    def _check(self) -> None:
+        if self.escalate != "none":
+            raise ValueError(f"escalate: the loop watchdog acts once (disarm or warn); got {self.escalate!r}, "
+                             "allowed: none")
+
+
+@dataclass(frozen=True)
 class FailsafeConfig(Config):
     """Every failsafe; each is shown, recorded, and latched until its cause clears."""
 
@@ -237,6 +257,54 @@ class FailsafeConfig(Config):
     tracking: FailsafeRule = FailsafeRule("warn", 10.0)
     #: the recorder failed to write (a full disk): warn, or hold until the operator acts
     recording: FailsafeRule = FailsafeRule("warn", 0.0)
+    loop_watchdog: LoopWatchdogRule = LoopWatchdogRule("disarm", 2.0)
+    #: the robot deeper than max_depth: surface (a hold would keep it beyond the limit)
+    depth_limit: FailsafeRule = FailsafeRule("surface", 1.0)
+    max_depth: float = param(
+        55.0, lo=0.1, hi=10_000.0, unit="m",
+        doc="depth_limit: a measured depth deeper than this (the default: 10 % beyond the setpoints' envelope, "
+        "loop.max_depth 50 m; set the pool's depth less a margin)",
+    )
+    #: the DVL's altitude below min_altitude: surface (a hold keeps the robot at the floor)
+    altitude: FailsafeRule = FailsafeRule("surface", 1.0)
+    min_altitude: float = param(
+        0.5, lo=0.0, hi=100.0, unit="m",
+        doc="altitude: the DVL's distance to the floor shorter than this (0: off); an invalid altitude "
+        "(none, NaN, not above 0) is not counted",
+    )
+    #: water in the hull (devices.leak): surface at once, under control, while the electronics work
+    leak: FailsafeRule = FailsafeRule("surface", 0.0)
+    #: the attitude estimate disagrees with the accelerometer, or the estimate stopped: hold
+    #: (stop; the depth is the pressure sensor's, the heading and speed loops are the estimate's)
+    estimate: FailsafeRule = FailsafeRule("hold", 2.0)
+    estimate_innovation: float = param(
+        0.2, lo=0.01, hi=3.15, unit="rad",
+        doc="estimate: the angle between the accelerometer's gravity and the attitude estimate's larger "
+        "than this (every reading taken at rest, |a| within 0.15 g of g0)",
+    )
+    #: the battery: warn first (a sagging pack, most of its energy used), then surface while it
+    #: still drives the fins; 10 s, ArduSub's BATT_LOW_TIMER, so a stroke's sag does not trip it
+    battery_low: FailsafeRule = FailsafeRule("warn", 10.0)
+    battery_critical: FailsafeRule = FailsafeRule("surface", 10.0)
+    battery_low_voltage: float = param(
+        22.0, lo=0.0, hi=100.0, unit="V",
+        doc="battery_low: the lowest drive's supply voltage below this (a 24 V pack, 7 Li-ion cells at 3.15 V)",
+    )
+    battery_critical_voltage: float = param(
+        21.0, lo=0.0, hi=100.0, unit="V",
+        doc="battery_critical: the lowest drive's supply voltage below this (7 cells at 3.0 V, their cut-off)",
+    )
+    battery_capacity: float = param(
+        0.0, lo=0.0, hi=100_000.0, unit="Wh",
+        doc="the energy the pack gives the four drives (0: the energy used is not judged); "
+        "the drives' electrical input counts the fins only, not the computer and the sensors",
+    )
+    battery_low_reserve: float = param(
+        0.3, lo=0.0, hi=1.0, doc="battery_low: less than this fraction of battery_capacity left",
+    )
+    battery_critical_reserve: float = param(
+        0.15, lo=0.0, hi=1.0, doc="battery_critical: less than this fraction of battery_capacity left",
+    )
     tracking_depth: float = param(
         0.2, lo=0.01, hi=100.0, unit="m", doc="tracking: depth further than this from its reference"
     )
@@ -248,7 +316,16 @@ class FailsafeConfig(Config):
     )
 
     #: the rules whose default acts on the robot (the others warn by default)
-    PROTECTIVE: ClassVar[tuple[str, ...]] = ("pilot_gone", "imu", "dvl", "depth", "motor", "planner_late")
+    PROTECTIVE: ClassVar[tuple[str, ...]] = ("pilot_gone", "imu", "dvl", "depth", "motor", "planner_late",
+                                              "loop_watchdog", "depth_limit", "altitude", "battery_critical", "leak", "estimate")
+
+    def _check(self) -> None:
+        if self.battery_critical_voltage >= self.battery_low_voltage:
+            raise ValueError(f"battery_critical_voltage: {self.battery_critical_voltage:g} V must be below "
+                             f"battery_low_voltage {self.battery_low_voltage:g} V")
+        if self.battery_critical_reserve >= self.battery_low_reserve:
+            raise ValueError(f"battery_critical_reserve: {self.battery_critical_reserve:g} must be below "
+                             f"battery_low_reserve {self.battery_low_reserve:g}")
 
     def warn_only(self) -> tuple[str, ...]:
         """The protective rules configured only to warn: the console logs them at start and the

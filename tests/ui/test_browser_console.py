@@ -67,7 +67,7 @@ def test_status_bar_armed_state_and_disarm_are_on_screen_on_every_tab(browser: B
         page.screenshot(path=str(ARTIFACTS / f"console-{size[0]}x{size[1]}-{tab.lower()}.png"))
     lights = page.locator("#ucat-lights .light-dot")
     assert {lights.nth(i).get_attribute("data-name") for i in range(lights.count())} == \
-        {"IMU", "DVL", "Depth", "Drives", "Planner", "Control", "Recording"}
+        {"IMU", "DVL", "Depth", "Drives", "Planner", "Control", "Recording", "Vehicle"}
     page.locator("#ucat-disarm").click()  # one click
     wait_for(lambda: not console.sup.armed, what="the bar's DISARM")
     expect(page.locator("#ucat-disarm")).to_be_disabled()

@@ -40,6 +40,34 @@ Failsafes (``FailsafeConfig`` has one rule, action and timeout, for each):
   a full disk, a removed drive) and has not been started again or acknowledged since (an
   Event ``recorder``/``failure_cleared``). Warns by default (``hold`` keeps the robot where
   it is until the operator acts): what the robot does from then on is not recorded.
+* ``loop_watchdog``: the control loop has not stepped for ``timeout`` s (the supervisor's
+  :class:`~ucat_console.backend.supervisor.watchdog.LoopWatchdog`, a thread of its own).
+  It triggers at once, from the watchdog's thread (:meth:`SafetyMonitor.loop_stuck`: the
+  loop's thread, which calls :meth:`SafetyMonitor.check`, is the one stuck), and clears at
+  the first check after the loop steps again (:meth:`SafetyMonitor.loop_resumed`).
+* ``depth_limit``: every valid depth reading for ``timeout`` s deeper than ``max_depth``;
+  clears with a valid reading within it.
+* ``altitude``: every valid DVL altitude (finite, above 0: a report without one is not an
+  altitude of 0 and neither starts nor clears it) for ``timeout`` s shorter than
+  ``min_altitude``; clears with a valid altitude at least that long. Both surface by default.
+* ``battery_low`` (warns) / ``battery_critical`` (surfaces): from the drives' electrical
+  input (``power/electrical``): the lowest supply voltage of the drives that answered
+  below ``battery_low_voltage`` / ``battery_critical_voltage`` for ``timeout`` s (a NaN
+  voltage, a drive that did not answer, is left out, never a zero: that drive is the motor
+  failsafe's), or, with a ``battery_capacity``, the energy the drives drew since the start
+  leaving less than ``battery_low_reserve`` / ``battery_critical_reserve`` of it (at once;
+  it never comes back). A voltage back above the threshold clears it.
+* ``leak``: the leak detector (``devices.leak``, Events of source ``leak``) reported water
+  ``timeout`` s ago and not dry since; an unreadable detector is shown
+  (:meth:`SafetyMonitor.leak`), not counted as water.
+* ``estimate``: the attitude estimate (the body state's orientation) disagrees with the
+  accelerometer: every IMU reading taken at rest (the specific force within the EKF's
+  ``accel_gate`` of g0; the others measure no gravity and are skipped) for ``timeout`` s
+  further than ``estimate_innovation`` from the gravity direction the estimate predicts
+  (``control.estimation.gravity_innovation``, the EKF correction's innovation as an angle);
+  or the estimate stopped: IMU readings for ``timeout`` s past the last body state (a
+  stalled loop, whose readings and states resume together, is not one). Clears with a
+  reading within the bound and a body state.
 
 Times are the supervisor's clock (the loop's time). A valid sensor reading counts at its
 own time ``t`` (the robot stamps readings with the loop's time; one more than a minute away
@@ -59,13 +87,15 @@ from typing import Any
 from ucat_console.backend.devices.reporting import READING_FAULTS
 from ucat_console.robot.readings import DepthReading, DvlVelocity, ImuReading
 from ucat_console.config import FailsafeConfig, FailsafeRule
+from ucat_console.control.estimation import AttitudeConfig, gravity_innovation
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event
 
 log = logging.getLogger(__name__)
 
 #: every failsafe, in display order
-FAILSAFES = ("pilot_gone", "imu", "dvl", "depth", "motor", "planner_late", "tracking", "recording")
+FAILSAFES = ("pilot_gone", "imu", "dvl", "depth", "motor", "planner_late", "tracking", "recording",
+             "loop_watchdog", "depth_limit", "altitude", "battery_low", "battery_critical", "leak", "estimate")
 SENSORS = ("imu", "dvl", "depth")
 #: motor controller event codes that start a fault (a ``quick_stop`` event is the other
 #: drives' safe-state reaction to one of these, which the failsafe already counts)
@@ -77,7 +107,15 @@ MOTOR_CLEARS: dict[str, frozenset[str]] = {
     "heartbeat_restored": frozenset({"heartbeat_lost"}),
 }
 #: the channels the monitor subscribes to
-CHANNELS = (ch.IMU, ch.DVL, ch.DEPTH, ch.EVENTS, ch.BODY_TRACKING, ch.BODY_ALLOCATION)
+CHANNELS = (ch.IMU, ch.DVL, ch.DEPTH, ch.EVENTS, ch.BODY_TRACKING, ch.BODY_ALLOCATION, ch.POWER_ELECTRICAL,
+            ch.BODY_STATE)
+#: the specific force's largest departure from g0 at which it measures gravity's direction (g0)
+ACCEL_GATE = AttitudeConfig().accel_gate
+#: the battery failsafes: (name, its voltage threshold, its reserve fraction)
+BATTERY = (("battery_low", "battery_low_voltage", "battery_low_reserve"),
+           ("battery_critical", "battery_critical_voltage", "battery_critical_reserve"))
+#: the longest gap between two electrical messages counted as drawing power (s)
+_ENERGY_GAP = 1.0
 #: the tracked axes: (name, the message's error field, the band's config field, unit)
 TRACKED = (("depth", "depth_error", "tracking_depth", "m"), ("speed", "speed_error", "tracking_speed", "m/s"),
            ("heading", "heading_error", "tracking_heading", "rad"))
@@ -186,6 +224,18 @@ class SafetyMonitor:
         self._off_track: dict[str, tuple[float, float]] = {}  # axis -> (since, the last error)
         self._allocation: Any = None  # the last BodyAllocation
         self._recorder_failed: tuple[float, str] | None = None  # (since, why)
+        self._loop_stuck: str | None = None  # why, while the loop watchdog holds it stuck
+        #: the last valid depth and altitude: (time, value)
+        self._depth: tuple[float, float] | None = None
+        self._altitude: tuple[float, float] | None = None
+        self._beyond: dict[str, tuple[float, float]] = {}  # depth_limit, altitude, battery_* -> (since, the last value)
+        self._volts: tuple[float, float] | None = None  # the last lowest supply voltage: (time, V)
+        self._power: tuple[float, float] | None = None  # the last battery power: (time, W)
+        self._energy = 0.0  # J drawn by the drives since the start
+        self._water: tuple[float, str] | None = None  # the leak detector's water: (since, message)
+        self._leak_state = ""  # the leak detector's last report: water, dry, unreadable ("": none)
+        self._estimate: tuple[float, Any] | None = None  # the last body state: (time, orientation)
+        self._innovation: tuple[float, float] | None = None  # the last finite innovation: (time, rad)
         self._active: dict[str, float] = {}  # name -> since
         self._escalated: set[str] = set()  # active failsafes whose escalation acted
         self._cause: dict[str, str] = {n: "" for n in FAILSAFES}
@@ -214,11 +264,23 @@ class SafetyMonitor:
                         self._track(msg)
                     elif channel == ch.BODY_ALLOCATION:
                         self._allocation = msg
+                    elif channel == ch.POWER_ELECTRICAL:
+                        self._electrical(msg)
+                    elif channel == ch.BODY_STATE:
+                        self._estimate = (_stamp(msg.t, now), msg.orientation)
                 elif reading_valid(msg):
                     t = msg.t
                     # readings carry the loop's time; one off by more than a minute does not
                     if not (isinstance(t, (int, float)) and abs(t - now) <= _CLOCK_SLACK):
                         t = now
+                    if sensor == "imu" and self._estimate is not None:
+                        rad = gravity_innovation(self._estimate[1], msg.accel, ACCEL_GATE)
+                        if rad == rad:  # NaN: accelerating, no measurement of gravity
+                            self._innovation = (t, rad)
+                            self._limit("estimate", rad > self.cfg.estimate_innovation, t, rad)
+                    if sensor == "depth":
+                        self._depth = (t, msg.depth_m)
+                        self._limit("depth_limit", msg.depth_m > self.cfg.max_depth, t, msg.depth_m)
                     if t > last_valid[sensor]:
                         last_valid[sensor] = t
                     k = kinds[sensor]
@@ -227,8 +289,37 @@ class SafetyMonitor:
                             del k[kind]
                 else:
                     _note(kinds[sensor], "invalid", 1, _stamp(msg.t, now))
+                if sensor == "dvl":
+                    alt = getattr(msg, "altitude", math.nan)
+                    if _finite(alt) and alt > 0.0:  # no altitude is not an altitude of 0
+                        t = _stamp(msg.t, now)
+                        self._altitude = (t, alt)
+                        self._limit("altitude", alt < self.cfg.min_altitude, t, alt)
         for ev in events:
             self.on_event(ev)
+
+    def _limit(self, name: str, beyond: bool, t: float, value: float) -> None:
+        """A reading beyond (or within) failsafe ``name``'s limit at ``t`` (the lock is held)."""
+        if beyond:
+            since = self._beyond[name][0] if name in self._beyond else t
+            self._beyond[name] = (since, value)
+        else:
+            self._beyond.pop(name, None)
+
+    def _electrical(self, msg: Any) -> None:
+        """The drives' electrical input: the lowest voltage, the energy (the lock is held)."""
+        t = _stamp(msg.t, self._now)
+        volts = [v for v in msg.voltage if _finite(v)]
+        if volts:  # a drive that did not answer (NaN) is left out, never a zero
+            low = min(volts)
+            self._volts = (t, low)
+            for name, threshold, _reserve in BATTERY:
+                self._limit(name, low < getattr(self.cfg, threshold), t, low)
+        watts = math.fsum(w for w in msg.per_fin if _finite(w))
+        last = self._power
+        if last is not None and 0.0 < t - last[0] <= _ENERGY_GAP:  # the mean power since the last message
+            self._energy += watts * (t - last[0])
+        self._power = (t, watts)
 
     def _track(self, msg: Any) -> None:
         """A tracking message: each axis out of its band since when (the lock is held)."""
@@ -262,6 +353,12 @@ class SafetyMonitor:
                         faults.pop(code, None)
                 elif ev.code == "recovered" and isinstance(ev.data.get("fault"), str):
                     faults.pop(ev.data["fault"], None)
+            elif ev.source == "leak":
+                self._leak_state = ev.code
+                if ev.code == "water":
+                    self._water = self._water or (self._now, ev.message)
+                elif ev.code == "dry":
+                    self._water = None
             elif ev.source == "loop" and ev.code == "late_plan":
                 self._late.append(self._now)
             elif ev.source == "recorder" and ev.code == "write_failed":
@@ -293,6 +390,26 @@ class SafetyMonitor:
         with self._lock:
             self._had_pilot = False
             self._pilot_left = None
+
+    def loop_stuck(self, silent_for: float) -> Transition | None:
+        """The loop has not stepped for ``silent_for`` s (the watchdog's thread): the
+        ``loop_watchdog`` failsafe triggers now, at the last check's time; None when it is
+        active already."""
+        cause = f"the control loop has not stepped for {silent_for:.2f} s"
+        with self._lock:
+            self._loop_stuck = cause
+            self._cause["loop_watchdog"] = cause
+            if "loop_watchdog" in self._active:
+                return None
+            self._active["loop_watchdog"] = self._now
+            tr = Transition("loop_watchdog", True, self._now, self.cfg.loop_watchdog.action, cause)
+        log.error("failsafe loop_watchdog triggered: %s", cause)
+        return tr
+
+    def loop_resumed(self) -> None:
+        """The loop steps again: ``loop_watchdog`` clears at the next check."""
+        with self._lock:
+            self._loop_stuck = None
 
     # ------------------------------------------------------------------ evaluation
     def check(self, now: float) -> list[Transition]:
@@ -359,6 +476,38 @@ class SafetyMonitor:
         failed = self._recorder_failed
         if failed is not None and now - failed[0] >= cfg.recording.timeout:
             causes["recording"] = f"the recording stopped: {failed[1]}"
+        if self._loop_stuck is not None:
+            causes["loop_watchdog"] = self._loop_stuck
+        beyond = self._beyond
+        if "depth_limit" in beyond and now - beyond["depth_limit"][0] >= cfg.depth_limit.timeout:
+            since, depth = beyond["depth_limit"]
+            causes["depth_limit"] = f"depth {depth:.2f} m deeper than the limit {cfg.max_depth:g} m for {now - since:.1f} s"
+        if "altitude" in beyond and now - beyond["altitude"][0] >= cfg.altitude.timeout:
+            since, alt = beyond["altitude"]
+            causes["altitude"] = (f"altitude {alt:.2f} m above the floor, below the minimum {cfg.min_altitude:g} m, "
+                                  f"for {now - since:.1f} s")
+        if self._water is not None and now - self._water[0] >= cfg.leak.timeout:
+            causes["leak"] = self._water[1]
+        est, timeout = self._estimate, cfg.estimate.timeout
+        if "estimate" in beyond and now - beyond["estimate"][0] >= timeout:
+            since, rad = beyond["estimate"]
+            causes["estimate"] = (f"the attitude estimate {rad:.2f} rad off the accelerometer's gravity "
+                                  f"(bound {cfg.estimate_innovation:g} rad) for {now - since:.1f} s")
+        elif est is not None and self._last_valid["imu"] - est[0] > timeout:  # readings come, no estimate
+            causes["estimate"] = (f"no state estimate for {self._last_valid['imu'] - est[0]:.1f} s "
+                                  "of IMU readings")
+        used = self._energy / 3600.0
+        for name, threshold, reserve in BATTERY:
+            why = []
+            if name in beyond and now - beyond[name][0] >= getattr(cfg, name).timeout:
+                since, volts = beyond[name]
+                why.append(f"the lowest drive supply {volts:.1f} V below {getattr(cfg, threshold):g} V "
+                           f"for {now - since:.0f} s")
+            cap, left = cfg.battery_capacity, getattr(cfg, reserve)
+            if cap > 0 and used >= (1.0 - left) * cap:
+                why.append(f"{used:.1f} Wh of {cap:g} Wh used, less than {left:.0%} left")
+            if why:
+                causes[name] = "battery: " + "; ".join(why)
         return causes
 
     # ------------------------------------------------------------------ reading
@@ -370,6 +519,28 @@ class SafetyMonitor:
         with self._lock:
             kinds = self._kinds[sensor]
             return max(0.0, now - self._last_valid[sensor]), fault_label(kinds) if kinds else ""
+
+    def envelope(self) -> tuple[tuple[float, float] | None, tuple[float, float] | None]:
+        """The last valid depth and DVL altitude, each (time, m), None before the first."""
+        with self._lock:
+            return self._depth, self._altitude
+
+    def battery(self) -> tuple[tuple[float, float] | None, float]:
+        """(the last lowest drive supply voltage as (time, V), None before the first; the
+        energy the drives drew since the start, Wh)."""
+        with self._lock:
+            return self._volts, self._energy / 3600.0
+
+    def estimate(self) -> tuple[tuple[float, float] | None, float | None]:
+        """(the last innovation taken at rest as (time, rad), None before the first; the last
+        body state's time, None before the first)."""
+        with self._lock:
+            return self._innovation, None if self._estimate is None else self._estimate[0]
+
+    def leak(self) -> str:
+        """The leak detector's last report: water, dry, unreadable; "" when none came."""
+        with self._lock:
+            return self._leak_state
 
     def recent_late_plans(self) -> int:
         """Late plans within the planner_late window (at the last check)."""

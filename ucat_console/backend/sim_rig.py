@@ -59,7 +59,7 @@ log = logging.getLogger(__name__)
 SOURCE = "rig"
 #: devices that take faults, and the faults each takes
 EMULATOR_FAULTS: dict[str, tuple[str, ...]] = {
-    "epos2": ("emcy", "heartbeat_loss", "silence", "slow"),
+    "epos2": ("emcy", "heartbeat_loss", "silence", "slow", "low_voltage"),
     "imu": tuple(f.value for f in Fault),
     "dvl": tuple(f.value for f in Fault),
     "pressure": tuple(f.value for f in Fault),
@@ -301,7 +301,8 @@ class SimRig:
         * ``epos2`` (``fin`` 0-3, default 0, or ``node``): ``emcy`` (``code``, default
           0x2310 overcurrent; ``register``), ``heartbeat_loss``, ``silence`` (the node
           stops answering), ``slow`` (``delay_s`` on each SDO reply, default 2 s: beyond the
-          drivers' SDO timeout on the rig, ``rig.sdo_timeout_s``); each
+          drivers' SDO timeout on the rig, ``rig.sdo_timeout_s``), ``low_voltage`` (the
+          drive measures ``volts`` supply, default 20 V: a sagging pack); each
           but ``emcy`` takes ``duration`` (s). An EMCY fault stays until the drive's fault
           is reset, as on the EPOS2.
 
@@ -344,6 +345,8 @@ class SimRig:
                     emulator.unsilence()
                 if fault in (None, "slow"):
                     emulator.slow_replies(0.0)
+                if fault in (None, "low_voltage"):
+                    emulator.set_supply_voltage(None)
         else:
             self._emulator(device).clear(None if fault is None else as_fault(fault))
         self._event("fault_cleared", f"{device}: {fault or 'all faults'} cleared", "info",
@@ -353,7 +356,8 @@ class SimRig:
         allowed = {"emcy": ("fin", "node", "code", "register"),
                    "heartbeat_loss": ("fin", "node", "duration"),
                    "silence": ("fin", "node", "duration"),
-                   "slow": ("fin", "node", "delay_s", "duration")}[fault]
+                   "slow": ("fin", "node", "delay_s", "duration"),
+                   "low_voltage": ("fin", "node", "volts", "duration")}[fault]
         _only(kw, allowed)
         node = self._node_id(kw.get("fin"), kw.get("node"))
         emulator = self._nodes()[node]
@@ -372,6 +376,13 @@ class SimRig:
         elif fault == "silence":
             emulator.silence()
             self._after(duration, emulator.unsilence)
+        elif fault == "low_voltage":
+            volts = kw.get("volts", 20.0)
+            if isinstance(volts, bool) or not isinstance(volts, (int, float)) or not 0.0 <= volts <= 100.0:
+                raise ValueError(f"volts: {volts!r} is out of range; allowed: [0, 100] V")
+            emulator.set_supply_voltage(float(volts))
+            self._after(duration, lambda: emulator.set_supply_voltage(None))
+            data["volts"] = float(volts)
         else:
             delay = kw.get("delay_s", 2.0)
             if isinstance(delay, bool) or not isinstance(delay, (int, float)) or not 0.0 < delay <= 60.0:

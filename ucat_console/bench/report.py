@@ -141,6 +141,11 @@ def _safety(d: dict[str, Any]) -> list[Row]:
         out.append(Row(f"the pilot's page the pilot again after a restart under {r['spinners']} spinning processes "
                        f"({r['back']} of {r['restarts']}): median / max from the console serving",
                        f"{r['from_up_median_s']:.1f} / {r['from_up_max_s']:.1f} s", "<= 10 s", cmd))
+    x = d.get("failsafes")
+    for name, f in (x or {}).get("triggers", {}).items():
+        out.append(Row(f"failsafe {name} ({f['action']}) on the emulated rig: detection to action beyond its "
+                       f"{f['timeout_s']:g} s timeout, p99 / max ({x['trials']} trials)",
+                       f"{f['p99_s'] * 1000:.0f} / {f['max_s'] * 1000:.0f} ms", "<= 100 ms", cmd))
     return out
 
 
@@ -206,6 +211,9 @@ def table(directory: Path) -> str:
             raise ValueError(f"{path}: not a benchmark file of this version ({type(e).__name__}: {e})") from e
         if "machine" in data:
             machines[name] = data["machine"]
+        for key in data:  # a run of some parts of the file keeps its own machine (machine_<parts>)
+            if key.startswith("machine_") and isinstance(data[key], dict):
+                machines[f"{name} {key.removeprefix('machine_').replace('_', ' ')}"] = data[key]
     if not rows:
         raise ValueError(f"{directory}: no benchmark files ({', '.join(f'{n}.json' for n in SOURCES)})")
     lines = [machine_line(machines), "", "| measure | figure | goal | measured by `ucat-console` |",

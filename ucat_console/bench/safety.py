@@ -32,6 +32,17 @@ a crowd of pages, measured against ``ucat-console run`` on the simulated robot.
 * **Hand-over**: a new raw page asks the pilot for control; the pilot presses *Hand over*.
   The time from that press to the new pilot's page showing it flies, and to its first
   command (a velocity, applied with *Apply setpoints*) in force in the supervisor.
+* **Failsafe triggers** (``failsafes``): the emulated rig (``sim-devices``, the drivers on the
+  device emulators) armed at 1 m; each new failsafe's cause is brought about ``--failsafe-trials``
+  times, each rule's timeout 1 s (the leak's 0 s, the loop watchdog's its default, 2 s): the loop's thread held
+  (``loop_watchdog``; the action: every emulated drive out of operation enabled), a dive to
+  2 m past a 1.3 m depth limit (``depth_limit``) and, on a second rig with its floor at
+  2.5 m, past a 1.2 m minimum altitude (``altitude``; from the first reading beyond the
+  limit on the stream), a drive's supply made to read 20 V (``battery_critical``), water at
+  the emulated leak detector (``leak``), the accelerometer streaming a tilt the estimate
+  lacks (``estimate``). Detection to action: from the cause (the injection, or the first
+  reading beyond the limit) to the action in force (the surfacing or holding setpoints
+  applied, the drives off), less the rule's timeout; the goal: 100 ms at the 99th percentile.
 * **Slow link**: the pilot's raw page reads 50 kB/s (``--slow-rate``) while the robot swims
   and the live view sends at its configured rates: whether it stays the pilot for
   ``--slow-seconds`` s, its heartbeats' round trips (the console's own measure) and whether
@@ -736,7 +747,124 @@ def restarts(count: int, spinners: int) -> dict[str, Any]:
 
 
 PARTS = ("frozen", "takeover", "crowd", "link-loss", "spam", "slow-link", "drop", "handover",
-         "slow-connect", "slow-disarm", "restart")
+         "slow-connect", "slow-disarm", "restart", "failsafes")
+PILOT = 1
+
+
+def _rig(tmp: str, bottom: float | None = None, **failsafe: Any) -> Any:
+    """The emulated rig's console, running, the bench its pilot, no failsafe active."""
+    from ucat_console.backend.supervisor import Supervisor
+    from ucat_console.config import load_config
+
+    cfg = load_config("sim-devices")
+    plant = cfg.plant
+    if bottom is not None:
+        plant = plant.replace(sensors=plant.sensors.replace(dvl=plant.sensors.dvl.replace(bottom_depth=bottom)))
+    cfg = cfg.replace(access=cfg.access.replace(token=TOKEN), console=cfg.console.replace(record_on_arm=False),
+                      plant=plant, failsafe=cfg.failsafe.replace(**failsafe))
+    sup = Supervisor(cfg, sessions_dir=tmp)
+    sup.start()
+    sup.client_connected(PILOT)
+    sup.take_control(PILOT, TOKEN)
+    _wait(lambda: sup.loop.time > 1.0 and not sup.safety.active(), 120.0, "the rig running, no failsafe")
+    return sup
+
+
+def _readings(sup: Any, channel: str, beyond: Any) -> list[float]:
+    """The wall times (monotonic) of the readings on ``channel`` beyond a limit, from now on."""
+    times: list[float] = []
+    sup.stream.subscribe(lambda c, m: times.append(time.monotonic()) if beyond(m) else None, [channel])
+    return times
+
+
+def _failsafe_trials(sup: Any, name: str, trials: int, inject: Any, clear: Any, acted: Any,
+                     crossed: list[float] | None = None) -> tuple[float, list[float]]:
+    """(the rule's timeout, detection to action in s beyond it of ``trials`` causes of ``name``)."""
+    from ucat_console.backend.supervisor import CommandRefused
+
+    timeout = sup.safety.rule(name).timeout
+    out = []
+    for trial in range(trials):
+        _wait(lambda: not sup.safety.active(), 120.0, f"no failsafe before {name} trial {trial + 1}")
+        if not sup.armed:
+            sup.arm(PILOT)
+        while True:
+            try:
+                sup.set_setpoints(PILOT, velocity=0.1, depth=1.0)
+                break
+            except CommandRefused:  # a hold not cleared yet
+                time.sleep(0.05)
+        _wait(lambda: abs(sup._last_body.depth - 1.0) < 0.1, 120.0, "the robot at 1 m")
+        if crossed is not None:
+            crossed.clear()
+        t0 = time.monotonic()
+        inject()
+        t_act = _wait(lambda: acted() and time.monotonic(), 120.0, f"the {name} failsafe's action")
+        start = crossed[0] if crossed else t0
+        out.append(t_act - start - timeout)
+        log.info("%s trial %d: acted %.3f s after its cause (timeout %g s)", name, trial + 1, t_act - start, timeout)
+        clear()
+        _wait(lambda: not sup.safety.is_active(name), 120.0, f"the {name} failsafe clearing")
+    return timeout, out
+
+
+def _percentile(xs: list[float], q: float) -> float:
+    """The ``q`` quantile of sorted ``xs``, interpolated between neighbours."""
+    k = (len(xs) - 1) * q
+    lo = int(k)
+    return xs[lo] + (xs[min(lo + 1, len(xs) - 1)] - xs[lo]) * (k - lo)
+
+
+def failsafe_triggers(trials: int) -> dict[str, Any]:
+    """Detection to action of the new failsafes on the emulated rig (module docstring)."""
+    from ucat_console.backend.devices import cia402
+    from ucat_console.config import FailsafeRule
+    from ucat_console.telemetry import channels as ch
+
+    rule = {"battery_low": FailsafeRule("warn", 1.0), "battery_critical": FailsafeRule("surface", 1.0),
+            "estimate": FailsafeRule("hold", 1.0)}
+    surfaced = (lambda sup: lambda: sup.setpoints.depth == 0.0)
+    result: dict[str, tuple[float, list[float]]] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        sup = _rig(tmp, max_depth=1.3, **rule)
+        try:
+            nodes = sup.rig.nodes.nodes.values()
+            result["loop_watchdog"] = _failsafe_trials(
+                sup, "loop_watchdog", trials, lambda: sup.stall_loop(PILOT, 30.0), sup._unstall.set,
+                lambda: all(n.state != cia402.OPERATION_ENABLED for n in nodes))
+            deep = _readings(sup, ch.DEPTH, lambda m: m.depth_m > 1.3)
+            result["depth_limit"] = _failsafe_trials(
+                sup, "depth_limit", trials, lambda: sup.set_setpoints(PILOT, depth=2.0), lambda: None,
+                surfaced(sup), deep)
+            result["battery_critical"] = _failsafe_trials(
+                sup, "battery_critical", trials, lambda: sup.inject_fault(PILOT, "epos2", "low_voltage", fin=2),
+                lambda: sup.clear_fault(PILOT, "epos2", "low_voltage"), surfaced(sup))
+            result["leak"] = _failsafe_trials(
+                sup, "leak", trials, lambda: sup.inject_leak(PILOT, True), lambda: sup.inject_leak(PILOT, False),
+                surfaced(sup))
+            result["estimate"] = _failsafe_trials(
+                sup, "estimate", trials,
+                lambda: sup.inject_fault(PILOT, "imu", "implausible", accel_g=(0.5, 0.0, -0.75 ** 0.5)),
+                lambda: sup.clear_fault(PILOT, "imu", "implausible"), lambda: sup.setpoints.velocity == 0.0)
+        finally:
+            sup.stop()
+        sup = _rig(tmp, bottom=2.5, min_altitude=1.2)
+        try:
+            low = _readings(sup, ch.DVL, lambda m: 0.0 < m.altitude < 1.2)
+            result["altitude"] = _failsafe_trials(
+                sup, "altitude", trials, lambda: sup.set_setpoints(PILOT, depth=2.0), lambda: None,
+                surfaced(sup), low)
+        finally:
+            sup.stop()
+    actions = {"loop_watchdog": "disarm (the drives off)", "depth_limit": "surface", "altitude": "surface",
+               "battery_critical": "surface", "leak": "surface", "estimate": "hold"}
+    out: dict[str, Any] = {"trials": trials, "goal_s": 0.1, "triggers": {}}
+    for name, (timeout, xs) in result.items():
+        xs = sorted(xs)
+        out["triggers"][name] = {"action": actions[name], "timeout_s": timeout,
+                                 "median_s": statistics.median(xs), "p99_s": _percentile(xs, 0.99),
+                                 "max_s": xs[-1]}
+    return out
 
 
 def measure(trials: int = 10, spam_trials: int = 10, rounds: int = 10, pages: int = 40,
@@ -745,7 +873,8 @@ def measure(trials: int = 10, spam_trials: int = 10, rounds: int = 10, pages: in
             spam_rate: float = 20.0, spam_before: float = 5.0, slow_rate: float = 50_000.0,
             slow_seconds: float = 60.0, drop_trials: int = 5, handover_trials: int = 10,
             connect_delay: float = 1.0, connect_trials: int = 3, disarm_delay: float = 0.6,
-            slow_disarm_trials: int = 5, restart_count: int = 10, spinners: int = 2) -> dict[str, Any]:
+            slow_disarm_trials: int = 5, restart_count: int = 10, spinners: int = 2,
+            failsafe_trials: int = 5) -> dict[str, Any]:
     from ucat_console.bench.machine import machine_info
 
     out: dict[str, Any] = {"machine": machine_info(None), "load_before": os.getloadavg()[0]}
@@ -772,6 +901,8 @@ def measure(trials: int = 10, spam_trials: int = 10, rounds: int = 10, pages: in
         out["slow_disarm"] = slow_disarm(disarm_delay, slow_disarm_trials)
     if "restart" in parts:
         out["restart"] = restarts(restart_count, spinners)
+    if "failsafes" in parts:
+        out["failsafes"] = failsafe_triggers(failsafe_trials)
     out["load_after"] = os.getloadavg()[0]
     return out
 
@@ -847,6 +978,12 @@ def format_result(r: dict[str, Any]) -> str:
                      f"pilot's page the pilot again {x['back']} of {x['restarts']} times, after median "
                      f"{x['from_up_median_s']:.1f} s, max {x['from_up_max_s']:.1f} s from the console serving "
                      f"(median {x['from_stop_median_s']:.1f} s, max {x['from_stop_max_s']:.1f} s from the stop)")
+    if "failsafes" in r:
+        x = r["failsafes"]
+        for name, f in x["triggers"].items():
+            lines.append(f"failsafe {name} ({x['trials']} trials, timeout {f['timeout_s']:g} s, {f['action']}): "
+                         f"detection to action beyond the timeout median {f['median_s'] * 1e3:.0f} ms, "
+                         f"p99 {f['p99_s'] * 1e3:.0f} ms, max {f['max_s'] * 1e3:.0f} ms")
     lines.append(f"load average {r['load_before']:.1f} before, {r['load_after']:.1f} after")
     return "\n".join(lines)
 
@@ -880,14 +1017,16 @@ def register_bench(kinds: argparse._SubParsersAction) -> None:
     p.add_argument("--slow-disarm-trials", type=int, default=5, help="slow-disarm: DISARM presses")
     p.add_argument("--restarts", type=int, default=10, help="restart: restarts of the console")
     p.add_argument("--spinners", type=int, default=2, help="restart: processes spinning meanwhile")
+    p.add_argument("--failsafe-trials", type=int, default=5, help="causes of each new failsafe on the emulated rig")
     p.add_argument("--json", type=Path, default=None,
-                   help="write the results as JSON")
+                   help="write the results as JSON (into the file's other parts' results when only some parts run)")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     for name in ("trials", "spam_trials", "rounds", "pages", "link_trials", "disarm_trials", "sessions",
-                 "spammers", "drop_trials", "handover_trials", "connect_trials", "slow_disarm_trials", "restarts"):
+                 "spammers", "drop_trials", "handover_trials", "connect_trials", "slow_disarm_trials", "restarts",
+                 "failsafe_trials"):
         if getattr(args, name) < 1:
             raise ValueError(f"--{name.replace('_', '-')}: must be at least 1")
     if args.spinners < 0:
@@ -907,8 +1046,12 @@ def run(args: argparse.Namespace) -> int:
                 tuple(args.parts), args.disarm_trials, args.sessions, args.session_seconds, args.spammers,
                 args.spam_rate, args.spam_before, args.slow_rate, args.slow_seconds, args.drop_trials,
                 args.handover_trials, args.connect_delay, args.connect_trials, args.disarm_delay,
-                args.slow_disarm_trials, args.restarts, args.spinners)
+                args.slow_disarm_trials, args.restarts, args.spinners, args.failsafe_trials)
     print(format_result(r))
     if args.json is not None:
+        if set(args.parts) != set(PARTS) and args.json.exists():  # the other parts' results stay
+            run_of = ("machine", "load_before", "load_after")  # this run's, kept beside the file's
+            r = {**json.loads(args.json.read_text()), **{k: v for k, v in r.items() if k not in run_of},
+                 **{f"{k}_{'_'.join(args.parts)}": r[k] for k in run_of}}
         args.json.write_text(json.dumps(r, indent=1))
     return 0

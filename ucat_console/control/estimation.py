@@ -211,6 +211,28 @@ def step(
     return correct(predict(state, t, gyro, config), accel, config)
 
 
+def gravity_innovation(q: Sequence[float], accel: Sequence[float], gate: float) -> float:
+    """The attitude ``q`` (w, x, y, z; sensor to NED) against the accelerometer: the angle
+    (rad) between the measured specific force ``accel`` and the direction ``q`` predicts for
+    it at rest, ``R(q)^T (0, 0, -1)`` (what :func:`correct` compares). NaN when the specific
+    force's norm differs from g0 by more than ``gate`` g0 (the sensor accelerates: its
+    specific force is not gravity's direction, and the filter skips it too) or a value is not
+    finite."""
+    w, x, y, z = (float(v) for v in q)
+    ax, ay, az = (float(v) for v in accel)
+    qn = math.sqrt(w * w + x * x + y * y + z * z)
+    norm = math.sqrt(ax * ax + ay * ay + az * az)
+    if not (math.isfinite(qn) and math.isfinite(norm) and qn > 0.0 and norm > 0.0):
+        return math.nan
+    if abs(norm / GRAVITY - 1.0) > gate:
+        return math.nan
+    w, x, y, z = w / qn, x / qn, y / qn, z / qn
+    # minus the third row of R(q): the world's up in the sensor frame
+    hx, hy, hz = -2.0 * (x * z - w * y), -2.0 * (y * z + w * x), -(1.0 - 2.0 * (x * x + y * y))
+    c = (ax * hx + ay * hy + az * hz) / norm
+    return math.acos(max(-1.0, min(1.0, c)))
+
+
 class AttitudeEstimator:
     """Holds the state between samples; the first sample initialises the tilt."""
 

@@ -1,5 +1,7 @@
 """What the fixed status bar shows: armed state, mode, pilot, recording, failsafes, a light for
-each sensor, the drives and the planner, and the battery.
+each sensor, the drives, the planner, the control, the recording, and the vehicle (one light
+for the loop watchdog, the depth limits, the battery, the leak detector and the estimate), and
+the battery's figure.
 
 :func:`bar_state` builds it from the supervisor for one page (the pilot reads "you"); the
 page's script (:mod:`ucat_console.ui.page_script`) draws it. Lights are ``ok`` (green),
@@ -17,7 +19,9 @@ from ucat_console.backend.safety import SENSORS
 
 #: the lights, in the bar's order: sensor or part -> label
 LIGHTS = {"imu": "IMU", "dvl": "DVL", "depth": "Depth", "drives": "Drives", "planner": "Planner",
-          "control": "Control", "recording": "Recording"}
+          "control": "Control", "recording": "Recording", "loop_watchdog": "Loop",
+          "limits": "Limits", "battery": "Battery",
+          "leak": "Leak", "estimate": "Estimate", "vehicle": "Vehicle"}
 ACTIONS = {"hold": "stops and holds its depth", "surface": "stops and rises to the surface",
            "disarm": "turns its motors off", "warn": "goes on (warn only)"}
 
@@ -72,7 +76,78 @@ def lights(sup: Any, loading: str = "") -> list[Light]:
             "a fin then starts its stroke a little later)" if overruns else "")))
     out.append(control_light(safety, active))
     out.append(recording_light(sup))
+    out.append(vehicle_light(vehicle_parts(sup)))
     return out
+
+
+def vehicle_parts(sup: Any) -> list[Light]:
+    """The parts of the Vehicle light: the loop watchdog, the depth limits, the battery, the
+    leak detector and the estimate, each its state and reason."""
+    safety = sup.safety
+    now = sup.loop.time
+    active = {s.name: s for s in safety.states() if s.active}
+    parts: list[Light] = []
+    rule = safety.rule("loop_watchdog")
+    parts.append(failsafes_light(active, "loop_watchdog", ("loop_watchdog",), "ok",
+                               f"stepping (watchdog after {rule.timeout:g} s: {rule.action})"))
+    depth, alt = safety.envelope()
+    cfg = safety.cfg
+    parts.append(failsafes_light(active, "limits", ("depth_limit", "altitude"), "ok", "; ".join([
+        (f"depth {depth[1]:.2f} m" if depth else "no depth yet") + f" (limit {cfg.max_depth:g} m)",
+        (f"altitude {alt[1]:.2f} m" if alt else "no altitude") + f" (minimum {cfg.min_altitude:g} m)"])))
+    volts, _used = safety.battery()
+    parts.append(failsafes_light(active, "battery", ("battery_critical", "battery_low"),
+                               "ok" if volts is not None else "off", battery_text(safety, now)))
+    parts.append(failsafes_light(active, "leak", ("leak",), *leak_state(sup)))
+    innovation, t_state = safety.estimate()
+    parts.append(failsafes_light(active, "estimate", ("estimate",), "ok", (
+        f"attitude {innovation[1]:.3f} rad off the accelerometer's gravity" if innovation else
+        "no attitude check at rest yet") + (f"; state {max(0.0, now - t_state):.2f} s old" if t_state is not None
+                                            else "; no state estimate yet")))
+    return parts
+
+
+#: how bad each state is, for the light that stands for several
+_WORST = {"off": 0, "ok": 1, "warn": 2, "bad": 3}
+
+
+def vehicle_light(parts: list[Light]) -> Light:
+    """One light for the loop watchdog, the depth limits, the battery, the leak detector and
+    the estimate (a bar of 1280 px keeps DISARM on screen): the worst of them, and each one's
+    reason, the ones not green first."""
+    worst = max(parts, key=lambda x: _WORST[x.state]).state
+    ranked = sorted(parts, key=lambda x: -_WORST[x.state])
+    return Light(LIGHTS["vehicle"], worst, "; ".join(f"{x.name}: {x.why}" for x in ranked))
+
+
+def failsafes_light(active: dict[str, Any], light: str, names: tuple[str, ...], state: str, why: str) -> Light:
+    """The light of failsafes of their own: red with their causes while one is active (amber
+    when all of those only warn), else ``state`` and ``why``."""
+    on = [active[n] for n in names if n in active]
+    if on:
+        return Light(LIGHTS[light], "warn" if all(s.action == "warn" for s in on) else "bad",
+                     "; ".join(f"failsafe {s.name}: {s.cause}" for s in on))
+    return Light(LIGHTS[light], state, why)
+
+
+def leak_state(sup: Any) -> tuple[str, str]:
+    """The leak detector's light and reason while its failsafe is not active."""
+    if sup.leak is None:
+        return "off", "no leak detector (devices.leak.path)"
+    return {"dry": ("ok", f"dry ({sup.leak.path})"),
+            "water": ("warn", f"water at {sup.leak.path} (failsafe after {sup.safety.rule('leak').timeout:g} s)"),
+            "unreadable": ("warn", f"leak detector {sup.leak.path} unreadable: a leak would not be seen"),
+            }.get(sup.safety.leak(), ("warn", "leak detector not read yet"))
+
+
+def battery_text(safety: Any, now: float) -> str:
+    """The bar's battery figure: the lowest drive supply voltage and the energy drawn."""
+    volts, used = safety.battery()
+    cap = safety.cfg.battery_capacity
+    energy = f"{used:.1f} of {cap:g} Wh used" if cap > 0 else f"{used:.1f} Wh used"
+    if volts is None:
+        return f"no supply voltage from the drives; {energy}"
+    return f"{volts[1]:.1f} V" + (f" ({now - volts[0]:.0f} s ago)" if now - volts[0] > 2.0 else "") + f"; {energy}"
 
 
 def recording_light(sup: Any) -> Light:
@@ -137,7 +212,7 @@ def bar_state(sup: Any, client: int | None, *, dark: bool, uuids: dict[str, str]
         "recording_failed": sup.recording.failed,
         "failsafes": list(sup.safety.active()) + ([f"loop stopped: {sup.fault}"] if sup.fault else []),
         "lights": [x.as_dict() for x in lights(sup, loading)],
-        "battery": "no battery sensor",
+        "battery": battery_text(sup.safety, sup.loop.time),
         "link_policy": link_policy(sup),
         "link_slow": bool(link_slow),
         "review": str(review),

@@ -27,6 +27,7 @@ from ucat_console.backend.devices.dvl_emulator import DvlEmulatorConfig
 from ucat_console.backend.devices.epos2 import Epos2Config
 from ucat_console.backend.devices.imu import ImuConfig
 from ucat_console.backend.devices.imu_emulator import ImuEmulatorConfig
+from ucat_console.backend.devices.leak import LeakConfig
 from ucat_console.backend.devices.plausibility import PlausibilityConfig
 from ucat_console.backend.devices.pressure import PressureConfig
 from ucat_console.backend.devices.pressure_emulator import PressureEmulatorConfig
@@ -82,13 +83,14 @@ class SimRigConfig(Config):
 
 @dataclass(frozen=True)
 class DevicesConfig(Config):
-    """The robot's devices (robot ``sim-devices`` and ``hardware``; ``plausibility`` for
-    every robot)."""
+    """The robot's devices (robot ``sim-devices`` and ``hardware``; ``plausibility`` and
+    ``leak`` for every robot: the leak detector is read by the console itself)."""
 
     epos2: Epos2Config = Epos2Config()
     imu: ImuConfig = ImuConfig()
     dvl: DvlConfig = DvlConfig()
     pressure: PressureConfig = PressureConfig()
+    leak: LeakConfig = LeakConfig()
     poll_period_s: float = param(
         0.005, lo=0.001, hi=0.1, unit="s",
         doc="the closed loop collects the drivers' readings this often (loop time)",

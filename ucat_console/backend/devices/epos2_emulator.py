@@ -23,7 +23,7 @@ in-process ``virtual`` interface). It implements what the driver relies on:
   on. The average is a first-order filter of the current over the ticks (time constant
   ``current_average_s``).
 * Fault injection: :meth:`Epos2Emulator.inject_emcy`, ``stop_heartbeat``/``resume_heartbeat``,
-  ``silence``/``unsilence`` and ``slow_replies``.
+  ``silence``/``unsilence``, ``slow_replies`` and ``set_supply_voltage`` (a sagging pack).
 
 Time advances through :meth:`Epos2Emulator.tick` (the headless simulator and tests call it
 with their own clock) or through a thread that calls it (:meth:`EmulatedNodes.start_thread`).
@@ -316,6 +316,8 @@ class Epos2Emulator:
         self.node_id = node_id
         self.config = config or Epos2EmulatorConfig()
         self.units = self.config.units
+        #: the supply voltage it measures (V): the configuration's, unless a fault set another
+        self.supply_voltage = self.config.supply_voltage
         self._clock = clock
         self.servo: Servo = servo or TrapezoidalServo(
             acceleration=self.config.servo_acceleration,
@@ -445,7 +447,7 @@ class Epos2Emulator:
             if index == cia402.CURRENT_ACTUAL_AVERAGED:
                 return _milliamps(self._current_average)
             if index == cia402.POWER_SUPPLY and subindex == cia402.POWER_SUPPLY_VOLTAGE_SUB:
-                return int(round(self.config.supply_voltage / cia402.POWER_SUPPLY_VOLTAGE_UNIT))
+                return int(round(self.supply_voltage / cia402.POWER_SUPPLY_VOLTAGE_UNIT))
             if index == cia402.ERROR_REGISTER:
                 return self._error_register
             if index == cia402.CONTROLWORD:
@@ -746,6 +748,12 @@ class Epos2Emulator:
         with self._lock:
             self.network.silenced = False
             self._restart_heartbeat()
+
+    def set_supply_voltage(self, volts: float | None) -> None:
+        """Measure ``volts`` at the power stage from now on (None: the configuration's)."""
+        if volts is not None and not 0.0 <= volts <= 100.0:
+            raise ValueError(f"volts: {volts!r} is out of range; allowed: [0, 100] V")
+        self.supply_voltage = self.config.supply_voltage if volts is None else float(volts)
 
     def slow_replies(self, delay_s: float) -> None:
         """Delay every SDO reply by ``delay_s`` seconds (0 restores normal replies)."""

@@ -63,6 +63,10 @@ class LoopCommands:
                 raise CommandRefused("the loop did not answer in time; nothing was done") from None
             return fut.result()  # started: wait for its answer
 
+    def post(self, fn: Callable[[], Any]) -> None:
+        """``fn()`` in the loop's thread at its next chunk; the caller does not wait for it."""
+        self._queue.put((Future(), fn))
+
     def run_pending(self) -> None:
         """Run every queued command (in the loop's thread)."""
         while True:

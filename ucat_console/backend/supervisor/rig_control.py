@@ -46,6 +46,8 @@ class RigHost:
     publish_event: Callable[..., Event]
     #: the operator's view changed
     notify: Callable[[], None]
+    #: ``leak(water)``: water at the emulated leak detector, or dry, and its event (None: no emulated detector)
+    leak: Callable[[bool], Event] | None = None
 
 
 class RigControl:
@@ -67,7 +69,7 @@ class RigControl:
         self._rig("fault injection")
         from ucat_console.backend.sim_rig import DEFAULT_EMCY, EMULATOR_FAULTS
 
-        return EMULATOR_FAULTS, DEFAULT_EMCY
+        return ({**EMULATOR_FAULTS, "leak": ("water",)} if self.host.leak else EMULATOR_FAULTS), DEFAULT_EMCY
 
     def _names(self, who: Actor, device: object, fault: object, fault_optional: bool) -> SimRig:
         self.host.require_pilot(who, "fault injection")
@@ -82,6 +84,13 @@ class RigControl:
         Arguments as :meth:`SimRig.inject`; its ``fault_injected`` event and every event the
         fault causes reach the events channel (and the recording)."""
         rig = self._names(who, device, fault, False)
+        if device == "leak" and self.host.leak is not None:  # the console's emulated leak detector
+            if fault != "water" or kw:
+                raise CommandRefused(f"fault injection: the leak detector takes only 'water', without arguments "
+                                     f"(it lasts until cleared); got {fault!r} {kw or ''}")
+            event = self.host.leak(True)
+            self.host.notify()
+            return event
         try:
             event = rig.inject(device, fault, **kw)  # type: ignore[arg-type]
         except ValueError as e:
@@ -92,6 +101,10 @@ class RigControl:
     def clear_fault(self, who: Actor, device: object, fault: object = None) -> None:
         """End one emulator fault of ``device`` on the simulated rig, or all of its faults."""
         rig = self._names(who, device, fault, True)
+        if device == "leak" and self.host.leak is not None and fault in (None, "water"):
+            self.host.leak(False)
+            self.host.notify()
+            return
         try:
             rig.clear(device, fault)  # type: ignore[arg-type]
         except ValueError as e:

@@ -54,6 +54,7 @@ from typing import TYPE_CHECKING, Any, Callable, Mapping
 from ucat_console.backend import redaction
 from ucat_console.backend.access import LOCAL, AccessControl, AccessDenied, AccessState, Actor, actor_name
 from ucat_console.backend.arming import ArmingGate
+from ucat_console.backend.devices.leak import LeakEmulator, LeakInput
 from ucat_console.backend.loop.clock import Clock, PacedClock
 from ucat_console.backend.loop.closed_loop import PID_LOOPS, ClosedLoop
 from ucat_console.backend.loop.config import MODES
@@ -74,6 +75,7 @@ from ucat_console.backend.supervisor.recording import SessionRecording
 from ucat_console.backend.supervisor.rig_control import RigControl, RigHost
 from ucat_console.backend.supervisor.robots import ROBOT_FACTORIES, RobotFactory, SteadyPacedClock, simulated_rig
 from ucat_console.backend.supervisor.tuning import Journal, JournalEntry, Tuning, fmt
+from ucat_console.backend.supervisor.watchdog import LoopWatchdog
 from ucat_console.config import AppConfig
 from ucat_console.control.allocation import BodySetpoints
 from ucat_console.telemetry import channels as ch
@@ -169,9 +171,16 @@ class Supervisor:
             weights=self._weights, on_arm=cfg.console.record_on_arm, tail=cfg.console.record_tail,
             tail_max=cfg.console.record_tail_max, notify=self._notify,
         )
+        # the leak detector, read by the console on any robot; a simulated one's is emulated
+        leak = cfg.devices.leak
+        simulated = cfg.robot in ("sim", "sim-devices")
+        self.leak_emulator = LeakEmulator(leak.active_high) if simulated and not leak.path else None
+        path = leak.path or (str(self.leak_emulator.path) if self.leak_emulator is not None else "")
+        self.leak = LeakInput(leak, path, self.report_event, lambda: self.loop.time) if path else None
         self.rig_control = RigControl(RigHost(
             robot=cfg.robot, rig=self.rig, gate=self.gate, require_pilot=self.access.require_pilot,
             in_loop=self.commands.run, publish_event=self._publish_event, notify=self._notify,
+            leak=self._set_leak if self.leak_emulator is not None else None,
         ))
         #: what an identification manoeuvre uses: the operator's commands, checked as any
         self.manoeuvre_host = ManoeuvreHost(
@@ -183,6 +192,9 @@ class Supervisor:
         #: each tuning, mode or setpoint change with the figures before and after it
         self.effects = ChangeEffects(cfg.metrics, lambda ev: self.stream.publish(ch.EVENTS, ev))
         self._thread: threading.Thread | None = None
+        #: the loop's watchdog (its thread runs with the loop's, :meth:`start`)
+        self.watchdog = LoopWatchdog(cfg.failsafe.loop_watchdog.timeout, self._loop_stuck, self.safety.loop_resumed)
+        self._unstall = threading.Event()
         self._stopping = False
         self._closed = False
         self._chunks = 0
@@ -195,6 +207,8 @@ class Supervisor:
         if add_telemetry is not None:
             self._unsubs.append(add_telemetry(self.stream.publish))
         self.access.add_listener(self._on_access)
+        if self.leak is not None:  # once the failsafes hear its events
+            self.leak.start()
 
     # ================================================================== lifecycle
     @property
@@ -212,6 +226,7 @@ class Supervisor:
         self._thread = threading.Thread(target=self._run, name="supervisor-loop", daemon=True)
         self.commands.thread = self._thread
         self._thread.start()
+        self.watchdog.start()
         log.info("supervisor started (robot %s, mode %s)", self.cfg.robot, self.loop.mode)
 
     def step(self, duration: float) -> None:
@@ -227,6 +242,8 @@ class Supervisor:
         if self._closed:
             return
         self._closed = True
+        self.watchdog.stop()
+        self._unstall.set()
         self._disarm(LOCAL, "shutdown")
         self.bursts.check(self.loop.time, flush=True)
         self._stopping = True
@@ -243,6 +260,10 @@ class Supervisor:
         finally:
             for unsub in self._unsubs:
                 unsub()
+            if self.leak is not None:
+                self.leak.stop()
+            if self.leak_emulator is not None:
+                self.leak_emulator.close()
             try:
                 self.loop.close()
             finally:
@@ -297,6 +318,7 @@ class Supervisor:
         the work of a chunk's end and of the next one's start, as :meth:`_chunk` does; the
         time the loop may run until without waiting (a period past the chunk's end)."""
         period = self.cfg.console.supervise_period
+        self.watchdog.beat()
         if t >= self._chunks * period - 1e-9:
             self._after_chunk()
             self.commands.run_pending()
@@ -305,6 +327,7 @@ class Supervisor:
         return self._chunks * period + period
 
     def _after_chunk(self) -> None:
+        self.watchdog.beat()
         now = self.loop.time
         clock = self.clock
         if isinstance(clock, PacedClock):
@@ -524,6 +547,11 @@ class Supervisor:
             self.gate.stop_drives()  # those that came up go off again: nothing is half-armed
             raise CommandRefused("arm: not every fin drive reached operation enabled (see its "
                                  "events); the robot stays disarmed")
+        try:  # a failsafe that triggered while the drives came up (the loop watchdog) refuses too
+            self._check_can_arm()
+        except CommandRefused:
+            self.gate.stop_drives()
+            raise
         try:  # first, so the recording holds the moment of arming
             self.recording.armed()
         except Exception as e:  # recording must never stop arming
@@ -542,9 +570,13 @@ class Supervisor:
         self.access.require_pilot(who, "disarm")
         self._disarm(who, reason)
 
-    def _disarm(self, who: Actor | str, reason: str) -> None:
+    def _disarm(self, who: Actor | str, reason: str, at_once: bool = False) -> None:
+        """``at_once``: the drives are turned off from this thread (the loop's is stuck),
+        not at the loop's next step."""
         was = self.gate.armed
         self.gate.disarm()
+        if at_once and self.gate.has_drives and not self.gate.stop_drives():
+            log.error("a fin drive did not confirm its stop (see its events)")
         self.arm_requests.clear()
         if was:
             self._armed_at = None
@@ -555,7 +587,45 @@ class Supervisor:
             self._notify()
 
     # ================================================================== failsafes
-    def _on_failsafe(self, tr: Transition) -> None:
+    def _loop_stuck(self, silent_for: float) -> None:
+        """The watchdog's thread: the loop has not stepped for ``silent_for`` s."""
+        tr = self.safety.loop_stuck(silent_for)
+        if tr is not None:
+            self._on_failsafe(tr, at_once=True)
+
+    def stall_loop(self, who: Actor, seconds: object) -> None:
+        """Fault injection on a simulated robot: the loop's thread is held for ``seconds``
+        s at its next chunk (the loop watchdog's trigger). The caller does not wait."""
+        self.access.require_pilot(who, "stall the loop")
+        if self.cfg.robot not in ("sim", "sim-devices"):
+            raise CommandRefused(f"stall the loop: only on a simulated robot (this one is {self.cfg.robot!r})")
+        s = number("seconds", seconds, False)
+        if not 0.0 < s <= 60.0:
+            raise CommandRefused(f"stall the loop: seconds {s:g} outside (0, 60]")
+        self._unstall.clear()
+        self.commands.post(lambda: self._unstall.wait(s))
+
+    def inject_leak(self, who: Actor, water: object) -> None:
+        """Fault injection on a simulated robot: water at the emulated leak detector, or dry
+        (on the rig also ``inject_fault(who, "leak", "water")``, the Safety tab's rig faults)."""
+        self.access.require_pilot(who, "leak")
+        if self.leak_emulator is None:
+            raise CommandRefused("leak: no emulated leak detector (only a simulated robot without "
+                                 "devices.leak.path has one)")
+        if not isinstance(water, bool):
+            raise CommandRefused(f"leak: expected true (water) or false (dry), got {water!r}")
+        self._set_leak(water)
+
+    def _set_leak(self, water: bool) -> Event:
+        assert self.leak_emulator is not None
+        self.leak_emulator.set(water)
+        return self._publish_event("rig", "fault_injected" if water else "fault_cleared",
+                                   f"leak: {'water' if water else 'dry'} at the emulated detector", "info",
+                                   {"device": "leak", "fault": "water", "water": water})
+
+    def _on_failsafe(self, tr: Transition, at_once: bool = False) -> None:
+        """Carry out a failsafe's action; ``at_once``: from a thread other than the loop's,
+        which is stuck (a disarm turns the drives off from here)."""
         rule = self.safety.rule(tr.name)
         if tr.active:
             data = {"action": tr.action, "timeout": rule.timeout, "cause": tr.cause}
@@ -567,7 +637,7 @@ class Supervisor:
                 message = f"{tr.name}: {tr.cause}; action: {tr.action}"
             self._publish_event("failsafe", tr.name, message, "error", data)
             if tr.action == "disarm":
-                self._disarm("failsafe", f"failsafe {tr.name}")
+                self._disarm("failsafe", f"failsafe {tr.name}", at_once)
             elif tr.action in ("hold", "surface"):
                 if tr.action == "hold":
                     body = self._last_body
