@@ -38,7 +38,8 @@ def open_page(browser: Any, url: str, width: int = 1280, height: int = 800, cont
     page = context.new_page() if context is not None else browser.new_page(viewport={"width": width, "height": height})
     page.goto(url)
     page.wait_for_function("() => !document.body.innerText.includes('Connecting...')", timeout=30_000)
-    expect(page.locator("#ucat-armed")).to_be_visible()
+    # the page's script comes with the page's first batch, which a loaded machine may take long to render
+    expect(page.locator("#ucat-armed")).to_be_visible(timeout=60_000)
     return page
 
 

@@ -3,6 +3,7 @@ state, the link, every light and DISARM are whole on screen (nothing of them cli
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -37,3 +38,31 @@ def test_the_bar_keeps_the_armed_state_link_lights_and_disarm_whole_at_1280(brow
         assert not any(clipped.values()), clipped
     finally:
         console.stop()
+
+
+def test_a_viewer_page_shows_the_viewer_badge_and_its_greyed_disarm_says_only_the_pilot_disarms(
+        browser: Browser, tmp_path: Path) -> None:
+    console = browser_console(tmp_path, pilot_gone=30.0)  # a pilot page slow to answer on a loaded machine
+    try:
+        pilot = open_page(browser, console.url, 1280, 800)
+        become_pilot(pilot)
+        console.sup.arm(LOCAL)
+        viewer = open_page(browser, console.url, 1280, 800)
+        expect(viewer.locator("#ucat-armed")).to_have_text("ARMED")
+        badge = viewer.locator("#ucat-viewer")
+        expect(badge).to_be_visible()
+        expect(badge).to_have_text("VIEWER")
+        disarm = viewer.locator("#ucat-disarm")
+        expect(disarm).to_be_disabled()
+        expect(disarm).to_have_attribute("title", re.compile("^only the pilot can disarm"))
+        assert not dict(viewer.evaluate(CLIPPED, ["ucat-armed", "ucat-viewer", "ucat-disarm"]))["ucat-viewer"]
+        viewer.screenshot(path=str(ARTIFACTS / "bar-viewer-1280x800.png"), clip={"x": 0, "y": 0, "width": 1280, "height": 46})
+        # the pilot's own page has no badge, and its DISARM acts
+        expect(pilot.locator("#ucat-armed")).to_have_text("ARMED")
+        expect(pilot.locator("#ucat-viewer")).to_be_hidden()
+        expect(pilot.locator("#ucat-disarm")).to_have_attribute("title", "motors off now (key: Esc)")
+        pilot.close()
+        viewer.close()
+    finally:
+        console.stop()
+
