@@ -383,7 +383,8 @@ class ControlPanel:
             return
         self.sup.set_setpoints(self.cid, **changed)
         self.show("setpoints applied: " + ", ".join(f"{k} {v:g}" for k, v in changed.items()))
-        self._applied = {f"sp.{k}": v for k, v in changed.items()}
+        # the line follows every setpoint from here on (a key, the gamepad, a failsafe)
+        self._applied = {f"sp.{k}": self._in_force(f"sp.{k}") for k in SETPOINTS}
 
     def _apply_tuning(self) -> None:
         changes = {}
@@ -452,15 +453,16 @@ class ControlPanel:
         self._set_prop(handle, "label", base + (DRAFT_MARK if drafted else ""))
 
     def _follow_applied(self) -> None:
-        """The feedback line of the last apply is replaced once what it applied is no longer in
-        force (reverted, undone, changed by a failsafe or another pilot)."""
+        """The feedback line of the last apply is replaced whenever what it says is no longer
+        in force (reverted, undone, a key or the gamepad, a failsafe or another pilot), and
+        follows those values from then on."""
         if not self._applied:
             return
         now = {k: self._in_force(k) for k in self._applied}
         if all(self._same(v, now[k]) for k, v in self._applied.items()):
             return
         tuning = not any(k.startswith("sp.") for k in self._applied)
-        self._applied = {}
+        self._applied = now
         self.show("now in force: " + ", ".join(f"{k.removeprefix('sp.')} = {v:g}" if not isinstance(v, str)
                                               else f"{k} = {v}" for k, v in now.items()), tuning=tuning)
 
