@@ -66,3 +66,31 @@ def test_a_viewer_page_shows_the_viewer_badge_and_its_greyed_disarm_says_only_th
     finally:
         console.stop()
 
+
+def test_the_bar_shows_the_cost_formulation_beside_an_mpc_mode_as_the_readme_names_it(
+        browser: Browser, tmp_path: Path) -> None:
+    from ucat_console.ui.status_bar import FORMULATIONS
+
+    console = browser_console(tmp_path)
+    sup = console.sup
+    try:
+        page = open_page(browser, console.url, 1280, 800)
+        info = page.locator("#ucat-info")
+        sup.set_mode(LOCAL, "mpc")
+        expect(info).to_contain_text("mode MPC · paper's cost")
+        sup.set_params(LOCAL, {"mpc.formulation": "closed_stroke"})
+        expect(info).to_contain_text("mode MPC · closed-stroke cost")
+        page.screenshot(path=str(ARTIFACTS / "bar-formulation-1280x800.png"),
+                        clip={"x": 0, "y": 0, "width": 1280, "height": 46})
+        sup.set_mode(LOCAL, "baseline")  # no MPC: no cost beside the mode
+        expect(info).to_contain_text("mode baseline  ·")
+        expect(info).not_to_contain_text("cost")
+        page.close()
+    finally:
+        console.stop()
+    # the README's tracking table names each controller as the bar shows it
+    readme = (Path(__file__).parents[2] / "README.md").read_text()
+    rows = [line.split("|")[1].strip() for line in readme.splitlines()
+            if line.startswith("| ") and "16 / 16" in line]
+    assert rows == ["baseline", f"MPC · {FORMULATIONS['paper']}", f"MPC sync · {FORMULATIONS['paper']}",
+                    f"MPC · {FORMULATIONS['closed_stroke']}"], rows

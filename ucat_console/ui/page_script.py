@@ -132,6 +132,8 @@ INSTALL = r"""
   u.send = send;
   disarm.addEventListener("click", () => { const s = u.state; if (s && !disarm.disabled) send(s.disarm_uuid, true); });
   theme.addEventListener("click", () => { const s = u.state; if (s) send(s.theme_uuid, true); });
+  // the mode, and beside an MPC mode its cost formulation
+  const modeText = (s) => `mode ${s.mode}` + (s.formulation ? ` · ${s.formulation}` : "");
   const showBanner = (on) => {
     if (on === u.lost) return;
     u.lost = on;
@@ -155,7 +157,7 @@ INSTALL = r"""
         armed.textContent = (s.armed ? "ARMED" : "DISARMED") + "?";
         armed.className = "armed stale";
         armed.title = "last known state: the link is lost";
-        info.textContent = `mode ${s.mode}  ·  pilot: ${s.pilot}  ·  LINK LOST`;
+        info.textContent = `${modeText(s)}  ·  pilot: ${s.pilot}  ·  LINK LOST`;
         link.textContent = ""; link.className = "item";
       }
       disarm.disabled = true;
@@ -173,7 +175,7 @@ INSTALL = r"""
     armed.textContent = s.armed ? "ARMED" : "DISARMED";
     armed.className = "armed " + (s.armed ? "on" : "off");
     armed.title = "";
-    info.textContent = `mode ${s.mode}  ·  pilot: ${s.pilot}  ·`;
+    info.textContent = `${modeText(s)}  ·  pilot: ${s.pilot}  ·`;
     link.textContent = s.link_slow ? "LINK SLOW: updates thinned" : "link ok";
     link.className = "item" + (s.link_slow ? " slow" : "");
     link.title = s.link_slow ? "this page reads slower than the console sends: it gets the newest poses "
