@@ -223,7 +223,7 @@ class ControlPanel:
         self.mode.on_update(self._guard(lambda: sup.set_mode(cid, self.mode.value)))
         self.apply_sp.on_click(self._guard(self._apply_setpoints))
         self.apply_tuning.on_click(self._guard(self._apply_tuning, tuning=True))
-        self.revert.on_click(self._guard(lambda: sup.revert_tuning(cid), tuning=True))
+        self.revert.on_click(self._guard(self._request_revert, tuning=True))
         self.undo.on_click(self._guard(lambda: sup.undo_tuning(cid), tuning=True))
         self.save.on_click(self._guard(lambda: sup.save_baseline(cid), tuning=True))
         self.history.on_update(self._guard(self._set_history))
@@ -399,6 +399,58 @@ class ControlPanel:
                                           for k, v in changes.items()), tuning=True)
         self._applied = dict(changes)
 
+    def _unsaved(self) -> dict[str, tuple[Any, Any]]:
+        """Each tuning value in force that is not the saved baseline's: key -> (in force, saved)."""
+        saved = self.sup.saved_tuning()
+        out = {}
+        for key in self.params:
+            block, _, name = key.rpartition(".")
+            now, was = self.sup.param_value(key), getattr(saved[block], name)
+            if not self._same(now, was):
+                out[key] = (now, was)
+        return out
+
+    def _request_revert(self) -> None:
+        """*Revert to saved*: at once while disarmed; while armed (the controller in force
+        changes under the swimming robot) only once the pilot confirms what it changes.
+        The page says what it did, or that nothing differed."""
+        unsaved = self._unsaved()
+        if not unsaved:
+            self.show("revert: the tuning in force is the saved baseline; nothing changed", tuning=True)
+            return
+        if not self.sup.armed:
+            self._revert()
+            return
+        gui = self.gui
+        modal = gui.add_modal("Revert the tuning while armed?")
+        with modal:
+            gui.add_markdown("The robot is armed: its controller changes at once to the saved baseline:\n\n"
+                             + "\n".join(f"- {esc(k)}: {_value(now)} → {_value(was)}"
+                                         for k, (now, was) in unsaved.items()))
+            confirm = gui.add_button("Revert now", color="orange")
+            cancel = gui.add_button("Cancel")
+        for h in (confirm, cancel):
+            self._allow(h, True)
+
+        def on_confirm(event: Any) -> None:
+            modal.close()
+            self.act(self._revert, tuning=True)
+
+        def on_cancel(event: Any) -> None:
+            modal.close()
+            self.show("revert cancelled: the tuning in force is unchanged", tuning=True)
+
+        confirm.on_click(on_confirm)
+        cancel.on_click(on_cancel)
+
+    def _revert(self) -> None:
+        unsaved = self._unsaved()
+        self.sup.revert_tuning(self.cid)
+        self.show("reverted to the saved baseline: " + (", ".join(
+            f"{k} {_value(now)} → {_value(was)}" for k, (now, was) in unsaved.items()) or "nothing differed"),
+            tuning=True)
+        self._applied = {k: self._in_force(k) for k in unsaved}
+
     def _set_history(self) -> None:
         self.app.set_history(self.cid, self.history.value)
 
@@ -558,6 +610,11 @@ class ControlPanel:
 
 
 _EVENTS_SHOWN = 12
+
+
+def _value(v: Any) -> str:
+    """A tuning value as the page says it."""
+    return v if isinstance(v, str) else f"{float(v):g}"
 
 
 #: added to the label of an input whose value is not the one in force
