@@ -11,8 +11,10 @@ import pytest
 pytest.importorskip("playwright.sync_api")
 from playwright.sync_api import Browser, expect  # noqa: E402
 from browser_harness import ARTIFACTS, browser_console, gui_input  # noqa: E402
-from support import Console  # noqa: E402
+from support import Console, wait_for  # noqa: E402
 from test_browser_console import open_page  # noqa: E402
+
+from ucat_console.backend.access import LOCAL  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "backend" / "sessions"))
 from session_helpers import record  # noqa: E402
@@ -50,4 +52,26 @@ def test_two_sessions_compared_in_the_review_tab(browser: Browser, console: Cons
     expect(page.locator("img").last).to_be_visible()
     ARTIFACTS.mkdir(exist_ok=True)
     page.screenshot(path=str(ARTIFACTS / "compare-1280x800.png"))
+    page.close()
+
+
+def test_a_recording_that_ends_shows_in_the_review_and_compare_lists_by_itself(browser: Browser,
+                                                                                console: Console) -> None:
+    sup = console.sup
+    page = open_page(browser, console, 1280, 800)
+    page.get_by_role("tab", name="Review", exact=True).click()
+    page.get_by_text("Compare runs").click()  # the folder opens
+    expect(gui_input(page, "Run 1")).to_be_visible()
+    sup.start_recording(LOCAL)
+    sid = sup.recorder.session_id
+    t0 = sup.loop.time
+    wait_for(lambda: sup.loop.time > t0 + 1.0, what="a second recorded")
+    sup.stop_recording(LOCAL)
+    # no Refresh: the Review tab's chooser and the comparison's runs list it
+    for label in ("Session", "Run 1"):
+        box = gui_input(page, label)
+        box.click()
+        expect(page.get_by_role("option", name=sid)).to_be_visible(timeout=30_000)
+        page.keyboard.press("Escape")
+    expect(page.get_by_text("Refused")).to_have_count(0)
     page.close()

@@ -278,9 +278,13 @@ class ConsoleApp:
                 with client.atomic():
                     panel = panels.ControlPanel(self, cid, client.gui, client, containers, allow=self._allow(cid))
                     review = self.build_review(client.gui, client.scene, cid)
-                    ComparePanel(client.gui, self.tab_review, self.sessions_dir, cfg=self.sup.cfg.metrics,
-                                 sessions=self.session_list.sessions, allow=self._allow(cid), client=client,
-                                 jobs=lambda what, job, coalesce: self.jobs.submit(cid, what, job, coalesce=coalesce))
+                    compare = ComparePanel(
+                        client.gui, self.tab_review, self.sessions_dir, cfg=self.sup.cfg.metrics,
+                        sessions=self.session_list.sessions, allow=self._allow(cid), client=client,
+                        jobs=lambda what, job, coalesce: self.jobs.submit(cid, what, job, coalesce=coalesce))
+                    # a recording that ends shows in the page's lists by itself
+                    panel.session_lists += [lambda: review.act(review.refresh_sessions),
+                                            lambda: compare.act(compare.refresh)]
             except Exception:
                 if self.page_present(cid):
                     raise

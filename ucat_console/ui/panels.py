@@ -173,6 +173,9 @@ class ControlPanel:
         self._events_shown = ""
         self._events_seen: tuple[int, str] | None = None
         self._listed: tuple[bool, bool] | None = None
+        #: the page's other lists of the sessions (its Review tab's, its comparison's runs):
+        #: listed again, with the identification's, whenever a recording ends
+        self.session_lists: list[Callable[[], Any]] = []
 
         self._wire()
         self._register_inputs()
@@ -575,17 +578,21 @@ class ControlPanel:
             self.faults.enable(pilot)
         run = sup.manoeuvre
         listed = (recording, run is not None and run.finished)
-        if force or listed != self._listed:  # a recording ended: it may be fitted (listed by the page jobs)
+        if force or listed != self._listed:  # a recording ended: it may be fitted, reviewed, compared
+            others = self._listed is not None and listed != self._listed
             self._listed = listed
             jobs = getattr(self.app, "jobs", None)
             if jobs is None:
-                self.identify.list_sessions()
-            else:
-                jobs.submit(self.cid, "list sessions to fit", self._list_sessions, coalesce=True)
+                self._list_sessions(others)
+            else:  # (listed by the page jobs)
+                jobs.submit(self.cid, "list sessions", lambda: self._list_sessions(others), coalesce=True)
         self.identify.refresh(pilot)
 
-    def _list_sessions(self) -> None:
+    def _list_sessions(self, others: bool = False) -> None:
+        """The identification's list of sessions, and with ``others`` the page's other lists."""
         self._quiet(lambda _: self.identify.list_sessions())(None)
+        for relist in self.session_lists if others else ():
+            self._quiet(lambda _, f=relist: f())(None)
 
     @staticmethod
     def _set_prop(handle: Any, name: str, value: Any) -> None:
