@@ -137,6 +137,8 @@ class ControlPanel:
                 self.note = gui.add_text("Marker note", "")
                 self.marker = gui.add_button("Add marker", hint="or press M")
                 self.follow = gui.add_checkbox("Follow the robot", True, hint="the 3-D view keeps the robot in view")
+                self.frame = gui.add_button("Frame the robot", hint="this page's 3-D view looks at the robot "
+                                            "(the live one, or the one this page reviews) from behind and above")
             listing = getattr(app, "session_list", None)
             self.identify = IdentifyInputs(gui, sup, client_id, getattr(app, "sessions_dir", None) or
                                            sup.recorder.directory, self.show,
@@ -197,7 +199,7 @@ class ControlPanel:
             allow(h, True)
         allow(self.note, True, 500)
         allow(self.drive_input, True, 200)
-        for h in (self.name, self.follow, self.severity, self.theme_button):
+        for h in (self.name, self.follow, self.frame, self.severity, self.theme_button):
             allow(h, False, MAX_NAME if h is self.name else 200)
         guard = getattr(self.app, "guard", None)
         if guard is not None and self.client is not None:
@@ -242,6 +244,7 @@ class ControlPanel:
         self.name.on_update(self._guard(lambda: sup.access.set_name(cid, self.name.value)))
         self.severity.on_update(self._quiet(lambda _: self.show_events(force=True)))
         self.theme_button.on_click(self._guard(self._toggle_theme))
+        self.frame.on_click(self._guard(lambda: self.app.frame_robot(cid)))
         if self.reset_drives is not None:
             self.reset_drives.on_click(self._guard(self._reset_drive_faults))
             self.zero_depth.on_click(self._guard(self._zero_depth))
