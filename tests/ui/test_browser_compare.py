@@ -45,10 +45,22 @@ def test_two_sessions_compared_in_the_review_tab(browser: Browser, console: Cons
         expect(box).to_have_value(name)
     page.get_by_role("button", name="Compare", exact=True).click()
     expect(page.get_by_text("not comparable").first).to_be_visible(timeout=60_000)
+    expect(page.get_by_text(f"#1: {SLOW}")).to_be_visible()
     table = page.locator("table", has_text="J/m").last
-    expect(table).to_contain_text(SLOW)
     expect(table).to_contain_text("32 [32, 32]")  # 8 W at 0.25 m/s
+    # the table whole inside the controls' panel at 1280 px, its last column too, and every
+    # figure on one line (not broken into a column of fragments)
+    table.scroll_into_view_if_needed()
+    fits = table.evaluate("""t => { const r = t.getBoundingClientRect(), box = t.closest('fieldset') || t.parentElement;
+        const lines = [...t.querySelectorAll('td, th')].filter(c => c.innerText.trim()).map(c => {
+            const g = document.createRange(); g.selectNodeContents(c);
+            return [c.innerText, new Set([...g.getClientRects()].map(x => Math.round(x.top))).size]; });
+        return {right: r.right, box: box.getBoundingClientRect().right, wrapped: lines.filter(l => l[1] > 1)}; }""")
+    assert fits["right"] <= fits["box"] and not fits["wrapped"], fits
     expect(page.get_by_role("button", name="Download CSV")).to_be_enabled()
+    for kind, suffix in (("CSV", "csv"), ("Markdown", "md"), ("PNG", "png")):  # the page offers each by name
+        page.get_by_role("button", name=f"Download {kind}").click()
+        expect(page.get_by_text(f"compare-{SLOW}-vs-{FAST}.{suffix}").first).to_be_visible(timeout=30_000)
     expect(page.locator("img").last).to_be_visible()
     ARTIFACTS.mkdir(exist_ok=True)
     page.screenshot(path=str(ARTIFACTS / "compare-1280x800.png"))
