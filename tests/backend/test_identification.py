@@ -29,8 +29,8 @@ TOKEN = "pool-side-token"
 PILOT = 1
 
 
-def app_config(hydro: FinHydroConfig, manoeuvre: ManoeuvreConfig | None = None) -> AppConfig:
-    cfg = AppConfig(plant=PlantConfig(hydro=hydro), console=ConsoleConfig(sim_depth=3.0),
+def app_config(hydro: FinHydroConfig, manoeuvre: ManoeuvreConfig | None = None, depth: float = 3.0) -> AppConfig:
+    cfg = AppConfig(plant=PlantConfig(hydro=hydro), console=ConsoleConfig(sim_depth=depth),
                     access=AccessConfig(token=TOKEN))
     return cfg if manoeuvre is None else cfg.replace(loop=cfg.loop.replace(manoeuvre=manoeuvre))
 
@@ -170,7 +170,9 @@ def test_the_plate_fit_recovers_the_plates_coefficients(tmp_path: Path, capsys, 
     from ucat_console.control.identification import IdentifyConfig
 
     plant = FinHydroConfig(coefficients="custom", custom=FinCoefficients(c_d=c_d, c_l=c_l), c_d0=c_d0)
-    path = record_manoeuvre(app_config(plant), tmp_path)
+    # from 8 m: the stronger plate climbs the robot more than 3 m, out of the water, where its
+    # transducer measures no depth and the depth failsafe disarms it
+    path = record_manoeuvre(app_config(plant, depth=8.0), tmp_path)
     r = identify_sessions([path.name], tmp_path, cfg=IdentifyConfig(fit="plate")).result
     assert r.c_d == pytest.approx(c_d, rel=0.08) and r.c_l == pytest.approx(c_l, rel=0.08)
     assert r.c_d0 == pytest.approx(c_d0, abs=0.1)

@@ -1,9 +1,11 @@
 """The plausibility checks of the sensors' readings, with hand-chosen values on both sides
 of each limit; their reports; the failsafes' label of what they dropped; the in-process
-simulator's compiled path through them."""
+simulator's compiled path through them; the simulator's own readings on a fast pitching and
+heaving manoeuvre and out of the water, honest and lying."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -24,10 +26,12 @@ from ucat_console.backend.sim_rig import SimRig
 from ucat_console.backend.sim_robot_io import SimRobotIO
 from ucat_console.config import AppConfig, FailsafeConfig, FailsafeRule
 from ucat_console.control.allocation import BodySetpoints
+from ucat_console.control.params import ManoeuvreConfig
+from ucat_console.experiments.scenario import family_name, plant_config
 from ucat_console.robot import reading_rows as rr
 from ucat_console.robot.readings import DepthReading, DvlVelocity, FinFeedback, ImuReading
 from ucat_console.robot.rotations import quaternion_from_euler
-from ucat_console.robot.units import GRAVITY, RHO_FRESH
+from ucat_console.robot.units import GRAVITY, LOOP_MIN_MA, RHO_FRESH, current_to_pressure, pressure_to_depth
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.stream import TelemetryStream
@@ -314,3 +318,70 @@ def test_nothing_the_simulator_measures_is_dropped_over_a_long_run() -> None:
         loop.set_setpoints(velocity=0.2, depth=0.0, yaw_rate=-0.4)
         loop.run(60.0)
     assert [io.checks.dropped(s) for s in pl.SENSORS] == [0, 0, 0]
+
+
+# ------------------------------------------------------------------ the simulator's sensors, moving fast
+class LyingSim(SimRobotIO):
+    """The in-process simulator through the checks' Python path, its readings handed on as
+    measured or changed by ``lie``: ``"dvl"`` a DVL that adds 0.3 m/s along its z axis,
+    ``"pressure"`` a transducer frozen at its first depth. Keeps every reading that passed."""
+
+    def __init__(self, *args, lie: str = "", **kw) -> None:
+        super().__init__(*args, **kw)
+        self.lie = lie
+        self.frozen: DepthReading | None = None
+        self.passed: list = []
+        self.depths: list[float] = []
+        self.pitches: list[float] = []
+
+    def advance_to(self, t: float) -> list:
+        measured = []
+        for r in self.plant.advance_and_sample(t):
+            if self.lie == "dvl" and type(r) is DvlVelocity and r.valid:
+                r = dataclasses.replace(r, vz=r.vz + 0.3)
+            elif self.lie == "pressure" and type(r) is DepthReading:
+                self.frozen = self.frozen or r
+                r = dataclasses.replace(self.frozen, t=r.t)
+            measured.append(r)
+        self.depths.append(self.plant.depth())
+        self.pitches.append(self.plant.euler()[1])
+        readings = self.checks.filter(measured)
+        self.checks.report(t)
+        self.passed += readings
+        return readings
+
+
+@pytest.mark.parametrize("lie", ["", "dvl", "pressure"])
+def test_the_identification_manoeuvre_at_scaled_fin_gains_passes_honest_sensors_and_catches_lying_ones(
+        lie: str) -> None:
+    # E6's strongest plant through the identification manoeuvre (5 s steps), deep enough to
+    # stay under water: pitching over 15 deg, heaving with the strokes, climbing more than a metre
+    io = LyingSim(plant_config(family_name(9.2, "plate"), 0), depth=8.0, seed=2, lie=lie)
+    with ClosedLoop(LoopConfig(mode="identify", manoeuvre=ManoeuvreConfig(step_s=5.0)), io) as loop:
+        loop.run(30.0)
+    assert max(abs(p) for p in io.pitches) > math.radians(15.0) and 8.0 - min(io.depths) > 1.0
+    assert min(io.depths) > 0.5  # under water throughout
+    if not lie:
+        assert [io.checks.dropped(s) for s in pl.SENSORS] == [0, 0, 0]
+    else:
+        assert io.checks.dropped("dvl") > 0 and io.checks.dropped("depth") > 0
+        assert "depth rate and the DVL's vertical velocity" in io.checks.reason("depth")
+
+
+def test_a_robot_out_of_the_water_gets_no_depth_from_its_pinned_transducer_and_keeps_its_dvl() -> None:
+    # pushed up through the surface: the transducer's loop current pins at NAMUR NE 43's
+    # 3.8 mA, a current that measures nothing (the pressure driver drops it); the simulator
+    # hands on no depth then, and the DVL's readings, which still measure, pass the checks
+    io = LyingSim(depth=1.0, seed=1)
+    io.plant.set_body_wrench(force=(0.0, 0.0, -60.0))
+    while io.plant.time < 8.0:
+        io.advance_to(io.next_reading_time())
+    assert min(io.depths) < -1.5
+    span = io.plant.cfg.sensors.pressure.span_pa
+    floor = pressure_to_depth(current_to_pressure(LOOP_MIN_MA, 0.0, span), 0.0, RHO_FRESH)
+    depths = [r for r in io.passed if type(r) is DepthReading]
+    assert min(r.depth_m for r in depths) > floor + 0.01  # none pinned at the floor
+    assert depths[-1].t < 5.0  # the robot was out of the water since
+    assert [io.checks.dropped(s) for s in pl.SENSORS] == [0, 0, 0]
+    dvl_times = [r.t for r in io.passed if type(r) is DvlVelocity and r.valid]
+    assert dvl_times[-1] > 7.5 and max(np.diff(dvl_times)) < 0.5  # the DVL throughout, but its dropouts

@@ -17,7 +17,7 @@ _TRACKED_ROWS = np.array([[COL[name], COL[f"{name}_sp"]] for name in _TRACKED])
 
 def filled(a: np.ndarray) -> np.ndarray:
     """``a`` with NaN replaced by the last finite value before it (leading NaN by the first
-    finite value; zeros when there is none); a 2-D ``a`` column by column."""
+    finite value; NaN when there is none); a 2-D ``a`` column by column."""
     ok = np.isfinite(a)
     if ok.all():
         return a
@@ -27,7 +27,7 @@ def filled(a: np.ndarray) -> np.ndarray:
             out[:, j] = filled(a[:, j])
         return out
     if not ok.any():
-        return np.zeros_like(a)
+        return np.full_like(a, np.nan)
     idx = np.where(ok, np.arange(len(a)), 0)
     np.maximum.accumulate(idx, out=idx)
     out = a[idx]
@@ -82,6 +82,11 @@ def chart_data(buffer: RingBuffer, n: int, max_points: int, corridor: tuple[floa
     pins = span_pins(tracked, spans)
     for k, name in enumerate(_TRACKED):
         out[name] = (t, tracked[k, 0], tracked[k, 1], pins[k, 0], pins[k, 1])
-    out["power"] = (t, *(val[COL[f"p{i}"]] for i in range(N_FINS)), val[COL["p_total"]], val[COL["p_mean"]],
-                    val[COL["energy_per_metre"]])
+    # the battery's power where the window has its total, the estimate's total beside it; else
+    # the estimate's, nothing beside it
+    battery = bool(np.isfinite(col[COL["e_total"]]).any())
+    p, mean, epm = ("e", "e_mean", "e_energy_per_metre") if battery else ("p", "p_mean", "energy_per_metre")
+    shaft = val[COL["p_total"]] if battery else np.full(m, np.nan, VALUES)
+    out["power"] = (t, *(val[COL[f"{p}{i}"]] for i in range(N_FINS)), val[COL[f"{p}_total"]], val[COL[mean]],
+                    val[COL[epm]], shaft)
     return out

@@ -55,7 +55,8 @@ def test_the_page_loads_and_shows_the_robot(browser: Browser, console: Console) 
                  "/floor", "/ned/trail"):
         assert page.evaluate(f"() => window.__viserSceneTree.getState()['{name}'] !== undefined"), name
     expect(page.get_by_text("St per fin 0-3")).to_be_visible()
-    expect(page.get_by_text("Power (W) and energy per metre (J/m)")).to_be_visible()
+    # the power chart names the power it draws: the simulated drives report the battery's
+    expect(page.get_by_text("Power (W) and energy per metre (J/m): electrical (battery)")).to_be_visible()
     wait_for(lambda: page.locator(".uplot").count() >= 5, what="five plots")
     expect(page.get_by_text("disarmed", exact=False).first).to_be_visible()
     t0 = console.sup.loop.time

@@ -150,6 +150,11 @@ Object.defineProperty(Navigator.prototype, "getGamepads",
 """
 
 
+#: the stick's path (the page polls its gamepad each animation frame, a software-rendered
+#: Chromium on a loaded machine draws few frames): a deadline for a machine that never gets there
+PAD = 60.0
+
+
 def page_with_gamepad(browser: Browser, console: Console) -> tuple[Page, object]:
     ctx = browser.new_context(viewport={"width": 1280, "height": 800})
     ctx.add_init_script(FAKE_GAMEPAD)
@@ -176,24 +181,24 @@ def test_the_gamepad_drives_the_pilot_stops_when_lost_and_disarms(browser: Brows
     assert sup.setpoints.velocity == 0.0
     # the pilot's stick: full forward is the envelope's velocity, half right half its yaw rate
     pilot.evaluate("() => { window.__pad.axes[1] = -1.0; window.__pad.axes[0] = 0.575; }")
-    wait_for(lambda: sup.setpoints.velocity == pytest.approx(lc.max_velocity), what="stick forward")
-    wait_for(lambda: sup.setpoints.yaw_rate == pytest.approx(0.5 * lc.max_yaw_rate), what="stick right")
+    wait_for(lambda: sup.setpoints.velocity == pytest.approx(lc.max_velocity), timeout=PAD, what="stick forward")
+    wait_for(lambda: sup.setpoints.yaw_rate == pytest.approx(0.5 * lc.max_yaw_rate), timeout=PAD, what="stick right")
     # within the dead zone is zero: released, the page sends zeros once
     pilot.evaluate("() => { window.__pad.axes[1] = -0.1; window.__pad.axes[0] = 0.0; }")
-    wait_for(lambda: sup.setpoints.velocity == 0.0 and sup.setpoints.yaw_rate == 0.0, what="stick released")
+    wait_for(lambda: sup.setpoints.velocity == 0.0 and sup.setpoints.yaw_rate == 0.0, timeout=PAD, what="stick released")
     # the gamepad lost while pushed: driving stops (no runaway stick)
     pilot.evaluate("() => { window.__pad.axes[1] = -1.0; }")
-    wait_for(lambda: sup.setpoints.velocity > 0.0, what="stick forward again")
+    wait_for(lambda: sup.setpoints.velocity > 0.0, timeout=PAD, what="stick forward again")
     pilot.evaluate("() => { window.__pad.connected = false;"
                    " window.dispatchEvent(new Event('gamepaddisconnected')); }")
-    wait_for(lambda: sup.setpoints.velocity == 0.0, what="driving stopped with the gamepad gone")
+    wait_for(lambda: sup.setpoints.velocity == 0.0, timeout=PAD, what="driving stopped with the gamepad gone")
     assert [(e.key, e.new) for e in sup.journal(3) if e.key == "gamepad"][-1] == ("gamepad", "off")
     # button 1 (B / circle) disarms
     pilot.evaluate("() => { window.__pad.connected = true; window.__pad.axes[1] = 0.0; }")
     sup.arm(LOCAL)
     expect(pilot.locator("#ucat-armed")).to_have_text("ARMED")
     pilot.evaluate("() => { window.__pad.buttons[1].pressed = true; window.__pad.buttons[1].value = 1; }")
-    wait_for(lambda: not sup.armed, what="the gamepad's disarm button")
+    wait_for(lambda: not sup.armed, timeout=PAD, what="the gamepad's disarm button")
     assert sup.setpoints.velocity == 0.0  # the viewer's stick, held forward all along, did nothing
     pilot_ctx.close()
     viewer_ctx.close()

@@ -111,8 +111,8 @@ def test_playback_reproduces_the_live_plot_values(run: Run) -> None:
     assert played.shape == run.live.shape
     for j, name in enumerate(COLUMNS):
         np.testing.assert_array_equal(played[:, j], run.live[:, j], err_msg=name)
-    # the series are not empty: body state, plans and power were all plotted
-    for name in ("depth", "velocity", "st0", "p_total"):
+    # the series are not empty: body state, plans and both powers were all plotted
+    for name in ("depth", "velocity", "st0", "p_total", "e_total", "e_mean", "e_energy_per_metre"):
         assert np.isfinite(run.live[:, COLUMNS.index(name)]).sum() > 5, name
 
 

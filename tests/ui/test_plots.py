@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from plots_reference import chart_data, filled, span_pins, st_shown
 
 from ucat_console.telemetry import channels as ch
-from ucat_console.telemetry.messages import BodyState, Power, Setpoints
+from ucat_console.telemetry.messages import BodyState, ElectricalPower, Power, Setpoints, Status
 from ucat_console.ui.plots import COL, MIN_SPAN, ST_HIDDEN, LivePlots, PlotFeeder, RingBuffer
 from ucat_console.ui import viser_compat
 
@@ -71,7 +71,7 @@ def test_feeder_rows_hold_the_latest_values() -> None:
     [
         ([1.0, 2.0], [1.0, 2.0]),
         ([math.nan, math.nan, 3.0, math.nan, 5.0], [3.0, 3.0, 3.0, 3.0, 5.0]),
-        ([math.nan, math.nan], [0.0, 0.0]),
+        ([math.nan, math.nan], [math.nan, math.nan]),  # never known: drawn as nothing, not 0
     ],
 )
 def test_filled_replaces_nan_by_the_last_value(a: list, expected: list) -> None:
@@ -80,7 +80,7 @@ def test_filled_replaces_nan_by_the_last_value(a: list, expected: list) -> None:
 
 def _filled_reference(column: list[float]) -> list[float]:
     finite = [x for x in column if math.isfinite(x)]
-    last, out = (finite[0] if finite else 0.0), []
+    last, out = (finite[0] if finite else math.nan), []
     for x in column:
         last = x if math.isfinite(x) else last
         out.append(last)
@@ -239,7 +239,9 @@ class _Chart:
 
 class _Gui:
     def add_uplot(self, *args: object, **kwargs: object) -> _Chart:
-        return _Chart()
+        chart = _Chart()
+        chart.title = kwargs.get("title")
+        return chart
 
 
 _cell = st.one_of(st.floats(-5.0, 5.0), st.floats(-5.0, 5.0), st.floats(-5.0, 5.0),
@@ -302,3 +304,138 @@ def test_changes_are_marked_on_every_chart_at_their_rows_and_go_with_a_reset() -
         assert t[marks == 1.0].tolist() == [1.0]
     feeder.reset()
     assert not feeder.changes
+
+
+NAN = math.nan
+
+
+def _power(t: float, per_fin: tuple, distance: float = 0.0, mean: float = NAN, epm: float = NAN) -> Power:
+    return Power(t, per_fin, sum(per_fin), mean, NAN, distance, epm)
+
+
+def _electrical(t: float, per_fin: tuple) -> ElectricalPower:
+    return ElectricalPower(t, (1.0,) * 4, (24.0,) * 4, per_fin, sum(per_fin))
+
+
+def _status(t: float, armed: bool) -> Status:
+    return Status(t, armed, "mpc", "", (), 0, "sim")
+
+
+def _power_chart(feeder: PlotFeeder) -> tuple[LivePlots, list[np.ndarray]]:
+    """The live plots of ``feeder``'s rows, refreshed once, and the power chart's series
+    (the time axis and the change marks left out)."""
+    plots = LivePlots(_Gui(), feeder, rate=10.0, max_points=100, corridor=lambda: (0.25, 0.35))
+    plots.refresh(10.0)
+    _, *series, _ = plots.power._impl.props.data
+    return plots, [np.asarray(s, dtype=np.float64) for s in series]
+
+
+def test_the_power_chart_draws_the_battery_with_the_estimates_total_beside_it() -> None:
+    f = PlotFeeder(capacity=50)
+    f.on_message(ch.STATUS, _status(0.0, True))
+    for k in range(5):
+        t = 0.1 * k
+        f.on_message(ch.POWER, _power(t, (0.5, 0.5, 0.5, 0.5), distance=0.01 * k, mean=2.0, epm=7.0))
+        f.on_message(ch.POWER_ELECTRICAL, _electrical(t, (3.0, 4.0, 5.0, 6.0 + k)))
+        f.sample()
+    plots, (*fins, total, mean, epm, shaft) = _power_chart(f)
+    for i, want in enumerate((3.0, 4.0, 5.0)):
+        np.testing.assert_array_equal(fins[i], want)  # each drive's battery power
+    np.testing.assert_array_equal(fins[3], [6.0, 7.0, 8.0, 9.0, 10.0])
+    np.testing.assert_array_equal(total, [18.0, 19.0, 20.0, 21.0, 22.0])  # the battery's total
+    np.testing.assert_array_equal(shaft, 2.0)  # the estimate's total, beside it
+    # the battery's running mean and energy per metre (0.01 m each 0.1 s), not the loop's 2 W and 7 J/m;
+    # before the first (two readings) as the first
+    np.testing.assert_allclose(mean, [18.5, 18.5, 19.0, 19.5, 20.0], rtol=1e-6)
+    np.testing.assert_allclose(epm, [185.0, 185.0, 190.0, 195.0, 200.0], rtol=1e-6)
+    assert plots.source == "electrical"
+    assert plots.power.title == "Power (W) and energy per metre (J/m): electrical (battery); " \
+                                "total of the mechanical (shaft estimate) dotted"
+
+
+def test_without_electrical_readings_the_estimate_is_drawn_and_labelled_so() -> None:
+    f = PlotFeeder(capacity=50)
+    f.on_message(ch.STATUS, _status(0.0, True))
+    for k in range(5):
+        t = 0.1 * k
+        f.on_message(ch.POWER, _power(t, (0.5, 0.5, 0.5, 0.5 + k), distance=0.01 * k, mean=2.5, epm=7.0))
+        # a drive that does not answer: its reading and the total are NaN
+        f.on_message(ch.POWER_ELECTRICAL, _electrical(t, (3.0, NAN, 5.0, 6.0)))
+        f.sample()
+    plots, (*fins, total, mean, epm, shaft) = _power_chart(f)
+    np.testing.assert_array_equal(fins[0], 0.5)  # the estimate's, not the battery's 3 W
+    np.testing.assert_array_equal(total, [2.0, 3.0, 4.0, 5.0, 6.0])
+    np.testing.assert_array_equal(mean, 2.5)  # the loop's running mean and energy per metre
+    np.testing.assert_array_equal(epm, 7.0)
+    assert np.isnan(shaft).all()  # nothing beside it
+    assert plots.source == "mechanical"
+    assert plots.power.title == ("Power (W) and energy per metre (J/m): "
+                                 "mechanical (shaft estimate): no electrical readings")
+    # the drives answer: the battery's again, and the title says so
+    f.on_message(ch.POWER_ELECTRICAL, _electrical(0.5, (3.0, 4.0, 5.0, 6.0)))
+    f.on_message(ch.POWER, _power(0.5, (0.5,) * 4))
+    f.sample()
+    plots.refresh(10.0)
+    assert plots.source == "electrical" and plots.power.title.endswith("electrical (battery); "
+                                                                      "total of the mechanical (shaft estimate) dotted")
+
+
+def test_a_power_figure_never_known_in_the_window_is_drawn_as_nothing_not_zero() -> None:
+    f = PlotFeeder(capacity=50)
+    f.on_message(ch.STATUS, _status(0.0, False))  # disarmed: no running mean, no energy per metre
+    for k in range(4):
+        t = 0.1 * k
+        f.on_message(ch.POWER, _power(t, (0.5,) * 4))
+        f.on_message(ch.POWER_ELECTRICAL, _electrical(t, (3.0, 4.0, 5.0, 6.0)))
+        f.sample()
+    _, (*fins, total, mean, epm, shaft) = _power_chart(f)
+    np.testing.assert_array_equal(total, 18.0)
+    np.testing.assert_array_equal(shaft, 2.0)
+    assert np.isnan(mean).all() and np.isnan(epm).all()  # never known: nothing drawn
+    # no electrical reading and no estimate either (a recording without power): nothing at all
+    f = PlotFeeder(capacity=50)
+    for k in range(4):
+        f.on_message(ch.SETPOINTS, Setpoints(0.1 * k, 0.2, 1.0, 0.0))
+        f.sample()
+    plots, power = _power_chart(f)
+    assert all(np.isnan(s).all() for s in power)
+    assert plots.source == "mechanical"
+
+
+def test_the_battery_running_mean_and_energy_per_metre_by_hand() -> None:
+    """Trapezoids between finite readings of one armed stretch: a NaN reading skipped (not
+    counted 0), a drop of the loop's distance count a new start, a disarm between two
+    readings (a NaN one in between) not counted; energy per metre over the distance."""
+    f = PlotFeeder(capacity=50)
+    f.on_message(ch.STATUS, _status(0.0, True))
+    steps = [  # t, the battery's total (W), the loop's distance count (m), a Status before (armed)
+        (0.0, 10.0, 0.0, None),
+        (1.0, 20.0, 0.5, None),  # 15 J over 1 s and 0.5 m
+        (2.0, NAN, 1.0, None),  # a drive did not answer: skipped
+        (3.0, 30.0, 1.5, None),  # 50 J over 2 s and 1.0 m
+        (4.0, 30.0, 0.25, None),  # the loop counts again from 0: 30 J over 1 s and 0.25 m
+        (5.0, NAN, 0.25, False),  # disarmed at 4.5 s ...
+        (6.0, 40.0, 0.75, True),  # ... armed again at 5.5 s: 4 to 6 s not counted
+        (7.0, 60.0, 1.25, None),  # 50 J over 1 s and 0.5 m
+    ]
+    for t, total, distance, armed in steps:
+        if armed is not None:
+            f.on_message(ch.STATUS, _status(t - 0.5, armed))
+        f.on_message(ch.POWER, _power(t, (0.5,) * 4, distance=distance))
+        f.on_message(ch.POWER_ELECTRICAL, _electrical(t, (total / 4,) * 4))
+        f.sample()
+    rows = f.buffer.last(50)
+    assert list(rows[:, COL["t"]]) == [s[0] for s in steps]
+    energy = np.array([NAN, 15.0, 15.0, 65.0, 95.0, 95.0, 95.0, 145.0])
+    time = np.array([NAN, 1.0, 1.0, 3.0, 4.0, 4.0, 4.0, 5.0])
+    distance = np.array([NAN, 0.5, 0.5, 1.5, 1.75, 1.75, 1.75, 2.25])
+    np.testing.assert_allclose(rows[:, COL["e_mean"]], energy / time)
+    np.testing.assert_allclose(rows[:, COL["e_energy_per_metre"]], energy / distance)
+    assert f.battery.mean == pytest.approx(29.0) and f.battery.energy_per_metre == pytest.approx(145.0 / 2.25)
+    # drawn as computed (float32), the NaN reading as the reading before it
+    _, (*_, total, mean, epm, _) = _power_chart(f)
+    np.testing.assert_array_equal(total, np.float32([10.0, 20.0, 20.0, 30.0, 30.0, 30.0, 40.0, 60.0]))
+    np.testing.assert_array_equal(mean[1:], (energy / time)[1:].astype(np.float32))
+    assert mean[0] == mean[1]  # before the first known value: the first one
+    f.reset()
+    assert math.isnan(f.battery.mean) and math.isnan(f.battery.energy_per_metre)

@@ -148,10 +148,17 @@ def _load(d: dict[str, Any]) -> list[Row]:
     ]
 
 
+def _pages(d: dict[str, Any]) -> list[Row]:
+    kept = sum(abs(n - d["baseline"][name]) for name, n in d["after"].items())
+    return [Row(f"{d['pages']:,} pages opened and closed at random moments: per-page state kept / Python "
+                "allocations kept / resident size", f"{kept} / {d['traced_growth_mb']:+.1f} MB / "
+                f"{d['rss_before_mb']:.0f} -> {d['rss_after_mb']:.0f} MB", "0 / < 10 MB", "`bench pages`")]
+
+
 #: each benchmark's file (in ``benchmarks/``) and the rows made from it, in the table's order
 SOURCES: dict[str, Callable[[dict[str, Any]], list[Row]]] = {
     "mpc": _mpc, "sim": _sim, "compile": _compile, "sessions": _sessions, "ui": _ui,
-    "safety": _safety, "load": _load, "tracking": _tracking,
+    "safety": _safety, "pages": _pages, "load": _load, "tracking": _tracking,
 }
 
 

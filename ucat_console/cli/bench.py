@@ -40,6 +40,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     q.set_defaults(func=run_sim)
 
     from ucat_console.bench import load as bench_load
+    from ucat_console.bench import pages as bench_pages
     from ucat_console.bench import plant as bench_plant
     from ucat_console.bench import report as bench_report
     from ucat_console.bench import safety as bench_safety
@@ -53,6 +54,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     bench_tracking.register_bench(kinds)
     bench_load.register_bench(kinds)
     bench_plant.register_bench(kinds)
+    bench_pages.register_bench(kinds)
     bench_report.register_bench(kinds)
     c = kinds.add_parser("compile", help="cold compile of every preparation step, serial and in parallel")
     c.add_argument("--config", default=None, metavar="NAME|FILE", help="the configuration to compile for")

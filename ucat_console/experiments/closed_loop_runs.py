@@ -300,6 +300,10 @@ def e6_plants(quick: bool) -> list[str]:
     return [family_name(g, m) for g in scales for m in E6_MODELS]
 
 
+#: m, where E6's identification manoeuvre starts
+E6_IDENTIFY_DEPTH = 8.0
+
+
 def identify_plant(plant: str, seed: int, quick: bool) -> dict[str, Any]:
     """Run and record the identification manoeuvre on ``plant`` (headless, in a temporary
     sessions directory) and fit the fin coefficients to it (``ucat-console identify``'s path)."""
@@ -312,7 +316,10 @@ def identify_plant(plant: str, seed: int, quick: bool) -> dict[str, Any]:
     from ucat_console.config import AccessConfig, AppConfig, ConsoleConfig
     from ucat_console.control.params import ManoeuvreConfig
 
-    app = AppConfig(plant=plant_config(plant, seed), console=ConsoleConfig(sim_depth=3.0, record_on_arm=False),
+    # from 8 m: the manoeuvre's off-centre steps climb the faster plants by more than 3 m, and
+    # above the surface the pressure transducer measures nothing (the depth failsafe ends the run)
+    app = AppConfig(plant=plant_config(plant, seed),
+                    console=ConsoleConfig(sim_depth=E6_IDENTIFY_DEPTH, record_on_arm=False),
                     access=AccessConfig(token="e6-identify"))
     if quick:
         app = app.replace(loop=app.loop.replace(manoeuvre=ManoeuvreConfig(step_s=12.0)))

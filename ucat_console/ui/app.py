@@ -281,7 +281,7 @@ class ConsoleApp:
                     compare = ComparePanel(
                         client.gui, self.tab_review, self.sessions_dir, cfg=self.sup.cfg.metrics,
                         sessions=self.session_list.sessions, allow=self._allow(cid), client=client,
-                        jobs=lambda what, job, coalesce: self.jobs.submit(cid, what, job, coalesce=coalesce))
+                        jobs=self._jobs_of(cid), present=lambda: self.page_present(cid))
                     # a recording that ends shows in the page's lists by itself
                     panel.session_lists += [lambda: review.act(review.refresh_sessions),
                                             lambda: compare.act(compare.refresh)]
@@ -353,12 +353,26 @@ class ConsoleApp:
             allow=self._allow(cid) if cid is not None else None,
             replay_slot=self.replay_slot, may_replay=lambda: self._may_replay(cid), plot_height=PLOT_HEIGHT,
             metrics=self.sup.cfg.metrics,
-            jobs=(lambda what, job, coalesce: self.jobs.submit(cid, what, job, coalesce=coalesce))
-            if cid is not None else None,
+            jobs=self._jobs_of(cid) if cid is not None else None,
             present=(lambda: self.page_present(cid)) if cid is not None else (lambda: True),
             sessions=lambda: self.session_list.listing(),
             may_repair=(lambda: self.sup.access.require_pilot(cid, "repair")) if cid is not None else (lambda: None),
         )
+
+    def submit_job(self, cid: int, what: str, job: Callable[[], Any], coalesce: bool = False) -> str | None:
+        """Queue ``job`` (a kind ``what``) on the page jobs for page ``cid``: None when queued,
+        else why not. A page that has gone has no job queued, and none of its jobs runs:
+        whatever a job holds of its page (its panels, its elements) is let go of with the page."""
+        if not self.page_present(cid):
+            return f"{what}: the page has gone"
+        why = self.jobs.submit(cid, what, lambda: job() if self.page_present(cid) else None, coalesce=coalesce)
+        if not self.page_present(cid):  # gone meanwhile: its jobs may have been forgotten before this one came
+            self.jobs.forget(cid)
+        return why
+
+    def _jobs_of(self, cid: int) -> Callable[[str, Callable[[], Any], bool], str | None]:
+        """``jobs(what, job, coalesce)`` of page ``cid``'s panels (:meth:`submit_job`)."""
+        return lambda what, job, coalesce: self.submit_job(cid, what, job, coalesce)
 
     def _may_replay(self, cid: int | None) -> bool:
         """CommandRefused unless page ``cid`` may start a counterfactual replay now: any page

@@ -69,8 +69,12 @@ class ComparePanel:
     def __init__(self, gui: Any, container: Any, directory: Any, *, cfg: MetricsConfig,
                  sessions: Callable[[], list[Any]],
                  jobs: Callable[[str, Callable[[], Any], bool], str | None] | None = None,
-                 allow: Callable[..., None] | None = None, client: Any = None) -> None:
+                 allow: Callable[..., None] | None = None, client: Any = None,
+                 present: Callable[[], bool] = lambda: True) -> None:
+        """``present()``: whether the page is still connected (a job that ends after its page
+        went ends quietly: its elements have gone with the page)."""
         self.gui = gui
+        self.present = present
         self.directory = directory
         self.cfg = cfg
         self._sessions = sessions
@@ -118,14 +122,25 @@ class ComparePanel:
         return cb
 
     def act(self, fn: Callable[[], Any]) -> bool:
+        """Run one action; a refusal is shown. When the page has gone meanwhile, nothing is
+        shown and nothing is an error."""
         try:
-            fn()
-            return True
-        except (ValueError, OSError, RuntimeError) as e:
-            self.show(str(e), error=True)
-        except Exception as e:  # a bug must not pass silently
-            log.exception("comparing runs failed")
-            self.show(f"internal error: {e}", error=True)
+            try:
+                fn()
+                return True
+            except (ValueError, OSError, RuntimeError) as e:
+                if not self.present():
+                    raise
+                self.show(str(e), error=True)
+            except Exception as e:  # a bug must not pass silently
+                if not self.present():
+                    raise
+                log.exception("comparing runs failed")
+                self.show(f"internal error: {e}", error=True)
+        except Exception:
+            if self.present():
+                raise
+            log.debug("a page left during a comparison", exc_info=True)
         return False
 
     def show(self, text: str, error: bool = False) -> None:

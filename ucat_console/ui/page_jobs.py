@@ -104,6 +104,12 @@ class PageJobs:
             st = self._pages.get(page)
             return st is not None and (bool(st.pending) or st.running is not None)
 
+    @property
+    def pages(self) -> int:
+        """How many pages the jobs keep a state of (a page's, until it has gone)."""
+        with self._cond:
+            return len(self._pages)
+
     def stop(self) -> None:
         with self._cond:
             self._stopped = True
@@ -157,3 +163,5 @@ class PageJobs:
                 if st.gone and self._pages.get(page) is st:
                     del self._pages[page]
                 self._rest_until = self.clock() + took * (1.0 - self.duty) / self.duty
+            # nothing of the job stays while the worker waits: it may hold a page that has gone
+            del nxt, job, st

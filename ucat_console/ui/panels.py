@@ -584,11 +584,11 @@ class ControlPanel:
         if force or listed != self._listed:  # a recording ended: it may be fitted, reviewed, compared
             others = self._listed is not None and listed != self._listed
             self._listed = listed
-            jobs = getattr(self.app, "jobs", None)
-            if jobs is None:
+            submit = getattr(self.app, "submit_job", None)
+            if submit is None:
                 self._list_sessions(others)
             else:  # (listed by the page jobs)
-                jobs.submit(self.cid, "list sessions", lambda: self._list_sessions(others), coalesce=True)
+                submit(self.cid, "list sessions", lambda: self._list_sessions(others), coalesce=True)
         self.identify.refresh(pilot)
 
     def _list_sessions(self, others: bool = False) -> None:

@@ -1,13 +1,14 @@
 """The plots' series from the ring buffer's rows, in one compiled pass (:func:`series`).
 
 Each refresh of the live plots (12 a second) turns the last rows of the plot ring buffer
-into the 27 series the five charts draw: the window's rows (decimated to a bound), every
+into the 28 series the five charts draw: the window's rows (decimated to a bound), every
 value column with its gaps filled, the Strouhal numbers hidden or capped, the tracking
-charts' axis pins, all but the time axis as float32. Done with numpy it took some forty
-array operations, 0.7 ms a refresh in the console with two pages (each operation's call
-costs more than its arithmetic on a few hundred rows), about a tenth of the live view's
-thread; here it is one call. ``ui/plots.py`` says what each series means; the tests keep
-the numpy version as the reference and check that both give the same arrays.
+charts' axis pins, the power chart's power chosen (the battery's, else the estimate's),
+all but the time axis as float32. Done with numpy it took some forty array operations,
+0.7 ms a refresh in the console with two pages (each operation's call costs more than its
+arithmetic on a few hundred rows), about a tenth of the live view's thread; here it is
+one call. ``ui/plots.py`` says what each series means; the tests keep the numpy version
+as the reference and check that both give the same arrays.
 """
 
 from __future__ import annotations
@@ -22,8 +23,13 @@ ST_HIGH, ST_LOW = 0, 1
 ST_FIN = 2  # four rows: the fins' St as drawn
 ST_ABOVE = 6  # markers at 1 where a fin's St is above 1
 TRACKED = 7  # three charts of four rows: value, target, lower pin, upper pin
-POWER = 19  # p0..p3, total, running mean, energy per metre
-ROWS = 26
+POWER = 19  # seven rows of the power drawn: per fin (four), total, running mean, energy per metre
+TOTAL = 4  # the total's place among a power's seven
+SHAFT = 26  # the mechanical estimate's total beside the battery's
+ROWS = 27
+#: the power the power chart draws (:func:`series`' result): the encoders' mechanical
+#: estimate, or the battery's (the fin drives' electrical input)
+MECHANICAL, ELECTRICAL = 0, 1
 
 
 def window_rows(count: int, n: int, max_points: int) -> tuple[int, int, int]:
@@ -36,11 +42,20 @@ def window_rows(count: int, n: int, max_points: int) -> tuple[int, int, int]:
 
 
 @njit(cache=True, nogil=True)
+def _value(x, values_max):
+    """``x`` as float32: beyond its range the largest finite value of the sign; NaN stays NaN."""
+    return np.float32(x if x != x else min(max(x, -values_max), values_max))
+
+
+@njit(cache=True, nogil=True)
 def series(data, next_row, n, step, st_cols, armed_col, speed_col, tracked_cols, spans, power_cols,
            corridor_lo, corridor_hi, st_min_speed, st_hidden, values_max, t_out, v_out):
     """Fill ``t_out`` (m,) float64 and ``v_out`` (ROWS, m) float32 from the ring ``data``
     (capacity, columns; column 0 the time), whose next row to write is ``next_row``, for
-    the window of the last ``n`` rows decimated by ``step`` (:func:`window_rows`)."""
+    the window of the last ``n`` rows decimated by ``step`` (:func:`window_rows`).
+    ``power_cols`` (2, 7): the columns of the power of :data:`MECHANICAL` and of
+    :data:`ELECTRICAL`, each as the :data:`POWER` rows. Returns the power drawn: ELECTRICAL
+    when the window has a finite electrical total, else MECHANICAL."""
     cap = data.shape[0]
     ncol = data.shape[1]
     m = t_out.shape[0]
@@ -48,9 +63,9 @@ def series(data, next_row, n, step, st_cols, armed_col, speed_col, tracked_cols,
     for j in range(m):
         rows[j, :] = data[(next_row - n + (n - 1 - (m - 1 - j) * step)) % cap]
     # every value column: a non-finite value is the last finite one before it (the first
-    # finite one before that; 0 when there is none)
+    # finite one before that; NaN, drawn as nothing, when there is none)
     for c in range(1, ncol):
-        first = 0.0
+        first = math.nan
         for j in range(m):
             if math.isfinite(rows[j, c]):
                 first = rows[j, c]
@@ -91,7 +106,7 @@ def series(data, next_row, n, step, st_cols, armed_col, speed_col, tracked_cols,
             r = TRACKED + 4 * k + i
             c = tracked_cols[k, i]
             for j in range(m):
-                x = np.float32(min(max(rows[j, c], -values_max), values_max))
+                x = _value(rows[j, c], values_max)
                 v_out[r, j] = x
                 if math.isfinite(x):
                     lo = min(lo, np.float64(x))
@@ -105,8 +120,15 @@ def series(data, next_row, n, step, st_cols, armed_col, speed_col, tracked_cols,
         for j in range(m):
             v_out[TRACKED + 4 * k + 2, j] = pin_lo
             v_out[TRACKED + 4 * k + 3, j] = pin_hi
-    for i in range(power_cols.shape[0]):
-        c = power_cols[i]
+    # the power chart: the battery's where the window has its total (every row's, filled,
+    # or none), the estimate's total beside it; else the estimate's, with nothing beside it
+    source = ELECTRICAL if m > 0 and math.isfinite(rows[0, power_cols[ELECTRICAL, TOTAL]]) else MECHANICAL
+    for i in range(power_cols.shape[1]):
+        c = power_cols[source, i]
         for j in range(m):
-            v_out[POWER + i, j] = np.float32(min(max(rows[j, c], -values_max), values_max))
+            v_out[POWER + i, j] = _value(rows[j, c], values_max)
+    c = power_cols[MECHANICAL, TOTAL]
+    for j in range(m):
+        v_out[SHAFT, j] = _value(rows[j, c] if source == ELECTRICAL else math.nan, values_max)
+    return source
 

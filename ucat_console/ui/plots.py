@@ -8,7 +8,8 @@ rate). :class:`LivePlots` then sends the rows of the chosen history window, deci
 at most ``max_plot_points`` per series: the size of a plot update is bounded by the
 configuration, never by the length of the session. A value not known at a row (NaN, or
 not finite) is drawn as the last known one before it (uPlot takes NaN for data, not for a
-gap); the series are computed in one compiled pass (:mod:`ucat_console.ui.plot_series`).
+gap), and a value not known anywhere in the window is drawn as nothing, never as 0; the
+series are computed in one compiled pass (:mod:`ucat_console.ui.plot_series`).
 
 Charts (one shared time axis labelled in seconds: of stream time live, from the session's start
 (:attr:`PlotFeeder.origin`) in review; synchronised cursors; no line until there are rows):
@@ -22,7 +23,16 @@ Charts (one shared time axis labelled in seconds: of stream time live, from the 
   zooming 2 mm of depth noise up to the whole chart);
 * power per fin and in total, with the running mean of the total, and the energy per
   metre travelled on the right-hand axis of the same chart (second, so that it is in view
-  at 1280x800);
+  at 1280x800). The power is the battery's (``power/electrical``, the fin drives'
+  electrical input), as in the efficiency figures (:mod:`ucat_console.backend.review.metrics`),
+  with the total of the encoders' mechanical estimate (``power``) dotted beside it; a
+  window without an electrical total (a recording made before the drives reported, a drive
+  that does not answer: NaN) draws the estimate's instead, and nothing beside it. The
+  chart's title names the power drawn (:func:`power_title`). The estimate's running mean
+  and energy per metre are the control loop's (``Power``); the battery's are
+  :class:`PlotFeeder`'s (:class:`BatteryMean`) over the readings it was given: live since
+  the view started, in review since the session's start, or since the history window
+  before a jump;
 * on every chart, each change (mode, tuning and formulation, setpoints, marker: the events
   of :data:`MARK_CODES`) as a pink spike at its time (:func:`change_marks`);
 * in review, the playhead: a black spike at the playback position (:func:`playhead_marks`).
@@ -38,10 +48,11 @@ from typing import Any, Callable, Iterator, Sequence
 
 import numpy as np
 
+from ucat_console.backend.review.metrics import ELECTRICAL, LABELS, MECHANICAL, default_label
 from ucat_console.robot import look
 from ucat_console.robot.look import hex_colour
 from ucat_console.telemetry import channels as ch
-from ucat_console.telemetry.messages import BodyState, FinPlan, Power, Setpoints, Status
+from ucat_console.telemetry.messages import BodyState, ElectricalPower, FinPlan, Power, Setpoints, Status
 from ucat_console.ui import plot_series as ps
 from ucat_console.ui.plot_series import window_rows
 from ucat_console.ui.viser_compat import set_plot_data
@@ -64,11 +75,15 @@ COLUMNS: tuple[str, ...] = (
     *(f"p{i}" for i in range(N_FINS)),
     "p_total", "p_mean",
     "energy_per_metre",
+    *(f"e{i}" for i in range(N_FINS)),
+    "e_total", "e_mean",
+    "e_energy_per_metre",
     "armed",
 )
 COL = {name: i for i, name in enumerate(COLUMNS)}
 #: the channels the feeder reads
-CHANNELS = (ch.BODY_STATE, ch.SETPOINTS, ch.POWER, ch.STATUS, ch.EVENTS, *(ch.fin_plan(i) for i in range(N_FINS)))
+CHANNELS = (ch.BODY_STATE, ch.SETPOINTS, ch.POWER, ch.POWER_ELECTRICAL, ch.STATUS, ch.EVENTS,
+            *(ch.fin_plan(i) for i in range(N_FINS)))
 #: the events marked on every chart's time axis: mode, tuning (the formulation too),
 #: setpoint changes and markers
 MARK_CODES = frozenset({"mode", "tuning", "setpoints", "marker"})
@@ -127,6 +142,56 @@ class RingBuffer:
             return self._data[idx].copy()
 
 
+class BatteryMean:
+    """The battery's running mean and energy per metre from its readings, as the loop's
+    :class:`~ucat_console.telemetry.messages.Power` gives the estimate's: its energy while
+    armed (trapezoidal between consecutive finite totals of one armed stretch; a reading a
+    drive did not answer, NaN, is skipped, never counted zero), over that time, and over the
+    distance the loop counted meanwhile (a drop of the count is the loop's new start, as in
+    the efficiency figures: the new count is what came since)."""
+
+    def __init__(self) -> None:
+        self.energy = self.time = 0.0  # J, s: while armed
+        self.moved_energy = self.distance = 0.0  # J, m: over the stretches whose distance is known
+        self._last: tuple[float, float, float] | None = None  # t, total, distance of the last finite reading
+        self._armed = False  # armed since that reading
+
+    def add(self, t: float, total: float, distance: float, armed: bool) -> None:
+        """A reading of the total at ``t`` (W), the loop's distance count then (m; NaN:
+        none yet), whether the fins are driven (armed)."""
+        last = self._last
+        if not math.isfinite(total) or not (last is None or t > last[0]):
+            return
+        self._last = (t, total, distance)
+        counted, self._armed = last is not None and self._armed and armed, armed
+        if not counted:
+            return
+        energy = 0.5 * (total + last[1]) * (t - last[0])
+        self.energy += energy
+        self.time += t - last[0]
+        moved = distance - last[2]
+        if moved < 0.0:  # the loop started its count again
+            moved = distance
+        if math.isfinite(moved):
+            self.moved_energy += energy
+            self.distance += moved
+
+    def disarmed(self) -> None:
+        """The fins stopped being driven: the time until the next reading after they are
+        armed again is not counted (however many readings were NaN in between)."""
+        self._armed = False
+
+    @property
+    def mean(self) -> float:
+        """W; NaN before two finite readings while armed."""
+        return self.energy / self.time if self.time > 0.0 else math.nan
+
+    @property
+    def energy_per_metre(self) -> float:
+        """J/m; NaN until the robot has moved."""
+        return self.moved_energy / self.distance if self.distance > 0.0 else math.nan
+
+
 class PlotFeeder:
     """Stream subscriber holding the latest plotted values; rows into a ring buffer."""
 
@@ -137,6 +202,8 @@ class PlotFeeder:
         self.origin = 0.0
         self._latest = [math.nan] * len(COLUMNS)
         self._t_last_row = -math.inf
+        self.battery = BatteryMean()
+        self._distance = math.nan  # the loop's distance count (Power)
         #: the times of the changes marked on the charts (MARK_CODES), oldest first
         self.changes: collections.deque[float] = collections.deque(maxlen=_MARKS_KEPT)
 
@@ -174,9 +241,22 @@ class PlotFeeder:
             row[COL["p_total"]] = p.total
             row[COL["p_mean"]] = p.mean_total
             row[COL["energy_per_metre"]] = p.energy_per_metre
+            self._distance = p.distance
+        elif channel == ch.POWER_ELECTRICAL:
+            e: ElectricalPower = msg
+            base = COL["e0"]
+            for i in range(N_FINS):
+                row[base + i] = e.per_fin[i]  # NaN: a drive that did not answer
+            row[COL["e_total"]] = e.total
+            b = self.battery
+            b.add(e.t, e.total, self._distance, row[COL["armed"]] == 1.0)
+            row[COL["e_mean"]] = b.mean
+            row[COL["e_energy_per_metre"]] = b.energy_per_metre
         elif channel == ch.STATUS:
             st: Status = msg
             row[COL["armed"]] = 1.0 if st.armed else 0.0
+            if not st.armed:
+                self.battery.disarmed()
         t = msg.t - self.origin
         if t > row[0] or row[0] != row[0]:
             row[0] = t
@@ -196,6 +276,8 @@ class PlotFeeder:
         self.buffer = RingBuffer(self.buffer.capacity, len(COLUMNS))
         self._latest = [math.nan] * len(COLUMNS)
         self._t_last_row = -math.inf
+        self.battery = BatteryMean()
+        self._distance = math.nan
         self.changes.clear()
 
 
@@ -252,8 +334,19 @@ _ST_COLS = np.array([COL[f"st{i}"] for i in range(N_FINS)], dtype=np.int64)
 _TRACKED = ("depth", "velocity", "yaw_rate")  # the tracking charts: value and target each
 _TRACKED_COLS = np.array([[COL[name], COL[f"{name}_sp"]] for name in _TRACKED], dtype=np.int64)
 _TRACKED_SPANS = np.array([MIN_SPAN[name] for name in _TRACKED])
-_POWER_COLS = np.array([COL[f"p{i}"] for i in range(N_FINS)] + [COL["p_total"], COL["p_mean"], COL["energy_per_metre"]],
-                       dtype=np.int64)
+_POWER_COLS = np.zeros((2, N_FINS + 3), dtype=np.int64)  # each power's columns, as plot_series' POWER rows
+_POWER_COLS[ps.MECHANICAL] = [*(COL[f"p{i}"] for i in range(N_FINS)), COL["p_total"], COL["p_mean"],
+                              COL["energy_per_metre"]]
+_POWER_COLS[ps.ELECTRICAL] = [*(COL[f"e{i}"] for i in range(N_FINS)), COL["e_total"], COL["e_mean"],
+                              COL["e_energy_per_metre"]]
+_SOURCES = {ps.MECHANICAL: MECHANICAL, ps.ELECTRICAL: ELECTRICAL}
+
+
+def power_title(source: str) -> str:
+    """The power chart's title, naming the power it draws by the efficiency figures' labels:
+    the battery's, with the estimate's total dotted beside it, or the estimate's, saying why."""
+    title = f"Power (W) and energy per metre (J/m): {default_label(source)}"
+    return title + (f"; total of the {LABELS[MECHANICAL]} dotted" if source == ELECTRICAL else "")
 
 
 class LivePlots:
@@ -306,11 +399,14 @@ class LivePlots:
         )
         epm = _series("energy per metre (J/m, right)", "#17becf", 2.0)
         epm["scale"] = "epm"
+        #: the power the power chart draws (metrics' ELECTRICAL or MECHANICAL)
+        self.source = ELECTRICAL
         self.power = gui.add_uplot(
-            _empty(1 + N_FINS + 4 + len(head)),
+            _empty(1 + N_FINS + 5 + len(head)),
             (_X, *(_series(f"fin {i}", FIN_COLOURS[i], 1.0) for i in fins),
-             _series("total", "#888", 2.0), _series("running mean", "#8c564b", 1.5, (6, 3)), epm, _MARK, *head),
-            title="Power (W) and energy per metre (J/m)",
+             _series("total", "#888", 2.0), _series("running mean", "#8c564b", 1.5, (6, 3)), epm,
+             _series(f"total, {LABELS[MECHANICAL]}", "#333", 1.5, (1.5, 3)), _MARK, *head),
+            title=power_title(self.source),
             axes=(_X_AXIS, {"label": "W", "size": 40},
                   {"scale": "epm", "side": 1, "label": "J/m", "grid": {"show": False}, "size": 40}),
             scales={**_SCALES, "epm": {"auto": True}}, cursor=_CURSOR, height=height,
@@ -326,7 +422,8 @@ class LivePlots:
         if got is None:
             return
         # new arrays each time, sent as they are (float32 values: ui.viser_compat.set_plot_data)
-        t, v = got
+        t, v, source = got
+        self._show_source(source)
         marks: tuple[np.ndarray, ...] = (change_marks(t, list(self.feeder.changes)),)
         if self.playhead is not None:
             marks += (playhead_marks(t, self.playhead()),)
@@ -340,19 +437,27 @@ class LivePlots:
     def charts(self) -> tuple[Any, ...]:
         return self.st, self.depth, self.velocity, self.yaw_rate, self.power
 
+    def _show_source(self, source: str) -> None:
+        """Title the power chart with the power it draws (sent only when that changes)."""
+        if source != self.source:
+            self.source = source
+            self.power.title = power_title(source)
+
     def clear(self) -> None:
         """Empty charts (a new source, before its first rows)."""
         for chart in self.charts:
             set_plot_data(chart, _empty(len(chart.data)))
+        self._show_source(ELECTRICAL)
 
 
 def series_of(buffer: RingBuffer, n: int, max_points: int,
-              corridor: tuple[float, float]) -> tuple[np.ndarray, np.ndarray] | None:
+              corridor: tuple[float, float]) -> tuple[np.ndarray, np.ndarray, str] | None:
     """(the time axis, float64; the value series, float32, by the rows of
-    :mod:`~ucat_console.ui.plot_series`) of the last ``n`` rows of ``buffer``, decimated to
-    ``max_points``; None when there are fewer than two rows or no time passed between the
-    first and the last. The time axis keeps its resolution over a long run; float32 is ample
-    for the values, and half the bytes sent to every page 12 times a second."""
+    :mod:`~ucat_console.ui.plot_series`; the power the power chart draws, ELECTRICAL or
+    MECHANICAL) of the last ``n`` rows of ``buffer``, decimated to ``max_points``; None when
+    there are fewer than two rows or no time passed between the first and the last. The
+    time axis keeps its resolution over a long run; float32 is ample for the values, and
+    half the bytes sent to every page 12 times a second."""
     lo, hi = corridor
     with buffer.locked() as (data, next_row, count):
         n, m, step = window_rows(count, n, max_points)
@@ -360,9 +465,10 @@ def series_of(buffer: RingBuffer, n: int, max_points: int,
             return None
         t = np.empty(m)
         v = np.empty((ps.ROWS, m), VALUES)
-        ps.series(data, next_row, n, step, _ST_COLS, COL["armed"], COL["velocity"], _TRACKED_COLS, _TRACKED_SPANS,
-                  _POWER_COLS, float(lo), float(hi), ST_MIN_SPEED, ST_HIDDEN, _VALUES_MAX, t, v)
-    return (t, v) if t[-1] > t[0] else None
+        source = ps.series(data, next_row, n, step, _ST_COLS, COL["armed"], COL["velocity"], _TRACKED_COLS,
+                           _TRACKED_SPANS, _POWER_COLS, float(lo), float(hi), ST_MIN_SPEED, ST_HIDDEN, _VALUES_MAX,
+                           t, v)
+    return (t, v, _SOURCES[source]) if t[-1] > t[0] else None
 
 
 def warm_up() -> None:

@@ -29,7 +29,10 @@ The checks (:class:`PlausibilityConfig` holds every limit):
   integrated: their difference, low-passed over ``agreement_window``, may drift by at most
   ``agreement_tolerance`` m/s. While it drifts faster, both the depth readings and the DVL
   reports are dropped (which of the two is wrong is not known). The comparison starts
-  afresh after a second without a valid DVL report or a depth reading.
+  afresh after a second without a valid DVL report or a depth reading. Both are taken at
+  the body's reference point (the robot description gives no sensor mounts): a mount
+  offset changes the vertical distance between the sensors by less than the hull's length
+  as the robot pitches, a passing difference the window spreads, not a drift.
 
 A reading with a non-finite value is let through here: the arming gate refuses it and the
 failsafes call it invalid (``backend/arming.py``); a DVL report without bottom lock is

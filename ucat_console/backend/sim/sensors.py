@@ -12,7 +12,10 @@ one sensor's sampling does not shift another's noise.
 * Pressure (Gems 3101P behind an ADC): gauge pressure rho g z plus noise, turned into the
   4-20 mA loop current (saturating at 3.8 and 20.5 mA, NAMUR NE 43), quantised by the ADC,
   and converted back to pressure and depth (the conversions of ``robot/units.py``, which the
-  pressure driver uses too).
+  pressure driver uses too). A current pinned at either limit measures nothing (the robot
+  more than 0.2/16 of the span above the surface, 0.32 m for the default 250 kPa, or deeper
+  than 16.5/16 of it): no reading then, as the pressure driver hands on none (its
+  ``loop_current_problem``).
 * IMU (3DM-CX5): gyro = body rate + constant bias + noise; accel in m/s^2 = the specific
   force a - g in the body frame (level and at rest: (0, 0, -g0)) plus the bias and noise,
   which are given in standard gravities g0 as the sensor's data sheet gives them; attitude
@@ -216,14 +219,16 @@ def sample_rows(mask: int, t: float, xv: np.ndarray, sf: np.ndarray, out: np.nda
         span = sf[S_SPAN]
         gauge = depth_to_pressure(xv[POS + 2], 0.0, rho)
         gauge += p_noise[i, 0]
-        current = adc_current(loop_current(gauge, span), int(sf[S_ADC_BITS]), sf[S_ADC_FS])
-        measured = current_to_pressure(current, 0.0, span)
-        r = rows[k]
-        r[rr.KIND] = rr.DEPTH
-        r[rr.T] = t
-        r[rr.DEPTH_M] = pressure_to_depth(measured, 0.0, rho)
-        r[rr.DEPTH_PA] = measured
-        k += 1
+        unclamped = pressure_to_current(gauge, 0.0, span)
+        if LOOP_MIN_MA <= unclamped <= LOOP_MAX_MA:  # pinned at a limit: no measurement, no reading
+            current = adc_current(loop_current(gauge, span), int(sf[S_ADC_BITS]), sf[S_ADC_FS])
+            measured = current_to_pressure(current, 0.0, span)
+            r = rows[k]
+            r[rr.KIND] = rr.DEPTH
+            r[rr.T] = t
+            r[rr.DEPTH_M] = pressure_to_depth(measured, 0.0, rho)
+            r[rr.DEPTH_PA] = measured
+            k += 1
     if mask & (1 << DVL):
         i = int(sf[S_DVL_ROW])  # drawn every time: the stream ignores validity
         sf[S_DVL_ROW] = i + 1
