@@ -22,11 +22,13 @@ expect.set_options(timeout=15_000)
 TOKEN = "browser-test-token"
 
 
-def browser_console(sessions_dir: Path, pilot_gone: float | None = None, **console: Any) -> Console:
+def browser_console(sessions_dir: Path, pilot_gone: float | None = None, base: str | None = None,
+                    **console: Any) -> Console:
     """A served console on the simulated robot in real time for a browser test: the pilot
     token :data:`TOKEN`, the live view at rates a software-rendered page keeps up with,
-    ``console`` settings and, when given, the pilot-gone timeout (s, hold)."""
-    cfg = console_config(TOKEN, pilot_gone, **{"scene_rate": 15.0, "plot_rate": 5.0, **console})
+    ``console`` settings and, when given, the pilot-gone timeout (s, hold) and the shipped
+    configuration ``base`` ("sim-tuned": a robot that swims)."""
+    cfg = console_config(TOKEN, pilot_gone, base, **{"scene_rate": 15.0, "plot_rate": 5.0, **console})
     return Console(cfg, sessions_dir, serve=True)
 
 
@@ -36,7 +38,8 @@ def open_page(browser: Any, url: str, width: int = 1280, height: int = 800, cont
     page = context.new_page() if context is not None else browser.new_page(viewport={"width": width, "height": height})
     page.goto(url)
     page.wait_for_function("() => !document.body.innerText.includes('Connecting...')", timeout=30_000)
-    expect(page.locator("#ucat-armed")).to_be_visible()
+    # the page's script comes with the page's first batch, which a loaded machine may take long to render
+    expect(page.locator("#ucat-armed")).to_be_visible(timeout=60_000)
     return page
 
 

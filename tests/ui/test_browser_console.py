@@ -277,3 +277,66 @@ def test_review_plots_draw_whichever_plot_tab_was_chosen_first(browser: Browser,
     finally:
         page.screenshot(path=str(ARTIFACTS / f"console-review-plots-{first.split()[0].lower()}.png"))
     page.close()
+
+
+@pytest.fixture
+def patient_console(tmp_path: Path) -> Iterator[Console]:
+    """A console whose pilot page is gone only after 30 s without an answer (a page slow to
+    render on a loaded machine stays the pilot)."""
+    c = browser_console(tmp_path, pilot_gone=30.0)
+    yield c
+    c.stop()
+
+
+def test_the_setpoints_line_follows_what_keys_set_after_an_apply(browser: Browser, patient_console: Console) -> None:
+    console = patient_console
+    sup = console.sup
+    page = open_page(browser, console)
+    become_pilot(page)
+    gui_input(page, "Velocity m/s").fill("0.1")
+    page.get_by_role("button", name="Apply setpoints").click()
+    expect(page.get_by_text(re.compile(r"setpoints applied: velocity 0\.1$"))).to_be_visible()
+    page.locator("#ucat-bar").click()  # focus on the page, not in a text box
+    for velocity in ("0.15", "0.2"):  # each key press: the line says what is in force now
+        page.keyboard.press("w")
+        expect(page.get_by_text(re.compile(rf"now in force: velocity = {velocity}, depth = "))).to_be_visible()
+    page.keyboard.press("e")
+    wait_for(lambda: sup.setpoints.yaw_rate == pytest.approx(0.05), what="a yaw-rate step")
+    expect(page.get_by_text(re.compile(r"now in force: velocity = 0\.2, depth = [\d.]+, yaw_rate = 0\.05"))
+           ).to_be_visible()
+    assert page.get_by_text("setpoints applied").count() == 0
+    page.close()
+
+
+def test_revert_to_saved_asks_while_armed_and_says_what_it_did(browser: Browser, patient_console: Console) -> None:
+    console = patient_console
+    sup = console.sup
+    saved = sup.param_value("mpc.lam_st")
+    page = open_page(browser, console)
+    become_pilot(page)
+    page.get_by_role("tab", name="Tuning", exact=True).click()
+    revert = page.get_by_role("button", name="Revert to saved")
+    # disarmed: at once, and the page says what changed
+    sup.set_params(LOCAL, {"mpc.lam_st": saved + 1.0})
+    revert.click()
+    expect(page.get_by_text(f"reverted to the saved baseline: mpc.lam_st {saved + 1.0:g} → {saved:g}").first
+           ).to_be_visible()
+    assert sup.param_value("mpc.lam_st") == saved
+    # armed: a question first, naming the change; Cancel changes nothing
+    sup.set_params(LOCAL, {"mpc.lam_st": saved + 1.0})
+    sup.arm(LOCAL)
+    expect(page.locator("#ucat-armed")).to_have_text("ARMED")
+    revert.click()
+    dialog = page.get_by_role("dialog")
+    expect(dialog).to_contain_text("Revert the tuning while armed?")
+    expect(dialog).to_contain_text(f"mpc.lam_st: {saved + 1.0:g} → {saved:g}")
+    assert sup.param_value("mpc.lam_st") == saved + 1.0
+    dialog.get_by_role("button", name="Cancel").click()
+    expect(page.get_by_text("revert cancelled: the tuning in force is unchanged").first).to_be_visible()
+    assert sup.param_value("mpc.lam_st") == saved + 1.0
+    revert.click()
+    page.get_by_role("dialog").get_by_role("button", name="Revert now").click()
+    wait_for(lambda: sup.param_value("mpc.lam_st") == saved, what="the revert confirmed")
+    expect(page.get_by_text(f"reverted to the saved baseline: mpc.lam_st {saved + 1.0:g} → {saved:g}").first
+           ).to_be_visible()
+    page.close()

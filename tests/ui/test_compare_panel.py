@@ -51,7 +51,7 @@ def test_two_sessions_compared_with_the_table_the_overlay_and_the_downloads(pane
     assert panel.table.content.startswith(esc("Power: mechanical (shaft estimate): no electrical readings"))
     assert panel.image.visible and panel.image.image.shape[2] == 3
     name, data = panel._downloads["CSV"]
-    assert name == "compare.csv" and b"energy_per_metre" in data
+    assert name == f"compare-{SLOW}-vs-{FAST}.csv" and b"energy_per_metre" in data  # named after the runs
     assert panel._downloads["PNG"][1][:4] == b"\x89PNG"
     [w] = [w for w in panel.result[1] if w.run.name == FAST]
     assert w.zero == pytest.approx(w.run.origin + 5.0)  # aligned at the marker
@@ -74,6 +74,7 @@ def test_what_a_page_sends_is_checked_and_refused_naming_it(panel, chosen, segme
 def test_one_session_cut_into_segments(panel):
     rows = panel.run([SLOW, NONE, NONE, NONE], "marker", "start")
     assert len(rows) == 2 and rows[1].label.endswith("(marker: go)")
+    assert panel._downloads["Markdown"][0] == f"compare-{SLOW}-at-marker.md"
 
 
 def test_the_table_says_its_power_is_the_batterys(tmp_path: Path):

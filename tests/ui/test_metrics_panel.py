@@ -100,3 +100,32 @@ def test_a_seek_back_starts_the_figures_afresh():
             stream.publish(channel, m)
     panel.refresh()
     assert _source_row(panel.html.content, "mechanical", used=True)[1] == "8.00"
+
+
+def _st_tiles(html: str) -> list[tuple[str, str]]:
+    """Each St tile's (class, text)."""
+    return re.findall(r'<span class="ucat-st ([^"]*)"[^>]*>([^<]*)<', html)
+
+
+def test_no_st_value_is_shown_while_the_robot_is_still_or_disarmed():
+    from ucat_console.telemetry import channels as C
+    from ucat_console.telemetry.messages import Status
+
+    # slower than the plots' 0.02 m/s: the strokes' St is the planner's speed floor's, no measurement
+    panel, stream = _panel()
+    for channel, m in run_items(speed=0.01):
+        stream.publish(channel, m)
+    panel.refresh()
+    assert _st_tiles(panel.html.content) == [("none", "–")] * 4
+    # swimming, then disarmed: the last strokes' values go, a greyed dash each
+    panel, stream = _panel()
+    items = run_items()
+    for channel, m in items:
+        stream.publish(channel, m)
+    panel.refresh()
+    assert len([c for c, _ in _st_tiles(panel.html.content) if c in ("in", "out")]) == 8
+    t = items[-1][1].t
+    stream.publish(C.STATUS, Status(t, False, "mpc", "", (), 0, "sim"))
+    panel.refresh()
+    assert _st_tiles(panel.html.content) == [("none", "–")] * 4
+    assert "the robot is disarmed" in panel.html.content

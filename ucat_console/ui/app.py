@@ -278,9 +278,13 @@ class ConsoleApp:
                 with client.atomic():
                     panel = panels.ControlPanel(self, cid, client.gui, client, containers, allow=self._allow(cid))
                     review = self.build_review(client.gui, client.scene, cid)
-                    ComparePanel(client.gui, self.tab_review, self.sessions_dir, cfg=self.sup.cfg.metrics,
-                                 sessions=self.session_list.sessions, allow=self._allow(cid), client=client,
-                                 jobs=self._jobs_of(cid), present=lambda: self.page_present(cid))
+                    compare = ComparePanel(
+                        client.gui, self.tab_review, self.sessions_dir, cfg=self.sup.cfg.metrics,
+                        sessions=self.session_list.sessions, allow=self._allow(cid), client=client,
+                        jobs=self._jobs_of(cid), present=lambda: self.page_present(cid))
+                    # a recording that ends shows in the page's lists by itself
+                    panel.session_lists += [lambda: review.act(review.refresh_sessions),
+                                            lambda: compare.act(compare.refresh)]
             except Exception:
                 if self.page_present(cid):
                     raise
@@ -294,21 +298,36 @@ class ConsoleApp:
                 self.pages[cid] = _Page(client, self.cfg.dark)
             self.reviews[cid] = review
         log.info("page connected: client %s (%s)", cid, self.guard.address(cid) or "?")
-        self._place_camera(client)
+        self._place_camera(client, self.view.scene)
         threading.Thread(target=self._remembered_theme, args=(cid,), name="page-theme", daemon=True).start()
         if self.initial_session is not None:
             review.act(lambda: review.open(self.initial_session))
 
-    def _place_camera(self, client: Any) -> None:
-        """A new page looks at the robot from behind, to port and a little above it."""
-        p = self.view.scene.world_position() if self.view.scene is not None else None
+    def _place_camera(self, client: Any, scene: Any) -> tuple[float, float, float]:
+        """The page looks at the robot of ``scene`` from behind, to port and a little above it
+        (where it is; without a pose yet, where the simulated robot starts); the point looked at.
+        The position goes first: viser moves the point looked at with the position."""
+        p = scene.world_position() if scene is not None else None
         x, y, z = p if p is not None else (0.0, 0.0, -max(self.cfg.sim_depth, 0.3))
         try:
             with client.atomic():
-                client.camera.look_at = (x, y, z)
                 client.camera.position = (x - 1.0, y + 0.8, z + 0.35)
+                client.camera.look_at = (x, y, z)
         except Exception:
             log.debug("placing the camera of client %s failed", client.client_id, exc_info=True)
+        return x, y, z
+
+    def _shown_scene(self, cid: int) -> Any:
+        """The robot page ``cid`` shows: the one it reviews, else the live one."""
+        review = self.reviews.get(cid)
+        return review.view.scene if review is not None and review.player is not None else self.view.scene
+
+    def frame_robot(self, cid: int) -> None:
+        """*Frame the robot*: page ``cid``'s camera looks at the robot it shows (following it
+        from there when it follows)."""
+        page = self.pages.get(cid)
+        if page is not None:
+            page.followed = self._place_camera(page.client, self._shown_scene(cid))
 
     def _allow(self, cid: int) -> Callable[..., None]:
         def allow(handle: Any, pilot_only: bool, max_len: int = 200, urgent: Callable[[], None] | None = None) -> None:
@@ -529,9 +548,9 @@ class ConsoleApp:
         if page.followed is not None:
             cam = page.client.camera  # keep the camera's offset from the robot, look at it
             offset = tuple(float(a - b) for a, b in zip(cam.position, page.followed, strict=True))
-            with page.client.atomic():
-                cam.look_at = p
+            with page.client.atomic():  # the position first: viser moves the point looked at with it
                 cam.position = tuple(a + b for a, b in zip(p, offset))
+                cam.look_at = p
         page.followed = p
 
     def _refresh_panels(self) -> None:

@@ -36,15 +36,25 @@ PAGE_COLUMNS = ("power", "energy_per_metre", "cost_of_transport", "speed_mae", "
 
 
 def page_table(rows: Sequence[TableRow]) -> str:
-    """The table in Markdown, after a line saying which power its P, J/m and CoT are of."""
+    """The table in Markdown, after a line saying which power its P, J/m and CoT are of: a row
+    per figure and a column per run (``#1`` ... named in a list above it), so that it fits the
+    docked panel however long the runs' names are."""
     heads = ("P (W)", "J/m", "CoT", "speed MAE", "St MAE", "St in %")
     source = rows[0].source_label if rows else "–"
-    out = [esc(f"Power: {source}. The downloads have the {LABELS[MECHANICAL]} figures too."), "",
-           "| run | " + " | ".join(heads) + " |", "|---" * (len(heads) + 1) + "|"]
-    for r in rows:
+    out = [esc(f"Power: {source}. The downloads have the {LABELS[MECHANICAL]} figures too."), ""]
+    for k, r in enumerate(rows):
         flag = f" **not comparable**: {esc(r.not_comparable)}" if r.not_comparable else ""
-        out.append(f"| {esc(r.label)}{flag} | " + " | ".join(esc(export.cell(r, k)) for k in PAGE_COLUMNS) + " |")
+        out.append(f"- #{k + 1}: {esc(r.label)}{flag}")
+    out += ["", "| | " + " | ".join(f"#{k + 1}" for k in range(len(rows))) + " |", "|---" * (len(rows) + 1) + "|"]
+    for head, key in zip(heads, PAGE_COLUMNS):
+        out.append(f"| {head} | " + " | ".join(esc(export.cell(r, key)) for r in rows) + " |")
     return "\n".join(out)
+
+
+def download_name(names: Sequence[str], segments: str) -> str:
+    """The downloads' file name (without its suffix): the runs compared, and where they were cut."""
+    cut = "" if segments == NONE else f"-at-{segments}"
+    return "compare-" + "-vs-".join(names) + cut
 
 
 def _image(png: bytes) -> np.ndarray:
@@ -172,10 +182,11 @@ class ComparePanel:
         rows = compare.table(wins, self.cfg)
         png = export.png_bytes(wins, dpi=60)
         self.result = (rows, wins)
+        name = download_name(names, str(segments))
         self._downloads = {
-            "Markdown": ("compare.md", export.markdown(rows, wins, self.cfg).encode()),
-            "CSV": ("compare.csv", export.csv_text(rows, wins).encode()),
-            "PNG": ("compare.png", png),
+            "Markdown": (f"{name}.md", export.markdown(rows, wins, self.cfg).encode()),
+            "CSV": (f"{name}.csv", export.csv_text(rows, wins).encode()),
+            "PNG": (f"{name}.png", png),
         }
         self.table.content = page_table(rows)
         self.image.image = _image(png)

@@ -10,6 +10,11 @@ keeps the messages of the last window in a :class:`~ucat_console.backend.review.
 (the figures' one definition); :meth:`MetricsPanel.refresh`, from a UI thread, renders them
 as an HTML table. Each fin's row starts with a swatch of its plot colour (the 3-D fins have
 the same colours).
+
+A stroke's St is a measurement only while the robot is armed and swims at least
+:data:`~ucat_console.ui.plots.ST_MIN_SPEED` (the plots' rule: St = f A / U means nothing
+slower, where the planner's speed floor sets it). Otherwise, and for every fin while the
+robot is disarmed (the stream's ``status``), its tile shows a greyed "–", never a value.
 """
 
 from __future__ import annotations
@@ -32,9 +37,11 @@ from ucat_console.backend.review.metrics import (
     fins_now,
     robot_now,
 )
+from ucat_console.robot.fins import N_FINS
+from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.stream import TelemetryStream
 from ucat_console.ui.markdown import esc
-from ucat_console.ui.plots import FIN_COLOURS
+from ucat_console.ui.plots import FIN_COLOURS, ST_MIN_SPEED
 
 #: the colours of a stroke's St inside and outside its corridor (text on them: white)
 IN_COLOUR = "#1e7b34"
@@ -44,6 +51,9 @@ MAX_WINDOW = 600.0
 KEEP = 60.0
 #: a message this much older than the latest (s) starts the figures afresh (a seek back)
 BACK = 1.0
+#: the channels the panel reads: the figures', and the armed state
+PANEL_CHANNELS = (*CHANNELS, ch.STATUS)
+_STROUHAL = frozenset(ch.fin_strouhal(i) for i in range(N_FINS))
 
 
 def _num(x: float, fmt: str) -> str:
@@ -80,23 +90,38 @@ def _power_rows(r: RobotNow) -> str:
             f'{"".join(rows)}</table>')
 
 
-def render(data: RunData, t: float, cfg: MetricsConfig) -> str:
-    """The panel's HTML for time ``t`` (the latest message)."""
+def _no_st(fin: int, why: str) -> str:
+    """A fin's St tile without a measurement: a greyed dash, the reason on hover."""
+    return (f'<span class="ucat-st none" data-fin="{fin}" title="{html.escape(why)}" '
+            f'style="opacity:.45;padding:0 3px">–</span>')
+
+
+def render(data: RunData, t: float, cfg: MetricsConfig, armed: bool | None = None) -> str:
+    """The panel's HTML for time ``t`` (the latest message); ``armed``: the robot's state as
+    last told (False: no St tile shows a value; None: not told)."""
     cell = _CELL
     rows = []
     for f in fins_now(data, t, cfg):
         sts = []
         for k, s in enumerate(f.strokes):
+            if not math.isfinite(s.st):  # not a measurement: nor is an older stroke one now
+                sts = []
+                continue
             inside = s.in_corridor
             sts.append(
                 f'<span class="ucat-st {"in" if inside else "out"}" data-fin="{f.fin}" data-stroke="{k}" '
                 f'title="corridor {s.low:.2f}-{s.high:.2f}" style="background:{IN_COLOUR if inside else OUT_COLOUR};'
                 f'color:#fff;border-radius:3px;padding:0 3px;margin-right:2px">{_num(s.st, ".2f")}</span>')
+        if armed is False:
+            sts = [_no_st(f.fin, "no measurement: the robot is disarmed")]
+        elif not sts:
+            sts = [_no_st(f.fin, f"no measurement: no stroke at {ST_MIN_SPEED:g} m/s or faster" if f.strokes
+                          else "no stroke yet")]
         swatch = (f'<span style="display:inline-block;width:10px;height:10px;background:{FIN_COLOURS[f.fin]};'
                   f'margin-right:3px"></span>')
         rows.append(
             f'<tr data-fin="{f.fin}"><td style="{cell};text-align:left">{swatch}{f.fin}</td>'
-            f'<td style="{cell}">{"".join(sts) or "–"}</td>'
+            f'<td style="{cell}">{"".join(sts)}</td>'
             f'<td style="{cell}" class="ucat-fin-power">{_num(f.power, ".2f")}</td>'
             f'<td style="{cell}">{_num(f.opening, ".2f")}</td>'
             f'<td style="{cell}">{_num(f.winding, ".1f")}</td></tr>')
@@ -123,6 +148,7 @@ class MetricsPanel:
         self._lock = threading.Lock()
         self._data = RunData()
         self._t = -math.inf
+        self._armed: bool | None = None  # as the stream last told
         self._dirty = False
         self.html = gui.add_html(self._empty(), order=order)
 
@@ -131,13 +157,18 @@ class MetricsPanel:
         return '<div class="ucat-metrics" style="font-size:12px;opacity:.7">efficiency: no telemetry yet</div>'
 
     def subscribe(self, stream: TelemetryStream) -> Callable[[], None]:
-        return stream.subscribe(self.on_message, CHANNELS)
+        return stream.subscribe(self.on_message, PANEL_CHANNELS)
 
     def on_message(self, channel: str, msg: Any) -> None:
         with self._lock:
             if msg.t < self._t - BACK:  # time went back (a review's seek, another session): afresh
                 self._data = RunData()
                 self._t = -math.inf
+                self._armed = None
+            if channel == ch.STATUS:
+                self._armed = bool(msg.armed)
+            elif channel in _STROUHAL and (self._armed is False or not msg.v_body >= ST_MIN_SPEED):
+                msg = replace(msg, st=math.nan)  # not a measurement: its tile shows none
             self._data.feed(channel, msg)
             self._t = max(self._t, msg.t)
             self._dirty = True
@@ -147,6 +178,7 @@ class MetricsPanel:
         with self._lock:
             self._data = RunData()
             self._t = -math.inf
+            self._armed = None
             self._dirty = False
         self._set(self._empty())
 
@@ -159,7 +191,7 @@ class MetricsPanel:
             window = min(float(self._window()), MAX_WINDOW)
             cfg = self.cfg if window == self.cfg.window else _with_window(self.cfg, window)
             self._data.drop_before(self._t - max(window, KEEP))
-            content = render(self._data, self._t, cfg)
+            content = render(self._data, self._t, cfg, self._armed)
         self._set(content)
 
     def _set(self, content: str) -> None:

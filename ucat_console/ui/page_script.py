@@ -82,6 +82,8 @@ INSTALL = r"""
     #ucat-bar .rec { color: #ff5c5c; font-weight: 700; }
     #ucat-bar .rec-failed { color: #fff; background: #b91c1c; padding: 2px 8px; border-radius: 3px; cursor: help; }
     #ucat-bar .review { color: #fff; background: #6d28d9; padding: 2px 8px; border-radius: 3px; font-weight: 700; }
+    #ucat-bar .viewer { color: #111; background: #cbd5e1; padding: 2px 8px; border-radius: 3px; font-weight: 700;
+      cursor: help; }
     #ucat-bar .fs { color: #fff; background: #b45309; padding: 2px 8px; border-radius: 3px; font-weight: 700; }
     #ucat-bar #ucat-link.slow { color: #111; background: #f59e0b; padding: 2px 8px; border-radius: 3px;
       font-weight: 700; }
@@ -114,6 +116,9 @@ INSTALL = r"""
     if (text !== undefined) e.textContent = text; return e; };
   const bar = el("div"); bar.id = "ucat-bar";
   const armed = el("span", "armed off", "DISARMED"); armed.id = "ucat-armed";
+  const viewer = el("span", "viewer", "VIEWER"); viewer.id = "ucat-viewer"; viewer.style.display = "none";
+  viewer.title = "this page only watches: the pilot's controls are greyed; enter the pilot token under Pilot "
+    + "to take control";
   const info = el("span", "item"); info.id = "ucat-info";
   const link = el("span", "item", "link ok"); link.id = "ucat-link";
   const rec = el("span", "rec"); rec.id = "ucat-rec";
@@ -124,8 +129,8 @@ INSTALL = r"""
   const grow = el("span", "grow");
   const theme = el("button", "", "theme"); theme.id = "ucat-theme"; theme.title = "dark / light (this browser)";
   const disarm = el("button", "", "DISARM"); disarm.id = "ucat-disarm"; disarm.disabled = true;
-  disarm.title = "motors off now (key: Esc)";
-  bar.append(armed, info, link, rec, review, fs, lights, battery, grow, theme, disarm);
+  disarm.title = "no state from the console yet";
+  bar.append(armed, viewer, info, link, rec, review, fs, lights, battery, grow, theme, disarm);
   const banner = el("div"); banner.id = "ucat-banner";
   const notice = el("div"); notice.id = "ucat-notice";
   const install = () => { if (!document.body) return setTimeout(install, 50);
@@ -140,6 +145,8 @@ INSTALL = r"""
   u.send = send;
   disarm.addEventListener("click", () => { const s = u.state; if (s && !disarm.disabled) send(s.disarm_uuid, true); });
   theme.addEventListener("click", () => { const s = u.state; if (s) send(s.theme_uuid, true); });
+  // the mode, and beside an MPC mode its cost formulation
+  const modeText = (s) => `mode ${s.mode}` + (s.formulation ? ` · ${s.formulation}` : "");
   const showBanner = (on) => {
     if (on === u.lost) return;
     u.lost = on;
@@ -163,7 +170,7 @@ INSTALL = r"""
         armed.textContent = (s.armed ? "ARMED" : "DISARMED") + "?";
         armed.className = "armed stale";
         armed.title = "last known state: the link is lost";
-        info.textContent = `mode ${s.mode}  ·  pilot: ${s.pilot}  ·  LINK LOST`;
+        info.textContent = `${modeText(s)}  ·  pilot: ${s.pilot}  ·  LINK LOST`;
         link.textContent = ""; link.className = "item";
       }
       disarm.disabled = true;
@@ -181,7 +188,7 @@ INSTALL = r"""
     armed.textContent = s.armed ? "ARMED" : "DISARMED";
     armed.className = "armed " + (s.armed ? "on" : "off");
     armed.title = "";
-    info.textContent = `mode ${s.mode}  ·  pilot: ${s.pilot}  ·`;
+    info.textContent = `${modeText(s)}  ·  pilot: ${s.pilot}  ·`;
     link.textContent = s.link_slow ? "LINK SLOW: updates thinned" : "link ok";
     link.className = "item" + (s.link_slow ? " slow" : "");
     link.title = s.link_slow ? "this page reads slower than the console sends: it gets the newest poses "
@@ -204,6 +211,7 @@ INSTALL = r"""
     battery.textContent = s.battery;
     u.token(s);
     disarm.disabled = !(s.armed && s.you_pilot);
+    viewer.style.display = s.you_pilot ? "none" : "inline";
     disarm.title = s.you_pilot ? "motors off now (key: Esc)"
       : "only the pilot can disarm: enter the pilot token under Pilot to take control";
     bar.classList.toggle("light", !s.dark);

@@ -137,6 +137,8 @@ class ControlPanel:
                 self.note = gui.add_text("Marker note", "")
                 self.marker = gui.add_button("Add marker", hint="or press M")
                 self.follow = gui.add_checkbox("Follow the robot", True, hint="the 3-D view keeps the robot in view")
+                self.frame = gui.add_button("Frame the robot", hint="this page's 3-D view looks at the robot "
+                                            "(the live one, or the one this page reviews) from behind and above")
             listing = getattr(app, "session_list", None)
             self.identify = IdentifyInputs(gui, sup, client_id, getattr(app, "sessions_dir", None) or
                                            sup.recorder.directory, self.show,
@@ -173,6 +175,9 @@ class ControlPanel:
         self._events_shown = ""
         self._events_seen: tuple[int, str] | None = None
         self._listed: tuple[bool, bool] | None = None
+        #: the page's other lists of the sessions (its Review tab's, its comparison's runs):
+        #: listed again, with the identification's, whenever a recording ends
+        self.session_lists: list[Callable[[], Any]] = []
 
         self._wire()
         self._register_inputs()
@@ -194,7 +199,7 @@ class ControlPanel:
             allow(h, True)
         allow(self.note, True, 500)
         allow(self.drive_input, True, 200)
-        for h in (self.name, self.follow, self.severity, self.theme_button):
+        for h in (self.name, self.follow, self.frame, self.severity, self.theme_button):
             allow(h, False, MAX_NAME if h is self.name else 200)
         guard = getattr(self.app, "guard", None)
         if guard is not None and self.client is not None:
@@ -223,7 +228,7 @@ class ControlPanel:
         self.mode.on_update(self._guard(lambda: sup.set_mode(cid, self.mode.value)))
         self.apply_sp.on_click(self._guard(self._apply_setpoints))
         self.apply_tuning.on_click(self._guard(self._apply_tuning, tuning=True))
-        self.revert.on_click(self._guard(lambda: sup.revert_tuning(cid), tuning=True))
+        self.revert.on_click(self._guard(self._request_revert, tuning=True))
         self.undo.on_click(self._guard(lambda: sup.undo_tuning(cid), tuning=True))
         self.save.on_click(self._guard(lambda: sup.save_baseline(cid), tuning=True))
         self.history.on_update(self._guard(self._set_history))
@@ -239,6 +244,7 @@ class ControlPanel:
         self.name.on_update(self._guard(lambda: sup.access.set_name(cid, self.name.value)))
         self.severity.on_update(self._quiet(lambda _: self.show_events(force=True)))
         self.theme_button.on_click(self._guard(self._toggle_theme))
+        self.frame.on_click(self._guard(lambda: self.app.frame_robot(cid)))
         if self.reset_drives is not None:
             self.reset_drives.on_click(self._guard(self._reset_drive_faults))
             self.zero_depth.on_click(self._guard(self._zero_depth))
@@ -383,7 +389,8 @@ class ControlPanel:
             return
         self.sup.set_setpoints(self.cid, **changed)
         self.show("setpoints applied: " + ", ".join(f"{k} {v:g}" for k, v in changed.items()))
-        self._applied = {f"sp.{k}": v for k, v in changed.items()}
+        # the line follows every setpoint from here on (a key, the gamepad, a failsafe)
+        self._applied = {f"sp.{k}": self._in_force(f"sp.{k}") for k in SETPOINTS}
 
     def _apply_tuning(self) -> None:
         changes = {}
@@ -397,6 +404,58 @@ class ControlPanel:
         self.show("applied: " + ", ".join(f"{k} = {v:g}" if not isinstance(v, str) else f"{k} = {v}"
                                           for k, v in changes.items()), tuning=True)
         self._applied = dict(changes)
+
+    def _unsaved(self) -> dict[str, tuple[Any, Any]]:
+        """Each tuning value in force that is not the saved baseline's: key -> (in force, saved)."""
+        saved = self.sup.saved_tuning()
+        out = {}
+        for key in self.params:
+            block, _, name = key.rpartition(".")
+            now, was = self.sup.param_value(key), getattr(saved[block], name)
+            if not self._same(now, was):
+                out[key] = (now, was)
+        return out
+
+    def _request_revert(self) -> None:
+        """*Revert to saved*: at once while disarmed; while armed (the controller in force
+        changes under the swimming robot) only once the pilot confirms what it changes.
+        The page says what it did, or that nothing differed."""
+        unsaved = self._unsaved()
+        if not unsaved:
+            self.show("revert: the tuning in force is the saved baseline; nothing changed", tuning=True)
+            return
+        if not self.sup.armed:
+            self._revert()
+            return
+        gui = self.gui
+        modal = gui.add_modal("Revert the tuning while armed?")
+        with modal:
+            gui.add_markdown("The robot is armed: its controller changes at once to the saved baseline:\n\n"
+                             + "\n".join(f"- {esc(k)}: {_value(now)} → {_value(was)}"
+                                         for k, (now, was) in unsaved.items()))
+            confirm = gui.add_button("Revert now", color="orange")
+            cancel = gui.add_button("Cancel")
+        for h in (confirm, cancel):
+            self._allow(h, True)
+
+        def on_confirm(event: Any) -> None:
+            modal.close()
+            self.act(self._revert, tuning=True)
+
+        def on_cancel(event: Any) -> None:
+            modal.close()
+            self.show("revert cancelled: the tuning in force is unchanged", tuning=True)
+
+        confirm.on_click(on_confirm)
+        cancel.on_click(on_cancel)
+
+    def _revert(self) -> None:
+        unsaved = self._unsaved()
+        self.sup.revert_tuning(self.cid)
+        self.show("reverted to the saved baseline: " + (", ".join(
+            f"{k} {_value(now)} → {_value(was)}" for k, (now, was) in unsaved.items()) or "nothing differed"),
+            tuning=True)
+        self._applied = {k: self._in_force(k) for k in unsaved}
 
     def _set_history(self) -> None:
         self.app.set_history(self.cid, self.history.value)
@@ -452,15 +511,16 @@ class ControlPanel:
         self._set_prop(handle, "label", base + (DRAFT_MARK if drafted else ""))
 
     def _follow_applied(self) -> None:
-        """The feedback line of the last apply is replaced once what it applied is no longer in
-        force (reverted, undone, changed by a failsafe or another pilot)."""
+        """The feedback line of the last apply is replaced whenever what it says is no longer
+        in force (reverted, undone, a key or the gamepad, a failsafe or another pilot), and
+        follows those values from then on."""
         if not self._applied:
             return
         now = {k: self._in_force(k) for k in self._applied}
         if all(self._same(v, now[k]) for k, v in self._applied.items()):
             return
         tuning = not any(k.startswith("sp.") for k in self._applied)
-        self._applied = {}
+        self._applied = now
         self.show("now in force: " + ", ".join(f"{k.removeprefix('sp.')} = {v:g}" if not isinstance(v, str)
                                               else f"{k} = {v}" for k, v in now.items()), tuning=tuning)
 
@@ -521,17 +581,21 @@ class ControlPanel:
             self.faults.enable(pilot)
         run = sup.manoeuvre
         listed = (recording, run is not None and run.finished)
-        if force or listed != self._listed:  # a recording ended: it may be fitted (listed by the page jobs)
+        if force or listed != self._listed:  # a recording ended: it may be fitted, reviewed, compared
+            others = self._listed is not None and listed != self._listed
             self._listed = listed
             submit = getattr(self.app, "submit_job", None)
             if submit is None:
-                self.identify.list_sessions()
-            else:
-                submit(self.cid, "list sessions to fit", self._list_sessions, coalesce=True)
+                self._list_sessions(others)
+            else:  # (listed by the page jobs)
+                submit(self.cid, "list sessions", lambda: self._list_sessions(others), coalesce=True)
         self.identify.refresh(pilot)
 
-    def _list_sessions(self) -> None:
+    def _list_sessions(self, others: bool = False) -> None:
+        """The identification's list of sessions, and with ``others`` the page's other lists."""
         self._quiet(lambda _: self.identify.list_sessions())(None)
+        for relist in self.session_lists if others else ():
+            self._quiet(lambda _, f=relist: f())(None)
 
     @staticmethod
     def _set_prop(handle: Any, name: str, value: Any) -> None:
@@ -556,6 +620,11 @@ class ControlPanel:
 
 
 _EVENTS_SHOWN = 12
+
+
+def _value(v: Any) -> str:
+    """A tuning value as the page says it."""
+    return v if isinstance(v, str) else f"{float(v):g}"
 
 
 #: added to the label of an input whose value is not the one in force

@@ -2,7 +2,7 @@
 
 Listing the folder reads each file's summary (:func:`ucat_console.backend.sessions.index.list_sessions`):
 with two dozen sessions of a minute each that is about a quarter of a second. Every page lists
-it when it connects, its Review tab on "Refresh list", its Session tab when a recording ends;
+it when it connects, its Review tab on "Refresh list", and its Session tab, Review tab and comparison when a recording ends;
 :class:`SessionList` keeps the last listing with the folder's signature (each entry's name,
 size and modification time, one ``stat`` each) and lists again only when that has changed.
 """

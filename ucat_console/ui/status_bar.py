@@ -187,6 +187,19 @@ def mode_label(mode: str) -> str:
     return MODES[mode].short if mode in MODES else mode
 
 
+#: the bar's label of each cost formulation (``mpc.formulation``), shown beside an MPC mode
+FORMULATIONS = {"paper": "paper's cost", "closed_stroke": "closed-stroke cost"}
+
+
+def formulation_label(sup: Any) -> str:
+    """The MPC's cost formulation as the bar shows it beside the mode ("" for a mode without the MPC)."""
+    m = MODES.get(sup.mode)
+    if m is None or not m.mpc:
+        return ""
+    f = sup.param_value("mpc.formulation")
+    return FORMULATIONS.get(f, str(f))
+
+
 def pilot_label(sup: Any, client: int | None) -> str:
     p = sup.access.pilot
     if p is None:
@@ -206,6 +219,7 @@ def bar_state(sup: Any, client: int | None, *, dark: bool, uuids: dict[str, str]
     return {
         "armed": bool(sup.armed),
         "mode": mode_label(sup.mode),
+        "formulation": formulation_label(sup),
         "pilot": pilot_label(sup, client),
         "you_pilot": client is not None and sup.access.is_pilot(client),
         "recording": sup.recording.session_id,
