@@ -29,10 +29,10 @@ against the heading at the start, every manoeuvre without a turn), and the depth
 error from :data:`DEPTH_FROM` s on at a constant depth setpoint (``depth_dev``).
 
 ``--seeds N`` runs seeds ``--seed`` ... ``--seed`` + N - 1 and reports each figure's median and
-worst case over them; the goals are judged on the worst case. ``--cases`` adds disturbance
-cases (:data:`CASES`: the robot 1 % light or heavy, 25 % heavier, one fin's drive at half
-speed), each on the manoeuvres and goals of :data:`CASE_GOALS`. ``--jobs`` runs that many
-processes. The goals (:data:`GOALS`); each figure is printed with its goal
+worst case over them; the goals are judged on the worst case. ``--cases`` names the nominal
+robot and disturbance cases (:data:`CASES`: the robot 1 % light or heavy, 25 % heavier, one fin's drive at half
+speed), each on the manoeuvres and goals of :data:`CASE_GOALS`; ``--manoeuvres`` keeps some
+manoeuvres only. ``--jobs`` runs that many processes. The goals (:data:`GOALS`); each figure is printed with its goal
 and whether it is met. ``--json`` writes everything, ``--plots DIR`` the step responses and
 the turns as PNG (matplotlib, the ``experiments`` extra).
 """
@@ -287,9 +287,10 @@ def _force_figures(errs: list[float]) -> dict[str, float]:
 
 
 def run_mode(app: Any, label: str, mode: str, formulation: str, quick: bool = False,
-             seed: int = 0, case: str | None = None) -> tuple[dict[str, Any], dict[str, _Log]]:
-    """Every manoeuvre in one mode (a case's own manoeuvres in a disturbance case): (figures by
-    manoeuvre and the fin force's, logs)."""
+             seed: int = 0, case: str | None = None,
+             only: frozenset[str] | None = None) -> tuple[dict[str, Any], dict[str, _Log]]:
+    """Every manoeuvre in one mode (a case's own manoeuvres in a disturbance case; of those,
+    the ones named in ``only``): (figures by manoeuvre and the fin force's, logs)."""
     figures: dict[str, Any] = {}
     logs: dict[str, _Log] = {}
     model_err: list[float] = []
@@ -297,7 +298,7 @@ def run_mode(app: Any, label: str, mode: str, formulation: str, quick: bool = Fa
     ratio: list[float] = []
     wanted = None if case is None else {k.split("/")[0] for k in CASE_GOALS[case]}
     for m in manoeuvres(quick):
-        if wanted is not None and m.name not in wanted:
+        if (wanted is not None and m.name not in wanted) or (only is not None and m.name not in only):
             continue
         r = run_manoeuvre(app, mode, formulation, m, seed, case)
         figures[m.name] = r["figures"]
@@ -401,17 +402,20 @@ def register_bench(kinds: argparse._SubParsersAction) -> None:
     p.add_argument("--quick", action="store_true", help="half-length manoeuvres (a smoke run)")
     p.add_argument("--seed", type=int, default=0, help="plant and planner seed (the first of --seeds)")
     p.add_argument("--seeds", type=int, default=1, help="how many seeds, from --seed on (median and worst case)")
-    p.add_argument("--cases", nargs="*", choices=list(CASES), default=[],
-                   help="disturbance cases to run besides the nominal robot")
+    p.add_argument("--cases", nargs="+", choices=["nominal", *CASES], default=["nominal"],
+                   help="the nominal robot and the disturbance cases to run (default: the nominal robot)")
     p.add_argument("--jobs", type=int, default=1, help="processes running the runs (default 1)")
+    p.add_argument("--manoeuvres", nargs="+", choices=[m.name for m in manoeuvres()], default=None,
+                   help="only these manoeuvres (default: all)")
     p.add_argument("--json", type=Path, default=None, help="write the figures as JSON")
     p.add_argument("--plots", type=Path, default=None, metavar="DIR", help="write the plots (PNG) here")
     p.set_defaults(func=run_bench)
 
 
-def _run_one(task: tuple[Any, str, str, str, bool, int, str | None]) -> tuple[str, str, int, dict[str, Any]]:
-    app, label, mode, formulation, quick, seed, case = task
-    figures, _ = run_mode(app, label, mode, formulation, quick, seed, case)
+def _run_one(task: tuple[Any, str, str, str, bool, int, str | None, frozenset[str] | None]
+             ) -> tuple[str, str, int, dict[str, Any]]:
+    app, label, mode, formulation, quick, seed, case, only = task
+    figures, _ = run_mode(app, label, mode, formulation, quick, seed, case, only)
     return case or "nominal", label, seed, figures
 
 
@@ -425,14 +429,20 @@ def run_bench(args: argparse.Namespace) -> int:
     prepare_all(args.config)
     seeds = list(range(args.seed, args.seed + args.seeds))
     modes = [m for m in MODES if m[0] in args.modes]
-    if args.seeds == 1 and not args.cases:
+    if args.seeds == 1 and args.cases == ["nominal"] and args.manoeuvres is None:
         return _run_single(app, args, modes)
-    cases: list[str | None] = [None, *args.cases]
-    tasks = [(app, label, mode, formulation, args.quick, seed, case)
+    cases: list[str | None] = [None if c == "nominal" else c for c in dict.fromkeys(args.cases)]
+    only = None if args.manoeuvres is None else frozenset(args.manoeuvres)
+    tasks = [(app, label, mode, formulation, args.quick, seed, case, only)
              for case in cases for label, mode, formulation in modes for seed in seeds]
     t0 = time.perf_counter()
     if args.jobs > 1:
         import multiprocessing
+
+        # every mode's compiled code loaded before the processes fork: each has it at once
+        for _, mode, formulation in modes:
+            run_manoeuvre(app, mode, formulation, Manoeuvre("warm", 2.0, 0.2, 1.0, start_velocity=0.2), 0,
+                          "weak_fin")
 
         with multiprocessing.get_context("fork").Pool(args.jobs) as pool:
             done = pool.map(_run_one, tasks, chunksize=1)
@@ -447,7 +457,8 @@ def run_bench(args: argparse.Namespace) -> int:
         goals = GOALS if case is None else CASE_GOALS[case]
         results["cases"][name] = {}
         for label, _, _ in modes:
-            v = over_seeds(per[name][label], goals)
+            ran = set(next(iter(per[name][label].values())))
+            v = over_seeds(per[name][label], {k: g for k, g in goals.items() if k.split("/")[0] in ran})
             results["cases"][name][label] = {"goals": v, "figures": per[name][label]}
             met = sum(x["met"] for x in v.values())
             print(f"{name} / {label}: {met}/{len(v)} goals met on the worst of {len(seeds)} seeds")
