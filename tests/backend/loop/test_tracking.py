@@ -68,7 +68,8 @@ def test_the_bench_writes_its_figures_and_judges_them(tmp_path: Path) -> None:
     import json
 
     out = tmp_path / "tracking.json"
-    args = argparse.Namespace(config=None, modes=["baseline"], quick=True, seed=0, json=out, plots=tmp_path)
+    args = argparse.Namespace(config=None, modes=["baseline"], quick=True, seed=0, seeds=1, cases=["nominal"],
+                              jobs=1, manoeuvres=None, json=out, plots=tmp_path)
     assert T.run_bench(args) == 0
     d = json.loads(out.read_text())
     goals = d["modes"]["baseline"]["goals"]
@@ -91,3 +92,34 @@ def test_the_verdicts_compare_as_the_goals_say() -> None:
     assert not v["depth_step/settled_error"]["met"]
     assert not v["force/model/share_over_90"]["met"]  # < 0.05 is strict
     assert not v["e5/within"]["met"] and np.isnan(v["e5/within"]["value"])  # missing: not met
+
+
+def test_over_seeds_judges_the_worst_case_and_names_its_seed() -> None:
+    per_seed = {0: {"straight": {"heading_all_deg": 1.0}, "speed_0.1": {"within": 0.95}},
+                1: {"straight": {"heading_all_deg": 4.0}, "speed_0.1": {"within": 0.85}},
+                2: {"straight": {"heading_all_deg": 2.0}, "speed_0.1": {"within": 1.0}}}
+    v = T.over_seeds(per_seed, {"straight/heading_all_deg": ("<=", 3.0), "speed_0.1/within": (">=", 0.9)})
+    h = v["straight/heading_all_deg"]
+    assert (h["median"], h["worst"], h["worst_seed"], h["met"], h["seeds_met"]) == (2.0, 4.0, 1, False, 2)
+    w = v["speed_0.1/within"]
+    assert (w["worst"], w["worst_seed"], w["met"]) == (0.85, 1, False)  # the lowest share is the worst
+    missing = T.over_seeds({0: {}}, {"straight/heading_all_deg": ("<=", 3.0)})["straight/heading_all_deg"]
+    assert not missing["met"]  # a figure not measured is never met
+
+
+def test_a_weak_fin_case_runs_one_drive_at_half_the_speed_it_is_commanded() -> None:
+    from ucat_console.robot.fins import PAPER_TO_ROBOT
+
+    calls = []
+
+    class Io:
+        def command_fin(self, fin: int, angle: float, rate: float) -> None:
+            calls.append((fin, rate))
+
+    io = Io()
+    T._weaken(io, T.WEAK_FIN, 0.5, max_rate=10.0)
+    weak = PAPER_TO_ROBOT[T.WEAK_FIN]
+    io.command_fin(weak, 0.1, 8.0)
+    io.command_fin(weak, 0.1, 30.0)  # beyond the servos' rate: half of the rate they make
+    io.command_fin((weak + 1) % 4, 0.1, 8.0)
+    assert calls == [(weak, 4.0), (weak, 5.0), ((weak + 1) % 4, 8.0)]
