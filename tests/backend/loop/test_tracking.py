@@ -123,3 +123,36 @@ def test_a_weak_fin_case_runs_one_drive_at_half_the_speed_it_is_commanded() -> N
     io.command_fin(weak, 0.1, 30.0)  # beyond the servos' rate: half of the rate they make
     io.command_fin((weak + 1) % 4, 0.1, 8.0)
     assert calls == [(weak, 4.0), (weak, 5.0), ((weak + 1) % 4, 8.0)]
+
+
+def test_a_fin_whose_drive_runs_at_half_speed_is_reported_slow_and_the_robot_keeps_its_heading() -> None:
+    """Straight at 0.2 m/s (baseline) with one fin's drive at half the commanded speed: its
+    cycles take longer than planned, the loop reports it (``fin_slow``, naming the fin) and
+    the other fins take its share: the heading stays within 10 degrees."""
+    from ucat_console.backend.loop.closed_loop import ClosedLoop
+    from ucat_console.backend.sim_robot_io import SimRobotIO
+    from ucat_console.control.allocation import BodySetpoints
+    from ucat_console.experiments.scenario import START_FIN_ANGLE, plant_config
+    from ucat_console.telemetry import channels as ch
+    from ucat_console.telemetry.stream import TelemetryStream
+
+    plant = plant_config("plate", 1)
+    io = SimRobotIO(plant, depth=1.0, velocity=0.2)
+    io.plant.reset(position_ned=(0.0, 0.0, 1.0), body_velocity=(0.2, 0.0, 0.0, 0.0, 0.0, 0.0),
+                   fin_angles=(START_FIN_ANGLE,) * 4, seed=1)
+    T._weaken(io, T.WEAK_FIN, 0.5, plant.servo.max_rate)
+    stream = TelemetryStream()
+    events = []
+    stream.subscribe(lambda _c, m: events.append(m), [ch.EVENTS])
+    loop = ClosedLoop(TUNED.loop.replace(mode="baseline", planner_seed=1), io, stream,
+                      setpoints=BodySetpoints(0.2, 1.0, 0.0))
+    yaw0 = io.truth().euler[2]
+    worst = 0.0
+    while loop.time < 40.0 - 1e-9:
+        loop.run(0.5)
+        worst = max(worst, abs(math.remainder(io.truth().euler[2] - yaw0, 2 * math.pi)))
+    loop.close()
+    slow = [e for e in events if e.code == "fin_slow"]
+    assert [e.data["fin"] for e in slow] == [T.WEAK_FIN]
+    assert slow[0].data["ratio"] > TUNED.loop.executor.slow_fin_ratio
+    assert worst < math.radians(10.0)
