@@ -402,11 +402,14 @@ def _move_shortfall(b: np.ndarray, t: float) -> None:
 def body_allocate(b: np.ndarray, sp_v: float, sync: bool) -> int:
     """The designed layer's allocation of its loops' demand with the fins' shortfall (in
     ``b[B_OUT:]``), and the cut fed back to the loops; the cut bits."""
-    x = b[B_X] + b[B_SHORTFALL]
+    # before a speed is measured the velocity loop is silent: no surge is made up, and the
+    # fins may push either way for yaw (nothing says the robot is under way)
+    moving = not math.isnan(b[B_V_REF])
+    x = b[B_X] + (b[B_SHORTFALL] if moving else 0.0)
     z = b[B_Z] + b[B_SHORTFALL + 1]
     n = b[B_N] + b[B_SHORTFALL + 2]
     b[B_ASKED], b[B_ASKED + 1], b[B_ASKED + 2] = x, z, n
-    direction = 1.0 if sp_v > 0.0 else -1.0 if sp_v < 0.0 else 0.0
+    direction = 0.0 if not moving else 1.0 if sp_v > 0.0 else -1.0 if sp_v < 0.0 else 0.0
     cut = allocate_wrench(x, z, n, direction, sync, b[B_ALLOC:B_ALLOC + NA], b[B_OUT:B_OUT + NW])
     b[B_APPLIED] = b[B_OUT + W_X]
     b[B_APPLIED + 1] = b[B_OUT + W_Z]

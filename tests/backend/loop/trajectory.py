@@ -26,7 +26,9 @@ bandwidth (``control.body_design``), which changes every trajectory by design. T
 written again when the designed layer began to feed the fins' shortfall forward (each running
 cycle's target against its plan's force, corrected by the fin's last executed cycle) and
 stopped making yaw with fins pushing against the travel, which changes the MPC scenarios'
-trajectories by design (the baseline scenario's stayed the same to rtol 1e-9).
+trajectories by design (the baseline scenario's stayed the same to rtol 1e-9); and again when,
+before a speed is measured, the layer stopped making up surge and let the fins push either
+way for yaw, which moves the MPC scenarios' first steps by design.
 
 Each scenario starts the simulated U-CAT at 1 m depth surging at 0.2 m/s with the
 configuration of the shipped ``sim-tuned``, runs one mode with a velocity, depth and yaw
