@@ -13,7 +13,9 @@ and a servo command:
 * carries out the executors' actions: a stroke to the servo (``command_fin``, with the
   profile velocity of ``control.stroke_timing``), a cycle completed, a late plan, a stroke
   timeout; and follows each cycle from its first stroke to its last to publish what it
-  delivered (and tells ``on_cycle`` when one begins: the body layer's feed-forward);
+  delivered (and tells the body layer's feed-forward of each: ``on_cycle`` when one begins,
+  ``on_executed`` when one ends), and judges each fin's pace (``fin_slow``: a cycle taking
+  longer than planned, a weak or lagging drive);
 * switches the mode bumplessly (:meth:`Actuators.switch`): the old executors finish the
   plans they hold, the new ones' first plans are made at once from where their fins will
   be, and each new executor takes over when the old ones of its fins are idle
@@ -63,6 +65,7 @@ def kept_waiting(done: float, arrived: float, deadline: float) -> float:
 
 #: the cycles over which a fin's pace is judged (``Actuators._judge_pace``)
 PACE_CYCLES = 5
+
 
 class Actuator:
     """One logical fin: its executor, its planner, and the plan hand-over state."""
