@@ -52,3 +52,22 @@ def test_the_docs_table_is_the_committed_benchmark_files(doc: str) -> None:
     changed in one and not the other fails here (run ``bench report --write``)."""
     text = (ROOT / doc).read_text()
     assert report.replace_block(text, report.table(ROOT / "benchmarks"), doc) == text
+
+
+def test_the_tracking_rows_over_seeds_give_each_modes_worst_case(tmp_path: Path) -> None:
+    def goals(**worst: float) -> dict:
+        return {"goals": {k.replace("__", "/"): {"worst": v} for k, v in worst.items()}}
+
+    write(tmp_path, "tracking_seeds", {"seeds": list(range(10)), "quick": True, "cases": {"nominal": {
+        "baseline": goals(depth_step__heading_all_deg=1.23, straight__heading_all_deg=0.71),
+        "mpc": goals(depth_step__heading_all_deg=23.46, straight__heading_all_deg=7.8)}}})
+    write(tmp_path, "tracking_cases", {"seeds": [0, 1], "quick": True, "cases": {
+        "weak_fin": {"mpc": goals(depth_step__heading_all_deg=13.18)},
+        "heavy_1pc": {"mpc": goals(straight__depth_dev=0.0981)}}})
+    text = report.table(tmp_path)
+    assert "the depth step, from its start, over 10 seeds (half-length manoeuvres), the worst (deg) | " \
+           "baseline 1.2, mpc 23.5 | <= 5 |" in text
+    assert "| baseline 0.7, mpc 7.8 | <= 3 |" in text
+    assert "half speed: heading error through the depth step, worst of 2 seeds (deg) | mpc 13.2 | <= 10 |" in text
+    assert "1 % heavy: depth error from 30 s, worst of 2 seeds (m) | mpc 0.10 | <= 0.1 |" in text
+    assert "1 % light" not in text  # a case not run, no row

@@ -135,9 +135,9 @@ def test_the_fins_coast_rather_than_push_against_the_travel():
     assert r.applied[0] == 0.0
     assert all(fx == 0.0 for fx, _ in r.allocation.per_fin())
     # a reverse setpoint mirrors it: backward force is given, forward is not
-    back = allocate_body_wrench(-1.0, 0.0, 0.0, params(), reverse=True)
+    back = allocate_body_wrench(-1.0, 0.0, 0.0, params(), direction=-1.0)
     assert back.cut == () and back.applied[0] == pytest.approx(-1.0)
-    assert allocate_body_wrench(1.0, 0.0, 0.0, params(), reverse=True).cut == ("coast",)
+    assert allocate_body_wrench(1.0, 0.0, 0.0, params(), direction=-1.0).cut == ("coast",)
 
 
 def test_sync_mode_puts_yaw_on_the_front_pair_and_the_rear_fins_alike():

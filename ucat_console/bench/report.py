@@ -158,6 +158,36 @@ def _tracking(d: dict[str, Any]) -> list[Row]:
                 ", ".join(figures), "all", "`bench tracking`")]
 
 
+def _worst(d: dict[str, Any], case: str, key: str, digits: int = 1) -> str:
+    """Each mode's worst case over the seeds of ``key`` in ``case``."""
+    return ", ".join(f"{mode} {m['goals'][key]['worst']:.{digits}f}" for mode, m in d["cases"][case].items()
+                     if key in m["goals"])
+
+
+def _tracking_seeds(d: dict[str, Any]) -> list[Row]:
+    n = len(d["seeds"])
+    how = f"over {n} seeds{' (half-length manoeuvres)' if d['quick'] else ''}, the worst"
+    return [Row(f"heading error through the depth step, from its start, {how} (deg)",
+                _worst(d, "nominal", "depth_step/heading_all_deg"), "<= 5", "`bench tracking --seeds`"),
+            Row(f"heading error going straight, from the start, {how} (deg)",
+                _worst(d, "nominal", "straight/heading_all_deg"), "<= 3", "`bench tracking --seeds`")]
+
+
+def _tracking_cases(d: dict[str, Any]) -> list[Row]:
+    n = len(d["seeds"])
+    rows = []
+    if "weak_fin" in d["cases"]:
+        rows.append(Row(f"one fin's drive at half speed: heading error through the depth step, worst of {n} seeds "
+                        "(deg)", _worst(d, "weak_fin", "depth_step/heading_all_deg"), "<= 10",
+                        "`bench tracking --cases weak_fin`"))
+    for case, what in (("light_1pc", "1 % light"), ("heavy_1pc", "1 % heavy")):
+        if case in d["cases"]:
+            rows.append(Row(f"the robot {what}: depth error from 30 s, worst of {n} seeds (m)",
+                            _worst(d, case, "straight/depth_dev", 2), "<= 0.1",
+                            f"`bench tracking --cases {case}`"))
+    return rows
+
+
 def _load(d: dict[str, Any]) -> list[Row]:
     return [
         Row(f"emulated rig swimming for {d['load_s'] / 60:g} min under {d['hogs']} spinning processes "
@@ -181,6 +211,7 @@ def _pages(d: dict[str, Any]) -> list[Row]:
 SOURCES: dict[str, Callable[[dict[str, Any]], list[Row]]] = {
     "mpc": _mpc, "sim": _sim, "compile": _compile, "sessions": _sessions, "ui": _ui,
     "safety": _safety, "link": _safety, "pages": _pages, "load": _load, "tracking": _tracking,
+    "tracking_seeds": _tracking_seeds, "tracking_cases": _tracking_cases,
 }
 
 

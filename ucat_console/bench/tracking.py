@@ -24,7 +24,15 @@ the robot can know, the telemetry channel), and by the simulator's true force (t
 force integrated over the cycle). The figures: median direction error and the share of
 cycles more than 90 degrees off, and the executed against the planned cycle duration.
 
-The goals (:data:`GOALS`); each figure is printed with its goal
+Heading is also judged from each manoeuvre's start (``heading_all_deg``: the largest error
+against the heading at the start, every manoeuvre without a turn), and the depth's largest
+error from :data:`DEPTH_FROM` s on at a constant depth setpoint (``depth_dev``).
+
+``--seeds N`` runs seeds ``--seed`` ... ``--seed`` + N - 1 and reports each figure's median and
+worst case over them; the goals are judged on the worst case. ``--cases`` names the nominal
+robot and disturbance cases (:data:`CASES`: the robot 1 % light or heavy, 25 % heavier, one fin's drive at half
+speed), each on the manoeuvres and goals of :data:`CASE_GOALS`; ``--manoeuvres`` keeps some
+manoeuvres only. ``--jobs`` runs that many processes. The goals (:data:`GOALS`); each figure is printed with its goal
 and whether it is met. ``--json`` writes everything, ``--plots DIR`` the step responses and
 the turns as PNG (matplotlib, the ``experiments`` extra).
 """
@@ -54,6 +62,8 @@ SPEED_FROM = 30.0  # s: speed figures from here on
 SPEEDS = (0.1, 0.2, 0.3)
 E5_CURRENT = (0.03, 0.02, 0.0)
 BAND = 0.025  # m/s
+DEPTH_FROM = 30.0  # s: ``depth_dev`` from here on
+WEAK_FIN = 2  # the paper fin whose drive is weak in the ``weak_fin`` case
 
 #: the goals: figure (manoeuvre/name) -> (comparison, bound)
 GOALS: dict[str, tuple[str, float]] = {
@@ -73,6 +83,27 @@ GOALS: dict[str, tuple[str, float]] = {
     "force/model/share_over_90": ("<", 0.05),
     "force/true/median_deg": ("<=", 15.0),
     "force/true/share_over_90": ("<", 0.05),
+    "depth_step/heading_all_deg": ("<=", 5.0),
+    "straight/heading_all_deg": ("<=", 3.0),
+    "speed_0.1/heading_all_deg": ("<=", 5.0),
+    "speed_0.2/heading_all_deg": ("<=", 5.0),
+    "speed_0.3/heading_all_deg": ("<=", 5.0),
+}
+
+#: the disturbance cases: name -> (buoyancy / weight, mass factor, the weak fin's speed factor)
+CASES: dict[str, tuple[float, float, float]] = {
+    "light_1pc": (1.01, 1.0, 1.0),
+    "heavy_1pc": (0.99, 1.0, 1.0),
+    "mass_x1.25": (1.0, 1.25, 1.0),
+    "weak_fin": (1.0, 1.0, 0.5),
+}
+#: each case's manoeuvres and goals
+CASE_GOALS: dict[str, dict[str, tuple[str, float]]] = {
+    "light_1pc": {"straight/depth_dev": ("<=", 0.10), "depth_step/heading_all_deg": ("<=", 5.0)},
+    "heavy_1pc": {"straight/depth_dev": ("<=", 0.10), "depth_step/heading_all_deg": ("<=", 5.0)},
+    "mass_x1.25": {"depth_step/heading_all_deg": ("<=", 5.0), "straight/heading_all_deg": ("<=", 3.0),
+                   "straight/depth_dev": ("<=", 0.10)},
+    "weak_fin": {"depth_step/heading_all_deg": ("<=", 10.0), "straight/heading_all_deg": ("<=", 10.0)},
 }
 
 
@@ -118,8 +149,10 @@ class _Log:
     duration_ratio: list[float] = field(default_factory=list)
 
 
-def run_manoeuvre(app: Any, mode: str, formulation: str, m: Manoeuvre, seed: int = 0) -> dict[str, Any]:
-    """One manoeuvre in one mode: its figures (module docstring) and its trace."""
+def run_manoeuvre(app: Any, mode: str, formulation: str, m: Manoeuvre, seed: int = 0,
+                  case: str | None = None) -> dict[str, Any]:
+    """One manoeuvre in one mode (in a disturbance case of :data:`CASES`): its figures
+    (module docstring) and its trace."""
     from ucat_console.backend.loop.closed_loop import ClosedLoop
     from ucat_console.backend.sim_robot_io import SimRobotIO
     from ucat_console.control.allocation import BodySetpoints
@@ -130,7 +163,14 @@ def run_manoeuvre(app: Any, mode: str, formulation: str, m: Manoeuvre, seed: int
 
     cfg = app.loop.replace(mode=mode, planner_seed=seed, mpc=app.mpc.replace(formulation=formulation))
     z0 = m.depth if m.start_depth is None else m.start_depth
-    io = SimRobotIO(plant_config(DEFAULT_PLANT, seed, m.current), depth=z0, velocity=m.start_velocity)
+    plant = plant_config(DEFAULT_PLANT, seed, m.current)
+    buoyancy, mass, weak = CASES[case] if case is not None else (1.0, 1.0, 1.0)
+    if (buoyancy, mass) != (1.0, 1.0):
+        plant = plant.replace(vehicle=plant.vehicle.replace(buoyancy_ratio=buoyancy,
+                                                            mass=plant.vehicle.mass * mass))
+    io = SimRobotIO(plant, depth=z0, velocity=m.start_velocity)
+    if weak != 1.0:
+        _weaken(io, WEAK_FIN, weak, plant.servo.max_rate)
     io.plant.reset(position_ned=(0.0, 0.0, z0), body_velocity=(m.start_velocity, 0.0, 0.0, 0.0, 0.0, 0.0),
                    fin_angles=(START_FIN_ANGLE,) * 4, seed=seed)
     stream = TelemetryStream(validate=False)
@@ -176,6 +216,20 @@ def run_manoeuvre(app: Any, mode: str, formulation: str, m: Manoeuvre, seed: int
     return {"figures": _figures(m, log), "log": log}
 
 
+def _weaken(io: Any, paper_fin: int, factor: float, max_rate: float) -> None:
+    """Paper fin ``paper_fin``'s drive runs at ``factor`` of the speed it is commanded (and
+    of the servos' maximum rate)."""
+    from ucat_console.robot.fins import PAPER_TO_ROBOT
+
+    fin = PAPER_TO_ROBOT[paper_fin]
+    command = io.command_fin
+
+    def weak(i: int, angle: float, rate: float) -> None:
+        command(i, angle, factor * min(rate, max_rate) if i == fin else rate)
+
+    io.command_fin = weak
+
+
 def _figures(m: Manoeuvre, log: _Log) -> dict[str, float]:
     t = np.asarray(log.t)
     z = np.asarray(log.depth)
@@ -202,6 +256,11 @@ def _figures(m: Manoeuvre, log: _Log) -> dict[str, float]:
             out["heading_error_sd_deg"] = float(err[w].std())
         else:
             out["heading_error_max_deg"] = float(np.abs(err[w]).max())
+    if m.yaw_rate == 0.0:
+        out["heading_all_deg"] = float(np.abs(np.degrees(yaw - yaw[0])).max())
+    if m.step_to is None and m.start_depth is None:
+        late = t >= DEPTH_FROM
+        out["depth_dev"] = float(np.abs(z[late] - m.depth).max()) if late.any() else math.inf
     if m.name.startswith("speed_"):
         w = dt >= SPEED_FROM
         out["within"] = float(np.mean(np.abs(dv[w] - m.velocity) <= BAND)) if w.any() else 0.0
@@ -228,15 +287,20 @@ def _force_figures(errs: list[float]) -> dict[str, float]:
 
 
 def run_mode(app: Any, label: str, mode: str, formulation: str, quick: bool = False,
-             seed: int = 0) -> tuple[dict[str, Any], dict[str, _Log]]:
-    """Every manoeuvre in one mode: (figures by manoeuvre and the fin force's, logs)."""
+             seed: int = 0, case: str | None = None,
+             only: frozenset[str] | None = None) -> tuple[dict[str, Any], dict[str, _Log]]:
+    """Every manoeuvre in one mode (a case's own manoeuvres in a disturbance case; of those,
+    the ones named in ``only``): (figures by manoeuvre and the fin force's, logs)."""
     figures: dict[str, Any] = {}
     logs: dict[str, _Log] = {}
     model_err: list[float] = []
     true_err: list[float] = []
     ratio: list[float] = []
+    wanted = None if case is None else {k.split("/")[0] for k in CASE_GOALS[case]}
     for m in manoeuvres(quick):
-        r = run_manoeuvre(app, mode, formulation, m, seed)
+        if (wanted is not None and m.name not in wanted) or (only is not None and m.name not in only):
+            continue
+        r = run_manoeuvre(app, mode, formulation, m, seed, case)
         figures[m.name] = r["figures"]
         logs[m.name] = r["log"]
         model_err += r["log"].model_err
@@ -254,13 +318,30 @@ def _lookup(figures: dict[str, Any], key: str) -> float:
     return float(v)
 
 
-def verdicts(figures: dict[str, Any]) -> dict[str, dict[str, Any]]:
-    """Each goal of :data:`GOALS`: the figure, the bound and whether it is met."""
+def verdicts(figures: dict[str, Any], goals: dict[str, tuple[str, float]] | None = None) -> dict[str, dict[str, Any]]:
+    """Each goal (of :data:`GOALS` by default): the figure, the bound and whether it is met."""
     out = {}
-    for key, (op, bound) in GOALS.items():
+    for key, (op, bound) in (GOALS if goals is None else goals).items():
         v = _lookup(figures, key)
         met = (v <= bound) if op == "<=" else (v >= bound) if op == ">=" else (v < bound)
         out[key] = {"value": v, "goal": f"{op} {bound:g}", "met": bool(met)}
+    return out
+
+
+def over_seeds(per_seed: dict[int, dict[str, Any]], goals: dict[str, tuple[str, float]]) -> dict[str, dict[str, Any]]:
+    """Each goal over the seeds: the median and the worst case (the seed it came from), the
+    goal judged on the worst case."""
+    out = {}
+    for key, (op, bound) in goals.items():
+        values = {seed: _lookup(f, key) for seed, f in per_seed.items()}
+        bad = {s: (math.inf if v != v else -v if op == ">=" else v) for s, v in values.items()}
+        worst_seed = max(bad, key=lambda s: bad[s])
+        worst = values[worst_seed]
+        met = (worst <= bound) if op == "<=" else (worst >= bound) if op == ">=" else (worst < bound)
+        out[key] = {"median": float(np.median(list(values.values()))), "worst": worst, "worst_seed": worst_seed,
+                    "goal": f"{op} {bound:g}", "met": bool(met), "seeds_met": sum(
+                        bool((v <= bound) if op == "<=" else (v >= bound) if op == ">=" else (v < bound))
+                        for v in values.values())}
     return out
 
 
@@ -319,23 +400,83 @@ def register_bench(kinds: argparse._SubParsersAction) -> None:
                    help="configuration: a shipped one's name or a file (default: sim-tuned)")
     p.add_argument("--modes", nargs="+", choices=[m[0] for m in MODES], default=[m[0] for m in MODES])
     p.add_argument("--quick", action="store_true", help="half-length manoeuvres (a smoke run)")
-    p.add_argument("--seed", type=int, default=0, help="plant and planner seed")
+    p.add_argument("--seed", type=int, default=0, help="plant and planner seed (the first of --seeds)")
+    p.add_argument("--seeds", type=int, default=1, help="how many seeds, from --seed on (median and worst case)")
+    p.add_argument("--cases", nargs="+", choices=["nominal", *CASES], default=["nominal"],
+                   help="the nominal robot and the disturbance cases to run (default: the nominal robot)")
+    p.add_argument("--jobs", type=int, default=1, help="processes running the runs (default 1)")
+    p.add_argument("--manoeuvres", nargs="+", choices=[m.name for m in manoeuvres()], default=None,
+                   help="only these manoeuvres (default: all)")
     p.add_argument("--json", type=Path, default=None, help="write the figures as JSON")
     p.add_argument("--plots", type=Path, default=None, metavar="DIR", help="write the plots (PNG) here")
     p.set_defaults(func=run_bench)
+
+
+def _run_one(task: tuple[Any, str, str, str, bool, int, str | None, frozenset[str] | None]
+             ) -> tuple[str, str, int, dict[str, Any]]:
+    app, label, mode, formulation, quick, seed, case, only = task
+    figures, _ = run_mode(app, label, mode, formulation, quick, seed, case, only)
+    return case or "nominal", label, seed, figures
 
 
 def run_bench(args: argparse.Namespace) -> int:
     from ucat_console.cli.compiled import prepare_all
     from ucat_console.config import load_config
 
+    if args.seeds < 1 or args.jobs < 1:
+        raise ValueError(f"--seeds and --jobs: at least 1, got {args.seeds} and {args.jobs}")
     app = load_config(args.config)
     prepare_all(args.config)
+    seeds = list(range(args.seed, args.seed + args.seeds))
+    modes = [m for m in MODES if m[0] in args.modes]
+    if args.seeds == 1 and args.cases == ["nominal"] and args.manoeuvres is None:
+        return _run_single(app, args, modes)
+    cases: list[str | None] = [None if c == "nominal" else c for c in dict.fromkeys(args.cases)]
+    only = None if args.manoeuvres is None else frozenset(args.manoeuvres)
+    tasks = [(app, label, mode, formulation, args.quick, seed, case, only)
+             for case in cases for label, mode, formulation in modes for seed in seeds]
+    t0 = time.perf_counter()
+    if args.jobs > 1:
+        import multiprocessing
+
+        # every mode's compiled code loaded before the processes fork: each has it at once
+        for _, mode, formulation in modes:
+            run_manoeuvre(app, mode, formulation, Manoeuvre("warm", 2.0, 0.2, 1.0, start_velocity=0.2), 0,
+                          "weak_fin")
+
+        with multiprocessing.get_context("fork").Pool(args.jobs) as pool:
+            done = pool.map(_run_one, tasks, chunksize=1)
+    else:
+        done = [_run_one(t) for t in tasks]
+    per: dict[str, dict[str, dict[int, dict[str, Any]]]] = {}
+    for case, label, seed, figures in done:
+        per.setdefault(case, {}).setdefault(label, {})[seed] = figures
+    results: dict[str, Any] = {"config": str(args.config), "seeds": seeds, "quick": args.quick, "cases": {}}
+    for case in cases:
+        name = case or "nominal"
+        goals = GOALS if case is None else CASE_GOALS[case]
+        results["cases"][name] = {}
+        for label, _, _ in modes:
+            ran = set(next(iter(per[name][label].values())))
+            v = over_seeds(per[name][label], {k: g for k, g in goals.items() if k.split("/")[0] in ran})
+            results["cases"][name][label] = {"goals": v, "figures": per[name][label]}
+            met = sum(x["met"] for x in v.values())
+            print(f"{name} / {label}: {met}/{len(v)} goals met on the worst of {len(seeds)} seeds")
+            for key, x in v.items():
+                print(f"    {key:34s} median {x['median']:8.3f} worst {x['worst']:8.3f} (seed {x['worst_seed']})"
+                      f"  goal {x['goal']:8s} {'met' if x['met'] else 'NOT MET'} ({x['seeds_met']}/{len(seeds)})")
+    print(f"({time.perf_counter() - t0:.0f} s)")
+    if args.json:
+        args.json.write_text(json.dumps(results, indent=2, default=float))
+        print(f"wrote {args.json}")
+    return 0
+
+
+def _run_single(app: Any, args: argparse.Namespace, modes: list[tuple[str, str, str]]) -> int:
+    """One seed, the nominal robot: every figure of every mode and the plots."""
     results: dict[str, Any] = {"config": str(args.config), "seed": args.seed, "quick": args.quick, "modes": {}}
     logs: dict[str, dict[str, _Log]] = {}
-    for label, mode, formulation in MODES:
-        if label not in args.modes:
-            continue
+    for label, mode, formulation in modes:
         t0 = time.perf_counter()
         figures, lg = run_mode(app, label, mode, formulation, args.quick, args.seed)
         logs[label] = lg

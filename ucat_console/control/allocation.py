@@ -148,13 +148,13 @@ def _logical(per_fin: tuple[tuple[float, float], ...], sync: bool) -> Allocation
 
 
 @register_jitable
-def allocate_wrench(x: float, z: float, n: float, reverse: bool, sync: bool, a: np.ndarray,
+def allocate_wrench(x: float, z: float, n: float, direction: float, sync: bool, a: np.ndarray,
                     out: np.ndarray) -> int:
     """The designed allocation (module docstring) of surge force ``x`` (N, forward > 0),
     heave force ``z`` (N, down > 0) and yaw moment ``n`` (N m, clockwise from above > 0):
     each paper fin's model target and the wrench applied into ``out`` (layout ``W_*``), the
-    cut bits returned. ``reverse``: the velocity setpoint is negative; ``a``: the parameters
-    (layout ``A_*``)."""
+    cut bits returned. ``direction``: the velocity setpoint's sign (> 0 forward, < 0 reverse, 0
+    at rest); ``a``: the parameters (layout ``A_*``)."""
     fmax, g, cos_a, arm = a[A_FMAX], a[A_GAIN], a[A_COS], a[A_ARM]
     rear = a[A_REAR]
     cut = 0
@@ -178,22 +178,25 @@ def allocate_wrench(x: float, z: float, n: float, reverse: bool, sync: bool, a: 
     sig3 = PAPER_SIDES[3] * sign_n if yaw_rear else 0.0
     sig = (sig0, sig1, sig2, sig3)
     cap = (c_front, c_front, c_rear, c_rear)
+    # each fin's physical x-force lies in [-g cap, cap]; under way, never against the travel
+    k_fwd = 0.0 if direction < 0.0 else g
+    k_back = 0.0 if direction > 0.0 else 1.0
     y_max = math.inf
     for i in range(4):
         for j in range(4):
             ds = sig[j] - sig[i]
             if ds > 0.0:
-                y_max = min(y_max, (cap[j] + g * cap[i]) / ds)
+                y_max = min(y_max, (k_back * cap[j] + k_fwd * cap[i]) / ds)
     if y > y_max:
         y = y_max
         cut |= CUT_YAW
     # 3. surge: the common per-fin share, within what every fin has left
     lo, hi = -math.inf, math.inf
     for i in range(4):
-        lo = max(lo, -g * cap[i] - sig[i] * y)
-        hi = min(hi, cap[i] - sig[i] * y)
+        lo = max(lo, -k_fwd * cap[i] - sig[i] * y)
+        hi = min(hi, k_back * cap[i] - sig[i] * y)
     share = -x / (4.0 * cos_a)
-    if (not reverse and share > 0.0) or (reverse and share < 0.0):
+    if (direction >= 0.0 and share > 0.0) or (direction < 0.0 and share < 0.0):
         share = 0.0
         cut |= CUT_COAST
     clipped = min(hi, max(lo, share))
@@ -236,14 +239,14 @@ def cut_names(bits: int) -> tuple[str, ...]:
     return tuple(name for bit, name in CUT_NAMES if bits & bit)
 
 
-def allocate_body_wrench(x: float, z: float, n: float, params: np.ndarray, *, reverse: bool = False,
+def allocate_body_wrench(x: float, z: float, n: float, params: np.ndarray, *, direction: float = 0.0,
                          sync: bool = False) -> WrenchAllocation:
     """:func:`allocate_wrench` as Python: surge ``x`` (N), heave ``z`` (N, down > 0) and yaw
     moment ``n`` (N m) into the fins' targets."""
     for name, v in (("x", x), ("z", z), ("n", n)):
         finite(name, v)
     out = np.zeros(NW)
-    bits = allocate_wrench(float(x), float(z), float(n), bool(reverse), bool(sync), params, out)
+    bits = allocate_wrench(float(x), float(z), float(n), float(direction), bool(sync), params, out)
     per_fin = tuple((float(out[2 * i]), float(out[2 * i + 1])) for i in range(N_FINS))
     return WrenchAllocation(_logical(per_fin, sync), (float(out[W_X]), float(out[W_Z]), float(out[W_N])),
                             cut_names(bits))

@@ -102,6 +102,13 @@ BODY = Layout("the body-frame layer's array", [
     ("speed_tau", 1, "designed: the speed low-pass's time constant (s; 0: none)"),
     ("v_lp", 1, "the low-passed speed (NaN: no sample yet)"), ("v_lp_t", 1, "the time of its last sample"),
     ("alloc", NA, "the allocation's parameters (allocation.A_*)"), ("out", NW, "its output (allocation.W_*)"),
+    ("cycle_target", 8, "each paper fin's running cycle: the force it was asked (f_x, f_y; NaN: none yet)"),
+    ("cycle_force", 8, "the force its plan makes by the fin model (f_x, f_y)"),
+    ("cycle_bias", 8, "what its last executed cycle made short of its plan, by the fin model (f_x, f_y)"),
+    ("bias_weight", 1, "designed: 1.0 the executed cycles correct the plans' force, 0.0 not"),
+    ("shortfall", 3, "designed: the fins' shortfall fed forward (surge N, heave N, yaw N m)"),
+    ("shortfall_cap", 3, "its bound on each axis"), ("shortfall_tau", 1, "its time constant (s; < 0: none)"),
+    ("shortfall_t", 1, "when it last moved (NaN: not yet)"), ("asked", 3, "the loops' demand and the shortfall"),
     ("pids", 3 * NPID, "velocity, depth, yaw rate or heading: a PID row each"),
     ("filters", 1, "velocity filter, then depth filter: median_size(window) numbers each (the array's rest)"),
 ])
@@ -111,8 +118,10 @@ B_FX, B_FY, B_YAW, B_DEPTH_SIGN, B_WINDOW, B_LAYER, B_HEADING, B_HEADING_REF, B_
     BODY.at(f) for f in BODY.fields[8:19])
 B_LEAD, B_REF_RATE, B_MAX_DIVE, B_MAX_ACC, B_MAX_YAW_ACC, B_V_REF, B_V_REF_RATE, B_Z_REF, B_Z_REF_RATE = (
     BODY.at(f) for f in BODY.fields[19:28])
-B_R_REF, B_R_REF_RATE, B_X, B_Z, B_N, B_APPLIED, B_CUT, B_SPEED_TAU, B_V_LP, B_V_LP_T, B_ALLOC, B_OUT, B_PIDS, \
-    B_FILTERS = (BODY.at(f) for f in BODY.fields[28:])
+B_R_REF, B_R_REF_RATE, B_X, B_Z, B_N, B_APPLIED, B_CUT, B_SPEED_TAU, B_V_LP, B_V_LP_T, B_ALLOC, B_OUT = (
+    BODY.at(f) for f in BODY.fields[28:40])
+B_CYCLE_TARGET, B_CYCLE_FORCE, B_CYCLE_BIAS, B_BIAS_WEIGHT, B_SHORTFALL, B_SHORTFALL_CAP, B_SHORTFALL_TAU, \
+    B_SHORTFALL_T, B_ASKED, B_PIDS, B_FILTERS = (BODY.at(f) for f in BODY.fields[40:])
 #: what the body functions return: all is well, or which input was not a finite number
 BODY_OK, BAD_DVL_VX, BAD_DVL_T, BAD_DEPTH, BAD_DEPTH_T, BAD_GYRO, BAD_IMU_T, BAD_T, EARLIER_T = range(9)
 #: the field each bad input is named by
@@ -158,6 +167,16 @@ def body_reset(b: np.ndarray) -> None:
     b[B_CUT] = 0.0
     for k in range(NW):
         b[B_OUT + k] = 0.0
+    for k in range(8):
+        b[B_CYCLE_TARGET + k] = math.nan
+        b[B_CYCLE_FORCE + k] = math.nan
+        b[B_CYCLE_BIAS + k] = 0.0
+    for k in range(3):
+        b[B_SHORTFALL + k] = 0.0
+    b[B_SHORTFALL_T] = math.nan
+    b[B_ASKED] = 0.0
+    b[B_ASKED + 1] = b[B_TRIM]
+    b[B_ASKED + 2] = 0.0
 
 
 @register_jitable
@@ -324,11 +343,74 @@ def _designed_loops(b: np.ndarray, t: float, sp_v: float, sp_z: float, sp_r: flo
 
 
 @register_jitable
+def body_on_cycle(b: np.ndarray, k: int, tx: float, ty: float, fx: float, fy: float) -> None:
+    """Paper fin ``k`` begins a cycle asked for ``(tx, ty)`` whose plan makes ``(fx, fy)``
+    by the fin model (N, the fin model's frame)."""
+    b[B_CYCLE_TARGET + 2 * k] = tx
+    b[B_CYCLE_TARGET + 2 * k + 1] = ty
+    b[B_CYCLE_FORCE + 2 * k] = fx
+    b[B_CYCLE_FORCE + 2 * k + 1] = fy
+
+
+@register_jitable
+def body_on_executed(b: np.ndarray, k: int, px: float, py: float, ex: float, ey: float) -> None:
+    """Paper fin ``k`` finished a cycle whose plan made ``(px, py)`` by the fin model and whose
+    executed strokes made ``(ex, ey)``: what it fell short is taken off its next plans' force
+    (a weak or lagging drive)."""
+    w = b[B_BIAS_WEIGHT]
+    b[B_CYCLE_BIAS + 2 * k] = w * (ex - px)
+    b[B_CYCLE_BIAS + 2 * k + 1] = w * (ey - py)
+
+
+@register_jitable
+def _fin_wrench(b: np.ndarray, fx: float, fy: float, k: int) -> tuple[float, float, float]:
+    """The physical wrench (surge, heave down > 0, yaw) of paper fin ``k``'s model force."""
+    if fx < 0.0:
+        fx *= b[B_ALLOC + A_GAIN]
+    return -b[B_ALLOC + A_COS] * fx, -fy, PAPER_SIDES[k] * b[B_ALLOC + A_ARM] * fx
+
+
+@register_jitable
+def _move_shortfall(b: np.ndarray, t: float) -> None:
+    """The fins' shortfall moves on to ``t``: the wrench the running cycles were asked for
+    minus the one their plans make by the fin model (each corrected by what the fin's last
+    executed cycle fell short of its plan), low-passed, within its bounds."""
+    tau = b[B_SHORTFALL_TAU]
+    if tau < 0.0:
+        return
+    sx = sz = sn = 0.0
+    for k in range(4):
+        tx, ty = b[B_CYCLE_TARGET + 2 * k], b[B_CYCLE_TARGET + 2 * k + 1]
+        fx, fy = b[B_CYCLE_FORCE + 2 * k], b[B_CYCLE_FORCE + 2 * k + 1]
+        if math.isnan(tx + ty + fx + fy):
+            continue
+        ax, az, an = _fin_wrench(b, tx, ty, k)
+        mx, mz, mn = _fin_wrench(b, fx + b[B_CYCLE_BIAS + 2 * k], fy + b[B_CYCLE_BIAS + 2 * k + 1], k)
+        sx += ax - mx
+        sz += az - mz
+        sn += an - mn
+    dt = 0.0 if math.isnan(b[B_SHORTFALL_T]) else max(0.0, t - b[B_SHORTFALL_T])
+    a = 1.0 if tau == 0.0 else 1.0 - math.exp(-dt / tau)
+    for k, v in ((0, sx), (1, sz), (2, sn)):
+        cap = b[B_SHORTFALL_CAP + k]
+        y = b[B_SHORTFALL + k] + a * (v - b[B_SHORTFALL + k])
+        b[B_SHORTFALL + k] = min(cap, max(-cap, y))
+    b[B_SHORTFALL_T] = t
+
+
+@register_jitable
 def body_allocate(b: np.ndarray, sp_v: float, sync: bool) -> int:
-    """The designed layer's allocation of its loops' demand (in ``b[B_OUT:]``), and the cut
-    fed back to the loops; the cut bits."""
-    x, z, n = b[B_X], b[B_Z], b[B_N]
-    cut = allocate_wrench(x, z, n, sp_v < 0.0, sync, b[B_ALLOC:B_ALLOC + NA], b[B_OUT:B_OUT + NW])
+    """The designed layer's allocation of its loops' demand with the fins' shortfall (in
+    ``b[B_OUT:]``), and the cut fed back to the loops; the cut bits."""
+    # before a speed is measured the velocity loop is silent: no surge is made up, and the
+    # fins may push either way for yaw (nothing says the robot is under way)
+    moving = not math.isnan(b[B_V_REF])
+    x = b[B_X] + (b[B_SHORTFALL] if moving else 0.0)
+    z = b[B_Z] + b[B_SHORTFALL + 1]
+    n = b[B_N] + b[B_SHORTFALL + 2]
+    b[B_ASKED], b[B_ASKED + 1], b[B_ASKED + 2] = x, z, n
+    direction = 0.0 if not moving else 1.0 if sp_v > 0.0 else -1.0 if sp_v < 0.0 else 0.0
+    cut = allocate_wrench(x, z, n, direction, sync, b[B_ALLOC:B_ALLOC + NA], b[B_OUT:B_OUT + NW])
     b[B_APPLIED] = b[B_OUT + W_X]
     b[B_APPLIED + 1] = b[B_OUT + W_Z]
     b[B_APPLIED + 2] = b[B_OUT + W_N]
@@ -360,6 +442,7 @@ def body_update(b: np.ndarray, t: float, sp_v: float, sp_z: float, sp_r: float,
         status = _paper_loops(b, t, sp_v, sp_z, sp_r, v, z, r)
     else:
         status = _designed_loops(b, t, sp_v, sp_z, sp_r, v, z, r)
+        _move_shortfall(b, t)
         body_allocate(b, sp_v, sync)
     b[B_NEW_V] = 0.0
     b[B_NEW_Z] = 0.0
@@ -490,6 +573,8 @@ class BodyController:
         b[B_REF_RATE] = cfg.reference_rate
         b[B_MAX_DIVE], b[B_MAX_ACC], b[B_MAX_YAW_ACC] = cfg.max_dive_rate, cfg.max_acceleration, cfg.max_yaw_acceleration
         b[B_SPEED_TAU] = cfg.speed_filter
+        b[B_SHORTFALL_TAU] = cfg.shortfall_filter if cfg.feed_shortfall else -1.0
+        b[B_BIAS_WEIGHT] = 1.0 if cfg.feed_executed else 0.0
         self._executor = executor or ExecutorConfig()
         self.velocity_pid = Pid(cfg.velocity, b[B_PIDS:B_PIDS + NPID])
         self.depth_pid = Pid(cfg.depth, b[B_PIDS + NPID:B_PIDS + 2 * NPID])
@@ -504,10 +589,14 @@ class BodyController:
         cfg = self.cfg
         ex = self._executor
         self.fin_force = deliverable_force(mpc, ex.acceleration, ex.max_rate)
+        if cfg.max_fin_force > 0.0:
+            self.fin_force = min(self.fin_force, cfg.max_fin_force)
         self.state[B_ALLOC:B_ALLOC + NA] = wrench_params(
             self.fin_force, cfg.thrust_gain, MOUNTING_ANGLE_DEG, ARM_YAW, cfg.heave_rear_share, cfg.yaw_on_rear)
+        lim = axis_limits(cfg, self.fin_force)
+        k = cfg.shortfall_limit
+        self.state[B_SHORTFALL_CAP:B_SHORTFALL_CAP + 3] = (k * lim.surge, k * lim.heave, k * lim.yaw)
         if cfg.layer == "designed":
-            lim = axis_limits(cfg, self.fin_force)
             for pid, cap in ((self.velocity_pid, lim.surge), (self.depth_pid, lim.heave), (self.yaw_pid, lim.yaw)):
                 pid.cap = cap
                 pid.set_gains(pid.gains)
@@ -564,6 +653,24 @@ class BodyController:
         if reading.quaternion is not None:
             self.set_heading(reading.quaternion)
 
+    def on_cycle(self, fin: int, target: tuple[float, float], force: tuple[float, float]) -> None:
+        """Paper fin ``fin`` begins a cycle asked for ``target`` whose plan makes ``force`` by
+        the fin model (N): the designed layer feeds the difference forward."""
+        body_on_cycle(self.state, fin, finite("target[0]", target[0]), finite("target[1]", target[1]),
+                      finite("force[0]", force[0]), finite("force[1]", force[1]))
+
+    def on_executed(self, fin: int, planned: tuple[float, float], executed: tuple[float, float]) -> None:
+        """Paper fin ``fin`` finished a cycle whose plan made ``planned`` and whose executed
+        strokes made ``executed`` by the fin model (N)."""
+        body_on_executed(self.state, fin, finite("planned[0]", planned[0]), finite("planned[1]", planned[1]),
+                         finite("executed[0]", executed[0]), finite("executed[1]", executed[1]))
+
+    @property
+    def shortfall(self) -> tuple[float, float, float]:
+        """The fins' shortfall the designed layer feeds forward (surge N, heave N, yaw N m)."""
+        b = self.state
+        return float(b[B_SHORTFALL]), float(b[B_SHORTFALL + 1]), float(b[B_SHORTFALL + 2])
+
     def set_heading(self, q: tuple[float, float, float, float]) -> None:
         """The attitude estimate (w, x, y, z; body -> NED): the heading the loop holds to."""
         body_set_heading(self.state, float(q[0]), float(q[1]), float(q[2]), float(q[3]))
@@ -585,7 +692,8 @@ class BodyController:
         else:
             per_fin = tuple(body_targets(b, k) for k in range(4))
             allocation = _logical(tuple((float(x), float(y)) for x, y in per_fin), sync)
-            demand = outputs = (float(b[B_X]), float(b[B_Z]), float(b[B_N]))
+            outputs = (float(b[B_X]), float(b[B_Z]), float(b[B_N]))
+            demand = (float(b[B_ASKED]), float(b[B_ASKED + 1]), float(b[B_ASKED + 2]))
             applied = (float(b[B_APPLIED]), float(b[B_APPLIED + 1]), float(b[B_APPLIED + 2]))
             cut = cut_names(int(b[B_CUT]))
         return BodyStep(

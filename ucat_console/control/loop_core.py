@@ -42,12 +42,10 @@ from numba import njit
 
 from ucat_console.control.body import (
     B_APPLIED,
+    B_ASKED,
     B_CUT,
     B_HEADING,
     B_LAYER,
-    B_N,
-    B_X,
-    B_Z,
     BODY_OK,
     body_allocate,
     body_on_depth,
@@ -433,7 +431,7 @@ def _keep_body_command(s: np.ndarray, body: np.ndarray, out: np.ndarray, t: floa
         o[_BC_APPLIED], o[_BC_APPLIED + 1], o[_BC_APPLIED + 2] = x, z, n
         o[_BC_CUT] = 0.0
     else:
-        o[_BC_ASKED], o[_BC_ASKED + 1], o[_BC_ASKED + 2] = body[B_X], body[B_Z], body[B_N]
+        o[_BC_ASKED], o[_BC_ASKED + 1], o[_BC_ASKED + 2] = body[B_ASKED], body[B_ASKED + 1], body[B_ASKED + 2]
         for k in range(3):
             o[_BC_APPLIED + k] = body[B_APPLIED + k]
         o[_BC_CUT] = body[B_CUT]

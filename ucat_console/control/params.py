@@ -208,6 +208,29 @@ class BodyConfig(Config):
         "loop closes on (0: none): the fins sample their force targets once a cycle, so DVL noise in the "
         "surge demand would reach each fin at a different time and turn the robot",
     )
+    max_fin_force: float = param(
+        0.0, lo=0.0, hi=100.0, unit="N",
+        doc="designed layer: the most force the allocation asks of a fin by the fin model (0: what the drives "
+        "can make, the fin model's deliverable force; less where the fin planners make less)",
+    )
+    feed_shortfall: bool = param(
+        True, doc="designed layer: add to the loops' demand what the fins' running cycles make short of what "
+        "they were asked (each plan's force by the fin model against its target), so that a fin whose planner "
+        "cannot make its share does not turn or tilt the robot",
+    )
+    feed_executed: bool = param(
+        True, doc="designed layer: correct each fin's plan force in that feed-forward by what its last executed "
+        "cycle (the measured strokes, by the fin model) made short of its plan: a weak or lagging drive's "
+        "share goes to the other fins",
+    )
+    shortfall_filter: float = param(
+        0.5, lo=0.0, hi=10.0, unit="s", doc="designed layer: time constant of the low-pass on the fins' shortfall",
+    )
+    shortfall_limit: float = param(
+        0.1, lo=0.0, hi=1.0,
+        doc="designed layer: the largest shortfall fed forward, as a share of what the fins deliver on each axis "
+        "(a planner that cannot make more than it does would wind it up)",
+    )
     max_heading_lead: float = param(
         0.5, lo=0.01, hi=3.0, unit="rad",
         doc="designed layer: how far the commanded heading may run ahead of the robot's (a turn "
@@ -251,6 +274,11 @@ PAPER_BODY = BodyConfig(
 class ExecutorConfig(Config):
     """Execution module (control.md section 8, Algorithm 2)."""
 
+    slow_fin_ratio: float = param(
+        1.5, lo=1.0, hi=10.0, lo_open=True,
+        doc="a fin whose executed cycles last this many times their plans' duration (the median of its last "
+        "five) is reported slow: a weak or lagging drive",
+    )
     w_threshold: float = param(
         0.3, lo=0.0, hi=50.0, lo_open=True, unit="rad/s", doc="stroke finished below this rate"
     )

@@ -68,7 +68,8 @@ def test_the_bench_writes_its_figures_and_judges_them(tmp_path: Path) -> None:
     import json
 
     out = tmp_path / "tracking.json"
-    args = argparse.Namespace(config=None, modes=["baseline"], quick=True, seed=0, json=out, plots=tmp_path)
+    args = argparse.Namespace(config=None, modes=["baseline"], quick=True, seed=0, seeds=1, cases=["nominal"],
+                              jobs=1, manoeuvres=None, json=out, plots=tmp_path)
     assert T.run_bench(args) == 0
     d = json.loads(out.read_text())
     goals = d["modes"]["baseline"]["goals"]
@@ -91,3 +92,67 @@ def test_the_verdicts_compare_as_the_goals_say() -> None:
     assert not v["depth_step/settled_error"]["met"]
     assert not v["force/model/share_over_90"]["met"]  # < 0.05 is strict
     assert not v["e5/within"]["met"] and np.isnan(v["e5/within"]["value"])  # missing: not met
+
+
+def test_over_seeds_judges_the_worst_case_and_names_its_seed() -> None:
+    per_seed = {0: {"straight": {"heading_all_deg": 1.0}, "speed_0.1": {"within": 0.95}},
+                1: {"straight": {"heading_all_deg": 4.0}, "speed_0.1": {"within": 0.85}},
+                2: {"straight": {"heading_all_deg": 2.0}, "speed_0.1": {"within": 1.0}}}
+    v = T.over_seeds(per_seed, {"straight/heading_all_deg": ("<=", 3.0), "speed_0.1/within": (">=", 0.9)})
+    h = v["straight/heading_all_deg"]
+    assert (h["median"], h["worst"], h["worst_seed"], h["met"], h["seeds_met"]) == (2.0, 4.0, 1, False, 2)
+    w = v["speed_0.1/within"]
+    assert (w["worst"], w["worst_seed"], w["met"]) == (0.85, 1, False)  # the lowest share is the worst
+    missing = T.over_seeds({0: {}}, {"straight/heading_all_deg": ("<=", 3.0)})["straight/heading_all_deg"]
+    assert not missing["met"]  # a figure not measured is never met
+
+
+def test_a_weak_fin_case_runs_one_drive_at_half_the_speed_it_is_commanded() -> None:
+    from ucat_console.robot.fins import PAPER_TO_ROBOT
+
+    calls = []
+
+    class Io:
+        def command_fin(self, fin: int, angle: float, rate: float) -> None:
+            calls.append((fin, rate))
+
+    io = Io()
+    T._weaken(io, T.WEAK_FIN, 0.5, max_rate=10.0)
+    weak = PAPER_TO_ROBOT[T.WEAK_FIN]
+    io.command_fin(weak, 0.1, 8.0)
+    io.command_fin(weak, 0.1, 30.0)  # beyond the servos' rate: half of the rate they make
+    io.command_fin((weak + 1) % 4, 0.1, 8.0)
+    assert calls == [(weak, 4.0), (weak, 5.0), ((weak + 1) % 4, 8.0)]
+
+
+def test_a_fin_whose_drive_runs_at_half_speed_is_reported_slow_and_the_robot_keeps_its_heading() -> None:
+    """Straight at 0.2 m/s (baseline) with one fin's drive at half the commanded speed: its
+    cycles take longer than planned, the loop reports it (``fin_slow``, naming the fin) and
+    the other fins take its share: the heading stays within 10 degrees."""
+    from ucat_console.backend.loop.closed_loop import ClosedLoop
+    from ucat_console.backend.sim_robot_io import SimRobotIO
+    from ucat_console.control.allocation import BodySetpoints
+    from ucat_console.experiments.scenario import START_FIN_ANGLE, plant_config
+    from ucat_console.telemetry import channels as ch
+    from ucat_console.telemetry.stream import TelemetryStream
+
+    plant = plant_config("plate", 1)
+    io = SimRobotIO(plant, depth=1.0, velocity=0.2)
+    io.plant.reset(position_ned=(0.0, 0.0, 1.0), body_velocity=(0.2, 0.0, 0.0, 0.0, 0.0, 0.0),
+                   fin_angles=(START_FIN_ANGLE,) * 4, seed=1)
+    T._weaken(io, T.WEAK_FIN, 0.5, plant.servo.max_rate)
+    stream = TelemetryStream()
+    events = []
+    stream.subscribe(lambda _c, m: events.append(m), [ch.EVENTS])
+    loop = ClosedLoop(TUNED.loop.replace(mode="baseline", planner_seed=1), io, stream,
+                      setpoints=BodySetpoints(0.2, 1.0, 0.0))
+    yaw0 = io.truth().euler[2]
+    worst = 0.0
+    while loop.time < 40.0 - 1e-9:
+        loop.run(0.5)
+        worst = max(worst, abs(math.remainder(io.truth().euler[2] - yaw0, 2 * math.pi)))
+    loop.close()
+    slow = [e for e in events if e.code == "fin_slow"]
+    assert [e.data["fin"] for e in slow] == [T.WEAK_FIN]
+    assert slow[0].data["ratio"] > TUNED.loop.executor.slow_fin_ratio
+    assert worst < math.radians(10.0)

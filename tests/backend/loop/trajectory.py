@@ -22,7 +22,13 @@ when the simulated fins became the energy-conserving plate (``backend/sim/plate.
 ``sim-tuned``'s thrust gain identified on it), which changes every trajectory by design: the
 plant's forces changed, not the controller. They were written again when the designed heading
 loop's bandwidth rose to 0.5 rad/s and the depth loop's integral zero to 3/8 of its
-bandwidth (``control.body_design``), which changes every trajectory by design.
+bandwidth (``control.body_design``), which changes every trajectory by design. They were
+written again when the designed layer began to feed the fins' shortfall forward (each running
+cycle's target against its plan's force, corrected by the fin's last executed cycle) and
+stopped making yaw with fins pushing against the travel, which changes the MPC scenarios'
+trajectories by design (the baseline scenario's stayed the same to rtol 1e-9); and again when,
+before a speed is measured, the layer stopped making up surge and let the fins push either
+way for yaw, which moves the MPC scenarios' first steps by design.
 
 Each scenario starts the simulated U-CAT at 1 m depth surging at 0.2 m/s with the
 configuration of the shipped ``sim-tuned``, runs one mode with a velocity, depth and yaw

@@ -13,7 +13,9 @@ and a servo command:
 * carries out the executors' actions: a stroke to the servo (``command_fin``, with the
   profile velocity of ``control.stroke_timing``), a cycle completed, a late plan, a stroke
   timeout; and follows each cycle from its first stroke to its last to publish what it
-  delivered;
+  delivered (and tells the body layer's feed-forward of each: ``on_cycle`` when one begins,
+  ``on_executed`` when one ends), and judges each fin's pace (``fin_slow``: a cycle taking
+  longer than planned, a weak or lagging drive);
 * switches the mode bumplessly (:meth:`Actuators.switch`): the old executors finish the
   plans they hold, the new ones' first plans are made at once from where their fins will
   be, and each new executor takes over when the old ones of its fins are idle
@@ -61,6 +63,10 @@ def kept_waiting(done: float, arrived: float, deadline: float) -> float:
     return done - max(arrived, deadline)
 
 
+#: the cycles over which a fin's pace is judged (``Actuators._judge_pace``)
+PACE_CYCLES = 5
+
+
 class Actuator:
     """One logical fin: its executor, its planner, and the plan hand-over state."""
 
@@ -87,7 +93,8 @@ class Actuator:
         self.ready: tuple[PlanInputs, FinPlan] | None = None
         self.requested = False
         self.retiring = False
-        self.loaded: tuple[tuple[float, float], float] = ((0.0, 0.0), 0.0)  # the last plan's target, duration
+        # the last plan's target, duration and force by the fin model
+        self.loaded: tuple[tuple[float, float], float, tuple[float, float]] = ((0.0, 0.0), 0.0, (0.0, 0.0))
 
     @property
     def idle(self) -> bool:
@@ -109,8 +116,17 @@ class Actuators:
     def __init__(self, cfg: LoopConfig, s: np.ndarray, members: np.ndarray, watches: StrokeWatches,
                  planning: PlanningService, outbox: Outbox, command_fin: Callable[[int, float, float], None],
                  wall_deadline: Callable[[float], float], driving: Callable[[], bool],
-                 mpc_planner: Callable[[int], Planner] | None = None) -> None:
+                 mpc_planner: Callable[[int], Planner] | None = None,
+                 on_cycle: Callable[[int, tuple[float, float], tuple[float, float]], None] | None = None,
+                 on_executed: Callable[[int, tuple[float, float], tuple[float, float]], None] | None = None) -> None:
         self.cfg = cfg
+        # told when a fin begins a cycle: (paper fin, its target, its plan's force by the fin model)
+        self._on_cycle = on_cycle
+        # told when a fin ends a cycle: (paper fin, its plan's force, its executed strokes' force by the fin model)
+        self._on_executed = on_executed
+        # each paper fin's last executed / planned cycle durations, and whether it is reported slow
+        self._ratios: list[list[float]] = [[] for _ in range(N_FINS)]
+        self._slow = [False] * N_FINS
         # an experiment's own planner for the MPC modes (by actuator index), e.g. E7's oracle
         self._mpc_planner = mpc_planner
         self.blocks: dict[str, Any] = {"mpc": cfg.mpc, "baseline": cfg.baseline, "manoeuvre": cfg.manoeuvre}
@@ -131,7 +147,8 @@ class Actuators:
         self._owner: list[Actuator] = [None] * N_FINS  # type: ignore[list-item]
         # each fin's cycle being executed (paper order): its plan's mode, target and duration,
         # and the measured angle and time at each stroke's start
-        self._cycles: list[tuple[str, tuple[float, float], float, list[float], list[float]] | None] = [None] * N_FINS
+        self._cycles: list[tuple[str, tuple[float, float], float, list[float], list[float], tuple[float, float]]
+                           | None] = [None] * N_FINS
         self.current: list[Actuator] = []
         self._install(self._new(cfg.mode))
 
@@ -213,7 +230,7 @@ class Actuators:
 
     def _load(self, act: Actuator, inputs: PlanInputs, outcome: FinPlan, t: float) -> None:
         was_running = act.executor.running
-        act.loaded = (inputs.target, planned_duration(outcome.u))
+        act.loaded = (inputs.target, planned_duration(outcome.u), outcome.mean_force)
         actions = act.executor.load(outcome.commands, t, theta_start=inputs.theta0)
         if was_running:
             act.pending_end = outcome.commands[2]
@@ -281,8 +298,10 @@ class Actuators:
         angle = float(self._s[lc.C_FB_ANGLE + PAPER_TO_ROBOT[fin]])
         cycle = self._cycles[fin]
         if stroke == 0:
-            target, duration = act.loaded
-            self._cycles[fin] = (act.mode, target, duration, [angle], [t])
+            target, duration, force = act.loaded
+            self._cycles[fin] = (act.mode, target, duration, [angle], [t], force)
+            if self._on_cycle is not None:
+                self._on_cycle(fin, target, force)
         elif cycle is not None:
             cycle[3].append(angle)
             cycle[4].append(t)
@@ -291,15 +310,42 @@ class Actuators:
         """Paper fin ``fin`` finished its plan's last stroke: publish what the cycle delivered."""
         cycle, self._cycles[fin] = self._cycles[fin], None
         pf = PAPER_TO_ROBOT[fin]
-        if cycle is None or not self._outbox.wants_cycle(pf):
+        if cycle is None:
             return
-        mode, target, duration, angles, times = cycle
+        mode, target, duration, angles, times, planned = cycle
         angles.append(float(self._s[lc.C_FB_ANGLE + pf]))
         times.append(t)
         if any(a != a for a in angles):
             return  # a fin without feedback yet
-        c = CycleForce(target, executed_force(angles, times, self.mpc), t - times[0], duration)
-        self._outbox.fin_cycle(t, pf, mode, c)
+        executed = executed_force(angles, times, self.mpc)
+        if self._on_executed is not None:
+            self._on_executed(fin, planned, executed)
+        self._judge_pace(fin, t, t - times[0], duration)
+        if self._outbox.wants_cycle(pf):
+            self._outbox.fin_cycle(t, pf, mode, CycleForce(target, executed, t - times[0], duration))
+
+    def _judge_pace(self, fin: int, t: float, executed: float, planned: float) -> None:
+        """Paper fin ``fin``'s cycle took ``executed`` s of its plan's ``planned``: over its last
+        :data:`PACE_CYCLES` cycles, a median ratio above ``executor.slow_fin_ratio`` reports the
+        fin slow (a weak or lagging drive: an event, the allocation's feed-forward shares its
+        work out), one back under the ratio's midpoint to 1 reports it recovered."""
+        if planned <= 0.0:
+            return
+        ratios = self._ratios[fin]
+        ratios.append(executed / planned)
+        del ratios[:-PACE_CYCLES]
+        if len(ratios) < PACE_CYCLES:
+            return
+        limit = self.cfg.executor.slow_fin_ratio
+        pace = float(np.median(ratios))
+        if not self._slow[fin] and pace > limit:
+            self._slow[fin] = True
+            self._outbox.event(t, "fin_slow", f"fin {fin}'s cycles take {pace:.2f} times their plans' "
+                               "duration: a weak or lagging drive", "warning", {"fin": fin, "ratio": pace})
+        elif self._slow[fin] and pace < 0.5 * (1.0 + limit):
+            self._slow[fin] = False
+            self._outbox.event(t, "fin_slow_cleared", f"fin {fin}'s cycles keep their plans' pace again "
+                               f"({pace:.2f})", "info", {"fin": fin, "ratio": pace})
 
     # ------------------------------------------------------------------ modes and tuning
     def _planner(self, mode: str, index: int) -> Planner:

@@ -157,7 +157,8 @@ class ClosedLoop:
         # looked up at each call: a caller may wrap the robot's command_fin or replace driving
         self.fins = Actuators(cfg, self._s, members, watches, self._planning, self.outbox,
                               lambda fin, angle, rate: self.io.command_fin(fin, angle, rate),
-                              self.clock.wall_deadline, lambda: self._driving(), mpc_planner)
+                              self.clock.wall_deadline, lambda: self._driving(), mpc_planner,
+                              on_cycle=self.body.on_cycle, on_executed=self.body.on_executed)
 
     # ------------------------------------------------------------------ public state
     @property
