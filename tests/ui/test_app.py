@@ -32,6 +32,13 @@ def app(tmp_path: Path):
 
 
 def page(app: ConsoleApp, cid: int, pilot: bool) -> ControlPanel:
+    """A stand-in page ``cid`` (no browser): the console takes it as connected, so its page
+    jobs run."""
+    stand_ins = app.__dict__.setdefault("_stand_ins", set())
+    if not stand_ins:
+        real = app.page_present
+        app.page_present = lambda c: c in stand_ins or real(c)  # type: ignore[method-assign]
+    stand_ins.add(cid)
     app.sup.client_connected(cid)
     if pilot:
         assert app.sup.take_control(cid, TOKEN)
