@@ -192,6 +192,13 @@ class Console:
             return []
         return wait_for(find, what="the page's role line")[0]
 
+    def fly(self, pilot: int, token: str) -> None:
+        """Start the supervisor (in real time when made with ``clock=None``) with page
+        ``pilot`` connected and in control by ``token``."""
+        self.sup.start()
+        self.sup.client_connected(pilot)
+        assert self.sup.take_control(pilot, token)
+
     def stop(self) -> None:
         app, self.app = self.app, None
         try:

@@ -106,9 +106,7 @@ def test_a_sagging_supply_injected_in_an_emulated_drive_surfaces_the_rig(tmp_pat
     c = Console(cfg, tmp_path, clock=None)
     sup = c.sup
     try:
-        sup.start()
-        sup.client_connected(PILOT)
-        assert sup.take_control(PILOT, TOKEN)
+        c.fly(PILOT, TOKEN)
         wait_for(lambda: sup.safety.battery()[0] is not None and not sup.safety.active(),
                  what="the drives' supply voltage, no failsafe")
         sup.arm(PILOT)

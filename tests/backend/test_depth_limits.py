@@ -110,9 +110,7 @@ def test_the_rig_diving_past_a_limit_surfaces_through_its_pressure_sensor_and_dv
     c = Console(_config("sim-devices", name), tmp_path, clock=None)
     sup = c.sup
     try:
-        sup.start()
-        sup.client_connected(PILOT)
-        assert sup.take_control(PILOT, TOKEN)
+        c.fly(PILOT, TOKEN)
         wait_for(lambda: sup.loop.time > 1.0 and not sup.safety.active(), what="the rig running, no failsafe")
         sup.arm(PILOT)
         sup.set_setpoints(PILOT, depth=2.0)

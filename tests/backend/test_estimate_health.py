@@ -90,9 +90,7 @@ def test_an_accelerometer_reading_a_tilt_the_estimate_lacks_makes_the_rig_hold(t
     c = Console(cfg, tmp_path, clock=None)
     sup = c.sup
     try:
-        sup.start()
-        sup.client_connected(PILOT)
-        assert sup.take_control(PILOT, TOKEN)
+        c.fly(PILOT, TOKEN)
         wait_for(lambda: sup.loop.time > 1.0 and not sup.safety.active() and sup.safety.estimate()[0],
                  what="the rig running, no failsafe, the attitude checked")
         assert next(x for x in vehicle_parts(sup) if x.name == "Estimate").state == "ok"

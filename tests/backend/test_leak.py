@@ -80,9 +80,7 @@ def test_water_at_the_rigs_emulated_detector_surfaces_the_robot(tmp_path) -> Non
     c = Console(cfg, tmp_path, clock=None)
     sup = c.sup
     try:
-        sup.start()
-        sup.client_connected(PILOT)
-        assert sup.take_control(PILOT, TOKEN)
+        c.fly(PILOT, TOKEN)
         wait_for(lambda: sup.loop.time > 1.0 and not sup.safety.active(), what="the rig running, no failsafe")
         sup.arm(PILOT)
         assert sup.rig_control.fault_tables()[0]["leak"] == ("water",)  # the Safety tab's rig faults

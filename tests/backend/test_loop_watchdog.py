@@ -56,11 +56,9 @@ def _console(tmp_path, base: str, **failsafes: FailsafeRule) -> Supervisor:
     cfg = load_config(base)
     cfg = cfg.replace(access=cfg.access.replace(token=TOKEN), console=cfg.console.replace(record_on_arm=False),
                       failsafe=cfg.failsafe.replace(**failsafes))
-    sup = Console(cfg, tmp_path, clock=None).sup
-    sup.start()
-    sup.client_connected(PILOT)
-    assert sup.take_control(PILOT, TOKEN)
-    return sup
+    c = Console(cfg, tmp_path, clock=None)
+    c.fly(PILOT, TOKEN)
+    return c.sup
 
 
 def _light(sup: Supervisor, name: str):
