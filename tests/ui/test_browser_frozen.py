@@ -1,6 +1,8 @@
 """A pilot's browser frozen (SIGSTOP on every Chromium process) while the robot is armed and
 moving: the console notices within the pilot-gone timeout, the failsafe acts, the page's
-socket is closed, and when the browser wakes its page is a viewer again."""
+socket is closed, and when the browser wakes its page comes back on a new connection and
+is the pilot again by the token it kept (checked by the console as any token), the robot
+still holding."""
 
 from __future__ import annotations
 
@@ -11,7 +13,6 @@ from support import Console, console_config, wait_for
 
 pytest.importorskip("playwright.sync_api")
 from browser_harness import open_page, take_control  # noqa: E402
-from playwright.sync_api import expect  # noqa: E402
 
 from ucat_console.backend.access import LOCAL  # noqa: E402
 
@@ -20,7 +21,7 @@ TOKEN = "frozen-browser-token"
 PILOT_GONE = 2.0
 
 
-def test_a_frozen_pilot_browser_trips_pilot_gone_and_wakes_up_a_viewer(
+def test_a_frozen_pilot_browser_trips_pilot_gone_and_wakes_up_the_pilot_again(
         chromium: Any, frozen_browser: Any, make_console: Callable[..., Console]) -> None:
     browser = frozen_browser
     console = make_console(console_config(TOKEN, PILOT_GONE, "sim-tuned", scene_rate=15.0, plot_rate=5.0),
@@ -45,9 +46,10 @@ def test_a_frozen_pilot_browser_trips_pilot_gone_and_wakes_up_a_viewer(
         assert sup.setpoints.velocity == 0.0 and sup.access.pilot is None
         wait_for(lambda: cid not in app.guard.clients, what="the frozen page's socket closed")
         chromium.thaw()
-        # the page reconnects as a new page: a viewer, which must present the token again
-        expect(page.get_by_text("Read-only").first).to_be_visible(timeout=30_000)
-        assert sup.access.pilot is None and sup.armed  # the robot holds; nobody flies
+        # the page reconnects as a new page and presents its kept token again: the pilot once
+        # more, on a new connection; the robot still holds what the failsafe set
+        wait_for(lambda: sup.access.pilot not in (None, cid), timeout=60.0, what="the woken page the pilot again")
+        assert sup.armed and sup.setpoints.velocity == 0.0
     finally:
         if chromium.stopped:
             chromium.thaw()
