@@ -134,6 +134,7 @@ def test_a_job_of_a_page_that_goes_while_it_runs_ends_quietly(
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(1500)  # 1,200 pages under tracemalloc: minutes on a busy machine
 def test_a_thousand_pages_closing_at_random_moments_leave_nothing_and_memory_flat(
         console: Console, caplog: pytest.LogCaptureFixture) -> None:
     """1,000 pages, 8 at a time, each closed at a seeded random moment: a fifth before it
