@@ -194,7 +194,7 @@ def _mapping(v: Any) -> str | None:
 
 
 #: every message type a page may send, and the check of each of its fields (viser's
-#: client -> server messages the console takes, ``viser._messages``; what the page's
+#: client -> server messages the console takes (viser's message classes); what the page's
 #: script sends, a browser's numbers as msgpack has them: a whole number as an integer)
 FIELDS: dict[str, dict[str, _Check]] = {
     "ViewerCameraMessage": {
