@@ -52,6 +52,28 @@ def _pages_alive() -> list[str]:
                   if type(o) in (viser.ClientHandle, panels.ControlPanel, PlaybackPanel, ComparePanel))
 
 
+def _holders() -> str:
+    """What is alive of the pages and, for each, the types of what refers to it (the diagnosis)."""
+    gc.collect()
+    alive = [o for o in gc.get_objects()
+             if type(o) in (viser.ClientHandle, panels.ControlPanel, PlaybackPanel, ComparePanel)]
+    lines = []
+    for o in alive[:5]:
+        refs = []
+        for r in gc.get_referrers(o):
+            if r is alive:
+                continue
+            name = type(r).__name__
+            if isinstance(r, dict):
+                owners = [type(x).__name__ for x in gc.get_referrers(r) if x is not alive][:3]
+                name += f" of {owners}"
+            elif type(r).__name__ == "frame":
+                name += f" {r.f_code.co_filename.rsplit('/', 1)[-1]}:{r.f_lineno} {r.f_code.co_name}"
+            refs.append(name)
+        lines.append(f"{type(o).__name__} held by {refs}")
+    return f"{len(alive)} objects; " + "; ".join(lines)
+
+
 def _all_gone(console: Console) -> bool:
     return not console.app.server.get_clients() and not console.app.guard.clients
 
@@ -154,7 +176,11 @@ def test_a_thousand_pages_closing_at_random_moments_leave_nothing_and_memory_fla
         kinds = churn(console.url, 1000, seed=0)
         _back_to(console, baseline)
         # the builds of the last pages, gone while they waited for their turn, end meanwhile
-        wait_for(lambda: not _pages_alive(), timeout=60.0, what="nothing alive of the pages gone (viser's handles, the console's panels)")
+        try:
+            wait_for(lambda: not _pages_alive(), timeout=300.0, poll=0.5,
+                     what="nothing alive of the pages gone")
+        except pytest.fail.Exception:
+            pytest.fail(f"alive after the pages went: {_holders()}")
         grown = tracemalloc.get_traced_memory()[0] / 2**20
     finally:
         tracemalloc.stop()
