@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     if args.out is not None and not args.out.parent.exists():
         raise ValueError(f"--out: directory {args.out.parent} does not exist")
     prepare_all()
-    with SessionParts(args.file, args.dir) as s:
+    with SessionParts(args.file, args.dir, confined=False) as s:
         result = counterfactual(s, weights, seed=recorded_seed if args.seed is None else args.seed,
                                 fins=args.fins)
     rows, skipped, config = result.rows, result.skipped, result.config

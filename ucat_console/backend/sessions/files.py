@@ -114,3 +114,11 @@ def inside_sessions(path: str | Path, directory: str | Path | None = None) -> Pa
     if not p.is_relative_to(root):
         raise ValueError(f"{path}: outside the sessions directory {root}")
     return p
+
+
+def session_path(path: str | Path, directory: str | Path | None = None, *, confined: bool = True) -> Path:
+    """``path`` resolved. ``confined`` (the default: what a page names) refuses a path
+    outside the sessions directory (:func:`inside_sessions`); ``confined=False`` is for a
+    file the person at the shell named (the command line, ``ucat_console.sessions.open``),
+    read wherever it is."""
+    return inside_sessions(path, directory) if confined else Path(path).expanduser().resolve()

@@ -353,8 +353,8 @@ class SessionReader(_Recording):
     ``os.pread``: one reader may serve several threads (the pages sharing it, :mod:`.shared`).
     """
 
-    def __init__(self, path: str | Path, directory: str | Path | None = None) -> None:
-        self.path = files.inside_sessions(path, directory)
+    def __init__(self, path: str | Path, directory: str | Path | None = None, *, confined: bool = True) -> None:
+        self.path = files.session_path(path, directory, confined=confined)
         p = self.path
         if not p.is_file():
             raise ValueError(f"{path}: no such session file")
@@ -796,16 +796,17 @@ def _named_file(session: str | Path, root: Path) -> Path | None:
     raise ValueError(f"{session}: no such session file")
 
 
-def _paths_of(session: str | Path, root: Path) -> tuple[str | None, list[Path]]:
+def _paths_of(session: str | Path, root: Path, confined: bool = True) -> tuple[str | None, list[Path]]:
     """(session id, part files in order) named by a session id or by one of its parts;
-    the id is None for a file whose name is not a part name (it is read alone)."""
+    the id is None for a file whose name is not a part name (it is read alone). A named
+    file outside ``root`` is refused when ``confined`` (:func:`files.session_path`)."""
     given = _named_file(session, root)
     if given is None:
         sid = str(session)
         if not sid:
             raise ValueError("session: no session id given")
         return sid, _sequence(sid, root)
-    p = files.inside_sessions(given, root)
+    p = files.session_path(given, root, confined=confined)
     parsed = files.parse_part_name(p)
     if parsed is None:
         return None, [p]
@@ -844,7 +845,9 @@ class SessionParts(_Recording):
 
     Opened from a session id (its parts in the sessions ``directory``) or from the path of
     any one part (its parts beside it); a file whose name is not a part name is read
-    alone, as the session named by its file name (whatever its metadata says). Holds one
+    alone, as the session named by its file name (whatever its metadata says). A named file
+    must lie in the sessions directory unless ``confined=False`` (the command line: a file
+    the user named is read wherever it is; a page never opens one so). Holds one
     :class:`SessionReader` per part in part order (``parts``) and offers their interface
     over the whole session, so the player, the review panel, the export and counterfactual
     replay read a split session as one file:
@@ -863,13 +866,14 @@ class SessionParts(_Recording):
     per session); ``paths`` every part's.
     """
 
-    def __init__(self, session: str | Path, directory: str | Path | None = None) -> None:
+    def __init__(self, session: str | Path, directory: str | Path | None = None, *,
+                 confined: bool = True) -> None:
         root = files.sessions_dir(directory)
-        sid, paths = _paths_of(session, root)
+        sid, paths = _paths_of(session, root, confined)
         readers: list[SessionReader] = []
         try:
             for path in paths:  # a truncated part: TruncatedSessionError naming it
-                readers.append(SessionReader(path, root))
+                readers.append(SessionReader(path, root, confined=confined))
             _check_parts(readers, sid)
         except BaseException:
             for r in readers:
@@ -1001,11 +1005,13 @@ class SessionParts(_Recording):
 SessionSource = SessionReader | SessionParts
 
 
-def open_session(session: str | Path, directory: str | Path | None = None) -> SessionParts:
+def open_session(session: str | Path, directory: str | Path | None = None, *,
+                 confined: bool = True) -> SessionParts:
     """Open a whole session inside ``directory`` (default: the project's ``sessions/``).
 
     ``session``: a session id, or the path or file name of any one of its parts (every
     part is opened); a file whose name is not a part name is opened alone. A one-part
-    session reads exactly as its file does with :class:`SessionReader`.
+    session reads exactly as its file does with :class:`SessionReader`. ``confined=False``:
+    a named file is read wherever it is (a path the user typed, :func:`files.session_path`).
     """
-    return SessionParts(session, directory)
+    return SessionParts(session, directory, confined=confined)
