@@ -33,13 +33,8 @@ from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
 
 from ucat_console.backend.sessions import files, limits, writing
-from ucat_console.backend.sessions.reader import (
-    MAGIC,
-    SessionReader,
-    TruncatedSessionError,
-    decompressed,
-    record_limit,
-)
+from ucat_console.backend.sessions.mcap_read import MAGIC, TruncatedSessionError, decompressed, record_limit
+from ucat_console.backend.sessions.reader import SessionReader
 
 log = logging.getLogger(__name__)
 
