@@ -10,7 +10,9 @@ commands). ``ucat-console prepare`` does the same ahead of time.
 ``run`` prepares behind its loading page (or, for a headless run, only what the run needs);
 ``replay``, ``identify --run``, ``experiment``, ``sweep`` and the benchmarks but ``bench
 compile`` (which times the compile itself) prepare every step (:func:`prepare_all`) once
-their arguments are checked.
+their arguments are checked. Outside the tool packages' layers (``cli`` > ``experiments`` >
+``bench`` > ``ui`` > ``backend``): the command line and the benchmarks both call it, and a
+step may compile the page's code.
 """
 
 from __future__ import annotations

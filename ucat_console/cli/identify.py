@@ -99,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
     cfg = load_config(args.config) if args.config is not None else None
     sessions = list(args.sessions)
     if args.run:
-        from ucat_console.cli.compiled import prepare_all
+        from ucat_console.compiled import prepare_all
 
         prepare_all(args.config)
         sessions.append(str(_record_manoeuvre(cfg or load_config(None), args.dir, args.realtime)))

@@ -52,7 +52,7 @@ def format_summary(summary: list[dict]) -> str:
 def run(args: argparse.Namespace) -> int:
     from ucat_console.backend.sessions.reader import SessionParts
     from ucat_console.backend.sessions.replay import counterfactual, parse_weights, recorded_seed
-    from ucat_console.cli.compiled import prepare_all
+    from ucat_console.compiled import prepare_all
 
     weights = parse_weights(args.weights)
     if args.out is not None and not args.out.parent.exists():
