@@ -42,8 +42,8 @@ def test_a_broken_contract_fails(tmp_path: Path) -> None:
 
 
 def test_the_backend_reaching_into_the_page_fails(tmp_path: Path) -> None:
-    """What compiles the page's code is named by the command line (``cli.compiled``), never
-    imported by the backend."""
+    """What compiles the page's code is named above the backend (``ucat_console.compiled``),
+    never imported by it."""
     shutil.copy(ROOT / "pyproject.toml", tmp_path / "pyproject.toml")
     shutil.copytree(ROOT / "ucat_console", tmp_path / "ucat_console",
                     ignore=shutil.ignore_patterns("__pycache__", "*.npz", "*.eds"))
@@ -51,4 +51,19 @@ def test_the_backend_reaching_into_the_page_fails(tmp_path: Path) -> None:
     run = lint_imports(tmp_path)
     assert run.returncode != 0
     assert "ucat_console.backend.leak -> ucat_console.ui.plots" in run.stdout
+    assert "the tool packages in layers" in run.stdout and "2 broken" in run.stdout
+
+
+def test_a_benchmark_reaching_into_the_command_line_fails(tmp_path: Path) -> None:
+    """The tool packages are layers: a benchmark (below the command line and the
+    experiments) importing the command line, even inside a function, breaks them."""
+    shutil.copy(ROOT / "pyproject.toml", tmp_path / "pyproject.toml")
+    shutil.copytree(ROOT / "ucat_console", tmp_path / "ucat_console",
+                    ignore=shutil.ignore_patterns("__pycache__", "*.npz", "*.eds"))
+    (tmp_path / "ucat_console" / "bench" / "leak.py").write_text(
+        "def prepare():\n    from ucat_console.cli import run\n")
+    run = lint_imports(tmp_path)
+    assert run.returncode != 0
+    assert "ucat_console.bench is not allowed to import ucat_console.cli" in run.stdout
+    assert "ucat_console.bench.leak -> ucat_console.cli.run" in run.stdout
     assert "1 broken" in run.stdout

@@ -125,7 +125,7 @@ def open(path: str | Path) -> Recording:  # noqa: A001 (the module's one entry: 
     p = Path(path).expanduser().resolve()
     if not p.is_file():
         raise ValueError(f"{path}: no such session file")
-    return Recording(open_session(p, p.parent))
+    return Recording(open_session(p, confined=False))
 
 
 def _read(parts: SessionParts, channel: str) -> Channel:

@@ -31,7 +31,7 @@ import tomllib
 import types
 import typing
 from pathlib import Path
-from typing import Any, Self, TypeVar
+from typing import Any, Callable, Self, TypeVar
 
 import tomli_w
 
@@ -47,13 +47,16 @@ def param(
     hi: float | None = None,
     lo_open: bool = False,
     hi_open: bool = False,
-    choices: tuple[Any, ...] | None = None,
+    choices: tuple[Any, ...] | Callable[[], tuple[Any, ...]] | None = None,
     unit: str = "",
     doc: str = "",
     secret: bool = False,
     default_factory: Any = _MISSING,
 ) -> Any:
     """A dataclass field with bounds: ``lo <= value <= hi`` (open ends with ``*_open``).
+
+    ``choices``: the values allowed, or a function returning them, read at every check (a
+    registry that grows after import, e.g. the loop's modes; read them with :func:`choices_of`).
 
     ``secret``: the value is never written where others read it: :func:`to_dict` with
     ``redact=True`` (what recordings store) leaves it out, and the dataclass's repr (what
@@ -73,11 +76,18 @@ def param(
     return dataclasses.field(default=default, metadata=meta, repr=not secret)
 
 
+def choices_of(f: dataclasses.Field) -> tuple[Any, ...] | None:
+    """The values a choice field allows now (None: not a choice field)."""
+    c = f.metadata.get("choices")
+    return tuple(c()) if callable(c) else c
+
+
 def describe_range(f: dataclasses.Field) -> str:
     """Human-readable allowed range of a field, e.g. ``[0.5, 8.0] rad/s``."""
     m = f.metadata
-    if m.get("choices") is not None:
-        return "one of " + ", ".join(repr(c) for c in m["choices"])
+    allowed = choices_of(f)
+    if allowed is not None:
+        return "one of " + ", ".join(repr(c) for c in allowed)
     lo, hi = m.get("lo"), m.get("hi")
     left = "(" if m.get("lo_open") else "["
     right = ")" if m.get("hi_open") else "]"
@@ -93,8 +103,9 @@ def check_value(f: dataclasses.Field, value: Any, prefix: str = "") -> None:
     m = f.metadata
     if not m:
         return
-    if m.get("choices") is not None:
-        if value not in m["choices"]:
+    allowed = choices_of(f)
+    if allowed is not None:
+        if value not in allowed:
             raise ValueError(f"{name}: {value!r} is not allowed; allowed: {describe_range(f)}")
         return
     if isinstance(value, bool) or not isinstance(value, (int, float)):

@@ -9,11 +9,11 @@ import threading
 import pytest
 from support import wait_for
 
+from ucat_console import compiled
 from ucat_console.backend import prepare
 from ucat_console.backend.prepare import Preparation, Progress, Step
 from ucat_console.backend.supervisor import CommandRefused
 from ucat_console.bench.raw_page import RawPage
-from ucat_console.cli import compiled
 from ucat_console.cli import run as run_cli
 from ucat_console.config import AppConfig, ConsoleConfig
 

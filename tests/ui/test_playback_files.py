@@ -110,3 +110,26 @@ def test_the_review_list_says_which_entries_it_did_not_read(server, recorded, tm
         assert "not read: folder.mcap: not a regular file" in text
     finally:
         p.stop()
+
+
+def test_a_page_cannot_open_a_session_file_outside_the_sessions_folder(server, recorded, tmp_path: Path) -> None:
+    """The shell reads a file wherever the user names it; a page stays in the sessions folder:
+    its panel takes names only, and the readers it opens through refuse a path outside."""
+    from ucat_console.backend.sessions.reader import SessionParts
+
+    d, sid, _ = recorded
+    away = tmp_path / "away"
+    away.mkdir()
+    moved = away / f"{sid}_001.mcap"
+    moved.write_bytes((d / moved.name).read_bytes())
+    p = panel(server, d)
+    try:
+        assert not p.act(lambda: p.open(str(moved)))
+        assert "is not a session or a file name" in p.messages[-1] and p.reader is None
+    finally:
+        p.stop()
+    for open_it in (lambda: shared.acquire(moved, d), lambda: SessionParts(moved, d)):
+        with pytest.raises(ValueError, match="outside the sessions directory"):
+            open_it()
+    with SessionParts(moved, d, confined=False) as s:  # what the command line opens
+        assert s.session_id == sid

@@ -111,8 +111,10 @@ class IdentifyReport:
 
 
 def identify_sessions(sessions: Sequence[str | Path], directory: str | Path | None = None,
-                      config: AppConfig | None = None, cfg: IdentifyConfig | None = None) -> IdentifyReport:
-    """Fit the fin coefficients to the recorded sessions (module docstring)."""
+                      config: AppConfig | None = None, cfg: IdentifyConfig | None = None, *,
+                      confined: bool = True) -> IdentifyReport:
+    """Fit the fin coefficients to the recorded sessions (module docstring; ``confined``: as
+    :func:`open_session`)."""
     if not sessions:
         raise ValueError("identify: name at least one session")
     recs: list[Measurements] = []
@@ -120,7 +122,7 @@ def identify_sessions(sessions: Sequence[str | Path], directory: str | Path | No
     app = config
     source_of_config = "the given configuration" if config is not None else ""
     for s in sessions:
-        src = open_session(s, directory)
+        src = open_session(s, directory, confined=confined)
         try:
             name = str(s)
             if app is None:
@@ -138,16 +140,17 @@ def identify_sessions(sessions: Sequence[str | Path], directory: str | Path | No
     return IdentifyReport(result, tuple(names), source_of_config, toml)
 
 
-def trim_sessions(sessions: Sequence[str | Path], directory: str | Path | None = None) -> tuple[HoverTrim, str]:
+def trim_sessions(sessions: Sequence[str | Path], directory: str | Path | None = None, *,
+                  confined: bool = True) -> tuple[HoverTrim, str]:
     """The heave trim from the hovers recorded in ``sessions`` (``control.identification.
     hover_trim``) and the TOML fragment to load; ValueError naming a session without the
-    body layer's channels."""
+    body layer's channels. ``confined``: as :func:`open_session`."""
     if not sessions:
         raise ValueError("identify --trim: name at least one session")
     cols: dict[str, list[float]] = {k: [] for k in ("t", "driving", "depth_error", "speed_ref", "heave")}
     names = []
     for s in sessions:
-        src = open_session(s, directory)
+        src = open_session(s, directory, confined=confined)
         try:
             name = str(s)
             present = {c for c, n in src.message_counts().items() if n > 0}

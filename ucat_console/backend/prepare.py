@@ -8,7 +8,7 @@ served or the drivers are supervised: :func:`start` runs the :class:`Step` s its
 gives in child processes (started with ``spawn``, as many as the machine has cores, two at
 most: independent kernels compile side by side, and numba's cache takes each from
 whichever process wrote it). What the steps are, and which a configuration needs, is the
-caller's (``cli.compiled.console_steps``); a step names the function that compiles it.
+caller's (``ucat_console.compiled.console_steps``); a step names the function that compiles it.
 
 The steps needed before serving (:attr:`Step.needed`) go first; :meth:`Preparation.wait`
 returns when they are done. The rest compiles on in the background;

@@ -1039,7 +1039,7 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--spam-rate: at most 100 clicks a second (the page guard allows 120 messages)")
     if args.spam_before < 0:
         raise ValueError("--spam-before: must not be negative")
-    from ucat_console.cli.compiled import prepare_all
+    from ucat_console.compiled import prepare_all
 
     prepare_all("sim-tuned")
     r = measure(args.trials, args.spam_trials, args.rounds, args.pages, args.pilot_gone, args.link_trials,

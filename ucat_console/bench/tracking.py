@@ -420,7 +420,7 @@ def _run_one(task: tuple[Any, str, str, str, bool, int, str | None, frozenset[st
 
 
 def run_bench(args: argparse.Namespace) -> int:
-    from ucat_console.cli.compiled import prepare_all
+    from ucat_console.compiled import prepare_all
     from ucat_console.config import load_config
 
     if args.seeds < 1 or args.jobs < 1:

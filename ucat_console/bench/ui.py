@@ -343,7 +343,7 @@ def run_ui(args: argparse.Namespace) -> int:
     if not Path(args.chromium).exists():
         raise ValueError(f"--chromium: {args.chromium} not found")
     from ucat_console.bench.machine import machine_info, speed_line
-    from ucat_console.cli.compiled import prepare_all
+    from ucat_console.compiled import prepare_all
 
     prepare_all()
     r = measure_ui(duration=args.duration, pages=args.pages, warmup=args.warmup, chromium=args.chromium)

@@ -94,7 +94,7 @@ def run_mpc(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from ucat_console.bench import mpc as B
-    from ucat_console.cli.compiled import prepare_all
+    from ucat_console.compiled import prepare_all
     from ucat_console.bench.machine import machine_info, pin_to_one_core, speed_line
     from ucat_console.control import FinMpc, MpcConfig
 
@@ -163,7 +163,7 @@ def run_mpc(args: argparse.Namespace) -> int:
 def run_sim(args: argparse.Namespace) -> int:
     from ucat_console.bench.sim import TELEMETRY, measure_realtime_factor
     from ucat_console.bench.machine import machine_info, pin_to_one_core, speed_line
-    from ucat_console.cli.compiled import prepare_all
+    from ucat_console.compiled import prepare_all
 
     if not 0.0 < args.seconds <= 3600.0:
         raise ValueError(f"--seconds: {args.seconds} must be in (0, 3600]")

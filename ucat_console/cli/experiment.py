@@ -31,7 +31,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     require_extra()
-    from ucat_console.cli.compiled import prepare_all
+    from ucat_console.compiled import prepare_all
     from ucat_console.experiments.runner import run_experiments
 
     prepare_all()

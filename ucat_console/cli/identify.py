@@ -74,7 +74,7 @@ def _record_manoeuvre(cfg: Any, directory: Path | None, realtime: bool) -> Path:
 def _trim(args: argparse.Namespace) -> int:
     from ucat_console.backend.identification import trim_sessions
 
-    trim, toml = trim_sessions(args.sessions, args.dir)
+    trim, toml = trim_sessions(args.sessions, args.dir, confined=False)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "identified.toml").write_text(toml)
     print(f"heave trim from {trim.seconds:.0f} s of hover: {trim.heave_trim:.3f} +- {trim.ci:.3f} N (95 %, down > 0)")
@@ -99,11 +99,11 @@ def run(args: argparse.Namespace) -> int:
     cfg = load_config(args.config) if args.config is not None else None
     sessions = list(args.sessions)
     if args.run:
-        from ucat_console.cli.compiled import prepare_all
+        from ucat_console.compiled import prepare_all
 
         prepare_all(args.config)
         sessions.append(str(_record_manoeuvre(cfg or load_config(None), args.dir, args.realtime)))
-    rep = identify_sessions(sessions, args.dir, cfg, icfg)
+    rep = identify_sessions(sessions, args.dir, cfg, icfg, confined=False)
     r = rep.result
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "identified.toml").write_text(rep.toml)

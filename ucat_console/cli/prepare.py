@@ -25,7 +25,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ucat_console import compiled_cache
-    from ucat_console.cli import compiled
+    from ucat_console import compiled
     from ucat_console.config import load_config
 
     if args.workers is not None and args.workers < 1:
@@ -54,7 +54,7 @@ def measure_cold(cfg, workers: int) -> dict:
     """Every step compiled from nothing (a numba cache of its own, removed afterwards) by
     ``workers`` processes: per-step seconds, and the wall time to ready and to complete."""
     from ucat_console.backend.prepare import Preparation
-    from ucat_console.cli.compiled import console_steps
+    from ucat_console.compiled import console_steps
 
     with tempfile.TemporaryDirectory(prefix="ucat-numba-cache-") as cache:
         t0 = time.perf_counter()

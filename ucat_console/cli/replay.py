@@ -52,13 +52,13 @@ def format_summary(summary: list[dict]) -> str:
 def run(args: argparse.Namespace) -> int:
     from ucat_console.backend.sessions.reader import SessionParts
     from ucat_console.backend.sessions.replay import counterfactual, parse_weights, recorded_seed
-    from ucat_console.cli.compiled import prepare_all
+    from ucat_console.compiled import prepare_all
 
     weights = parse_weights(args.weights)
     if args.out is not None and not args.out.parent.exists():
         raise ValueError(f"--out: directory {args.out.parent} does not exist")
     prepare_all()
-    with SessionParts(args.file, args.dir) as s:
+    with SessionParts(args.file, args.dir, confined=False) as s:
         result = counterfactual(s, weights, seed=recorded_seed if args.seed is None else args.seed,
                                 fins=args.fins)
     rows, skipped, config = result.rows, result.skipped, result.config

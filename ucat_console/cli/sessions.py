@@ -5,8 +5,9 @@ sessions directory): ``info`` and ``export`` cover every part of the session, in
 one recording; ``repair`` takes one file (not one being recorded; the original is kept,
 listed, as ``<name>.orig.mcap``); ``compare`` writes two to four sessions' (or their
 segments') efficiency figures side by side (docs/review.md). ``--dir`` names the sessions directory (default:
-``$UCAT_CONSOLE_SESSIONS``, else the user's data folder: ``ucat-console paths``); files
-outside it are refused.
+``$UCAT_CONSOLE_SESSIONS``, else the user's data folder: ``ucat-console paths``), where a
+session id or a bare file name is looked for; a path is read wherever it is (the page, unlike
+the shell, is confined to the sessions directory).
 """
 
 from __future__ import annotations
@@ -143,7 +144,7 @@ def run_info(args: argparse.Namespace) -> int:
     from ucat_console.backend.sessions import files
     from ucat_console.backend.sessions.reader import SessionParts
 
-    with SessionParts(args.file, args.dir) as s:
+    with SessionParts(args.file, args.dir, confined=False) as s:
         print(f"session {s.session_id}: {len(s.parts)} part{'s' if len(s.parts) > 1 else ''} "
               f"in {s.directory}, software {files.printable(s.version[:40]) or '?'}")
         print(f"  {s.message_count} messages, {s.duration:.1f} s "
@@ -168,7 +169,7 @@ def run_export(args: argparse.Namespace) -> int:
     topics = [t for arg in args.topics for t in arg.split(",") if t]
     if "all" in topics:
         topics = list(CHANNELS)
-    with SessionParts(args.file, args.dir) as s:
+    with SessionParts(args.file, args.dir, confined=False) as s:
         result = export_csv(s, topics, args.out, args.start, args.end)
     for channel, (path, rows) in result.items():
         print(f"{channel:<20} {rows:>9} rows -> {path}")
@@ -181,7 +182,7 @@ def run_repair(args: argparse.Namespace) -> int:
     paths = resolve(args.file, args.dir)
     if len(paths) != 1:
         raise ValueError(f"{args.file}: names {len(paths)} files; repair one file at a time")
-    report = repair(paths[0], args.dir, keep_original=not args.no_keep, force=args.force)
+    report = repair(paths[0], args.dir, keep_original=not args.no_keep, force=args.force, confined=False)
     if not report.repaired:
         print(f"{report.path}: complete, nothing to repair ({report.messages} messages)")
         return 0
@@ -205,7 +206,7 @@ def run_compare(args: argparse.Namespace) -> int:
     cfg = MetricsConfig()
     wins = []
     for f in args.files:
-        run = compare.load_run(f, args.dir)
+        run = compare.load_run(f, args.dir, confined=False)
         if args.window is not None:
             run.cut(*args.window)
         wins += compare.windows(run, args.segments, args.align)

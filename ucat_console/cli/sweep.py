@@ -32,7 +32,7 @@ def run(args: argparse.Namespace) -> int:
     from ucat_console.experiments import require_extra
 
     require_extra()
-    from ucat_console.cli.compiled import prepare_all
+    from ucat_console.compiled import prepare_all
     from ucat_console.experiments.runner import run_sweep_command
 
     if args.seed < 0:

@@ -72,7 +72,7 @@ from ucat_console.backend.review.metrics import MetricsConfig
 from ucat_console.backend.sessions import export, files, index, repair, shared
 from ucat_console.backend.sessions.markers import MAX_NOTE_BYTES, Marker, check_note
 from ucat_console.backend.sessions.player import MAX_SPEED, MIN_SPEED, Player, check_speed
-from ucat_console.backend.sessions.reader import SessionParts, part_paths
+from ucat_console.backend.sessions.reader import SessionParts
 from ucat_console.backend.sessions.replay import ReplayResult, parse_weights, recorded_config, replay_config
 from ucat_console.backend.sessions.replay_job import ReplayJob, ReplaySlot
 from ucat_console.robot.geometry import Geometry
@@ -347,7 +347,7 @@ class PlaybackPanel:
         """The files ``name`` names: a part file, or every part of a session id."""
         if self._name(name).endswith(files.SUFFIX):
             return [self._path(name)]
-        parts = part_paths(name, self.directory)
+        parts = files.part_paths(name, self.directory)
         if not parts:
             raise ValueError(f"session {name!r}: no files in {self.directory}")
         return [p for _, p in sorted(parts.items())]

@@ -11,7 +11,7 @@ from dataclasses import dataclass, fields
 from typing import Any
 
 from ucat_console.backend.supervisor import TUNABLE
-from ucat_console.typedconf import describe_range
+from ucat_console.typedconf import choices_of, describe_range
 
 
 def step_for(value: float, is_int: bool) -> float:
@@ -44,9 +44,9 @@ def param_specs(tuning: dict[str, Any]) -> dict[str, list[ParamSpec]]:
         for name in names:
             f = by_name[name]
             value = getattr(cfg, name)
-            if f.metadata.get("choices") is not None:  # e.g. mpc.formulation
-                specs.append(ParamSpec(f"{block}.{name}", name, f.metadata.get("doc", ""), 0.0, False,
-                                       tuple(f.metadata["choices"])))
+            allowed = choices_of(f)
+            if allowed is not None:  # e.g. mpc.formulation
+                specs.append(ParamSpec(f"{block}.{name}", name, f.metadata.get("doc", ""), 0.0, False, allowed))
                 continue
 
             is_int = isinstance(value, int)

@@ -5,8 +5,10 @@ bar) reads it."""
 from __future__ import annotations
 
 from dataclasses import fields
+from pathlib import Path
 
 import pytest
+from support import TOKEN, Console, console_config
 
 from ucat_console.backend.loop import modes
 from ucat_console.backend.loop.closed_loop import ClosedLoop
@@ -14,9 +16,11 @@ from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.backend.loop.modes import MODES, Mode, PlannerSetting, mode_names, register
 from ucat_console.backend.loop.planners import MpcFinPlanner
 from ucat_console.backend.sim_robot_io import SimRobotIO
+from ucat_console.backend.supervisor import CommandRefused
 from ucat_console.cli import build_parser
 from ucat_console.control.allocation import INDEPENDENT_FINS, SYNC_FINS, BodySetpoints
 from ucat_console.telemetry.stream import TelemetryStream
+from ucat_console.typedconf import choices_of, describe_range
 
 
 @pytest.fixture
@@ -45,7 +49,7 @@ def test_the_built_in_modes_are_registered_in_the_page_order() -> None:
 
 def test_the_loop_configuration_takes_the_registered_modes() -> None:
     f = next(f for f in fields(LoopConfig) if f.name == "mode")
-    assert f.metadata["choices"] == mode_names()
+    assert choices_of(f) == mode_names()
     with pytest.raises(ValueError, match="mode"):
         LoopConfig(mode="oracle")
 
@@ -66,6 +70,50 @@ def test_the_command_line_reads_the_registry(echo) -> None:
     assert "echo" in _choices(["run"], "--mode")
     assert _choices(["bench", "sim"], "--modes") == mode_names(follows_targets=True)
     assert build_parser().parse_args(["run", "--headless", "--mode", "echo"]).mode == "echo"
+
+
+def test_a_mode_registered_after_import_is_taken_by_the_configuration_and_the_command_line(
+        echo, tmp_path: Path) -> None:
+    """``echo`` is registered by this test module, long after the loop's configuration was
+    imported: the configuration, a TOML file and ``run --mode`` all take it."""
+    from ucat_console.cli import run
+    from ucat_console.config import load_config
+
+    assert LoopConfig(mode="echo").mode == "echo"
+    assert "'echo'" in describe_range(next(f for f in fields(LoopConfig) if f.name == "mode"))
+    toml = tmp_path / "echo.toml"
+    toml.write_text('[loop]\nmode = "echo"\n')
+    assert load_config(str(toml)).loop.mode == "echo"
+    args = build_parser().parse_args(["run", "--headless", "--mode", "echo"])
+    assert run._config(args).loop.mode == "echo"
+    with pytest.raises(ValueError, match="'oracle' is not allowed; allowed: one of .*'echo'"):
+        LoopConfig(mode="oracle")
+
+
+def test_a_mode_registered_after_import_is_chosen_on_the_page_and_runs(echo, tmp_path: Path) -> None:
+    """The page's mode selector lists ``echo``; the pilot's choice passes the supervisor's
+    check and the loop runs it."""
+    from ucat_console.ui.app import ConsoleApp
+    from ucat_console.ui.panels import ControlPanel
+
+    console = Console(console_config(), tmp_path)
+    app = ConsoleApp(console.sup, port=0)
+    try:
+        sup = console.sup
+        sup.client_connected(3)
+        assert sup.take_control(3, TOKEN)
+        pilot = ControlPanel(app, 3, app.server.gui)
+        assert "echo" in pilot.mode.options
+        pilot.mode.value = "echo"
+        assert pilot.act(lambda: sup.set_mode(3, pilot.mode.value)) is True
+        assert sup.mode == "echo"
+        sup.step(1.0)
+        assert len(echo) == 4  # each logical fin's planner made through the registry
+        with pytest.raises(CommandRefused, match="'oracle' is not one of .*echo"):
+            sup.set_mode(3, "oracle")
+    finally:
+        app.stop()
+        console.stop()
 
 
 def test_a_registered_mode_runs_in_the_loop(echo) -> None:

@@ -45,10 +45,40 @@ def test_errors_are_reported_with_exit_status_2(sessions, tmp_path, capsys):
     outside = tmp_path / "outside.mcap"
     outside.write_text("x")
     assert main(["sessions", "info", str(outside), "--dir", str(sessions)]) == 2
-    assert "outside the sessions directory" in capsys.readouterr().err
+    assert "not an MCAP file" in capsys.readouterr().err  # read where it is, and refused for what it is
     [path] = _session(sessions)
     assert main(["replay", str(path), "--weights", "lam_q=1", "--dir", str(sessions)]) == 2
     assert "lam_q: unknown weight" in capsys.readouterr().err
+
+
+def test_the_commands_read_a_session_file_the_user_names_outside_the_sessions_folder(sessions, tmp_path, capsys):
+    """A path typed at the shell is read wherever it is: a split session's part in another
+    folder (its parts beside it), by info, export, compare (which reads it, then finds no
+    power to compare) and repair; a bare name is still looked for in the sessions folder."""
+    items = [(C.SETPOINTS, Setpoints(0.1 * k, 0.1 * k, 1.0, 0.0)) for k in range(30)]
+    parts = record(sessions, items, RecorderConfig(split_duration=1.0, chunk_size=4096), label="away")
+    assert len(parts) > 1
+    downloads = tmp_path / "downloads"
+    downloads.mkdir()
+    for p in parts:
+        p.rename(downloads / p.name)
+    first = downloads / parts[0].name
+    assert main(["sessions", "info", str(first), "--dir", str(sessions)]) == 0
+    out = capsys.readouterr().out
+    assert f"{len(parts)} parts in {downloads}" in out and "30 messages" in out
+    dest = tmp_path / "out"
+    assert main(["sessions", "export", str(first), "--topics", "body/setpoints", "--out", str(dest)]) == 0
+    with open(dest / "body_setpoints.csv", newline="") as fh:
+        assert len(list(csv.DictReader(fh))) == 30
+    assert main(["sessions", "compare", str(first), str(first), "--out", str(tmp_path / "cmp")]) == 2
+    assert "has no power messages" in capsys.readouterr().err  # read, then judged
+    assert main(["sessions", "info", first.name, "--dir", str(sessions)]) == 2
+    assert "no such session file" in capsys.readouterr().err
+    last = downloads / parts[-1].name
+    last.write_bytes(last.read_bytes()[:-40])  # cut in its summary: truncated
+    assert main(["sessions", "repair", str(last), "--dir", str(sessions)]) == 0
+    out = capsys.readouterr().out
+    assert "repaired" in out and (downloads / (last.stem + ".orig.mcap")).is_file()
 
 
 def test_repair_command(sessions, capsys):

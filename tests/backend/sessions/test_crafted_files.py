@@ -16,7 +16,8 @@ from mcap.reader import make_reader
 from session_helpers import example_message, record
 
 from ucat_console.backend.sessions import codec, index, limits, shared
-from ucat_console.backend.sessions.reader import SessionParts, SessionReader, TruncatedSessionError
+from ucat_console.backend.sessions.mcap_read import TruncatedSessionError
+from ucat_console.backend.sessions.reader import SessionParts, SessionReader
 from ucat_console.backend.sessions.recorder import RecorderConfig
 from ucat_console.cli import main
 from ucat_console.telemetry import channels as C

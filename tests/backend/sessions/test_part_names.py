@@ -11,7 +11,8 @@ import pytest
 from session_helpers import record
 
 from ucat_console.backend.sessions import files, index
-from ucat_console.backend.sessions.reader import SessionParts, part_paths
+from ucat_console.backend.sessions.files import part_paths
+from ucat_console.backend.sessions.reader import SessionParts
 from ucat_console.backend.sessions.recorder import RecorderConfig
 from ucat_console.telemetry import channels as C
 from ucat_console.telemetry.messages import Setpoints

@@ -19,12 +19,8 @@ from session_helpers import record
 
 from ucat_console.backend.sessions import files, repair
 from ucat_console.backend.sessions.player import Player
-from ucat_console.backend.sessions.reader import (
-    SessionParts,
-    SessionReader,
-    TruncatedSessionError,
-    open_session,
-)
+from ucat_console.backend.sessions.mcap_read import TruncatedSessionError
+from ucat_console.backend.sessions.reader import SessionParts, SessionReader, open_session
 from ucat_console.backend.sessions.recorder import Recorder, RecorderConfig
 from ucat_console.backend.sessions.replay import counterfactual
 from ucat_console.telemetry import channels as C

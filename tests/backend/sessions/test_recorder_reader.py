@@ -17,7 +17,8 @@ from session_helpers import FIXTURES, example_message, record, same
 
 import ucat_console
 from ucat_console.backend.sessions import files
-from ucat_console.backend.sessions.reader import SessionReader, TruncatedSessionError
+from ucat_console.backend.sessions.mcap_read import TruncatedSessionError
+from ucat_console.backend.sessions.reader import SessionReader
 from ucat_console.backend.sessions.recorder import Recorder, RecorderConfig
 from ucat_console.telemetry import channels as C
 from ucat_console.telemetry.events import Event

@@ -18,7 +18,8 @@ from mcap.stream_reader import breakup_chunk
 from session_helpers import record
 
 from ucat_console.backend.sessions.index import list_sessions
-from ucat_console.backend.sessions.reader import SessionReader, TruncatedSessionError
+from ucat_console.backend.sessions.mcap_read import TruncatedSessionError
+from ucat_console.backend.sessions.reader import SessionReader
 from ucat_console.backend.sessions.recorder import RecorderConfig
 from ucat_console.backend.sessions.repair import repair
 from ucat_console.telemetry import channels as C

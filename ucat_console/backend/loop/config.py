@@ -21,16 +21,13 @@ from ucat_console.control.params import (
 )
 from ucat_console.typedconf import Config, param
 
-#: the fin controllers' names (``modes.MODES``: four MPC fins, three MPC problems with the
-#: rear pair synchronised, the inverse-model baseline, the identification manoeuvre)
-MODES = mode_names()
-
 
 @dataclass(frozen=True)
 class LoopConfig(Config):
     """The closed loop (control.md sections 7-9)."""
 
-    mode: str = param("mpc", choices=MODES, doc="fin controller")
+    # the registry is read at each check: a mode registered after this import is a choice too
+    mode: str = param("mpc", choices=mode_names, doc="fin controller (a mode of ``modes.MODES``)")
     plan_latency: float = param(
         0.02, lo=0.0, hi=1.0, unit="s",
         doc="a plan requested at t is handed to its executor at t + plan_latency "

@@ -83,10 +83,11 @@ def read_run(session: SessionParts, name: str | None = None, max_messages: int |
     return Run(name or session.session_id, data, events, session.start, session.start, session.end)
 
 
-def load_run(session: str | Path, directory: str | Path | None = None, max_messages: int | None = None) -> Run:
+def load_run(session: str | Path, directory: str | Path | None = None, max_messages: int | None = None,
+             *, confined: bool = True) -> Run:
     """Open a session (id or any part file; a file that is not a session is refused with a
-    ValueError naming it) and read it."""
-    with SessionParts(session, directory) as s:
+    ValueError naming it; ``confined``: as :class:`SessionParts`) and read it."""
+    with SessionParts(session, directory, confined=confined) as s:
         return read_run(s, max_messages=max_messages)
 
 

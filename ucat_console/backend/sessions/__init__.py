@@ -9,10 +9,12 @@ writes what is published, the player publishes what was written.
     legacy     reading files of encoding 1 (written before encoding 2)
     foxglove   the robot for Foxglove's 3-D panel (transforms, scene) and foxglove.Log,
                written beside our channels (and served live by backend.foxglove_live)
-    files      the sessions directory, file names, metadata record names
-    recorder   Recorder: stream -> crash-safe MCAP parts
+    files      the sessions directory, file names, metadata record names, a session's part
+               files (a page's paths confined to the directory, the shell's not)
+    recorder   Recorder: stream -> crash-safe MCAP parts (its writer: mcap_writer)
+    mcap_read  one MCAP file's summary, metadata and chunks, read within the limits
     reader     SessionReader (one part file) and SessionParts (every part of a session as one
-               recording): messages, time ranges, state_at, events
+               recording): decoded messages, time ranges, state_at, events
     repair     rewrite a truncated file fully indexed
     index      list sessions from their summaries
     export     CSV per channel

@@ -1,4 +1,5 @@
-"""Where session files live, what they are called, and the metadata records they hold.
+"""Where session files live, what they are called, and the metadata records they hold;
+which files a session id or a named part stands for (:func:`session_paths`).
 
 The sessions directory is the one a run is given (``run --sessions-dir``, a command's
 ``--dir``, ``console.sessions_dir`` in the configuration), else the folder the environment
@@ -114,3 +115,84 @@ def inside_sessions(path: str | Path, directory: str | Path | None = None) -> Pa
     if not p.is_relative_to(root):
         raise ValueError(f"{path}: outside the sessions directory {root}")
     return p
+
+
+def session_path(path: str | Path, directory: str | Path | None = None, *, confined: bool = True) -> Path:
+    """``path`` resolved. ``confined`` (the default: what a page names) refuses a path
+    outside the sessions directory (:func:`inside_sessions`); ``confined=False`` is for a
+    file the person at the shell named (the command line, ``ucat_console.sessions.open``),
+    read wherever it is."""
+    return inside_sessions(path, directory) if confined else Path(path).expanduser().resolve()
+
+
+def part_paths(session_id: str, directory: str | Path | None = None) -> dict[int, Path]:
+    """The part files of ``session_id`` in ``directory``, by part number (empty when none):
+    the regular files named ``<session_id>_<part>.mcap`` (a symbolic link is never a part).
+
+    Two files naming the same part (``_001`` and ``_0001``) raise ValueError naming both.
+    """
+    root = sessions_dir(directory)
+    found: dict[int, Path] = {}
+    if not root.is_dir():
+        return found
+    for path in sorted(root.iterdir()):
+        parsed = parse_part_name(path)
+        if parsed is None or parsed[0] != session_id or path.is_symlink() or not path.is_file():
+            continue
+        if parsed[1] in found:
+            raise ValueError(f"{path}: part {parsed[1]} of session {session_id!r} is also "
+                             f"{found[parsed[1]].name}; keep one of the two")
+        found[parsed[1]] = path
+    return found
+
+
+def part_sequence(session_id: str, folder: Path) -> list[Path]:
+    """The part files of a session in part order; ValueError naming the first missing one."""
+    found = part_paths(session_id, folder)
+    if not found:
+        raise ValueError(f"session {session_id!r}: no files in {folder}")
+    for n in range(1, max(found) + 1):
+        if n not in found:
+            have = ", ".join(p.name for _, p in sorted(found.items()))
+            raise ValueError(f"{folder / part_name(session_id, n)}: no such file: part {n} "
+                             f"of session {session_id!r} is missing (found {have})")
+    return [found[n] for n in sorted(found)]
+
+
+def named_file(session: str | Path, root: Path) -> Path | None:
+    """The file ``session`` names (as given, else inside ``root``), None when it names none.
+
+    A ``Path``, or text holding a path separator or ending in ``.mcap``, names a file
+    (ValueError when there is none); any other text is a session id (None).
+    """
+    text = str(session)
+    is_path = isinstance(session, Path) or "/" in text or "\\" in text
+    if not is_path and not text.endswith(SUFFIX):
+        return None
+    p = Path(text).expanduser()
+    for candidate in (p,) if p.is_absolute() else (p, root / p):
+        if candidate.is_file():
+            return candidate
+    raise ValueError(f"{session}: no such session file")
+
+
+def session_paths(session: str | Path, root: Path, confined: bool = True) -> tuple[str | None, list[Path]]:
+    """(session id, part files in order) named by a session id or by one of its parts;
+    the id is None for a file whose name is not a part name (it is read alone). A named
+    file outside ``root`` is refused when ``confined`` (:func:`session_path`)."""
+    given = named_file(session, root)
+    if given is None:
+        sid = str(session)
+        if not sid:
+            raise ValueError("session: no session id given")
+        return sid, part_sequence(sid, root)
+    p = session_path(given, root, confined=confined)
+    parsed = parse_part_name(p)
+    if parsed is None:
+        return None, [p]
+    return parsed[0], part_sequence(parsed[0], p.parent)
+
+
+def session_files(session: str | Path, directory: str | Path | None = None) -> list[Path]:
+    """The part files :class:`~.reader.SessionParts` opens for ``session``, in part order."""
+    return session_paths(session, sessions_dir(directory))[1]

@@ -25,13 +25,8 @@ from mcap.records import Chunk, Metadata
 from mcap.stream_reader import StreamReader
 
 from ucat_console.backend.sessions import codec, files, writing
-from ucat_console.backend.sessions.reader import (
-    MAGIC,
-    SessionReader,
-    TruncatedSessionError,
-    part_paths,
-    record_limit,
-)
+from ucat_console.backend.sessions.mcap_read import MAGIC, TruncatedSessionError, record_limit
+from ucat_console.backend.sessions.reader import SessionReader
 from ucat_console.telemetry.channels import EVENTS
 
 log = logging.getLogger(__name__)
@@ -239,7 +234,7 @@ def session_parts(session_id: str, directory: str | Path | None = None) -> list[
     reads a session as one, also refuses a gap in the part numbers.
     """
     root = files.sessions_dir(directory)
-    parts = part_paths(session_id, root)
+    parts = files.part_paths(session_id, root)
     if not parts:
         raise ValueError(f"session {session_id!r}: no files in {root}")
     return [p for _, p in sorted(parts.items())]

@@ -15,46 +15,29 @@ Times given to and returned by the reader are seconds on the recorded stream's c
 messages' ``t``); the file's ``epoch_offset`` converts them to the file's nanoseconds.
 Time ranges are half-open, ``[start, end)``, as mcap's ``starting_at``/``ending_before``.
 
-Over 500 lines because the one part file and the whole session are one interface with one
-base (records in time order, ``state_at``, events, the refusals above): split, the checks
-a part and a session share would be read in two places.
+The reader is a typed view: the MCAP file's summary, metadata and chunks are read by
+:mod:`.mcap_read` (beside the writer, :mod:`.mcap_writer`), a session's part files are
+found by :mod:`.files`; here the messages are decoded and a part and a whole session offer
+one interface (one base: records in time order, ``state_at``, events).
 """
 
 from __future__ import annotations
 
 import bisect
 import heapq
-import io
-import logging
 import math
 import os
-import struct
 import threading
-import zlib
 from array import array
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any, Iterable, Iterator, Self, Sequence
 
-from mcap.data_stream import ReadDataStream
-from mcap.exceptions import McapError
-from mcap.opcode import Opcode
-from mcap.records import (
-    AttachmentIndex,
-    Channel,
-    Chunk,
-    ChunkIndex,
-    Footer,
-    Message,
-    Metadata,
-    MetadataIndex,
-    Schema,
-    Statistics,
-)
-from mcap.stream_reader import StreamReader
+from mcap.records import Channel, Message, Schema
 from mcap.summary import Summary
 
-from ucat_console.backend.sessions import codec, files, foxglove, legacy, limits
+from ucat_console.backend.sessions import codec, files, foxglove, legacy
+from ucat_console.backend.sessions.mcap_read import MAGIC, BudgetHolder, McapFile
 from ucat_console.backend.sessions.schema import (
     MESSAGE_ENCODING,
     NONFINITE,
@@ -63,77 +46,11 @@ from ucat_console.backend.sessions.schema import (
     schema_encoding,
     schema_name,
 )
-
-#: the message decoder of each schema encoding (schema.schema_encoding)
-_DECODERS = {1: legacy.decode, 2: codec.decode}
 from ucat_console.telemetry.channels import CHANNELS, EVENTS
 from ucat_console.telemetry.events import LEVELS, Event
 
-log = logging.getLogger(__name__)
-
-MAGIC = b"\x89MCAP0\r\n"
-FOOTER_SIZE = 1 + 8 + 8 + 8 + 4  # opcode, length, summary start, summary offset start, CRC
-_RECORD_HEAD = struct.Struct("<BQ")  # opcode, length
-_MESSAGE_FIELDS = struct.Struct("<HIQQ")  # channel, sequence, log time, publish time
-#: bytes of the memory budget per byte of a summary section (its records as Python objects,
-#: measured with tracemalloc: about 6 on a recorded session)
-SUMMARY_COST = 8
-#: bytes of the memory budget per message held besides its data (the record object, its
-#: place in the ordering heap; measured with tracemalloc: about 200)
-MESSAGE_COST = 400
-
-
-def record_limit() -> int:
-    """The largest record read whole: a chunk within the limit, compressed (zstd and lz4
-    add a little to data that does not compress), with its header."""
-    cap = limits.limits().max_chunk
-    return cap + cap // 64 + 4096
-
-
-def _error(e: BaseException) -> str:
-    text = str(e)
-    return f"{type(e).__name__}: {text if len(text) <= 200 else text[:197] + '...'}"
-
-
-def _by_offset(ci: ChunkIndex) -> int:
-    return ci.chunk_start_offset
-
-
-def _chunk_data(body: bytes, ci: ChunkIndex) -> bytes:
-    """The decompressed records of the chunk record ``body`` (read where ``ci`` puts it);
-    ValueError unless it is the chunk ``ci`` describes and decompresses as it declares."""
-    if len(body) != ci.chunk_length:
-        raise ValueError("the file ends inside it")
-    opcode, length = _RECORD_HEAD.unpack_from(body)
-    if opcode != Opcode.CHUNK or _RECORD_HEAD.size + length != len(body):
-        raise ValueError(f"there is no chunk record of {ci.chunk_length} bytes there")
-    try:
-        chunk = Chunk.read(ReadDataStream(io.BytesIO(body[_RECORD_HEAD.size:])))
-    except Exception as e:
-        raise ValueError(f"unreadable chunk header ({_error(e)})") from None
-    if (chunk.uncompressed_size, chunk.compression, len(chunk.data)) != (
-            ci.uncompressed_size, ci.compression, ci.compressed_size):
-        raise ValueError(
-            f"it is not the chunk its index describes ({codec.short(chunk.compression, 12)}, {len(chunk.data)} -> "
-            f"{chunk.uncompressed_size} bytes; the index: {codec.short(ci.compression, 12)}, {ci.compressed_size} -> "
-            f"{ci.uncompressed_size} bytes)")
-    return decompressed(chunk)
-
-
-def decompressed(chunk: Chunk) -> bytes:
-    """A chunk's records, decompressed within the chunk limit, CRC checked (ValueError)."""
-    cap = limits.limits().max_chunk
-    if chunk.uncompressed_size > cap:
-        raise ValueError(f"it decompresses to {chunk.uncompressed_size} bytes, over the limit of "
-                         f"{cap} (review.max_chunk)")
-    data = limits.decompress(chunk.compression, chunk.data, chunk.uncompressed_size)
-    if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
-        raise ValueError("its CRC does not match its data")
-    return data
-
-
-class TruncatedSessionError(ValueError):
-    """The file has no readable summary (a killed recorder): ``repair`` recovers it."""
+#: the message decoder of each schema encoding (schema.schema_encoding)
+_DECODERS = {1: legacy.decode, 2: codec.decode}
 
 
 @dataclass(frozen=True)
@@ -206,7 +123,7 @@ class EventIndex:
 _INDEX_LOCK = threading.Lock()
 
 
-class _Recording:
+class _Recording(BudgetHolder):
     """What a recording offers on top of its ``records`` and ``state_records_at_ns``: times
     in stream seconds, metadata by name, messages, state and events (shared by one part
     file and a whole session)."""
@@ -217,19 +134,10 @@ class _Recording:
     message_count: int
     start_ns: int
     end_ns: int
-    _held = 0  # bytes of the memory budget held while open (summary, metadata, event index)
     _event_index: EventIndex | None = None
 
     def close(self) -> None:
         raise NotImplementedError
-
-    def _hold(self, n: int, what: str) -> None:
-        limits.budget().reserve(n, f"{self.path}: {what}")
-        self._held += n
-
-    def _let_go(self) -> None:
-        held, self._held = self._held, 0
-        limits.budget().release(held)
 
     def records(
         self,
@@ -343,18 +251,17 @@ class _Recording:
             return self._event_index
 
 
-class SessionReader(_Recording):
+class SessionReader(McapFile, _Recording):
     """One session file, opened for reading (use as a context manager or ``close()``).
 
-    Within the limits of :mod:`~ucat_console.backend.sessions.limits`: the summary, the
-    metadata and each chunk are read with mcap's record reader (``StreamReader``, chunks
-    emitted whole: nothing is decompressed behind the limits' back), each chunk checked
-    against its index and decompressed here no further than it declares. Reads use
-    ``os.pread``: one reader may serve several threads (the pages sharing it, :mod:`.shared`).
+    Its summary, metadata and chunks are read by :class:`~.mcap_read.McapFile`, within the
+    limits of :mod:`~ucat_console.backend.sessions.limits`, with ``os.pread``: one reader may
+    serve several threads (the pages sharing it, :mod:`.shared`). Its channels must be ours
+    (our schemas); its messages are decoded to the telemetry dataclasses.
     """
 
-    def __init__(self, path: str | Path, directory: str | Path | None = None) -> None:
-        self.path = files.inside_sessions(path, directory)
+    def __init__(self, path: str | Path, directory: str | Path | None = None, *, confined: bool = True) -> None:
+        self.path = files.session_path(path, directory, confined=confined)
         p = self.path
         if not p.is_file():
             raise ValueError(f"{path}: no such session file")
@@ -411,106 +318,7 @@ class SessionReader(_Recording):
         self.start_ns = stats.message_start_time
         self.end_ns = stats.message_end_time
 
-    def _records_at(self, offset: int) -> Iterator[Any]:
-        """mcap's record reader from ``offset`` (chunks emitted whole, records within the
-        limits' largest record)."""
-        self._file.seek(offset)
-        return StreamReader(self._file, skip_magic=True, emit_chunks=True,
-                            record_size_limit=record_limit()).records
-
-    def _read_summary(self) -> Summary:
-        """The summary section (TruncatedSessionError when there is none): its records, read
-        within the memory budget, and nothing but summary records."""
-        p = self.path
-        tail = FOOTER_SIZE + len(MAGIC)
-        end = os.pread(self._fd, tail, self._size - tail) if self._size >= len(MAGIC) + tail else b""
-        if len(end) != tail or end[-len(MAGIC):] != MAGIC or end[0] != Opcode.FOOTER:
-            raise TruncatedSessionError(
-                f"{p}: truncated or corrupted (no footer at its end); "
-                "`ucat-console sessions repair` recovers its complete records"
-            )
-        summary_start = int.from_bytes(end[9:17], "little")
-        if summary_start == 0:
-            raise TruncatedSessionError(
-                f"{p}: has no summary section; `ucat-console sessions repair` "
-                "rewrites it fully indexed"
-            )
-        if not len(MAGIC) <= summary_start <= self._size - tail:
-            raise ValueError(f"{p}: corrupted data: its footer puts the summary at byte {summary_start} "
-                             f"of {self._size}")
-        self._hold(SUMMARY_COST * (self._size - tail - summary_start), "its summary")
-        summary = Summary()
-        try:
-            for rec in self._records_at(summary_start):
-                if isinstance(rec, Footer):
-                    break
-                if isinstance(rec, Statistics):
-                    summary.statistics = rec
-                elif isinstance(rec, Schema):
-                    summary.schemas[rec.id] = rec
-                elif isinstance(rec, Channel):
-                    summary.channels[rec.id] = rec
-                elif isinstance(rec, ChunkIndex):
-                    summary.chunk_indexes.append(rec)
-                elif isinstance(rec, MetadataIndex):
-                    summary.metadata_indexes.append(rec)
-                elif isinstance(rec, AttachmentIndex):
-                    summary.attachment_indexes.append(rec)
-                elif isinstance(rec, (Chunk, Message)):
-                    raise McapError(f"a {type(rec).__name__} record in the summary section")
-        except ValueError:
-            raise
-        except Exception as e:
-            raise TruncatedSessionError(
-                f"{p}: truncated or corrupted (no readable summary: {_error(e)}); "
-                "`ucat-console sessions repair` recovers its complete records"
-            ) from None
-        if summary.statistics is None:
-            raise TruncatedSessionError(
-                f"{p}: has no summary section; `ucat-console sessions repair` "
-                "rewrites it fully indexed"
-            )
-        return summary
-
-    def _check_chunk_indexes(self, summary: Summary) -> None:
-        """Every chunk the index lists lies within the file and within the chunk limit."""
-        p, cap, stats = self.path, limits.limits().max_chunk, summary.statistics
-        assert stats is not None
-        if stats.message_count and not summary.chunk_indexes:
-            raise ValueError(f"{p}: has messages but no chunk index; `ucat-console sessions repair "
-                             "--force` rewrites it indexed")
-        for ci in summary.chunk_indexes:
-            where = f"{p}: the chunk at byte {ci.chunk_start_offset}"
-            if ci.uncompressed_size > cap:
-                raise ValueError(f"{where} decompresses to {ci.uncompressed_size} bytes, over the "
-                                 f"limit of {cap} (review.max_chunk)")
-            if not (len(MAGIC) <= ci.chunk_start_offset
-                    and ci.chunk_start_offset + ci.chunk_length <= self._size
-                    and ci.chunk_length <= record_limit()):
-                raise ValueError(f"{where}: corrupted index: {ci.chunk_length} bytes at byte "
-                                 f"{ci.chunk_start_offset} of a {self._size}-byte file")
-
-    def _read_metadata(self, summary: Summary) -> dict[str, dict[str, str]]:
-        """The metadata records by name (a later record replaces an earlier one)."""
-        out: dict[str, dict[str, str]] = {}
-        self._hold(2 * sum(mi.length for mi in summary.metadata_indexes), "its metadata")
-        try:
-            for mi in summary.metadata_indexes:
-                if not len(MAGIC) <= mi.offset < self._size:
-                    raise McapError(f"a metadata index points to byte {mi.offset} of {self._size}")
-                rec = next(self._records_at(mi.offset))
-                if not isinstance(rec, Metadata):
-                    raise McapError(f"a metadata index points to a {type(rec).__name__} record")
-                out[rec.name] = dict(rec.metadata)
-        except Exception as e:
-            raise ValueError(f"{self.path}: corrupted metadata ({_error(e)})") from None
-        return out
-
     # ------------------------------------------------------------------ properties
-    def close(self) -> None:
-        self._file.close()
-        self._let_go()
-
     @property
     def channels(self) -> list[str]:
         """Telemetry channels registered in the file."""
@@ -537,132 +345,6 @@ class SessionReader(_Recording):
             if c in self._topic_ids:
                 out.append(c)
         return out
-
-    def _iter(
-        self, topics: list[str], starting_at: int | None, ending_before: int | None,
-        reverse: bool = False, ordered: bool = True,
-    ) -> Iterator[tuple[Channel, Message]]:
-        """The messages of ``topics`` in ``[starting_at, ending_before)``: in time order
-        (``reverse``: latest first; at equal times in file order, as mcap's reader), or
-        chunk by chunk in file order. A chunk is read when the next message may be in it;
-        while its messages wait to be yielded they count against the memory budget."""
-        if not topics:
-            return
-        lo, hi = starting_at, ending_before
-        if lo is not None and hi is not None and lo >= hi:
-            return
-        ids = {self._topic_ids[t] for t in topics}
-        chunks = [
-            ci for ci in self._summary.chunk_indexes
-            if (lo is None or ci.message_end_time >= lo) and (hi is None or ci.message_start_time < hi)
-            and (not ci.message_index_offsets or not ids.isdisjoint(ci.message_index_offsets))
-        ]
-        channels = self._summary.channels
-        budget = limits.budget()
-        held: dict[int, list[int]] = {}  # chunk offset -> [messages still queued, bytes held]
-        try:
-            if not ordered:
-                for ci in sorted(chunks, key=_by_offset):
-                    messages, n = self._read_chunk(ci, ids, lo, hi)
-                    held[ci.chunk_start_offset] = [0, n]
-                    for m in messages:
-                        yield channels[m.channel_id], m
-                    del held[ci.chunk_start_offset]
-                    budget.release(n)
-                return
-            heap: list[tuple[int, int, int, Any]] = [
-                (-ci.message_end_time, -(ci.chunk_start_offset + ci.chunk_length), 1, ci) if reverse
-                else (ci.message_start_time, ci.chunk_start_offset, -1, ci)
-                for ci in chunks
-            ]
-            heapq.heapify(heap)
-            sign = -1 if reverse else 1
-            while heap:
-                _, off, _, item = heapq.heappop(heap)
-                if type(item) is ChunkIndex:
-                    messages, n = self._read_chunk(item, ids, lo, hi)
-                    if not messages:
-                        budget.release(n)
-                        continue
-                    at = item.chunk_start_offset
-                    held[at] = [len(messages), n]
-                    for i, m in enumerate(messages):
-                        heapq.heappush(heap, (sign * m.log_time, sign * at, sign * i, m))
-                    continue
-                at = sign * off
-                h = held[at]
-                h[0] -= 1
-                if h[0] == 0:
-                    del held[at]
-                    budget.release(h[1])
-                yield channels[item.channel_id], item
-        finally:
-            for _, n in held.values():
-                budget.release(n)
-
-    def _read_chunk(self, ci: ChunkIndex, ids: set[int], lo: int | None,
-                    hi: int | None) -> tuple[list[Message], int]:
-        """The messages of channels ``ids`` in ``[lo, hi)`` of one chunk, in file order, and
-        the bytes of the memory budget they hold (the caller releases them).
-
-        The chunk record is read whole (its length from the index, within the limits) and
-        must be the chunk its index describes; its data is decompressed no further than the
-        size it declares (a chunk that decompresses to another size is refused); the CRC is
-        checked; each record must lie within the chunk; a message larger than the message
-        limit is refused before it is decoded."""
-        where = f"{self.path}: the chunk at byte {ci.chunk_start_offset}"
-        if self._file.closed:  # its descriptor may be another file's by now
-            raise ValueError(f"{self.path}: the reader is closed")
-        budget = limits.budget()
-        need = ci.chunk_length + ci.uncompressed_size
-        budget.reserve(need, f"{where}")
-        try:
-            try:
-                data = _chunk_data(os.pread(self._fd, ci.chunk_length, ci.chunk_start_offset), ci)
-            except ValueError as e:
-                raise ValueError(f"{where}: corrupted data: {e}") from None
-            messages, kept = self._messages_in(data, ids, lo, hi, where)
-            if kept > need:  # many small messages: their objects outweigh the chunk's bytes
-                budget.reserve(kept - need, f"{where}: its {len(messages)} messages")
-        except BaseException:
-            budget.release(need)
-            raise
-        if kept < need:
-            budget.release(need - kept)
-        return messages, kept
-
-    def _messages_in(self, data: bytes, ids: set[int], lo: int | None, hi: int | None,
-                     where: str) -> tuple[list[Message], int]:
-        """The messages in a chunk's records (channels ``ids``, times ``[lo, hi)``) and the
-        bytes they hold."""
-        out: list[Message] = []
-        kept = 0
-        cap = limits.limits().max_message
-        pos, n = 0, len(data)
-        while pos < n:
-            if pos + _RECORD_HEAD.size > n:
-                raise ValueError(f"{where}: corrupted data: a record header is cut at the chunk's end")
-            opcode, length = _RECORD_HEAD.unpack_from(data, pos)
-            pos += _RECORD_HEAD.size
-            end = pos + length
-            if end > n:
-                raise ValueError(f"{where}: corrupted data: a record of {length} bytes runs past the chunk's end")
-            if opcode == Opcode.MESSAGE:
-                if length < _MESSAGE_FIELDS.size:
-                    raise ValueError(f"{where}: corrupted data: a message record of {length} bytes")
-                cid, seq, log_time, publish_time = _MESSAGE_FIELDS.unpack_from(data, pos)
-                if cid in ids and (lo is None or log_time >= lo) and (hi is None or log_time < hi):
-                    size = length - _MESSAGE_FIELDS.size
-                    if size > cap:
-                        topic = self._summary.channels[cid].topic
-                        raise ValueError(
-                            f"{self.path}: channel {codec.short(topic)}, message at {log_time} ns: {size} bytes, "
-                            f"over the limit of {cap} (review.max_message)")
-                    out.append(Message(channel_id=cid, sequence=seq, log_time=log_time,
-                                       publish_time=publish_time, data=data[pos + _MESSAGE_FIELDS.size:end]))
-                    kept += size + MESSAGE_COST
-            pos = end
-        return out, kept
 
     def _decode(self, channel: Channel, message: Message) -> Record:
         cls = CHANNELS[channel.topic]
@@ -714,109 +396,8 @@ class SessionReader(_Recording):
             pending.difference_update(latest)
         return {c: self._decode(*latest[c]) for c in topics if c in latest}
 
-    def _chunks_by_start(self) -> tuple[list[ChunkIndex], list[int]]:
-        if getattr(self, "_by_start", None) is None:
-            chunks = sorted(self._summary.chunk_indexes, key=lambda c: c.message_start_time)
-            self._by_start = (chunks, [c.message_start_time for c in chunks])
-        return self._by_start
-
-    def _present_before(self, topics: list[str], ns: int) -> list[str]:
-        """Topics with a chunk that starts at or before ``ns`` (they may have a message then)."""
-        first = self._first_chunk_ns()
-        return [t for t in topics if first.get(t, ns + 1) <= ns]
-
-    def _first_chunk_ns(self) -> dict[str, int]:
-        """For each topic, the start time of the earliest chunk holding it (from the index)."""
-        if getattr(self, "_first_ns", None) is None:
-            names = {cid: ch.topic for cid, ch in self._summary.channels.items()}
-            first: dict[str, int] = {}
-            for ci in self._summary.chunk_indexes:
-                if not ci.message_index_offsets:  # unindexed chunk: any topic may be in it
-                    for topic in names.values():
-                        first[topic] = min(first.get(topic, 1 << 63), ci.message_start_time)
-                    continue
-                for cid in ci.message_index_offsets:
-                    topic = names.get(cid)
-                    if topic is not None and ci.message_start_time < first.get(topic, 1 << 63):
-                        first[topic] = ci.message_start_time
-            self._first_ns: dict[str, int] | None = first
-        assert self._first_ns is not None
-        return self._first_ns
-
 
 # ---------------------------------------------------------------------- whole sessions
-def part_paths(session_id: str, directory: str | Path | None = None) -> dict[int, Path]:
-    """The part files of ``session_id`` in ``directory``, by part number (empty when none):
-    the regular files named ``<session_id>_<part>.mcap`` (a symbolic link is never a part).
-
-    Two files naming the same part (``_001`` and ``_0001``) raise ValueError naming both.
-    """
-    root = files.sessions_dir(directory)
-    found: dict[int, Path] = {}
-    if not root.is_dir():
-        return found
-    for path in sorted(root.iterdir()):
-        parsed = files.parse_part_name(path)
-        if parsed is None or parsed[0] != session_id or path.is_symlink() or not path.is_file():
-            continue
-        if parsed[1] in found:
-            raise ValueError(f"{path}: part {parsed[1]} of session {session_id!r} is also "
-                             f"{found[parsed[1]].name}; keep one of the two")
-        found[parsed[1]] = path
-    return found
-
-
-def _sequence(session_id: str, folder: Path) -> list[Path]:
-    """The part files of a session in part order; ValueError naming the first missing one."""
-    found = part_paths(session_id, folder)
-    if not found:
-        raise ValueError(f"session {session_id!r}: no files in {folder}")
-    for n in range(1, max(found) + 1):
-        if n not in found:
-            have = ", ".join(p.name for _, p in sorted(found.items()))
-            raise ValueError(f"{folder / files.part_name(session_id, n)}: no such file: part {n} "
-                             f"of session {session_id!r} is missing (found {have})")
-    return [found[n] for n in sorted(found)]
-
-
-def _named_file(session: str | Path, root: Path) -> Path | None:
-    """The file ``session`` names (as given, else inside ``root``), None when it names none.
-
-    A ``Path``, or text holding a path separator or ending in ``.mcap``, names a file
-    (ValueError when there is none); any other text is a session id (None).
-    """
-    text = str(session)
-    is_path = isinstance(session, Path) or "/" in text or "\\" in text
-    if not is_path and not text.endswith(files.SUFFIX):
-        return None
-    p = Path(text).expanduser()
-    for candidate in (p,) if p.is_absolute() else (p, root / p):
-        if candidate.is_file():
-            return candidate
-    raise ValueError(f"{session}: no such session file")
-
-
-def _paths_of(session: str | Path, root: Path) -> tuple[str | None, list[Path]]:
-    """(session id, part files in order) named by a session id or by one of its parts;
-    the id is None for a file whose name is not a part name (it is read alone)."""
-    given = _named_file(session, root)
-    if given is None:
-        sid = str(session)
-        if not sid:
-            raise ValueError("session: no session id given")
-        return sid, _sequence(sid, root)
-    p = files.inside_sessions(given, root)
-    parsed = files.parse_part_name(p)
-    if parsed is None:
-        return None, [p]
-    return parsed[0], _sequence(parsed[0], p.parent)
-
-
-def session_files(session: str | Path, directory: str | Path | None = None) -> list[Path]:
-    """The part files :class:`SessionParts` opens for ``session``, in part order."""
-    return _paths_of(session, files.sessions_dir(directory))[1]
-
-
 def _check_parts(readers: Sequence[SessionReader], session_id: str | None) -> None:
     """ValueError naming the part that does not belong with the first: another session id
     or part number in its metadata than in its name, or another ``epoch_offset``."""
@@ -844,7 +425,9 @@ class SessionParts(_Recording):
 
     Opened from a session id (its parts in the sessions ``directory``) or from the path of
     any one part (its parts beside it); a file whose name is not a part name is read
-    alone, as the session named by its file name (whatever its metadata says). Holds one
+    alone, as the session named by its file name (whatever its metadata says). A named file
+    must lie in the sessions directory unless ``confined=False`` (the command line: a file
+    the user named is read wherever it is; a page never opens one so). Holds one
     :class:`SessionReader` per part in part order (``parts``) and offers their interface
     over the whole session, so the player, the review panel, the export and counterfactual
     replay read a split session as one file:
@@ -863,13 +446,14 @@ class SessionParts(_Recording):
     per session); ``paths`` every part's.
     """
 
-    def __init__(self, session: str | Path, directory: str | Path | None = None) -> None:
+    def __init__(self, session: str | Path, directory: str | Path | None = None, *,
+                 confined: bool = True) -> None:
         root = files.sessions_dir(directory)
-        sid, paths = _paths_of(session, root)
+        sid, paths = files.session_paths(session, root, confined)
         readers: list[SessionReader] = []
         try:
             for path in paths:  # a truncated part: TruncatedSessionError naming it
-                readers.append(SessionReader(path, root))
+                readers.append(SessionReader(path, root, confined=confined))
             _check_parts(readers, sid)
         except BaseException:
             for r in readers:
@@ -1001,11 +585,13 @@ class SessionParts(_Recording):
 SessionSource = SessionReader | SessionParts
 
 
-def open_session(session: str | Path, directory: str | Path | None = None) -> SessionParts:
+def open_session(session: str | Path, directory: str | Path | None = None, *,
+                 confined: bool = True) -> SessionParts:
     """Open a whole session inside ``directory`` (default: the project's ``sessions/``).
 
     ``session``: a session id, or the path or file name of any one of its parts (every
     part is opened); a file whose name is not a part name is opened alone. A one-part
-    session reads exactly as its file does with :class:`SessionReader`.
+    session reads exactly as its file does with :class:`SessionReader`. ``confined=False``:
+    a named file is read wherever it is (a path the user typed, :func:`files.session_path`).
     """
-    return SessionParts(session, directory)
+    return SessionParts(session, directory, confined=confined)

@@ -33,13 +33,8 @@ from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
 
 from ucat_console.backend.sessions import files, limits, writing
-from ucat_console.backend.sessions.reader import (
-    MAGIC,
-    SessionReader,
-    TruncatedSessionError,
-    decompressed,
-    record_limit,
-)
+from ucat_console.backend.sessions.mcap_read import MAGIC, TruncatedSessionError, decompressed, record_limit
+from ucat_console.backend.sessions.reader import SessionReader
 
 log = logging.getLogger(__name__)
 
@@ -74,13 +69,15 @@ def repair(
     *,
     keep_original: bool = True,
     force: bool = False,
+    confined: bool = True,
 ) -> RepairReport:
     """Rewrite ``path`` fully indexed from its complete records.
 
     A file that already opens is left alone (``repaired`` False) unless ``force``; a file
-    being recorded, and an original a repair kept, are refused (ValueError).
+    being recorded, and an original a repair kept, are refused (ValueError). ``confined``:
+    ``path`` must lie in the sessions directory (:func:`files.session_path`).
     """
-    p = files.inside_sessions(path, directory)
+    p = files.session_path(path, directory, confined=confined)
     if not p.is_file():
         raise ValueError(f"{path}: no such session file")
     if files.original_of(p.name):

@@ -17,7 +17,7 @@ import threading
 from pathlib import Path
 
 from ucat_console.backend.sessions import files
-from ucat_console.backend.sessions.reader import SessionParts, session_files
+from ucat_console.backend.sessions.reader import SessionParts
 
 _lock = threading.Lock()
 #: the files' identity -> [reader, users]
@@ -37,7 +37,7 @@ def acquire(session: str | Path, directory: str | Path | None = None) -> Session
     """The reader of ``session`` (a session id or a part file, as :class:`SessionParts`
     takes it), shared with every other user of the same files; :func:`release` it."""
     root = files.sessions_dir(directory)
-    key = _identity(session_files(session, root))
+    key = _identity(files.session_files(session, root))
     with _lock:
         entry = _open.get(key)
         if entry is not None:

@@ -57,8 +57,8 @@ from ucat_console.backend.arming import ArmingGate
 from ucat_console.backend.devices.leak import LeakEmulator, LeakInput
 from ucat_console.backend.loop.clock import Clock, PacedClock
 from ucat_console.backend.loop.closed_loop import PID_LOOPS, ClosedLoop
-from ucat_console.backend.loop.config import MODES
 from ucat_console.backend.loop.kernels_warm_up import warm_up
+from ucat_console.backend.loop.modes import MODES
 from ucat_console.backend.review.effects import ChangeEffects
 from ucat_console.backend.safety import CHANNELS as SAFETY_CHANNELS
 from ucat_console.backend.safety import SafetyMonitor, Transition

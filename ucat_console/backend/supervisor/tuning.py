@@ -19,7 +19,7 @@ from ucat_console.backend.loop.closed_loop import PID_LOOPS, ClosedLoop
 from ucat_console.backend.supervisor.commands import CommandRefused, number
 from ucat_console.config import AppConfig
 from ucat_console.control.mpc import check_config
-from ucat_console.typedconf import check_value
+from ucat_console.typedconf import check_value, choices_of
 
 #: what the operator may tune live: block -> fields (PID blocks are "pid.<loop>")
 TUNABLE: dict[str, tuple[str, ...]] = {
@@ -125,9 +125,10 @@ class Tuning:
             block, name = split_key(key)
             cfg = current[block]
             f = next(f for f in fields(cfg) if f.name == name)
-            if f.metadata.get("choices") is not None:
+            allowed = choices_of(f)
+            if allowed is not None:
                 if not isinstance(value, str):
-                    raise CommandRefused(f"{key}: expected a name, one of {', '.join(map(str, f.metadata['choices']))}; "
+                    raise CommandRefused(f"{key}: expected a name, one of {', '.join(map(str, allowed))}; "
                                          f"got {value!r}")
                 v: Any = value
             else:
