@@ -124,8 +124,8 @@ _WORST = {"off": 0, "ok": 1, "warn": 2, "bad": 3}
 
 def vehicle_light(parts: list[Light]) -> Light:
     """One light for the loop watchdog, the depth limits, the battery, the leak detector, the
-    estimate and the fins' pace (a bar of 1280 px keeps DISARM on screen): the worst of them, and each one's
-    reason, the ones not green first."""
+    estimate and the fins' pace (a bar of 1280 px keeps DISARM on screen): the worst of them,
+    and each one's reason, the ones not green first."""
     worst = max(parts, key=lambda x: _WORST[x.state]).state
     ranked = sorted(parts, key=lambda x: -_WORST[x.state])
     return Light(LIGHTS["vehicle"], worst, "; ".join(f"{x.name}: {x.why}" for x in ranked))
