@@ -97,6 +97,28 @@ def test_a_start_with_the_fins_fifteen_seconds_late_is_no_alarm() -> None:
     assert alarms and alarms[0].active and "speed -" in alarms[0].cause
 
 
+def test_starts_after_a_disarm_raise_no_slow_fin_and_no_alarm(make_console: Any) -> None:
+    """Disarmed, the fins are not driven and their cycles do not keep pace: that is not a
+    slow fin, and the next start from rest is no alarm."""
+    from support import TOKEN, console_config
+
+    sup = make_console(console_config(base="sim-tuned")).sup
+    sup.client_connected(1)
+    assert sup.take_control(1, TOKEN)
+    seen: list[Any] = []
+    sup.stream.subscribe(lambda _c, ev: seen.append(ev), [ch.EVENTS])
+    sup.set_setpoints(1, velocity=0.0, depth=1.0)
+    for _ in range(3):
+        sup.arm(1)
+        sup.set_setpoints(1, velocity=0.2)
+        sup.step(30.0)
+        sup.set_setpoints(1, velocity=0.0)
+        sup.disarm(1)
+        sup.step(15.0)
+    assert sum(ev.code == "armed" for ev in seen) == 3
+    assert [(ev.source, ev.code) for ev in seen if ev.code.startswith("fin_slow") or ev.source == "failsafe"] == []
+
+
 @pytest.mark.parametrize("mode", ["mpc", "baseline"])
 def test_a_stuck_fin_raises_the_tracking_alarm_within_15_s(mode: str) -> None:
     r = swim(mode, 1, 55.0, start_velocity=0.2, failure=(35.0, stuck(2)))
