@@ -54,9 +54,14 @@ from ucat_console.backend.review.metrics import MetricsConfig
 from ucat_console.backend.sessions.limits import ReviewConfig
 from ucat_console.backend.sessions.recorder import RecorderConfig
 from ucat_console.backend.sim.params import PlantConfig
+from ucat_console.control.body_design import HEADING_FACTOR
+from ucat_console.control.params import DESIGN_DELAY, DESIGN_FACTOR, BodyConfig
 from ucat_console.typedconf import Config, coerce, from_dict, param, to_dict
 
 log = logging.getLogger(__name__)
+
+#: the body layer's defaults, the tracking failsafe's expected response's limits
+_BODY = BodyConfig()
 
 #: what a failsafe does when it triggers
 FAILSAFE_ACTIONS = ("hold", "surface", "disarm", "warn")
@@ -306,13 +311,42 @@ class FailsafeConfig(Config):
         0.15, lo=0.0, hi=1.0, doc="battery_critical: less than this fraction of battery_capacity left",
     )
     tracking_depth: float = param(
-        0.2, lo=0.01, hi=100.0, unit="m", doc="tracking: depth further than this from its reference"
+        0.2, lo=0.01, hi=100.0, unit="m",
+        doc="tracking: depth further than this from its expected response (backend.tracking_alarm)",
     )
     tracking_speed: float = param(
-        0.05, lo=0.005, hi=5.0, unit="m/s", doc="tracking: forward speed further than this from its reference"
+        0.05, lo=0.005, hi=5.0, unit="m/s",
+        doc="tracking: forward speed further than this from its expected response",
     )
     tracking_heading: float = param(
-        0.35, lo=0.01, hi=3.15, unit="rad", doc="tracking: heading further than this from its reference"
+        0.35, lo=0.01, hi=3.15, unit="rad", doc="tracking: heading further than this from its expected response"
+    )
+    tracking_delay: float = param(
+        DESIGN_DELAY, lo=0.01, hi=30.0, unit="s",
+        doc="tracking: the fins' delay in the slowest expected response (the body layer's design delay, "
+        "control.params.DESIGN_DELAY)",
+    )
+    tracking_bandwidth: float = param(
+        round(1.0 / (DESIGN_FACTOR * DESIGN_DELAY), 4), lo=0.001, hi=10.0, unit="rad/s",
+        doc="tracking: the speed and depth loops' closed-loop bandwidth in the slowest expected response "
+        "(the designed 1 / (k tau), control.body_design)",
+    )
+    tracking_heading_bandwidth: float = param(
+        round(1.0 / (HEADING_FACTOR * DESIGN_DELAY), 4), lo=0.001, hi=10.0, unit="rad/s",
+        doc="tracking: the heading loop's closed-loop bandwidth in the slowest expected response "
+        "(the designed 1 / (HEADING_FACTOR tau), control.body_design)",
+    )
+    tracking_max_acceleration: float = param(
+        _BODY.max_acceleration, lo=0.001, hi=2.0, unit="m/s2",
+        doc="tracking: the expected speed's fastest change (body.max_acceleration's default)",
+    )
+    tracking_max_dive_rate: float = param(
+        _BODY.max_dive_rate, lo=0.001, hi=2.0, unit="m/s",
+        doc="tracking: the expected depth's fastest change (body.max_dive_rate's default)",
+    )
+    tracking_max_yaw_rate: float = param(
+        LoopConfig().max_yaw_rate, lo=0.001, hi=10.0, unit="rad/s",
+        doc="tracking: the expected heading's fastest change (loop.max_yaw_rate's default)",
     )
 
     #: the rules whose default acts on the robot (the others warn by default)

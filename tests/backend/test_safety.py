@@ -263,10 +263,10 @@ def test_tracking_counts_only_while_driving_and_restarts_its_time_when_back_in_b
         feed_all(m, t)
         m.on_message(ch.BODY_TRACKING, tracking(t, driving=False, speed_err=0.3))
         assert not [tr for tr in m.check(t) if tr.name == "tracking"]
-    for k in range(60, 110):  # driving: off for 2 s, back once, off again for 2.8 s
+    for k in range(60, 110):  # driving from on its reference: off for 2 s, back once, off again for 2.8 s
         t = 0.1 * k
         feed_all(m, t)
-        m.on_message(ch.BODY_TRACKING, tracking(t, heading_err=0.0 if k == 80 else 0.5))
+        m.on_message(ch.BODY_TRACKING, tracking(t, heading_err=0.0 if k in (60, 80) else 0.5))
         assert not [tr for tr in m.check(t) if tr.name == "tracking"]
     cut, off = m.control()
     assert off == ["heading +0.50 rad for 3 s"] and cut == []

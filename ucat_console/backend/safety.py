@@ -33,9 +33,15 @@ Failsafes (``FailsafeConfig`` has one rule, action and timeout, for each):
   the last ``timeout`` s; clears when fewer remain in that window.
 * ``tracking``: while the fins are driven, the depth, the forward speed or the heading
   (``body/tracking``) has been further than its band (``tracking_depth``,
-  ``tracking_speed``, ``tracking_heading``) from what the body layer holds it to for
-  ``timeout`` s; clears when every axis is back within its band. Warns by default: the
-  robot does not go where it is sent.
+  ``tracking_speed``, ``tracking_heading``) from its expected response for ``timeout`` s:
+  outside the envelope between the body layer's reference and the slowest response the body
+  layer is designed to give, started when the fins start their first stroke
+  (:mod:`~ucat_console.backend.tracking_alarm`; ``tracking_delay``, ``tracking_bandwidth``,
+  ``tracking_heading_bandwidth``, ``tracking_max_*``), so that a start from rest, the fins
+  late on a busy computer, is not an alarm; or a fin is reported slow (loop Event
+  ``fin_slow``, not yet ``fin_slow_cleared``: its cycles take longer than planned, a weak,
+  lagging or stuck drive), at once. Clears when every axis is back within its band and no
+  fin is slow. Warns by default: the robot does not go where it is sent.
 * ``recording``: the session recorder failed to write (an Event ``recorder``/``write_failed``:
   a full disk, a removed drive) and has not been started again or acknowledged since (an
   Event ``recorder``/``failure_cleared``). Warns by default (``hold`` keeps the robot where
@@ -85,6 +91,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ucat_console.backend.devices.reporting import READING_FAULTS
+from ucat_console.backend.tracking_alarm import AxisModel, Envelope
 from ucat_console.robot.readings import DepthReading, DvlVelocity, ImuReading
 from ucat_console.config import FailsafeConfig, FailsafeRule
 from ucat_console.control.estimation import AttitudeConfig, gravity_innovation
@@ -108,7 +115,9 @@ MOTOR_CLEARS: dict[str, frozenset[str]] = {
 }
 #: the channels the monitor subscribes to
 CHANNELS = (ch.IMU, ch.DVL, ch.DEPTH, ch.EVENTS, ch.BODY_TRACKING, ch.BODY_ALLOCATION, ch.POWER_ELECTRICAL,
-            ch.BODY_STATE)
+            ch.BODY_STATE, *(ch.fin_strouhal(i) for i in range(ch.N_FINS)))
+#: the channels whose messages mark a fin's stroke starting
+_STROKES = frozenset(ch.fin_strouhal(i) for i in range(ch.N_FINS))
 #: the specific force's largest departure from g0 at which it measures gravity's direction (g0)
 ACCEL_GATE = AttitudeConfig().accel_gate
 #: the battery failsafes: (name, its voltage threshold, its reserve fraction)
@@ -119,6 +128,16 @@ _ENERGY_GAP = 1.0
 #: the tracked axes: (name, the message's error field, the band's config field, unit)
 TRACKED = (("depth", "depth_error", "tracking_depth", "m"), ("speed", "speed_error", "tracking_speed", "m/s"),
            ("heading", "heading_error", "tracking_heading", "rad"))
+#: each tracked axis's reference field
+_REF = {"depth": "depth_ref", "speed": "speed_ref", "heading": "heading_ref"}
+
+
+def expected_response(cfg: FailsafeConfig) -> dict[str, AxisModel]:
+    """Each tracked axis's slowest expected response (``backend.tracking_alarm``)."""
+    return {"depth": AxisModel(cfg.tracking_delay, cfg.tracking_bandwidth, cfg.tracking_max_dive_rate),
+            "speed": AxisModel(cfg.tracking_delay, cfg.tracking_bandwidth, cfg.tracking_max_acceleration),
+            "heading": AxisModel(cfg.tracking_delay, cfg.tracking_heading_bandwidth, cfg.tracking_max_yaw_rate,
+                                 angle=True)}
 
 
 @dataclass(frozen=True)
@@ -222,6 +241,10 @@ class SafetyMonitor:
         self._motor: dict[str, dict[str, tuple[float, str]]] = {}  # source -> fault code -> (since, message)
         self._late: collections.deque[float] = collections.deque()
         self._off_track: dict[str, tuple[float, float]] = {}  # axis -> (since, the last error)
+        self._expected = {axis: Envelope(m) for axis, m in expected_response(self.cfg).items()}
+        self._driving = False  # the last tracking message's
+        self._fins_started = False  # a stroke started since the fins were driven
+        self._slow_fins: dict[int, tuple[float, str]] = {}  # paper fin -> (since, what was reported)
         self._allocation: Any = None  # the last BodyAllocation
         self._recorder_failed: tuple[float, str] | None = None  # (since, why)
         self._loop_stuck: str | None = None  # why, while the loop watchdog holds it stuck
@@ -268,6 +291,10 @@ class SafetyMonitor:
                         self._electrical(msg)
                     elif channel == ch.BODY_STATE:
                         self._estimate = (_stamp(msg.t, now), msg.orientation)
+                    elif channel in _STROKES and self._driving and not self._fins_started:
+                        self._fins_started = True  # the expected response starts from here
+                        for env in self._expected.values():
+                            env.stop()
                 elif reading_valid(msg):
                     t = msg.t
                     # readings carry the loop's time; one off by more than a minute does not
@@ -322,13 +349,25 @@ class SafetyMonitor:
         self._power = (t, watts)
 
     def _track(self, msg: Any) -> None:
-        """A tracking message: each axis out of its band since when (the lock is held)."""
+        """A tracking message: each axis further than its band outside its expected response,
+        since when (the lock is held)."""
         off = self._off_track
+        driving = bool(msg.driving)
+        if not driving:
+            self._fins_started = False
+        self._driving = driving
         for axis, field, band, _unit in TRACKED:
-            err = getattr(msg, field, math.nan)
-            if msg.driving and _finite(err) and abs(err) > getattr(self.cfg, band):
+            env = self._expected[axis]
+            if not driving:
+                env.stop()
+                off.pop(axis, None)
+                continue
+            ref, err = getattr(msg, _REF[axis], math.nan), getattr(msg, field, math.nan)
+            known = _finite(ref, err)  # a missing one starts the envelope again from the next
+            dist = env.off(msg.t, ref if known else math.nan, ref + err if known else math.nan)
+            if _finite(dist) and abs(dist) > getattr(self.cfg, band):
                 since = off[axis][0] if axis in off else msg.t
-                off[axis] = (since, err)
+                off[axis] = (since, dist)
             else:
                 off.pop(axis, None)
 
@@ -361,6 +400,13 @@ class SafetyMonitor:
                     self._water = None
             elif ev.source == "loop" and ev.code == "late_plan":
                 self._late.append(self._now)
+            elif ev.source == "loop" and ev.code in ("fin_slow", "fin_slow_cleared"):
+                fin = ev.data.get("fin") if isinstance(ev.data, dict) else None
+                if isinstance(fin, int):
+                    if ev.code == "fin_slow":
+                        self._slow_fins.setdefault(fin, (self._now, ev.message))
+                    else:
+                        self._slow_fins.pop(fin, None)
             elif ev.source == "recorder" and ev.code == "write_failed":
                 why = ev.data.get("error")
                 self._recorder_failed = (self._now, why if isinstance(why, str) else ev.message)
@@ -468,9 +514,12 @@ class SafetyMonitor:
             late.popleft()
         if len(late) >= cfg.late_plans:
             causes["planner_late"] = f"{len(late)} late plans in the last {window:g} s"
-        off = [f"{axis} {err:+.2f} {unit} off its reference for {now - since:.0f} s"
+        off = [f"{axis} {err:+.2f} {unit} off its reference and the slowest expected response "
+               f"for {now - since:.0f} s"
                for axis, _f, _b, unit in TRACKED if axis in self._off_track
                for since, err in (self._off_track[axis],) if now - since >= cfg.tracking.timeout]
+        if self._driving:
+            off += [what for _fin, (_since, what) in sorted(self._slow_fins.items())]
         if off:
             causes["tracking"] = "not tracking: " + ", ".join(off)
         failed = self._recorder_failed
@@ -566,6 +615,11 @@ class SafetyMonitor:
                    for axis, _f, _b, unit in TRACKED if axis in self._off_track
                    for since, err in (self._off_track[axis],)]
             return cut, off
+
+    def slow_fins(self) -> list[str]:
+        """What was reported of each fin reported slow and not recovered since (paper fin order)."""
+        with self._lock:
+            return [what for _fin, (_since, what) in sorted(self._slow_fins.items())]
 
     def motor_faults(self) -> list[str]:
         """The motor controller faults reported and not cleared ("source: what it reported")."""

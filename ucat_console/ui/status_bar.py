@@ -1,7 +1,7 @@
 """What the fixed status bar shows: armed state, mode, pilot, recording, failsafes, a light for
 each sensor, the drives, the planner, the control, the recording, and the vehicle (one light
-for the loop watchdog, the depth limits, the battery, the leak detector and the estimate), and
-the battery's figure.
+for the loop watchdog, the depth limits, the battery, the leak detector, the estimate and the
+fins' pace), and the battery's figure.
 
 :func:`bar_state` builds it from the supervisor for one page (the pilot reads "you"); the
 page's script (:mod:`ucat_console.ui.page_script`) draws it. Lights are ``ok`` (green),
@@ -21,7 +21,7 @@ from ucat_console.backend.safety import SENSORS
 LIGHTS = {"imu": "IMU", "dvl": "DVL", "depth": "Depth", "drives": "Drives", "planner": "Planner",
           "control": "Control", "recording": "Recording", "loop_watchdog": "Loop",
           "limits": "Limits", "battery": "Battery",
-          "leak": "Leak", "estimate": "Estimate", "vehicle": "Vehicle"}
+          "leak": "Leak", "estimate": "Estimate", "fins": "Fins", "vehicle": "Vehicle"}
 ACTIONS = {"hold": "stops and holds its depth", "surface": "stops and rises to the surface",
            "disarm": "turns its motors off", "warn": "goes on (warn only)"}
 
@@ -82,7 +82,7 @@ def lights(sup: Any, loading: str = "") -> list[Light]:
 
 def vehicle_parts(sup: Any) -> list[Light]:
     """The parts of the Vehicle light: the loop watchdog, the depth limits, the battery, the
-    leak detector and the estimate, each its state and reason."""
+    leak detector, the estimate and the fins' pace, each its state and reason."""
     safety = sup.safety
     now = sup.loop.time
     active = {s.name: s for s in safety.states() if s.active}
@@ -104,7 +104,18 @@ def vehicle_parts(sup: Any) -> list[Light]:
         f"attitude {innovation[1]:.3f} rad off the accelerometer's gravity" if innovation else
         "no attitude check at rest yet") + (f"; state {max(0.0, now - t_state):.2f} s old" if t_state is not None
                                             else "; no state estimate yet")))
+    parts.append(fins_light(safety))
     return parts
+
+
+def fins_light(safety: Any) -> Light:
+    """The fins' pace: amber while a fin is reported slow (its executed cycles take longer
+    than their plans: a weak, lagging or stuck drive; the loop's ``fin_slow`` event), with
+    what was reported of it."""
+    slow = safety.slow_fins()
+    if slow:
+        return Light(LIGHTS["fins"], "warn", "; ".join(slow))
+    return Light(LIGHTS["fins"], "ok", "every fin keeps its plans' pace")
 
 
 #: how bad each state is, for the light that stands for several
@@ -112,9 +123,9 @@ _WORST = {"off": 0, "ok": 1, "warn": 2, "bad": 3}
 
 
 def vehicle_light(parts: list[Light]) -> Light:
-    """One light for the loop watchdog, the depth limits, the battery, the leak detector and
-    the estimate (a bar of 1280 px keeps DISARM on screen): the worst of them, and each one's
-    reason, the ones not green first."""
+    """One light for the loop watchdog, the depth limits, the battery, the leak detector, the
+    estimate and the fins' pace (a bar of 1280 px keeps DISARM on screen): the worst of them,
+    and each one's reason, the ones not green first."""
     worst = max(parts, key=lambda x: _WORST[x.state]).state
     ranked = sorted(parts, key=lambda x: -_WORST[x.state])
     return Light(LIGHTS["vehicle"], worst, "; ".join(f"{x.name}: {x.why}" for x in ranked))

@@ -328,8 +328,9 @@ class Actuators:
         """Paper fin ``fin``'s cycle took ``executed`` s of its plan's ``planned``: over its last
         :data:`PACE_CYCLES` cycles, a median ratio above ``executor.slow_fin_ratio`` reports the
         fin slow (a weak or lagging drive: an event, the allocation's feed-forward shares its
-        work out), one back under the ratio's midpoint to 1 reports it recovered."""
-        if planned <= 0.0:
+        work out), one back under the ratio's midpoint to 1 reports it recovered. A cycle that
+        ends while the fins are not driven (disarmed: the drives do not follow) is not judged."""
+        if planned <= 0.0 or not self._driving():
             return
         ratios = self._ratios[fin]
         ratios.append(executed / planned)
