@@ -15,6 +15,7 @@ import pytest
 from support import Console, wait_for
 
 from ucat_console.backend.access import LOCAL, AccessDenied
+from ucat_console.backend.arming import STOP_RATE
 from ucat_console.robot.readings import DepthReading
 from ucat_console.backend.sim_robot_io import SimRobotIO
 from ucat_console.backend.sessions.reader import SessionReader
@@ -796,6 +797,27 @@ def test_a_burst_of_plan_overruns_is_one_event_with_its_count(sup: Supervisor) -
     o = overruns[0]
     assert o.data["count"] == 20 and o.data["fins"] == [0, 1, 2, 3]
     assert "20 x plan ready after its hand-over deadline" in o.message and "19.0 ms late" in o.message
+
+
+def test_disarmed_the_public_fin_states_carry_the_stop_the_gate_sent_and_no_stroke_timeout(
+        sup: Supervisor) -> None:
+    """The loop publishes what the fins were sent (the arming gate's): after a disarm, the
+    stop at each fin's measured angle, though its executor goes on with strokes the gate
+    holds back; their timeouts are no events."""
+    states: list = []
+    sup.stream.subscribe(lambda c, m: states.append(m), [ch.fin_state(pf) for pf in range(4)])
+    ev = Events(sup)
+    sup.set_setpoints(PILOT, velocity=0.3)
+    sup.arm(PILOT)
+    sup.step(3.0)
+    sup.disarm(PILOT)
+    t_disarm, dropped = sup.loop.time, sup.gate.dropped_commands
+    sup.step(4.0)
+    assert sup.gate.dropped_commands > dropped
+    held = [m for m in states if m.t > t_disarm]
+    assert held and all((m.angle_cmd, m.rate_cmd) == sup.gate.sent[m.fin] for m in held)
+    assert {m.rate_cmd for m in held} == {STOP_RATE}
+    assert not [e for e in ev.events if e.code == "stroke_timeout" and e.t > t_disarm]
 
 
 def test_a_single_overrun_keeps_its_own_message(sup: Supervisor) -> None:

@@ -9,6 +9,9 @@ the failsafes need the readings), so the gate sits between it and the robot:
   at their last measured angle (the servo decelerates and stops there). Either way a fin
   never keeps swimming towards an old target;
 * armed: commands pass unchanged;
+* each set-point a fin is actually sent (a command passed on, a stop) is kept in
+  :attr:`ArmingGate.sent` and reported to the one :meth:`ArmingGate.report_sent` names
+  (the closed loop, which publishes it in its fin states);
 * readings with non-finite values are dropped before they reach the loop (they would stop
   it) and reported through ``on_invalid(sensor, description)``; the failsafes then see
   the sensor as silent.
@@ -76,6 +79,7 @@ class ArmingGate(RobotIO):
         self.measured: list[float] = [math.nan] * N_FINS
         #: the last set-point each fin was actually sent (angle, rate)
         self.sent: list[tuple[float, float]] = [(0.0, 0.0)] * N_FINS
+        self._report: Callable[[int, float, float], None] | None = None
         self.dropped_commands = 0
         self.dropped_readings = 0
 
@@ -111,9 +115,14 @@ class ArmingGate(RobotIO):
             angle = self.measured[fin]
             if math.isnan(angle):
                 angle = self.sent[fin][0]
-            self.inner.command_fin(fin, angle, STOP_RATE)
-            self.sent[fin] = (angle, STOP_RATE)
+            self._send(fin, angle, STOP_RATE)
         log.info("fins stopped at their measured angles")
+
+    def _send(self, fin: int, target_rad: float, profile_velocity_rad_s: float) -> None:
+        self.inner.command_fin(fin, target_rad, profile_velocity_rad_s)
+        self.sent[fin] = (target_rad, profile_velocity_rad_s)
+        if self._report is not None:
+            self._report(fin, target_rad, profile_velocity_rad_s)
 
     # ------------------------------------------------------------------ RobotIO
     def command_fin(self, fin: int, target_rad: float, profile_velocity_rad_s: float) -> None:
@@ -122,8 +131,13 @@ class ArmingGate(RobotIO):
         if not self._armed:
             self.dropped_commands += 1
             return
-        self.inner.command_fin(fin, target_rad, profile_velocity_rad_s)
-        self.sent[fin] = (target_rad, profile_velocity_rad_s)
+        self._send(fin, target_rad, profile_velocity_rad_s)
+
+    def report_sent(self, report: Callable[[int, float, float], None]) -> bool:
+        """Each set-point a fin is sent from now on, passed on or a stop, goes to ``report``
+        too (the module docstring)."""
+        self._report = report
+        return True
 
     @property
     def has_drives(self) -> bool:  # type: ignore[override]

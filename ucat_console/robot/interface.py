@@ -13,6 +13,9 @@ Contract:
   controller's (paper) order with ``robot.fins.PAPER_TO_ROBOT``.
 * :meth:`RobotIO.command_fin` is a profile-position set-point that acts at once (the
   EPOS2's "change set immediately"): target angle (rad) and profile velocity (rad/s).
+  A robot sends each command as given, unless it says otherwise through
+  :meth:`RobotIO.report_sent`: one that may hold commands back or send set-points of its
+  own (the arming gate) reports each set-point a fin is actually sent.
 * :meth:`RobotIO.advance_to` lets the robot reach time ``t`` (the simulator steps its
   physics; a device-backed robot simply returns when its clock reaches ``t``) and returns
   the readings taken since the last call, in time order: ``ImuReading``, ``DvlVelocity``,
@@ -37,7 +40,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Callable
 
 from ucat_console.robot.readings import Reading
 
@@ -84,6 +87,13 @@ class RobotIO(ABC):
     has_drives: bool = False
     #: the robot runs the loop's compiled core itself (:meth:`run_core`)
     runs_core: bool = False
+
+    def report_sent(self, report: Callable[[int, float, float], None]) -> bool:
+        """Have ``report(fin, target_rad, profile_velocity_rad_s)`` called with each
+        set-point a fin is actually sent, in the thread that drives the robot; whether this
+        robot reports them. False (this one): every command is sent as given, the caller
+        knows what each fin was sent."""
+        return False
 
     def run_core(self, core: Any) -> int:
         """Run the loop's core (a ``control.loop_core.LoopCore``) with this robot

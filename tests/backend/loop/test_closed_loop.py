@@ -10,6 +10,7 @@ import pytest
 from support import FakeClock
 
 from ucat_console.robot.readings import DvlVelocity
+from ucat_console.backend.arming import STOP_RATE, ArmingGate
 from ucat_console.backend.loop.clock import PacedClock
 from ucat_console.backend.loop.closed_loop import ClosedLoop
 from ucat_console.backend.loop.config import LoopConfig
@@ -406,3 +407,45 @@ def test_the_power_estimate_uses_the_fins_coefficients_not_the_controllers() -> 
     assert last.energy > 0.0
     assert last.energy == pytest.approx(sum(f.energy for f in fins), rel=1e-9)
     assert last.per_fin == pytest.approx(tuple(f.last.p_fin for f in fins), rel=1e-9)
+
+
+def test_through_the_arming_gate_the_fin_states_carry_what_each_fin_was_sent() -> None:
+    """Armed, each fin state's set-point is one its fin was sent. Disarmed, the gate holds
+    the executors' strokes back and stops each fin at its measured angle: the fin states
+    carry that stop, and the strokes' timeouts (no stroke was sent) are neither counted nor
+    published."""
+    inner = SimRobotIO(depth=1.0, velocity=0.2, seed=0)
+    received: list[tuple[int, float, float]] = []
+    command = inner.command_fin
+
+    def spy(fin: int, target: float, rate: float) -> None:
+        received.append((fin, target, rate))
+        command(fin, target, rate)
+
+    inner.command_fin = spy  # type: ignore[method-assign]
+    gate = ArmingGate(inner)
+    stream = TelemetryStream()
+    log = Log(stream)
+    loop = ClosedLoop(LoopConfig(mode="baseline"), gate, stream, driving=lambda: gate.armed,
+                      setpoints=BodySetpoints(velocity=0.2, depth=1.0))
+    gate.arm()
+    loop.run_until(4.0)
+    for pf in range(4):
+        sent = {(0.0, 0.0)} | {(a, r) for f, a, r in received if f == pf}
+        assert {(s.angle_cmd, s.rate_cmd) for s in log.get(ch.fin_state(pf))} <= sent
+    assert len(received) > 8
+
+    gate.disarm()
+    n, timeouts = len(received), loop.stroke_timeouts
+    before = {pf: len(log.get(ch.fin_state(pf))) for pf in range(4)}
+    loop.run_until(8.0)
+    loop.close()
+    stops = {f: (a, r) for f, a, r in received[n:]}
+    assert len(received) == n + 4 and sorted(stops) == [0, 1, 2, 3]  # the stops, nothing else
+    assert all(r == STOP_RATE for _, r in stops.values())
+    assert gate.dropped_commands > 0  # the executors went on with their strokes
+    for pf in range(4):
+        held = log.get(ch.fin_state(pf))[before[pf]:]
+        assert held and {(s.angle_cmd, s.rate_cmd) for s in held} == {stops[pf]}
+    assert loop.stroke_timeouts == timeouts
+    assert [e for e in log.events("stroke_timeout") if e.t > 4.0] == []

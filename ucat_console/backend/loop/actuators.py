@@ -12,7 +12,8 @@ and a servo command:
   overruns, and loads it into its executor;
 * carries out the executors' actions: a stroke to the servo (``command_fin``, with the
   profile velocity of ``control.stroke_timing``), a cycle completed, a late plan, a stroke
-  timeout; and follows each cycle from its first stroke to its last to publish what it
+  timeout (one while the fins are not driven is none: disarmed, no stroke was sent, or the
+  fins were stopped under it); and follows each cycle from its first stroke to its last to publish what it
   delivered (and tells the body layer's feed-forward of each: ``on_cycle`` when one begins,
   ``on_executed`` when one ends), and judges each fin's pace (``fin_slow``: a cycle taking
   longer than planned, a weak or lagging drive);
@@ -20,10 +21,12 @@ and a servo command:
   plans they hold, the new ones' first plans are made at once from where their fins will
   be, and each new executor takes over when the old ones of its fins are idle
   (:meth:`Actuators.check_handovers`);
-* rebuilds the planners when a configuration block they are made from changes.
+* rebuilds the planners when a configuration block they are made from changes;
+* keeps, in the core's state row, the set-point each fin was actually sent
+  (:meth:`Actuators.sent`, told by the loop): the fin states carry it.
 
 Its collaborators are narrow: the core's state row ``s`` (targets, forward speed, fin
-feedback and commands) and its members table, the planning service, the robot's
+feedback and set-points sent) and its members table, the planning service, the robot's
 ``command_fin``, the outbox, the clock's wall deadline and whether the fins are driven.
 """
 
@@ -149,6 +152,9 @@ class Actuators:
         # and the measured angle and time at each stroke's start
         self._cycles: list[tuple[str, tuple[float, float], float, list[float], list[float], tuple[float, float]]
                            | None] = [None] * N_FINS
+        # each robot fin's last stroke target the executors asked for (sent or not): a stroke's
+        # start while the fin has no feedback, and its size for the Strouhal number
+        self._asked = [0.0] * N_FINS
         self.current: list[Actuator] = []
         self._install(self._new(cfg.mode))
 
@@ -263,14 +269,12 @@ class Actuators:
                 self._stroke_begins(act, a.fin, a.stroke, t)
                 angle = float(s[lc.C_FB_ANGLE + pf])
                 if angle != angle:  # no feedback yet: from the last command
-                    angle = float(s[lc.C_CMD_ANGLE + pf])
+                    angle = self._asked[pf]
                 ex = self.cfg.executor
                 v = profile_velocity(a.theta_ref - angle, a.w_ref, ex.acceleration, ex.max_rate)
                 self._command_fin(pf, a.theta_ref, v)
-                self._outbox.stroke(t, pf, a.theta_ref - float(s[lc.C_CMD_ANGLE + pf]), a.w_ref,
-                                    float(s[lc.C_V_BODY]), self.mpc)
-                s[lc.C_CMD_ANGLE + pf] = a.theta_ref
-                s[lc.C_CMD_RATE + pf] = v
+                self._outbox.stroke(t, pf, a.theta_ref - self._asked[pf], a.w_ref, float(s[lc.C_V_BODY]), self.mpc)
+                self._asked[pf] = a.theta_ref
             elif tp is PlanRequest:
                 if not act.retiring:
                     self._request(act, t, a.theta_start)
@@ -288,9 +292,17 @@ class Actuators:
                                    f"{a.lateness * 1e3:.1f} ms after the fin went idle", "warning",
                                    {"fins": list(a.fins), "lateness": a.lateness})
             elif tp is StrokeTimeout:
+                if not self._driving():  # no stroke was sent, or the fins were stopped under it
+                    continue
                 self.stroke_timeouts += 1
                 self._outbox.event(t, "stroke_timeout", f"fin {a.fin} stroke ended by its timeout",
                                    "info", {"fin": a.fin, "elapsed": a.elapsed, "planned": a.planned})
+
+    def sent(self, fin: int, target: float, rate: float) -> None:
+        """Robot fin ``fin`` was sent the set-point (``target`` rad, profile velocity
+        ``rate`` rad/s): the one its fin states carry from now on."""
+        self._s[lc.C_CMD_ANGLE + fin] = target
+        self._s[lc.C_CMD_RATE + fin] = rate
 
     def _stroke_begins(self, act: Actuator, fin: int, stroke: int, t: float) -> None:
         """Paper fin ``fin`` starts stroke ``stroke`` of its plan: a stroke boundary of the

@@ -155,10 +155,12 @@ class ClosedLoop:
         self.stalls = 0
         self.outbox = Outbox(self.stream)
         # looked up at each call: a caller may wrap the robot's command_fin or replace driving
-        self.fins = Actuators(cfg, self._s, members, watches, self._planning, self.outbox,
-                              lambda fin, angle, rate: self.io.command_fin(fin, angle, rate),
+        self.fins = Actuators(cfg, self._s, members, watches, self._planning, self.outbox, self._command_fin,
                               self.clock.wall_deadline, lambda: self._driving(), mpc_planner,
                               on_cycle=self.body.on_cycle, on_executed=self.body.on_executed)
+        # the set-points the fins are actually sent: the robot's report (the arming gate:
+        # those it passes on, and its stops), else each command as given
+        self._sent_as_given = not io.report_sent(self.fins.sent)
 
     # ------------------------------------------------------------------ public state
     @property
@@ -222,7 +224,7 @@ class ClosedLoop:
         return self.io.truth()
 
     def fin_command(self, fin: int) -> tuple[float, float]:
-        """(target angle, profile velocity) last sent to robot fin ``fin``."""
+        """(target angle, profile velocity) robot fin ``fin`` was last actually sent."""
         return float(self._s[lc.C_CMD_ANGLE + fin]), float(self._s[lc.C_CMD_RATE + fin])
 
     @property
@@ -317,6 +319,11 @@ class ClosedLoop:
         self.fins.restart(self._mode)  # the next control tick requests their first plans
         self.outbox.event(t, "restarted", "body loops and fins start afresh from the measured state",
                           "info", {"mode": self._mode})
+
+    def _command_fin(self, fin: int, target: float, rate: float) -> None:
+        self.io.command_fin(fin, target, rate)
+        if self._sent_as_given:
+            self.fins.sent(fin, target, rate)
 
     # ------------------------------------------------------------------ running
     def run(self, duration: float) -> None:

@@ -22,10 +22,11 @@
 * Arming takes two steps (:class:`~.arm_requests.ArmRequests`): :meth:`Supervisor.request_arm`
   returns a nonce that the same pilot passes to :meth:`Supervisor.confirm_arm` within
   ``access.confirm_timeout``. :meth:`Supervisor.disarm` acts at once.
-* The loop's stream is forwarded to the public one (:class:`~.forwarding.LoopOutlet`); on
-  the way, Status messages get the supervisor's arming, pilot and failsafe state, and while
-  disarmed the fins' commanded angles are the ones really sent (none) and the executors'
-  stroke timeouts are dropped.
+* The loop's stream is forwarded to the public one (:class:`~.forwarding.LoopOutlet`), a
+  burst of plan overruns or stalls folded into one event. The loop publishes what the
+  robot really does: its Status messages are the supervisor's (arming, pilot, failsafes),
+  its fin states carry the set-points the gate actually sent (disarmed: the last, or the
+  stop), and a disarmed loop publishes no stroke timeouts.
 * Telemetry time ``t`` is the loop's time, seconds from the start; the recorder's epoch
   offset is the wall-clock time of ``t = 0``.
 
@@ -114,8 +115,7 @@ class Supervisor:
         self.stream = TelemetryStream()
         #: plan overruns and the loop's stalls, one event per burst
         self.bursts = BurstFolder(lambda ev: self.stream.publish(ch.EVENTS, ev), ("plan_overrun", "stall"))
-        self._loop_stream = LoopOutlet(self.stream, self.bursts, armed=lambda: self.gate.armed,
-                                       sent=lambda fin: self.gate.sent[fin])
+        self._loop_stream = LoopOutlet(self.stream, self.bursts)
         self._lock = threading.RLock()
         self._listeners: list[Callable[[], None]] = []
         self.access = AccessControl(cfg.access)
