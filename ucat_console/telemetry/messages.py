@@ -104,8 +104,10 @@ class FinState:
     fin: Fin
     angle: Annotated[float, Doc("measured fin angle (0 neutral, > 0 tip up)", "rad")]
     rate: Annotated[float, Doc("measured fin rate", "rad/s")]
-    angle_cmd: Annotated[float, Doc("target angle of the stroke being executed", "rad")]
-    rate_cmd: Annotated[float, Doc("profile velocity of that stroke (timed so the stroke takes its planned duration)", "rad/s")]
+    angle_cmd: Annotated[float, Doc("set-point angle the fin was last sent: the target of its stroke "
+                                    "(disarmed: the last one sent, or the stop)", "rad")]
+    rate_cmd: Annotated[float, Doc("profile velocity of that set-point (a stroke's is timed so the stroke "
+                                   "takes its planned duration)", "rad/s")]
 
 
 @dataclass(frozen=True)
