@@ -12,10 +12,10 @@ and a servo command:
   overruns, and loads it into its executor;
 * carries out the executors' actions: a stroke to the servo (``command_fin``, with the
   profile velocity of ``control.stroke_timing``), a cycle completed, a late plan, a stroke
-  timeout (one while the fins are not driven is none: disarmed, no stroke was sent, or the
-  fins were stopped under it); and follows each cycle from its first stroke to its last to publish what it
-  delivered (and tells the body layer's feed-forward of each: ``on_cycle`` when one begins,
-  ``on_executed`` when one ends), and judges each fin's pace (``fin_slow``: a cycle taking
+  timeout (none while the fins are not driven: disarmed, no stroke was sent, or the fins
+  were stopped under it); and follows each cycle from its first stroke to its last to
+  publish what it delivered (and tells the body layer's feed-forward of each: ``on_cycle``
+  when one begins, ``on_executed`` when one ends), and judges each fin's pace (``fin_slow``: a cycle taking
   longer than planned, a weak or lagging drive);
 * switches the mode bumplessly (:meth:`Actuators.switch`): the old executors finish the
   plans they hold, the new ones' first plans are made at once from where their fins will
