@@ -377,7 +377,8 @@ def centred_cycles(u: np.ndarray, f_target: Sequence[float], theta0: float, u_pr
     d = np.abs(u[..., :H])
     limit = cfg.centre_rate * (d[..., 0] / u[..., 2] + d[..., 1] / u[..., 3])
     centre = prev + np.clip(math.remainder(want - prev, 2.0 * math.pi), -limit, limit)
-    rel = np.remainder(theta0 - centre + math.pi, 2.0 * math.pi) - math.pi  # where the fin is, from the centre
+    rel = theta0 - centre  # where the fin is, from the centre (math.remainder's, exact)
+    rel = rel - 2.0 * math.pi * np.round(rel / (2.0 * math.pi))
     side = np.where(rel >= 0.0, 1.0, -1.0)
     amplitude = 0.25 * (d[..., 0] + d[..., 1])
     return np.stack([-rel - side * amplitude, 2.0 * side * amplitude, u[..., 2], u[..., 3]], axis=-1)
