@@ -399,13 +399,15 @@ def cycle_grid(n: int, a_lo: float, a_hi: float, w_lo: float, w_hi: float
 
 def fine_grid(about: np.ndarray, da: float, dw: float, a_lo: float, a_hi: float, w_lo: float, w_hi: float
               ) -> np.ndarray:
-    """Symmetric cycles half a coarse step (``da``, ``dw``) and one step either side of the
-    amplitude and first rate of the cycle ``about``, within the bounds (none if ``da`` is 0)."""
+    """Symmetric cycles a quarter of a coarse step (``da``, ``dw``) apart, to one step either
+    side of the amplitude and first rate of the cycle ``about``, within the bounds (none if
+    ``da`` is 0): the force grows with the rate squared, and half a step of the rate (some
+    12 % of the force) left the fins' forward forces unequal enough to turn the robot."""
     if da == 0.0:
         return np.zeros((0, 4))
     a0, w0 = 0.25 * (abs(about[0]) + abs(about[1])), about[2]
-    a = np.clip(a0 + da * np.array([-1.0, -0.5, 0.0, 0.5, 1.0]), a_lo, a_hi)
-    w = np.clip(w0 + dw * np.array([-1.0, -0.5, 0.0, 0.5, 1.0]), w_lo, w_hi)
+    a = np.clip(a0 + da * np.linspace(-1.0, 1.0, 9), a_lo, a_hi)
+    w = np.clip(w0 + dw * np.linspace(-1.0, 1.0, 9), w_lo, w_hi)
     aa, ww = np.meshgrid(a, w, indexing="ij")
     aa, ww = aa.ravel(), ww.ravel()
     return np.stack([2.0 * aa, -2.0 * aa, ww, ww], axis=-1)
