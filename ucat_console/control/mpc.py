@@ -16,10 +16,12 @@ Beyond the paper, two things make a plan the one that runs. Given the fin drives
 (``FinMpc(..., drive=ExecutorConfig)``), the cost caps each stroke's rate at what the drive
 can make of it (``control.stroke_timing``), so the solver searches the plans the drive runs,
 and the plan's rates are capped the same way. With ``MpcConfig.centre_rate`` > 0 the
-solved cycle is laid about the oscillation centre the target's direction asks for
-(:func:`centred_cycle`): the solver decides the cycle's amplitude and rates (its trade-off of
-force, Strouhal number, amplitude and smoothness), the centre its direction. The plan
-returned is the cycle as it runs, with its cost.
+cycle that runs is laid about the oscillation centre the target's direction asks for
+(:func:`centred_cycle`), and its amplitude and rates are those of least cost (the same
+trade-off of force, Strouhal number, amplitude and smoothness) among the centred cycles of
+the solver's amplitude and rates and of a grid (``MpcConfig.centre_grid``): the solver
+chooses them for a cycle from where the fin is, which, laid about another centre, can make
+a fraction of the force. The plan returned is the cycle as it runs, with its cost.
 The compiled solver also solves the closed-stroke formulation (``formulation =
 "closed_stroke"``, see :mod:`ucat_console.control.cost`), with its own compiled entry points.
 
@@ -281,8 +283,10 @@ class FinMpc:
 
     def _executable(self, u: list[float], f: tuple, v: float, th: float, up: tuple) -> tuple[list[float], CostBreakdown]:
         """The solved plan as it will run (beyond the paper; module docstring): centred on
-        the oscillation centre the target's direction asks for, and its rates timed by the
-        drive. Returns the plan and its cost."""
+        the oscillation centre the target's direction asks for, with the amplitude and rates
+        of least cost among the solver's and the grids' (:func:`cycle_grid`, then
+        :func:`fine_grid` about the best), and its rates timed by the drive. Returns the plan
+        and its cost."""
         cfg = self.config
         if not (cfg.centre_rate > 0.0 and math.hypot(*f) >= 1e-3):
             out = self._timed(u)
@@ -377,7 +381,7 @@ def centred_cycles(u: np.ndarray, f_target: Sequence[float], theta0: float, u_pr
     d = np.abs(u[..., :H])
     limit = cfg.centre_rate * (d[..., 0] / u[..., 2] + d[..., 1] / u[..., 3])
     centre = prev + np.clip(math.remainder(want - prev, 2.0 * math.pi), -limit, limit)
-    rel = theta0 - centre  # where the fin is, from the centre (math.remainder's, exact)
+    rel = theta0 - centre  # where the fin is, from the centre (wrapped as math.remainder does, exactly)
     rel = rel - 2.0 * math.pi * np.round(rel / (2.0 * math.pi))
     side = np.where(rel >= 0.0, 1.0, -1.0)
     amplitude = 0.25 * (d[..., 0] + d[..., 1])
