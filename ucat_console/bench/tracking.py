@@ -7,7 +7,10 @@ rear pair synchronised, and the MPC's closed-stroke formulation):
 
 * ``depth_step``: cruising at 0.2 m/s at 0.5 m, the depth setpoint steps to 1.5 m at
   :data:`STEP_AT` s: the time to 90 % of the step, the overshoot, and whether the depth stays
-  within +-5 cm from 45 s after the step;
+  within +-5 cm from 45 s after the step; ``depth_step_2m`` the same to 2.5 m (its time to
+  90 % within what the dive-rate limit allows, 0.06 m/s, plus 10 s);
+* ``speed_step``: cruising at 0.1 m/s at 1 m, the speed setpoint steps to 0.35 m/s at
+  STEP_AT s (the heading through it);
 * ``straight``: 0.2 m/s at 1 m, yaw rate setpoint 0: the largest heading error against the
   heading held at the start (after :data:`SETTLE` s);
 * ``turn``: the same with a yaw rate setpoint of 0.1 rad/s: the mean rate error and the
@@ -88,6 +91,9 @@ GOALS: dict[str, tuple[str, float]] = {
     "speed_0.1/heading_all_deg": ("<=", 5.0),
     "speed_0.2/heading_all_deg": ("<=", 5.0),
     "speed_0.3/heading_all_deg": ("<=", 5.0),
+    "depth_step_2m/t90": ("<=", 0.9 * 2.0 / 0.06 + 10.0),
+    "depth_step_2m/heading_all_deg": ("<=", 5.0),
+    "speed_step/heading_all_deg": ("<=", 5.0),
 }
 
 #: the disturbance cases: name -> (buoyancy / weight, mass factor, the weak fin's speed factor)
@@ -118,12 +124,15 @@ class Manoeuvre:
     start_velocity: float = 0.0
     current: tuple[float, float, float] = (0.0, 0.0, 0.0)
     step_to: float | None = None  # the depth setpoint from STEP_AT on
+    speed_to: float | None = None  # the speed setpoint from STEP_AT on
 
 
 def manoeuvres(quick: bool = False) -> list[Manoeuvre]:
     k = 0.5 if quick else 1.0
     out = [
         Manoeuvre("depth_step", STEP_AT + 90.0 * k, 0.2, 0.5, start_velocity=0.2, step_to=1.5),
+        Manoeuvre("depth_step_2m", STEP_AT + 110.0 * k, 0.2, 0.5, start_velocity=0.2, step_to=2.5),
+        Manoeuvre("speed_step", STEP_AT + 80.0 * k, 0.1, 1.0, start_velocity=0.1, speed_to=0.35),
         Manoeuvre("straight", 120.0 * k, 0.2, 1.0, start_velocity=0.2),
         Manoeuvre("turn", 120.0 * k, 0.2, 1.0, yaw_rate=0.1, start_velocity=0.2),
     ]
@@ -208,9 +217,9 @@ def run_manoeuvre(app: Any, mode: str, formulation: str, m: Manoeuvre, seed: int
 
     chans = [ch.POWER, ch.DVL] + [ch.fin_strouhal(i) for i in range(4)] + [ch.fin_cycle(i) for i in range(4)]
     stream.subscribe(on, chans)
-    if m.step_to is not None:
+    if m.step_to is not None or m.speed_to is not None:
         loop.run_until(STEP_AT)
-        loop.set_setpoints(depth=m.step_to)
+        loop.set_setpoints(depth=m.step_to, velocity=m.speed_to)
     loop.run_until(m.duration)
     loop.close()
     return {"figures": _figures(m, log), "log": log}
@@ -238,8 +247,8 @@ def _figures(m: Manoeuvre, log: _Log) -> dict[str, float]:
     dt = np.asarray(log.dvl_t)
     dv = np.asarray(log.dvl_v)
     out: dict[str, float] = {}
-    if m.name == "depth_step":
-        z0, z1 = m.depth, float(m.step_to)  # type: ignore[arg-type]
+    if m.step_to is not None:
+        z0, z1 = m.depth, float(m.step_to)
         after = t >= STEP_AT
         reached = np.nonzero(after & (z >= z0 + 0.9 * (z1 - z0)))[0]
         out["t90"] = float(t[reached[0]] - STEP_AT) if reached.size else math.inf

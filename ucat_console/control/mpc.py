@@ -16,10 +16,12 @@ Beyond the paper, two things make a plan the one that runs. Given the fin drives
 (``FinMpc(..., drive=ExecutorConfig)``), the cost caps each stroke's rate at what the drive
 can make of it (``control.stroke_timing``), so the solver searches the plans the drive runs,
 and the plan's rates are capped the same way. With ``MpcConfig.centre_rate`` > 0 the
-solved cycle is laid about the oscillation centre the target's direction asks for
-(:func:`centred_cycle`): the solver decides the cycle's amplitude and rates (its trade-off of
-force, Strouhal number, amplitude and smoothness), the centre its direction. The plan
-returned is the cycle as it runs, with its cost.
+cycle that runs is laid about the oscillation centre the target's direction asks for
+(:func:`centred_cycle`), and its amplitude and rates are those of least cost (the same
+trade-off of force, Strouhal number, amplitude and smoothness) among the centred cycles of
+the solver's amplitude and rates and of a grid (``MpcConfig.centre_grid``): the solver
+chooses them for a cycle from where the fin is, which, laid about another centre, can make
+a fraction of the force. The plan returned is the cycle as it runs, with its cost.
 The compiled solver also solves the closed-stroke formulation (``formulation =
 "closed_stroke"``, see :mod:`ucat_console.control.cost`), with its own compiled entry points.
 
@@ -41,7 +43,7 @@ from typing import Callable, NamedTuple, Sequence
 import numpy as np
 
 from ucat_console.control import mpc_kernels as K
-from ucat_console.control.cost import H, CostBreakdown, breakdown_from_terms, cost_terms
+from ucat_console.control.cost import H, CostBreakdown, breakdown_from_terms, cost_terms, timed_rates
 from ucat_console.control.fin_model import ForceTable
 from ucat_console.control.params import ExecutorConfig, MpcConfig
 from ucat_console.control.stroke_timing import mean_rate_limit
@@ -158,6 +160,10 @@ class FinMpc:
         self._terms = np.zeros(K.N_TERMS)
         self._grad = np.zeros(4)
         self._np_rng = np.random.default_rng(seed)
+        # the cycles the executable plan is chosen among (``_executable``), and the grid's steps
+        w_hi = cfg.w_max if self._drive is None else min(cfg.w_max, max(cfg.w_min, mean_rate_limit(
+            cfg.d_max, *self._drive)))
+        self._grid, self._steps = cycle_grid(cfg.centre_grid, 0.5 * cfg.d_eps, 0.5 * cfg.d_max, cfg.w_min, w_hi)
 
     # ------------------------------------------------------------------ validation
     def _inputs(self, f_target, v_body, theta0, u_prev) -> tuple[tuple, float, float, tuple]:
@@ -271,14 +277,29 @@ class FinMpc:
         return [u[0], u[1], min(u[2], max(self.config.w_min, mean_rate_limit(u[0], a, w_max))),
                 min(u[3], max(self.config.w_min, mean_rate_limit(u[1], a, w_max)))]
 
+    def _timed_all(self, u: np.ndarray) -> np.ndarray:
+        """:meth:`_timed` of every plan of ``u`` (shape (..., 4))."""
+        return u if self._drive is None else timed_rates(u, self.config, self._drive)
+
     def _executable(self, u: list[float], f: tuple, v: float, th: float, up: tuple) -> tuple[list[float], CostBreakdown]:
         """The solved plan as it will run (beyond the paper; module docstring): centred on
-        the oscillation centre the target's direction asks for, and its rates timed by the
-        drive. Returns the plan and its cost."""
-        out = u
-        if self.config.centre_rate > 0.0 and math.hypot(*f) >= 1e-3:
-            out = centred_cycle(u, f, th, up, self.config)
-        out = self._timed(out)
+        the oscillation centre the target's direction asks for, with the amplitude and rates
+        of least cost among the solver's and the grids' (:func:`cycle_grid`, then
+        :func:`fine_grid` about the best), and its rates timed by the drive. Returns the plan
+        and its cost."""
+        cfg = self.config
+        if not (cfg.centre_rate > 0.0 and math.hypot(*f) >= 1e-3):
+            out = self._timed(u)
+            return out, self.score(tuple(out), f, v, th, up)
+        rows = np.vstack([np.asarray(u, dtype=float)[None], self._grid])
+        cycles = self._timed_all(centred_cycles(rows, f, th, up, cfg))
+        j = cost_terms(cycles, f, v, th, up, cfg, self.table)["total"]
+        k = int(np.argmin(j))
+        fine = fine_grid(rows[k], *self._steps)
+        if len(fine):  # the fine grid about the best, which stays if none is better
+            cycles = np.vstack([cycles[k][None], self._timed_all(centred_cycles(fine, f, th, up, cfg))])
+            k = int(np.argmin(cost_terms(cycles, f, v, th, up, cfg, self.table)["total"]))
+        out = cycles[k].tolist()
         return out, self.score(tuple(out), f, v, th, up)
 
     def _plan_scipy(self, f, v, th, up, seed, refine) -> Plan:
@@ -349,15 +370,51 @@ def centred_cycle(u: Sequence[float], f_target: Sequence[float], theta0: float, 
     its first stroke takes the fin from ``theta0`` across the centre to ``c -+ A``, its second
     sweeps to ``c +- A``; in steady state (the fin at one end of the last cycle) the two
     strokes are the same sweep back and forth about ``c``."""
+    return centred_cycles(np.asarray(u, dtype=float), f_target, theta0, u_prev, cfg).tolist()
+
+
+def centred_cycles(u: np.ndarray, f_target: Sequence[float], theta0: float, u_prev: Sequence[float],
+                   cfg: MpcConfig) -> np.ndarray:
+    """:func:`centred_cycle` of every plan of ``u`` (shape (..., 4))."""
     want = math.atan2(f_target[1], f_target[0]) - math.atan2(-cfg.c_d, -cfg.c_l)
     prev = theta0 - 0.5 * u_prev[1]
-    duration = abs(u[0]) / u[2] + abs(u[1]) / u[3]
-    limit = cfg.centre_rate * duration
-    centre = prev + min(limit, max(-limit, math.remainder(want - prev, 2.0 * math.pi)))
-    rel = math.remainder(theta0 - centre, 2.0 * math.pi)  # where the fin is, from the centre
-    side = 1.0 if rel >= 0.0 else -1.0
-    amplitude = 0.25 * (abs(u[0]) + abs(u[1]))
-    return [-rel - side * amplitude, 2.0 * side * amplitude, u[2], u[3]]
+    d = np.abs(u[..., :H])
+    limit = cfg.centre_rate * (d[..., 0] / u[..., 2] + d[..., 1] / u[..., 3])
+    centre = prev + np.clip(math.remainder(want - prev, 2.0 * math.pi), -limit, limit)
+    rel = theta0 - centre  # where the fin is, from the centre (wrapped as math.remainder does, exactly)
+    rel = rel - 2.0 * math.pi * np.round(rel / (2.0 * math.pi))
+    side = np.where(rel >= 0.0, 1.0, -1.0)
+    amplitude = 0.25 * (d[..., 0] + d[..., 1])
+    return np.stack([-rel - side * amplitude, 2.0 * side * amplitude, u[..., 2], u[..., 3]], axis=-1)
+
+
+def cycle_grid(n: int, a_lo: float, a_hi: float, w_lo: float, w_hi: float
+               ) -> tuple[np.ndarray, tuple[float, float, float, float, float, float]]:
+    """The symmetric cycles ``[2 A, -2 A, w, w]`` of ``n`` amplitudes A in [a_lo, a_hi] by ``n``
+    rates w in [w_lo, w_hi] (shape (n * n, 4); none for n = 0), and the grid's (amplitude
+    step, rate step, the four bounds) for :func:`fine_grid`."""
+    if n == 0:
+        return np.zeros((0, 4)), (0.0, 0.0, a_lo, a_hi, w_lo, w_hi)
+    a, w = np.meshgrid(np.linspace(a_lo, a_hi, n), np.linspace(w_lo, w_hi, n), indexing="ij")
+    a, w = a.ravel(), w.ravel()
+    steps = ((a_hi - a_lo) / max(1, n - 1), (w_hi - w_lo) / max(1, n - 1), a_lo, a_hi, w_lo, w_hi)
+    return np.stack([2.0 * a, -2.0 * a, w, w], axis=-1), steps
+
+
+def fine_grid(about: np.ndarray, da: float, dw: float, a_lo: float, a_hi: float, w_lo: float, w_hi: float
+              ) -> np.ndarray:
+    """Symmetric cycles a quarter of a coarse step (``da``, ``dw``) apart, to one step either
+    side of the amplitude and first rate of the cycle ``about``, within the bounds (none if
+    ``da`` is 0): the force grows with the rate squared, and half a step of the rate (some
+    12 % of the force) left the fins' forward forces unequal enough to turn the robot."""
+    if da == 0.0:
+        return np.zeros((0, 4))
+    a0, w0 = 0.25 * (abs(about[0]) + abs(about[1])), about[2]
+    a = np.clip(a0 + da * np.linspace(-1.0, 1.0, 9), a_lo, a_hi)
+    w = np.clip(w0 + dw * np.linspace(-1.0, 1.0, 9), w_lo, w_hi)
+    aa, ww = np.meshgrid(a, w, indexing="ij")
+    aa, ww = aa.ravel(), ww.ravel()
+    return np.stack([2.0 * aa, -2.0 * aa, ww, ww], axis=-1)
 
 
 def _breakdown(terms: np.ndarray) -> CostBreakdown:

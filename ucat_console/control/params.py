@@ -90,6 +90,12 @@ class MpcConfig(Config):
         doc="turn each planned cycle (its oscillation centre) so its mean force points along the "
         "target, at most this fast (0: the paper's MPC, the cycle as solved)",
     )
+    centre_grid: int = param(
+        12, lo=0, hi=64,
+        doc="with centre_rate > 0: the centred cycle is the one of least cost among the solver's and a grid of "
+        "this many amplitudes by as many rates, then a finer grid about the best (0: the solver's amplitude "
+        "and rates)",
+    )
 
     def _check(self) -> None:
         require_below(self, "d_eps", "d_max")
