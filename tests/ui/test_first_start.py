@@ -1,25 +1,29 @@
 """The first start: the page is served at once while the compiled code is prepared (a slow
 compile stood in by a preparation that waits for the test), nothing can be armed then, and
-the console takes over the same port when it is ready."""
+the console takes the page's server over when it is ready."""
 
 from __future__ import annotations
 
+import os
+import re
+import signal
+import socket
 import threading
 
 import pytest
-from support import wait_for
+from support import TOKEN, wait_for
 
 from ucat_console import compiled
 from ucat_console.backend import prepare
 from ucat_console.backend.prepare import Preparation, Progress, Step
 from ucat_console.backend.supervisor import CommandRefused
 from ucat_console.bench.raw_page import RawPage
-from ucat_console.cli import run as run_cli
-from ucat_console.config import AppConfig, ConsoleConfig
+from ucat_console.cli import main
+from ucat_console.config import AppConfig
 
 
 class SlowPreparation:
-    """Compiling until the test says it is done."""
+    """Compiling until the test says it is done (``go``); then everything is ready."""
 
     def __init__(self, steps, on_progress) -> None:
         self.error = ""
@@ -35,40 +39,73 @@ class SlowPreparation:
     def wait(self, timeout=None) -> bool:
         self.go.wait()
         self.on_progress(Progress(2, 2, ""))
+        self.complete = True
         return True
 
     def cancel(self) -> None:
         self.go.set()
 
 
-def test_the_page_is_served_while_compiling_and_the_console_takes_over(make_console, monkeypatch, capsys) -> None:
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_the_console_takes_the_loading_page_over_one_server_one_address(monkeypatch, capsys, tmp_path) -> None:
+    """``ucat-console run``: the page served at once while compiling (nothing to arm, nothing a
+    page sends taken), then the console on the same server: a page open during the loading
+    gets the console on its socket, and the terminal shows one address box, one address,
+    and viser's "Server stopped" only once the console stops."""
     slow: list[SlowPreparation] = []
     monkeypatch.setattr(prepare, "start",
                         lambda cfg, steps, cb, workers=None: slow.append(SlowPreparation(steps, cb)) or slow[-1])
-    cfg = AppConfig(console=ConsoleConfig(port=0, record_on_arm=False, heartbeat_period=0.1))
-    out: dict = {}
-    t = threading.Thread(target=lambda: out.setdefault("cfg", run_cli._prepare_with_page(cfg)[0]), daemon=True)
-    t.start()
-    url = wait_for(lambda: next((w for w in capsys.readouterr().out.split() if w.startswith("http://")), None),
-                   what="the loading page's address")
-    page = RawPage(url)
-    # the page first shows the start, then the preparation's progress
-    text = wait_for(lambda: next((str(e.get("_markdown")) for e in page.elements.values()
-                                  if "step 1 of 2" in str(e.get("_markdown", ""))), None),
-                    what="the progress shown")
-    assert "Starting the console" in text
-    assert page.find("Arm motors") is None and page.find("Take control") is None  # nothing to arm yet
-    page.update("any", value=True)  # whatever a page sends, there is no input to take it
-    slow[0].go.set()
-    t.join(timeout=30.0)
-    wait_for(lambda: page.closed, what="the loading page closing")
-    port = out["cfg"].console.port
-    assert f":{port}" in url
-    console = make_console(out["cfg"], serve=True)
-    assert console.url == url  # the same address: open pages reconnect to the console
-    console_page = RawPage(url)
-    console_page.wait_for("Arm motors")
-    console_page.close()
+    config = tmp_path / "console.toml"
+    config.write_text(f'[console]\nrecord_on_arm = false\nheartbeat_period = 0.1\n[access]\ntoken = "{TOKEN}"\n')
+    url = f"http://127.0.0.1:{_free_port()}"
+    seen: dict = {}
+
+    def operator() -> None:
+        try:
+            wait_for(lambda: slow, timeout=60.0, what="the preparation started")
+            page = RawPage(url)
+            # the page first shows the start, then the preparation's progress
+            text = wait_for(lambda: next((str(e.get("_markdown")) for e in page.elements.values()
+                                          if "step 1 of 2" in str(e.get("_markdown", ""))), None),
+                            what="the progress shown")
+            assert "Starting the console" in text
+            assert page.find("Arm motors") is None and page.find("Take control") is None  # nothing to arm yet
+            page.update("any", value=True)  # whatever a page sends, there is no input to take it
+            slow[0].go.set()
+            seen["arm"] = page.wait_for("Arm motors", timeout=120.0)  # the console, on the same socket
+            seen["closed"] = page.closed
+            seen["loading_left"] = [e for e in page.elements.values() if "Starting the console" in
+                                    str(e.get("_markdown", ""))]
+            page.take_control(TOKEN)
+            seen["pilot"] = wait_for(lambda: page.bar.get("you_pilot"), timeout=30.0, what="the page the pilot")
+            page.close()
+        except BaseException as e:  # noqa: BLE001 (the test's thread says what failed)
+            seen["error"] = e
+        finally:
+            if slow:
+                slow[0].go.set()
+            wait_for(lambda: signal.getsignal(signal.SIGTERM) not in (signal.SIG_DFL, None), timeout=60.0,
+                     what="the console's handler of SIGTERM")
+            os.kill(os.getpid(), signal.SIGTERM)  # as the operator's Ctrl-C
+
+    monkeypatch.setenv("UCAT_CONSOLE_SESSIONS", str(tmp_path))
+    thread = threading.Thread(target=operator, daemon=True)
+    thread.start()
+    code = main(["run", "--config", str(config), "--port", url.rsplit(":", 1)[1]])
+    thread.join(timeout=30.0)
+    out = capsys.readouterr().out
+    assert "error" not in seen, (seen.get("error"), out)
+    assert code == 0, out
+    assert seen["arm"] and not seen["closed"] and not seen["loading_left"] and seen["pilot"]
+    # viser's "Server stopped" once, when the console stops (after it was ready)
+    assert out.count("Server stopped") == 1 and out.rfind("pilot token") < out.find("Server stopped"), out
+    assert out.count("HTTP") == 1, out  # viser's address box, once
+    assert set(re.findall(r"(?:http|ws)://[^\s)│]+", out)) == {url, url.replace("http", "ws", 1)}, out
 
 
 def test_a_real_preparation_reports_its_steps_and_finishes() -> None:

@@ -11,8 +11,9 @@ printed below) arms them. ``--headless`` runs without a page and arms at once wi
 given setpoints, for ``--duration`` seconds of robot time from arming (real time; ``--fast``
 runs the simulator as fast as it goes). Ctrl-C disarms, stops the motors and closes the files.
 
-The compiled code is prepared first in child processes (``cli.compiled``: the first run on a
-machine compiles it, with its progress on the terminal and on the loading page). A start
+The compiled code is prepared first in child processes (:mod:`ucat_console.compiled`: the first run on a
+machine compiles it, with its progress on the terminal and on the loading page, whose
+server the console then takes over: one server, one address, for the run). A start
 that fails (or is stopped) before the run begins leaves no session file behind.
 """
 
@@ -27,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from ucat_console.backend.loop.modes import mode_names
-from ucat_console.cli import compiled
+from ucat_console import compiled
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -90,21 +91,28 @@ def _foxglove_server(port: int, cfg: Any, sup: Any) -> Any:
 TOKEN_REPEAT = 60.0
 
 
-def _prepare_with_page(cfg: Any) -> tuple[Any, Any]:
+def _prepare_with_page(cfg: Any) -> tuple[Any, Any, Any]:
     """Serve the loading page at once and compile in child processes; (the configuration
-    with the port the page got (the console takes it over), the preparation, which goes on
-    with what may wait)."""
+    with the port the page got, the preparation, which goes on with what may wait, the
+    loading page, still serving: the console takes its server over). A preparation that
+    fails or is stopped stops the page."""
     from ucat_console.ui.loading import LoadingPage
 
     page = LoadingPage(cfg, cfg.console.host, cfg.console.port)
-    url_host = cfg.console.host if cfg.console.host not in ("0.0.0.0", "::") else "127.0.0.1"
-    print(f"U-CAT console on http://{url_host}:{page.port}  (starting: the page shows the progress)", flush=True)
+    print(f"U-CAT console on {_url(cfg.console.host, page.port)}  (starting: the page shows the progress)",
+          flush=True)
     try:
         prep = compiled.prepare(cfg, compiled.console_steps(cfg), on_progress=page.set_progress)
-    finally:
-        port = page.port
+    except BaseException:
         page.stop()
-    return cfg.replace(console=cfg.console.replace(port=port)), prep
+        raise
+    return cfg.replace(console=cfg.console.replace(port=page.port)), prep, page
+
+
+def _url(host: str, port: int) -> str:
+    """The page's address on ``host`` (any address: this machine's loopback one)."""
+    host = host if host not in ("0.0.0.0", "::") else "127.0.0.1"
+    return f"http://[{host}]:{port}" if ":" in host else f"http://{host}:{port}"
 
 
 def _wait_first_step(sup: Any) -> None:
@@ -140,11 +148,12 @@ def run(args: argparse.Namespace) -> int:
         raise KeyboardInterrupt
 
     previous = signal.signal(signal.SIGTERM, on_term)
+    loading = None  # the loading page, until the console takes its server over
     try:
         if args.headless:  # no formulation switch without a page: only what the run needs
             prep = compiled.prepare(cfg, compiled.needed_steps(cfg))
         else:
-            cfg, prep = _prepare_with_page(cfg)
+            cfg, prep, loading = _prepare_with_page(cfg)
     except KeyboardInterrupt:
         print("\nstopped while starting", file=sys.stderr)
         signal.signal(signal.SIGTERM, previous)
@@ -161,6 +170,8 @@ def run(args: argparse.Namespace) -> int:
                          planner_ready=lambda f: prep.done(compiled.planner_step(f)), sessions_dir=args.sessions_dir)
     except BaseException:
         prep.cancel()
+        if loading is not None:
+            loading.stop()
         signal.signal(signal.SIGTERM, previous)
         raise
     started = False  # the run has begun: from here on its recording is kept
@@ -173,7 +184,8 @@ def run(args: argparse.Namespace) -> int:
         if not args.headless:
             from ucat_console.ui.app import ConsoleApp
 
-            app = ConsoleApp(sup)
+            app = ConsoleApp(sup, loading_page=loading)
+            loading = None
             app.start()
             if args.playback is not None:
                 name = Path(args.playback).name
@@ -190,7 +202,7 @@ def run(args: argparse.Namespace) -> int:
         if args.record:
             print(f"recording session {sup.start_recording(LOCAL)}")
         if app is not None:
-            print(f"U-CAT console on {app.url}  (port {app.port})")
+            print(f"U-CAT console ready on {app.url}  (port {app.port})")
             print(f"pilot token: {sup.access.token}")
         t_stop = args.duration
         if app is None:
@@ -237,6 +249,8 @@ def run(args: argparse.Namespace) -> int:
             fox.stop()
         if app is not None:
             app.stop()
+        elif loading is not None:  # the console did not take its server over
+            loading.stop()
         prep.cancel()  # a background compile still running is not waited for
         signal.signal(signal.SIGTERM, previous)
     p = last_power[0]

@@ -48,7 +48,7 @@ import logging
 import math
 import threading
 import time
-from typing import Any, Callable, Iterator
+from typing import TYPE_CHECKING, Any, Callable, Iterator
 
 import viser
 
@@ -69,6 +69,9 @@ from ucat_console.ui.scene import add_pool
 from ucat_console.ui.session_list import SessionList
 from ucat_console.ui.status_bar import bar_state
 from ucat_console.ui.view import StreamView
+
+if TYPE_CHECKING:
+    from ucat_console.ui.loading import LoadingPage
 
 log = logging.getLogger(__name__)
 #: how far (m) the followed robot moves before the camera follows it
@@ -111,11 +114,11 @@ class ConsoleApp:
     """The viser app of one supervisor (module docstring)."""
 
     def __init__(self, supervisor: Supervisor, *, host: str | None = None, port: int | None = None,
-                 probe: bool = False) -> None:
+                 probe: bool = False, loading_page: LoadingPage | None = None) -> None:
         self.sup = supervisor
         cfg = supervisor.cfg.console
         self.cfg = cfg
-        self.host = cfg.host if host is None else host
+        self.host = loading_page.host if loading_page is not None else cfg.host if host is None else host
         if not is_loopback(self.host):
             log.warning("the console binds to %s: anyone who reaches it sees the live page "
                         "(control still needs the pilot token); use 127.0.0.1 unless you mean it",
@@ -144,17 +147,21 @@ class ConsoleApp:
         #: another run says the console restarted)
         self.run_id = {"id": f"{time.time_ns():x}", "started": time.strftime("%H:%M:%S")}
 
-        self.guard = PageGuard(
+        pages = dict(
             is_pilot=supervisor.access.is_pilot,
             pilot_timeout=lambda: supervisor.cfg.failsafe.pilot_gone.timeout,
-            page_timeout=cfg.page_timeout, heartbeat_period=cfg.heartbeat_period,
-            allowed_origins=cfg.allowed_origins, max_per_address=cfg.max_pages_per_address,
             on_connect=supervisor.client_connected,
             on_disconnect=supervisor.client_disconnected,
             on_gone=lambda cid, silent: supervisor.client_disconnected(cid, silent_for=silent),
         )
-        server = self.guard.serve(host=self.host, port=cfg.port if port is None else port, verbose=False,
-                                  label="U-CAT console")
+        if loading_page is not None:  # its server goes on as the console's: one server for the run
+            self.guard, server = loading_page.hand_over(**pages)
+        else:
+            self.guard = PageGuard(page_timeout=cfg.page_timeout, heartbeat_period=cfg.heartbeat_period,
+                                   allowed_origins=cfg.allowed_origins, max_per_address=cfg.max_pages_per_address,
+                                   **pages)
+            server = self.guard.serve(host=self.host, port=cfg.port if port is None else port, verbose=False,
+                                      label="U-CAT console")
         self.server = server
         self._theme(server.gui, cfg.dark)
         server.request_share_url = _no_share_url  # type: ignore[method-assign]

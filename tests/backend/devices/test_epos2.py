@@ -482,9 +482,10 @@ def test_drive_without_event_timer_falls_back_to_on_change_feedback():
     try:
         drives.connect()
         refused = [e for e in rec.events if e.code == "no_event_timer"]
-        assert len(refused) == 2  # TPDO1 and TPDO2
+        assert len(refused) == 3  # TPDO1, TPDO2 and TPDO3 (current and supply voltage)
         assert all(e.data["abort_code"] == 0x06090011 for e in refused)
         assert group[21].value(0x1801, 3) == 100  # inhibit time 10 ms in 100 us units
+        assert group[21].value(0x1802, 3) == 200  # 20 ms: the electrical period
         assert drives.enable_all()
     finally:
         drives.close()
@@ -525,8 +526,8 @@ def _sdo_upload(bus: can.BusABC, node: int, index: int, sub: int) -> bytes:
 
 
 def test_current_and_voltage_frames_are_the_epos2s_and_the_driver_reads_them():
-    """0x2027 (INT16 mA) and 0x2200 sub 1 (UINT16, 0.1 V), byte for byte, then through the
-    driver: a fixed 1.234 A at 23.7 V. (The polling thread runs in test_rig's closed loop.)"""
+    """0x2027 (INT16 mA) and 0x2200 sub 1 (UINT16, 0.1 V) by SDO, byte for byte, then through
+    the driver: a fixed 1.234 A at 23.7 V. (The round's thread runs in test_rig's closed loop.)"""
     channel = _channel("elec")
     emulators = start_emulated_nodes(channel, (21,), lambda node: _LoadedServo(amps=1.234),
                                      config=Epos2EmulatorConfig(units=UNITS, supply_voltage=23.7))
@@ -541,8 +542,12 @@ def test_current_and_voltage_frames_are_the_epos2s_and_the_driver_reads_them():
         emu = emulators[21]
         # the averaged current settles on the motor current (1234 mA = 0x04D2)
         wait_for(lambda: emu.value(0x2027) == 1234, what="the emulated current")
-        [(fin, reading)] = drives.read_electrical().items()  # one round, by fin
-        assert fin == 0 and reading is not None and reading.fin == 0
+        def settled() -> tuple | None:  # one round, by fin (its TPDO3 may be from before the settling)
+            [(fin, reading)] = drives.read_electrical().items()
+            return (fin, reading) if reading is not None and abs(reading.current_a - 1.234) < 1e-9 else None
+
+        fin, reading = wait_for(settled, what="the settled current read")
+        assert fin == 0 and reading.fin == 0
         assert reading.current_a == pytest.approx(1.234, abs=1e-12)
         assert reading.voltage_v == pytest.approx(23.7, abs=1e-12)
 
@@ -577,8 +582,51 @@ def test_emulated_current_is_the_servo_s_or_the_no_load_current_and_none_without
         group.close()
 
 
+def test_the_electrical_tpdo_is_the_epos2s_and_brings_a_sagging_supply_at_once():
+    """TPDO3 (0x380 + node): 0x2027 (INT16 mA) then 0x2200 sub 1 (UINT16 0.1 V), byte for
+    byte as the drive maps them, every electrical period; the driver's reading is the last
+    one, stamped on arrival, without an SDO request (the node's SDO replies held back for
+    longer than the test waits); a node that stops sending gives no reading (SDO then, which
+    it does not answer either)."""
+    channel = _channel("tpdo3")
+    emulators = start_emulated_nodes(channel, (21,), lambda node: _LoadedServo(amps=1.234),
+                                     config=Epos2EmulatorConfig(units=UNITS, supply_voltage=23.7))
+    raw = can.Bus(interface="virtual", channel=channel, ignore_config=True)
+    cfg = Epos2Config(interface="virtual", channel=channel, units=UNITS, sdo_timeout=1.0,
+                      heartbeat_ms=HEARTBEAT_MS, electrical_period_ms=20)
+    rec = Recorder()
+    drives = FinDrives(cfg, rec.on_feedback, rec.on_event, fins={0: 21})
+    try:
+        drives.connect()
+        assert drives.enable_all()
+        emu = emulators[21]
+        wait_for(lambda: emu.value(0x2027) == 1234, what="the emulated current")
+
+        def tpdo3() -> bool:  # 1234 mA = 0x04D2, then 237 x 0.1 V = 0x00ED (older ones: the current settling)
+            msg = raw.recv(timeout=0.1)
+            return msg is not None and msg.arbitration_id == 0x380 + 21 and \
+                bytes(msg.data) == bytes([0xD2, 0x04, 0xED, 0x00])
+
+        wait_for(tpdo3, what="the TPDO3 of 1.234 A at 23.7 V from the node")
+        emu.slow_replies(30.0)  # from now on, what the driver reads comes by PDO
+        emu.set_supply_voltage(20.0)
+        reading = wait_for(lambda: (r := drives.drive(0).read_electrical()) is not None and r.voltage_v < 23
+                           and r, what="the sagging supply read")
+        assert reading.voltage_v == pytest.approx(20.0, abs=1e-12)
+        assert reading.current_a == pytest.approx(1.234, abs=1e-12)
+        assert not [e for e in rec.events if e.code.startswith("sdo")]
+        emu.slow_replies(0.0)
+        emu.silence()
+        assert wait_for(lambda: drives.drive(0).read_electrical() is None, what="no reading from a silent node")
+    finally:
+        drives.close()
+        raw.shutdown()
+        emulators.close()
+
+
 def test_a_node_that_does_not_answer_gives_no_electrical_reading_and_one_event():
-    rig = Rig((21,), sdo_timeout=0.1)
+    """By SDO (no electrical TPDO: ``electrical_period_ms`` 0, as for a node that refuses it)."""
+    rig = Rig((21,), sdo_timeout=0.1, electrical_period_ms=0)
     try:
         emu = rig.emulators[21]
         emu.slow_replies(0.3)

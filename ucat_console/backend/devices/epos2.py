@@ -16,7 +16,11 @@ deceleration and quick-stop deceleration, PDO mapping), NMT start. PDOs as confi
 * TPDO2 position actual + velocity actual every ``feedback_period_ms`` (event timer; the
   inhibit time keeps it to one frame per period where the drive also sends on change, and
   a drive that refuses the event timer is left sending on change), delivered as
-  :class:`FinFeedback`.
+  :class:`FinFeedback`;
+* TPDO3 averaged motor current (0x2027, INT16 mA) + supply voltage (0x2200 sub 1, UINT16
+  0.1 V) every ``electrical_period_ms`` (event timer and inhibit time as TPDO2), kept as
+  the drive's electrical input (:meth:`Epos2Driver.read_electrical`), read by SDO instead
+  while no fresh TPDO3 has come (a drive that refuses the mapping or the event timer).
 
 A stroke (:meth:`Epos2Driver.command`) writes RPDO2, then controlword 0x003F; when the
 statusword shows set-point acknowledge (bit 12) the driver clears bit 4 (0x000F). With
@@ -88,7 +92,9 @@ logger = logging.getLogger(__name__)
 EDS_PATH = Path(__file__).with_name("epos2.eds")
 
 _UINT32_MAX = 2**32 - 1
-_FEEDBACK_TPDO, _STATUS_TPDO = 2, 1
+_FEEDBACK_TPDO, _STATUS_TPDO, _ELECTRICAL_TPDO = 2, 1, 3
+#: a TPDO3 older than this many electrical periods is not the drive's present input (SDO then)
+_ELECTRICAL_STALE_PERIODS = 2.5
 _CONTROL_RPDO, _SETPOINT_RPDO = 1, 2
 
 FeedbackSink = Callable[[FinFeedback], None]
@@ -166,9 +172,9 @@ class Epos2Config(Config):
     )
     motor: FinMotor = FinMotor()  # the drives' motor, gearhead and bridge (battery power; robot.motor)
     electrical_period_ms: int = param(
-        100, lo=0, hi=60_000, unit="ms",
-        doc="read each drive's averaged motor current (0x2027) and supply voltage (0x2200 sub 1) "
-        "by SDO this often (0: never)",
+        20, lo=0, hi=60_000, unit="ms",
+        doc="each drive sends its averaged motor current (0x2027) and supply voltage (0x2200 sub 1) "
+        "this often in TPDO3 (by SDO where it does not), handed on as a round (0: never)",
     )
 
     def _check(self) -> None:
@@ -257,9 +263,12 @@ class Epos2Driver:
         self.node.nmt.add_heartbeat_callback(self._on_heartbeat)
         self.node.emcy.add_callback(self._on_emcy)
         self._tp_status = self._tp_mode = self._tp_position = self._tp_velocity = None
+        self._tp_current = self._tp_voltage = None
+        self._electrical_pdo: DriveElectrical | None = None  # the last TPDO3's reading
         self._rp_control = self._rp_target = self._rp_velocity = None
         self.node.tpdo[_STATUS_TPDO].add_callback(self._on_status_pdo)
         self.node.tpdo[_FEEDBACK_TPDO].add_callback(self._on_feedback_pdo)
+        self.node.tpdo[_ELECTRICAL_TPDO].add_callback(self._on_electrical_pdo)
 
     # ----------------------------------------------------------------------------- events
     def _emit(self, event_code: str, message: str, level: str = "error", **data: Any) -> None:
@@ -366,18 +375,46 @@ class Epos2Driver:
         self._tp_mode = tpdo[_STATUS_TPDO].add_variable(cia402.MODES_OF_OPERATION_DISPLAY)
         self._tp_position = tpdo[_FEEDBACK_TPDO].add_variable(cia402.POSITION_ACTUAL)
         self._tp_velocity = tpdo[_FEEDBACK_TPDO].add_variable(cia402.VELOCITY_ACTUAL)
+        electrical = self.config.electrical_period_ms
+        self._tp_current = self._tp_voltage = None
+        with self._lock:
+            self._electrical_pdo = None
         for n in (1, 2, 3, 4):
-            try:
-                tpdo[n].save()
-            except SdoAbortedError as e:
-                if tpdo[n].event_timer is None:
-                    raise
-                # drives without an event timer (0x18xx sub 5) send on change only
-                tpdo[n].event_timer = None
-                self._emit("no_event_timer",
-                           f"TPDO{n} event timer refused ({e}); feedback on change only",
-                           level="warning", abort_code=e.code)
-                tpdo[n].save()
+            if n == _ELECTRICAL_TPDO and electrical > 0:
+                try:
+                    self._configure_electrical_tpdo(tpdo[n], electrical)
+                except SdoAbortedError as e:  # read by SDO instead
+                    tpdo[n].clear()
+                    tpdo[n].enabled = False
+                    self._tp_current = self._tp_voltage = None
+                    self._emit("pdo_fallback", f"TPDO3 (current, supply voltage) refused ({e}); "
+                               "read by SDO", level="warning", abort_code=e.code)
+                else:
+                    continue
+            self._save_tpdo(tpdo[n], n)
+
+    def _configure_electrical_tpdo(self, pdo_map: Any, period_ms: int) -> None:
+        """TPDO3: the averaged motor current and the supply voltage every ``period_ms``."""
+        pdo_map.enabled = True
+        pdo_map.trans_type = 255
+        pdo_map.event_timer = period_ms
+        pdo_map.inhibit_time = min(period_ms * 10, 0xFFFF)  # 100 us units
+        self._tp_current = pdo_map.add_variable(cia402.CURRENT_ACTUAL_AVERAGED)
+        self._tp_voltage = pdo_map.add_variable(cia402.POWER_SUPPLY, cia402.POWER_SUPPLY_VOLTAGE_SUB)
+        self._save_tpdo(pdo_map, _ELECTRICAL_TPDO)
+
+    def _save_tpdo(self, pdo_map: Any, n: int) -> None:
+        try:
+            pdo_map.save()
+        except SdoAbortedError as e:
+            if pdo_map.event_timer is None:
+                raise
+            # drives without an event timer (0x18xx sub 5) send on change only
+            pdo_map.event_timer = None
+            self._emit("no_event_timer",
+                       f"TPDO{n} event timer refused ({e}); sent on change only",
+                       level="warning", abort_code=e.code)
+            pdo_map.save()
 
     def _configure_rpdos(self) -> None:
         rpdo = self.node.rpdo
@@ -677,9 +714,15 @@ class Epos2Driver:
         return milliamps * cia402.CURRENT_UNIT
 
     def read_electrical(self) -> DriveElectrical | None:
-        """The drive's electrical input by SDO: the motor current averaged by the drive
-        (0x2027, mA) and the supply voltage (0x2200 sub 1, 0.1 V); None with a (throttled)
-        event when the node does not answer or refuses."""
+        """The drive's electrical input: the motor current averaged by the drive (0x2027,
+        mA) and the supply voltage (0x2200 sub 1, 0.1 V), as its last TPDO3 brought them
+        (stamped on arrival) when that came within the last 2.5 electrical periods, else
+        by SDO; None with a (throttled) event when the node does not answer or refuses."""
+        with self._lock:
+            last = self._electrical_pdo
+        stale = _ELECTRICAL_STALE_PERIODS * self.config.electrical_period_ms / 1000.0
+        if last is not None and self._clock() - last.t <= stale:
+            return last
         try:
             with self._sdo_lock:
                 milliamps = self.node.sdo[cia402.CURRENT_ACTUAL_AVERAGED].raw
@@ -735,6 +778,21 @@ class Epos2Driver:
             self._set_statusword(sw)
         except Exception:
             logger.exception("%s: statusword handling failed", self.source)
+
+    def _on_electrical_pdo(self, pdo_map: Any) -> None:
+        if self._tp_current is None or self._tp_voltage is None:
+            return
+        try:
+            milliamps = self._tp_current.raw
+            decivolts = self._tp_voltage.raw
+        except Exception as e:
+            self._report.throttled("invalid_data", f"electrical TPDO unreadable: {e}",
+                                   "warning", frame=bytes(pdo_map.data).hex())
+            return
+        reading = DriveElectrical(t=self._clock(), fin=self.fin, current_a=milliamps * cia402.CURRENT_UNIT,
+                                  voltage_v=decivolts * cia402.POWER_SUPPLY_VOLTAGE_UNIT)
+        with self._lock:
+            self._electrical_pdo = reading
 
     def _on_feedback_pdo(self, pdo_map: Any) -> None:
         try:

@@ -11,10 +11,11 @@ present. A busy machine that holds the reader (or the supervision thread) back l
 frames unread in the queue; a heartbeat among them is not missing, it is not heard yet.
 
 Electrical input: with ``on_electrical`` given and ``electrical_period_ms`` > 0, a thread
-reads every started node's averaged motor current and supply voltage by SDO once per
-period (:meth:`Epos2Driver.read_electrical`) and hands each round to ``on_electrical``: a
-list of :class:`DriveElectrical` by fin, None for a node that did not answer. It runs apart
-from the supervision thread, so a slow SDO reply never delays a heartbeat check.
+takes every started node's averaged motor current and supply voltage once per period
+(:meth:`Epos2Driver.read_electrical`: its last TPDO3, by SDO where none came lately) and
+hands each round to ``on_electrical``: a list of :class:`DriveElectrical` by fin, None for
+a node that did not answer. It runs apart from the supervision thread, so a slow SDO reply
+never delays a heartbeat check.
 """
 
 from __future__ import annotations
