@@ -169,6 +169,7 @@ def test_simulated_robot_runs_closed_loop_through_drivers_and_emulators() -> Non
         start = io.truth()
         loop.run(3.0)
         end = io.truth()
+        during = list(got[ch.POWER_ELECTRICAL])  # the drives keep reporting after the loop stopped
         commands = [loop.fin_command(f) for f in range(4)]
 
         # depth and forward velocity move towards the setpoints, as on the in-process robot
@@ -204,7 +205,10 @@ def test_simulated_robot_runs_closed_loop_through_drivers_and_emulators() -> Non
             assert min(m.per_fin) >= motor.quiescent_power - 1e-9
             assert m.total == pytest.approx(sum(m.per_fin))
         assert max(max(abs(i) for i in m.current) for m in electrical) > 0.05
-        assert all(0.0 <= m.t <= loop.time + io.config.resync_s + 0.05 for m in electrical)
+        # stamped in the loop's time (those reported while it ran)
+        assert during and all(0.0 <= m.t <= loop.time + io.config.resync_s + 0.05 for m in during), (
+            f"loop time {loop.time:.3f} s, reported at {[round(m.t, 3) for m in during]}")
+        assert [m.t for m in during] == sorted(m.t for m in during)  # the channel's time never goes back
 
         # the sensors reached the loop through their drivers and agree with the plant
         assert got[ch.IMU] and got[ch.DVL] and got[ch.DEPTH]

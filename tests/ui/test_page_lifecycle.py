@@ -12,6 +12,7 @@ import gc
 import logging
 import threading
 import tracemalloc
+import weakref
 from typing import Any, Callable
 
 import pytest
@@ -45,31 +46,51 @@ def _back_to(console: Console, baseline: dict[str, int]) -> dict[str, int]:
     return now
 
 
-def _pages_alive() -> list[str]:
-    """What is alive (after a collection) of the pages: viser's handles and the console's panels."""
-    gc.collect()
-    return sorted(type(o).__name__ for o in gc.get_objects()
-                  if type(o) in (viser.ClientHandle, panels.ControlPanel, PlaybackPanel, ComparePanel))
+#: what a page is made of that must go with it: viser's handle and the console's panels
+_PAGE_PARTS = (viser.ClientHandle, panels.ControlPanel, PlaybackPanel, ComparePanel)
 
 
-def _holders() -> str:
-    """What is alive of the pages and, for each, the types of what refers to it (the diagnosis)."""
+def _track(monkeypatch: pytest.MonkeyPatch) -> weakref.WeakSet[Any]:
+    """Every page part made from now on, held weakly. (Not ``gc.get_objects()``: called while
+    the console's threads build tuples, it hands out a tuple still being built, and CPython
+    then fails that thread's ``tuple(...)`` with a SystemError.)"""
+    made: weakref.WeakSet[Any] = weakref.WeakSet()
+
+    def tracking(real: Callable[..., None]) -> Callable[..., None]:
+        def __init__(self: Any, *args: Any, **kwargs: Any) -> None:
+            real(self, *args, **kwargs)
+            made.add(self)
+        return __init__
+
+    for cls in _PAGE_PARTS:
+        monkeypatch.setattr(cls, "__init__", tracking(cls.__init__))
+    return made
+
+
+def _pages_alive(made: weakref.WeakSet[Any]) -> list[str]:
+    """What is alive (after a collection) of the page parts made."""
     gc.collect()
-    alive = [o for o in gc.get_objects()
-             if type(o) in (viser.ClientHandle, panels.ControlPanel, PlaybackPanel, ComparePanel)]
+    return sorted(type(o).__name__ for o in list(made))
+
+
+def _holders(made: weakref.WeakSet[Any]) -> str:
+    """What is alive of the page parts and, for a few, the types of what refers to them (the diagnosis)."""
+    gc.collect()
+    alive = list(made)
     lines = []
-    for o in alive[:5]:
+    for o in alive[:3]:
         refs = []
         for r in gc.get_referrers(o):
             if r is alive:
                 continue
             name = type(r).__name__
-            if isinstance(r, dict):
+            if isinstance(r, (dict, list)):
                 owners = [type(x).__name__ for x in gc.get_referrers(r) if x is not alive][:3]
-                name += f" of {owners}"
-            elif type(r).__name__ == "frame":
+                name += f"({len(r)}) of {owners}"
+            elif name == "frame":
                 name += f" {r.f_code.co_filename.rsplit('/', 1)[-1]}:{r.f_lineno} {r.f_code.co_name}"
-            refs.append(name)
+            if name != "cell":
+                refs.append(name)
         lines.append(f"{type(o).__name__} held by {refs}")
     return f"{len(alive)} objects; " + "; ".join(lines)
 
@@ -158,7 +179,7 @@ def test_a_job_of_a_page_that_goes_while_it_runs_ends_quietly(
 @pytest.mark.slow
 @pytest.mark.timeout(1500)  # 1,200 pages under tracemalloc: minutes on a busy machine
 def test_a_thousand_pages_closing_at_random_moments_leave_nothing_and_memory_flat(
-        console: Console, caplog: pytest.LogCaptureFixture) -> None:
+        console: Console, caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch) -> None:
     """1,000 pages, 8 at a time, each closed at a seeded random moment: a fifth before it
     shows, the others while or after their controls are built, half of them dropping the
     connection; after 200 such pages to warm up (caches, viser's thread pool). No page's
@@ -166,6 +187,7 @@ def test_a_thousand_pages_closing_at_random_moments_leave_nothing_and_memory_fla
     than a quarter of what the pages' panels and elements would hold had each stayed (about
     40 kB a page): the rest is the supervisor's own windows filling while the pages come and go."""
     app = console.app
+    made = _track(monkeypatch)
     empty = counts(app)
     churn(console.url, 200, seed=1)
     baseline = _back_to(console, empty)
@@ -177,10 +199,10 @@ def test_a_thousand_pages_closing_at_random_moments_leave_nothing_and_memory_fla
         _back_to(console, baseline)
         # the builds of the last pages, gone while they waited for their turn, end meanwhile
         try:
-            wait_for(lambda: not _pages_alive(), timeout=300.0, poll=0.5,
+            wait_for(lambda: not _pages_alive(made), timeout=300.0, poll=0.5,
                      what="nothing alive of the pages gone")
         except pytest.fail.Exception:
-            pytest.fail(f"alive after the pages went: {_holders()}")
+            pytest.fail(f"alive after the pages went: {_holders(made)}")
         grown = tracemalloc.get_traced_memory()[0] / 2**20
     finally:
         tracemalloc.stop()

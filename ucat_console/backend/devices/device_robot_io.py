@@ -140,6 +140,7 @@ class DeviceRobotIO(RobotIO):
         self._lock = threading.Lock()
         self._pending: list[Reading] = []
         self._t = 0.0
+        self._electrical_t = 0.0  # the time of the last power/electrical message (the drives' round)
         self._started_loop = False
         self._reset = False  # re-anchored (resync): the next readings are the latest of each kind
         self._last_t: dict[object, float] = {}
@@ -370,6 +371,9 @@ class DeviceRobotIO(RobotIO):
             return  # no drive answered: each one's event says so
         wall = max(stamps)
         t = self.time.to_loop(wall) if self.time.anchored else self._t
+        # a drive's TPDO3 that came before the clock was anchored maps to before the loop's
+        # start: the channel's time never goes back (nor before 0)
+        t = self._electrical_t = max(t, self._electrical_t)
         with self._lock:
             sinks = self._telemetry_sinks
             rates = list(self._fin_rates)
