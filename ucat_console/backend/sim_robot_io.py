@@ -45,8 +45,9 @@ from ucat_console.telemetry.channels import POWER_ELECTRICAL
 from ucat_console.telemetry.events import EventSink
 from ucat_console.telemetry.messages import ElectricalPower
 
-#: how often the simulated drives' electrical input is reported (s): the drives' default
-#: reading period (``Epos2Config.electrical_period_ms``)
+#: how often the simulated drives' electrical input is reported (s of plant time), each
+#: message the mean over its period; the EPOS2s report every ``Epos2Config.electrical_period_ms``
+#: (20 ms), the simulated drives every 0.1 s
 ELECTRICAL_PERIOD = 0.1
 #: what :func:`run_core_on_plant` returns besides the core's own statuses
 NEED_NOISE = -1  # a noise block is used up: new blocks, then call again
