@@ -4,6 +4,7 @@ the console takes the page's server over when it is ready."""
 
 from __future__ import annotations
 
+import logging
 import os
 import re
 import signal
@@ -105,6 +106,8 @@ def test_the_console_takes_the_loading_page_over_one_server_one_address(monkeypa
     # viser's "Server stopped" once, when the console stops (after it was ready)
     assert out.count("Server stopped") == 1 and out.rfind("pilot token") < out.find("Server stopped"), out
     assert out.count("HTTP") == 1, out  # viser's address box, once
+    # websockets' INFO lines ("connection rejected (200 OK)" for each page load) kept off the terminal
+    assert logging.getLogger("websockets.server").getEffectiveLevel() >= logging.WARNING
     assert set(re.findall(r"(?:http|ws)://[^\s)│]+", out)) == {url, url.replace("http", "ws", 1)}, out
 
 

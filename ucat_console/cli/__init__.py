@@ -37,8 +37,11 @@ def main(argv: list[str] | None = None) -> int:
         level=logging.DEBUG if args.verbose else logging.INFO,
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
     )
-    if not args.verbose:  # the CANopen stack logs every NMT step at INFO
-        logging.getLogger("canopen").setLevel(logging.WARNING)
+    if not args.verbose:
+        # the CANopen stack logs every NMT step at INFO; websockets logs each page load it
+        # serves as "connection rejected (200 OK)" and its listening address beside viser's box
+        for name in ("canopen", "websockets.server"):
+            logging.getLogger(name).setLevel(logging.WARNING)
     try:
         return int(args.func(args) or 0)
     except BrokenPipeError:  # output piped into e.g. `head`
