@@ -229,7 +229,11 @@ INSTALL = r"""
   u.connection = 0;
   const watch = (msg) => {
     const s = u.state;
-    if (!s || !msg || msg.type !== "GuiUpdateMessage" || !msg.updates) return;
+    if (!msg || msg.type !== "GuiUpdateMessage" || !msg.updates) return;
+    if (!s) {  // typed before the bar's first state came (a slow link): judged when it comes
+      u.early = (u.early || []).concat([msg]).slice(-20);
+      return;
+    }
     if (msg.uuid === s.token_uuid) u.typed = msg.updates.value;
     else if (msg.uuid === s.take_uuid && typeof u.typed === "string" && u.typed) u.offered = u.typed;
   };
@@ -243,6 +247,7 @@ INSTALL = r"""
     client.__ucatWatched = true;
   }
   u.token = (s) => {
+    if (u.early) { const early = u.early; u.early = null; early.forEach(watch); }
     const token = kept.get();
     if (u.tokenConnection !== u.connection) {  // the first state on a new connection (or a reload)
       u.tokenConnection = u.connection; u.wasPilot = false; u.resent = 0;
