@@ -24,10 +24,15 @@ def test_the_contracts_hold() -> None:
     assert "0 broken" in run.stdout
 
 
-def test_a_broken_contract_fails(tmp_path: Path) -> None:
+def _copy_package(tmp_path: Path) -> None:
+    """The package and its contracts in ``tmp_path``, for a test to add a leak to."""
     shutil.copy(ROOT / "pyproject.toml", tmp_path / "pyproject.toml")
     shutil.copytree(ROOT / "ucat_console", tmp_path / "ucat_console",
                     ignore=shutil.ignore_patterns("__pycache__", "*.npz", "*.eds"))
+
+
+def test_a_broken_contract_fails(tmp_path: Path) -> None:
+    _copy_package(tmp_path)
     # the robot's description reaching into the core, and the page into a driver
     (tmp_path / "ucat_console" / "robot" / "leak.py").write_text(
         "from ucat_console.control.params import MpcConfig\n")
@@ -44,9 +49,7 @@ def test_a_broken_contract_fails(tmp_path: Path) -> None:
 def test_the_backend_reaching_into_the_page_fails(tmp_path: Path) -> None:
     """What compiles the page's code is named above the backend (``ucat_console.compiled``),
     never imported by it."""
-    shutil.copy(ROOT / "pyproject.toml", tmp_path / "pyproject.toml")
-    shutil.copytree(ROOT / "ucat_console", tmp_path / "ucat_console",
-                    ignore=shutil.ignore_patterns("__pycache__", "*.npz", "*.eds"))
+    _copy_package(tmp_path)
     (tmp_path / "ucat_console" / "backend" / "leak.py").write_text("from ucat_console.ui import plots\n")
     run = lint_imports(tmp_path)
     assert run.returncode != 0
@@ -57,9 +60,7 @@ def test_the_backend_reaching_into_the_page_fails(tmp_path: Path) -> None:
 def test_a_benchmark_reaching_into_the_command_line_fails(tmp_path: Path) -> None:
     """The tool packages are layers: a benchmark (below the command line and the
     experiments) importing the command line, even inside a function, breaks them."""
-    shutil.copy(ROOT / "pyproject.toml", tmp_path / "pyproject.toml")
-    shutil.copytree(ROOT / "ucat_console", tmp_path / "ucat_console",
-                    ignore=shutil.ignore_patterns("__pycache__", "*.npz", "*.eds"))
+    _copy_package(tmp_path)
     (tmp_path / "ucat_console" / "bench" / "leak.py").write_text(
         "def prepare():\n    from ucat_console.cli import run\n")
     run = lint_imports(tmp_path)
