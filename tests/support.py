@@ -128,7 +128,8 @@ def console_config(token: str = TOKEN, pilot_gone: Any = None, base: str | None 
     configuration ``base``: "sim-tuned" for a robot that swims), a fixed pilot token, a free
     port, no recording at arming (unless given), ``console`` settings and, when given, the
     pilot-gone failsafe rule (a FailsafeRule, or its timeout in s: hold)."""
-    from ucat_console.config import FailsafeRule, load_config
+    from ucat_console.backend.failsafe_config import FailsafeRule
+    from ucat_console.config import load_config
 
     cfg = load_config(base)
     cfg = cfg.replace(access=cfg.access.replace(token=token),

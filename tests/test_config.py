@@ -6,7 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from ucat_console.config import AppConfig, FailsafeRule, PilotGoneRule, load_config
+from ucat_console.backend.failsafe_config import FailsafeRule, PilotGoneRule
+
+from ucat_console.config import AppConfig, load_config
 
 
 def test_defaults_are_the_blocks_defaults() -> None:
@@ -85,7 +87,7 @@ def test_a_binary_file_is_refused_naming_the_file(tmp_path: Path) -> None:
 
 
 def test_secret_fields_are_left_out_of_a_redacted_config_and_its_repr() -> None:
-    from ucat_console.config import AccessConfig
+    from ucat_console.backend.access import AccessConfig
 
     cfg = AppConfig(access=AccessConfig(token="s3cret-pilot-token"))
     assert "s3cret-pilot-token" in cfg.to_toml()  # the file the operator writes keeps it

@@ -3,9 +3,11 @@
 :class:`AppConfig` composes the blocks defined beside the code that uses them (the
 controller's ``mpc``, ``body``, ``baseline``, ``executor``, ``power``; the closed loop's
 ``loop``; the simulated robot's ``plant``; the ``recorder``; the limits on reading session
-files, ``review``; the efficiency figures and their comparison, ``metrics``; the drivers' ``devices``) with the console's own
-blocks defined here: ``console`` (web server, plots, supervision), ``access`` (pilot
-token), ``failsafe`` (one rule per failsafe) and ``foxglove`` (the live Foxglove server).
+files, ``review``; the efficiency figures and their comparison, ``metrics``; the drivers' ``devices``; the pilot's ``access``, beside
+the access control; the ``failsafe`` rules, beside the safety monitor) with the console's own
+blocks defined here: ``console`` (web server, plots, supervision) and ``foxglove`` (the live
+Foxglove server). This module composes; it is imported by the supervisor and the tools
+(command line, benchmarks, experiments), never by the parts it composes.
 ``robot``, the one robot selector, picks the robot the supervisor drives: ``"sim"`` (the
 in-process simulator), ``"sim-devices"`` (the simulator behind the device emulators,
 through the drivers) or ``"hardware"`` (the drivers on the robot's devices, ``[devices]``).
@@ -42,33 +44,24 @@ import logging
 import typing
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, ClassVar, Self
+from typing import Any, Self
 from urllib.parse import urlsplit
 
 import tomli_w
 
 from ucat_console import shipped
+from ucat_console.backend.access import AccessConfig
 from ucat_console.backend.devices.config import ROBOTS, DevicesConfig
+from ucat_console.backend.failsafe_config import FailsafeConfig
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.backend.review.metrics import MetricsConfig
 from ucat_console.backend.sessions.limits import ReviewConfig
 from ucat_console.backend.sessions.recorder import RecorderConfig
 from ucat_console.backend.sim.params import PlantConfig
-from ucat_console.control.body_design import HEADING_FACTOR
-from ucat_console.control.params import DESIGN_DELAY, DESIGN_FACTOR, BodyConfig
 from ucat_console.typedconf import Config, coerce, from_dict, param, to_dict
 
 log = logging.getLogger(__name__)
 
-#: the body layer's defaults, the tracking failsafe's expected response's limits
-_BODY = BodyConfig()
-
-#: what a failsafe does when it triggers
-FAILSAFE_ACTIONS = ("hold", "surface", "disarm", "warn")
-#: how strongly each action acts: an escalation acts more strongly than the action before it
-ACTION_STRENGTH = {"warn": 0, "hold": 1, "surface": 2, "disarm": 3}
-#: what a failsafe may do when its cause lasts on (``none``: nothing more)
-ESCALATIONS = ("none", "hold", "surface", "disarm")
 #: the controller blocks: held by the loop's configuration, top-level tables in a file
 LOOP_BLOCKS = ("mpc", "baseline", "body", "executor", "power")
 
@@ -154,217 +147,6 @@ class ConsoleConfig(Config):
         if self.record_tail_max < self.record_tail:
             raise ValueError(f"record_tail_max: {self.record_tail_max:g} s is shorter than record_tail "
                              f"{self.record_tail:g} s; allowed: at least record_tail")
-
-
-@dataclass(frozen=True)
-class AccessConfig(Config):
-    """One pilot, everyone else read-only (console.md, Safety and access)."""
-
-    token: str = param("", secret=True,
-                       doc="pilot token; empty: a new random token at every start (never recorded or logged)")
-    max_failures: int = param(5, lo=1, hi=1000, doc="wrong tokens from one page before its token entry is locked")
-    address_max_failures: int = param(
-        20, lo=1, hi=100_000,
-        doc="wrong tokens from one remote address before every page of that address is locked out "
-        "(the pilot in control needs no token and is not affected)",
-    )
-    lockout: float = param(30.0, lo=0.0, hi=3600.0, unit="s",
-                           doc="window for counting wrong tokens, and how long a lock lasts")
-    confirm_timeout: float = param(
-        20.0, lo=1.0, hi=600.0, unit="s", doc="an arm request must be confirmed within this time"
-    )
-    handover_timeout: float = param(
-        20.0, lo=1.0, hi=600.0, unit="s",
-        doc="a request for control the pilot has not handed over within this time lapses; a request "
-        "lapses too when the pilot's page goes (it never takes control by itself)",
-    )
-
-    def _check(self) -> None:
-        if self.token != self.token.strip():
-            raise ValueError("token: the fixed token has surrounding spaces, which a page's token box "
-                             "never sends; remove them")
-        if self.token and len(self.token) < 8:
-            raise ValueError(f"token: a fixed token needs at least 8 characters, got {len(self.token)}")
-
-
-_ESCALATE_DOC = ("what the failsafe does when its cause lasts escalate_after s after it triggered: "
-                 "none (nothing more), hold, surface or disarm")
-_ESCALATE_AFTER_DOC = "how long the failsafe acts before it escalates"
-
-
-@dataclass(frozen=True)
-class FailsafeRule(Config):
-    """What one failsafe does, after how long its cause triggers it, and what it does when the
-    cause lasts on (``escalate``, ``escalate_after`` s after it triggered)."""
-
-    action: str = param(
-        "hold", choices=FAILSAFE_ACTIONS,
-        doc="hold: stop and hold the present depth; surface: stop and rise to 0 m; "
-        "disarm: motors off; warn: show and record only",
-    )
-    timeout: float = param(2.0, lo=0.0, hi=3600.0, unit="s", doc="how long the cause lasts before it triggers")
-    escalate: str = param("none", choices=ESCALATIONS, doc=_ESCALATE_DOC)
-    escalate_after: float = param(30.0, lo=0.0, hi=3600.0, unit="s", doc=_ESCALATE_AFTER_DOC)
-
-    def _check(self) -> None:
-        if self.escalate != "none" and ACTION_STRENGTH[self.escalate] < ACTION_STRENGTH[self.action]:
-            stronger = [a for a in ESCALATIONS[1:] if ACTION_STRENGTH[a] >= ACTION_STRENGTH[self.action]]
-            raise ValueError(f"escalate: {self.escalate!r} would act less strongly than action "
-                             f"{self.action!r}; allowed: none, {', '.join(stronger)}")
-
-    @property
-    def escalates(self) -> bool:
-        """Whether the escalation acts more strongly than the action (otherwise it is none)."""
-        return self.escalate != "none" and ACTION_STRENGTH[self.escalate] > ACTION_STRENGTH[self.action]
-
-
-@dataclass(frozen=True)
-class PilotGoneRule(FailsafeRule):
-    """The pilot-gone failsafe: hold where the robot is, then, if no pilot has come back
-    after 30 s, disarm (ArduSub's default GCS failsafe disarms after 5 s)."""
-
-    escalate: str = param("disarm", choices=ESCALATIONS, doc=_ESCALATE_DOC)
-
-
-@dataclass(frozen=True)
-class LoopWatchdogRule(FailsafeRule):
-    """The control loop's watchdog (a thread of its own): when the loop has not stepped for
-    ``timeout`` s it disarms, turning the drives off from its own thread. Only disarm or warn:
-    a hold or a surfacing needs the loop that is stuck. The default, 2 s, is over eight times
-    the loop's longest caught-up lag (``console.max_lag``, 0.25 s) and half as long again as
-    the longest lag measured with the computer at twice its load goal (1.3 s, docs/safety.md);
-    the drives hold their last set-point meanwhile."""
-
-    action: str = param("disarm", choices=("disarm", "warn"),
-                        doc="disarm: the drives off from the watchdog's thread; warn: show and record only")
-    timeout: float = param(2.0, lo=0.05, hi=60.0, unit="s",
-                           doc="how long the loop has not stepped before the watchdog acts")
-
-    def _check(self) -> None:
-        if self.escalate != "none":
-            raise ValueError(f"escalate: the loop watchdog acts once (disarm or warn); got {self.escalate!r}, "
-                             "allowed: none")
-
-
-@dataclass(frozen=True)
-class FailsafeConfig(Config):
-    """Every failsafe; each is shown, recorded, and latched until its cause clears."""
-
-    pilot_gone: PilotGoneRule = PilotGoneRule()
-    imu: FailsafeRule = FailsafeRule("disarm", 1.0)
-    dvl: FailsafeRule = FailsafeRule("hold", 2.0)
-    depth: FailsafeRule = FailsafeRule("disarm", 1.0)
-    motor: FailsafeRule = FailsafeRule("disarm", 0.0)
-    planner_late: FailsafeRule = FailsafeRule("hold", 10.0)
-    late_plans: int = param(
-        10, lo=1, hi=100_000, doc="late plans within planner_late.timeout that trigger planner_late"
-    )
-    tracking: FailsafeRule = FailsafeRule("warn", 10.0)
-    #: the recorder failed to write (a full disk): warn, or hold until the operator acts
-    recording: FailsafeRule = FailsafeRule("warn", 0.0)
-    loop_watchdog: LoopWatchdogRule = LoopWatchdogRule("disarm", 2.0)
-    #: the robot deeper than max_depth: surface (a hold would keep it beyond the limit)
-    depth_limit: FailsafeRule = FailsafeRule("surface", 1.0)
-    max_depth: float = param(
-        55.0, lo=0.1, hi=10_000.0, unit="m",
-        doc="depth_limit: a measured depth deeper than this (the default: 10 % beyond the setpoints' envelope, "
-        "loop.max_depth 50 m; set the pool's depth less a margin)",
-    )
-    #: the DVL's altitude below min_altitude: surface (a hold keeps the robot at the floor)
-    altitude: FailsafeRule = FailsafeRule("surface", 1.0)
-    min_altitude: float = param(
-        0.5, lo=0.0, hi=100.0, unit="m",
-        doc="altitude: the DVL's distance to the floor shorter than this (0: off); an invalid altitude "
-        "(none, NaN, not above 0) is not counted",
-    )
-    #: water in the hull (devices.leak): surface at once, under control, while the electronics work
-    leak: FailsafeRule = FailsafeRule("surface", 0.0)
-    #: the attitude estimate disagrees with the accelerometer, or the estimate stopped: hold
-    #: (stop; the depth is the pressure sensor's, the heading and speed loops are the estimate's)
-    estimate: FailsafeRule = FailsafeRule("hold", 2.0)
-    estimate_innovation: float = param(
-        0.2, lo=0.01, hi=3.15, unit="rad",
-        doc="estimate: the angle between the accelerometer's gravity and the attitude estimate's larger "
-        "than this (every reading taken at rest, |a| within 0.15 g of g0)",
-    )
-    #: the battery: warn first (a sagging pack, most of its energy used), then surface while it
-    #: still drives the fins; 10 s, ArduSub's BATT_LOW_TIMER, so a stroke's sag does not trip it
-    battery_low: FailsafeRule = FailsafeRule("warn", 10.0)
-    battery_critical: FailsafeRule = FailsafeRule("surface", 10.0)
-    battery_low_voltage: float = param(
-        22.0, lo=0.0, hi=100.0, unit="V",
-        doc="battery_low: the lowest drive's supply voltage below this (a 24 V pack, 7 Li-ion cells at 3.15 V)",
-    )
-    battery_critical_voltage: float = param(
-        21.0, lo=0.0, hi=100.0, unit="V",
-        doc="battery_critical: the lowest drive's supply voltage below this (7 cells at 3.0 V, their cut-off)",
-    )
-    battery_capacity: float = param(
-        0.0, lo=0.0, hi=100_000.0, unit="Wh",
-        doc="the energy the pack gives the four drives (0: the energy used is not judged); "
-        "the drives' electrical input counts the fins only, not the computer and the sensors",
-    )
-    battery_low_reserve: float = param(
-        0.3, lo=0.0, hi=1.0, doc="battery_low: less than this fraction of battery_capacity left",
-    )
-    battery_critical_reserve: float = param(
-        0.15, lo=0.0, hi=1.0, doc="battery_critical: less than this fraction of battery_capacity left",
-    )
-    tracking_depth: float = param(
-        0.2, lo=0.01, hi=100.0, unit="m",
-        doc="tracking: depth further than this from its expected response (backend.tracking_alarm)",
-    )
-    tracking_speed: float = param(
-        0.05, lo=0.005, hi=5.0, unit="m/s",
-        doc="tracking: forward speed further than this from its expected response",
-    )
-    tracking_heading: float = param(
-        0.35, lo=0.01, hi=3.15, unit="rad", doc="tracking: heading further than this from its expected response"
-    )
-    tracking_delay: float = param(
-        DESIGN_DELAY, lo=0.01, hi=30.0, unit="s",
-        doc="tracking: the fins' delay in the slowest expected response (the body layer's design delay, "
-        "control.params.DESIGN_DELAY)",
-    )
-    tracking_bandwidth: float = param(
-        round(1.0 / (DESIGN_FACTOR * DESIGN_DELAY), 4), lo=0.001, hi=10.0, unit="rad/s",
-        doc="tracking: the speed and depth loops' closed-loop bandwidth in the slowest expected response "
-        "(the designed 1 / (k tau), control.body_design)",
-    )
-    tracking_heading_bandwidth: float = param(
-        round(1.0 / (HEADING_FACTOR * DESIGN_DELAY), 4), lo=0.001, hi=10.0, unit="rad/s",
-        doc="tracking: the heading loop's closed-loop bandwidth in the slowest expected response "
-        "(the designed 1 / (HEADING_FACTOR tau), control.body_design)",
-    )
-    tracking_max_acceleration: float = param(
-        _BODY.max_acceleration, lo=0.001, hi=2.0, unit="m/s2",
-        doc="tracking: the expected speed's fastest change (body.max_acceleration's default)",
-    )
-    tracking_max_dive_rate: float = param(
-        _BODY.max_dive_rate, lo=0.001, hi=2.0, unit="m/s",
-        doc="tracking: the expected depth's fastest change (body.max_dive_rate's default)",
-    )
-    tracking_max_yaw_rate: float = param(
-        LoopConfig().max_yaw_rate, lo=0.001, hi=10.0, unit="rad/s",
-        doc="tracking: the expected heading's fastest change (loop.max_yaw_rate's default)",
-    )
-
-    #: the rules whose default acts on the robot (the others warn by default)
-    PROTECTIVE: ClassVar[tuple[str, ...]] = ("pilot_gone", "imu", "dvl", "depth", "motor", "planner_late",
-                                              "loop_watchdog", "depth_limit", "altitude", "battery_critical", "leak", "estimate")
-
-    def _check(self) -> None:
-        if self.battery_critical_voltage >= self.battery_low_voltage:
-            raise ValueError(f"battery_critical_voltage: {self.battery_critical_voltage:g} V must be below "
-                             f"battery_low_voltage {self.battery_low_voltage:g} V")
-        if self.battery_critical_reserve >= self.battery_low_reserve:
-            raise ValueError(f"battery_critical_reserve: {self.battery_critical_reserve:g} must be below "
-                             f"battery_low_reserve {self.battery_low_reserve:g}")
-
-    def warn_only(self) -> tuple[str, ...]:
-        """The protective rules configured only to warn: the console logs them at start and the
-        Safety tab lists them, since such a rule no longer protects the robot."""
-        return tuple(name for name in self.PROTECTIVE if getattr(self, name).action == "warn")
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,7 @@ import pytest
 from support import FakeClock
 
 from ucat_console.backend.access import LOCAL, AccessControl, AccessDenied
-from ucat_console.config import AccessConfig
+from ucat_console.backend.access import AccessConfig
 
 TOKEN = "correct-horse-battery"
 

@@ -12,7 +12,8 @@ from support import Console, wait_for
 
 from ucat_console.backend.access import LOCAL
 from ucat_console.backend.safety import SafetyMonitor
-from ucat_console.config import FailsafeConfig, FailsafeRule, load_config
+from ucat_console.backend.failsafe_config import FailsafeConfig, FailsafeRule
+from ucat_console.config import load_config
 from ucat_console.robot.readings import DepthReading, DvlVelocity
 from ucat_console.telemetry import channels as ch
 from ucat_console.ui.status_bar import vehicle_parts

@@ -11,7 +11,8 @@ import pytest
 from support import Console, wait_for
 
 from ucat_console.backend.safety import SafetyMonitor
-from ucat_console.config import FailsafeConfig, FailsafeRule, load_config
+from ucat_console.backend.failsafe_config import FailsafeConfig, FailsafeRule
+from ucat_console.config import load_config
 from ucat_console.control.estimation import gravity_innovation
 from ucat_console.robot.readings import ImuReading
 from ucat_console.robot.rotations import quaternion_from_euler, rotation_matrix

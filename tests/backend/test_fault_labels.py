@@ -13,7 +13,9 @@ from support import Console, wait_for
 
 from ucat_console.backend.access import LOCAL
 from ucat_console.backend.supervisor import Supervisor
-from ucat_console.config import AccessConfig, FailsafeRule, load_config
+from ucat_console.backend.access import AccessConfig
+from ucat_console.backend.failsafe_config import FailsafeRule
+from ucat_console.config import load_config
 from ucat_console.robot.rotations import euler_from_quaternion
 from ucat_console.robot.units import GRAVITY
 from ucat_console.telemetry import channels as ch

@@ -19,7 +19,8 @@ from ucat_console.backend.sim.params import FinCoefficients, FinHydroConfig, Pla
 from ucat_console.backend.supervisor import CommandRefused
 from ucat_console.backend.supervisor.manoeuvre import ManoeuvreRun
 from ucat_console.cli import main
-from ucat_console.config import AccessConfig, AppConfig, ConsoleConfig
+from ucat_console.backend.access import AccessConfig
+from ucat_console.config import AppConfig, ConsoleConfig
 from ucat_console.control.params import ManoeuvreConfig
 from ucat_console.robot.readings import DvlVelocity, ImuReading
 from ucat_console.telemetry import TelemetryStream

@@ -10,7 +10,8 @@ from support import Console, FakeClock, wait_for
 from ucat_console.backend.devices import cia402
 from ucat_console.backend.supervisor import CommandRefused, Supervisor
 from ucat_console.backend.supervisor.watchdog import LoopWatchdog
-from ucat_console.config import FailsafeRule, LoopWatchdogRule, load_config
+from ucat_console.backend.failsafe_config import FailsafeRule, LoopWatchdogRule
+from ucat_console.config import load_config
 from ucat_console.ui.status_bar import lights, vehicle_parts
 
 TOKEN = "watchdog-token"

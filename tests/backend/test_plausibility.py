@@ -24,7 +24,8 @@ from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.backend.safety import SafetyMonitor
 from ucat_console.backend.sim_rig import SimRig
 from ucat_console.backend.sim_robot_io import SimRobotIO
-from ucat_console.config import AppConfig, FailsafeConfig, FailsafeRule
+from ucat_console.backend.failsafe_config import FailsafeConfig, FailsafeRule
+from ucat_console.config import AppConfig
 from ucat_console.control.allocation import BodySetpoints
 from ucat_console.control.params import ManoeuvreConfig
 from ucat_console.experiments.scenario import family_name, plant_config

@@ -8,7 +8,7 @@ import pytest
 
 from ucat_console.robot.readings import DepthReading, DvlVelocity, ImuReading
 from ucat_console.backend.safety import SafetyMonitor
-from ucat_console.config import FailsafeConfig, FailsafeRule
+from ucat_console.backend.failsafe_config import FailsafeConfig, FailsafeRule
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event
 

@@ -21,7 +21,9 @@ from ucat_console.backend.sim_robot_io import SimRobotIO
 from ucat_console.backend.sessions.reader import SessionReader
 from ucat_console.backend.supervisor import CommandRefused, SteadyPacedClock, Supervisor
 from ucat_console.backend.supervisor.robots import sim_robot
-from ucat_console.config import AccessConfig, AppConfig, ConsoleConfig, FailsafeConfig, FailsafeRule, load_config
+from ucat_console.backend.access import AccessConfig
+from ucat_console.backend.failsafe_config import FailsafeConfig, FailsafeRule
+from ucat_console.config import AppConfig, ConsoleConfig, load_config
 from ucat_console.control import FinMpc
 from ucat_console.control.baseline import wrap_angle
 from ucat_console.control.params import MpcConfig

@@ -13,7 +13,9 @@ import pytest
 from support import Console
 
 from ucat_console.backend.access import AccessDenied
-from ucat_console.config import AccessConfig, AppConfig, ConsoleConfig, FailsafeConfig, FailsafeRule
+from ucat_console.backend.access import AccessConfig
+from ucat_console.backend.failsafe_config import FailsafeConfig, FailsafeRule
+from ucat_console.config import AppConfig, ConsoleConfig
 
 TOKEN = "pool-side-token"
 PILOT, WAITING, RETURNING = 1, 2, 3

@@ -11,7 +11,8 @@ import pytest
 
 from ucat_console.backend.safety import CHANNELS, SafetyMonitor
 from ucat_console.backend.tracking_alarm import AxisModel, Envelope, outside, slow_step
-from ucat_console.config import FailsafeConfig, load_config
+from ucat_console.backend.failsafe_config import FailsafeConfig
+from ucat_console.config import load_config
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.messages import BodyTracking
 

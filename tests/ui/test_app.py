@@ -12,7 +12,8 @@ import pytest
 from support import Console, wait_for
 
 from ucat_console.backend.supervisor import CommandRefused
-from ucat_console.config import AccessConfig, AppConfig, ConsoleConfig, load_config
+from ucat_console.backend.access import AccessConfig
+from ucat_console.config import AppConfig, ConsoleConfig, load_config
 from ucat_console.telemetry import channels as ch
 from ucat_console.ui.app import ConsoleApp, is_loopback
 from ucat_console.ui.identify_inputs import NO_SESSION

@@ -23,7 +23,9 @@ from ucat_console.backend.sessions.reader import SessionReader
 from ucat_console.backend.sessions.repair import needs_repair, repair
 from ucat_console.backend.supervisor import CommandRefused, Supervisor
 from ucat_console.bench.raw_page import RawPage
-from ucat_console.config import AccessConfig, AppConfig, FailsafeConfig, FailsafeRule
+from ucat_console.backend.access import AccessConfig
+from ucat_console.backend.failsafe_config import FailsafeConfig, FailsafeRule
+from ucat_console.config import AppConfig
 from ucat_console.telemetry import channels as ch
 from ucat_console.ui.app import ConsoleApp
 from ucat_console.ui.status_bar import bar_state

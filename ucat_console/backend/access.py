@@ -47,7 +47,7 @@ import time
 from dataclasses import dataclass
 from typing import Callable
 
-from ucat_console.config import AccessConfig
+from ucat_console.typedconf import Config, param
 
 log = logging.getLogger(__name__)
 
@@ -57,6 +57,37 @@ LOCAL = "local"
 Actor = int | str  # a client id, or LOCAL
 #: the longest name a page may give itself
 MAX_NAME = 40
+
+
+@dataclass(frozen=True)
+class AccessConfig(Config):
+    """One pilot, everyone else read-only (console.md, Safety and access)."""
+
+    token: str = param("", secret=True,
+                       doc="pilot token; empty: a new random token at every start (never recorded or logged)")
+    max_failures: int = param(5, lo=1, hi=1000, doc="wrong tokens from one page before its token entry is locked")
+    address_max_failures: int = param(
+        20, lo=1, hi=100_000,
+        doc="wrong tokens from one remote address before every page of that address is locked out "
+        "(the pilot in control needs no token and is not affected)",
+    )
+    lockout: float = param(30.0, lo=0.0, hi=3600.0, unit="s",
+                           doc="window for counting wrong tokens, and how long a lock lasts")
+    confirm_timeout: float = param(
+        20.0, lo=1.0, hi=600.0, unit="s", doc="an arm request must be confirmed within this time"
+    )
+    handover_timeout: float = param(
+        20.0, lo=1.0, hi=600.0, unit="s",
+        doc="a request for control the pilot has not handed over within this time lapses; a request "
+        "lapses too when the pilot's page goes (it never takes control by itself)",
+    )
+
+    def _check(self) -> None:
+        if self.token != self.token.strip():
+            raise ValueError("token: the fixed token has surrounding spaces, which a page's token box "
+                             "never sends; remove them")
+        if self.token and len(self.token) < 8:
+            raise ValueError(f"token: a fixed token needs at least 8 characters, got {len(self.token)}")
 
 
 class AccessDenied(PermissionError):

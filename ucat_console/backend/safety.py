@@ -93,7 +93,7 @@ from typing import Any
 from ucat_console.backend.devices.reporting import READING_FAULTS
 from ucat_console.backend.tracking_alarm import AxisModel, Envelope
 from ucat_console.robot.readings import DepthReading, DvlVelocity, ImuReading
-from ucat_console.config import FailsafeConfig, FailsafeRule
+from ucat_console.backend.failsafe_config import FailsafeConfig, FailsafeRule
 from ucat_console.control.estimation import AttitudeConfig, gravity_innovation
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event

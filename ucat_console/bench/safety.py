@@ -86,7 +86,9 @@ TOKEN = "safety-bench-token"
 
 def _console(tmp: str, pilot_gone: float, port: int = 0) -> tuple[Any, Any, list]:
     from ucat_console.backend.supervisor import Supervisor
-    from ucat_console.config import AccessConfig, ConsoleConfig, FailsafeConfig, FailsafeRule, load_config
+    from ucat_console.backend.access import AccessConfig
+    from ucat_console.backend.failsafe_config import FailsafeConfig, FailsafeRule
+    from ucat_console.config import ConsoleConfig, load_config
     from ucat_console.telemetry import channels as ch
     from ucat_console.ui.app import ConsoleApp
 
@@ -818,7 +820,7 @@ def _percentile(xs: list[float], q: float) -> float:
 def failsafe_triggers(trials: int) -> dict[str, Any]:
     """Detection to action of the new failsafes on the emulated rig (module docstring)."""
     from ucat_console.backend.devices import cia402
-    from ucat_console.config import FailsafeRule
+    from ucat_console.backend.failsafe_config import FailsafeRule
     from ucat_console.telemetry import channels as ch
 
     rule = {"battery_low": FailsafeRule("warn", 1.0), "battery_critical": FailsafeRule("surface", 1.0),

@@ -313,7 +313,8 @@ def identify_plant(plant: str, seed: int, quick: bool) -> dict[str, Any]:
     from ucat_console.backend.identification import identify_sessions
     from ucat_console.backend.loop.clock import SimulatedClock
     from ucat_console.backend.supervisor import Supervisor
-    from ucat_console.config import AccessConfig, AppConfig, ConsoleConfig
+    from ucat_console.backend.access import AccessConfig
+    from ucat_console.config import AppConfig, ConsoleConfig
     from ucat_console.control.params import ManoeuvreConfig
 
     # from 8 m: the manoeuvre's off-centre steps climb the faster plants by more than 3 m, and

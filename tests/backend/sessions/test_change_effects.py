@@ -14,7 +14,8 @@ from ucat_console.backend.review.effects import ChangeEffects
 from ucat_console.backend.review.metrics import MetricsConfig
 from ucat_console.backend.sessions.reader import SessionReader
 from ucat_console.backend.supervisor import Supervisor
-from ucat_console.config import AccessConfig, AppConfig, ConsoleConfig
+from ucat_console.backend.access import AccessConfig
+from ucat_console.config import AppConfig, ConsoleConfig
 from ucat_console.telemetry import channels as C
 from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.stream import TelemetryStream
