@@ -1,3 +1,4 @@
+# Over 600 lines: every failsafe's trigger, latch and escalation run in one monitor, under one lock, so that no two failsafes act on stale state.
 """Failsafes: each watches one cause, triggers after its timeout, latches until the cause clears.
 
 The :class:`SafetyMonitor` is a telemetry subscriber (sensor channels and events) plus two

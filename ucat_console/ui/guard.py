@@ -1,3 +1,4 @@
+# Over 600 lines: every check of what a page sends is in this one module, so that no message reaches viser by another, unchecked path.
 """What the console checks of every page before viser acts on it.
 
 viser trusts its pages: it accepts any websocket (any Origin), applies whatever property an

@@ -1,3 +1,4 @@
+# Over 600 lines: the Review tab's panel: its controls, their callbacks and the playback's refresh share one page's handles.
 """The review panel: browse recorded sessions, play them back, mark them, replay them with
 other MPC weights.
 

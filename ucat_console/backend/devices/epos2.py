@@ -1,3 +1,4 @@
+# Over 600 lines: one CANopen node's driver: its configuration, CiA 402 state machine, PDO mapping and fault handling share the node's state.
 """Maxon EPOS2 fin drives over CANopen (CiA 402), on python-can through ``canopen``: the
 configuration and the driver of one node.
 

@@ -1,3 +1,4 @@
+# Over 600 lines: one emulated EPOS2 node: its object dictionary's behaviour, CiA 402 state machine, PDO timing and servo share its state.
 """EPOS2 emulator: CANopen CiA 402 nodes that speak the EPOS2's frames on a CAN bus.
 
 Each emulated node is a ``canopen.LocalNode`` built from ``epos2.eds`` on its own

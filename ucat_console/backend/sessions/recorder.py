@@ -1,3 +1,4 @@
+# Over 600 lines: the recorder's write path, its parts' rotation and its failure handling share one writer's state and lock.
 """The recorder: one end of the telemetry stream, writing it to MCAP session files.
 
 The recorder subscribes to a :class:`~ucat_console.telemetry.TelemetryStream`. Its
