@@ -38,7 +38,7 @@ def test_the_slow_link_measure_watches_a_pilot_reading_50_kb_s() -> None:
 @pytest.mark.browser
 def test_the_link_loss_measure_sees_the_pages_banner_after_the_console_stops() -> None:
     pytest.importorskip("playwright.sync_api")
-    from ucat_console.bench.safety import link_loss
+    from ucat_console.bench.safety_browser import link_loss
     from ucat_console.bench.ui import CHROMIUM
 
     if not Path(CHROMIUM).exists():
@@ -60,7 +60,7 @@ def test_the_link_loss_measure_sees_the_pages_banner_after_the_console_stops() -
 @pytest.mark.browser
 def test_the_slow_link_and_restart_measures_report_what_they_measured() -> None:
     pytest.importorskip("playwright.sync_api")
-    from ucat_console.bench.safety import restarts, slow_connect, slow_disarm
+    from ucat_console.bench.safety_browser import restarts, slow_connect, slow_disarm
 
     c = slow_connect(0.3, 1)
     assert 0 < c["loaded_median_s"] <= c["connect_median_s"] and c["socket_median_s"] <= c["connect_median_s"]

@@ -1,19 +1,11 @@
 """``ucat-console bench safety``: how the console treats a frozen pilot, a token spammer and
 a crowd of pages, measured against ``ucat-console run`` on the simulated robot.
 
-* **Frozen pilot**: a headless Chromium page takes control, the robot is armed and swims at
-  0.2 m/s, then every process of the browser is stopped (SIGSTOP). Detection time: from
-  the stop to the ``pilot_gone`` failsafe event (wall clock). docs/performance.md states the goal:
-  within ``failsafe.pilot_gone.timeout`` + 1 s.
 * **Take-over under spam**: a raw page sends a wrong token every 0.1 s; another raw page
   from the same address presents the right one. Take-over time: from sending the token
   to being the pilot.
 * **Crowd**: rounds of pages connecting at the same moment; a page is broken when it does
   not get its controls or its *Take control* does not make it the pilot.
-* **Link loss**: a headless Chromium page shows the console, then the console stops
-  (server and supervisor gone). Banner time: from the stop to the page showing its
-  link-loss banner, by the page's own clock (``Date.now()``, the same wall clock as the
-  bench's). The issue's goal: within 2 s.
 * **Disarm under spam**: the sessions folder holds ``--sessions`` copies of a recorded
   ``--session-seconds`` s session (the simulated robot, swimming); the pilot (a raw page) arms
   the robot swimming at 0.2 m/s while ``--spammers`` raw viewers click Review's "Refresh list"
@@ -32,35 +24,14 @@ a crowd of pages, measured against ``ucat-console run`` on the simulated robot.
 * **Hand-over**: a new raw page asks the pilot for control; the pilot presses *Hand over*.
   The time from that press to the new pilot's page showing it flies, and to its first
   command (a velocity, applied with *Apply setpoints*) in force in the supervisor.
-* **Failsafe triggers** (``failsafes``): the emulated rig (``sim-devices``, the drivers on the
-  device emulators) armed at 1 m; each new failsafe's cause is brought about ``--failsafe-trials``
-  times, each rule's timeout 1 s (the leak's 0 s, the loop watchdog's its default, 2 s): the loop's thread held
-  (``loop_watchdog``; the action: every emulated drive out of operation enabled), a dive to
-  2 m past a 1.3 m depth limit (``depth_limit``) and, on a second rig with its floor at
-  2.5 m, past a 1.2 m minimum altitude (``altitude``; from the first reading beyond the
-  limit on the stream), a drive's supply made to read 20 V (``battery_critical``), water at
-  the emulated leak detector (``leak``), the accelerometer streaming a tilt the estimate
-  lacks (``estimate``). Detection to action: from the cause (the injection, or the first
-  reading beyond the limit) to the action in force (the surfacing or holding setpoints
-  applied, the drives off), less the rule's timeout; the goal: 100 ms at the 99th percentile.
 * **Slow link**: the pilot's raw page reads 50 kB/s (``--slow-rate``) while the robot swims
   and the live view sends at its configured rates: whether it stays the pilot for
   ``--slow-seconds`` s, its heartbeats' round trips (the console's own measure) and whether
   its status bar says "link slow".
 
-* **Slow connect**: a headless Chromium page through a link that delays every chunk
-  ``--connect-delay`` s each way (1.0: a 2 s round trip; ``bench/delay_proxy.py``): from its
-  navigation to its HTML loaded, to its socket open and to the status bar's first state,
-  and from its *Take control* to the page flying. The goal: connected (the first state)
-  within 10 s through a 2 s round trip.
-* **Slow DISARM**: the pilot's Chromium page through ``--disarm-delay`` s each way, the robot
-  armed: from the click on the bar's DISARM (its event, by the page's wall clock) to the
-  supervisor disarmed; a press not applied within 20 s is counted (a page declared gone
-  under load has its DISARM refused). The goal: within the link's delay + 0.5 s.
-* **Restart**: the pilot's Chromium page while the console is stopped and started again on
-  the same port ``--restarts`` times, ``--spinners`` processes spinning throughout: from the
-  restarted console serving to the page the pilot again (its kept token, no reload). The
-  goal: within 10 s of every restart.
+The measures in headless Chromium (a frozen pilot, link loss, a slow link's connect and
+DISARM, restarts) are in :mod:`.safety_browser`, the failsafe triggers in
+:mod:`.safety_failsafes`, what they share in :mod:`.safety_console`.
 
 Figures depend on the machine and its load (reported with them); they are for docs/performance.md,
 never test assertions.
@@ -79,134 +50,11 @@ import time
 from pathlib import Path
 from typing import Any
 
+from ucat_console.bench.safety_browser import frozen_pilot, link_loss, restarts, slow_connect, slow_disarm
+from ucat_console.bench.safety_console import TOKEN, event_time, sim_tuned, start_console, take_pilot, wait_until
+from ucat_console.bench.safety_failsafes import failsafe_triggers
+
 log = logging.getLogger(__name__)
-
-TOKEN = "safety-bench-token"
-
-
-def _console(tmp: str, pilot_gone: float, port: int = 0) -> tuple[Any, Any, list]:
-    from ucat_console.backend.supervisor import Supervisor
-    from ucat_console.backend.access import AccessConfig
-    from ucat_console.backend.failsafe_config import FailsafeConfig, FailsafeRule
-    from ucat_console.config import ConsoleConfig, load_config
-    from ucat_console.telemetry import channels as ch
-    from ucat_console.ui.app import ConsoleApp
-
-    cfg = load_config("sim-tuned").replace(
-        access=AccessConfig(token=TOKEN),
-        console=ConsoleConfig(port=port, record_on_arm=False),
-        failsafe=FailsafeConfig(pilot_gone=FailsafeRule("hold", pilot_gone)),
-    )
-    sup = Supervisor(cfg, sessions_dir=tmp)
-    events: list = []
-    sup.stream.subscribe(lambda c, m: events.append((time.monotonic(), m)), [ch.EVENTS])
-    app = ConsoleApp(sup)
-    app.start()
-    sup.start()
-    return sup, app, events
-
-
-def _wait(pred: Any, timeout: float, what: str) -> Any:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        v = pred()
-        if v:
-            return v
-        time.sleep(0.005)
-    raise TimeoutError(f"gave up waiting for {what}")
-
-
-def frozen_pilot(trials: int, pilot_gone: float) -> dict[str, Any]:
-    from playwright.sync_api import sync_playwright
-
-    from ucat_console.backend.access import LOCAL
-    from ucat_console.bench.chromium import Chromium
-
-    times: list[float] = []
-    with tempfile.TemporaryDirectory() as tmp:
-        sup, app, events = _console(tmp, pilot_gone)
-        try:
-            with sync_playwright() as p:
-                for trial in range(trials):
-                    with Chromium() as chrome:
-                        browser = p.chromium.connect_over_cdp(chrome.ws_url)
-                        page = browser.contexts[0].new_page()
-                        page.goto(app.url)
-                        page.wait_for_function("() => !document.body.innerText.includes('Connecting...')",
-                                               timeout=60_000)
-                        box = page.locator("label", has_text="Pilot token").first.locator(
-                            "xpath=ancestor::div[contains(@class, 'Flex-root')][1]").locator("input").first
-                        box.fill(TOKEN)
-                        page.get_by_role("button", name="Take control").click()
-                        _wait(lambda: sup.access.pilot is not None, 30.0, "the page taking control")
-                        # the last trial's failsafe clears once the supervisor sees the new pilot
-                        _wait(lambda: not any(s.active for s in sup.safety.states() if s.name == "pilot_gone"),
-                              30.0, "the last trial's pilot_gone failsafe cleared")
-                        if not sup.armed:
-                            sup.arm(LOCAL)
-                        sup.set_setpoints(LOCAL, velocity=0.2)
-                        _wait(lambda: sup._last_body is not None and sup._last_body.velocity[0] > 0.05, 60.0,
-                              "the robot swimming")
-                        n = len(events)
-                        t0 = time.monotonic()
-                        chrome.freeze()
-                        t_fired = _wait(lambda: next((t for t, e in events[n:] if e.source == "failsafe"
-                                                      and e.code == "pilot_gone"), None), pilot_gone + 60.0,
-                                        "the pilot_gone failsafe")
-                        times.append(t_fired - t0)
-                        log.info("frozen pilot trial %d: pilot_gone after %.2f s", trial + 1, times[-1])
-                        chrome.thaw()
-                        try:
-                            browser.close()
-                        except Exception:
-                            pass
-        finally:
-            sup.stop()
-            app.stop()
-    return {"trials": trials, "pilot_gone_timeout_s": pilot_gone,
-            "detection_median_s": statistics.median(times), "detection_max_s": max(times),
-            "detection_s": times}
-
-
-#: records, in the page, the wall-clock time at which the link-loss banner first shows
-_BANNER_WATCH = """
-new MutationObserver((_, obs) => {
-  const b = document.getElementById("ucat-banner");
-  if (b && b.style.display === "block") { window.__bannerAt = Date.now(); obs.disconnect(); }
-}).observe(document, {subtree: true, attributes: true, attributeFilter: ["style"]});
-"""
-
-
-def link_loss(trials: int) -> dict[str, Any]:
-    from playwright.sync_api import sync_playwright
-
-    from ucat_console.bench.ui import CHROMIUM, CHROMIUM_ARGS
-
-    times: list[float] = []
-    with tempfile.TemporaryDirectory() as tmp, sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        try:
-            for trial in range(trials):
-                sup, app, _ = _console(tmp, 2.0)
-                try:
-                    page = browser.new_page()
-                    page.add_init_script(_BANNER_WATCH)
-                    page.goto(app.url)
-                    page.wait_for_function("() => window.__ucat && window.__ucat.state !== null", timeout=60_000)
-                    time.sleep(1.0)  # a few states received, as an open page has
-                finally:
-                    t0 = time.time()
-                    sup.stop()
-                    app.stop()
-                page.wait_for_function("() => window.__bannerAt !== undefined", timeout=60_000)
-                times.append(page.evaluate("() => window.__bannerAt") / 1e3 - t0)
-                log.info("link loss trial %d: banner after %.2f s", trial + 1, times[-1])
-                page.close()
-        finally:
-            browser.close()
-    return {"trials": trials, "banner_median_s": statistics.median(times), "banner_max_s": max(times),
-            "banner_s": times}
-
 
 def takeover_under_spam(trials: int) -> dict[str, Any]:
     from ucat_console.bench.raw_page import RawPage
@@ -214,7 +62,7 @@ def takeover_under_spam(trials: int) -> dict[str, Any]:
     times: list[float] = []
     refused = 0
     with tempfile.TemporaryDirectory() as tmp:
-        sup, app, events = _console(tmp, 2.0)
+        sup, app, events = start_console(tmp, 2.0)
         try:
             spammer = RawPage(app.url)
             spammer.wait_for("Take control")
@@ -237,10 +85,10 @@ def takeover_under_spam(trials: int) -> dict[str, Any]:
                 before = sup.access.pilot
                 t0 = time.monotonic()
                 page.take_control(TOKEN)
-                _wait(lambda: sup.access.pilot not in (None, before), 30.0, "the pilot taking control")
+                wait_until(lambda: sup.access.pilot not in (None, before), 30.0, "the pilot taking control")
                 times.append(time.monotonic() - t0)
                 page.click("Release control")
-                _wait(lambda: sup.access.pilot is None, 30.0, "the release")
+                wait_until(lambda: sup.access.pilot is None, 30.0, "the release")
                 page.close()
             refused = sum(1 for _, e in events if e.source == "access" and e.code == "refused")
             stop.set()
@@ -258,7 +106,7 @@ def crowd(rounds: int, pages: int) -> dict[str, Any]:
 
     broken_per_round: list[int] = []
     with tempfile.TemporaryDirectory() as tmp:
-        sup, app, events = _console(tmp, 2.0)
+        sup, app, events = start_console(tmp, 2.0)
         try:
             for r in range(rounds):
                 opened: list[RawPage] = []
@@ -287,14 +135,14 @@ def crowd(rounds: int, pages: int) -> dict[str, Any]:
                     try:
                         before = sup.access.pilot
                         p.take_control(TOKEN)
-                        _wait(lambda: sup.access.pilot not in (None, before), 10.0, "taking control")
+                        wait_until(lambda: sup.access.pilot not in (None, before), 10.0, "taking control")
                         p.click("Release control")
-                        _wait(lambda: sup.access.pilot is None, 10.0, "releasing control")
+                        wait_until(lambda: sup.access.pilot is None, 10.0, "releasing control")
                     except Exception:
                         broken += 1
                 for p in opened:
                     p.close()
-                _wait(lambda: not sup.access.clients, 60.0, "the pages gone")
+                wait_until(lambda: not sup.access.clients, 60.0, "the pages gone")
                 broken_per_round.append(broken)
                 log.info("crowd round %d: %d of %d pages broken", r + 1, broken, pages)
         finally:
@@ -316,7 +164,7 @@ def _sessions_folder(directory: Path, copies: int, seconds: float) -> dict[str, 
     from ucat_console.backend.supervisor import Supervisor
 
     rec = directory / "recording"
-    sup = Supervisor(_config(), clock=SimulatedClock(), sessions_dir=rec)
+    sup = Supervisor(sim_tuned(), clock=SimulatedClock(), sessions_dir=rec)
     try:
         sup.set_setpoints(LOCAL, velocity=0.2)
         sup.start_recording(LOCAL, "disarm-under-spam bench")
@@ -334,23 +182,6 @@ def _sessions_folder(directory: Path, copies: int, seconds: float) -> dict[str, 
     return {"copies": copies, "session_s": seconds, "file_bytes": size, "listing_s": time.perf_counter() - t0}
 
 
-def _config() -> Any:
-    from ucat_console.config import load_config
-
-    return load_config("sim-tuned")
-
-
-def _pilot(app: Any, sup: Any, **kw: Any) -> Any:
-    from ucat_console.bench.raw_page import RawPage
-
-    page = RawPage(app.url, **kw)
-    page.wait_for("Take control", timeout=120.0)
-    before = sup.access.pilot
-    page.take_control(TOKEN)
-    _wait(lambda: sup.access.pilot not in (None, before), 60.0, "the pilot taking control")
-    return page
-
-
 def disarm_under_spam(trials: int, copies: int = 23, session_seconds: float = 60.0, spammers: int = 1,
                       rate: float = 20.0, before: float = 5.0) -> dict[str, Any]:
     from ucat_console.backend.access import LOCAL
@@ -359,11 +190,11 @@ def disarm_under_spam(trials: int, copies: int = 23, session_seconds: float = 60
     delays: list[float] = []
     with tempfile.TemporaryDirectory() as tmp:
         folder = _sessions_folder(Path(tmp), copies, session_seconds)
-        sup, app, events = _console(tmp, 2.0)
+        sup, app, events = start_console(tmp, 2.0)
         stop = threading.Event()
         threads: list[threading.Thread] = []
         try:
-            pilot = _pilot(app, sup)
+            pilot = take_pilot(app, sup)
             disarm = pilot.wait_for("DISARM", "GuiButtonMessage")
             pages = [RawPage(app.url) for _ in range(spammers)]
 
@@ -398,7 +229,7 @@ def disarm_under_spam(trials: int, copies: int = 23, session_seconds: float = 60
                 time.sleep(before)  # the spam going on
                 t0 = time.monotonic()
                 pilot.update(disarm, value=True)
-                _wait(lambda: not sup.armed, 120.0, "the pilot's disarm")
+                wait_until(lambda: not sup.armed, 120.0, "the pilot's disarm")
                 delays.append(time.monotonic() - t0)
                 log.info("disarm under spam, trial %d: %.3f s", trial + 1, delays[-1])
             spam_s = time.monotonic() - t_spam
@@ -421,9 +252,9 @@ def slow_link(rate: float = 50_000.0, seconds: float = 60.0) -> dict[str, Any]:
     from ucat_console.backend.access import LOCAL
 
     with tempfile.TemporaryDirectory() as tmp:
-        sup, app, events = _console(tmp, 2.0)
+        sup, app, events = start_console(tmp, 2.0)
         try:
-            pilot = _pilot(app, sup)
+            pilot = take_pilot(app, sup)
             cid = sup.access.pilot
             sup.arm(LOCAL)
             sup.set_setpoints(LOCAL, velocity=0.2)
@@ -454,46 +285,36 @@ def slow_link(rate: float = 50_000.0, seconds: float = 60.0) -> dict[str, Any]:
             "gone_events": gone}
 
 
-def _event_time(events: list, after: int, source: str, code: str, timeout: float) -> float | None:
-    """The time (monotonic) of the first event ``source``/``code`` from event ``after`` on,
-    waiting up to ``timeout`` s for it (None: none came)."""
-    try:
-        return _wait(lambda: next((t for t, e in events[after:] if e.source == source and e.code == code), None),
-                     timeout, f"{source}/{code}")
-    except TimeoutError:
-        return None
-
-
 def pilot_drop(trials: int, pilot_gone: float) -> dict[str, Any]:
     from ucat_console.backend.access import LOCAL
     from ucat_console.bench.raw_page import RawPage
 
     runs: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory() as tmp:
-        sup, app, events = _console(tmp, pilot_gone)
+        sup, app, events = start_console(tmp, pilot_gone)
         try:
             for trial in range(trials):
-                a = _pilot(app, sup)
+                a = take_pilot(app, sup)
                 a_id = sup.access.pilot
-                _wait(lambda: not sup.safety.active(), 30.0, "the last trial's failsafe cleared")
+                wait_until(lambda: not sup.safety.active(), 30.0, "the last trial's failsafe cleared")
                 sup.arm(LOCAL)
                 sup.set_setpoints(LOCAL, velocity=0.2)
-                _wait(lambda: sup._last_body is not None and sup._last_body.velocity[0] > 0.05, 60.0,
+                wait_until(lambda: sup._last_body is not None and sup._last_body.velocity[0] > 0.05, 60.0,
                       "the robot swimming")
                 b = RawPage(app.url)
                 b.wait_for("Take control", timeout=120.0)
                 b.take_control(TOKEN)
-                b_id = _wait(lambda: sup.access.pending, 30.0, "the request for control")
+                b_id = wait_until(lambda: sup.access.pending, 30.0, "the request for control")
                 n = len(events)
                 t0 = time.monotonic()
                 a.answer_heartbeats = False  # the pilot's link drops
                 a.stop_reading()
-                if _event_time(events, n, "access", "pilot_left", pilot_gone + 30.0) is None:
+                if event_time(events, n, "access", "pilot_left", pilot_gone + 30.0) is None:
                     raise TimeoutError("the console never saw the pilot's page gone")
                 pilot = sup.access.pilot
-                t_hold = _event_time(events, n, "failsafe", "pilot_gone", pilot_gone + 2.0)
+                t_hold = event_time(events, n, "failsafe", "pilot_gone", pilot_gone + 2.0)
                 try:
-                    held = t_hold is not None and _wait(lambda: sup.setpoints.velocity == 0.0, 5.0, "the hold")
+                    held = t_hold is not None and wait_until(lambda: sup.setpoints.velocity == 0.0, 5.0, "the hold")
                 except TimeoutError:
                     held = False
                 run: dict[str, Any] = {
@@ -508,23 +329,23 @@ def pilot_drop(trials: int, pilot_gone: float) -> dict[str, Any]:
                 t1 = time.monotonic()
                 c.take_control(TOKEN)
                 try:
-                    _wait(lambda: c.bar.get("you_pilot"), 10.0, "the returning operator's page flying")
+                    wait_until(lambda: c.bar.get("you_pilot"), 10.0, "the returning operator's page flying")
                 except TimeoutError:
                     run.update(control_s=None, disarm_s=None)
                     sup.disarm(LOCAL)
                 else:
                     t2 = time.monotonic()
                     c.update(c.bar["disarm_uuid"], value=True)
-                    t3 = _event_time(events, n, "supervisor", "disarmed", 30.0)
+                    t3 = event_time(events, n, "supervisor", "disarmed", 30.0)
                     run.update(control_s=t2 - t1, disarm_s=None if t3 is None else t3 - t2)
                 runs.append(run)
                 log.info("pilot drop trial %d: %s", trial + 1, run)
-                _wait(lambda: not sup.armed, 30.0, "the robot disarmed")
+                wait_until(lambda: not sup.armed, 30.0, "the robot disarmed")
                 if sup.access.pilot is not None:
                     sup.release(sup.access.pilot)
                 for p in (a, b, c):
                     p.close()
-                _wait(lambda: a_id not in sup.access.clients, 60.0, "the dropped page gone")
+                wait_until(lambda: a_id not in sup.access.clients, 60.0, "the dropped page gone")
         finally:
             sup.stop()
             app.stop()
@@ -548,26 +369,26 @@ def handover(trials: int) -> dict[str, Any]:
     to_page: list[float] = []
     to_command: list[float] = []
     with tempfile.TemporaryDirectory() as tmp:
-        sup, app, events = _console(tmp, 2.0)
+        sup, app, events = start_console(tmp, 2.0)
         try:
-            pilot = _pilot(app, sup)
+            pilot = take_pilot(app, sup)
             sup.arm(LOCAL)
             sup.set_setpoints(LOCAL, velocity=0.1)
             for trial in range(trials):
                 asker = RawPage(app.url)
                 asker.wait_for("Take control", timeout=120.0)
                 asker.take_control(TOKEN)
-                asker_id = _wait(lambda: sup.access.pending, 30.0, "the request for control")
+                asker_id = wait_until(lambda: sup.access.pending, 30.0, "the request for control")
                 accept = pilot.wait_for(f"Hand over to client {asker_id}", "GuiButtonMessage")
-                _wait(lambda: pilot.element(accept).get("visible"), 30.0, "the pilot's page showing the request")
+                wait_until(lambda: pilot.element(accept).get("visible"), 30.0, "the pilot's page showing the request")
                 velocity = 0.2 if trial % 2 == 0 else 0.1
                 t0 = time.monotonic()
                 pilot.update(accept, value=True)
-                _wait(lambda: asker.bar.get("you_pilot"), 30.0, "the new pilot's page flying")
+                wait_until(lambda: asker.bar.get("you_pilot"), 30.0, "the new pilot's page flying")
                 to_page.append(time.monotonic() - t0)
                 asker.set_value("Velocity m/s", velocity)
                 asker.click("Apply setpoints")
-                _wait(lambda: sup.setpoints.velocity == velocity, 30.0, "the new pilot's setpoint in force")
+                wait_until(lambda: sup.setpoints.velocity == velocity, 30.0, "the new pilot's setpoint in force")
                 to_command.append(time.monotonic() - t0)
                 log.info("hand-over trial %d: the new pilot's page after %.3f s, its command after %.3f s",
                          trial + 1, to_page[-1], to_command[-1])
@@ -582,291 +403,8 @@ def handover(trials: int) -> dict[str, Any]:
             "page_s": to_page, "command_s": to_command}
 
 
-def _chromium_page(browser: Any, url: str) -> Any:
-    """A page on ``url`` at 1280x800 whose status bar shows the console's state."""
-    page = browser.new_page(viewport={"width": 1280, "height": 800})
-    page.goto(url, timeout=120_000)
-    page.wait_for_function("() => window.__ucat && window.__ucat.state !== null", timeout=120_000)
-    return page
-
-
-def _take_control(page: Any) -> None:
-    box = page.locator("label", has_text="Pilot token").first.locator(
-        "xpath=ancestor::div[contains(@class, 'Flex-root')][1]").locator("input").first
-    box.fill(TOKEN)
-    page.get_by_role("button", name="Take control").click()
-
-
-_YOU_PILOT = "() => window.__ucat && window.__ucat.state && window.__ucat.state.you_pilot"
-
-
-def slow_connect(delay: float, trials: int) -> dict[str, Any]:
-    """A Chromium page through a link delaying every chunk ``delay`` s each way
-    (:class:`~ucat_console.bench.delay_proxy.DelayProxy`): from the page's navigation to its
-    HTML loaded, to its socket open (viser's client logs "Connected!") and to the status
-    bar's first state, and from its *Take control* to the page showing it flies."""
-    from playwright.sync_api import sync_playwright
-
-    from ucat_console.bench.delay_proxy import DelayProxy
-    from ucat_console.bench.ui import CHROMIUM, CHROMIUM_ARGS
-
-    loaded: list[float] = []
-    socket: list[float] = []
-    connect: list[float] = []
-    control: list[float] = []
-    with tempfile.TemporaryDirectory() as tmp, sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        sup, app, _ = _console(tmp, 2.0)
-        proxy = DelayProxy(app.port, delay)
-        try:
-            for trial in range(trials):
-                page = browser.new_page(viewport={"width": 1280, "height": 800})
-                opened: list[float] = []  # when viser's client logs its socket open
-                page.on("console", lambda m: opened.append(time.monotonic()) if m.text.startswith("Connected!") else None)
-                t0 = time.monotonic()
-                page.goto(proxy.url, timeout=120_000, wait_until="domcontentloaded")
-                loaded.append(time.monotonic() - t0)
-                page.wait_for_function("() => window.__ucat && window.__ucat.state !== null", timeout=120_000)
-                connect.append(time.monotonic() - t0)
-                socket.append(opened[0] - t0 if opened else connect[-1])
-                t1 = time.monotonic()
-                _take_control(page)
-                page.wait_for_function(_YOU_PILOT, timeout=120_000)
-                control.append(time.monotonic() - t1)
-                log.info("slow link %.1f s each way, trial %d: page loaded after %.1f s, socket open after %.1f s, "
-                         "first state after %.1f s, pilot %.1f s later", delay, trial + 1, loaded[-1], socket[-1],
-                         connect[-1], control[-1])
-                page.close()
-                _wait(lambda: sup.access.pilot is None, 30.0, "the closed page's control released")
-        finally:
-            proxy.close()
-            sup.stop()
-            app.stop()
-            browser.close()
-    return {"delay_each_way_s": delay, "trials": trials, "loaded_median_s": statistics.median(loaded),
-            "socket_median_s": statistics.median(socket), "socket_max_s": max(socket),
-            "connect_median_s": statistics.median(connect),
-            "connect_max_s": max(connect), "connect_s": connect, "control_median_s": statistics.median(control),
-            "control_max_s": max(control)}
-
-
-def slow_disarm(delay: float, trials: int) -> dict[str, Any]:
-    """The pilot's Chromium page through a link delaying every chunk ``delay`` s each way, the
-    robot armed: from the click on the bar's DISARM (its event in the page, by the page's
-    wall clock) to the supervisor disarmed."""
-    from playwright.sync_api import sync_playwright
-
-    from ucat_console.backend.access import LOCAL
-    from ucat_console.bench.delay_proxy import DelayProxy
-    from ucat_console.bench.ui import CHROMIUM, CHROMIUM_ARGS
-
-    times: list[float] = []
-    lost = 0
-    with tempfile.TemporaryDirectory() as tmp, sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        sup, app, _ = _console(tmp, 2.0)
-        proxy = DelayProxy(app.port, delay)
-        try:
-            page = _chromium_page(browser, proxy.url)
-            _take_control(page)
-            page.wait_for_function(_YOU_PILOT, timeout=120_000)
-            # the press's moment by the page's clock (the wall clock, as the bench's): the click's
-            # dispatch in a busy browser is not the link's
-            page.evaluate("() => document.getElementById('ucat-disarm').addEventListener('click', "
-                          "() => { window.__disarmAt = Date.now(); }, true)")
-            for trial in range(trials):
-                # the page shows the last trial's DISARM first: a button still enabled by an older
-                # state may turn off under the click
-                page.wait_for_function("() => document.getElementById('ucat-disarm').disabled", timeout=120_000)
-                sup.arm(LOCAL)
-                page.wait_for_function("() => !document.getElementById('ucat-disarm').disabled", timeout=120_000)
-                page.locator("#ucat-disarm").click()
-                try:
-                    _wait(lambda: not sup.armed, 20.0, "DISARM through the slow link")
-                except TimeoutError:  # refused or lost: counted, and the next trial starts afresh
-                    lost += 1
-                    log.warning("DISARM through %.1f s each way, trial %d: not applied", delay, trial + 1)
-                    sup.disarm(LOCAL)
-                    page.wait_for_function(_YOU_PILOT, timeout=120_000)  # back as the pilot (its kept token)
-                    continue
-                applied = time.time()
-                times.append(applied - page.evaluate("() => window.__disarmAt") / 1e3)
-                log.info("DISARM through %.1f s each way, trial %d: %.2f s", delay, trial + 1, times[-1])
-        finally:
-            proxy.close()
-            sup.stop()
-            app.stop()
-            browser.close()
-    return {"delay_each_way_s": delay, "trials": trials, "applied": len(times), "not_applied": lost,
-            "disarm_median_s": statistics.median(times) if times else None,
-            "disarm_max_s": max(times) if times else None, "disarm_s": times}
-
-
-def restarts(count: int, spinners: int) -> dict[str, Any]:
-    """The pilot's Chromium page while the console restarts ``count`` times on the same port,
-    ``spinners`` processes spinning meanwhile: the time from the restarted console serving
-    (and from the old one stopped) to the page the pilot again, by its kept token, without a
-    reload."""
-    import subprocess
-    import sys
-
-    from playwright.sync_api import sync_playwright
-
-    from ucat_console.bench.ui import CHROMIUM, CHROMIUM_ARGS
-
-    from_up: list[float] = []
-    from_stop: list[float] = []
-    hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(spinners)]
-    with tempfile.TemporaryDirectory() as tmp, sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        sup, app, _ = _console(tmp, 2.0)
-        port = app.port
-        try:
-            page = _chromium_page(browser, app.url)
-            _take_control(page)
-            page.wait_for_function(_YOU_PILOT, timeout=120_000)
-            for trial in range(count):
-                t_stop = time.monotonic()
-                sup.stop()
-                app.stop()
-                sup, app, _ = _console(tmp, 2.0, port)
-                t_up = time.monotonic()
-                _wait(lambda: sup.access.pilot is not None, 120.0, "the page back as the pilot")
-                from_up.append(time.monotonic() - t_up)
-                from_stop.append(time.monotonic() - t_stop)
-                log.info("restart %d: the page the pilot again %.1f s after the console served (%.1f s after "
-                         "the stop)", trial + 1, from_up[-1], from_stop[-1])
-        finally:
-            for h in hogs:
-                h.kill()
-                h.wait()
-            sup.stop()
-            app.stop()
-            browser.close()
-    return {"restarts": count, "spinners": spinners, "back": len(from_up),
-            "from_up_median_s": statistics.median(from_up), "from_up_max_s": max(from_up), "from_up_s": from_up,
-            "from_stop_median_s": statistics.median(from_stop), "from_stop_max_s": max(from_stop)}
-
-
 PARTS = ("frozen", "takeover", "crowd", "link-loss", "spam", "slow-link", "drop", "handover",
          "slow-connect", "slow-disarm", "restart", "failsafes")
-PILOT = 1
-
-
-def _rig(tmp: str, bottom: float | None = None, **failsafe: Any) -> Any:
-    """The emulated rig's console, running, the bench its pilot, no failsafe active."""
-    from ucat_console.backend.supervisor import Supervisor
-    from ucat_console.config import load_config
-
-    cfg = load_config("sim-devices")
-    plant = cfg.plant
-    if bottom is not None:
-        plant = plant.replace(sensors=plant.sensors.replace(dvl=plant.sensors.dvl.replace(bottom_depth=bottom)))
-    cfg = cfg.replace(access=cfg.access.replace(token=TOKEN), console=cfg.console.replace(record_on_arm=False),
-                      plant=plant, failsafe=cfg.failsafe.replace(**failsafe))
-    sup = Supervisor(cfg, sessions_dir=tmp)
-    sup.start()
-    sup.client_connected(PILOT)
-    sup.take_control(PILOT, TOKEN)
-    _wait(lambda: sup.loop.time > 1.0 and not sup.safety.active(), 120.0, "the rig running, no failsafe")
-    return sup
-
-
-def _readings(sup: Any, channel: str, beyond: Any) -> list[float]:
-    """The wall times (monotonic) of the readings on ``channel`` beyond a limit, from now on."""
-    times: list[float] = []
-    sup.stream.subscribe(lambda c, m: times.append(time.monotonic()) if beyond(m) else None, [channel])
-    return times
-
-
-def _failsafe_trials(sup: Any, name: str, trials: int, inject: Any, clear: Any, acted: Any,
-                     crossed: list[float] | None = None) -> tuple[float, list[float]]:
-    """(the rule's timeout, detection to action in s beyond it of ``trials`` causes of ``name``)."""
-    from ucat_console.backend.supervisor import CommandRefused
-
-    timeout = sup.safety.rule(name).timeout
-    out = []
-    for trial in range(trials):
-        _wait(lambda: not sup.safety.active(), 120.0, f"no failsafe before {name} trial {trial + 1}")
-        if not sup.armed:
-            sup.arm(PILOT)
-        while True:
-            try:
-                sup.set_setpoints(PILOT, velocity=0.1, depth=1.0)
-                break
-            except CommandRefused:  # a hold not cleared yet
-                time.sleep(0.05)
-        _wait(lambda: abs(sup._last_body.depth - 1.0) < 0.1, 120.0, "the robot at 1 m")
-        if crossed is not None:
-            crossed.clear()
-        t0 = time.monotonic()
-        inject()
-        t_act = _wait(lambda: acted() and time.monotonic(), 120.0, f"the {name} failsafe's action")
-        start = crossed[0] if crossed else t0
-        out.append(t_act - start - timeout)
-        log.info("%s trial %d: acted %.3f s after its cause (timeout %g s)", name, trial + 1, t_act - start, timeout)
-        clear()
-        _wait(lambda: not sup.safety.is_active(name), 120.0, f"the {name} failsafe clearing")
-    return timeout, out
-
-
-def _percentile(xs: list[float], q: float) -> float:
-    """The ``q`` quantile of sorted ``xs``, interpolated between neighbours."""
-    k = (len(xs) - 1) * q
-    lo = int(k)
-    return xs[lo] + (xs[min(lo + 1, len(xs) - 1)] - xs[lo]) * (k - lo)
-
-
-def failsafe_triggers(trials: int) -> dict[str, Any]:
-    """Detection to action of the new failsafes on the emulated rig (module docstring)."""
-    from ucat_console.backend.devices import cia402
-    from ucat_console.backend.failsafe_config import FailsafeRule
-    from ucat_console.telemetry import channels as ch
-
-    rule = {"battery_low": FailsafeRule("warn", 1.0), "battery_critical": FailsafeRule("surface", 1.0),
-            "estimate": FailsafeRule("hold", 1.0)}
-    surfaced = (lambda sup: lambda: sup.setpoints.depth == 0.0)
-    result: dict[str, tuple[float, list[float]]] = {}
-    with tempfile.TemporaryDirectory() as tmp:
-        sup = _rig(tmp, max_depth=1.3, **rule)
-        try:
-            nodes = sup.rig.nodes.nodes.values()
-            result["loop_watchdog"] = _failsafe_trials(
-                sup, "loop_watchdog", trials, lambda: sup.stall_loop(PILOT, 30.0), sup._unstall.set,
-                lambda: all(n.state != cia402.OPERATION_ENABLED for n in nodes))
-            deep = _readings(sup, ch.DEPTH, lambda m: m.depth_m > 1.3)
-            result["depth_limit"] = _failsafe_trials(
-                sup, "depth_limit", trials, lambda: sup.set_setpoints(PILOT, depth=2.0), lambda: None,
-                surfaced(sup), deep)
-            result["battery_critical"] = _failsafe_trials(
-                sup, "battery_critical", trials, lambda: sup.inject_fault(PILOT, "epos2", "low_voltage", fin=2),
-                lambda: sup.clear_fault(PILOT, "epos2", "low_voltage"), surfaced(sup))
-            result["leak"] = _failsafe_trials(
-                sup, "leak", trials, lambda: sup.inject_leak(PILOT, True), lambda: sup.inject_leak(PILOT, False),
-                surfaced(sup))
-            result["estimate"] = _failsafe_trials(
-                sup, "estimate", trials,
-                lambda: sup.inject_fault(PILOT, "imu", "implausible", accel_g=(0.5, 0.0, -0.75 ** 0.5)),
-                lambda: sup.clear_fault(PILOT, "imu", "implausible"), lambda: sup.setpoints.velocity == 0.0)
-        finally:
-            sup.stop()
-        sup = _rig(tmp, bottom=2.5, min_altitude=1.2)
-        try:
-            low = _readings(sup, ch.DVL, lambda m: 0.0 < m.altitude < 1.2)
-            result["altitude"] = _failsafe_trials(
-                sup, "altitude", trials, lambda: sup.set_setpoints(PILOT, depth=2.0), lambda: None,
-                surfaced(sup), low)
-        finally:
-            sup.stop()
-    actions = {"loop_watchdog": "disarm (the drives off)", "depth_limit": "surface", "altitude": "surface",
-               "battery_critical": "surface", "leak": "surface", "estimate": "hold"}
-    out: dict[str, Any] = {"trials": trials, "goal_s": 0.1, "triggers": {}}
-    for name, (timeout, xs) in result.items():
-        xs = sorted(xs)
-        out["triggers"][name] = {"action": actions[name], "timeout_s": timeout,
-                                 "median_s": statistics.median(xs), "p99_s": _percentile(xs, 0.99),
-                                 "max_s": xs[-1]}
-    return out
 
 
 def measure(trials: int = 10, spam_trials: int = 10, rounds: int = 10, pages: int = 40,
