@@ -32,6 +32,10 @@ def test_a_headless_run_swims_records_and_reports(tmp_path: Path, monkeypatch, c
         < out.index("headless run: mode baseline")
     distance = float(re.search(r"distance ([0-9.]+) m", out).group(1))
     assert distance > 0.4  # it swam: 10 s armed towards 0.2 m/s from rest (noise alone: < 0.1 m)
+    # the battery's figure beside the shaft's: the drives draw more than the shaft gives the water
+    shaft = float(re.search(r"shaft .*mean power ([0-9.]+) W", out).group(1))
+    battery = float(re.search(r"battery power .*mean ([0-9.]+) W", out).group(1))
+    assert battery > shaft > 0.0
     (recorded,) = re.findall(r"recorded (\S+)", out)  # armed at once: recorded from arming
     assert Path(recorded).parent == tmp_path.resolve()
     with SessionReader(recorded, tmp_path) as r:
@@ -101,3 +105,15 @@ def test_recordings_go_to_the_user_data_folder_unless_told_otherwise(tmp_path: P
     assert str(shipped.config_path("robot")) in out
     layout = re.search(r"foxglove layout\s+(\S+)", out).group(1)
     assert json.loads(Path(layout).read_text())["layout"]  # the Foxglove layout, found
+
+
+def test_the_battery_energy_integrates_readings_and_leaves_out_missing_ones() -> None:
+    from ucat_console.cli.run import BatteryEnergy
+
+    b = BatteryEnergy()
+    assert "no readings" in b.line()
+    for t, w in ((0.0, 10.0), (1.0, 20.0), (2.0, float("nan")), (3.0, 4.0), (4.0, 4.0)):
+        b.add(t, w)
+    # 15 J over the first second, the NaN and the seconds either side of it left out, 4 J after
+    assert b.energy == pytest.approx(19.0) and b.covered == pytest.approx(2.0) and b.skipped == 1
+    assert "energy 19.0 J, mean 9.50 W over 2.0 s (1 readings" in b.line()

@@ -179,6 +179,8 @@ def run(args: argparse.Namespace) -> int:
     fox = None
     last_power: list[Any] = [None]
     sup.stream.subscribe(lambda c, m: last_power.__setitem__(0, m), [ch.POWER])
+    battery = BatteryEnergy()
+    sup.stream.subscribe(lambda c, m: battery.add(m.t, m.total), [ch.POWER_ELECTRICAL])
     try:
         sup.set_setpoints(LOCAL, velocity=args.velocity, depth=args.depth, yaw_rate=args.yaw_rate)
         if not args.headless:
@@ -257,8 +259,38 @@ def run(args: argparse.Namespace) -> int:
     print(h.line())
     if p is not None:
         epm = f"{p.energy_per_metre:.1f} J/m" if math.isfinite(p.energy_per_metre) else "n/a"
-        print(f"distance {p.distance:.2f} m, energy {p.energy:.1f} J, energy per metre {epm}, "
-              f"mean power {p.mean_total:.2f} W")
+        print(f"distance {p.distance:.2f} m; the fins' shaft (encoders, while armed): energy {p.energy:.1f} J, "
+              f"energy per metre {epm}, mean power {p.mean_total:.2f} W")
+    print(battery.line())
     for path in paths:
         print(f"recorded {path}")
     return 1 if sup.fault else 0
+
+
+class BatteryEnergy:
+    """The drives' battery power over the run (``power/electrical``), by the trapezoid rule
+    between consecutive finite readings: a reading a drive did not answer (NaN) is not taken
+    as zero, and the time it spans is left out (and said)."""
+
+    def __init__(self) -> None:
+        self.energy = 0.0
+        self.covered = 0.0
+        self.skipped = 0
+        self._last: tuple[float, float] | None = None
+
+    def add(self, t: float, total: float) -> None:
+        if not math.isfinite(total):
+            self.skipped += 1
+            self._last = None
+            return
+        if self._last is not None and t > self._last[0]:
+            self.energy += 0.5 * (total + self._last[1]) * (t - self._last[0])
+            self.covered += t - self._last[0]
+        self._last = (t, total)
+
+    def line(self) -> str:
+        if self.covered <= 0.0:
+            return "the drives' battery power: no readings"
+        gaps = f" ({self.skipped} readings without every drive left out)" if self.skipped else ""
+        return (f"the drives' battery power (whole run): energy {self.energy:.1f} J, mean "
+                f"{self.energy / self.covered:.2f} W over {self.covered:.1f} s{gaps}")
