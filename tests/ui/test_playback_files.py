@@ -33,8 +33,8 @@ def server():
     s.stop()
 
 
-def panel(server: viser.ViserServer, directory: Path) -> PlaybackPanel:
-    return PlaybackPanel(server.gui, server.scene, AppConfig().plant.geometry, directory=directory)
+def panel(server: viser.ViserServer, directory: Path, readers: shared.SharedReaders | None = None) -> PlaybackPanel:
+    return PlaybackPanel(server.gui, server.scene, AppConfig().plant.geometry, directory=directory, readers=readers)
 
 
 def bodies(base: Base, ks: range) -> list[bytes]:
@@ -53,16 +53,17 @@ def recorded(tmp_path: Path) -> tuple[Path, str, Base]:
 
 def test_two_pages_opening_one_session_share_its_reader(server, recorded) -> None:
     d, sid, _ = recorded
-    a, b = panel(server, d), panel(server, d)
+    readers = shared.SharedReaders()  # the console's
+    a, b = panel(server, d, readers), panel(server, d, readers)
     try:
         assert a.act(lambda: a.open(sid)) and b.act(lambda: b.open(sid))
-        assert a.reader is b.reader and shared.users(a.reader) == 2
+        assert a.reader is b.reader and readers.users(a.reader) == 2
         a.close_session()
-        assert shared.users(b.reader) == 1
+        assert readers.users(b.reader) == 1
         assert b.act(lambda: b.seek(0.5)) and b.player.position > b.player.start
         reader = b.reader
         b.close_session()
-        assert shared.users(reader) == 0
+        assert readers.users(reader) == 0 and readers.budget.used == 0
     finally:
         a.stop()
         b.stop()
@@ -128,7 +129,7 @@ def test_a_page_cannot_open_a_session_file_outside_the_sessions_folder(server, r
         assert "is not a session or a file name" in p.messages[-1] and p.reader is None
     finally:
         p.stop()
-    for open_it in (lambda: shared.acquire(moved, d), lambda: SessionParts(moved, d)):
+    for open_it in (lambda: shared.SharedReaders().acquire(moved, d), lambda: SessionParts(moved, d)):
         with pytest.raises(ValueError, match="outside the sessions directory"):
             open_it()
     with SessionParts(moved, d, confined=False) as s:  # what the command line opens

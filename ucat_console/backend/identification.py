@@ -23,6 +23,7 @@ from typing import Sequence
 
 import numpy as np
 
+from ucat_console.backend.sessions.limits import MemoryBudget
 from ucat_console.backend.sessions.reader import SessionSource, open_session
 from ucat_console.config import AppConfig
 from ucat_console.control.estimation import tilt_from_accel
@@ -112,9 +113,9 @@ class IdentifyReport:
 
 def identify_sessions(sessions: Sequence[str | Path], directory: str | Path | None = None,
                       config: AppConfig | None = None, cfg: IdentifyConfig | None = None, *,
-                      confined: bool = True) -> IdentifyReport:
-    """Fit the fin coefficients to the recorded sessions (module docstring; ``confined``: as
-    :func:`open_session`)."""
+                      confined: bool = True, budget: MemoryBudget | None = None) -> IdentifyReport:
+    """Fit the fin coefficients to the recorded sessions (module docstring; ``confined`` and
+    ``budget``: as :func:`open_session`)."""
     if not sessions:
         raise ValueError("identify: name at least one session")
     recs: list[Measurements] = []
@@ -122,7 +123,7 @@ def identify_sessions(sessions: Sequence[str | Path], directory: str | Path | No
     app = config
     source_of_config = "the given configuration" if config is not None else ""
     for s in sessions:
-        src = open_session(s, directory, confined=confined)
+        src = open_session(s, directory, confined=confined, budget=budget)
         try:
             name = str(s)
             if app is None:
@@ -141,16 +142,16 @@ def identify_sessions(sessions: Sequence[str | Path], directory: str | Path | No
 
 
 def trim_sessions(sessions: Sequence[str | Path], directory: str | Path | None = None, *,
-                  confined: bool = True) -> tuple[HoverTrim, str]:
+                  confined: bool = True, budget: MemoryBudget | None = None) -> tuple[HoverTrim, str]:
     """The heave trim from the hovers recorded in ``sessions`` (``control.identification.
     hover_trim``) and the TOML fragment to load; ValueError naming a session without the
-    body layer's channels. ``confined``: as :func:`open_session`."""
+    body layer's channels. ``confined`` and ``budget``: as :func:`open_session`."""
     if not sessions:
         raise ValueError("identify --trim: name at least one session")
     cols: dict[str, list[float]] = {k: [] for k in ("t", "driving", "depth_error", "speed_ref", "heave")}
     names = []
     for s in sessions:
-        src = open_session(s, directory, confined=confined)
+        src = open_session(s, directory, confined=confined, budget=budget)
         try:
             name = str(s)
             present = {c for c, n in src.message_counts().items() if n > 0}

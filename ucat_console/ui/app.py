@@ -138,9 +138,9 @@ class ConsoleApp:
         #: a session every new page opens in its Review tab (``run --playback``)
         self.initial_session: str | None = None
         self.sessions_dir = supervisor.recorder.directory
-        self.session_list = SessionList(self.sessions_dir)
+        self.session_list = SessionList(self.sessions_dir, supervisor.readers.budget)
         self.jobs = PageJobs()  # what reads session files, for every page
-        self.replay_slot = ReplaySlot()
+        self.replay_slot = ReplaySlot(supervisor.readers.budget.config)
         #: what the planner light says while the planners load ("" when ready)
         self.loading = ""
         #: this run of the console, as the pages' bars carry it (a page that comes back to
@@ -288,7 +288,8 @@ class ConsoleApp:
                     compare = ComparePanel(
                         client.gui, self.tab_review, self.sessions_dir, cfg=self.sup.cfg.metrics,
                         sessions=self.session_list.sessions, allow=self._allow(cid), client=client,
-                        jobs=self._jobs_of(cid), present=lambda: self.page_present(cid))
+                        jobs=self._jobs_of(cid), present=lambda: self.page_present(cid),
+                        budget=self.sup.readers.budget)
                     # a recording that ends shows in the page's lists by itself
                     panel.session_lists += [lambda: review.act(review.refresh_sessions),
                                             lambda: compare.act(compare.refresh)]
@@ -359,7 +360,7 @@ class ConsoleApp:
             container=self.tab_review, plot_container=self.review_plot_tab,
             allow=self._allow(cid) if cid is not None else None,
             replay_slot=self.replay_slot, may_replay=lambda: self._may_replay(cid), plot_height=PLOT_HEIGHT,
-            metrics=self.sup.cfg.metrics,
+            metrics=self.sup.cfg.metrics, readers=self.sup.readers,
             jobs=self._jobs_of(cid) if cid is not None else None,
             present=(lambda: self.page_present(cid)) if cid is not None else (lambda: True),
             sessions=lambda: self.session_list.listing(),

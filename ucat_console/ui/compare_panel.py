@@ -20,6 +20,7 @@ import numpy as np
 
 from ucat_console.backend.review import compare, export
 from ucat_console.backend.review.metrics import LABELS, MECHANICAL, MetricsConfig, TableRow
+from ucat_console.backend.sessions.limits import MemoryBudget
 from ucat_console.ui.markdown import esc, within
 
 log = logging.getLogger(__name__)
@@ -70,12 +71,14 @@ class ComparePanel:
                  sessions: Callable[[], list[Any]],
                  jobs: Callable[[str, Callable[[], Any], bool], str | None] | None = None,
                  allow: Callable[..., None] | None = None, client: Any = None,
-                 present: Callable[[], bool] = lambda: True) -> None:
+                 present: Callable[[], bool] = lambda: True, budget: MemoryBudget | None = None) -> None:
         """``present()``: whether the page is still connected (a job that ends after its page
-        went ends quietly: its elements have gone with the page)."""
+        went ends quietly: its elements have gone with the page); ``budget``: the console's
+        memory budget for reading session files (default: the panel's own)."""
         self.gui = gui
         self.present = present
         self.directory = directory
+        self.budget = budget if budget is not None else MemoryBudget()
         self.cfg = cfg
         self._sessions = sessions
         self.jobs = jobs
@@ -177,7 +180,7 @@ class ComparePanel:
         codes = () if segments == NONE else (str(segments),)
         wins: list[compare.Window] = []
         for name in names:
-            run = compare.load_run(name, self.directory, max_messages=MAX_MESSAGES)
+            run = compare.load_run(name, self.directory, max_messages=MAX_MESSAGES, budget=self.budget)
             wins += compare.windows(run, codes, None if align == "start" else str(align))
         rows = compare.table(wins, self.cfg)
         png = export.png_bytes(wins, dpi=60)

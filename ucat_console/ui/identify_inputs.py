@@ -93,7 +93,8 @@ class IdentifyInputs:
 
     def _fit(self, name: str) -> None:
         try:
-            self.report = identify_sessions([name], self.directory, config=self.sup.current_config())
+            self.report = identify_sessions([name], self.directory, config=self.sup.current_config(),
+                                            budget=self.sup.readers.budget)
         except Exception as e:  # a recording the fit refuses: the reason on the page
             self.error = str(e)
         self._changed()

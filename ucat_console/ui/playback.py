@@ -70,12 +70,13 @@ from pathlib import Path
 from typing import Any, Callable
 
 from ucat_console.backend.review.metrics import MetricsConfig
-from ucat_console.backend.sessions import export, files, index, repair, shared
+from ucat_console.backend.sessions import export, files, index, repair
 from ucat_console.backend.sessions.markers import MAX_NOTE_BYTES, Marker, check_note
 from ucat_console.backend.sessions.player import MAX_SPEED, MIN_SPEED, Player, check_speed
 from ucat_console.backend.sessions.reader import SessionParts
 from ucat_console.backend.sessions.replay import ReplayResult, parse_weights, recorded_config, replay_config
 from ucat_console.backend.sessions.replay_job import ReplayJob, ReplaySlot
+from ucat_console.backend.sessions.shared import SharedReaders
 from ucat_console.robot.geometry import Geometry
 from ucat_console.telemetry.channels import CHANNELS
 from ucat_console.telemetry.events import Event
@@ -141,19 +142,22 @@ class PlaybackPanel:
         present: Callable[[], bool] = lambda: True,
         sessions: Callable[[], index.Listing] | None = None,
         may_repair: Callable[[], None] = lambda: None,
+        readers: SharedReaders | None = None,
     ) -> None:
         """``jobs(what, job, coalesce)``: queue an action that reads files (None when queued,
         else why not; None: run it in the callback); ``present()``: whether the page is
         still connected; ``sessions()``: the folder's listing, with what it skipped (default:
         read it each time); ``may_repair()``: raises (PermissionError) when this page may not
-        repair (the console: unless it is the pilot's)."""
+        repair (the console: unless it is the pilot's); ``readers``: the console's open
+        readers, within its memory budget (default: readers of the panel's own)."""
         self.directory = files.sessions_dir(directory)
         self.gui = gui
         self.jobs = jobs
         self.may_repair = may_repair
         self.present = present
-        self._sessions = sessions or (lambda: index.scan(self.directory))
-        self.replay_slot = replay_slot if replay_slot is not None else ReplaySlot()
+        self.readers = readers if readers is not None else SharedReaders()
+        self._sessions = sessions or (lambda: index.scan(self.directory, self.readers.budget))
+        self.replay_slot = replay_slot if replay_slot is not None else ReplaySlot(self.readers.budget.config)
         self.may_replay = may_replay
         self.job: ReplayJob | None = None
         self._job_weights: dict[str, float] = {}
@@ -358,9 +362,9 @@ class PlaybackPanel:
         page may, and never a part being recorded."""
         self.may_repair()
         paths = self._files(name)
-        todo = [p for p in paths if len(paths) == 1 or repair.needs_repair(p)]
+        todo = [p for p in paths if len(paths) == 1 or repair.needs_repair(p, self.readers.budget)]
         try:
-            reports = [repair.repair(p, self.directory) for p in todo]
+            reports = [repair.repair(p, self.directory, budget=self.readers.budget) for p in todo]
         finally:
             self.refresh_sessions()
         done = [r for r in reports if r.repaired]
@@ -377,12 +381,12 @@ class PlaybackPanel:
         """Open a session for review at its start (paused): every part of the session named
         by its id or by any one of its part files."""
         target: str | Path = self._path(name) if self._name(name).endswith(files.SUFFIX) else name
-        reader = shared.acquire(target, self.directory)  # a truncated part: TruncatedSessionError
+        reader = self.readers.acquire(target, self.directory)  # a truncated part: TruncatedSessionError
         try:
             player = Player(reader, self.stream, speed=self._speed, loop=bool(self.loop.value),
                             on_error=self._play_failed)
         except BaseException:
-            shared.release(reader)
+            self.readers.release(reader)
             raise
         self.close_session(quiet=True)
         with self._lock:
@@ -412,7 +416,7 @@ class PlaybackPanel:
         if player is not None:
             player.close()
         if reader is not None:
-            shared.release(reader)
+            self.readers.release(reader)
         return player is not None
 
     def _play_failed(self, text: str) -> None:

@@ -14,13 +14,15 @@ import threading
 from pathlib import Path
 
 from ucat_console.backend.sessions import index
+from ucat_console.backend.sessions.limits import MemoryBudget
 
 
 class SessionList:
     """The listing of one sessions folder (module docstring); thread-safe."""
 
-    def __init__(self, directory: str | Path) -> None:
+    def __init__(self, directory: str | Path, budget: MemoryBudget | None = None) -> None:
         self.directory = Path(directory)
+        self.budget = budget if budget is not None else MemoryBudget()  # what reading a file may hold
         self._lock = threading.Lock()
         self._key: tuple | None = None
         self._listing = index.Listing([], [])
@@ -45,7 +47,7 @@ class SessionList:
         with self._lock:
             key = self._signature()
             if key != self._key:
-                self._listing = index.scan(self.directory)
+                self._listing = index.scan(self.directory, self.budget)
                 self._key = key
                 self.listings += 1
             return index.Listing(list(self._listing.sessions), list(self._listing.skipped))

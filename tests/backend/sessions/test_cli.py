@@ -168,13 +168,8 @@ def test_a_replay_process_reads_under_the_consoles_review_limits(sessions):
                    (0.6, -0.6, 3.0, 3.0), (0.6, 3.0, 0.0, 3.0), 1.0, 0.1, 0.1, 0.0, 0.1, 0.3,
                    (-0.3, 0.1), 0.002, False)
     [path] = record(sessions, [(C.fin_plan(1), plan)], config_toml="[mpc]\nn_samples = 32\nmax_iter = 5\n")
-    before = limits.limits()
-    limits.configure(limits.ReviewConfig(max_message=4096))
-    try:
-        job = ReplayJob(path.name, sessions, {"lam_st": 2.0}, nice=0)
-        assert job.wait(120.0)
-    finally:
-        limits.configure(before)
+    job = ReplayJob(path.name, sessions, {"lam_st": 2.0}, nice=0, review=limits.ReviewConfig(max_message=4096))
+    assert job.wait(120.0)
     assert "review.max_message" in job.error and job.result is None
     job = ReplayJob(path.name, sessions, {"lam_st": 2.0}, nice=0)  # the defaults read it
     assert job.wait(120.0)

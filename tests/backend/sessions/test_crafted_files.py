@@ -37,14 +37,6 @@ def base(sessions: Path) -> Base:
     return Base.of(path)
 
 
-@pytest.fixture
-def limited():
-    """Limits put in force by a test are taken back after it."""
-    before = limits.limits()
-    yield limits.configure
-    limits.configure(before)
-
-
 def body_record(base: Base, k: int, pad: int = 0) -> bytes:
     data = codec.encode(example_message(BodyState, t=0.01 * k, nan=False)) + b" " * pad
     return message_record(base.topic_ids[C.BODY_STATE], T0 + k * 10**7, data)
@@ -73,8 +65,8 @@ def peak_while(fn) -> tuple[int, object]:
         tracemalloc.stop()
 
 
-def read_all(path: Path, directory: Path) -> int:
-    with SessionParts(path, directory) as s:
+def read_all(path: Path, directory: Path, budget: limits.MemoryBudget | None = None) -> int:
+    with SessionParts(path, directory, budget=budget) as s:
         return sum(1 for _ in s.records())
 
 
@@ -105,12 +97,13 @@ def test_a_chunk_that_decompresses_to_more_than_it_declares_is_refused_within_wh
     big = chunk_of(padded(base, 64 * MIB), T0, T0 + 10**9, compression, content_size)
     lie = CraftedChunk(big.data, 4096, big.crc, compression, T0, T0 + 10**9)  # header and index: 4 kB
     path = write(sessions / "lie.mcap", base, [lie])
-    with SessionReader(path, sessions) as r:  # the index is within the limits: the file opens
+    budget = limits.MemoryBudget()
+    with SessionReader(path, sessions, budget=budget) as r:  # the index is within the limits: the file opens
         peak, err = peak_while(lambda: list(r.records()))
     assert isinstance(err, ValueError) and "the chunk at byte" in str(err) and str(path) in str(err)
     assert "4096" in str(err)
     assert peak < 2 * MIB + len(big.data)
-    assert limits.budget().used == 0
+    assert budget.used == 0
 
 
 def test_a_message_over_the_message_limit_is_refused_before_it_is_decoded(base, sessions):
@@ -122,23 +115,21 @@ def test_a_message_over_the_message_limit_is_refused_before_it_is_decoded(base, 
             list(r.records())
 
 
-def test_overlapping_chunks_are_read_within_the_memory_cap(base, sessions, limited):
+def test_overlapping_chunks_are_read_within_the_memory_cap(base, sessions):
     """Chunks that all claim the same time must all be read before the first message: the
     reading stops at the cap, gives back what it held, and the file can be read again once
     the cap is raised."""
-    limited(limits.ReviewConfig(max_chunk=4 * MIB, memory=16 * MIB))
+    budget = limits.MemoryBudget(limits.ReviewConfig(max_chunk=4 * MIB, memory=16 * MIB))
     n = 12
     chunks = [chunk_of([body_record(base, 100 + i, pad=512 * 1024) for i in range(6)], T0, T0 + 10**9)
               for _ in range(n)]  # about 3 MiB each, 36 MiB in all
     path = write(sessions / "overlap.mcap", base, chunks)
-    budget = limits.budget()
-    budget.peak = budget.used
-    peak, err = peak_while(lambda: read_all(path, sessions))
+    peak, err = peak_while(lambda: read_all(path, sessions, budget))
     assert isinstance(err, limits.MemoryExceeded) and "review.memory" in str(err) and str(path) in str(err)
     assert budget.used == 0 and budget.peak <= 16 * MIB
     assert peak < 16 * MIB + 4 * MIB  # what the cap counts, and a chunk being parsed
-    limited(limits.ReviewConfig(max_chunk=4 * MIB, memory=64 * MIB))
-    assert read_all(path, sessions) == 6 * n
+    assert read_all(path, sessions, limits.MemoryBudget(limits.ReviewConfig(max_chunk=4 * MIB, memory=64 * MIB))) \
+        == 6 * n
 
 
 def test_json_nested_100k_deep_is_refused_with_a_one_line_error(base, sessions, capsys):
@@ -242,15 +233,18 @@ def test_the_folder_listing_skips_symlinks_out_of_it_pipes_and_odd_names(base, s
 
 def test_pages_opening_one_session_share_one_reader(base, sessions):
     path = write(sessions / "s.mcap", base, [chunk_of([body_record(base, k) for k in range(10)], T0, T0 + 10**8)])
-    before = limits.budget().used
-    a = shared.acquire("s.mcap", sessions)
-    b = shared.acquire(path, sessions)  # by a part file: the same files
-    assert a is b and shared.users(a) == 2
-    held = limits.budget().used - before
+    readers = shared.SharedReaders()
+    a = readers.acquire("s.mcap", sessions)
+    b = readers.acquire(path, sessions)  # by a part file: the same files
+    assert a is b and readers.users(a) == 2
+    held = readers.budget.used
     assert held > 0  # the summary and metadata, counted once
-    shared.release(a)
+    alone = limits.MemoryBudget()
+    SessionParts(path, sessions, budget=alone).close()
+    assert alone.peak == held  # as much as one reader holds
+    readers.release(a)
     assert sum(1 for _ in b.records()) == 10  # the other page still reads it
-    shared.release(b)
-    assert shared.users(a) == 0 and limits.budget().used == before
+    readers.release(b)
+    assert readers.users(a) == 0 and readers.budget.used == 0
     with pytest.raises(ValueError):
         next(a.records())  # closed

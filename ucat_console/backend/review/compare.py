@@ -28,6 +28,7 @@ from ucat_console.backend.review.metrics import (
     table_row,
 )
 from ucat_console.backend.review.metrics import power_source as window_source
+from ucat_console.backend.sessions.limits import MemoryBudget
 from ucat_console.backend.sessions.reader import SessionParts
 from ucat_console.telemetry.channels import EVENTS
 from ucat_console.telemetry.events import Event
@@ -84,10 +85,10 @@ def read_run(session: SessionParts, name: str | None = None, max_messages: int |
 
 
 def load_run(session: str | Path, directory: str | Path | None = None, max_messages: int | None = None,
-             *, confined: bool = True) -> Run:
+             *, confined: bool = True, budget: MemoryBudget | None = None) -> Run:
     """Open a session (id or any part file; a file that is not a session is refused with a
-    ValueError naming it; ``confined``: as :class:`SessionParts`) and read it."""
-    with SessionParts(session, directory, confined=confined) as s:
+    ValueError naming it; ``confined`` and ``budget``: as :class:`SessionParts`) and read it."""
+    with SessionParts(session, directory, confined=confined, budget=budget) as s:
         return read_run(s, max_messages=max_messages)
 
 

@@ -25,6 +25,7 @@ from mcap.records import Chunk, Metadata
 from mcap.stream_reader import StreamReader
 
 from ucat_console.backend.sessions import codec, files, writing
+from ucat_console.backend.sessions.limits import MemoryBudget
 from ucat_console.backend.sessions.mcap_read import MAGIC, TruncatedSessionError, record_limit
 from ucat_console.backend.sessions.reader import SessionReader
 from ucat_console.telemetry.channels import EVENTS
@@ -96,12 +97,12 @@ class SessionInfo:
         return self.parts[0].start if self.parts else None
 
 
-def _leading_metadata(path: Path) -> dict[str, dict[str, str]]:
+def _leading_metadata(path: Path, budget: MemoryBudget) -> dict[str, dict[str, str]]:
     """Metadata records before the first chunk (read without the summary)."""
     out: dict[str, dict[str, str]] = {}
     with open(path, "rb") as fh:
         try:
-            for rec in StreamReader(fh, emit_chunks=True, record_size_limit=record_limit()).records:
+            for rec in StreamReader(fh, emit_chunks=True, record_size_limit=record_limit(budget.config)).records:
                 if isinstance(rec, Metadata):
                     out[rec.name] = dict(rec.metadata)
                 elif isinstance(rec, Chunk):
@@ -130,15 +131,18 @@ def _disagreement(path: Path, session: dict[str, str]) -> str:
     return ""
 
 
-def part_info(path: str | Path, directory: str | Path | None = None) -> PartInfo:
-    """Describe one session file from its summary (or its first records when truncated);
-    its session and part are those of its name (module docstring)."""
+def part_info(path: str | Path, directory: str | Path | None = None,
+              budget: MemoryBudget | None = None) -> PartInfo:
+    """Describe one session file from its summary (or its first records when truncated),
+    read within ``budget`` (default: one of its own); its session and part are those of its
+    name (module docstring)."""
+    budget = budget if budget is not None else MemoryBudget()
     p = files.inside_sessions(path, directory)
     size = p.stat().st_size
     sid, part = listed_as(p)
     original_of = files.original_of(p.name)
     try:
-        with SessionReader(p, p.parent) as r:
+        with SessionReader(p, p.parent, budget=budget) as r:
             counts = r.message_counts()
             return PartInfo(
                 path=p, session_id=sid, part=part, size=size, truncated=False,
@@ -150,7 +154,7 @@ def part_info(path: str | Path, directory: str | Path | None = None) -> PartInfo
     except TruncatedSessionError:
         with open(p, "rb") as fh:
             is_mcap = fh.read(len(MAGIC)) == MAGIC
-        meta = _leading_metadata(p) if is_mcap else {}
+        meta = _leading_metadata(p, budget) if is_mcap else {}
         session = meta.get(files.META_SESSION, {})
         started = session.get("started_ns", "")
         return PartInfo(
@@ -196,10 +200,12 @@ def _why_skipped(entry: os.DirEntry, root: Path) -> str:
     return ""
 
 
-def scan(directory: str | Path | None = None) -> Listing:
+def scan(directory: str | Path | None = None, budget: MemoryBudget | None = None) -> Listing:
     """Every session in the directory (oldest first, parts in order, grouped by their file
     names) and the ``*.mcap`` entries that are not read: symbolic links (never followed),
-    what is not a regular file (a directory, a pipe, a device), names that cannot be shown."""
+    what is not a regular file (a directory, a pipe, a device), names that cannot be shown.
+    Each file is read within ``budget`` (default: one of the listing's own)."""
+    budget = budget if budget is not None else MemoryBudget()
     root = files.sessions_dir(directory)
     if not root.is_dir():
         return Listing([], [])
@@ -212,7 +218,7 @@ def scan(directory: str | Path | None = None) -> Listing:
         if why:
             skipped.append(Skipped(files.printable(entry.name), why))
             continue
-        info = part_info(root / entry.name, root)
+        info = part_info(root / entry.name, root, budget)
         by_id.setdefault(info.session_id, []).append(info)
     sessions = [
         SessionInfo(sid, tuple(sorted(ps, key=lambda x: x.part))) for sid, ps in by_id.items()
@@ -221,10 +227,10 @@ def scan(directory: str | Path | None = None) -> Listing:
     return Listing(sessions, skipped)
 
 
-def list_sessions(directory: str | Path | None = None) -> list[SessionInfo]:
+def list_sessions(directory: str | Path | None = None, budget: MemoryBudget | None = None) -> list[SessionInfo]:
     """Every session in the directory, oldest first, parts in order (:func:`scan` also
     says what it skipped)."""
-    return scan(directory).sessions
+    return scan(directory, budget).sessions
 
 
 def session_parts(session_id: str, directory: str | Path | None = None) -> list[Path]:

@@ -11,9 +11,11 @@ describes millions of chunks, or sizes in its headers that lie. Everything that 
   whole). A chunk's declared size is checked before anything is decompressed, and the
   decompression itself stops at the declared size (a chunk whose data decompresses to more
   or less than it declares is refused as corrupted, whatever its headers say);
-* ``memory``: what every reading in the process may hold at once (:class:`MemoryBudget`):
-  each open file's summary and event index, and each chunk a reading holds decompressed. A
-  reading that would go over is refused with the amounts; what it held is given back.
+* ``memory``: what the readings sharing one :class:`MemoryBudget` may hold at once (the
+  console's budget, owned by its supervisor, is every page's and every review's; a command
+  of the shell reads within a budget of its own): each open file's summary and event index,
+  and each chunk a reading holds decompressed. A reading that would go over is refused with
+  the amounts; what it held is given back.
 
 :data:`MAX_JSON_DEPTH` bounds the nesting of JSON in a file (messages, schemas, markers).
 
@@ -97,27 +99,6 @@ class MemoryBudget:
     def release(self, n: int) -> None:
         with self._lock:
             self.used = max(0, self.used - n)
-
-
-_budget = MemoryBudget()
-_budget_lock = threading.Lock()
-
-
-def budget() -> MemoryBudget:
-    """The process's budget (its limits: :func:`configure`)."""
-    return _budget
-
-
-def configure(config: ReviewConfig) -> None:
-    """Put ``config``'s limits in force for every reading in this process from now on."""
-    if not isinstance(config, ReviewConfig):
-        raise ValueError(f"review: expected a ReviewConfig, got {type(config).__name__}")
-    with _budget_lock:
-        _budget.config = config
-
-
-def limits() -> ReviewConfig:
-    return _budget.config
 
 
 def decompress(compression: str, data: bytes, size: int) -> bytes:

@@ -53,10 +53,10 @@ SUMMARY_COST = 8
 MESSAGE_COST = 400
 
 
-def record_limit() -> int:
-    """The largest record read whole: a chunk within the limit, compressed (zstd and lz4
-    add a little to data that does not compress), with its header."""
-    cap = limits.limits().max_chunk
+def record_limit(cfg: limits.ReviewConfig) -> int:
+    """The largest record read whole: a chunk within ``cfg``'s limit, compressed (zstd and
+    lz4 add a little to data that does not compress), with its header."""
+    cap = cfg.max_chunk
     return cap + cap // 64 + 4096
 
 
@@ -69,7 +69,7 @@ def _by_offset(ci: ChunkIndex) -> int:
     return ci.chunk_start_offset
 
 
-def _chunk_data(body: bytes, ci: ChunkIndex) -> bytes:
+def _chunk_data(body: bytes, ci: ChunkIndex, cfg: limits.ReviewConfig) -> bytes:
     """The decompressed records of the chunk record ``body`` (read where ``ci`` puts it);
     ValueError unless it is the chunk ``ci`` describes and decompresses as it declares."""
     if len(body) != ci.chunk_length:
@@ -87,12 +87,12 @@ def _chunk_data(body: bytes, ci: ChunkIndex) -> bytes:
             f"it is not the chunk its index describes ({codec.short(chunk.compression, 12)}, {len(chunk.data)} -> "
             f"{chunk.uncompressed_size} bytes; the index: {codec.short(ci.compression, 12)}, {ci.compressed_size} -> "
             f"{ci.uncompressed_size} bytes)")
-    return decompressed(chunk)
+    return decompressed(chunk, cfg)
 
 
-def decompressed(chunk: Chunk) -> bytes:
-    """A chunk's records, decompressed within the chunk limit, CRC checked (ValueError)."""
-    cap = limits.limits().max_chunk
+def decompressed(chunk: Chunk, cfg: limits.ReviewConfig) -> bytes:
+    """A chunk's records, decompressed within ``cfg``'s chunk limit, CRC checked (ValueError)."""
+    cap = cfg.max_chunk
     if chunk.uncompressed_size > cap:
         raise ValueError(f"it decompresses to {chunk.uncompressed_size} bytes, over the limit of "
                          f"{cap} (review.max_chunk)")
@@ -107,19 +107,20 @@ class TruncatedSessionError(ValueError):
 
 
 class BudgetHolder:
-    """Holds bytes of the memory budget while open (summary, metadata, event index) and
-    lets them go on closing."""
+    """Holds bytes of its ``budget`` while open (summary, metadata, event index) and lets
+    them go on closing; the opener sets ``budget``."""
 
     path: Path
+    budget: limits.MemoryBudget
     _held = 0  # bytes of the memory budget held while open
 
     def _hold(self, n: int, what: str) -> None:
-        limits.budget().reserve(n, f"{self.path}: {what}")
+        self.budget.reserve(n, f"{self.path}: {what}")
         self._held += n
 
     def _let_go(self) -> None:
         held, self._held = self._held, 0
-        limits.budget().release(held)
+        self.budget.release(held)
 
 
 class McapFile(BudgetHolder):
@@ -138,7 +139,7 @@ class McapFile(BudgetHolder):
         limits' largest record)."""
         self._file.seek(offset)
         return StreamReader(self._file, skip_magic=True, emit_chunks=True,
-                            record_size_limit=record_limit()).records
+                            record_size_limit=record_limit(self.budget.config)).records
 
     def _read_summary(self) -> Summary:
         """The summary section (TruncatedSessionError when there is none): its records, read
@@ -196,7 +197,7 @@ class McapFile(BudgetHolder):
 
     def _check_chunk_indexes(self, summary: Summary) -> None:
         """Every chunk the index lists lies within the file and within the chunk limit."""
-        p, cap, stats = self.path, limits.limits().max_chunk, summary.statistics
+        p, cap, stats = self.path, self.budget.config.max_chunk, summary.statistics
         assert stats is not None
         if stats.message_count and not summary.chunk_indexes:
             raise ValueError(f"{p}: has messages but no chunk index; `ucat-console sessions repair "
@@ -208,7 +209,7 @@ class McapFile(BudgetHolder):
                                  f"limit of {cap} (review.max_chunk)")
             if not (len(MAGIC) <= ci.chunk_start_offset
                     and ci.chunk_start_offset + ci.chunk_length <= self._size
-                    and ci.chunk_length <= record_limit()):
+                    and ci.chunk_length <= record_limit(self.budget.config)):
                 raise ValueError(f"{where}: corrupted index: {ci.chunk_length} bytes at byte "
                                  f"{ci.chunk_start_offset} of a {self._size}-byte file")
 
@@ -252,7 +253,7 @@ class McapFile(BudgetHolder):
             and (not ci.message_index_offsets or not ids.isdisjoint(ci.message_index_offsets))
         ]
         channels = self._summary.channels
-        budget = limits.budget()
+        budget = self.budget
         held: dict[int, list[int]] = {}  # chunk offset -> [messages still queued, bytes held]
         try:
             if not ordered:
@@ -307,12 +308,12 @@ class McapFile(BudgetHolder):
         where = f"{self.path}: the chunk at byte {ci.chunk_start_offset}"
         if self._file.closed:  # its descriptor may be another file's by now
             raise ValueError(f"{self.path}: the reader is closed")
-        budget = limits.budget()
+        budget = self.budget
         need = ci.chunk_length + ci.uncompressed_size
         budget.reserve(need, f"{where}")
         try:
             try:
-                data = _chunk_data(os.pread(self._fd, ci.chunk_length, ci.chunk_start_offset), ci)
+                data = _chunk_data(os.pread(self._fd, ci.chunk_length, ci.chunk_start_offset), ci, self.budget.config)
             except ValueError as e:
                 raise ValueError(f"{where}: corrupted data: {e}") from None
             messages, kept = self._messages_in(data, ids, lo, hi, where)
@@ -331,7 +332,7 @@ class McapFile(BudgetHolder):
         bytes they hold."""
         out: list[Message] = []
         kept = 0
-        cap = limits.limits().max_message
+        cap = self.budget.config.max_message
         pos, n = 0, len(data)
         while pos < n:
             if pos + _RECORD_HEAD.size > n:

@@ -37,6 +37,7 @@ from mcap.records import Channel, Message, Schema
 from mcap.summary import Summary
 
 from ucat_console.backend.sessions import codec, files, foxglove, legacy
+from ucat_console.backend.sessions.limits import MemoryBudget
 from ucat_console.backend.sessions.mcap_read import MAGIC, BudgetHolder, McapFile
 from ucat_console.backend.sessions.schema import (
     MESSAGE_ENCODING,
@@ -255,13 +256,16 @@ class SessionReader(McapFile, _Recording):
     """One session file, opened for reading (use as a context manager or ``close()``).
 
     Its summary, metadata and chunks are read by :class:`~.mcap_read.McapFile`, within the
-    limits of :mod:`~ucat_console.backend.sessions.limits`, with ``os.pread``: one reader may
+    limits of its ``budget`` (:mod:`~ucat_console.backend.sessions.limits`; default: one of
+    its own with the default limits), with ``os.pread``: one reader may
     serve several threads (the pages sharing it, :mod:`.shared`). Its channels must be ours
     (our schemas); its messages are decoded to the telemetry dataclasses.
     """
 
-    def __init__(self, path: str | Path, directory: str | Path | None = None, *, confined: bool = True) -> None:
+    def __init__(self, path: str | Path, directory: str | Path | None = None, *, confined: bool = True,
+                 budget: MemoryBudget | None = None) -> None:
         self.path = files.session_path(path, directory, confined=confined)
+        self.budget = budget if budget is not None else MemoryBudget()
         p = self.path
         if not p.is_file():
             raise ValueError(f"{path}: no such session file")
@@ -447,13 +451,14 @@ class SessionParts(_Recording):
     """
 
     def __init__(self, session: str | Path, directory: str | Path | None = None, *,
-                 confined: bool = True) -> None:
+                 confined: bool = True, budget: MemoryBudget | None = None) -> None:
         root = files.sessions_dir(directory)
         sid, paths = files.session_paths(session, root, confined)
+        self.budget = budget if budget is not None else MemoryBudget()
         readers: list[SessionReader] = []
         try:
             for path in paths:  # a truncated part: TruncatedSessionError naming it
-                readers.append(SessionReader(path, root, confined=confined))
+                readers.append(SessionReader(path, root, confined=confined, budget=self.budget))
             _check_parts(readers, sid)
         except BaseException:
             for r in readers:
@@ -586,12 +591,13 @@ SessionSource = SessionReader | SessionParts
 
 
 def open_session(session: str | Path, directory: str | Path | None = None, *,
-                 confined: bool = True) -> SessionParts:
+                 confined: bool = True, budget: MemoryBudget | None = None) -> SessionParts:
     """Open a whole session inside ``directory`` (default: the project's ``sessions/``).
 
     ``session``: a session id, or the path or file name of any one of its parts (every
     part is opened); a file whose name is not a part name is opened alone. A one-part
     session reads exactly as its file does with :class:`SessionReader`. ``confined=False``:
     a named file is read wherever it is (a path the user typed, :func:`files.session_path`).
+    ``budget``: the memory budget it reads within (default: one of its own).
     """
-    return SessionParts(session, directory, confined=confined)
+    return SessionParts(session, directory, confined=confined, budget=budget)

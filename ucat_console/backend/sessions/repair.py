@@ -51,11 +51,11 @@ class RepairReport:
     original: Path | None  # where the original was kept
 
 
-def needs_repair(path: str | Path) -> bool:
+def needs_repair(path: str | Path, budget: limits.MemoryBudget | None = None) -> bool:
     """True when the file has no readable summary (it opens only after a repair)."""
     p = Path(path)
     try:
-        SessionReader(p, p.resolve().parent).close()
+        SessionReader(p, p.resolve().parent, budget=budget).close()
     except TruncatedSessionError:
         return True
     except ValueError:
@@ -70,13 +70,17 @@ def repair(
     keep_original: bool = True,
     force: bool = False,
     confined: bool = True,
+    budget: limits.MemoryBudget | None = None,
 ) -> RepairReport:
     """Rewrite ``path`` fully indexed from its complete records.
 
     A file that already opens is left alone (``repaired`` False) unless ``force``; a file
     being recorded, and an original a repair kept, are refused (ValueError). ``confined``:
-    ``path`` must lie in the sessions directory (:func:`files.session_path`).
+    ``path`` must lie in the sessions directory (:func:`files.session_path`). The file is
+    read within ``budget``'s limits (default: one of its own).
     """
+    budget = budget if budget is not None else limits.MemoryBudget()
+    cfg = budget.config
     p = files.session_path(path, directory, confined=confined)
     if not p.is_file():
         raise ValueError(f"{path}: no such session file")
@@ -88,13 +92,13 @@ def repair(
     with open(p, "rb") as fh:
         if fh.read(len(MAGIC)) != MAGIC:
             raise ValueError(f"{p}: not an MCAP file (it does not start with the MCAP magic)")
-    if not force and not needs_repair(p):
-        with SessionReader(p, p.parent) as r:
+    if not force and not needs_repair(p, budget):
+        with SessionReader(p, p.parent, budget=budget) as r:
             return RepairReport(p, False, r.message_count, len(r.metadata), "", None)
 
     with open(p, "rb") as fh:
         try:
-            header = NonSeekingReader(fh, record_size_limit=record_limit()).get_header()
+            header = NonSeekingReader(fh, record_size_limit=record_limit(cfg)).get_header()
         except Exception as e:
             raise ValueError(f"{p}: not repairable: no complete MCAP header ({e})") from None
 
@@ -105,8 +109,8 @@ def repair(
         with open(p, "rb") as src, open(tmp, "wb") as out:
             w = Writer(out, chunk_size=_CHUNK_SIZE, compression=CompressionType.ZSTD)
             w.start(profile=header.profile, library=header.library)
-            records = StreamReader(src, validate_crcs=True, emit_chunks=True, record_size_limit=record_limit())
-            stop = _copy_records(_unchunked(records.records), w, counts)
+            records = StreamReader(src, validate_crcs=True, emit_chunks=True, record_size_limit=record_limit(cfg))
+            stop = _copy_records(_unchunked(records.records, cfg), w, counts)
             w.finish()
             out.flush()
             os.fsync(out.fileno())
@@ -120,15 +124,15 @@ def repair(
     return RepairReport(p, True, n, counts["metadata"], stop, original)
 
 
-def _unchunked(records: Iterator[Any]) -> Iterator[Any]:
-    """The records, those of each chunk in its place (opened within the limits)."""
-    cap = limits.limits().max_message
+def _unchunked(records: Iterator[Any], cfg: limits.ReviewConfig) -> Iterator[Any]:
+    """The records, those of each chunk in its place (opened within ``cfg``'s limits)."""
+    cap = cfg.max_message
     for rec in records:
         if not isinstance(rec, Chunk):
             yield rec
             continue
         try:
-            inner = breakup_chunk(replace(rec, compression="", data=decompressed(rec), uncompressed_crc=0))
+            inner = breakup_chunk(replace(rec, compression="", data=decompressed(rec, cfg), uncompressed_crc=0))
         except ValueError as e:
             raise McapError(f"a chunk: {e}") from None
         for r in inner:

@@ -36,12 +36,11 @@ def _child(conn: Any, session: str, directory: str, weights: dict[str, float], n
         pass
     try:
         from ucat_console.backend.sessions.reader import SessionParts
-
-        limits.configure(review)  # the console's [review] limits, not the defaults
         from ucat_console.backend.sessions.replay import counterfactual
         from ucat_console.telemetry.channels import N_FINS, fin_plan
 
-        with SessionParts(session, directory) as reader:
+        # the console's [review] limits, not the defaults, in a budget of the process's own
+        with SessionParts(session, directory, budget=limits.MemoryBudget(review)) as reader:
             counts = reader.message_counts()
             total = sum(counts.get(fin_plan(i), 0) for i in range(N_FINS))
             conn.send(("progress", 0, total))
@@ -64,17 +63,18 @@ class Progress:
 
 
 class ReplayJob:
-    """One replay of ``session`` (an id or a part file name in ``directory``) with ``weights``."""
+    """One replay of ``session`` (an id or a part file name in ``directory``) with ``weights``,
+    reading the session within ``review``'s limits."""
 
     def __init__(self, session: str | Path, directory: str | Path, weights: Mapping[str, float],
-                 *, owner: Any = None, nice: int = NICE) -> None:
+                 *, owner: Any = None, nice: int = NICE, review: limits.ReviewConfig | None = None) -> None:
         self.session = str(session)
         self.weights = dict(weights)
         self.owner = owner
         ctx = mp.get_context("spawn")
         self._conn, child_conn = ctx.Pipe(duplex=False)
         self._proc = ctx.Process(target=_child, args=(child_conn, self.session, str(directory), self.weights, nice,
-                                       limits.limits()),
+                                       review if review is not None else limits.ReviewConfig()),
                                  name="ucat-replay", daemon=True)
         self._proc.start()
         child_conn.close()
@@ -137,9 +137,10 @@ class ReplayJob:
 
 
 class ReplaySlot:
-    """At most one replay at a time (per console)."""
+    """At most one replay at a time (per console), each reading within ``review``'s limits."""
 
-    def __init__(self) -> None:
+    def __init__(self, review: limits.ReviewConfig | None = None) -> None:
+        self.review = review if review is not None else limits.ReviewConfig()
         self._lock = threading.Lock()
         self.job: ReplayJob | None = None
 
@@ -154,7 +155,7 @@ class ReplaySlot:
                     raise ValueError(f"a counterfactual replay of {running.session} is running; "
                                      "wait for it or cancel it first")
                 running.cancel("the pilot's page started one")
-            self.job = ReplayJob(session, directory, weights, owner=owner)
+            self.job = ReplayJob(session, directory, weights, owner=owner, review=self.review)
             return self.job
 
     def cancel(self) -> None:

@@ -63,7 +63,8 @@ from ucat_console.backend.loop.modes import MODES
 from ucat_console.backend.review.effects import ChangeEffects
 from ucat_console.backend.safety import CHANNELS as SAFETY_CHANNELS
 from ucat_console.backend.safety import SafetyMonitor, Transition
-from ucat_console.backend.sessions import limits
+from ucat_console.backend.sessions.limits import MemoryBudget
+from ucat_console.backend.sessions.shared import SharedReaders
 from ucat_console.backend.sessions.foxglove import robot_geometry
 from ucat_console.backend.sessions.recorder import Recorder
 from ucat_console.backend.supervisor.arm_requests import ArmRequests
@@ -160,7 +161,8 @@ class Supervisor:
         self._lag = 0.0
         self.fault = ""
         self.wall0 = time.time()
-        limits.configure(cfg.review)  # what reading session files may cost, in this process
+        #: the console's open session readers, all within its memory budget (``[review]``)
+        self.readers = SharedReaders(MemoryBudget(cfg.review))
         self.recorder = Recorder(
             self.stream, cfg.recorder,
             directory=sessions_dir if sessions_dir is not None else (cfg.console.sessions_dir or None),
