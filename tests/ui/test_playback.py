@@ -520,17 +520,17 @@ def test_a_truncated_part_is_repaired_from_the_session_chooser(
 
 
 def test_review_markers_are_limited_in_size_and_rate(panel: PlaybackPanel, run: Run, monkeypatch) -> None:
-    import ucat_console.ui.playback as playback
+    from ucat_console.backend.review.session import MARKER_INTERVAL
 
     t = [1000.0]
-    monkeypatch.setattr(playback, "_now", lambda: t[0])
+    monkeypatch.setattr(panel.session, "_clock", lambda: t[0])
     panel.open(run.path.name)
     assert panel.act(lambda: panel.add_marker("x" * 2049)) is False
     assert "2048 bytes" in panel.messages[-1]
     assert panel.act(lambda: panel.add_marker("first"))
     assert panel.act(lambda: panel.add_marker("too soon")) is False
     assert "at most one every" in panel.messages[-1]
-    t[0] += playback.MARKER_INTERVAL
+    t[0] += MARKER_INTERVAL
     assert panel.act(lambda: panel.add_marker("second"))
     notes = [m.note for m in panel.player.markers.markers]
     assert "first" in notes and "second" in notes and "too soon" not in notes

@@ -1,6 +1,8 @@
-# Over 600 lines: the Review tab's panel: its controls, their callbacks and the playback's refresh share one page's handles.
+# Over 600 lines: the Review tab's inputs, their callbacks and its view act on one open review; the review itself is backend/review/session.py.
 """The review panel: browse recorded sessions, play them back, mark them, replay them with
-other MPC weights.
+other MPC weights. What a page reviews is a viser-free
+:class:`~ucat_console.backend.review.session.ReviewSession` (the folder, the open session,
+its player, markers, export and counterfactual replay); this panel renders it.
 
 Playback is the other end of the telemetry stream: a
 :class:`~ucat_console.backend.sessions.player.Player` publishes a session onto a
@@ -19,14 +21,8 @@ the one before. Rows of the review plots are taken on the recording's clock (one
 (seek, step back, event) the plot buffer is rebuilt from the file for the history window
 before the new position.
 
-The session chooser opens a whole session: a session split into parts
-(``<id>_001.mcap``, ``_002`` ...) is read as one recording
-(:class:`~ucat_console.backend.sessions.reader.SessionParts`), so the timeline, playing,
-seeking, frame steps, event jumps and counterfactual replay run across the part
-boundaries; the browser's table lists every part, and a truncated part is repaired from
-here (the session then opens; the original stays beside it, listed as
-``<part>.orig.mcap``). Only the pilot's page repairs (``may_repair()`` raises for any
-other), and a part being recorded is never repaired (:mod:`~ucat_console.backend.sessions.repair`).
+The browser's table lists every part of a session; the session (every part) and the
+repair are the review's (:mod:`~ucat_console.backend.review.session`).
 
 Every page reviews on its own: the console builds one panel per page on that page's
 ``client.gui`` and ``client.scene``, so each page has its own player, position, speed and
@@ -46,39 +42,28 @@ reason shown on the page. A job takes the value the page sent when it sent it, s
 a marker asked while a session opens lands once it is open. The sessions' listing is the
 console's shared :class:`~ucat_console.ui.session_list.SessionList`.
 
-A counterfactual replay runs in a child process at a lower CPU priority
-(:class:`~ucat_console.backend.sessions.replay_job.ReplayJob`), one at a time per console
-(the console's :class:`~ucat_console.backend.sessions.replay_job.ReplaySlot`), with its
-progress shown in the panel and a Cancel; ``may_replay()`` raises when this page may not
-start one now.
-
-The module is over 500 lines: it is the one Review tab, whose browser, playback, markers and
-replay all act on the same open session and inputs; the pieces that stand alone (the view,
-the sampler, the markdown, the replay job, the player) are in their own modules.
+A counterfactual replay's progress shows in the panel, with a Cancel.
 """
 
 from __future__ import annotations
 
-import io
 import logging
-import math
-import tempfile
 import threading
 import time
-import zipfile
 from pathlib import Path
 from typing import Any, Callable
 
 from ucat_console.backend.review.metrics import MetricsConfig
-from ucat_console.backend.sessions import export, files, index, repair
-from ucat_console.backend.sessions.markers import MAX_NOTE_BYTES, Marker, check_note
-from ucat_console.backend.sessions.player import MAX_SPEED, MIN_SPEED, Player, check_speed
+from ucat_console.backend.review.session import ReviewSession
+from ucat_console.backend.sessions import index
+from ucat_console.backend.sessions.markers import MAX_NOTE_BYTES, Marker
+from ucat_console.backend.sessions.player import MAX_SPEED, MIN_SPEED, Player
 from ucat_console.backend.sessions.reader import SessionParts
-from ucat_console.backend.sessions.replay import ReplayResult, parse_weights, recorded_config, replay_config
+from ucat_console.backend.sessions.replay import ReplayResult
+from ucat_console.backend.sessions.repair import RepairReport
 from ucat_console.backend.sessions.replay_job import ReplayJob, ReplaySlot
 from ucat_console.backend.sessions.shared import SharedReaders
 from ucat_console.robot.geometry import Geometry
-from ucat_console.telemetry.channels import CHANNELS
 from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.stream import TelemetryStream
 from ucat_console.ui.markdown import _describe, esc, replay_markdown, sessions_markdown, within
@@ -94,8 +79,6 @@ log = logging.getLogger(__name__)
 
 DEFAULT_WEIGHTS = "lam_st=2.0"
 _SLOW_PERIOD = 0.25  # s, timeline, status, label, trail
-#: a page adds at most one review marker this often (s)
-MARKER_INTERVAL = 0.5
 #: what Previous / Next event stop at: name -> event levels (None: every event)
 JUMP_LEVELS: dict[str, frozenset[str] | None] = {
     "all events": None,
@@ -104,7 +87,6 @@ JUMP_LEVELS: dict[str, frozenset[str] | None] = {
 }
 #: the most event ticks the timeline shows
 MAX_TIMELINE_MARKS = 200
-_now = time.monotonic
 
 
 class PlaybackPanel:
@@ -150,28 +132,22 @@ class PlaybackPanel:
         read it each time); ``may_repair()``: raises (PermissionError) when this page may not
         repair (the console: unless it is the pilot's); ``readers``: the console's open
         readers, within its memory budget (default: readers of the panel's own)."""
-        self.directory = files.sessions_dir(directory)
         self.gui = gui
         self.jobs = jobs
-        self.may_repair = may_repair
         self.present = present
-        self.readers = readers if readers is not None else SharedReaders()
-        self._sessions = sessions or (lambda: index.scan(self.directory, self.readers.budget))
-        self.replay_slot = replay_slot if replay_slot is not None else ReplaySlot(self.readers.budget.config)
-        self.may_replay = may_replay
-        self.job: ReplayJob | None = None
-        self._job_weights: dict[str, float] = {}
-        self._last_marker = -math.inf
+        self.stream = TelemetryStream()
+        #: what this page reviews, without the page
+        self.session = ReviewSession(directory, self.stream, readers=readers, replay_slot=replay_slot,
+                                     may_repair=may_repair, may_replay=may_replay, sessions=sessions,
+                                     on_play_error=self._play_failed)
+        self.directory = self.session.directory
+        self.replay_slot = self.session.replay_slot
         self.plot_rate = float(plot_rate)
         self.scene_rate = float(scene_rate)
         self.history = history
         self.messages: list[str] = []
-        self.stream = TelemetryStream()
-        self.reader: SessionParts | None = None
-        self.player: Player | None = None
         self.last_replay: ReplayResult | None = None
         self._lock = threading.RLock()
-        self._speed = 1.0  # the last speed accepted
         self._hide_live: Any = None  # this page's invisible shadow of the live robot
         with within(plot_container):
             self.view = StreamView(
@@ -326,7 +302,7 @@ class PlaybackPanel:
     # ------------------------------------------------------------------ browser
     def refresh_sessions(self) -> list[index.SessionInfo]:
         """List the sessions (the table shows every part; the chooser, the sessions)."""
-        listing = self._sessions()
+        listing = self.session.listing()
         sessions = listing.sessions
         self.browser.content = sessions_markdown(sessions, listing.skipped)
         names = tuple(s.session_id for s in sessions) or ("",)
@@ -336,61 +312,23 @@ class PlaybackPanel:
         self.repair_button.disabled = not any(p.repairable for s in sessions for p in s.parts)
         return sessions
 
-    def _name(self, name: object) -> str:
-        """``name`` when it is a plain name (a session id or a file name), else ValueError."""
-        if not isinstance(name, str) or not name or "/" in name or "\\" in name or name in (".", ".."):
-            raise ValueError(f"session: {name!r} is not a session or a file name in {self.directory}")
-        return name
-
-    def _path(self, name: str) -> Path:
-        p = files.inside_sessions(self.directory / self._name(name), self.directory)
-        if not p.is_file():
-            raise ValueError(f"{name}: no such session file in {self.directory}")
-        return p
-
-    def _files(self, name: str) -> list[Path]:
-        """The files ``name`` names: a part file, or every part of a session id."""
-        if self._name(name).endswith(files.SUFFIX):
-            return [self._path(name)]
-        parts = files.part_paths(name, self.directory)
-        if not parts:
-            raise ValueError(f"session {name!r}: no files in {self.directory}")
-        return [p for _, p in sorted(parts.items())]
-
-    def repair(self, name: str) -> list[repair.RepairReport]:
+    def repair(self, name: str) -> list[RepairReport]:
         """Repair the truncated files of a session (or one named part file); only the pilot's
         page may, and never a part being recorded."""
-        self.may_repair()
-        paths = self._files(name)
-        todo = [p for p in paths if len(paths) == 1 or repair.needs_repair(p, self.readers.budget)]
         try:
-            reports = [repair.repair(p, self.directory, budget=self.readers.budget) for p in todo]
+            reports = self.session.repair(name)
         finally:
             self.refresh_sessions()
-        done = [r for r in reports if r.repaired]
-        if done:
-            self.show("; ".join(f"repaired {r.path.name}: {r.messages} messages recovered"
-                                + (f", the original kept as {r.original.name}" if r.original else "")
-                                for r in done))
-        else:
-            self.show(f"{name} was complete; nothing to repair")
+        self.show(self.session.said)
         return reports
 
     # ------------------------------------------------------------------ open / close
     def open(self, name: str) -> Player:
         """Open a session for review at its start (paused): every part of the session named
         by its id or by any one of its part files."""
-        target: str | Path = self._path(name) if self._name(name).endswith(files.SUFFIX) else name
-        reader = self.readers.acquire(target, self.directory)  # a truncated part: TruncatedSessionError
-        try:
-            player = Player(reader, self.stream, speed=self._speed, loop=bool(self.loop.value),
-                            on_error=self._play_failed)
-        except BaseException:
-            self.readers.release(reader)
-            raise
-        self.close_session(quiet=True)
         with self._lock:
-            self.reader, self.player = reader, player
+            reader, player = self.session.open(name)  # the session open before is closed
+            self.close_session(quiet=True, closed=True)
             self.feeder.origin = player.start  # the plots in seconds from the session's start
             self.view.show()  # a fresh robot and trail
             if self._hide_live is None:  # the reviewed robot in place of the live one
@@ -401,23 +339,20 @@ class PlaybackPanel:
         self._jumped(player.seek(player.start))
         self._set_enabled()
         self.view.start()
-        n = len(reader.parts)
-        what = "" if name == reader.session_id else f" (session {reader.session_id})"
-        self.show(f"opened {name}{what}: {n} part{'s' if n > 1 else ''}, {reader.duration:.1f} s, "
-                  f"notes: {reader.notes or '-'}")
+        self.show(self.session.said)
         return player
 
-    def _let_go(self) -> bool:
-        """Stop the view and close the player and the reader; whether a session was open."""
-        with self._lock:
-            player, reader = self.player, self.reader
-            self.player = self.reader = None
-        self.view.stop()
-        if player is not None:
-            player.close()
-        if reader is not None:
-            self.readers.release(reader)
-        return player is not None
+    @property
+    def reader(self) -> SessionParts | None:
+        return self.session.reader
+
+    @property
+    def player(self) -> Player | None:
+        return self.session.player
+
+    @property
+    def job(self) -> ReplayJob | None:
+        return self.session.job
 
     def _play_failed(self, text: str) -> None:
         """The player stopped on a failure (its thread): the page shows why."""
@@ -426,9 +361,11 @@ class PlaybackPanel:
         except Exception:
             log.debug("a playback failure was not shown", exc_info=True)
 
-    def close_session(self, quiet: bool = False) -> None:
-        """Close the session: nothing of it stays (plots, timeline ticks, replay table, robot)."""
-        was_open = self._let_go()
+    def close_session(self, quiet: bool = False, closed: bool = False) -> None:
+        """Close the session: nothing of it stays (plots, timeline ticks, replay table, robot);
+        ``closed``: the session has closed it already (another opened)."""
+        self.view.stop()
+        was_open = False if closed else self.session.close()
         self._show_live()
         self.view.hide()
         self.view.reset()
@@ -446,10 +383,8 @@ class PlaybackPanel:
     def stop(self, page_gone: bool = False) -> None:
         """Close the session and let go of the stream (the app is stopping, or with
         ``page_gone`` the page has gone and its elements with it)."""
-        job, self.job = self.job, None
-        if job is not None and self.replay_slot.job is job:
-            job.cancel()
-        self._let_go()
+        self.view.stop()
+        self.session.stop()
         if not page_gone:
             self._set_enabled()
             self._show_live()
@@ -459,45 +394,32 @@ class PlaybackPanel:
         self._unsubs = []
 
     # ------------------------------------------------------------------ playback
-    def _need(self) -> Player:
-        if self.player is None:
-            raise ValueError("no session open: choose one and press Open")
-        return self.player
-
     def play(self) -> None:
-        self._need().play()
+        self.session.need().play()
 
     def pause(self) -> None:
-        p = self._need()
+        p = self.session.need()
         p.pause()
         self.sampler.flush()
 
     def set_speed(self, speed: object) -> None:
-        v = check_speed(speed)  # type: ignore[arg-type]
-        if self.player is not None:
-            self.player.speed = v
-        self._speed = v
+        v = self.session.set_speed(speed)
         if self.speed.value != v:
             self.speed.value = v
 
     def set_loop(self, loop: object) -> None:
-        if not isinstance(loop, bool):
-            raise ValueError(f"loop: expected true or false, got {loop!r}")
-        if self.player is not None:
-            self.player.loop = loop
+        self.session.set_loop(loop)
         self.loop.value = loop
 
     def seek(self, t: object) -> None:
         """Go to ``t`` seconds from the session's start (clamped to the session)."""
-        if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t):
-            raise ValueError(f"time: expected a number of seconds, got {t!r}")
-        p = self._need()
-        self._moved(lambda: p.seek(p.start + float(t)))
+        t = self.session.check_time(t)
+        p = self.session.need()
+        self._moved(lambda: p.seek(p.start + t))
 
     def step(self, n: int) -> bool:
-        p = self._need()
-        if n not in (1, -1):
-            raise ValueError(f"step: {n!r} must be +1 or -1")
+        n = self.session.check_step(n)
+        p = self.session.need()
         if n > 0:
             ok = p.step(1)
             self.sampler.flush()
@@ -511,64 +433,45 @@ class PlaybackPanel:
         return JUMP_LEVELS.get(self.jump_levels.value)
 
     def next_event(self) -> Event | Marker | None:
-        p = self._need()
-        what = self._moved(lambda: p.next_event(self._levels()))
-        self.show(_describe(what, p.start) if what is not None else "no event after this one")
-        return what
+        return self._jump(True)
 
     def prev_event(self) -> Event | Marker | None:
-        p = self._need()
-        what = self._moved(lambda: p.prev_event(self._levels()))
-        self.show(_describe(what, p.start) if what is not None else "no event before this one")
+        return self._jump(False)
+
+    def _jump(self, forward: bool) -> Event | Marker | None:
+        p = self.session.need()
+        what = self._moved(lambda: self.session.jump(forward, self._levels()))
+        self.show(_describe(what, p.start) if what is not None
+                  else f"no event {'after' if forward else 'before'} this one")
         return what
 
     def add_marker(self, note: object) -> Marker:
-        note = check_note(note)
-        now = _now()
-        if now - self._last_marker < MARKER_INTERVAL:
-            raise ValueError(f"marker: at most one every {MARKER_INTERVAL:g} s from a page")
-        self._last_marker = now
-        p = self._need()
-        m = p.add_marker(note)
+        m = self.session.add_marker(note)
         self.note.value = ""
-        self.show(f"marker at {m.t - p.start:.2f} s saved to {p.markers.path.name}")
+        self.show(self.session.said)
         return m
 
     def position(self) -> float | None:
         """The playback position in seconds from the session's start (None: none open)."""
-        p = self.player
-        return None if p is None else min(max(p.position - p.start, 0.0), p.end - p.start)
+        return self.session.position()
 
     @property
     def reviewing(self) -> str:
         """The session this page plays ("" when none is open)."""
-        r = self.reader
-        return r.session_id if r is not None else ""
+        return self.session.reviewing
 
     def export_csv(self, send: Callable[[str, bytes], Any]) -> dict[str, int]:
         """The open session's channels over the plots' time window (the history before the
         position), as ``sessions export`` writes them, zipped and handed to ``send(name,
         content)``; channel -> rows."""
-        p, r = self.player, self.reader
-        if p is None or r is None:
-            raise ValueError("no session open: choose one and press Open")
-        end = p.position
-        start = max(end - float(self.history()), p.start)
-        name = f"{r.session_id}_{start - p.start:.1f}-{end - p.start:.1f}s_csv"
-        buf = io.BytesIO()
-        with tempfile.TemporaryDirectory() as d:
-            got = export.export_csv(r, [c for c in CHANNELS if c in r.channels], d, start,
-                                    math.nextafter(end, math.inf))
-            with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
-                for f in sorted(Path(d).iterdir()):
-                    z.write(f, f"{name}/{f.name}")
-        send(f"{name}.zip", buf.getvalue())
-        self.show(f"exported {len(got)} channels, {start - p.start:.2f} to {end - p.start:.2f} s, as {name}.zip")
-        return {c: n for c, (_, n) in got.items()}
+        x = self.session.export(float(self.history()))
+        send(f"{x.name}.zip", x.content)
+        self.show(self.session.said)
+        return x.rows
 
     def _moved(self, fn: Callable[[], Any]) -> Any:
         """Run a jump with playback paused, then rebuild the plots before the new position."""
-        p = self._need()
+        p = self.session.need()
         was_playing = p.playing
         p.pause()
         with self._lock:
@@ -598,26 +501,16 @@ class PlaybackPanel:
     # ------------------------------------------------------------------ counterfactual
     def run_counterfactual(self, text: object) -> ReplayJob:
         """Start replaying the open session's plans with other weights (in the background)."""
-        r = self.reader
-        if r is None:
-            raise ValueError("no session open: choose one and press Open")
-        weights = parse_weights(text)  # type: ignore[arg-type]
-        replay_config(recorded_config(r), weights)  # a weight out of range: refused here, at once
-        pilot = bool(self.may_replay())
-        job = self.replay_slot.start(r.session_id, self.directory, weights, owner=self, preempt=pilot)
-        self.job, self._job_weights = job, weights
+        job = self.session.run_counterfactual(text, owner=self)
         self.replay_progress.value = 0.0
         self.replay_progress.visible = self.cancel_button.visible = True
         self.replay_table.content = "Counterfactual replay running ..."
-        self.show("counterfactual replay started")
+        self.show(self.session.said)
         self.view.start()
         return job
 
     def cancel_counterfactual(self) -> None:
-        job = self.job
-        if job is None or job.done:
-            raise ValueError("no counterfactual replay of this page is running")
-        job.cancel()
+        self.session.cancel_counterfactual()
         self._job_finished()
 
     def wait_replay(self, timeout: float = 300.0) -> ReplayResult | None:
@@ -630,22 +523,21 @@ class PlaybackPanel:
 
     def _job_finished(self) -> None:
         """Show the end of this page's replay (once)."""
-        with self._lock:
-            job, self.job = self.job, None
-        if job is None:
+        end = self.session.replay_ended()
+        if end is None:
             return
         self.replay_progress.visible = self.cancel_button.visible = False
-        if job.result is not None:
-            self.last_replay = job.result
-            self.replay_table.content = replay_markdown(job.result, self._job_weights)
-            self.show(f"counterfactual replay: {len(job.result.rows)} plans")
-        elif job.cancelled:
-            self.replay_table.content = ("Counterfactual replay cancelled." if job.cancelled_by is None
-                                         else f"Counterfactual replay cancelled: {job.cancelled_by}.")
+        if end.result is not None:
+            self.last_replay = end.result
+            self.replay_table.content = replay_markdown(end.result, end.weights)
+            self.show(f"counterfactual replay: {len(end.result.rows)} plans")
+        elif end.cancelled:
+            self.replay_table.content = ("Counterfactual replay cancelled." if end.cancelled_by is None
+                                         else f"Counterfactual replay cancelled: {end.cancelled_by}.")
             self.show("counterfactual replay cancelled")
         else:
             self.replay_table.content = ""
-            self.show(f"counterfactual replay failed: {job.error}", error=True)
+            self.show(f"counterfactual replay failed: {end.error}", error=True)
 
     def _tick_job(self) -> None:
         job = self.job
@@ -699,8 +591,8 @@ class PlaybackPanel:
         p = self.player
         if p is None:
             self.status.content = "No session open."
-            if self.speed.value != self._speed:
-                self.speed.value = self._speed
+            if self.speed.value != self.session.speed:
+                self.speed.value = self.session.speed
             return
         rel = self.position() or 0.0
         if abs(self.timeline.value - rel) > 1e-9:
