@@ -46,12 +46,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     from ucat_console.bench import safety as bench_safety
     from ucat_console.bench import sessions as bench_sessions
     from ucat_console.bench import tracking as bench_tracking
+    from ucat_console.bench import tracking_live as bench_tracking_live
     from ucat_console.bench import ui as bench_ui
 
     bench_sessions.register(kinds)
     bench_ui.register_bench(kinds)
     bench_safety.register_bench(kinds)
     bench_tracking.register_bench(kinds)
+    bench_tracking_live.register_bench(kinds)
     bench_load.register_bench(kinds)
     bench_plant.register_bench(kinds)
     bench_pages.register_bench(kinds)
