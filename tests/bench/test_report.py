@@ -71,3 +71,17 @@ def test_the_tracking_rows_over_seeds_give_each_modes_worst_case(tmp_path: Path)
     assert "half speed: heading error through the depth step, worst of 2 seeds (deg) | mpc 13.2 | <= 10 |" in text
     assert "1 % heavy: depth error from 30 s, worst of 2 seeds (m) | mpc 0.10 | <= 0.1 |" in text
     assert "1 % light" not in text  # a case not run, no row
+
+
+def test_the_mpc_rows_include_the_shipped_configurations_plan(tmp_path: Path) -> None:
+    row = {"n": 500, "solver": "numba", "stage": "two_stage", "formulation": "paper", "mean_cost": 1.9,
+           "p50_us": 37.54, "p99_us": 53.0, "solves": 605}
+    write(tmp_path, "mpc", {"runs": [row], "shipped": {**row, "p50_us": 468.7, "p99_us": 1482.1,
+                                                        "config": "sim-tuned", "centre_rate": 3.0,
+                                                        "centre_grid": 12}})
+    text = report.table(tmp_path)
+    assert "| 37.5 / 53.0 us | <= 80 / <= 200 us |" in text
+    assert "as sim-tuned runs it (the cycle centred by its cost over a 12 x 12 grid): p50 / p99 | " \
+           "468.7 / 1482.1 us |" in text
+    write(tmp_path, "mpc", {"runs": [row]})  # a file from before: no such row
+    assert "as sim-tuned runs it" not in report.table(tmp_path)

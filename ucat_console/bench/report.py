@@ -41,6 +41,12 @@ def _mpc(d: dict[str, Any]) -> list[Row]:
         if r is not None:
             out.append(Row(f"MPC solve, two-stage, N = 500, {label}: p50 / p99",
                            f"{r['p50_us']:.1f} / {r['p99_us']:.1f} us", "<= 80 / <= 200 us", cmd))
+    shipped = d.get("shipped")
+    if shipped:
+        out.append(Row(f"the same, as {shipped['config']} runs it (the cycle centred by its cost over a "
+                       f"{shipped['centre_grid']} x {shipped['centre_grid']} grid): p50 / p99",
+                       f"{shipped['p50_us']:.1f} / {shipped['p99_us']:.1f} us",
+                       "one plan per fin cycle (>= 0.25 s)", cmd))
     ref = run("paper", "scipy")
     if ref is not None:
         out.append(Row("the same, the paper's scipy path: p50", f"{ref['p50_us'] / 1000:.1f} ms",

@@ -27,6 +27,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--gap-cases", type=int, default=40,
                    help="fixed cases for the quality gap (0: skip)")
     p.add_argument("--no-first-call", action="store_true", help="skip the first-call latency")
+    p.add_argument("--shipped", default="sim-tuned", metavar="NAME|FILE",
+                   help="also time the MPC of this configuration as the console runs it (sim-tuned: the "
+                        "cycle centred by its cost over a grid); 'none': skip")
     p.add_argument("--json", type=Path, default=None, help="write the results as JSON")
     p.set_defaults(func=run_mpc)
     q = kinds.add_parser("sim", help="headless real-time factor of the closed loop (1 kHz physics)")
@@ -134,6 +137,14 @@ def run_mpc(args: argparse.Namespace) -> int:
                                            on_solve=lambda: bar.update())
                         res = r if res is None else res.merge(r)
                     runs.append(res.row())
+    shipped = None
+    if args.shipped != "none":
+        from ucat_console.config import load_config
+
+        mpc_cfg = load_config(args.shipped).mpc
+        FinMpc(mpc_cfg).plan((-0.5, 0.5), 0.3, 0.0, B.U_PREV0)  # its kernels loaded before timing
+        shipped = B.run_protocol(mpc_cfg, refine=True, seed=0).row()
+        shipped.update(config=args.shipped, centre_rate=mpc_cfg.centre_rate, centre_grid=mpc_cfg.centre_grid)
     gap = {}
     if args.gap_cases:
         cases = B.fixed_cases(args.gap_cases)
@@ -142,6 +153,10 @@ def run_mpc(args: argparse.Namespace) -> int:
         )
 
     print(B.format_table(runs))
+    if shipped is not None:
+        print(f"\nthe MPC of {shipped['config']} as the console runs it ({shipped['formulation']}, N = "
+              f"{shipped['n']}, centre_rate {shipped['centre_rate']:g} rad/s, centre_grid {shipped['centre_grid']}): "
+              f"p50 {shipped['p50_us']:.1f} us, p99 {shipped['p99_us']:.1f} us")
     machine = machine_info(cpu)
     print(speed_line(machine))
     if first_call:
@@ -153,7 +168,7 @@ def run_mpc(args: argparse.Namespace) -> int:
             print(f"  {name:>12}: mean {g['mean_gap']:.4f}  p90 {g['p90_gap']:.4f}  "
                   f"max {g['max_gap']:.4f}")
     if args.json:
-        doc = {"runs": runs, "machine": machine, "first_call": first_call,
+        doc = {"runs": runs, "shipped": shipped, "machine": machine, "first_call": first_call,
                "quality_gap": gap, "protocol": {"v_body": B.V_BODY, "cycles": B.CYCLES,
                                                 "targets": 121, "u_prev0": B.U_PREV0,
                                                 "seeds": args.seeds}}
