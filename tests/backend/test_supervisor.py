@@ -670,7 +670,7 @@ def test_a_command_the_loop_cannot_take_in_time_is_refused_and_never_done(
     robot = StallingRobot()
     sup = make_console(make_config(),
                      robot_factory=lambda c, ev: (robot, lambda: None)).sup
-    sup.commands.wait = 0.3  # how long a command waits for the loop's thread
+    sup.loop_wait = 0.3  # how long a command waits for the loop's thread
     sup.start()
     try:
         assert robot.stalled.wait(10.0)

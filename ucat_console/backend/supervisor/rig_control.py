@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Callable, Protocol
 
 from ucat_console.backend.access import Actor, actor_name
-from ucat_console.backend.supervisor.commands import CommandRefused
+from ucat_console.backend.loop.commands import CommandRefused
 from ucat_console.telemetry.events import Event
 
 if TYPE_CHECKING:
