@@ -62,15 +62,6 @@ from ucat_console.backend.arming import ArmingGate
 from ucat_console.backend.devices.leak import LeakEmulator, LeakInput
 from ucat_console.backend.loop.clock import Clock, PacedClock
 from ucat_console.backend.loop.closed_loop import PID_LOOPS, ClosedLoop
-from ucat_console.backend.loop.kernels_warm_up import warm_up
-from ucat_console.backend.review.effects import ChangeEffects
-from ucat_console.backend.safety import CHANNELS as SAFETY_CHANNELS
-from ucat_console.backend.safety import SafetyMonitor, Transition
-from ucat_console.backend.sessions import limits
-from ucat_console.backend.sessions.foxglove import robot_geometry
-from ucat_console.backend.sessions.recorder import Recorder
-from ucat_console.backend.supervisor.arm_requests import ArmRequests
-from ucat_console.backend.supervisor.bursts import BurstFolder
 from ucat_console.backend.loop.commands import (
     SETPOINTS,
     CommandRefused,
@@ -80,6 +71,15 @@ from ucat_console.backend.loop.commands import (
     SetSetpoints,
     number,
 )
+from ucat_console.backend.loop.kernels_warm_up import warm_up
+from ucat_console.backend.review.effects import ChangeEffects
+from ucat_console.backend.safety import CHANNELS as SAFETY_CHANNELS
+from ucat_console.backend.safety import SafetyMonitor, Transition
+from ucat_console.backend.sessions import limits
+from ucat_console.backend.sessions.foxglove import robot_geometry
+from ucat_console.backend.sessions.recorder import Recorder
+from ucat_console.backend.supervisor.arm_requests import ArmRequests
+from ucat_console.backend.supervisor.bursts import BurstFolder
 from ucat_console.backend.supervisor.forwarding import LoopOutlet
 from ucat_console.backend.supervisor.health import Health
 from ucat_console.backend.supervisor.manoeuvre import ManoeuvreHost, ManoeuvreRun
