@@ -7,6 +7,7 @@ from typing import Any, Callable
 
 import pytest
 
+from ucat_console.backend.loop.closed_loop import ClosedLoop
 from ucat_console.backend.loop.command_channel import CommandChannel
 from ucat_console.backend.loop.commands import (
     CommandRefused,
@@ -18,8 +19,11 @@ from ucat_console.backend.loop.commands import (
     SetSetpoints,
 )
 from ucat_console.backend.loop.config import LoopConfig
+from ucat_console.backend.sim_robot_io import SimRobotIO
 from ucat_console.control.allocation import BodySetpoints
 from ucat_console.control.params import BaselineConfig, MpcConfig, PidGains
+from ucat_console.telemetry import channels as tch
+from ucat_console.telemetry.stream import TelemetryStream
 
 
 class Target:
@@ -155,3 +159,19 @@ def test_commands_still_queued_when_the_loop_stops_are_refused() -> None:
         fut.result(0)
     ch.drain(1.0)
     assert target.applied == []
+
+
+def test_the_loop_applies_a_submitted_command_at_its_next_event_not_before() -> None:
+    stream = TelemetryStream()
+    published: list[Any] = []
+    stream.subscribe(lambda c, m: published.append(m), [tch.SETPOINTS])
+    with ClosedLoop(LoopConfig(mode="baseline"), SimRobotIO(depth=1.0, seed=0), stream,
+                    setpoints=BodySetpoints(depth=1.0)) as loop:
+        loop.run_until(0.5)
+        published.clear()
+        fut = loop.submit(SetSetpoints(velocity=0.2))
+        assert loop.setpoints == BodySetpoints(velocity=0.2, depth=1.0)  # commanded at once
+        assert not fut.done() and published == []  # in force only from the loop's next event
+        loop.run_until(0.6)
+    assert fut.result(0) == BodySetpoints(depth=1.0)
+    assert [(m.velocity, m.depth) for m in published] == [(0.2, 1.0)] and 0.5 <= published[0].t <= 0.6
