@@ -119,8 +119,6 @@ class SetSetpoints(LoopCommand):
                 depth=cur.depth if self.depth is None else self.depth,
                 yaw_rate=cur.yaw_rate if self.yaw_rate is None else self.yaw_rate,
             ))
-        except CommandRefused:
-            raise
         except ValueError as e:
             raise CommandRefused(str(e)) from None
         return SetSetpoints(sp.velocity, sp.depth, sp.yaw_rate)

@@ -40,7 +40,7 @@ class RigHost:
     rig: SimRig | None
     gate: DeviceGate
     require_pilot: Callable[[Actor, str], None]
-    #: run a function in the loop's thread, between chunks, and return its result
+    #: run a function in the loop's thread, at its next event, and return its result
     in_loop: Callable[[Callable[[], Any]], Any]
     #: ``publish_event(source, code, message, level, data)`` onto the events channel
     publish_event: Callable[..., Event]
