@@ -20,6 +20,7 @@ from ucat_console.backend.devices.plausibility import Plausibility, Plausibility
 from ucat_console.backend.devices.pressure import PressureConfig, PressureDriver
 from ucat_console.backend.devices.pressure_emulator import PressureEmulator
 from ucat_console.backend.loop.closed_loop import ClosedLoop
+from ucat_console.backend.loop.commands import SetSetpoints
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.backend.safety import SafetyMonitor
 from ucat_console.backend.sim_rig import SimRig
@@ -317,7 +318,7 @@ def test_nothing_the_simulator_measures_is_dropped_over_a_long_run() -> None:
     with ClosedLoop(LoopConfig(mode="baseline"), io,
                     setpoints=BodySetpoints(velocity=0.4, depth=2.5, yaw_rate=0.4)) as loop:
         loop.run(60.0)
-        loop.set_setpoints(velocity=0.2, depth=0.0, yaw_rate=-0.4)
+        loop.submit(SetSetpoints(velocity=0.2, depth=0.0, yaw_rate=-0.4))
         loop.run(60.0)
     assert [io.checks.dropped(s) for s in pl.SENSORS] == [0, 0, 0]
 

@@ -672,7 +672,7 @@ def test_a_command_the_loop_cannot_take_in_time_is_refused_and_never_done(
     robot = StallingRobot()
     sup = make_console(make_config(),
                      robot_factory=lambda c, ev: (robot, lambda: None)).sup
-    sup.commands.wait = 0.3  # how long a command waits for the loop's thread
+    sup.loop_wait = 0.3  # how long a command waits for the loop's thread
     sup.start()
     try:
         assert robot.stalled.wait(10.0)
@@ -682,6 +682,43 @@ def test_a_command_the_loop_cannot_take_in_time_is_refused_and_never_done(
         t = sup.loop.time
         wait_for(lambda: sup.loop.time > t + 1.0, what="the loop going on")
         assert not sup.armed  # the refused arming did not happen later
+    finally:
+        robot.release.set()
+        sup.stop()
+
+
+def test_a_disarm_acts_at_once_while_a_command_waits_for_a_held_loop(
+        make_console: Callable[..., Console]) -> None:
+    """A disarm never queues behind another command: with the loop's thread held and an
+    arming queued for it, the motors are off at once; the queued arming, given up, never runs."""
+    robot = StallingRobot()
+    sup = make_console(make_config(), robot_factory=lambda c, ev: (robot, lambda: None)).sup
+    ev = Events(sup)
+    sup.arm(LOCAL)  # no loop thread yet: at once
+    sup.loop_wait = 1.0
+    sup.start()
+    refused: list[Exception] = []
+
+    def arm_again() -> None:
+        try:
+            sup.arm(LOCAL)
+        except CommandRefused as e:
+            refused.append(e)
+
+    other = threading.Thread(target=arm_again)
+    try:
+        assert robot.stalled.wait(10.0)
+        other.start()
+        wait_for(lambda: sup.loop.commands.waiting, what="the arming queued for the held loop")
+        sup.disarm(LOCAL, "operator")
+        assert not sup.armed and "disarmed" in ev.codes("supervisor")
+        assert sup.loop.commands.waiting  # the arming still waits: the disarm did not
+        other.join(10.0)
+        assert refused and "nothing was done" in str(refused[0])
+        robot.release.set()
+        t = sup.loop.time
+        wait_for(lambda: sup.loop.time > t + 1.0, what="the loop going on")
+        assert not sup.armed
     finally:
         robot.release.set()
         sup.stop()

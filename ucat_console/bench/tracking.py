@@ -163,6 +163,7 @@ def run_manoeuvre(app: Any, mode: str, formulation: str, m: Manoeuvre, seed: int
     """One manoeuvre in one mode (in a disturbance case of :data:`CASES`): its figures
     (module docstring) and its trace."""
     from ucat_console.backend.loop.closed_loop import ClosedLoop
+    from ucat_console.backend.loop.commands import SetSetpoints
     from ucat_console.backend.sim_robot_io import SimRobotIO
     from ucat_console.control.allocation import BodySetpoints
     from ucat_console.control.fin_cycle import direction_error
@@ -219,7 +220,7 @@ def run_manoeuvre(app: Any, mode: str, formulation: str, m: Manoeuvre, seed: int
     stream.subscribe(on, chans)
     if m.step_to is not None or m.speed_to is not None:
         loop.run_until(STEP_AT)
-        loop.set_setpoints(depth=m.step_to, velocity=m.speed_to)
+        loop.submit(SetSetpoints(depth=m.step_to, velocity=m.speed_to))
     loop.run_until(m.duration)
     loop.close()
     return {"figures": _figures(m, log), "log": log}

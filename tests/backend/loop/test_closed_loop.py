@@ -13,6 +13,7 @@ from ucat_console.robot.readings import DvlVelocity
 from ucat_console.backend.arming import STOP_RATE, ArmingGate
 from ucat_console.backend.loop.clock import PacedClock
 from ucat_console.backend.loop.closed_loop import ClosedLoop
+from ucat_console.backend.loop.commands import SetBlock, SetGains, SetMode, SetSetpoints
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.backend.loop.planners import BaselineFinPlanner, PlanInputs
 from ucat_console.backend.sim_robot_io import SimRobotIO
@@ -149,7 +150,7 @@ def test_mode_switch_is_bumpless(first: str, second: str) -> None:
     io.command_fin = spy  # type: ignore[method-assign]
     loop.run_until(3.0)
     before = {pf: [m for m in log.get(ch.fin_plan(pf))] for pf in range(4)}
-    loop.set_mode(second)
+    loop.submit(SetMode(second))
     loop.run_until(6.0)
     assert [e.data for e in log.events("mode")] == [{"from": first, "to": second}]
     assert loop.mode == second
@@ -259,9 +260,9 @@ def test_a_paced_loop_held_back_beyond_max_lag_skips_ahead_and_records_the_stall
 def test_tuning_changes_apply_from_the_next_plan_and_are_events() -> None:
     loop, _, log = make_loop("mpc")
     loop.run_until(1.0)
-    loop.set_mpc_config(loop.mpc_config.replace(lam_st=2.0))
+    loop.submit(SetBlock("mpc", loop.mpc_config.replace(lam_st=2.0)))
     depth = loop.pid_gains("depth")
-    loop.set_pid_gains("depth", depth.replace(kp=6.0))
+    loop.submit(SetGains("depth", depth.replace(kp=6.0)))
     loop.run_until(3.0)
     ev = log.events("tuning")
     assert [e.data["changes"] for e in ev] == [{"lam_st": [5.0, 2.0]}, {"kp": [depth.kp, 6.0]}]
@@ -276,13 +277,13 @@ def test_tuning_changes_apply_from_the_next_plan_and_are_events() -> None:
 def test_bad_setpoints_and_commands_are_refused() -> None:
     loop, _, _ = make_loop("mpc")
     with pytest.raises(ValueError, match="velocity"):
-        loop.set_setpoints(velocity=0.6)  # envelope 0.5 m/s
+        loop.submit(SetSetpoints(velocity=0.6))  # envelope 0.5 m/s
     with pytest.raises(ValueError, match="depth"):
-        loop.set_setpoints(depth=-1.0)
+        loop.submit(SetSetpoints(depth=-1.0))
     with pytest.raises(ValueError, match="mode"):
-        loop.set_mode("turbo")
+        SetMode("turbo")
     with pytest.raises(ValueError, match="loop"):
-        loop.set_pid_gains("pitch", PidGains())
+        SetGains("pitch", PidGains())
     with pytest.raises(ValueError, match="depth"):
         SimRobotIO(depth=-0.5)
     assert loop.setpoints == BodySetpoints(velocity=0.2, depth=1.0)

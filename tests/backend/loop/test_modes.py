@@ -12,6 +12,7 @@ from support import TOKEN, Console, console_config
 
 from ucat_console.backend.loop import modes
 from ucat_console.backend.loop.closed_loop import ClosedLoop
+from ucat_console.backend.loop.commands import SetMode
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.backend.loop.modes import MODES, Mode, PlannerSetting, mode_names, register
 from ucat_console.backend.loop.planners import MpcFinPlanner
@@ -124,15 +125,16 @@ def test_a_registered_mode_runs_in_the_loop(echo) -> None:
     io = SimRobotIO(depth=1.0, velocity=0.2, seed=0)
     loop = ClosedLoop(LoopConfig(mode="mpc"), io, stream, setpoints=BodySetpoints(velocity=0.2, depth=1.0))
     loop.run_until(1.0)
-    assert loop.set_mode("echo", who="test") == "mpc"
+    switched = loop.submit(SetMode("echo", who="test"))
     loop.run_until(4.0)
+    assert switched.result(timeout=0) == "mpc"  # the mode in force before
     loop.close()
     assert loop.mode == "echo"
     assert len(echo) == 4 and {s.mpc for s in echo} == {loop.mpc_config}
     assert len({s.seed for s in echo}) == 4  # each logical fin its own stream
     assert {p.mode for p in plans} == {"mpc", "echo"}
     with pytest.raises(ValueError, match="is not one of mpc, mpc_sync, baseline, identify, echo"):
-        loop.set_mode("oracle")
+        SetMode("oracle")
 
 
 def test_a_mode_is_refused_when_the_loop_cannot_run_it() -> None:

@@ -51,6 +51,7 @@ import numpy as np
 
 from ucat_console import shipped
 from ucat_console.backend.loop.closed_loop import ClosedLoop
+from ucat_console.backend.loop.commands import SetMode
 from ucat_console.backend.sim_robot_io import SimRobotIO
 from ucat_console.config import AppConfig
 from ucat_console.control.allocation import BodySetpoints
@@ -102,7 +103,7 @@ def run(mode: str) -> dict[str, np.ndarray]:
     loop = ClosedLoop(app.loop.replace(mode=mode), io, stream,
                       setpoints=BodySetpoints(velocity=0.2, depth=1.2, yaw_rate=0.05))
     loop.run_until(SWITCH_AT)
-    loop.set_mode(SCENARIOS[mode])
+    loop.submit(SetMode(SCENARIOS[mode]))
     loop.run_until(DURATION)
     truth = io.truth()
     loop.close()

@@ -19,8 +19,10 @@ and publishes what it does on a :class:`TelemetryStream` (channels of
 It is made of parts, each in its module, this one holding the run loop and putting them
 together:
 
-* ``commands``: what the supervisor and the page ask (mode, setpoints, tuning, restart),
-  checked in the caller's thread, applied by the loop's thread at its next event;
+* ``commands``, ``command_channel``: what the supervisor and the page ask (mode,
+  setpoints, tuning, restart, the supervisor's work in the loop's thread), typed commands
+  checked in the caller's thread, submitted (:meth:`ClosedLoop.submit`) and applied by the
+  loop's thread at its next event;
 * the run loop (here): the compiled core's steps and what the loop does in Python between
   them;
 * ``actuators``: each logical fin's executor and planner, the plan hand-over, the mode
@@ -54,9 +56,9 @@ assumed either (a DVL without bottom lock counts as reported: its fault is then 
 the depth loop runs).
 
 Mode switches are bumpless (``actuators``): a fin's stroke in flight is never interrupted.
-Tuning (MPC weights, PID gains) applies from the next plan / PID step. Mutators may be
-called from any thread: they are validated at once and applied by the loop's thread at its
-next event (``commands``).
+Tuning (MPC weights, PID gains) applies from the next plan / PID step. Commands may be
+submitted from any thread: they are validated at once and applied by the loop's thread at
+its next event (``command_channel``).
 
 Estimation: the attitude comes from the IMU's own filter, or from the core's EKF
 (``control.estimation``, run here on each IMU reading when configured); dead reckoning is
@@ -70,13 +72,15 @@ mapped by ``robot.fins.PAPER_TO_ROBOT``.
 from __future__ import annotations
 
 import math
+from concurrent.futures import Future
 from typing import Any, Callable
 
 import numpy as np
 
 from ucat_console.backend.loop.actuators import Actuators, kept_waiting
 from ucat_console.backend.loop.clock import Clock, SimulatedClock
-from ucat_console.backend.loop.commands import PID_LOOPS, LoopCommands, check_setpoints
+from ucat_console.backend.loop.command_channel import CommandChannel
+from ucat_console.backend.loop.commands import PID_LOOPS, LoopCommand, check_setpoints, pid_loop
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.backend.loop.modes import MODES
 from ucat_console.backend.loop.outbox import Outbox
@@ -128,9 +132,9 @@ class ClosedLoop:
         self._planning: PlanningService = ThreadedPlanning() if self.clock.threaded else PlanningService()
         self._source = source
         self.body = BodyController(cfg.body, cfg.mpc, cfg.executor)
-        self.commands = LoopCommands(cfg, setpoints or BodySetpoints(), self)
-        # in force (the loop's thread); the commanded ones are the commands'
-        self._setpoints = self.commands.setpoints
+        self.commands = CommandChannel(cfg, setpoints or BodySetpoints(), self)
+        # in force (the loop's thread); the commanded ones are the channel's
+        self._setpoints = self.commands.commanded.setpoints
         self._mode = cfg.mode
         self._stop = False
         self._power = PowerBank(cfg.power, N_FINS)  # rows: robot order
@@ -193,27 +197,27 @@ class ClosedLoop:
     def plans_made(self) -> int:
         return self.fins.plans_made
 
-    # What the loop is commanded to do (``commands``); in force from its next event. The
-    # loop is the one owner of these: the supervisor and the page read them here.
+    # What the loop is commanded to do (``command_channel``); in force from its next event.
+    # The loop is the one owner of these: the supervisor and the page read them here.
     @property
     def mode(self) -> str:
-        return self.commands.mode
+        return self.commands.commanded.mode
 
     @property
     def setpoints(self) -> BodySetpoints:
-        return self.commands.setpoints
+        return self.commands.commanded.setpoints
 
     @property
     def mpc_config(self) -> MpcConfig:
-        return self.commands.mpc_config
+        return self.commands.commanded.mpc
 
     @property
     def baseline_config(self) -> BaselineConfig:
-        return self.commands.baseline_config
+        return self.commands.commanded.baseline
 
     def pid_gains(self, loop: str) -> PidGains:
         """The gains of the body-frame PID ``loop`` ("velocity", "depth" or "yaw_rate")."""
-        return self.commands.pid_gains(loop)
+        return self.commands.commanded.pid[pid_loop(loop)]
 
     @property
     def planner_threads(self) -> int:
@@ -231,41 +235,15 @@ class ClosedLoop:
     def _sync(self) -> bool:
         return MODES[self._mode].rear_synchronised
 
-    # ------------------------------------------------------------------ requests (``commands``)
-    def check_setpoints(self, sp: BodySetpoints) -> BodySetpoints:
-        """``sp`` if it lies inside the configured envelope, else ValueError naming the value."""
-        return self.commands.check_setpoints(sp)
-
-    def set_setpoints(
-        self, velocity: float | None = None, depth: float | None = None, yaw_rate: float | None = None
-    ) -> BodySetpoints:
-        """New setpoints (unchanged where None), checked against the envelope now; the
-        setpoints commanded before (they are in force from the next event)."""
-        return self.commands.set_setpoints(velocity, depth, yaw_rate)
-
-    def set_mode(self, mode: str, who: str = "") -> str:
-        """Switch the fin controller while swimming (bumpless; an Event with code "mode"
-        naming ``who``); the mode commanded before."""
-        return self.commands.set_mode(mode, who)
-
-    def set_mpc_config(self, cfg: MpcConfig, who: str = "") -> None:
-        """New MPC configuration (e.g. ``loop.mpc_config.replace(lam_st=2.0)``) from the next plan."""
-        self.commands.set_mpc_config(cfg, who)
-
-    def set_baseline_config(self, cfg: BaselineConfig, who: str = "") -> None:
-        self.commands.set_baseline_config(cfg, who)
-
-    def set_pid_gains(self, loop: str, gains: PidGains, who: str = "") -> None:
-        """New gains of one body-frame PID ("velocity", "depth" or "yaw_rate")."""
-        self.commands.set_pid_gains(loop, gains, who)
-
-    def restart(self) -> None:
-        """Start the body loops and every fin afresh, as at start-up (an Event with code
-        "restarted"): the PIDs and filters are reset, and each fin's first plan waits for new
-        depth and DVL reports and starts from its measured angle. The supervisor calls it on
-        arming: the strokes run while the motors were held never happened (each fin would
-        wait for its stroke timeout), and the loops' outputs were held ones."""
-        self.commands.restart()
+    # ------------------------------------------------------------------ commands (``commands``)
+    def submit(self, command: LoopCommand) -> Future:
+        """Queue ``command`` (``commands``: SetSetpoints, SetMode, SetBlock, SetGains,
+        Restart, LoopWork) for the loop's thread, from any thread: checked now (a refused one
+        raises CommandRefused and changes nothing), commanded from now, applied at the next
+        event; the Future answers what it returns (SetSetpoints, SetMode: what was in force
+        before). Restart starts the body loops and every fin afresh, as at start-up (an
+        Event with code "restarted"): the supervisor submits it on arming."""
+        return self.commands.submit(command)
 
     def stop(self) -> None:
         """Make :meth:`run_until` return at its next event (any thread)."""
@@ -285,14 +263,15 @@ class ClosedLoop:
         self.close()
 
     # ------------------------------------------------------------------ commands applied (the loop's thread)
-    def apply_setpoints(self, sp: BodySetpoints, t: float) -> None:
-        self._setpoints = sp
+    def apply_setpoints(self, sp: BodySetpoints, t: float) -> BodySetpoints:
+        old, self._setpoints = self._setpoints, sp
         self.outbox.setpoints(t, sp)
+        return old
 
-    def apply_mode(self, mode: str, t: float, who: str = "") -> None:
-        if mode == self._mode:
-            return
+    def apply_mode(self, mode: str, t: float, who: str = "") -> str:
         old = self._mode
+        if mode == old:
+            return old
         self._mode = mode
         lc.retarget(self._s, self.body.state, self._sync)
         self.fins.switch(mode, t)
@@ -300,6 +279,7 @@ class ClosedLoop:
                           {"from": old, "to": mode, **({"who": who} if who else {})})
         self.fins.check_handovers(t)
         self._publish_status(t)
+        return old
 
     def apply_block(self, block: str, cfg: Any, t: float, who: str) -> None:
         old = self.fins.blocks[block]

@@ -1,26 +1,52 @@
-"""What the supervisor and the page ask of the closed loop, from any thread.
+"""The commands the closed loop takes, from any thread (:meth:`ClosedLoop.submit`).
 
-:class:`LoopCommands` holds what the loop is commanded to do (mode, setpoints, the MPC and
-baseline configurations, the PID gains): each request is checked at once, in the caller's
-thread (a bad one raises ValueError naming what is wrong, and nothing changes), recorded as
-commanded (what the supervisor and the page read back), and queued; the loop's thread
-applies the queue at its next event (:meth:`LoopCommands.drain`), through the narrow
-:class:`CommandTarget` the loop gives it.
+Each command is a frozen dataclass that checks its own values once, when it is made (a bad
+one raises :class:`CommandRefused`, a ValueError naming the field, and nothing changes):
+:class:`SetSetpoints`, :class:`SetMode`, :class:`SetBlock` (the MPC or baseline
+configuration), :class:`SetGains` (one body-frame PID), :class:`Restart`, and
+:class:`LoopWork` (the supervisor's work that must run in the loop's thread: arming, drive
+resets). At submission (``command_channel``) a command is resolved against what is
+commanded (:meth:`LoopCommand.resolve`: the setpoints left as they are where None, then
+checked against the envelope), recorded as commanded (:meth:`LoopCommand.commanded`: what
+the supervisor and the page read back), and queued; the loop's thread applies it at its
+next event (:meth:`LoopCommand.apply`) through the narrow :class:`CommandTarget` the loop
+gives it.
 """
 
 from __future__ import annotations
 
-import queue
-import threading
-from typing import Any, Callable, Protocol
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Any, Callable, Mapping, Protocol
 
 from ucat_console.backend.loop.config import LoopConfig
-from ucat_console.backend.loop.modes import mode
+from ucat_console.backend.loop.modes import MODES
 from ucat_console.control.allocation import BodySetpoints
 from ucat_console.control.mpc import check_config
 from ucat_console.control.params import BaselineConfig, MpcConfig, PidGains
 
 PID_LOOPS = ("velocity", "depth", "yaw_rate")
+#: the setpoints the operator sets
+SETPOINTS = ("velocity", "depth", "yaw_rate")
+
+
+class CommandRefused(ValueError):
+    """A command refused because of its value or the present state (the message says why)."""
+
+
+def number(key: str, value: Any, integer: bool) -> float | int:
+    """``value`` as a finite number of the right kind, or CommandRefused naming ``key``."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        kind = "an integer" if integer else "a number"
+        raise CommandRefused(f"{key}: expected {kind}, got {value!r}")
+    if not math.isfinite(value):
+        raise CommandRefused(f"{key}: {value!r} is not a finite number")
+    if integer:
+        if float(value) != int(value):
+            raise CommandRefused(f"{key}: expected an integer, got {value!r}")
+        return int(value)
+    return float(value)
 
 
 def check_setpoints(cfg: LoopConfig, sp: BodySetpoints) -> BodySetpoints:
@@ -28,124 +54,191 @@ def check_setpoints(cfg: LoopConfig, sp: BodySetpoints) -> BodySetpoints:
     return sp.within(cfg.max_velocity, cfg.max_depth, cfg.max_yaw_rate)
 
 
+@dataclass(frozen=True)
+class Commanded:
+    """What the loop is commanded to do (in force from its next event)."""
+
+    mode: str
+    setpoints: BodySetpoints
+    mpc: MpcConfig
+    baseline: BaselineConfig
+    pid: Mapping[str, PidGains]  # loop -> gains
+
+    @classmethod
+    def of(cls, cfg: LoopConfig, setpoints: BodySetpoints) -> Commanded:
+        return cls(mode=cfg.mode, setpoints=check_setpoints(cfg, setpoints), mpc=cfg.mpc, baseline=cfg.baseline,
+                   pid={loop: getattr(cfg.body, loop) for loop in PID_LOOPS})
+
+
 class CommandTarget(Protocol):
     """What the loop's thread does with each command (at loop time ``t``)."""
 
-    def apply_setpoints(self, sp: BodySetpoints, t: float) -> None: ...
-    def apply_mode(self, mode: str, t: float, who: str) -> None: ...
+    def apply_setpoints(self, sp: BodySetpoints, t: float) -> BodySetpoints: ...
+    def apply_mode(self, mode: str, t: float, who: str) -> str: ...
     def apply_block(self, block: str, cfg: Any, t: float, who: str) -> None: ...
     def apply_gains(self, loop: str, gains: PidGains, t: float, who: str) -> None: ...
     def apply_restart(self, t: float) -> None: ...
 
 
-class LoopCommands:
-    """The loop's commanded state and its queue of commands (module docstring)."""
+class LoopCommand:
+    """A command of the loop (module docstring); values checked when it is made."""
 
-    def __init__(self, cfg: LoopConfig, setpoints: BodySetpoints, target: CommandTarget) -> None:
-        self._cfg = cfg
-        self._target = target
-        self._lock = threading.Lock()
-        self._commanded: dict[str, Any] = {
-            "mode": cfg.mode, "setpoints": self.check_setpoints(setpoints), "mpc": cfg.mpc, "baseline": cfg.baseline,
-            **{f"pid.{loop}": getattr(cfg.body, loop) for loop in PID_LOOPS},
-        }
-        self._queue: queue.SimpleQueue[Callable[[float], None]] = queue.SimpleQueue()
+    def resolve(self, now: Commanded, cfg: LoopConfig) -> LoopCommand:
+        """The command as it will apply, given what is commanded ``now``; CommandRefused
+        when it does not fit the configuration."""
+        return self
 
-    # ------------------------------------------------------------------ what is commanded
-    @property
-    def mode(self) -> str:
-        return self._commanded["mode"]
+    def commanded(self, now: Commanded) -> Commanded:
+        """What is commanded once this (resolved) command is submitted."""
+        return now
+
+    def apply(self, target: CommandTarget, t: float) -> Any:
+        """Carry it out in the loop's thread at loop time ``t``; its answer (the Future's result)."""
+        raise NotImplementedError
+
+
+@dataclass(frozen=True)
+class SetSetpoints(LoopCommand):
+    """New setpoints, unchanged where None; applied, the setpoints in force before."""
+
+    velocity: float | None = None
+    depth: float | None = None
+    yaw_rate: float | None = None
+
+    def __post_init__(self) -> None:
+        for k in SETPOINTS:
+            v = getattr(self, k)
+            if v is not None:
+                object.__setattr__(self, k, number(k, v, False))
+
+    def resolve(self, now: Commanded, cfg: LoopConfig) -> SetSetpoints:
+        cur = now.setpoints
+        try:
+            sp = check_setpoints(cfg, BodySetpoints(
+                velocity=cur.velocity if self.velocity is None else self.velocity,
+                depth=cur.depth if self.depth is None else self.depth,
+                yaw_rate=cur.yaw_rate if self.yaw_rate is None else self.yaw_rate,
+            ))
+        except ValueError as e:
+            raise CommandRefused(str(e)) from None
+        return SetSetpoints(sp.velocity, sp.depth, sp.yaw_rate)
 
     @property
     def setpoints(self) -> BodySetpoints:
-        return self._commanded["setpoints"]
+        """The setpoints of a resolved command (every one given)."""
+        assert self.velocity is not None and self.depth is not None and self.yaw_rate is not None
+        return BodySetpoints(self.velocity, self.depth, self.yaw_rate)
 
-    @property
-    def mpc_config(self) -> MpcConfig:
-        return self._commanded["mpc"]
+    def commanded(self, now: Commanded) -> Commanded:
+        return dataclasses.replace(now, setpoints=self.setpoints)
 
-    @property
-    def baseline_config(self) -> BaselineConfig:
-        return self._commanded["baseline"]
+    def apply(self, target: CommandTarget, t: float) -> BodySetpoints:
+        return target.apply_setpoints(self.setpoints, t)
 
-    def pid_gains(self, loop: str) -> PidGains:
-        """The gains of the body-frame PID ``loop`` ("velocity", "depth" or "yaw_rate")."""
-        return self._commanded[f"pid.{_pid_loop(loop)}"]
 
-    # ------------------------------------------------------------------ requests
-    def check_setpoints(self, sp: BodySetpoints) -> BodySetpoints:
-        """``sp`` if it lies inside the configured envelope, else ValueError naming the value."""
-        return check_setpoints(self._cfg, sp)
+@dataclass(frozen=True)
+class SetMode(LoopCommand):
+    """Switch the fin controller while swimming (bumpless; an Event with code "mode"
+    naming ``who``); applied, the mode in force before."""
 
-    def set_setpoints(self, velocity: float | None = None, depth: float | None = None,
-                      yaw_rate: float | None = None) -> BodySetpoints:
-        """New setpoints (unchanged where None), checked against the envelope now; the
-        setpoints commanded before (they are in force from the next event)."""
-        with self._lock:
-            cur = self._commanded["setpoints"]
-            sp = self.check_setpoints(BodySetpoints(
-                velocity=cur.velocity if velocity is None else velocity,
-                depth=cur.depth if depth is None else depth,
-                yaw_rate=cur.yaw_rate if yaw_rate is None else yaw_rate,
-            ))
-            self._commanded["setpoints"] = sp
-            self._queue.put(lambda t: self._target.apply_setpoints(sp, t))
-        return cur
+    name: str
+    who: str = ""
 
-    def set_mode(self, name: str, who: str = "") -> str:
-        """Switch the fin controller while swimming (bumpless; an Event with code "mode"
-        naming ``who``); the mode commanded before."""
-        mode(name)  # a mode of the registry, else ValueError naming them
-        with self._lock:
-            old = self._commanded["mode"]
-            self._commanded["mode"] = name
-            self._queue.put(lambda t: self._target.apply_mode(name, t, who))
-        return old
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or self.name not in MODES:
+            raise CommandRefused(f"mode: {self.name!r} is not one of {', '.join(MODES)}")
 
-    def set_mpc_config(self, cfg: MpcConfig, who: str = "") -> None:
-        """New MPC configuration (e.g. ``loop.mpc_config.replace(lam_st=2.0)``) from the next plan."""
-        if not isinstance(cfg, MpcConfig):
-            raise ValueError(f"mpc config: expected an MpcConfig, got {type(cfg).__name__}")
-        check_config(cfg)  # a configuration the planner refuses fails here, in the caller
-        self._command("mpc", cfg, lambda t: self._target.apply_block("mpc", cfg, t, who))
+    def commanded(self, now: Commanded) -> Commanded:
+        return dataclasses.replace(now, mode=self.name)
 
-    def set_baseline_config(self, cfg: BaselineConfig, who: str = "") -> None:
-        if not isinstance(cfg, BaselineConfig):
-            raise ValueError(f"baseline config: expected a BaselineConfig, got {type(cfg).__name__}")
-        self._command("baseline", cfg, lambda t: self._target.apply_block("baseline", cfg, t, who))
+    def apply(self, target: CommandTarget, t: float) -> str:
+        return target.apply_mode(self.name, t, self.who)
 
-    def set_pid_gains(self, loop: str, gains: PidGains, who: str = "") -> None:
-        """New gains of one body-frame PID ("velocity", "depth" or "yaw_rate")."""
-        _pid_loop(loop)
-        if not isinstance(gains, PidGains):
-            raise ValueError(f"gains: expected PidGains, got {type(gains).__name__}")
-        self._command(f"pid.{loop}", gains, lambda t: self._target.apply_gains(loop, gains, t, who))
 
-    def restart(self) -> None:
-        """Start the body loops and every fin afresh at the next event."""
-        self._queue.put(self._target.apply_restart)
+_BLOCK_TYPES: dict[str, type] = {"mpc": MpcConfig, "baseline": BaselineConfig}
 
-    def _command(self, key: str, value: Any, apply: Callable[[float], None]) -> None:
-        with self._lock:
-            self._commanded[key] = value
-            self._queue.put(apply)
 
-    # ------------------------------------------------------------------ the loop's thread
-    @property
-    def waiting(self) -> bool:
-        return not self._queue.empty()
+@dataclass(frozen=True)
+class SetBlock(LoopCommand):
+    """A new MPC configuration (from the next plan; one the planner refuses is refused
+    here) or baseline configuration."""
 
-    def drain(self, t: float) -> None:
-        """Apply every queued command, in order, at loop time ``t``."""
-        while True:
+    block: str
+    cfg: MpcConfig | BaselineConfig
+    who: str = ""
+
+    def __post_init__(self) -> None:
+        kind = _BLOCK_TYPES.get(self.block)
+        if kind is None:
+            raise CommandRefused(f"block: {self.block!r} is not one of {', '.join(_BLOCK_TYPES)}")
+        if not isinstance(self.cfg, kind):
+            raise CommandRefused(f"{self.block} config: expected a {kind.__name__}, got {type(self.cfg).__name__}")
+        if isinstance(self.cfg, MpcConfig):
             try:
-                fn = self._queue.get_nowait()
-            except queue.Empty:
-                return
-            fn(t)
+                check_config(self.cfg)
+            except ValueError as e:
+                raise CommandRefused(f"mpc: {e}") from None
+
+    def commanded(self, now: Commanded) -> Commanded:
+        return dataclasses.replace(now, **{self.block: self.cfg})
+
+    def apply(self, target: CommandTarget, t: float) -> None:
+        target.apply_block(self.block, self.cfg, t, self.who)
 
 
-def _pid_loop(loop: str) -> str:
+@dataclass(frozen=True)
+class SetGains(LoopCommand):
+    """New gains of one body-frame PID ("velocity", "depth" or "yaw_rate")."""
+
+    loop: str
+    gains: PidGains
+    who: str = ""
+
+    def __post_init__(self) -> None:
+        pid_loop(self.loop)
+        if not isinstance(self.gains, PidGains):
+            raise CommandRefused(f"gains: expected PidGains, got {type(self.gains).__name__}")
+
+    def commanded(self, now: Commanded) -> Commanded:
+        return dataclasses.replace(now, pid={**now.pid, self.loop: self.gains})
+
+    def apply(self, target: CommandTarget, t: float) -> None:
+        target.apply_gains(self.loop, self.gains, t, self.who)
+
+
+@dataclass(frozen=True)
+class Restart(LoopCommand):
+    """Start the body loops and every fin afresh, as at start-up (ClosedLoop.apply_restart)."""
+
+    def apply(self, target: CommandTarget, t: float) -> None:
+        target.apply_restart(t)
+
+
+@dataclass(frozen=True)
+class LoopWork(LoopCommand):
+    """``fn()`` in the loop's thread, between two of its events (the supervisor's arming,
+    drive resets, a stall injected); applied, what ``fn`` returns."""
+
+    fn: Callable[[], Any]
+    what: str = ""
+
+    def __post_init__(self) -> None:
+        if not callable(self.fn):
+            raise CommandRefused(f"loop work {self.what!r}: expected a callable, got {self.fn!r}")
+
+    def apply(self, target: CommandTarget, t: float) -> Any:
+        return self.fn()
+
+
+def tuning_command(block: str, cfg: Any, who: str = "") -> SetBlock | SetGains:
+    """The command setting tuning block ``block`` ("mpc", "baseline", "pid.<loop>") to ``cfg``."""
+    if block.startswith("pid."):
+        return SetGains(block.split(".", 1)[1], cfg, who)
+    return SetBlock(block, cfg, who)
+
+
+def pid_loop(loop: str) -> str:
+    """``loop`` if it names a body-frame PID, else CommandRefused naming them."""
     if loop not in PID_LOOPS:
-        raise ValueError(f"loop: {loop!r} is not one of {', '.join(PID_LOOPS)}")
+        raise CommandRefused(f"loop: {loop!r} is not one of {', '.join(PID_LOOPS)}")
     return loop

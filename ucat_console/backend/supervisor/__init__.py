@@ -1,11 +1,11 @@
 """The supervisor and its parts (one module each): the robot's factory and clock
-(``robots``), the loop's command queue and refusals (``commands``), live tuning and its
-journal (``tuning``), the two-step arming (``arm_requests``), recording (``recording``),
+(``robots``), live tuning and its journal (``tuning``), the two-step arming (``arm_requests``), recording (``recording``),
 the device commands (``rig_control``), the identification manoeuvre (``manoeuvre``), the
 loop's stream onto the public one (``forwarding``), the health line (``health``), and the
-:class:`Supervisor` that holds them together (``supervisor``)."""
+:class:`Supervisor` that holds them together (``supervisor``). Refused commands raise
+:class:`CommandRefused` (``backend.loop.commands``, where the loop's commands are)."""
 
-from ucat_console.backend.supervisor.commands import CommandRefused
+from ucat_console.backend.loop.commands import CommandRefused
 from ucat_console.backend.supervisor.health import Health
 from ucat_console.backend.supervisor.robots import (
     ROBOT_FACTORIES,

@@ -14,7 +14,7 @@ import time
 from dataclasses import dataclass
 
 from ucat_console.backend.access import Actor
-from ucat_console.backend.supervisor.commands import CommandRefused
+from ucat_console.backend.loop.commands import CommandRefused
 
 
 @dataclass(frozen=True)

@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from ucat_console.backend.access import LOCAL, Actor
-from ucat_console.backend.supervisor.commands import CommandRefused
+from ucat_console.backend.loop.commands import CommandRefused
 
 
 @dataclass(frozen=True)

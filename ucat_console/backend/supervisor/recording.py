@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Callable
 
 from ucat_console.backend.sessions.recorder import Recorder
-from ucat_console.backend.supervisor.commands import CommandRefused
+from ucat_console.backend.loop.commands import CommandRefused
 
 log = logging.getLogger(__name__)
 

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Callable, Protocol
 
 from ucat_console.backend.access import Actor, actor_name
-from ucat_console.backend.supervisor.commands import CommandRefused
+from ucat_console.backend.loop.commands import CommandRefused
 from ucat_console.telemetry.events import Event
 
 if TYPE_CHECKING:
@@ -40,7 +40,7 @@ class RigHost:
     rig: SimRig | None
     gate: DeviceGate
     require_pilot: Callable[[Actor, str], None]
-    #: run a function in the loop's thread, between chunks, and return its result
+    #: run a function in the loop's thread, at its next event, and return its result
     in_loop: Callable[[Callable[[], Any]], Any]
     #: ``publish_event(source, code, message, level, data)`` onto the events channel
     publish_event: Callable[..., Event]

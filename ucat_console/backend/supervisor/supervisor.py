@@ -12,13 +12,17 @@
       and the envelope, before the loop                   '--> SafetyMonitor --> actions
 
 * The loop runs in chunks of ``console.supervise_period``; between chunks the supervisor's
-  thread runs the commands that must act there (:class:`~.commands.LoopCommands`: arming,
-  drive resets), evaluates the failsafes and carries out their actions, and stops an
-  automatic recording.
+  thread evaluates the failsafes and carries out their actions, and stops an automatic
+  recording.
 * Commands come from any thread (UI callbacks, the CLI). Each checks who asks
-  (:class:`~ucat_console.backend.access.AccessDenied` unless the pilot) and the value
-  (:class:`~.commands.CommandRefused`, a ValueError naming the value and the allowed range)
-  before anything changes; a refused command changes nothing.
+  (:class:`~ucat_console.backend.access.AccessDenied` unless the pilot) and what the
+  failsafes allow, then submits a typed command to the loop
+  (:mod:`ucat_console.backend.loop.commands`: the command checks its own values, a
+  :class:`CommandRefused` naming the field and the allowed range); a refused command
+  changes nothing. The work that must run in the loop's thread (arming, drive resets) is a
+  :class:`LoopWork` command too: the caller waits up to ``loop_wait`` s for its answer,
+  then cancels it, so it either ran and was answered or never runs. A disarm acts at once,
+  never behind a queued command.
 * Arming takes two steps (:class:`~.arm_requests.ArmRequests`): :meth:`Supervisor.request_arm`
   returns a nonce that the same pilot passes to :meth:`Supervisor.confirm_arm` within
   ``access.confirm_timeout``. :meth:`Supervisor.disarm` acts at once.
@@ -58,8 +62,16 @@ from ucat_console.backend.arming import ArmingGate
 from ucat_console.backend.devices.leak import LeakEmulator, LeakInput
 from ucat_console.backend.loop.clock import Clock, PacedClock
 from ucat_console.backend.loop.closed_loop import PID_LOOPS, ClosedLoop
+from ucat_console.backend.loop.commands import (
+    SETPOINTS,
+    CommandRefused,
+    LoopWork,
+    Restart,
+    SetMode,
+    SetSetpoints,
+    number,
+)
 from ucat_console.backend.loop.kernels_warm_up import warm_up
-from ucat_console.backend.loop.modes import MODES
 from ucat_console.backend.review.effects import ChangeEffects
 from ucat_console.backend.safety import CHANNELS as SAFETY_CHANNELS
 from ucat_console.backend.safety import SafetyMonitor, Transition
@@ -69,7 +81,6 @@ from ucat_console.backend.sessions.foxglove import robot_geometry
 from ucat_console.backend.sessions.recorder import Recorder
 from ucat_console.backend.supervisor.arm_requests import ArmRequests
 from ucat_console.backend.supervisor.bursts import BurstFolder
-from ucat_console.backend.supervisor.commands import CommandRefused, LoopCommands, number
 from ucat_console.backend.supervisor.forwarding import LoopOutlet
 from ucat_console.backend.supervisor.health import Health
 from ucat_console.backend.supervisor.manoeuvre import ManoeuvreHost, ManoeuvreRun
@@ -91,8 +102,8 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-#: the setpoints the operator sets
-SETPOINTS = ("velocity", "depth", "yaw_rate")
+#: seconds a command waits for the loop's thread
+WAIT_LOOP = 5.0
 #: the longest note of a live marker (characters)
 MAX_MARKER_NOTE = 500
 
@@ -152,8 +163,8 @@ class Supervisor:
         self.journal_log = Journal(lambda: self.loop.time)
         self.tuning_state = Tuning(cfg, self.loop, self.journal_log, planner_ready or (lambda f: True))
         self.arm_requests = ArmRequests(cfg.access.confirm_timeout)
-        self.commands = LoopCommands()
-        self.commands.why_not_running = lambda: self.fault
+        #: seconds a command waits for the loop's thread (:meth:`_in_loop`)
+        self.loop_wait = WAIT_LOOP
         self._armed_at: float | None = None
         #: the identification manoeuvre last started (None: none yet)
         self.manoeuvre: ManoeuvreRun | None = None
@@ -181,7 +192,7 @@ class Supervisor:
         self.leak = LeakInput(leak, path, self.report_event, lambda: self.loop.time) if path else None
         self.rig_control = RigControl(RigHost(
             robot=cfg.robot, rig=self.rig, gate=self.gate, require_pilot=self.access.require_pilot,
-            in_loop=self.commands.run, publish_event=self._publish_event, notify=self._notify,
+            in_loop=self._in_loop, publish_event=self._publish_event, notify=self._notify,
             leak=self._set_leak if self.leak_emulator is not None else None,
         ))
         #: what an identification manoeuvre uses: the operator's commands, checked as any
@@ -226,7 +237,6 @@ class Supervisor:
         self.wall0 = time.time() - self.loop.time
         self.recorder.epoch_offset = self.wall0
         self._thread = threading.Thread(target=self._run, name="supervisor-loop", daemon=True)
-        self.commands.thread = self._thread
         self._thread.start()
         self.watchdog.start()
         log.info("supervisor started (robot %s, mode %s)", self.cfg.robot, self.loop.mode)
@@ -256,7 +266,7 @@ class Supervisor:
                 log.error("the loop thread did not stop within 10 s")
         else:
             self.gate.flush()
-        self.commands.fail_all("the supervisor is stopping")
+        self.loop.commands.fail_all("the supervisor is stopping")
         try:
             self.recorder.stop()
         finally:
@@ -297,14 +307,14 @@ class Supervisor:
                 self.gate.flush()
             except Exception:
                 log.exception("stopping the fins failed")
-            self.commands.fail_all("the loop is not running")
+            self.loop.commands.fail_all("the loop is not running")
 
     def _chunk(self) -> None:
         """One chunk of ``supervise_period`` of loop time, with the supervisor's work at its
         start and end. A paced loop does the chunks' ends and starts where it waits for the
         clock anyway (:meth:`_between`), without returning; it returns (ending a chunk here)
-        only when it has not waited for a whole period more, or is stopped."""
-        self.commands.run_pending()
+        only when it has not waited for a whole period more, or is stopped. Commands are
+        the loop's to take, at its next event."""
         self.gate.flush()
         self._chunks += 1
         period = self.cfg.console.supervise_period
@@ -323,10 +333,26 @@ class Supervisor:
         self.watchdog.beat()
         if t >= self._chunks * period - 1e-9:
             self._after_chunk()
-            self.commands.run_pending()
             self.gate.flush()
             self._chunks = max(self._chunks + 1, math.floor(t / period + 1e-9) + 1)
         return self._chunks * period + period
+
+    def _in_loop(self, fn: Callable[[], Any], what: str = "") -> Any:
+        """``fn()`` in the loop's thread (at once when no loop thread runs, or from it),
+        submitted as :class:`LoopWork`; its answer. Not taken within ``loop_wait`` s, it is
+        cancelled and never runs (CommandRefused "nothing was done")."""
+        t = self._thread
+        if t is None or threading.current_thread() is t:
+            return fn()
+        if not t.is_alive():
+            raise CommandRefused(f"the loop is not running{': ' + self.fault if self.fault else ''}")
+        fut = self.loop.submit(LoopWork(fn, what))
+        try:
+            return fut.result(timeout=self.loop_wait)
+        except TimeoutError:
+            if fut.cancel():  # not started: it never will be
+                raise CommandRefused("the loop did not answer in time; nothing was done") from None
+            return fut.result()  # started: wait for its answer
 
     def _after_chunk(self) -> None:
         self.watchdog.beat()
@@ -334,7 +360,6 @@ class Supervisor:
         clock = self.clock
         if isinstance(clock, PacedClock):
             self._lag = max(0.0, time.perf_counter() - clock.wall_deadline(now))
-        self.commands.run_pending()
         self._expire_request()
         for tr in self.safety.check(now):
             self._on_failsafe(tr)
@@ -535,7 +560,7 @@ class Supervisor:
         self.access.require_pilot(who, "arm")
         self.arm_requests.confirm(who, nonce)
         self._check_can_arm()
-        self.commands.run(lambda: self._do_arm(who))
+        self._in_loop(lambda: self._do_arm(who), "arm")
 
     def arm(self, who: Actor = LOCAL) -> None:
         """Request and confirm in one call (the console itself: headless runs)."""
@@ -559,7 +584,7 @@ class Supervisor:
         except Exception as e:  # recording must never stop arming
             log.exception("automatic recording failed")
             self._publish_event("recorder", "start_failed", f"recording did not start: {e}", "error")
-        self.loop.restart()  # nothing the loop did while the fins were held carries over
+        self.loop.submit(Restart())  # nothing the loop did while the fins were held carries over
         self.gate.arm()
         self._armed_at = self.loop.time
         self._publish_event("supervisor", "armed", f"motors armed by {actor_name(who)}", "warning",
@@ -605,7 +630,7 @@ class Supervisor:
         if not 0.0 < s <= 60.0:
             raise CommandRefused(f"stall the loop: seconds {s:g} outside (0, 60]")
         self._unstall.clear()
-        self.commands.post(lambda: self._unstall.wait(s))
+        self.loop.submit(LoopWork(lambda: self._unstall.wait(s), "stall"))
 
     def inject_leak(self, who: Actor, water: object) -> None:
         """Fault injection on a simulated robot: water at the emulated leak detector, or dry
@@ -647,7 +672,7 @@ class Supervisor:
                     depth = round(min(max(depth, 0.0), self.cfg.loop.max_depth), 3)  # to the mm
                 else:
                     depth = 0.0
-                self._apply_setpoints(BodySetpoints(0.0, depth, 0.0), f"failsafe {tr.name}")
+                self._submit_setpoints(SetSetpoints(0.0, depth, 0.0), f"failsafe {tr.name}")
         else:
             self._publish_event("failsafe", "cleared", f"{tr.name} cleared", "info", {"failsafe": tr.name})
         self._publish_status()
@@ -659,12 +684,12 @@ class Supervisor:
     # ================================================================== commands
     def set_mode(self, who: Actor, mode: object) -> None:
         self.access.require_pilot(who, "mode")
-        if not isinstance(mode, str) or mode not in MODES:
-            raise CommandRefused(f"mode: {mode!r} is not one of {', '.join(MODES)}")
+        command = SetMode(mode, actor_name(who))  # type: ignore[arg-type]  # checked here; its event names who
         with self._lock:
-            if mode == self.loop.mode:
+            old = self.loop.mode
+            if mode == old:
                 return
-            old = self.loop.set_mode(mode, actor_name(who))  # its event names who
+            self.loop.submit(command)
         self.journal_log.add(actor_name(who), "mode", old, mode)
         self._publish_status()
         self._notify()
@@ -675,26 +700,19 @@ class Supervisor:
         journalled or announced one by one (a gamepad sends several a second; the loop
         still records every setpoint on its Setpoints channel)."""
         self.access.require_pilot(who, "setpoints")
-        given = {"velocity": velocity, "depth": depth, "yaw_rate": yaw_rate}
-        values = {k: number(k, v, False) for k, v in given.items() if v is not None}
+        command = SetSetpoints(velocity, depth, yaw_rate)  # type: ignore[arg-type]  # checked here
         holding = self._holding()
         if holding:
             raise CommandRefused(
                 f"setpoints: failsafe {', '.join(holding)} holds the setpoints until its cause clears"
             )
-        cur = self.loop.setpoints
-        try:
-            sp = self.loop.check_setpoints(BodySetpoints(
-                velocity=values.get("velocity", cur.velocity), depth=values.get("depth", cur.depth),
-                yaw_rate=values.get("yaw_rate", cur.yaw_rate),
-            ))
-        except ValueError as e:
-            raise CommandRefused(str(e)) from None
-        self._apply_setpoints(sp, actor_name(who), quiet)
+        self._submit_setpoints(command, actor_name(who), quiet)
 
-    def _apply_setpoints(self, sp: BodySetpoints, who: str, quiet: bool = False) -> None:
+    def _submit_setpoints(self, command: SetSetpoints, who: str, quiet: bool = False) -> None:
         with self._lock:
-            old = self.loop.set_setpoints(velocity=sp.velocity, depth=sp.depth, yaw_rate=sp.yaw_rate)
+            old = self.loop.setpoints
+            self.loop.submit(command)  # the envelope checked there
+            sp = self.loop.setpoints
         changes = {}
         for k in SETPOINTS:
             a, b = getattr(old, k), getattr(sp, k)
@@ -708,20 +726,17 @@ class Supervisor:
                 {"who": who, "changes": changes})
         self._notify()
 
-    def check_params(self, changes: Mapping[str, object]) -> dict[str, Any]:
-        """The tuning blocks ``changes`` would give, or CommandRefused; changes nothing."""
-        return self.tuning_state.check(changes)
-
     def set_params(self, who: Actor, changes: Mapping[str, object]) -> None:
         """Apply ``{"mpc.lam_st": 2.0, "pid.depth.kp": 4.0, ...}`` together, or none of them."""
         self.access.require_pilot(who, "tuning")
-        self._apply_tuning(self.check_params(changes), actor_name(who))
+        name = actor_name(who)
+        self._apply_tuning(self.tuning_state.check(changes, name), name)
 
     def set_param(self, who: Actor, key: str, value: object) -> None:
         self.set_params(who, {key: value})
 
-    def _apply_tuning(self, new_blocks: Mapping[str, Any], who: str) -> None:
-        if self.tuning_state.apply(new_blocks, who):  # the loop's event of each block names who
+    def _apply_tuning(self, commands: Mapping[str, Any], who: str) -> None:
+        if self.tuning_state.apply(commands, who):  # the loop's event of each block names who
             self._notify()
 
     def save_baseline(self, who: Actor) -> None:
@@ -733,7 +748,8 @@ class Supervisor:
     def revert_tuning(self, who: Actor) -> None:
         """Back to the saved tuning in one step (journalled like any change)."""
         self.access.require_pilot(who, "revert tuning")
-        self._apply_tuning(self.saved_tuning(), actor_name(who))
+        name = actor_name(who)
+        self._apply_tuning(self.tuning_state.commands(self.saved_tuning(), name), name)
 
     def undo_tuning(self, who: Actor) -> None:
         """The latest tuning change undone in one step: the parameters it changed back to

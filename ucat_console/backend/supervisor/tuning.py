@@ -3,9 +3,10 @@ tuning to revert to, and who changed what when.
 
 :class:`Tuning` owns the commanded tuning (block -> frozen config: ``mpc``, ``baseline``,
 ``pid.<loop>``). A change is checked whole before anything changes
-(:meth:`Tuning.check`: every key tunable, every value of its field's kind and range, and an
-MPC configuration the planner accepts), then handed to the closed loop, which applies it
-from its next plan or PID step, and journalled (:class:`Journal`).
+(:meth:`Tuning.check`: every key tunable, every value of its field's kind and range, then
+each changed block made into the loop's command, which refuses an MPC configuration the
+planner does not accept), then submitted to the closed loop, which applies it from its next
+plan or PID step, and journalled (:class:`Journal`).
 """
 
 from __future__ import annotations
@@ -16,9 +17,8 @@ from dataclasses import dataclass, fields
 from typing import Any, Callable, Mapping
 
 from ucat_console.backend.loop.closed_loop import PID_LOOPS, ClosedLoop
-from ucat_console.backend.supervisor.commands import CommandRefused, number
+from ucat_console.backend.loop.commands import CommandRefused, SetBlock, SetGains, number, tuning_command
 from ucat_console.config import AppConfig
-from ucat_console.control.mpc import check_config
 from ucat_console.typedconf import check_value, choices_of
 
 #: what the operator may tune live: block -> fields (PID blocks are "pid.<loop>")
@@ -115,8 +115,9 @@ class Tuning:
         block, name = split_key(key)
         return getattr(self.blocks()[block], name)
 
-    def check(self, changes: Mapping[str, object]) -> dict[str, Any]:
-        """The tuning blocks ``changes`` would give, or CommandRefused; changes nothing."""
+    def check(self, changes: Mapping[str, object], who: str = "") -> dict[str, SetBlock | SetGains]:
+        """The loop's commands giving the tuning blocks ``changes`` asks (block -> command),
+        or CommandRefused; changes nothing."""
         if not isinstance(changes, Mapping) or not changes:
             raise CommandRefused("tuning: no changes given")
         current = self.blocks()
@@ -138,41 +139,38 @@ class Tuning:
             except ValueError as e:
                 raise CommandRefused(str(e)) from None
             per_block.setdefault(block, {})[name] = v
-        out: dict[str, Any] = {}
+        out: dict[str, SetBlock | SetGains] = {}
         for block, vals in per_block.items():
             try:
                 new = current[block].replace(**vals)
             except ValueError as e:
                 raise CommandRefused(f"{block}.{e}" if not str(e).startswith(block) else str(e)) from None
+            out[block] = tuning_command(block, new, who)  # an MPC configuration the planner refuses fails here
             if block == "mpc":
-                try:
-                    check_config(new)
-                except ValueError as e:
-                    raise CommandRefused(f"mpc: {e}") from None
                 f = new.formulation
                 if f != current["mpc"].formulation and not self.planner_ready(f):
                     raise CommandRefused(
                         f"mpc.formulation: the {f} planner is still being compiled in the background "
                         "(a compile here would hold the loop for a minute); try again when the "
                         "console's terminal says it is compiled")
-            out[block] = new
         return out
 
-    def apply(self, new_blocks: Mapping[str, Any], who: str) -> dict[str, list[Any]]:
-        """Hand checked blocks to the loop and journal them; the changed fields (key -> [old, new])."""
+    def commands(self, blocks: Mapping[str, Any], who: str) -> dict[str, SetBlock | SetGains]:
+        """The loop's commands giving ``blocks`` (block -> config, e.g. the saved tuning)."""
+        return {block: tuning_command(block, cfg, who) for block, cfg in blocks.items()}
+
+    def apply(self, commands: Mapping[str, SetBlock | SetGains], who: str) -> dict[str, list[Any]]:
+        """Submit checked commands (:meth:`check`) to the loop and journal them; the changed
+        fields (key -> [old, new])."""
         diffs: dict[str, list[Any]] = {}
         with self._lock:
             current = self.blocks()
-            for block, new in new_blocks.items():
+            for block, command in commands.items():
                 old = current[block]
+                new = command.gains if isinstance(command, SetGains) else command.cfg
                 if new == old:
                     continue
-                if block == "mpc":
-                    self.loop.set_mpc_config(new, who)
-                elif block == "baseline":
-                    self.loop.set_baseline_config(new, who)
-                else:
-                    self.loop.set_pid_gains(block.split(".", 1)[1], new, who)
+                self.loop.submit(command)
                 for f in fields(new):
                     a, b = getattr(old, f.name), getattr(new, f.name)
                     if a != b:
