@@ -200,7 +200,7 @@ def run_e7(client: Any, quick: bool, seed: int, progress: bool = True, n_seeds: 
     identified = {d["plant"]: d for d in idents}
     configs = {p: _configs(identified[p]) for p in plants}
     # the best fixed frequency, on the held-out seed
-    tuning = [_scenario(p, v, design["held_out"], quick, configs[p]["baseline"], f"E7:tune", f)
+    tuning = [_scenario(p, v, design["held_out"], quick, configs[p]["baseline"], "E7:tune", f)
               for p in plants for v in speeds for f in design["frequencies"]]
     tuned_runs = run_all(client, run_scenario, tuning, "E7 tuning", progress)
     chosen = _tune(tuned_runs)

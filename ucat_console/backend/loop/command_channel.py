@@ -17,7 +17,6 @@ import logging
 import queue
 import threading
 from concurrent.futures import Future
-from typing import Any
 
 from ucat_console.backend.loop.commands import CommandRefused, Commanded, CommandTarget, LoopCommand
 from ucat_console.backend.loop.config import LoopConfig
