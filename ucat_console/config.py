@@ -106,7 +106,7 @@ class ConsoleConfig(Config):
     trail_spacing: float = param(0.05, lo=0.001, hi=10.0, unit="m", doc="distance between trail points")
     supervise_period: float = param(
         0.05, lo=0.005, hi=0.5, unit="s",
-        doc="the loop runs in chunks of this length; arming, failsafes and status act between chunks",
+        doc="the loop runs in chunks of this length; failsafes and status act between chunks (arming at the loop's next event)",
     )
     max_lag: float = param(
         0.25, lo=0.02, hi=10.0, unit="s",
