@@ -25,19 +25,17 @@ from __future__ import annotations
 
 import logging
 import time
-from typing import TYPE_CHECKING, Any, Callable
+from typing import Any, Callable, Protocol
 
 from ucat_console.backend.access import MAX_NAME, AccessDenied, actor_name
 from ucat_console.backend.loop.modes import MODES
-from ucat_console.backend.supervisor import SETPOINTS, CommandRefused
+from ucat_console.backend.supervisor import SETPOINTS, CommandRefused, Supervisor
+from ucat_console.telemetry.events import Event
 from ucat_console.ui.driving import KEY_MAP, KEYS, Driving
 from ucat_console.ui.markdown import _set, esc, events_markdown, within
 from ucat_console.ui.identify_inputs import IdentifyInputs
 from ucat_console.ui.rig_faults import RigFaultInputs
 from ucat_console.ui.tuning_inputs import BLOCK_TITLES, param_specs
-
-if TYPE_CHECKING:
-    from ucat_console.ui.app import ConsoleApp
 
 log = logging.getLogger(__name__)
 
@@ -50,10 +48,26 @@ SEVERITY_FILTERS = {
 }
 
 
+class PanelHost(Protocol):
+    """What a page's controls use of the console app (``ui.app.ConsoleApp``); the app may
+    also offer ``session_list``, ``sessions_dir``, ``guard``, ``page_present`` and
+    ``submit_job``, which the panel uses when present."""
+
+    sup: Supervisor
+    history: float
+    events_seen: int
+
+    def recent_events(self) -> list[Event]: ...
+    def request_refresh(self) -> None: ...
+    def frame_robot(self, cid: int) -> None: ...
+    def set_history(self, who: Any, seconds: object) -> None: ...
+    def toggle_theme(self, cid: int) -> None: ...
+
+
 class ControlPanel:
     """One page's controls; ``gui`` is that page's ``client.gui``."""
 
-    def __init__(self, app: ConsoleApp, client_id: int, gui: Any, client: Any = None,
+    def __init__(self, app: PanelHost, client_id: int, gui: Any, client: Any = None,
                  containers: dict[str, Any] | None = None,
                  allow: Callable[..., None] | None = None) -> None:
         """``allow(handle, pilot_only, max_len, urgent)`` tells the page guard which inputs this
