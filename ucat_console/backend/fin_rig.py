@@ -1,10 +1,9 @@
 """One fin of the plant beating at a held hull speed: what its strokes and cycles make and cost.
 
 The open-loop view of the plant the efficiency experiment (E7) declares before it runs and
-the plant benchmark checks (``bench plant``): a fin
-driven through the plant's own servo profile (``robot.servo``) and hydrodynamics
-(``plate``), the hull held at a surge speed through the water, with no body
-dynamics. :func:`stroke` runs one stroke from rest to rest; :func:`cycle` runs symmetric
+the plant benchmark checks (``bench plant``): a fin driven through the plant's own servo
+profile (``robot.servo``) and hydrodynamics (``plate``), the hull held at a surge speed
+through the water, with no body dynamics. :func:`stroke` runs one stroke from rest to rest; :func:`cycle` runs symmetric
 stroke pairs about a centre until they repeat and measures the last ones. Both return the
 mean fin-frame force (N), the mean true shaft power (W, no regeneration), the duration (s)
 and the mean battery power of the fin's drive (W, ``robot.motor``), the same quantities the
