@@ -11,7 +11,8 @@ import pytest
 
 from ucat_console.cli import main
 from ucat_console.experiments import e7
-from ucat_console.experiments.efficiency_curves import e7_plants, plant_hash
+from ucat_console.backend.sim.variants import e7_plants
+from ucat_console.experiments.efficiency_curves import plant_hash
 
 DECLARATION = Path(__file__).resolve().parents[2] / "docs" / "experiments" / "e7-declaration.md"
 
@@ -27,10 +28,10 @@ def test_the_plants_are_the_declared_ones() -> None:
 
 
 def test_a_changed_plant_changes_the_hash(monkeypatch: pytest.MonkeyPatch) -> None:
-    from ucat_console.experiments import efficiency_curves
+    from ucat_console.backend.sim import variants
 
-    monkeypatch.setattr(efficiency_curves, "E7_CD0", (0.02, 0.05, 0.31))
-    assert plant_hash(efficiency_curves.e7_plants()) != declared_hash()
+    monkeypatch.setattr(variants, "E7_CD0", (0.02, 0.05, 0.31))
+    assert plant_hash(variants.e7_plants()) != declared_hash()
 
 
 def test_paired_saving_and_its_interval() -> None:

@@ -4,7 +4,7 @@ calibration, a published reference and the paper.
 Four parts (docs/fin-plant.md, "Checks"):
 
 * ``energy``: for every shipped plant variant, one fin beats symmetric stroke pairs over a
-  grid of centres, amplitudes, rates and hull speeds (``experiments.fin_rig``); the largest
+  grid of centres, amplitudes, rates and hull speeds (``backend.fin_rig``); the largest
   ratio of the power it delivers to the hull to its shaft power, ``T V / P`` (goal: below 1
   everywhere);
 * ``bollard``: the plate's mean still-water force of symmetric stroke pairs against the
@@ -60,9 +60,8 @@ def register_bench(kinds: argparse._SubParsersAction) -> None:
 # ------------------------------------------------------------------------------ energy
 def energy_check(quick: bool = False) -> dict[str, Any]:
     """The largest T V / P of each shipped plant variant over the grid (module docstring)."""
-    from ucat_console.experiments.efficiency_curves import e7_plants
-    from ucat_console.experiments.fin_rig import FinRig
-    from ucat_console.experiments.scenario import PLANT_VARIANTS, family_name, plant_config
+    from ucat_console.backend.fin_rig import FinRig
+    from ucat_console.backend.sim.variants import PLANT_VARIANTS, e7_plants, family_name, plant_config
 
     names = [*PLANT_VARIANTS, *e7_plants(), *(family_name(g, m) for g in (1.0, 2.3, 4.6, 9.2)
                                               for m in ("plate", "still_water"))]
@@ -90,8 +89,7 @@ def energy_check(quick: bool = False) -> dict[str, Any]:
 def bollard_check() -> list[dict[str, Any]]:
     """Still-water mean force of symmetric pairs against the identified model's."""
     from ucat_console.backend.sim.params import PlantConfig, ServoConfig
-    from ucat_console.experiments.fin_rig import FinRig
-    from ucat_console.experiments.scenario import START_FIN_ANGLE
+    from ucat_console.backend.fin_rig import START_FIN_ANGLE, FinRig
 
     plant = PlantConfig()
     c = plant.hydro.resolved()
@@ -138,8 +136,8 @@ def trailing_edge_st(paper_st: float, plant: Any) -> float:
 
 
 def efficiency_check(speed: float = 0.2) -> dict[str, Any]:
-    from ucat_console.experiments.efficiency_curves import CORRIDOR, curve, e7_plants
-    from ucat_console.experiments.scenario import DEFAULT_PLANT, plant_config
+    from ucat_console.backend.fin_rig import CORRIDOR, curve
+    from ucat_console.backend.sim.variants import DEFAULT_PLANT, e7_plants, plant_config
 
     plants = list(dict.fromkeys([*e7_plants(), DEFAULT_PLANT]))
     out: dict[str, Any] = {"speed": speed, "corridor": list(CORRIDOR), "curves": {}, "ebt": {}}
@@ -196,7 +194,7 @@ def efficiency_figure(res: dict[str, Any], path: Path) -> Path:
 def cruise_check(quick: bool = False) -> list[dict[str, Any]]:
     """Baseline and MPC at 0.1-0.4 m/s on the default plant with the shipped sim-tuned."""
     from ucat_console.config import load_config
-    from ucat_console.experiments.scenario import Scenario, run_scenario
+    from ucat_console.backend.scenario import Scenario, run_scenario
 
     app = load_config("sim-tuned")
     speeds = (0.2,) if quick else CRUISE_SPEEDS

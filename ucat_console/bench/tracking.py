@@ -167,7 +167,8 @@ def run_manoeuvre(app: Any, mode: str, formulation: str, m: Manoeuvre, seed: int
     from ucat_console.backend.sim_robot_io import SimRobotIO
     from ucat_console.control.allocation import BodySetpoints
     from ucat_console.control.fin_cycle import direction_error
-    from ucat_console.experiments.scenario import DEFAULT_PLANT, START_FIN_ANGLE, plant_config
+    from ucat_console.backend.fin_rig import START_FIN_ANGLE
+    from ucat_console.backend.sim.variants import DEFAULT_PLANT, plant_config
     from ucat_console.telemetry import channels as ch
     from ucat_console.telemetry.stream import TelemetryStream
 
@@ -358,7 +359,7 @@ def over_seeds(per_seed: dict[int, dict[str, Any]], goals: dict[str, tuple[str, 
 def plot(logs: dict[str, dict[str, _Log]], out: Path) -> list[Path]:
     """The depth steps, the turns' heading errors and the E5 paths, every mode on one
     figure each (PNG)."""
-    from ucat_console.experiments import require_extra
+    from ucat_console.bench.extras import require_extra
 
     require_extra("matplotlib")
     import matplotlib

@@ -1,7 +1,7 @@
 """Closed-loop experiments: E4 (Table V, Fig. 7), E4R (E4 from rest), E5 (Fig. 8), E6 (the
 plant family, each with its identified model), the sweep.
 
-Every run is a :class:`~ucat_console.experiments.scenario.Scenario` executed by
+Every run is a :class:`~ucat_console.backend.scenario.Scenario` executed by
 :func:`~ucat_console.experiments.scenario.run_scenario` on the distributed executor
 (``distributed.run_all``), so seeds, plant variants and weight grids spread over the
 workers; the aggregation here is plain arithmetic over the returned numbers.
@@ -23,17 +23,17 @@ import numpy as np
 from ucat_console.control.params import PAPER_BASELINE, PAPER_BODY, BaselineConfig, BodyConfig, MpcConfig
 from ucat_console.experiments import paper
 from ucat_console.experiments.distributed import run_all
+from ucat_console.backend.scenario import Scenario
 from ucat_console.backend.sim.params import PAPER_COEFFICIENTS
-from ucat_console.experiments.scenario import (
+from ucat_console.backend.sim.variants import (
     DEFAULT_PLANT,
     PLANT_VARIANTS,
-    Scenario,
     family_name,
     hydro_of,
     plant_assumptions,
     plant_config,
-    run_scenario,
 )
+from ucat_console.experiments.scenario import run_scenario
 
 CONTROLLERS = ("baseline", "mpc", "mpc_sync")
 E4_SPEEDS = (0.1, 0.2, 0.3, 0.4)

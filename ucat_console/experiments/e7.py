@@ -2,7 +2,7 @@
 
 Declared before it was run (docs/experiments/e7-declaration.md, which prints the plants'
 hash, :func:`~ucat_console.experiments.efficiency_curves.plant_hash`). Plants: the plate
-over the profile drag C_D0 (:data:`~ucat_console.experiments.efficiency_curves.E7_CD0`) and
+over the profile drag C_D0 (:data:`~ucat_console.backend.sim.variants.E7_CD0`) and
 the null plant (``still_water``: the plate as if in still water, the thrust's work paid
 through the shaft, so that how a force is made costs the same at any St).
 Every run starts from rest, with the shipped sim-tuned's MPC weights and body layer.
@@ -40,15 +40,11 @@ import numpy as np
 from ucat_console.control.params import BaselineConfig
 from ucat_console.experiments.closed_loop_runs import _label, e4_timing, e4r_settings, identify_plant
 from ucat_console.experiments.distributed import run_all
-from ucat_console.experiments.efficiency_curves import (
-    CORRIDOR,
-    E7_SPEEDS,
-    NULL_PLANT,
-    all_curves,
-    e7_plants,
-    plant_hash,
-)
-from ucat_console.experiments.scenario import Scenario, plant_assumptions, run_scenario
+from ucat_console.backend.fin_rig import CORRIDOR
+from ucat_console.backend.scenario import Scenario
+from ucat_console.backend.sim.variants import NULL_PLANT, e7_plants, plant_assumptions
+from ucat_console.experiments.efficiency_curves import E7_SPEEDS, all_curves, plant_hash
+from ucat_console.experiments.scenario import run_scenario
 
 #: the energy per metre the decision rules read, and the one reported beside it
 PRIMARY = "energy_per_metre_electrical"

@@ -25,8 +25,8 @@ import numpy as np
 from ucat_console.control.baseline import wrap_angle
 from ucat_console.control.mpc import FinMpc
 from ucat_console.control.params import MpcConfig
-from ucat_console.experiments.fin_rig import FinMeans, FinRig
-from ucat_console.experiments.scenario import plant_config
+from ucat_console.backend.fin_rig import FinMeans, FinRig
+from ucat_console.backend.sim.variants import plant_config
 from ucat_console.telemetry.messages import FinPlan
 
 ORACLE_SPEEDS = tuple(round(0.05 * k, 2) for k in range(11))  # 0 .. 0.5 m/s

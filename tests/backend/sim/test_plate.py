@@ -13,8 +13,7 @@ import pytest
 from ucat_console.backend.sim import plate
 from ucat_console.backend.sim.fin_hydro import H_PLATE, hydro_params
 from ucat_console.backend.sim.params import FinGeometryConfig, FinHydroConfig, PlantConfig
-from ucat_console.experiments.efficiency_curves import e7_plants
-from ucat_console.experiments.scenario import PLANT_VARIANTS, family_name, plant_config
+from ucat_console.backend.sim.variants import PLANT_VARIANTS, e7_plants, family_name, plant_config
 from ucat_console.robot.servo import servo_step
 
 GEOM = FinGeometryConfig()

@@ -21,24 +21,39 @@ from numba import njit
 from ucat_console.backend.sim.params import FinGeometryConfig, FinHydroConfig
 from ucat_console.backend.sim.plate import NP, plate_params
 from ucat_console.robot.fins import N_FINS, fin_signs
+from ucat_console.robot.layout import Layout
 from ucat_console.robot.motor import FinMotor
 
-# hydro parameter vector layout
-H_LF = 0
-H_V_FLOOR = 1
-H_TAU = 2
-H_COS_A = 3
-H_SIN_A = 4
-H_ARM_R = 5
-H_ARM_P = 6
-H_ARM_Y = 7
-H_PLATE = 8  # the plate's entries (``plate.P_*``) start here
-H_MOTOR = H_PLATE + NP  # the drive's (``FinMotor.constants()``) from here
-NPH = H_MOTOR + 8
+#: the fins' parameter vector (``ph``): where the fins sit, their flow and Strouhal filter,
+#: the plate's entries (``plate.PLATE``) and their drives' (``FinMotor.constants()``, in its order)
+HYDRO = Layout("the fins' parameter vector", [
+    ("fin_length", 1, "L_f (m), of the recorded Strouhal number"),
+    ("v_floor", 1, "speed floor of the recorded Strouhal number (m/s)"),
+    ("tau_rate", 1, "time constant of the mean |rate| (s)"),
+    ("cos_mount", 1, "cos of the mounting angle"),
+    ("sin_mount", 1, "sin of the mounting angle"),
+    ("arm_roll", 1, "roll moment arm (m)"),
+    ("arm_pitch", 1, "pitch moment arm (m)"),
+    ("arm_yaw", 1, "yaw moment arm (m)"),
+    ("plate", NP, "the plate (plate.PLATE)"),
+    ("torque_constant", 1, "the drive: motor torque constant (N m/A)"),
+    ("resistance", 1, "winding resistance (ohm)"),
+    ("no_load_current", 1, "no-load current (A)"),
+    ("rotor_inertia", 1, "rotor inertia (kg m2)"),
+    ("gear_ratio", 1, "gear ratio"),
+    ("gear_efficiency", 1, "gearhead efficiency"),
+    ("bridge_efficiency", 1, "bridge efficiency"),
+    ("quiescent_power", 1, "quiescent power (W)"),
+])
+H_LF, H_V_FLOOR, H_TAU, H_COS_A, H_SIN_A, H_ARM_R, H_ARM_P, H_ARM_Y, H_PLATE = (
+    HYDRO.at(f) for f in HYDRO.fields[:9])
+H_K_T, H_R_M, H_I_0, H_J_R, H_N_G, H_ETA_G, H_ETA_B, H_P_Q = (HYDRO.at(f) for f in HYDRO.fields[9:])
+H_MOTOR = H_K_T  # the drive's entries from here (``FinMotor.constants()``)
+NPH = HYDRO.size
 
 
 def hydro_params(hydro: FinHydroConfig, geometry: FinGeometryConfig, motor: FinMotor = FinMotor()) -> np.ndarray:
-    """The fins' parameter vector read by the compiled functions (layout ``H_*``): their
+    """The fins' parameter vector read by the compiled functions (:data:`HYDRO`): their
     hydrodynamics, where they sit, and their drives."""
     c = hydro.resolved()
     ph = np.zeros(NPH)
@@ -51,14 +66,22 @@ def hydro_params(hydro: FinHydroConfig, geometry: FinGeometryConfig, motor: FinM
     ph[H_ARM_R] = geometry.arm_roll
     ph[H_ARM_P] = geometry.arm_pitch
     ph[H_ARM_Y] = geometry.arm_yaw
-    ph[H_PLATE:H_MOTOR] = plate_params(c.rho, c.area, c.r_c, c.c_d, c.c_l, hydro.c_d0, hydro.lift_ratio,
+    ph[HYDRO.span("plate")] = plate_params(c.rho, c.area, c.r_c, c.c_d, c.c_l, hydro.c_d0, hydro.lift_ratio,
                                        hydro.added_mass, hydro.strips, hydro.model == "still_water")
-    ph[H_MOTOR:] = motor.constants()
+    ph[H_MOTOR:NPH] = motor.constants()
     return ph
 
 
+#: a fin's row of the sign table (``robot.fins.fin_signs``)
+SIGNS = Layout("a fin's signs row", [
+    ("s_lat", 1, "+1 starboard, -1 port"), ("s_long", 1, "+1 front, -1 rear"),
+    ("s_y", 1, "lateral sign of the fin plane's x_m axis"),
+])
+SG_LAT, SG_LONG, SG_Y = (SIGNS.at(f) for f in SIGNS.fields)
+
+
 def fin_sign_table() -> np.ndarray:
-    """(4, 3) array of (s_lat, s_long, s_y) per plant fin (see ``robot.fins.fin_signs``)."""
+    """(4, 3) array of a :data:`SIGNS` row per plant fin (see ``robot.fins.fin_signs``)."""
     return np.array([fin_signs(i) for i in range(N_FINS)], dtype=float)
 
 

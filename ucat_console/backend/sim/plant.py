@@ -25,9 +25,19 @@ import numpy as np
 from numba import njit
 
 from ucat_console.backend.sim.fin_hydro import (
-    H_MOTOR,
+    H_ETA_B,
+    H_ETA_G,
+    H_I_0,
+    H_J_R,
+    H_K_T,
+    H_N_G,
+    H_P_Q,
     H_PLATE,
+    H_R_M,
     H_TAU,
+    SG_LAT,
+    SG_LONG,
+    SG_Y,
     add_fin_wrench,
     fin_flow,
     fin_sign_table,
@@ -35,7 +45,7 @@ from ucat_console.backend.sim.fin_hydro import (
     hydro_params,
 )
 from ucat_console.backend.sim.params import PlantConfig
-from ucat_console.backend.sim.plate import fin_load
+from ucat_console.backend.sim.plate import NP, fin_load
 from ucat_console.backend.sim.sensors import SensorSuite, sample_rows, sense
 from ucat_console.backend.sim.vehicle import (
     NU,
@@ -51,6 +61,7 @@ from ucat_console.backend.sim.vehicle import (
 )
 from ucat_console.robot import reading_rows as rr
 from ucat_console.robot.fins import N_FINS
+from ucat_console.robot.layout import Layout
 from ucat_console.robot.motor import battery_power, motor_current
 from ucat_console.robot.readings import Reading
 from ucat_console.robot.rotations import euler_from_quaternion, quat_to_rot, quaternion_from_euler
@@ -58,28 +69,51 @@ from ucat_console.robot.servo import encoder_reading, servo_step
 
 log = logging.getLogger(__name__)
 
-# fin state layout: one row per fin
-F_THETA = 0  # angle (rad)
-F_OMEGA = 1  # rate (rad/s)
-F_RATE_MEAN = 2  # filtered |rate| (Strouhal)
-F_FX = 3  # last fin-frame force f_x (N)
-F_FY = 4  # last fin-frame force f_y (N)
-F_ST = 5  # last Strouhal number
-F_USEFUL = 6  # last power the fin delivered to the hull (W)
-F_ALPHA = 7  # last angular acceleration (rad/s2)
-F_POWER = 8  # last true shaft power (W), no regeneration
-F_ENERGY = 9  # shaft energy since reset (J)
-F_IMPULSE_X = 10  # time integral of the fin-frame force f_x since reset (N s)
-F_IMPULSE_Y = 11  # and of f_y
-F_WORK = 12  # work the fin did on the hull since reset (J)
-F_CURRENT = 13  # last motor current of its drive (A)
-F_BATTERY = 14  # last battery power of its drive (W)
-F_BATTERY_ENERGY = 15  # battery energy of its drive since reset (J)
-NF = 16
+# the declared layouts of the plant's own arrays; their columns as constants (module globals,
+# which the compiled functions take as constants)
+FIN_STATE = Layout("a fin's state row (xf, one per fin)", [
+    ("theta", 1, "angle (rad)"),
+    ("omega", 1, "rate (rad/s)"),
+    ("rate_mean", 1, "filtered |rate| (Strouhal)"),
+    ("fx", 1, "last fin-frame force f_x (N)"),
+    ("fy", 1, "last fin-frame force f_y (N)"),
+    ("st", 1, "last Strouhal number"),
+    ("useful", 1, "last power the fin delivered to the hull (W)"),
+    ("alpha", 1, "last angular acceleration (rad/s2)"),
+    ("power", 1, "last true shaft power (W), no regeneration"),
+    ("energy", 1, "shaft energy since reset (J)"),
+    ("impulse_x", 1, "time integral of the fin-frame force f_x since reset (N s)"),
+    ("impulse_y", 1, "and of f_y"),
+    ("work", 1, "work the fin did on the hull since reset (J)"),
+    ("current", 1, "last motor current of its drive (A)"),
+    ("battery", 1, "last battery power of its drive (W)"),
+    ("battery_energy", 1, "battery energy of its drive since reset (J)"),
+])
+(F_THETA, F_OMEGA, F_RATE_MEAN, F_FX, F_FY, F_ST, F_USEFUL, F_ALPHA, F_POWER, F_ENERGY, F_IMPULSE_X,
+ F_IMPULSE_Y, F_WORK, F_CURRENT, F_BATTERY, F_BATTERY_ENERGY) = (FIN_STATE.at(f) for f in FIN_STATE.fields)
+NF = FIN_STATE.size
 
-# command layout: one row per fin
-C_TARGET = 0
-C_PROFILE_VELOCITY = 1
+COMMAND = Layout("a fin's command row (cmd, one per fin)", [
+    ("target", 1, "profile-position target angle (rad)"),
+    ("profile_velocity", 1, "profile velocity (rad/s)"),
+])
+C_TARGET, C_PROFILE_VELOCITY = (COMMAND.at(f) for f in COMMAND.fields)
+
+SERVO = Layout("the servos' constants (servo)", [
+    ("acceleration", 1, "profile acceleration = deceleration (rad/s2)"),
+    ("max_rate", 1, "maximum fin rate (rad/s)"),
+    ("fin_inertia", 1, "fin inertia about its axis (kg m2)"),
+    ("dt", 1, "physics time step (s)"),
+])
+S_ACCELERATION, S_MAX_RATE, S_FIN_INERTIA, S_DT = (SERVO.at(f) for f in SERVO.fields)
+
+MATRICES = Layout("the hull's matrices (mats, each 6x6)", [
+    ("m_rb", 1, "rigid-body inertia M_RB"), ("m_a", 1, "added mass M_A"), ("m_inv", 1, "(M_RB + M_A)^-1"),
+])
+M_RB, M_A, M_INV = (MATRICES.at(f) for f in MATRICES.fields)
+
+COUNT = Layout("the plant's step count (steps)", [("steps", 1, "physics steps since the reset")])
+K_STEPS = COUNT.at("steps")
 
 
 @njit(cache=True)
@@ -118,12 +152,12 @@ def advance_steps(
     nuc = np.empty(3)
     nu_r = np.empty(6)
     k_rate = dt / ph[H_TAU]
-    pf = ph[H_PLATE:H_MOTOR]
-    k_t, r_m, i_0, j_r = ph[H_MOTOR], ph[H_MOTOR + 1], ph[H_MOTOR + 2], ph[H_MOTOR + 3]
-    n_g, eta_g, eta_b, p_q = ph[H_MOTOR + 4], ph[H_MOTOR + 5], ph[H_MOTOR + 6], ph[H_MOTOR + 7]
+    pf = ph[H_PLATE:H_PLATE + NP]
+    k_t, r_m, i_0, j_r = ph[H_K_T], ph[H_R_M], ph[H_I_0], ph[H_J_R]
+    n_g, eta_g, eta_b, p_q = ph[H_N_G], ph[H_ETA_G], ph[H_ETA_B], ph[H_P_Q]
     for _ in range(n_steps):
         # 1. servos, mean |rate|
-        for i in range(4):
+        for i in range(N_FINS):
             th, om, al = servo_step(
                 xf_out[i, F_THETA], xf_out[i, F_OMEGA], cmd[i, C_TARGET], cmd[i, C_PROFILE_VELOCITY],
                 acceleration, max_rate, dt,
@@ -140,8 +174,9 @@ def advance_steps(
             tau[j] = 0.0
         for j in range(3):
             nu_r[j] -= nuc[j]
-        for i in range(4):
-            ux, uy = fin_flow(nu_r, signs[i, 0], signs[i, 1], signs[i, 2], ph)
+        for i in range(N_FINS):
+            s_lat, s_long, s_y = signs[i, SG_LAT], signs[i, SG_LONG], signs[i, SG_Y]
+            ux, uy = fin_flow(nu_r, s_lat, s_long, s_y, ph)
             om = xf_out[i, F_OMEGA]
             al = xf_out[i, F_ALPHA]
             fx, fy, torque, p, useful = fin_load(xf_out[i, F_THETA], om, al, ux, uy, fin_inertia, dt, pf)
@@ -159,7 +194,7 @@ def advance_steps(
             xf_out[i, F_IMPULSE_X] += fx * dt
             xf_out[i, F_IMPULSE_Y] += fy * dt
             xf_out[i, F_ST] = fin_strouhal(xf_out[i, F_RATE_MEAN], nu_r[0], ph)  # recorded; no force reads it
-            add_fin_wrench(fx, fy, signs[i, 0], signs[i, 1], signs[i, 2], ph, tau)
+            add_fin_wrench(fx, fy, s_lat, s_long, s_y, ph, tau)
         # 3. hull
         vehicle_step(xv_out, tau, mrb, ma, minv, pv, dt, r, nuc, work)
     total = 0.0
@@ -177,8 +212,8 @@ def advance_and_sense(xv: np.ndarray, xf: np.ndarray, cmd: np.ndarray, mats: np.
     ``mats`` holds M_RB, M_A and M^-1, ``servo`` the acceleration, maximum rate, fin inertia
     and time step. Returns the sensors' mask, or -1 when the state is no longer finite."""
     if n_steps > 0:
-        ok = advance_steps(xv, xf, cmd, mats[0], mats[1], mats[2], pv, ph, signs,
-                           servo[0], servo[1], servo[2], servo[3], n_steps, xv, xf)
+        ok = advance_steps(xv, xf, cmd, mats[M_RB], mats[M_A], mats[M_INV], pv, ph, signs, servo[S_ACCELERATION],
+                           servo[S_MAX_RATE], servo[S_FIN_INERTIA], servo[S_DT], n_steps, xv, xf)
         if not ok:
             return -1
     return sense(xv, xf[:, F_THETA], xf[:, F_OMEGA], t, sf, imu_noise, out)
@@ -188,15 +223,15 @@ def advance_and_sense(xv: np.ndarray, xf: np.ndarray, cmd: np.ndarray, mats: np.
 def sample_plant(xv: np.ndarray, xf: np.ndarray, cmd: np.ndarray, mats: np.ndarray, pv: np.ndarray, ph: np.ndarray,
                  signs: np.ndarray, servo: np.ndarray, steps: np.ndarray, t: float, sf: np.ndarray, out: np.ndarray,
                  imu_noise: np.ndarray, p_noise: np.ndarray, dvl_noise: np.ndarray, rows: np.ndarray) -> int:
-    """Whole physics steps up to the first step at or after ``t`` (``steps[0]`` counts
+    """Whole physics steps up to the first step at or after ``t`` (``steps`` counts
     them), then the readings due there as rows (``robot.reading_rows``) into ``rows``: their
     number, or -1 when the state is no longer finite. The noise blocks must each have a row
     left (:meth:`SensorSuite.noise`)."""
-    dt = servo[3]
-    n = max(0, math.ceil((t - steps[0] * dt) / dt - 1e-6))
-    t_after = (steps[0] + n) * dt
+    dt = servo[S_DT]
+    n = max(0, math.ceil((t - steps[K_STEPS] * dt) / dt - 1e-6))
+    t_after = (steps[K_STEPS] + n) * dt
     mask = advance_and_sense(xv, xf, cmd, mats, pv, ph, signs, servo, n, t_after, sf, imu_noise, out)
-    steps[0] += n
+    steps[K_STEPS] += n
     if mask < 0:
         return -1
     if mask == 0:
@@ -221,7 +256,8 @@ class Plant:
         self._cfg = cfg if cfg is not None else PlantConfig()
         c = self._cfg
         self._mrb, self._ma, self._minv = vehicle_matrices(c.vehicle)
-        self._mats = np.stack([self._mrb, self._ma, self._minv])
+        self._mats = np.empty((MATRICES.size, 6, 6))
+        self._mats[M_RB], self._mats[M_A], self._mats[M_INV] = self._mrb, self._ma, self._minv
         self._tau_ext = (0.0,) * 6
         self._pv = vehicle_params(c.vehicle, self._tau_ext)
         self._ph = hydro_params(c.hydro, c.fins, c.motor)
@@ -229,12 +265,14 @@ class Plant:
         self._acc = float(c.servo.acceleration)
         self._max_rate = float(c.servo.max_rate)
         self._fin_inertia = float(c.fins.fin_inertia)
-        self._servo_consts = np.array([self._acc, self._max_rate, self._fin_inertia, float(c.dt)])
+        self._servo_consts = np.empty(SERVO.size)
+        self._servo_consts[S_ACCELERATION], self._servo_consts[S_MAX_RATE] = self._acc, self._max_rate
+        self._servo_consts[S_FIN_INERTIA], self._servo_consts[S_DT] = self._fin_inertia, float(c.dt)
         self._sensors = SensorSuite(c.sensors, c.servo, c.seed)
         self._xv = np.zeros(NX)
         self._xf = np.zeros((N_FINS, NF))
         self._cmd = np.zeros((N_FINS, 2))
-        self._step_count = np.zeros(1, dtype=np.int64)  # physics steps since the reset
+        self._step_count = np.zeros(COUNT.size, dtype=np.int64)  # physics steps since the reset
         self._t_goal = 0.0
         self.reset()
 
@@ -245,7 +283,7 @@ class Plant:
 
     @property
     def _steps(self) -> int:
-        return int(self._step_count[0])
+        return int(self._step_count[K_STEPS])
 
     @property
     def time(self) -> float:
@@ -277,7 +315,7 @@ class Plant:
         self._xf[:, F_THETA] = angles
         self._cmd[:, C_TARGET] = angles
         self._cmd[:, C_PROFILE_VELOCITY] = self._cfg.servo.max_rate
-        self._step_count[0] = 0
+        self._step_count[K_STEPS] = 0
         self._t_goal = 0.0
         self._sensors.reset(self._cfg.seed if seed is None else seed)
 
@@ -330,7 +368,7 @@ class Plant:
             self._xv, self._xf, self._cmd, self._mrb, self._ma, self._minv, self._pv, self._ph,
             self._signs, self._acc, self._max_rate, self._fin_inertia, dt, n, self._xv, self._xf,
         )
-        self._step_count[0] += n
+        self._step_count[K_STEPS] += n
         if not ok:
             raise FloatingPointError(f"plant state diverged at t={self.time:.3f} s: {self._xv!r}")
 

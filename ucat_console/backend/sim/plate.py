@@ -57,20 +57,26 @@ import math
 import numpy as np
 from numba import njit
 
-# plate entries of the hydro parameter vector (``fin_hydro.hydro_params`` fills them from
-# ``P_BASE`` on)
-P_NULL = 0  # 1.0: the still-water null plant
-P_CD0 = 1  # profile drag C_D0
-P_CD90 = 2  # C_D90: the normal force at 90 degrees is C_D0 + C_D90
-P_CLMAX = 3  # largest lift C_Lmax
-P_ROT = 4  # rho span C_R R^2 / 2: the circulation term's rho span Gamma_R per unit rate (kg/m)
-P_N = 5  # number of strips
-P_RADIUS = 6  # R (m)
-P_SPAN = 7  # span along the shaft (m)
-P_PHI = 8  # plate line - fin angle (rad)
-P_ADDED_I = 9  # added inertia about the shaft (kg m2)
-P_RHO = 10
-NP = 11
+from ucat_console.robot.layout import Layout
+
+#: the plate's entries of the hydro parameter vector (``fin_hydro.HYDRO``'s ``plate`` field
+#: holds them), and their columns as constants
+PLATE = Layout("the plate's parameters", [
+    ("null", 1, "1.0: the still-water null plant"),
+    ("c_d0", 1, "profile drag C_D0"),
+    ("c_d90", 1, "C_D90: the normal force at 90 degrees is C_D0 + C_D90"),
+    ("c_lmax", 1, "largest lift C_Lmax"),
+    ("rot", 1, "rho span C_R R^2 / 2: the circulation term's rho span Gamma_R per unit rate (kg/m)"),
+    ("strips", 1, "number of strips"),
+    ("radius", 1, "R (m)"),
+    ("span", 1, "span along the shaft (m)"),
+    ("phi", 1, "plate line - fin angle (rad)"),
+    ("added_inertia", 1, "added inertia about the shaft (kg m2)"),
+    ("rho", 1, "water density (kg/m3)"),
+])
+P_NULL, P_CD0, P_CD90, P_CLMAX, P_ROT, P_N, P_RADIUS, P_SPAN, P_PHI, P_ADDED_I, P_RHO = (
+    PLATE.at(f) for f in PLATE.fields)
+NP = PLATE.size
 
 
 def plate_geometry(r_c: float, area: float) -> tuple[float, float]:
@@ -102,7 +108,7 @@ def rotational_coefficient(c_d: float, c_l: float) -> float:
 
 def plate_params(rho: float, area: float, r_c: float, c_d: float, c_l: float, c_d0: float, lift_ratio: float,
                  added_mass: float, strips: int, null: bool) -> np.ndarray:
-    """The plate entries of the hydro parameter vector (layout ``P_*``), calibrated to the
+    """The plate entries of the hydro parameter vector (:data:`PLATE`), calibrated to the
     still-water model ``(C_D, C_L)`` (module docstring)."""
     if c_d0 > c_d:
         raise ValueError(f"c_d0: the profile drag {c_d0} exceeds the normal force {c_d} it is part of")

@@ -35,6 +35,7 @@ from numba.extending import register_jitable
 from ucat_console.backend.sim.params import PressureModelConfig, SensorsConfig, ServoConfig
 from ucat_console.backend.sim.vehicle import NU, NU_DOT, POS, QUAT
 from ucat_console.robot.fins import N_FINS
+from ucat_console.robot.layout import Layout
 from ucat_console.robot import reading_rows as rr
 from ucat_console.robot.readings import Reading
 from ucat_console.robot.rotations import quat_mul, quat_to_euler
@@ -74,14 +75,33 @@ def adc_quantise(current_ma: float, cfg: PressureModelConfig) -> float:
     return adc_current(current_ma, cfg.adc_bits, cfg.adc_full_scale_ma)
 
 
+#: the IMU model's output, and a row of its noise block (scaled standard normals)
+IMU_OUT = Layout("the IMU model's output", [
+    ("accel", 3, "specific force, body frame (m/s2)"), ("gyro", 3, "body rates (rad/s)"),
+    ("q", 4, "attitude w, x, y, z"), ("euler", 3, "its roll, pitch, yaw (rad)"),
+])
+I_ACCEL, I_GYRO, I_Q, I_EULER = (IMU_OUT.at(f) for f in IMU_OUT.fields)
+NI = IMU_OUT.size
+IMU_NOISE = Layout("a row of the IMU's noise block", [
+    ("accel", 3, "accelerometer noise (g_n)"), ("gyro", 3, "gyro noise (rad/s)"),
+    ("attitude", 3, "attitude noise, a small rotation vector (rad)"),
+])
+N_ACCEL, N_GYRO, N_ATTITUDE = (IMU_NOISE.at(f) for f in IMU_NOISE.fields)
+DVL_NOISE = Layout("a row of the DVL's noise block", [
+    ("velocity", 3, "velocity noise per axis (m/s)"),
+    ("dropout", 1, "a standard normal: decides dropouts"),
+])
+D_VELOCITY, D_DROPOUT = (DVL_NOISE.at(f) for f in DVL_NOISE.fields)
+PRESSURE_NOISE = Layout("a row of the pressure sensor's noise block", [("pressure", 1, "transducer noise (Pa)")])
+R_PRESSURE = PRESSURE_NOISE.at("pressure")
+
+
 @njit(cache=True)
 def imu_kernel(
     xv: np.ndarray, noise: np.ndarray, gyro_bias: np.ndarray, accel_bias: np.ndarray, out: np.ndarray
 ) -> None:
-    """IMU outputs from the true state into ``out`` (13): accel in m/s^2 (3), gyro (3), q (4), euler (3).
-
-    ``noise`` (9) holds the scaled accel, gyro and attitude noise of this sample.
-    """
+    """IMU outputs from the true state into ``out`` (:data:`IMU_OUT`); ``noise`` is this
+    sample's row of the noise block (:data:`IMU_NOISE`)."""
     w, x, y, z = xv[QUAT], xv[QUAT + 1], xv[QUAT + 2], xv[QUAT + 3]
     # NED down axis in body coordinates (third row of R)
     g0x = 2.0 * (x * z - w * y)
@@ -93,14 +113,14 @@ def imu_kernel(
     ay = xv[NU_DOT + 1] + (r * u - p * ww)
     az = xv[NU_DOT + 2] + (p * v - q * u)
     # in standard gravities (the bias and noise are), then in m/s^2
-    out[0] = (ax / GRAVITY - g0x + accel_bias[0] + noise[0]) * GRAVITY
-    out[1] = (ay / GRAVITY - g0y + accel_bias[1] + noise[1]) * GRAVITY
-    out[2] = (az / GRAVITY - g0z + accel_bias[2] + noise[2]) * GRAVITY
-    out[3] = p + gyro_bias[0] + noise[3]
-    out[4] = q + gyro_bias[1] + noise[4]
-    out[5] = r + gyro_bias[2] + noise[5]
+    out[I_ACCEL] = (ax / GRAVITY - g0x + accel_bias[0] + noise[N_ACCEL]) * GRAVITY
+    out[I_ACCEL + 1] = (ay / GRAVITY - g0y + accel_bias[1] + noise[N_ACCEL + 1]) * GRAVITY
+    out[I_ACCEL + 2] = (az / GRAVITY - g0z + accel_bias[2] + noise[N_ACCEL + 2]) * GRAVITY
+    out[I_GYRO] = p + gyro_bias[0] + noise[N_GYRO]
+    out[I_GYRO + 1] = q + gyro_bias[1] + noise[N_GYRO + 1]
+    out[I_GYRO + 2] = r + gyro_bias[2] + noise[N_GYRO + 2]
     # attitude: q (x) exp(n / 2)
-    nx, ny, nz = noise[6], noise[7], noise[8]
+    nx, ny, nz = noise[N_ATTITUDE], noise[N_ATTITUDE + 1], noise[N_ATTITUDE + 2]
     a = math.sqrt(nx * nx + ny * ny + nz * nz)
     if a > 1e-15:
         c = math.cos(0.5 * a)
@@ -112,44 +132,52 @@ def imu_kernel(
     qw, qx, qy, qz = quat_mul(w, x, y, z, dw, dx, dy, dz)
     norm = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
     qw, qx, qy, qz = qw / norm, qx / norm, qy / norm, qz / norm
-    out[6] = qw
-    out[7] = qx
-    out[8] = qy
-    out[9] = qz
-    out[10], out[11], out[12] = quat_to_euler(qw, qx, qy, qz)
+    out[I_Q] = qw
+    out[I_Q + 1] = qx
+    out[I_Q + 2] = qy
+    out[I_Q + 3] = qz
+    out[I_EULER], out[I_EULER + 1], out[I_EULER + 2] = quat_to_euler(qw, qx, qy, qz)
 
 
 # which sensor (schedule index), and its bit in a sample mask
 IMU, PRESSURE, DVL, FINS = 0, 1, 2, 3
-# the suite's numbers, one array for the compiled sampler: per sensor its schedule (first
-# sample time, period, samples taken), the earliest due time, the IMU's biases, the
-# encoders' resolution, and the next row of the IMU noise block
-S_T0 = 0
-S_PERIOD = 4
-S_K = 8
-S_NEXT = 12
-S_GYRO_BIAS = 13
-S_ACCEL_BIAS = 16
-S_COUNTS = 19
-S_RATE_STEP = 20
-S_IMU_ROW = 21
-S_P_ROW = 22  # the next row of the pressure noise block
-S_DVL_ROW = 23  # the next row of the DVL's
-S_RHO = 24  # the pressure model: water density, span, ADC bits and full scale
-S_SPAN = 25
-S_ADC_BITS = 26
-S_ADC_FS = 27
-S_DVL_STD = 28  # the DVL model: noise, dropout probability, valid altitudes, bottom depth
-S_DROPOUT = 29
-S_ALT_MIN = 30
-S_ALT_MAX = 31
-S_BOTTOM = 32
-NS = 33
-# the sampler's output: the IMU (accel 3, gyro 3, q 4, euler 3), then fin angles and rates
-O_IMU = 0
-O_FIN_POS = 13
-O_FIN_VEL = 17
-NO = 21
+N_SENSORS = 4
+#: the suite's numbers, one array for the compiled sampler (``state``), and their columns as
+#: constants
+SUITE = Layout("the sensor suite's state", [
+    ("t0", N_SENSORS, "per sensor (IMU, PRESSURE, DVL, FINS): its first sample time (s)"),
+    ("period", N_SENSORS, "its period (s)"),
+    ("k", N_SENSORS, "samples it has taken"),
+    ("next", 1, "the earliest due time (s)"),
+    ("gyro_bias", 3, "the IMU's constant gyro bias (rad/s)"),
+    ("accel_bias", 3, "its constant accelerometer bias (g_n)"),
+    ("counts", 1, "the encoders' resolution: quadcounts per rad"),
+    ("rate_step", 1, "and their rate quantum (rad/s)"),
+    ("imu_row", 1, "the next row of the IMU noise block"),
+    ("p_row", 1, "the next row of the pressure noise block"),
+    ("dvl_row", 1, "the next row of the DVL's"),
+    ("rho", 1, "the pressure model: water density (kg/m3)"),
+    ("span", 1, "its span (Pa)"),
+    ("adc_bits", 1, "its ADC bits"),
+    ("adc_fs", 1, "and full scale (mA)"),
+    ("dvl_std", 1, "the DVL model: velocity noise (m/s)"),
+    ("dropout", 1, "dropout probability"),
+    ("alt_min", 1, "shortest valid altitude (m)"),
+    ("alt_max", 1, "longest valid altitude (m)"),
+    ("bottom", 1, "depth of the flat bottom (m)"),
+])
+(S_T0, S_PERIOD, S_K, S_NEXT, S_GYRO_BIAS, S_ACCEL_BIAS, S_COUNTS, S_RATE_STEP, S_IMU_ROW, S_P_ROW, S_DVL_ROW,
+ S_RHO, S_SPAN, S_ADC_BITS, S_ADC_FS, S_DVL_STD, S_DROPOUT, S_ALT_MIN, S_ALT_MAX, S_BOTTOM) = (
+    SUITE.at(f) for f in SUITE.fields)
+NS = SUITE.size
+#: the sampler's output (``out``)
+OUTPUT = Layout("the sampler's output", [
+    ("imu", NI, "the IMU's (IMU_OUT)"),
+    ("fin_pos", N_FINS, "each fin's encoder angle (rad)"),
+    ("fin_vel", N_FINS, "and rate (rad/s); right after the angles (the fins' reading row takes both)"),
+])
+O_IMU, O_FIN_POS, O_FIN_VEL = (OUTPUT.at(f) for f in OUTPUT.fields)
+NO = OUTPUT.size
 
 
 @njit(cache=True)
@@ -175,7 +203,7 @@ def sense(xv: np.ndarray, fin_theta: np.ndarray, fin_omega: np.ndarray, t: float
     if _take(sf, IMU, t):
         row = int(sf[S_IMU_ROW])
         imu_kernel(xv, imu_noise[row], sf[S_GYRO_BIAS:S_GYRO_BIAS + 3], sf[S_ACCEL_BIAS:S_ACCEL_BIAS + 3],
-                   out[O_IMU:O_IMU + 13])
+                   out[O_IMU:O_IMU + NI])
         sf[S_IMU_ROW] = row + 1
         mask |= 1 << IMU
     if _take(sf, PRESSURE, t):
@@ -189,7 +217,7 @@ def sense(xv: np.ndarray, fin_theta: np.ndarray, fin_omega: np.ndarray, t: float
             out[O_FIN_VEL + i] = np.rint(fin_omega[i] / q) * q
         mask |= 1 << FINS
     nxt = math.inf
-    for i in range(4):
+    for i in range(N_SENSORS):
         due = sf[S_T0 + i] + sf[S_K + i] * sf[S_PERIOD + i]
         if due < nxt:
             nxt = due
@@ -209,7 +237,7 @@ def sample_rows(mask: int, t: float, xv: np.ndarray, sf: np.ndarray, out: np.nda
         r = rows[k]
         r[rr.KIND] = rr.IMU
         r[rr.T] = t
-        for i in range(13):
+        for i in range(NI):
             r[rr.IMU_ACCEL + i] = out[O_IMU + i]
         k += 1
     if mask & (1 << PRESSURE):
@@ -218,7 +246,7 @@ def sample_rows(mask: int, t: float, xv: np.ndarray, sf: np.ndarray, out: np.nda
         rho = sf[S_RHO]
         span = sf[S_SPAN]
         gauge = depth_to_pressure(xv[POS + 2], 0.0, rho)
-        gauge += p_noise[i, 0]
+        gauge += p_noise[i, R_PRESSURE]
         unclamped = pressure_to_current(gauge, 0.0, span)
         if LOOP_MIN_MA <= unclamped <= LOOP_MAX_MA:  # pinned at a limit: no measurement, no reading
             current = adc_current(loop_current(gauge, span), int(sf[S_ADC_BITS]), sf[S_ADC_FS])
@@ -233,7 +261,7 @@ def sample_rows(mask: int, t: float, xv: np.ndarray, sf: np.ndarray, out: np.nda
         i = int(sf[S_DVL_ROW])  # drawn every time: the stream ignores validity
         sf[S_DVL_ROW] = i + 1
         n = dvl_noise[i]
-        drop = 0.5 * math.erfc(-n[3] / math.sqrt(2.0)) < sf[S_DROPOUT]  # uniform via the normal CDF
+        drop = 0.5 * math.erfc(-n[D_DROPOUT] / math.sqrt(2.0)) < sf[S_DROPOUT]  # uniform via the normal CDF
         altitude = sf[S_BOTTOM] - xv[POS + 2]
         in_range = sf[S_ALT_MIN] <= altitude <= sf[S_ALT_MAX]
         r = rows[k]
@@ -247,9 +275,9 @@ def sample_rows(mask: int, t: float, xv: np.ndarray, sf: np.ndarray, out: np.nda
             r[rr.DVL_ALTITUDE] = altitude if in_range else math.nan
             r[rr.DVL_FOM] = math.nan
         else:
-            r[rr.DVL_V] = xv[NU] + n[0]
-            r[rr.DVL_V + 1] = xv[NU + 1] + n[1]
-            r[rr.DVL_V + 2] = xv[NU + 2] + n[2]
+            r[rr.DVL_V] = xv[NU] + n[D_VELOCITY]
+            r[rr.DVL_V + 1] = xv[NU + 1] + n[D_VELOCITY + 1]
+            r[rr.DVL_V + 2] = xv[NU + 2] + n[D_VELOCITY + 2]
             r[rr.DVL_VALID] = 1.0
             r[rr.DVL_ALTITUDE] = altitude
             r[rr.DVL_FOM] = sf[S_DVL_STD]
@@ -262,6 +290,14 @@ def sample_rows(mask: int, t: float, xv: np.ndarray, sf: np.ndarray, out: np.nda
             r[rr.FINS_ANGLE + i] = out[O_FIN_POS + i]
         k += 1
     return k
+
+
+def _scale(layout: Layout, **std: float) -> list[float]:
+    """The scale of each column of a noise block: each field's standard deviation."""
+    out = [0.0] * layout.size
+    for f in layout.fields:
+        out[layout.span(f)] = [std[f]] * layout.width(f)
+    return out
 
 
 class _Noise:
@@ -310,17 +346,17 @@ class SensorSuite:
         rng_imu = np.random.default_rng(imu_ss)
         icfg = self._cfg.imu
         sf = self.state
-        sf[S_GYRO_BIAS:S_GYRO_BIAS + 3] = rng_imu.normal(0.0, icfg.gyro_bias_std, 3)
-        sf[S_ACCEL_BIAS:S_ACCEL_BIAS + 3] = rng_imu.normal(0.0, icfg.accel_bias_std, 3)
-        self._imu_noise = _Noise(
-            rng_imu, [icfg.accel_noise_std] * 3 + [icfg.gyro_noise_std] * 3 + [icfg.attitude_noise_std] * 3,
-            sf, S_IMU_ROW,
-        )
+        sf[SUITE.span("gyro_bias")] = rng_imu.normal(0.0, icfg.gyro_bias_std, SUITE.width("gyro_bias"))
+        sf[SUITE.span("accel_bias")] = rng_imu.normal(0.0, icfg.accel_bias_std, SUITE.width("accel_bias"))
+        self._imu_noise = _Noise(rng_imu, _scale(IMU_NOISE, accel=icfg.accel_noise_std, gyro=icfg.gyro_noise_std,
+                                                 attitude=icfg.attitude_noise_std), sf, S_IMU_ROW)
         dcfg = self._cfg.dvl
-        # the fourth column stays a standard normal: it decides dropouts
-        self._dvl_noise = _Noise(np.random.default_rng(dvl_ss), [dcfg.noise_std] * 3 + [1.0], sf, S_DVL_ROW)
+        # the dropout column stays a standard normal
+        self._dvl_noise = _Noise(np.random.default_rng(dvl_ss), _scale(DVL_NOISE, velocity=dcfg.noise_std, dropout=1.0),
+                                 sf, S_DVL_ROW)
         pcfg = self._cfg.pressure
-        self._p_noise = _Noise(np.random.default_rng(p_ss), [pcfg.noise_std_pa], sf, S_P_ROW)
+        self._p_noise = _Noise(np.random.default_rng(p_ss), _scale(PRESSURE_NOISE, pressure=pcfg.noise_std_pa),
+                               sf, S_P_ROW)
         rates = (icfg.rate, pcfg.rate, dcfg.rate, self._servo.feedback_rate)
         for i, rate in enumerate(rates):
             sf[S_T0 + i] = t0
@@ -337,11 +373,11 @@ class SensorSuite:
 
     @property
     def gyro_bias(self) -> np.ndarray:
-        return self.state[S_GYRO_BIAS:S_GYRO_BIAS + 3].copy()
+        return self.state[SUITE.span("gyro_bias")].copy()
 
     @property
     def accel_bias(self) -> np.ndarray:
-        return self.state[S_ACCEL_BIAS:S_ACCEL_BIAS + 3].copy()
+        return self.state[SUITE.span("accel_bias")].copy()
 
     def next_due(self) -> float:
         """Earliest time at which some sensor has a sample due."""

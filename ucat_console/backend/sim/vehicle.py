@@ -15,9 +15,9 @@ irrotational (nu_c = (R^T V_c, 0), nu_r = nu - nu_c):
 * g(eta): weight W at r_g and buoyancy B at r_b, resolved in the body frame through the
   attitude, so the CG below the CB gives a restoring moment.
 
-State vector ``xv`` (float64, length :data:`NX`): position NED (0:3), quaternion w,x,y,z
-body->NED (3:7), body velocity u,v,w,p,q,r (7:13), and the body acceleration of the last
-step (13:19, read by the IMU model). Integration is semi-implicit Euler: velocities first,
+State vector ``xv`` (float64, :data:`STATE`): position NED, quaternion w,x,y,z body->NED,
+body velocity u,v,w,p,q,r, and the body acceleration of the last step (read by the IMU
+model). Integration is semi-implicit Euler: velocities first,
 then position and attitude with the new velocities (the attitude through the exact
 quaternion exponential of the rotation over the step), stable and accurate at 1 kHz for
 this hull (its fastest mode, roll, has a natural frequency of about 6.5 rad/s).
@@ -31,30 +31,43 @@ import numpy as np
 from numba import njit
 
 from ucat_console.backend.sim.params import VehicleConfig
+from ucat_console.robot.layout import Layout
 from ucat_console.robot.rotations import quat_mul, skew
 from ucat_console.robot.units import GRAVITY
 
-# state layout
-POS = 0
-QUAT = 3
-NU = 7
-NU_DOT = 13
-NX = 19
+# the declared layouts of the hull's arrays; their columns as constants (module globals, which
+# the compiled functions take as constants)
+STATE = Layout("the vehicle state xv", [
+    ("pos", 3, "position, world NED (m)"),
+    ("quat", 4, "attitude quaternion w, x, y, z, body -> NED"),
+    ("nu", 6, "body velocity over ground u, v, w (m/s), p, q, r (rad/s)"),
+    ("nu_dot", 6, "body acceleration of the last step (read by the IMU model)"),
+])
+POS, QUAT, NU, NU_DOT = (STATE.at(f) for f in STATE.fields)
+NX = STATE.size
 
-# vehicle parameter vector layout
-P_W = 0
-P_B = 1
-P_RG = 2
-P_RB = 5
-P_CUR = 8
-P_DIST = 11
-P_TAU = 14
-P_DLIN = 20
-P_DQUAD = 26
-NPV = 32
+PARAMS = Layout("the vehicle parameter vector pv", [
+    ("weight", 1, "weight W = m g (N)"),
+    ("buoyancy", 1, "buoyancy B (N)"),
+    ("r_g", 3, "centre of gravity, body FRD (m)"),
+    ("r_b", 3, "centre of buoyancy, body FRD (m)"),
+    ("current", 3, "water current, world NED (m/s)"),
+    ("disturbance", 3, "disturbance force at the body origin, world NED (N)"),
+    ("tau_ext", 6, "extra wrench at the body origin, body frame (N, N m; Plant.set_body_wrench)"),
+    ("d_lin", 6, "linear damping per axis (Fossen signs)"),
+    ("d_quad", 6, "quadratic damping per axis (Fossen signs)"),
+])
+P_W, P_B, P_RG, P_RB, P_CUR, P_DIST, P_TAU, P_DLIN, P_DQUAD = (PARAMS.at(f) for f in PARAMS.fields)
+NPV = PARAMS.size
 
-#: work buffer length needed by :func:`vehicle_step`
-NWORK = 24
+#: the scratch buffer of :func:`vehicle_step` (``body_acceleration``'s)
+WORK = Layout("the hull step's scratch buffer", [
+    ("force", 6, "the total generalised force"),
+    ("nu_r", 6, "the velocity through the water"),
+    ("momentum", 6, "M nu of the Coriolis terms"),
+])
+W_FORCE, W_NU_R, W_MOMENTUM = (WORK.at(f) for f in WORK.fields)
+NWORK = WORK.size
 
 
 def vehicle_matrices(cfg: VehicleConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -79,18 +92,18 @@ def vehicle_matrices(cfg: VehicleConfig) -> tuple[np.ndarray, np.ndarray, np.nda
 def vehicle_params(
     cfg: VehicleConfig, tau_ext: tuple[float, ...] = (0.0,) * 6
 ) -> np.ndarray:
-    """The vehicle parameter vector read by the compiled step (layout ``P_*``)."""
+    """The vehicle parameter vector read by the compiled step (:data:`PARAMS`)."""
     pv = np.zeros(NPV)
     w = cfg.mass * GRAVITY
     pv[P_W] = w
     pv[P_B] = w * cfg.buoyancy_ratio
-    pv[P_RG : P_RG + 3] = cfg.cg
-    pv[P_RB : P_RB + 3] = cfg.cb
-    pv[P_CUR : P_CUR + 3] = cfg.current_ned
-    pv[P_DIST : P_DIST + 3] = cfg.disturbance_ned
-    pv[P_TAU : P_TAU + 6] = tau_ext
-    pv[P_DLIN : P_DLIN + 6] = (cfg.x_u, cfg.y_v, cfg.z_w, cfg.k_p, cfg.m_q, cfg.n_r)
-    pv[P_DQUAD : P_DQUAD + 6] = (cfg.x_uu, cfg.y_vv, cfg.z_ww, cfg.k_pp, cfg.m_qq, cfg.n_rr)
+    pv[PARAMS.span("r_g")] = cfg.cg
+    pv[PARAMS.span("r_b")] = cfg.cb
+    pv[PARAMS.span("current")] = cfg.current_ned
+    pv[PARAMS.span("disturbance")] = cfg.disturbance_ned
+    pv[PARAMS.span("tau_ext")] = tau_ext
+    pv[PARAMS.span("d_lin")] = (cfg.x_u, cfg.y_v, cfg.z_w, cfg.k_p, cfg.m_q, cfg.n_r)
+    pv[PARAMS.span("d_quad")] = (cfg.x_uu, cfg.y_vv, cfg.z_ww, cfg.k_pp, cfg.m_qq, cfg.n_rr)
     return pv
 
 
@@ -109,9 +122,9 @@ def initial_state(
         if a.shape != (k,) or not np.all(np.isfinite(a)):
             raise ValueError(f"{name}: expected {k} finite numbers, got {v!r}")
     xv = np.zeros(NX)
-    xv[POS : POS + 3] = position_ned
-    xv[QUAT : QUAT + 4] = q / n
-    xv[NU : NU + 6] = body_velocity
+    xv[STATE.span("pos")] = position_ned
+    xv[STATE.span("quat")] = q / n
+    xv[STATE.span("nu")] = body_velocity
     return xv
 
 
@@ -155,9 +168,9 @@ def body_acceleration(
     """nu_dot (6) for state ``xv`` under the fin wrench ``tau_fins``; ``r`` must hold R(q)
     and ``nuc`` the current in the body frame (:func:`body_current`)."""
     nu = xv[NU : NU + 6]
-    f = work[0:6]  # total generalised force
-    nur = work[6:12]
-    p = work[12:18]
+    f = work[W_FORCE:W_FORCE + 6]
+    nur = work[W_NU_R:W_NU_R + 6]
+    p = work[W_MOMENTUM:W_MOMENTUM + 6]
     for i in range(6):
         nur[i] = nu[i]
     for i in range(3):
