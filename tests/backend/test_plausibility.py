@@ -29,7 +29,7 @@ from ucat_console.backend.failsafe_config import FailsafeConfig, FailsafeRule
 from ucat_console.config import AppConfig
 from ucat_console.control.allocation import BodySetpoints
 from ucat_console.control.params import ManoeuvreConfig
-from ucat_console.experiments.scenario import family_name, plant_config
+from ucat_console.backend.sim.variants import family_name, plant_config
 from ucat_console.robot import reading_rows as rr
 from ucat_console.robot.readings import DepthReading, DvlVelocity, FinFeedback, ImuReading
 from ucat_console.robot.rotations import quaternion_from_euler

@@ -31,7 +31,8 @@ def swim(mode: str, seed: int, t_end: float, *, hold: float = 0.0, start_velocit
     from ucat_console.backend.loop.closed_loop import ClosedLoop
     from ucat_console.backend.sim_robot_io import SimRobotIO
     from ucat_console.control.allocation import BodySetpoints
-    from ucat_console.experiments.scenario import DEFAULT_PLANT, START_FIN_ANGLE, plant_config
+    from ucat_console.backend.fin_rig import START_FIN_ANGLE
+    from ucat_console.backend.sim.variants import DEFAULT_PLANT, plant_config
     from ucat_console.telemetry.stream import TelemetryStream
 
     plant = plant_config(DEFAULT_PLANT, seed, (0.0, 0.0, 0.0))

@@ -93,7 +93,7 @@ def run_compile(args: argparse.Namespace) -> int:
 
 
 def run_mpc(args: argparse.Namespace) -> int:
-    from ucat_console.experiments import require_extra
+    from ucat_console.bench.extras import require_extra
 
     require_extra("tqdm")
     from tqdm import tqdm

@@ -6,7 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from ucat_console.experiments import EXPERIMENTS, NAMED_ONLY, require_extra
+from ucat_console.bench.extras import require_extra
+from ucat_console.experiments import EXPERIMENTS, NAMED_ONLY
 
 
 def register(sub: argparse._SubParsersAction) -> None:

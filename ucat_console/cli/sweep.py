@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ucat_console.experiments.scenario import DEFAULT_PLANT, PLANT_VARIANTS
+from ucat_console.backend.sim.variants import DEFAULT_PLANT, PLANT_VARIANTS
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -29,7 +29,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ucat_console.experiments import require_extra
+    from ucat_console.bench.extras import require_extra
 
     require_extra()
     from ucat_console.compiled import prepare_all

@@ -7,9 +7,7 @@ imports none of them.
 
 from __future__ import annotations
 
-from ucat_console.bench.extras import EXTRA_MODULES, require_extra
-
-__all__ = ["EXPERIMENTS", "EXTRA_MODULES", "NAMED_ONLY", "require_extra"]
+__all__ = ["EXPERIMENTS", "NAMED_ONLY"]
 
 EXPERIMENTS = ("E1", "E2", "E3", "E4", "E4R", "E5", "E6")
 #: experiments run only when named (not by "all"): E7 (docs/experiments/e7-declaration.md)

@@ -24,7 +24,7 @@ from ucat_console.control.allocation import BodySetpoints
 from ucat_console.control.params import BaselineConfig, MpcConfig, PidGains, PowerConfig
 from ucat_console.control.power import PowerEstimator
 from ucat_console.robot.readings import FinFeedbacks
-from ucat_console.experiments.scenario import START_FIN_ANGLE
+from ucat_console.backend.fin_rig import START_FIN_ANGLE
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.stream import TelemetryStream
 

@@ -37,7 +37,8 @@ def test_heading_hold_returns_to_the_held_heading_after_a_yaw_disturbance(mode: 
     from ucat_console.backend.loop.closed_loop import ClosedLoop
     from ucat_console.backend.sim_robot_io import SimRobotIO
     from ucat_console.control.allocation import BodySetpoints
-    from ucat_console.experiments.scenario import START_FIN_ANGLE, plant_config
+    from ucat_console.backend.fin_rig import START_FIN_ANGLE
+    from ucat_console.backend.sim.variants import plant_config
     from ucat_console.telemetry.stream import TelemetryStream
 
     io = SimRobotIO(plant_config("plate", 5), depth=1.0, velocity=0.2)
@@ -132,7 +133,8 @@ def test_a_fin_whose_drive_runs_at_half_speed_is_reported_slow_and_the_robot_kee
     from ucat_console.backend.loop.closed_loop import ClosedLoop
     from ucat_console.backend.sim_robot_io import SimRobotIO
     from ucat_console.control.allocation import BodySetpoints
-    from ucat_console.experiments.scenario import START_FIN_ANGLE, plant_config
+    from ucat_console.backend.fin_rig import START_FIN_ANGLE
+    from ucat_console.backend.sim.variants import plant_config
     from ucat_console.telemetry import channels as ch
     from ucat_console.telemetry.stream import TelemetryStream
 
