@@ -51,8 +51,10 @@ import tomli_w
 
 from ucat_console import shipped
 from ucat_console.backend.access import AccessConfig
-from ucat_console.backend.devices.config import ROBOTS, DevicesConfig
+from ucat_console.backend.devices.config import DevicesConfig
 from ucat_console.backend.failsafe_config import FailsafeConfig
+from ucat_console.backend.robots import robot as registered_robot
+from ucat_console.backend.robots import robot_names
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.backend.review.metrics import MetricsConfig
 from ucat_console.backend.sessions.limits import ReviewConfig
@@ -130,7 +132,6 @@ class ConsoleConfig(Config):
         "", doc="where recordings go; empty: $UCAT_CONSOLE_SESSIONS, else the user's data folder "
         "(ucat-console paths prints it)",
     )
-    sim_depth: float = param(0.5, lo=0.0, hi=100.0, unit="m", doc="depth the simulated robot starts at")
     sim_early: float = param(
         0.01, lo=0.0, hi=0.02, unit="s",
         doc="simulated robot only: loop events due within this much wall time run at once, together "
@@ -177,7 +178,7 @@ class AppConfig(Config):
     """Everything one run of the console needs (module docstring)."""
 
     robot: str = param(
-        "sim", choices=ROBOTS,
+        "sim", choices=robot_names,
         doc="the robot to drive: sim: in-process simulator; sim-devices: simulator behind the device "
         "emulators, through the drivers; hardware: the drivers on the robot's devices ([devices])",
     )
@@ -226,7 +227,7 @@ class AppConfig(Config):
     def from_dict(cls, data: dict[str, Any]) -> Self:
         if not isinstance(data, dict):
             return from_dict(cls, data)
-        data = migrate_robot(data)
+        data = migrate_sim_depth(migrate_robot(data))
         loop = data.get("loop")
         if isinstance(loop, dict):
             for name in LOOP_BLOCKS:
@@ -250,7 +251,7 @@ class AppConfig(Config):
     @property
     def simulated(self) -> bool:
         """Whether the robot is (or is behind the emulators of) the simulated plant."""
-        return self.robot in ("sim", "sim-devices")
+        return registered_robot(self.robot).simulated
 
 
 def migrate_robot(data: dict[str, Any]) -> dict[str, Any]:
@@ -277,6 +278,25 @@ def migrate_robot(data: dict[str, Any]) -> dict[str, Any]:
     log.warning("configuration: %s: the robot is one key now; loaded as robot = %r (write that instead)",
                 keys, new)
     return data
+
+
+def migrate_sim_depth(data: dict[str, Any]) -> dict[str, Any]:
+    """``data`` with an older version's ``console.sim_depth`` made the simulated robot's one
+    start, ``devices.start.depth``, with a warning naming the key to replace; ValueError
+    when both are given and differ."""
+    console = data.get("console")
+    if not isinstance(console, dict) or "sim_depth" not in console:
+        return data
+    depth = console["sim_depth"]
+    devices = data.get("devices") if isinstance(data.get("devices"), dict) else {}
+    start = devices.get("start") if isinstance(devices.get("start"), dict) else {}
+    if "depth" in start and start["depth"] != depth:
+        raise ValueError(f"console.sim_depth: {depth!r} and devices.start.depth {start['depth']!r} both give the "
+                         "simulated robot's start depth; keep devices.start.depth only")
+    log.warning("configuration: console.sim_depth: the simulated robot's start is devices.start now; loaded as "
+                "devices.start.depth = %r (write that instead)", depth)
+    return {**data, "console": {k: v for k, v in console.items() if k != "sim_depth"},
+            "devices": {**devices, "start": {**start, "depth": depth}}}
 
 
 def load_config(path: str | Path | None) -> AppConfig:

@@ -70,8 +70,8 @@ LIMITS = {"depth_limit": {"max_depth": 1.3}, "altitude": {"min_altitude": 1.2}}
 def _config(base: str | None, name: str):
     cfg = load_config(base)
     plant = cfg.plant.replace(sensors=cfg.plant.sensors.replace(dvl=cfg.plant.sensors.dvl.replace(bottom_depth=2.5)))
-    return cfg.replace(access=cfg.access.replace(token=TOKEN), console=cfg.console.replace(record_on_arm=False,
-                       sim_depth=1.0), plant=plant, failsafe=cfg.failsafe.replace(**LIMITS[name]))
+    return cfg.replace(access=cfg.access.replace(token=TOKEN), console=cfg.console.replace(record_on_arm=False),
+                       devices=cfg.devices.replace(start=cfg.devices.start.replace(depth=1.0)), plant=plant, failsafe=cfg.failsafe.replace(**LIMITS[name]))
 
 
 def _surfaced(sup, name: str, events: list) -> None:

@@ -20,7 +20,8 @@ from ucat_console.backend.supervisor import CommandRefused
 from ucat_console.backend.supervisor.manoeuvre import ManoeuvreRun
 from ucat_console.cli import main
 from ucat_console.backend.access import AccessConfig
-from ucat_console.config import AppConfig, ConsoleConfig
+from ucat_console.backend.devices.config import DevicesConfig, SimStartConfig
+from ucat_console.config import AppConfig
 from ucat_console.control.params import ManoeuvreConfig
 from ucat_console.robot.readings import DvlVelocity, ImuReading
 from ucat_console.telemetry import TelemetryStream
@@ -31,7 +32,7 @@ PILOT = 1
 
 
 def app_config(hydro: FinHydroConfig, manoeuvre: ManoeuvreConfig | None = None, depth: float = 3.0) -> AppConfig:
-    cfg = AppConfig(plant=PlantConfig(hydro=hydro), console=ConsoleConfig(sim_depth=depth),
+    cfg = AppConfig(plant=PlantConfig(hydro=hydro), devices=DevicesConfig(start=SimStartConfig(depth=depth)),
                     access=AccessConfig(token=TOKEN))
     return cfg if manoeuvre is None else cfg.replace(loop=cfg.loop.replace(manoeuvre=manoeuvre))
 
@@ -125,7 +126,7 @@ def test_the_heave_trim_is_identified_from_a_recorded_hover(tmp_path: Path, caps
     from ucat_console.backend.sim.params import VehicleConfig
 
     cfg = AppConfig(plant=PlantConfig(vehicle=VehicleConfig(buoyancy_ratio=1.005)),
-                    console=ConsoleConfig(sim_depth=2.0), access=AccessConfig(token=TOKEN))
+                    devices=DevicesConfig(start=SimStartConfig(depth=2.0)), access=AccessConfig(token=TOKEN))
     cfg = cfg.replace(loop=cfg.loop.replace(mode="baseline"))
     sup = Console(cfg, tmp_path).sup
     try:

@@ -20,7 +20,7 @@ from ucat_console.robot.readings import DepthReading
 from ucat_console.backend.sim_robot_io import SimRobotIO
 from ucat_console.backend.sessions.reader import SessionReader
 from ucat_console.backend.supervisor import CommandRefused, SteadyPacedClock, Supervisor
-from ucat_console.backend.supervisor.robots import sim_robot
+from ucat_console.backend.robots import robot as registered_robot
 from ucat_console.backend.access import AccessConfig
 from ucat_console.backend.failsafe_config import FailsafeConfig, FailsafeRule
 from ucat_console.config import AppConfig, ConsoleConfig, load_config
@@ -874,7 +874,9 @@ def test_only_the_simulated_robot_runs_events_early(make_console: Callable[..., 
     the simulator gets a clock that waits for every event."""
     cfg = make_config().replace(console=ConsoleConfig(supervise_period=0.05, record_tail=1.0, sim_early=0.015))
     for robot, early in (("sim", 0.015), ("sim-devices", 0.0), ("hardware", 0.0)):
-        sup = make_console(cfg.replace(robot=robot), robot_factory=sim_robot, clock=None).sup
+        sim = registered_robot("sim").build  # the simulator stands in for every robot's devices
+        sup = make_console(cfg.replace(robot=robot), robot_factory=lambda c, ev: sim(c.devices, c.plant, ev),
+                           clock=None).sup
         try:
             assert isinstance(sup.clock, SteadyPacedClock) and sup.clock.early == early, robot
         finally:

@@ -13,7 +13,8 @@ from support import Console, wait_for
 
 from ucat_console.backend.supervisor import CommandRefused
 from ucat_console.backend.access import AccessConfig
-from ucat_console.config import AppConfig, ConsoleConfig, load_config
+from ucat_console.backend.devices.config import DevicesConfig, SimStartConfig
+from ucat_console.config import AppConfig, load_config
 from ucat_console.telemetry import channels as ch
 from ucat_console.ui.app import ConsoleApp, is_loopback
 from ucat_console.ui.identify_inputs import NO_SESSION
@@ -368,7 +369,7 @@ def test_recording_buttons_follow_the_recording_and_setpoints_show_rounded(app: 
 
 
 def test_the_pilot_identifies_the_fin_model_from_the_session_tab(tmp_path: Path) -> None:
-    cfg = AppConfig(access=AccessConfig(token=TOKEN), console=ConsoleConfig(sim_depth=3.0))
+    cfg = AppConfig(access=AccessConfig(token=TOKEN), devices=DevicesConfig(start=SimStartConfig(depth=3.0)))
     sup = Console(cfg, tmp_path).sup
     a = ConsoleApp(sup, port=0)
     try:

@@ -60,14 +60,9 @@ def run_step(step: Step, cfg: AppConfig) -> None:
     fn(cfg, *step.args)
 
 
-def _worker(tasks: Any, results: Any, cfg_toml: str, steps: list[Step]) -> None:
-    import tomllib
-
-    try:
-        cfg = AppConfig.from_dict(tomllib.loads(cfg_toml))
-    except Exception as e:
-        results.put(("error", "", f"{type(e).__name__}: {e}"))
-        return
+def _worker(tasks: Any, results: Any, cfg: AppConfig, steps: list[Step]) -> None:
+    # the parent's configuration as it is (pickled): a mode or a robot registered by a module
+    # the parent imported is not in this process's registries, and no step needs them
     by_key = {s.key: s for s in steps}
     while True:
         key = tasks.get()
@@ -133,7 +128,7 @@ class Preparation:
             os.environ.update(env or {})
             for i in range(max(1, min(n, len(self.steps)))):
                 self._tasks.put(None)
-                p = ctx.Process(target=_worker, args=(self._tasks, self._results, cfg.to_toml(), self.steps),
+                p = ctx.Process(target=_worker, args=(self._tasks, self._results, cfg, self.steps),
                                 name=f"ucat-prepare-{i}", daemon=True)
                 p.start()
                 self._procs.append(p)

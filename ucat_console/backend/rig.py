@@ -1,7 +1,7 @@
 """The robot behind the closed loop, built from configuration: :func:`build_robot_io`.
 
-Three robots share one interface (``robot.interface.RobotIO``), picked by the
-configuration's ``robot``::
+The built-in robots (``backend.robots``, the registry the configuration's ``robot`` names
+one of) share one interface (``robot.interface.RobotIO``)::
 
     sim          SimRobotIO ------------------------------------> Plant (in process)
     sim-devices  DeviceRobotIO -> drivers -> virtual CAN / pty / 127.0.0.1 -> emulators -> Plant
@@ -17,7 +17,8 @@ from __future__ import annotations
 import logging
 from typing import Callable
 
-from ucat_console.backend.devices.config import ROBOTS, DevicesConfig
+from ucat_console.backend import robots
+from ucat_console.backend.devices.config import DevicesConfig
 from ucat_console.backend.devices.device_robot_io import DeviceRobotIO
 from ucat_console.backend.sim_rig import SimRig
 from ucat_console.backend.sim_robot_io import SimRobotIO
@@ -37,50 +38,59 @@ def build_robot_io(
     plant: PlantConfig | None = None,
     event_sink: EventSink | None = None,
 ) -> tuple[RobotIO, Close]:
-    """The robot ``robot`` (one of :data:`ROBOTS`, ``AppConfig.robot``) with the devices
-    ``devices``, started, and the function that shuts it down.
-
-    * ``sim``: the in-process :class:`SimRobotIO` (no devices; events only of readings its
-      plausibility checks drop);
-    * ``sim-devices``: a :class:`SimRig` (plant + emulators) and a :class:`DeviceRobotIO`
-      on the rig's endpoints, at the rig's pace;
-    * ``hardware``: a :class:`DeviceRobotIO` on the configured endpoints.
+    """The registered robot ``robot`` (``AppConfig.robot``, :mod:`~ucat_console.backend.robots`)
+    with the devices ``devices``, started, and the function that shuts it down: for the
+    built-in ones, :func:`build_sim`, :func:`build_sim_devices` or :func:`build_hardware`.
 
     ``plant`` configures the simulated plant. ``event_sink`` receives
     the robot's fault events from the start (more sinks: :func:`connect_events`). Bad configuration fails here with a
     ValueError naming the key (see :meth:`DeviceRobotIO.start`); nothing is left running.
     """
-    if robot not in ROBOTS:
-        raise ValueError(f"robot: {robot!r} is not one of {', '.join(ROBOTS)}")
+    entry = robots.robot(robot)
     if not isinstance(devices, DevicesConfig):
         raise ValueError(f"devices: expected a DevicesConfig, got {type(devices).__name__}")
-    cfg, plant_cfg = devices, plant
-    if robot == "sim":
-        s = cfg.start
-        io = SimRobotIO(plant_cfg, depth=s.depth, yaw=s.yaw, velocity=s.velocity,
-                        seed=None if s.seed < 0 else s.seed, plausibility=cfg.plausibility, on_event=event_sink)
-        return io, io.close
-    if robot == "sim-devices":
-        rig = SimRig(cfg, plant_cfg)
-        driver_cfg = rig.start()
+    return entry.build(devices, plant if plant is not None else PlantConfig(), event_sink)
+
+
+def build_sim(devices: DevicesConfig, plant: PlantConfig, event_sink: EventSink | None) -> tuple[RobotIO, Close]:
+    """The in-process :class:`SimRobotIO` at ``devices.start`` (no devices; events only of
+    readings its plausibility checks drop)."""
+    s = devices.start
+    io = SimRobotIO(plant, depth=s.depth, yaw=s.yaw, velocity=s.velocity,
+                    seed=None if s.seed < 0 else s.seed, plausibility=devices.plausibility, on_event=event_sink)
+    return io, io.close
+
+
+def build_sim_devices(devices: DevicesConfig, plant: PlantConfig,
+                      event_sink: EventSink | None) -> tuple[RobotIO, Close]:
+    """A :class:`SimRig` (plant + emulators, starting at ``devices.start``) and a
+    :class:`DeviceRobotIO` on the rig's endpoints, at the rig's pace."""
+    cfg = devices
+    rig = SimRig(cfg, plant)
+    driver_cfg = rig.start()
+    try:
+        dev = DeviceRobotIO(driver_cfg, pace=cfg.rig.pace, truth=rig.truth, on_event=event_sink,
+                            device_time=rig.device_time)
+        dev.rig = rig
+        rig.on_event = dev.publish_event
+        dev.start()
+    except BaseException:
+        rig.stop()
+        raise
+
+    def close_sim_devices() -> None:
         try:
-            dev = DeviceRobotIO(driver_cfg, pace=cfg.rig.pace, truth=rig.truth, on_event=event_sink,
-                                device_time=rig.device_time)
-            dev.rig = rig
-            rig.on_event = dev.publish_event
-            dev.start()
-        except BaseException:
+            dev.close()
+        finally:
             rig.stop()
-            raise
 
-        def close_sim_devices() -> None:
-            try:
-                dev.close()
-            finally:
-                rig.stop()
+    log.info("robot: simulated U-CAT behind the device emulators (pace %g)", cfg.rig.pace)
+    return dev, close_sim_devices
 
-        log.info("robot: simulated U-CAT behind the device emulators (pace %g)", cfg.rig.pace)
-        return dev, close_sim_devices
+
+def build_hardware(devices: DevicesConfig, plant: PlantConfig, event_sink: EventSink | None) -> tuple[RobotIO, Close]:
+    """A :class:`DeviceRobotIO` on the configured endpoints (``plant`` unused)."""
+    cfg = devices
     dev = DeviceRobotIO(cfg, pace=1.0, on_event=event_sink)
     dev.start()
     log.info("robot: hardware (CAN %s %s, IMU %s, DVL %s:%d, pressure %s)", cfg.epos2.interface,

@@ -55,7 +55,9 @@ def _record_manoeuvre(cfg: Any, directory: Path | None, realtime: bool) -> Path:
     from ucat_console.backend.loop.clock import SimulatedClock
     from ucat_console.backend.supervisor import Supervisor
 
-    fast = cfg.robot == "sim" and not realtime
+    from ucat_console.backend.robots import robot
+
+    fast = robot(cfg.robot).computed_readings and not realtime
     sup = Supervisor(cfg, clock=SimulatedClock() if fast else None, sessions_dir=directory)
     try:
         sup.start()

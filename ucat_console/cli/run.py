@@ -126,6 +126,7 @@ def _wait_first_step(sup: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ucat_console.backend.access import LOCAL
+    from ucat_console.backend.robots import robot
     from ucat_console.backend.loop.clock import SimulatedClock
     from ucat_console.backend.supervisor import Supervisor
     from ucat_console.telemetry import channels as ch
@@ -138,8 +139,8 @@ def run(args: argparse.Namespace) -> int:
     if args.fast and not args.headless:
         raise ValueError("--fast: only with --headless")
     cfg = _config(args)
-    if args.fast and cfg.robot != "sim":
-        raise ValueError("--fast: only with the simulated robot")
+    if args.fast and not robot(cfg.robot).computed_readings:
+        raise ValueError(f"--fast: only with a robot whose readings the console computes (sim), not {cfg.robot!r}")
     if not args.headless and not is_loopback(cfg.console.host):
         print(f"WARNING: binding to {cfg.console.host}: the page is reachable from other machines "
               "(control still needs the pilot token)", file=sys.stderr)

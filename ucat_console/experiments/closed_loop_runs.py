@@ -314,13 +314,15 @@ def identify_plant(plant: str, seed: int, quick: bool) -> dict[str, Any]:
     from ucat_console.backend.loop.clock import SimulatedClock
     from ucat_console.backend.supervisor import Supervisor
     from ucat_console.backend.access import AccessConfig
+    from ucat_console.backend.devices.config import DevicesConfig, SimStartConfig
     from ucat_console.config import AppConfig, ConsoleConfig
     from ucat_console.control.params import ManoeuvreConfig
 
     # from 8 m: the manoeuvre's off-centre steps climb the faster plants by more than 3 m, and
     # above the surface the pressure transducer measures nothing (the depth failsafe ends the run)
     app = AppConfig(plant=plant_config(plant, seed),
-                    console=ConsoleConfig(sim_depth=E6_IDENTIFY_DEPTH, record_on_arm=False),
+                    console=ConsoleConfig(record_on_arm=False),
+                    devices=DevicesConfig(start=SimStartConfig(depth=E6_IDENTIFY_DEPTH)),
                     access=AccessConfig(token="e6-identify"))
     if quick:
         app = app.replace(loop=app.loop.replace(manoeuvre=ManoeuvreConfig(step_s=12.0)))

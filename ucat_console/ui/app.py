@@ -316,7 +316,7 @@ class ConsoleApp:
         (where it is; without a pose yet, where the simulated robot starts); the point looked at.
         The position goes first: viser moves the point looked at with the position."""
         p = scene.world_position() if scene is not None else None
-        x, y, z = p if p is not None else (0.0, 0.0, -max(self.cfg.sim_depth, 0.3))
+        x, y, z = p if p is not None else (0.0, 0.0, -max(self.sup.start_depth, 0.3))
         try:
             with client.atomic():
                 client.camera.position = (x - 1.0, y + 0.8, z + 0.35)

@@ -1,7 +1,6 @@
-"""Where the robot's devices are: :class:`DevicesConfig`; the robots the console can drive:
-:data:`ROBOTS` (the application configuration's one selector, ``robot``).
-
-Three robots behind the same closed loop:
+"""Where the robot's devices are: :class:`DevicesConfig`, for the built-in robots the
+console can drive (``backend.robots``, the application configuration's one selector,
+``robot``), behind the same closed loop:
 
 * ``"sim"``: the in-process simulated U-CAT (``backend.sim_robot_io.SimRobotIO``), no devices;
 * ``"sim-devices"``: the simulated U-CAT behind protocol-exact emulators (EPOS2 nodes on a
@@ -33,15 +32,12 @@ from ucat_console.backend.devices.pressure import PressureConfig
 from ucat_console.backend.devices.pressure_emulator import PressureEmulatorConfig
 from ucat_console.typedconf import Config, param
 
-#: the robots the console can drive (``AppConfig.robot``)
-ROBOTS = ("sim", "sim-devices", "hardware")
-
-
 @dataclass(frozen=True)
 class SimStartConfig(Config):
     """Where the simulated U-CAT starts (robot ``sim`` and ``sim-devices``)."""
 
-    depth: float = param(1.0, lo=0.0, hi=1000.0, unit="m", doc="start depth (positive down)")
+    depth: float = param(0.5, lo=0.0, hi=1000.0, unit="m",
+                         doc="start depth (positive down); the depth setpoint starts there too")
     yaw: float = param(0.0, lo=-math.pi, hi=math.pi, unit="rad", doc="start heading")
     velocity: float = param(0.0, lo=-5.0, hi=5.0, unit="m/s", doc="start surge (body x)")
     seed: int = param(

@@ -1,5 +1,4 @@
-"""The supervisor and its parts (one module each): the robot's factory and clock
-(``robots``), live tuning and its journal (``tuning``), the two-step arming (``arm_requests``), recording (``recording``),
+"""The supervisor and its parts (one module each): the robot's clock (``robots``), live tuning and its journal (``tuning``), the two-step arming (``arm_requests``), recording (``recording``),
 the device commands (``rig_control``), the identification manoeuvre (``manoeuvre``), the
 loop's stream onto the public one (``forwarding``), the health line (``health``), and the
 :class:`Supervisor` that holds them together (``supervisor``). Refused commands raise
@@ -7,15 +6,9 @@ loop's stream onto the public one (``forwarding``), the health line (``health``)
 
 from ucat_console.backend.loop.commands import CommandRefused
 from ucat_console.backend.supervisor.health import Health
-from ucat_console.backend.supervisor.robots import (
-    ROBOT_FACTORIES,
-    RobotFactory,
-    SteadyPacedClock,
-    rig_robot,
-    sim_robot,
-)
+from ucat_console.backend.supervisor.robots import RobotFactory, SteadyPacedClock
 from ucat_console.backend.supervisor.supervisor import SETPOINTS, Supervisor
 from ucat_console.backend.supervisor.tuning import TUNABLE, JournalEntry
 
-__all__ = ["CommandRefused", "Health", "ROBOT_FACTORIES", "RobotFactory", "SETPOINTS", "SteadyPacedClock",
-           "Supervisor", "TUNABLE", "JournalEntry", "rig_robot", "sim_robot"]
+__all__ = ["CommandRefused", "Health", "RobotFactory", "SETPOINTS", "SteadyPacedClock", "Supervisor", "TUNABLE",
+           "JournalEntry"]

@@ -1,8 +1,8 @@
 """Where the supervisor's robot comes from, and the clock it runs on in real time.
 
-A robot factory is ``(app_config, event_sink) -> (robot_io, close)``: :func:`sim_robot`
-(the default for ``robot = "sim"``) or :func:`rig_robot` (the drivers, for ``"sim-devices"``
-and ``"hardware"``: ``ucat_console.backend.rig.build_robot_io``).
+The robot is the registered one the configuration names (``backend.robots``); a test may
+hand the supervisor a robot factory of its own, ``(app_config, event_sink) -> (robot_io,
+close)``.
 """
 
 from __future__ import annotations
@@ -11,7 +11,6 @@ import math
 from typing import TYPE_CHECKING, Callable
 
 from ucat_console.backend.loop.clock import PacedClock
-from ucat_console.backend.sim_robot_io import SimRobotIO
 from ucat_console.config import AppConfig
 from ucat_console.robot.interface import RobotIO
 from ucat_console.telemetry.events import EventSink
@@ -20,23 +19,6 @@ if TYPE_CHECKING:
     from ucat_console.backend.sim_rig import SimRig
 
 RobotFactory = Callable[[AppConfig, EventSink], tuple[RobotIO, Callable[[], None]]]
-
-
-def sim_robot(cfg: AppConfig, events: EventSink) -> tuple[RobotIO, Callable[[], None]]:
-    """The in-process simulated U-CAT, level at ``console.sim_depth``; its readings' checks
-    report to ``events``."""
-    return SimRobotIO(cfg.plant, depth=cfg.console.sim_depth, plausibility=cfg.devices.plausibility,
-                      on_event=events), lambda: None
-
-
-def rig_robot(cfg: AppConfig, events: EventSink) -> tuple[RobotIO, Callable[[], None]]:
-    """The device rig (drivers on emulators or the robot), from ``backend.rig``."""
-    from ucat_console.backend import rig
-
-    return rig.build_robot_io(cfg.robot, cfg.devices, plant=cfg.plant, event_sink=events)
-
-
-ROBOT_FACTORIES: dict[str, RobotFactory] = {"sim": sim_robot, "sim-devices": rig_robot, "hardware": rig_robot}
 
 
 def simulated_rig(robot_io: RobotIO) -> SimRig | None:

@@ -86,7 +86,8 @@ from ucat_console.backend.supervisor.health import Health
 from ucat_console.backend.supervisor.manoeuvre import ManoeuvreHost, ManoeuvreRun
 from ucat_console.backend.supervisor.recording import SessionRecording
 from ucat_console.backend.supervisor.rig_control import RigControl, RigHost
-from ucat_console.backend.supervisor.robots import ROBOT_FACTORIES, RobotFactory, SteadyPacedClock, simulated_rig
+from ucat_console.backend.robots import robot
+from ucat_console.backend.supervisor.robots import RobotFactory, SteadyPacedClock, simulated_rig
 from ucat_console.backend.supervisor.tuning import Journal, JournalEntry, Tuning, fmt
 from ucat_console.backend.supervisor.watchdog import LoopWatchdog
 from ucat_console.config import AppConfig
@@ -140,20 +141,21 @@ class Supervisor:
         # which the drivers' heartbeat supervision would read as silent drives
         mine = (cfg.mpc.formulation,) if planner_ready is not None else None
         log.debug("planners warmed up in %.2f s", warm_up(cfg.loop, formulations=mine))
-        factory = robot_factory or ROBOT_FACTORIES[cfg.robot]
+        entry = robot(cfg.robot)
+        factory = robot_factory or (lambda c, events: entry.build(c.devices, c.plant, events))
         inner, self._close_robot = factory(cfg, self.report_event)
         #: the simulated rig behind the drivers (robot "sim-devices"), else None
         self.rig: SimRig | None = simulated_rig(inner)
         try:
             self.gate = ArmingGate(inner, on_invalid=self._on_invalid_reading)
-            sim = cfg.robot == "sim"
             # a computed reading may be taken early, a device's not before its time
-            early = cfg.console.sim_early if sim else 0.0
+            early = cfg.console.sim_early if entry.computed_readings else 0.0
             self.clock: Clock = clock if clock is not None else SteadyPacedClock(1.0, early, cfg.console.max_lag)
-            start_depth = cfg.console.sim_depth if sim else 0.0
+            #: where the depth setpoint starts (the simulated robot's start, else the surface)
+            self.start_depth = min(entry.start_depth(cfg.devices), cfg.loop.max_depth)
             self.loop = ClosedLoop(
                 cfg.loop, self.gate, self._loop_stream, self.clock,
-                setpoints=BodySetpoints(depth=min(start_depth, cfg.loop.max_depth)),
+                setpoints=BodySetpoints(depth=self.start_depth),
                 source=cfg.robot, driving=lambda: self.gate.armed, status=self.status,
             )
         except BaseException:
@@ -186,8 +188,7 @@ class Supervisor:
         )
         # the leak detector, read by the console on any robot; a simulated one's is emulated
         leak = cfg.devices.leak
-        simulated = cfg.robot in ("sim", "sim-devices")
-        self.leak_emulator = LeakEmulator(leak.active_high) if simulated and not leak.path else None
+        self.leak_emulator = LeakEmulator(leak.active_high) if entry.simulated and not leak.path else None
         path = leak.path or (str(self.leak_emulator.path) if self.leak_emulator is not None else "")
         self.leak = LeakInput(leak, path, self.report_event, lambda: self.loop.time) if path else None
         self.rig_control = RigControl(RigHost(
@@ -624,7 +625,7 @@ class Supervisor:
         """Fault injection on a simulated robot: the loop's thread is held for ``seconds``
         s at its next chunk (the loop watchdog's trigger). The caller does not wait."""
         self.access.require_pilot(who, "stall the loop")
-        if self.cfg.robot not in ("sim", "sim-devices"):
+        if not self.cfg.simulated:
             raise CommandRefused(f"stall the loop: only on a simulated robot (this one is {self.cfg.robot!r})")
         s = number("seconds", seconds, False)
         if not 0.0 < s <= 60.0:
