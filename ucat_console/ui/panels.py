@@ -1,3 +1,4 @@
+# Over 600 lines: one page's controls (setpoints, arming, tuning, recording, events, theme) share that page's handles and its pilot state.
 """Per-page control panels: pilot token and hand-over, arming, mode, setpoints, live tuning,
 recording; plus the shared read-only panels (MPC introspection, failsafes, journal, events).
 

@@ -1,9 +1,8 @@
 """Reading session files: messages decoded back to the telemetry dataclasses.
 
 :class:`SessionReader` opens one session file (part) and refuses, with a ValueError naming
-the problem: a path outside the sessions directory, a file that is not MCAP, a truncated
-file (no summary: run ``ucat-console sessions repair``), a corrupted file, and a foreign
-MCAP file (a channel or schema that is not ours).
+the problem: a path outside the sessions directory, a file that is not MCAP, a truncated file
+(no summary: ``ucat-console sessions repair``), a corrupted or a foreign one (not our channels).
 
 :class:`SessionParts` opens every part of one session (``<id>_001.mcap``, ``_002`` ...)
 and reads them as one recording with the same interface: records in time order across
@@ -11,14 +10,12 @@ part boundaries, the state at any time, the events of every part. It refuses a g
 the part numbers and parts that disagree on the session or its ``epoch_offset``;
 :func:`open_session` opens a session by id or by any of its part files.
 
-Times given to and returned by the reader are seconds on the recorded stream's clock (the
-messages' ``t``); the file's ``epoch_offset`` converts them to the file's nanoseconds.
-Time ranges are half-open, ``[start, end)``, as mcap's ``starting_at``/``ending_before``.
+Times are seconds on the recorded stream's clock (the messages' ``t``; the file's
+``epoch_offset`` converts them to its nanoseconds), ranges half-open ``[start, end)``.
 
-The reader is a typed view: the MCAP file's summary, metadata and chunks are read by
-:mod:`.mcap_read` (beside the writer, :mod:`.mcap_writer`), a session's part files are
-found by :mod:`.files`; here the messages are decoded and a part and a whole session offer
-one interface (one base: records in time order, ``state_at``, events).
+The reader is a typed view: :mod:`.mcap_read` reads the file (beside the writer), :mod:`.files`
+finds a session's parts; here the messages are decoded, and a part and a whole session offer
+one interface (records in time order, ``state_at``, events).
 """
 
 from __future__ import annotations
@@ -255,11 +252,10 @@ class _Recording(BudgetHolder):
 class SessionReader(McapFile, _Recording):
     """One session file, opened for reading (use as a context manager or ``close()``).
 
-    Its summary, metadata and chunks are read by :class:`~.mcap_read.McapFile`, within the
-    limits of its ``budget`` (:mod:`~ucat_console.backend.sessions.limits`; default: one of
-    its own with the default limits), with ``os.pread``: one reader may
-    serve several threads (the pages sharing it, :mod:`.shared`). Its channels must be ours
-    (our schemas); its messages are decoded to the telemetry dataclasses.
+    Read by :class:`~.mcap_read.McapFile` within its ``budget``'s limits (default: a budget
+    of its own), with ``os.pread``: one reader may serve several threads (the pages sharing
+    it, :mod:`.shared`). Its channels must be ours; its messages are decoded to the
+    telemetry dataclasses.
     """
 
     def __init__(self, path: str | Path, directory: str | Path | None = None, *, confined: bool = True,

@@ -1,3 +1,4 @@
+# Over 600 lines: the supervisor composes the console's parts and is the one door of every command (access and failsafe checks, then the part that acts).
 """The supervisor: one process running the robot, the closed loop, the failsafes and the recorder.
 
 ::
