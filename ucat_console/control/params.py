@@ -214,6 +214,26 @@ class BodyConfig(Config):
         "loop closes on (0: none): the fins sample their force targets once a cycle, so DVL noise in the "
         "surge demand would reach each fin at a different time and turn the robot",
     )
+    schedule: bool = param(
+        True, doc="designed layer: the loops' gains and the speed low-pass follow the period of the cycles the fins "
+        "execute (the configured ones are for the design delay, 1.25 s; control.body_design), between "
+        "schedule_min_delay and schedule_max_delay",
+    )
+    schedule_min_delay: float = param(
+        DESIGN_DELAY, lo=0.1, hi=4.0, unit="s",
+        doc="designed layer: the shortest fin delay the loops are scheduled for (the design delay: shorter "
+        "cycles keep the configured gains)",
+    )
+    schedule_max_delay: float = param(
+        2.0, lo=0.1, hi=4.0, unit="s",
+        doc="designed layer: the longest fin delay the loops are scheduled for (longer cycles keep its gains; "
+        "beyond 4 s the designed velocity loop would have no proportional gain)",
+    )
+    schedule_filter: float = param(
+        5.0, lo=0.0, hi=60.0, unit="s",
+        doc="designed layer: time constant of the low-pass on the fins' executed cycle period the loops are "
+        "scheduled on",
+    )
     max_fin_force: float = param(
         0.0, lo=0.0, hi=100.0, unit="N",
         doc="designed layer: the most force the allocation asks of a fin by the fin model (0: what the drives "
@@ -258,6 +278,11 @@ class BodyConfig(Config):
     )
 
     def _check(self) -> None:
+        if self.schedule_min_delay > self.schedule_max_delay:
+            raise ValueError(
+                f"schedule_min_delay: {self.schedule_min_delay!r} s is above schedule_max_delay "
+                f"({self.schedule_max_delay!r} s); allowed: at most schedule_max_delay"
+            )
         if self.layer == "designed":
             for loop in ("velocity", "depth", "yaw_rate"):
                 if getattr(self, loop).kp <= 0.0:
