@@ -179,7 +179,9 @@ def test_the_compiled_body_layer_names_a_bad_reading():
 
 # ------------------------------------------------------------------ the designed layer
 def designed(**kw) -> BodyController:
-    return BodyController(BodyConfig(**kw), MpcConfig())
+    """The designed layer on its configured gains (not scheduled on the fins' cycles: no fin
+    runs here; ``test_body_schedule.py``)."""
+    return BodyController(BodyConfig(**{"schedule": False, **kw}), MpcConfig())
 
 
 def test_the_depth_reference_ramps_at_the_dive_rate_with_the_hull_drag_as_feed_forward():

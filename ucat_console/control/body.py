@@ -129,6 +129,8 @@ BODY_OK, BAD_DVL_VX, BAD_DVL_T, BAD_DEPTH, BAD_DEPTH_T, BAD_GYRO, BAD_IMU_T, BAD
 BODY_FIELDS = {BAD_DVL_VX: "dvl.vx", BAD_DVL_T: "dvl.t", BAD_DEPTH: "depth.depth_m", BAD_DEPTH_T: "depth.t",
                BAD_GYRO: "imu.gyro[2]", BAD_IMU_T: "imu.t", BAD_T: "t"}
 LAYERS = {"paper": 0.0, "designed": 1.0}
+#: how close (s) the scheduled delay comes to a fin's period before it takes it
+PERIOD_SNAP = 1e-3
 
 
 def body_size(window: int) -> int:
@@ -554,7 +556,7 @@ class BodyController:
     Feed readings with :meth:`on_dvl`, :meth:`on_depth`, :meth:`on_imu` (and the heading
     with :meth:`set_heading`) as they arrive and call :meth:`update` at the control rate.
     :meth:`on_cycle` (each fin's cycle as it begins, and when) schedules the designed loops
-    on the fins' executed cycle period (``BodyConfig.schedule``, ``control.body_design``).
+    on the fins' executed cycle periods (``BodyConfig.schedule``, ``control.body_design``).
     ``mpc`` and ``executor`` give the fin model and the drives' timing the designed layer's
     deliverable force comes from.
     """
@@ -610,16 +612,17 @@ class BodyController:
         return {"velocity": self.velocity_pid, "depth": self.depth_pid, "yaw_rate": self.yaw_pid}[loop]
 
     def reset(self) -> None:
-        """Forget every reading, output and held heading, and the fins' cycles: the loops run
-        the gains of the shortest scheduled delay again."""
+        """Forget every reading, output and held heading, and the fins' cycles: until the fins'
+        cycles show shorter periods the scheduled loops run the gains of the longest delay (a
+        loop designed for a longer delay stays stable with a shorter one)."""
         body_reset(self.state)
         # each paper fin's last cycle start (NaN: none yet); the executed period's estimate
         self._cycle_start = [math.nan] * 4
-        self._period = self.cfg.schedule_min_delay
+        self._period = self.cfg.schedule_max_delay
         self._period_t = math.nan
         self._delay = math.nan
         if self._scheduled:
-            self._schedule(self.cfg.schedule_min_delay)
+            self._schedule(self._period)
 
     @property
     def delay(self) -> float:
@@ -628,29 +631,31 @@ class BodyController:
         return self._delay if self._scheduled else DESIGN_DELAY
 
     def _schedule(self, delay: float) -> None:
-        """The designed loops' gains and the speed low-pass for the fins' ``delay`` (s),
-        bumplessly (``control.body_design.gain_schedule``, ``pid.Pid.schedule``)."""
+        """The designed loops' gains for the fins' ``delay`` (s) (``control.body_design.gain_schedule``,
+        ``pid.Pid.schedule``); nothing changes while the delay stays the same."""
+        if delay == self._delay:
+            return
         self._delay = delay
         scale = gain_schedule(self.cfg.hull, delay, DESIGN_DELAY, DESIGN_FACTOR)
         for pid, loop in ((self.velocity_pid, "velocity"), (self.depth_pid, "depth"), (self.yaw_pid, "heading")):
             g = scale[loop]
             pid.schedule((g.kp, g.ki, g.kd))
-        self.state[B_SPEED_TAU] = self.cfg.speed_filter * delay / DESIGN_DELAY
 
     def _cycle_began(self, fin: int, t: float) -> None:
         """Paper fin ``fin`` began a cycle at ``t``: the time since its last one is an executed
-        period; the loops follow the period's low-passed, bounded estimate."""
+        period, bounded. The scheduled delay follows it low-passed, a longer one quickly
+        (``schedule_rise``), a shorter one slowly (``schedule_filter``): the loops stay
+        scheduled for the longest of the fins' recent cycles, and their gains move smoothly."""
         cfg = self.cfg
         last, self._cycle_start[fin] = self._cycle_start[fin], t
         if not t > last:  # the first cycle, or not after the last
             return
         sample = min(cfg.schedule_max_delay, max(cfg.schedule_min_delay, t - last))
-        if math.isnan(self._period_t):
-            a = 1.0
-        else:
-            dt = max(0.0, t - self._period_t)
-            a = 1.0 if cfg.schedule_filter == 0.0 else 1.0 - math.exp(-dt / cfg.schedule_filter)
-        self._period += a * (sample - self._period)
+        tau = cfg.schedule_rise if sample > self._period else cfg.schedule_filter
+        dt = max(0.0, t - self._period_t) if self._period_t == self._period_t else t - last
+        self._period += (1.0 if tau == 0.0 else 1.0 - math.exp(-dt / tau)) * (sample - self._period)
+        if abs(self._period - sample) < PERIOD_SNAP:  # arrived (an exponential never quite does)
+            self._period = sample
         self._period_t = t
         self._schedule(self._period)
 

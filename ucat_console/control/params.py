@@ -215,9 +215,9 @@ class BodyConfig(Config):
         "surge demand would reach each fin at a different time and turn the robot",
     )
     schedule: bool = param(
-        True, doc="designed layer: the loops' gains and the speed low-pass follow the period of the cycles the fins "
-        "execute (the configured ones are for the design delay, 1.25 s; control.body_design), between "
-        "schedule_min_delay and schedule_max_delay",
+        True, doc="designed layer: the loops' gains follow the period of the cycles the fins execute (the "
+        "configured gains are for the design delay, 1.25 s; control.body_design), between schedule_min_delay and "
+        "schedule_max_delay, the period low-passed (schedule_rise, schedule_filter) so that the gains move smoothly",
     )
     schedule_min_delay: float = param(
         DESIGN_DELAY, lo=0.1, hi=4.0, unit="s",
@@ -229,10 +229,15 @@ class BodyConfig(Config):
         doc="designed layer: the longest fin delay the loops are scheduled for (longer cycles keep its gains; "
         "beyond 4 s the designed velocity loop would have no proportional gain)",
     )
+    schedule_rise: float = param(
+        2.0, lo=0.0, hi=600.0, unit="s",
+        doc="designed layer: time constant with which the scheduled delay follows a fin's cycle longer than it "
+        "(0: at once)",
+    )
     schedule_filter: float = param(
-        5.0, lo=0.0, hi=60.0, unit="s",
-        doc="designed layer: time constant of the low-pass on the fins' executed cycle period the loops are "
-        "scheduled on",
+        20.0, lo=0.0, hi=600.0, unit="s",
+        doc="designed layer: time constant with which the scheduled delay follows a fin's cycle shorter than it "
+        "(0: at once): slow, so the loops stay scheduled for the longest of the fins' recent cycles",
     )
     max_fin_force: float = param(
         0.0, lo=0.0, hi=100.0, unit="N",

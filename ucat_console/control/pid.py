@@ -14,8 +14,7 @@ saturation on the first step at which the error changes sign enough to pull it b
 
 ``preset(output)`` sets the integral so that the next output, with unchanged error and
 measurement, equals ``output`` (bumpless transfer when a loop is switched on).
-``schedule(scale)`` runs the gains times ``scale`` from now on, bumplessly: what the
-proportional and derivative terms of the last step change by goes into the integral.
+``schedule(scale)`` runs the gains times ``scale`` from now on (a gain schedule).
 """
 
 from __future__ import annotations
@@ -136,20 +135,6 @@ def set_pid_gains(s: np.ndarray, gains: PidGains, cap: float = math.inf,
     s[PID_INTEGRAL] = min(limit, max(-limit, float(s[PID_INTEGRAL])))
 
 
-def pid_rescaled(s: np.ndarray, kp: float, kd: float) -> None:
-    """The PID ``s`` runs ``kp`` and ``kd`` from now on (its ki and limit already set):
-    its last proportional and derivative terms are those of the new gains, and the integral
-    takes what they changed by, so the output for the same inputs stays what it was."""
-    p, d = float(s[PID_P]), float(s[PID_D])
-    p_new = p * kp / s[PID_KP] if s[PID_KP] > 0.0 else 0.0
-    d_new = d * kd / s[PID_KD] if s[PID_KD] > 0.0 else 0.0
-    shift = (p - p_new) + (d - d_new)
-    limit = float(s[PID_LIMIT])
-    s[PID_INTEGRAL] = min(limit, max(-limit, float(s[PID_INTEGRAL]) + shift))
-    s[PID_I_PREV] = float(s[PID_I_PREV]) + shift
-    s[PID_P], s[PID_D], s[PID_KP], s[PID_KD] = p_new, d_new, kp, kd
-
-
 class Pid:
     """One PID loop; ``update`` returns the limited output. Its numbers are a row of
     ``state`` (layout ``PID_*``): its own, or a row of a table another owner shares (the
@@ -190,18 +175,13 @@ class Pid:
         set_pid_gains(self.state, gains, self.cap, self.scale)
 
     def schedule(self, scale: tuple[float, float, float]) -> None:
-        """Run the gains times ``scale`` (kp, ki, kd; each >= 0) from now on, bumplessly: the
-        next output for the same inputs is what it would have been (module docstring)."""
+        """Run the gains times ``scale`` (kp, ki, kd; each >= 0) from now on, the integral
+        kept (it is in output units: a new ki does not move the output)."""
         for name, x in zip(("kp", "ki", "kd"), scale):
             if not (math.isfinite(x) and x >= 0.0):
                 raise ValueError(f"scale.{name}: {x!r} is out of range; allowed: a finite number >= 0")
-        s = self.state
-        kp0, kd0 = float(s[PID_KP]), float(s[PID_KD])
         self.scale = (float(scale[0]), float(scale[1]), float(scale[2]))
-        set_pid_gains(s, self.gains, self.cap, self.scale)
-        kp, kd = float(s[PID_KP]), float(s[PID_KD])
-        s[PID_KP], s[PID_KD] = kp0, kd0
-        pid_rescaled(s, kp, kd)
+        set_pid_gains(self.state, self.gains, self.cap, self.scale)
 
     def preset(self, output: float) -> None:
         """Make the next output equal ``output`` for the same inputs (bumpless transfer)."""
