@@ -16,6 +16,12 @@ from ucat_console.control.body_design import HullModel, designed_gains, gain_sch
 from ucat_console.control.params import DESIGN_DELAY, DESIGN_FACTOR, BodyConfig, PidGains
 from ucat_console.control.pid import Pid
 
+
+def scheduled(**kw) -> BodyConfig:
+    """The designed layer scheduled on the fins' cycles (off by default)."""
+    return BodyConfig(**{"schedule": True, **kw})
+
+
 LOOPS = (("velocity", "velocity"), ("depth", "depth"), ("yaw_rate", "heading"))
 
 
@@ -51,7 +57,7 @@ def test_the_schedule_is_the_ratio_of_the_designed_gains():
 
 
 def test_cycles_no_longer_than_the_design_delay_keep_the_configured_gains():
-    cfg = BodyConfig()
+    cfg = scheduled()
     ctl = BodyController(cfg)
     assert ctl.delay == cfg.schedule_max_delay  # before the fins' cycles are known: the longest
     assert gains_run(ctl, "depth")[0] < cfg.depth.kp
@@ -65,7 +71,7 @@ def test_cycles_no_longer_than_the_design_delay_keep_the_configured_gains():
 
 
 def test_long_cycles_run_the_gains_designed_for_their_period_within_the_bound():
-    cfg = BodyConfig(schedule_max_delay=2.5)
+    cfg = scheduled(schedule_max_delay=2.5)
     ctl = BodyController(cfg)
     cycles(ctl, 1.8, 200)  # 360 s: the low-passed estimate has come down from the longest delay
     assert ctl.delay == pytest.approx(1.8, rel=1e-3)
@@ -83,7 +89,7 @@ def test_long_cycles_run_the_gains_designed_for_their_period_within_the_bound():
 
 
 def test_the_delay_follows_longer_cycles_quickly_and_shorter_ones_slowly():
-    cfg = BodyConfig(schedule_rise=2.0, schedule_filter=20.0)
+    cfg = scheduled(schedule_rise=2.0, schedule_filter=20.0)
     ctl = BodyController(cfg)
     cycles(ctl, 1.0, 1000)
     assert ctl.delay == DESIGN_DELAY
@@ -101,7 +107,7 @@ def test_the_delay_follows_longer_cycles_quickly_and_shorter_ones_slowly():
 def test_the_gains_move_smoothly():
     """Each cycle moves the gains by a fraction of the way only: no fin's single long cycle
     changes a gain by more than schedule_rise allows."""
-    ctl = BodyController(BodyConfig())
+    ctl = BodyController(scheduled())
     cycles(ctl, 1.0, 1000)
     kp = [gains_run(ctl, "yaw_rate")[0]]
     t = 1000.0
@@ -117,7 +123,7 @@ def test_the_gains_move_smoothly():
 
 
 def test_unscheduled_or_paper_layers_keep_their_gains():
-    for cfg in (BodyConfig(schedule=False), BodyConfig(layer="paper", yaw_rate=PidGains(kp=3.0, limit=0.5))):
+    for cfg in (BodyConfig(), scheduled(schedule=False), scheduled(layer="paper", yaw_rate=PidGains(kp=3.0, limit=0.5))):
         ctl = BodyController(cfg)
         before = gains_run(ctl, "velocity")
         cycles(ctl, 3.0, 30)
@@ -126,9 +132,9 @@ def test_unscheduled_or_paper_layers_keep_their_gains():
 
 def test_the_bounds_are_checked():
     with pytest.raises(ValueError, match="schedule_min_delay"):
-        BodyConfig(schedule_min_delay=2.0, schedule_max_delay=1.5)
+        scheduled(schedule_min_delay=2.0, schedule_max_delay=1.5)
     with pytest.raises(ValueError, match="t"):
-        BodyController(BodyConfig()).on_cycle(0, (-0.1, 0.0), (-0.1, 0.0), math.nan)
+        BodyController(scheduled()).on_cycle(0, (-0.1, 0.0), (-0.1, 0.0), math.nan)
 
 
 def test_a_scheduled_pid_runs_its_gains_scaled_and_keeps_its_integral():

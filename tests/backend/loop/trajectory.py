@@ -32,11 +32,7 @@ way for yaw, which moves the MPC scenarios' first steps by design. They were wri
 when the MPC's centred cycle became the one of least cost among the solver's and a grid's
 (``MpcConfig.centre_grid``), which changes the MPC's plans by design: with ``centre_grid = 0``
 the run gave the former fixtures to rtol 1e-9, and the baseline scenario's first six seconds,
-before it switches to the MPC, stayed the same. They were written again when the designed
-layer's loops became scheduled on the fins' executed cycle period (``BodyConfig.schedule``,
-starting on the gains of the longest delay until the fins' cycles are known), which changes
-every trajectory by design: with ``schedule = false`` the run gave the former fixtures to
-rtol 1e-9.
+before it switches to the MPC, stayed the same.
 
 Each scenario starts the simulated U-CAT at 1 m depth surging at 0.2 m/s with the
 configuration of the shipped ``sim-tuned``, runs one mode with a velocity, depth and yaw
