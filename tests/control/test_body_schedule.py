@@ -123,7 +123,8 @@ def test_the_gains_move_smoothly():
 
 
 def test_unscheduled_or_paper_layers_keep_their_gains():
-    for cfg in (BodyConfig(), scheduled(schedule=False), scheduled(layer="paper", yaw_rate=PidGains(kp=3.0, limit=0.5))):
+    paper = scheduled(layer="paper", yaw_rate=PidGains(kp=3.0, limit=0.5))
+    for cfg in (BodyConfig(), scheduled(schedule=False), paper):
         ctl = BodyController(cfg)
         before = gains_run(ctl, "velocity")
         cycles(ctl, 3.0, 30)

@@ -631,8 +631,8 @@ class BodyController:
         return self._delay if self._scheduled else DESIGN_DELAY
 
     def _schedule(self, delay: float) -> None:
-        """The designed loops' gains for the fins' ``delay`` (s) (``control.body_design.gain_schedule``,
-        ``pid.Pid.schedule``); nothing changes while the delay stays the same."""
+        """The designed loops' gains for the fins' ``delay`` (s): the configured ones scaled by
+        ``control.body_design.gain_schedule``; nothing changes while the delay stays the same."""
         if delay == self._delay:
             return
         self._delay = delay
@@ -652,7 +652,7 @@ class BodyController:
             return
         sample = min(cfg.schedule_max_delay, max(cfg.schedule_min_delay, t - last))
         tau = cfg.schedule_rise if sample > self._period else cfg.schedule_filter
-        dt = max(0.0, t - self._period_t) if self._period_t == self._period_t else t - last
+        dt = t - last if math.isnan(self._period_t) else max(0.0, t - self._period_t)
         self._period += (1.0 if tau == 0.0 else 1.0 - math.exp(-dt / tau)) * (sample - self._period)
         if abs(self._period - sample) < PERIOD_SNAP:  # arrived (an exponential never quite does)
             self._period = sample

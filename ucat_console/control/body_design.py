@@ -50,13 +50,15 @@ rad/s the rear-synchronised MPC swings 20-27 degrees after a 0.25 N m push of 2 
 
 The fins' cycles are not always 1.25 s: the MPC's run up to 3 s at 0.1 m/s, a slow baseline
 gait (0.5 Hz) 2 s, and loops designed for 1.25 s then get their fins' force later than they
-were designed for. The body layer therefore schedules its loops on the period of the cycles
-the fins actually execute (``BodyConfig.schedule``): each fin's time from one cycle's first
-stroke to the next's, bounded (``schedule_min_delay``, ``schedule_max_delay``), is followed
-by the delay ``tau`` low-passed, a longer one within seconds (``schedule_rise``), a shorter
-one slowly (``schedule_filter``), so that the loops are designed for the longest of the
-fins' recent cycles and their gains move smoothly; before any cycle is known ``tau`` is the
-longest (a loop designed for a longer delay stays stable with a shorter one). Each loop's
+were designed for. The body layer can therefore schedule its loops on the period of the
+cycles the fins actually execute (``BodyConfig.schedule``, off by default: measured, it
+steadies slow gaits but costs the MPC modes heading; ``docs/control.md``): each fin's time
+from one cycle's first stroke to the next's, bounded (``schedule_min_delay``,
+``schedule_max_delay``), is followed by the delay ``tau`` low-passed, a longer one within
+seconds (``schedule_rise``), a shorter one slowly (``schedule_filter``), so that the loops
+are designed for the longest of the fins' recent cycles and their gains move smoothly;
+before any cycle is known ``tau`` is the longest (a loop designed for a longer delay stays
+stable with a shorter one). Each loop's
 configured gains are scaled by :func:`gain_schedule` (the gains designed for ``tau`` over
 those designed for the shipped 1.25 s); with the shortest delay at the design delay (the
 default), cycles of 1.25 s or shorter run the configured gains. Moving what the proportional
