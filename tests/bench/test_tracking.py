@@ -36,3 +36,16 @@ def test_the_speed_step_steps_the_speed_and_judges_the_heading():
     f = _figures(m, _log(t, np.ones_like(t), np.radians(np.where(t < 30.0, 0.0, -6.0))))
     assert f["heading_all_deg"] == pytest.approx(6.0)
     assert "t90" not in f
+
+
+def test_the_gait_change_is_the_baselines_and_judged_on_its_heading():
+    from ucat_console.bench.tracking import GAIT_FROM, GAIT_TO, verdicts
+
+    m = next(m for m in manoeuvres(quick=True) if m.name == "gait_change")
+    assert (m.velocity, m.gait_to, GAIT_FROM, GAIT_TO) == (0.1, 0.5, 2.0, 0.5)
+    t = np.arange(0.0, m.duration, 0.1)
+    f = _figures(m, _log(t, np.ones_like(t), np.radians(np.where(t < 30.0, 0.0, 6.0))))
+    assert f["heading_all_deg"] == pytest.approx(6.0)
+    v = verdicts({"gait_change": f})
+    assert v["gait_change/heading_all_deg"]["met"] is False
+    assert "gait_change/heading_all_deg" not in verdicts({"straight": {"heading_all_deg": 1.0}})

@@ -179,7 +179,9 @@ def test_the_compiled_body_layer_names_a_bad_reading():
 
 # ------------------------------------------------------------------ the designed layer
 def designed(**kw) -> BodyController:
-    return BodyController(BodyConfig(**kw), MpcConfig())
+    """The designed layer on its configured gains (not scheduled on the fins' cycles: no fin
+    runs here; ``test_body_schedule.py``)."""
+    return BodyController(BodyConfig(**{"schedule": False, **kw}), MpcConfig())
 
 
 def test_the_depth_reference_ramps_at_the_dive_rate_with_the_hull_drag_as_feed_forward():
@@ -387,18 +389,18 @@ def _fin_yaw(fx: float, k: int) -> float:
 def test_a_fin_whose_plan_makes_less_than_it_was_asked_is_fed_forward_to_the_others():
     ctl, sp = _cruising()
     for k in range(4):
-        ctl.on_cycle(k, (-0.1, 0.0), (-0.1, 0.0))
+        ctl.on_cycle(k, (-0.1, 0.0), (-0.1, 0.0), 0.0)
     ctl.update(0.1, sp)
     assert ctl.shortfall == pytest.approx((0.0, 0.0, 0.0), abs=1e-12)
     # fin 0's plan makes half the forward force it was asked: the yaw it misses is added
-    ctl.on_cycle(0, (-0.1, 0.0), (-0.05, 0.0))
+    ctl.on_cycle(0, (-0.1, 0.0), (-0.05, 0.0), 0.0)
     step = ctl.update(0.2, sp)
     missed = _fin_yaw(-0.1, 0) - _fin_yaw(-0.05, 0)
     assert ctl.shortfall[2] == pytest.approx(missed)
     assert ctl.shortfall[0] > 0.0  # and the surge it misses
     assert step.demand[2] == pytest.approx(step.outputs[2] + missed)
     off, sp = _cruising(feed_shortfall=False)
-    off.on_cycle(0, (-0.1, 0.0), (-0.05, 0.0))
+    off.on_cycle(0, (-0.1, 0.0), (-0.05, 0.0), 0.0)
     off.update(0.2, sp)
     assert off.shortfall == (0.0, 0.0, 0.0)
 
@@ -406,14 +408,14 @@ def test_a_fin_whose_plan_makes_less_than_it_was_asked_is_fed_forward_to_the_oth
 def test_a_fin_whose_executed_cycle_fell_short_of_its_plan_has_its_next_plans_corrected():
     ctl, sp = _cruising()
     for k in range(4):
-        ctl.on_cycle(k, (-0.1, 0.0), (-0.1, 0.0))
+        ctl.on_cycle(k, (-0.1, 0.0), (-0.1, 0.0), 0.0)
     # fin 2's strokes ran slow: its last cycle made (by the fin model) 60 % of its plan
     ctl.on_executed(2, (-0.1, 0.0), (-0.06, 0.0))
     ctl.update(0.1, sp)
     assert ctl.shortfall[2] == pytest.approx(_fin_yaw(-0.1, 2) - _fin_yaw(-0.06, 2))
     off, sp = _cruising(feed_executed=False)
     for k in range(4):
-        off.on_cycle(k, (-0.1, 0.0), (-0.1, 0.0))
+        off.on_cycle(k, (-0.1, 0.0), (-0.1, 0.0), 0.0)
     off.on_executed(2, (-0.1, 0.0), (-0.06, 0.0))
     off.update(0.1, sp)
     assert off.shortfall == pytest.approx((0.0, 0.0, 0.0), abs=1e-12)

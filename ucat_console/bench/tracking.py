@@ -17,6 +17,9 @@ rear pair synchronised, and the MPC's closed-stroke formulation):
   standard deviation of the heading error against the commanded heading (after SETTLE s);
 * ``speed_<v>``: from rest at 1 m to v in {0.1, 0.2, 0.3} m/s: the share of DVL samples
   within +-0.025 m/s of v from 30 s on;
+* ``gait_change`` (the baseline only, whose beat frequency is its gait): cruising at 0.1 m/s
+  at 1 m at 2 Hz, the frequency changes to 0.5 Hz at STEP_AT s (cycles from 0.5 s to 2 s: the
+  body loops' schedule follows): the heading from the start;
 * ``e5``: the paper's Fig. 8: from rest at 0.5 m to 3 m, 0.2 m/s, 0.1 rad/s, in a current of
   (0.03, 0.02, 0) m/s, 300 s: after the dive (from when the depth first comes within 5 cm),
   the depth MAE, the share of DVL samples within +-0.025 m/s, the mean yaw rate and its sign.
@@ -67,6 +70,7 @@ E5_CURRENT = (0.03, 0.02, 0.0)
 BAND = 0.025  # m/s
 DEPTH_FROM = 30.0  # s: ``depth_dev`` from here on
 WEAK_FIN = 2  # the paper fin whose drive is weak in the ``weak_fin`` case
+GAIT_FROM, GAIT_TO = 2.0, 0.5  # Hz: the baseline's beat frequency before and after the gait change
 
 #: the goals: figure (manoeuvre/name) -> (comparison, bound)
 GOALS: dict[str, tuple[str, float]] = {
@@ -94,6 +98,7 @@ GOALS: dict[str, tuple[str, float]] = {
     "depth_step_2m/t90": ("<=", 0.9 * 2.0 / 0.06 + 10.0),
     "depth_step_2m/heading_all_deg": ("<=", 5.0),
     "speed_step/heading_all_deg": ("<=", 5.0),
+    "gait_change/heading_all_deg": ("<=", 5.0),
 }
 
 #: the disturbance cases: name -> (buoyancy / weight, mass factor, the weak fin's speed factor)
@@ -125,6 +130,7 @@ class Manoeuvre:
     current: tuple[float, float, float] = (0.0, 0.0, 0.0)
     step_to: float | None = None  # the depth setpoint from STEP_AT on
     speed_to: float | None = None  # the speed setpoint from STEP_AT on
+    gait_to: float | None = None  # the baseline's beat frequency (Hz) from STEP_AT on (the baseline only)
 
 
 def manoeuvres(quick: bool = False) -> list[Manoeuvre]:
@@ -137,6 +143,7 @@ def manoeuvres(quick: bool = False) -> list[Manoeuvre]:
         Manoeuvre("turn", 120.0 * k, 0.2, 1.0, yaw_rate=0.1, start_velocity=0.2),
     ]
     out += [Manoeuvre(f"speed_{v:g}", 120.0 * k, v, 1.0) for v in SPEEDS]
+    out.append(Manoeuvre("gait_change", STEP_AT + 80.0 * k, 0.1, 1.0, start_velocity=0.1, gait_to=GAIT_TO))
     out.append(Manoeuvre("e5", 300.0 * k, 0.2, 3.0, yaw_rate=0.1, start_depth=0.5, current=E5_CURRENT))
     return out
 
@@ -163,7 +170,7 @@ def run_manoeuvre(app: Any, mode: str, formulation: str, m: Manoeuvre, seed: int
     """One manoeuvre in one mode (in a disturbance case of :data:`CASES`): its figures
     (module docstring) and its trace."""
     from ucat_console.backend.loop.closed_loop import ClosedLoop
-    from ucat_console.backend.loop.commands import SetSetpoints
+    from ucat_console.backend.loop.commands import SetBlock, SetSetpoints
     from ucat_console.backend.sim_robot_io import SimRobotIO
     from ucat_console.control.allocation import BodySetpoints
     from ucat_console.control.fin_cycle import direction_error
@@ -173,6 +180,8 @@ def run_manoeuvre(app: Any, mode: str, formulation: str, m: Manoeuvre, seed: int
     from ucat_console.telemetry.stream import TelemetryStream
 
     cfg = app.loop.replace(mode=mode, planner_seed=seed, mpc=app.mpc.replace(formulation=formulation))
+    if m.gait_to is not None:
+        cfg = cfg.replace(baseline=cfg.baseline.replace(frequency=GAIT_FROM))
     z0 = m.depth if m.start_depth is None else m.start_depth
     plant = plant_config(DEFAULT_PLANT, seed, m.current)
     buoyancy, mass, weak = CASES[case] if case is not None else (1.0, 1.0, 1.0)
@@ -219,9 +228,11 @@ def run_manoeuvre(app: Any, mode: str, formulation: str, m: Manoeuvre, seed: int
 
     chans = [ch.POWER, ch.DVL] + [ch.fin_strouhal(i) for i in range(4)] + [ch.fin_cycle(i) for i in range(4)]
     stream.subscribe(on, chans)
-    if m.step_to is not None or m.speed_to is not None:
+    if m.step_to is not None or m.speed_to is not None or m.gait_to is not None:
         loop.run_until(STEP_AT)
         loop.submit(SetSetpoints(depth=m.step_to, velocity=m.speed_to))
+        if m.gait_to is not None:
+            loop.submit(SetBlock("baseline", cfg.baseline.replace(frequency=m.gait_to)))
     loop.run_until(m.duration)
     loop.close()
     return {"figures": _figures(m, log), "log": log}
@@ -309,7 +320,8 @@ def run_mode(app: Any, label: str, mode: str, formulation: str, quick: bool = Fa
     ratio: list[float] = []
     wanted = None if case is None else {k.split("/")[0] for k in CASE_GOALS[case]}
     for m in manoeuvres(quick):
-        if (wanted is not None and m.name not in wanted) or (only is not None and m.name not in only):
+        if (wanted is not None and m.name not in wanted) or (only is not None and m.name not in only) \
+                or (m.gait_to is not None and mode != "baseline"):
             continue
         r = run_manoeuvre(app, mode, formulation, m, seed, case)
         figures[m.name] = r["figures"]
@@ -333,6 +345,8 @@ def verdicts(figures: dict[str, Any], goals: dict[str, tuple[str, float]] | None
     """Each goal (of :data:`GOALS` by default): the figure, the bound and whether it is met."""
     out = {}
     for key, (op, bound) in (GOALS if goals is None else goals).items():
+        if key.split("/")[0] not in figures:  # a manoeuvre this mode does not run
+            continue
         v = _lookup(figures, key)
         met = (v <= bound) if op == "<=" else (v >= bound) if op == ">=" else (v < bound)
         out[key] = {"value": v, "goal": f"{op} {bound:g}", "met": bool(met)}

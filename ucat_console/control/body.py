@@ -65,7 +65,8 @@ from ucat_console.control.allocation import (
 )
 from ucat_console.control.argcheck import finite
 from ucat_console.control.filters import MedianFilter, median_clear, median_push, median_size, median_value
-from ucat_console.control.params import BodyConfig, ExecutorConfig, MpcConfig
+from ucat_console.control.body_design import gain_schedule
+from ucat_console.control.params import DESIGN_DELAY, DESIGN_FACTOR, BodyConfig, ExecutorConfig, MpcConfig
 from ucat_console.control.pid import EARLIER, NPID, Pid, pid_reset, pid_step, pid_step_rate, pid_unwind
 from ucat_console.control.stroke_timing import deliverable_force
 from ucat_console.robot.fins import PAPER_SIDES
@@ -128,6 +129,8 @@ BODY_OK, BAD_DVL_VX, BAD_DVL_T, BAD_DEPTH, BAD_DEPTH_T, BAD_GYRO, BAD_IMU_T, BAD
 BODY_FIELDS = {BAD_DVL_VX: "dvl.vx", BAD_DVL_T: "dvl.t", BAD_DEPTH: "depth.depth_m", BAD_DEPTH_T: "depth.t",
                BAD_GYRO: "imu.gyro[2]", BAD_IMU_T: "imu.t", BAD_T: "t"}
 LAYERS = {"paper": 0.0, "designed": 1.0}
+#: how close (s) the scheduled delay comes to a fin's period before it takes it
+PERIOD_SNAP = 1e-3
 
 
 def body_size(window: int) -> int:
@@ -552,6 +555,8 @@ class BodyController:
 
     Feed readings with :meth:`on_dvl`, :meth:`on_depth`, :meth:`on_imu` (and the heading
     with :meth:`set_heading`) as they arrive and call :meth:`update` at the control rate.
+    :meth:`on_cycle` (each fin's cycle as it begins, and when) schedules the designed loops
+    on the fins' executed cycle periods (``BodyConfig.schedule``, ``control.body_design``).
     ``mpc`` and ``executor`` give the fin model and the drives' timing the designed layer's
     deliverable force comes from.
     """
@@ -582,6 +587,7 @@ class BodyController:
         self.set_fin_model(mpc or MpcConfig())
         self.velocity_filter = MedianFilter(w, b, B_FILTERS)
         self.depth_filter = MedianFilter(w, b, B_FILTERS + median_size(w))
+        self._scheduled = cfg.layer == "designed" and cfg.schedule
         self.reset()
 
     def set_fin_model(self, mpc: MpcConfig) -> None:
@@ -606,7 +612,52 @@ class BodyController:
         return {"velocity": self.velocity_pid, "depth": self.depth_pid, "yaw_rate": self.yaw_pid}[loop]
 
     def reset(self) -> None:
+        """Forget every reading, output and held heading, and the fins' cycles: until the fins'
+        cycles show shorter periods the scheduled loops run the gains of the longest delay (a
+        loop designed for a longer delay stays stable with a shorter one)."""
         body_reset(self.state)
+        # each paper fin's last cycle start (NaN: none yet); the executed period's estimate
+        self._cycle_start = [math.nan] * 4
+        self._period = self.cfg.schedule_max_delay
+        self._period_t = math.nan
+        self._delay = math.nan
+        if self._scheduled:
+            self._schedule(self._period)
+
+    @property
+    def delay(self) -> float:
+        """The fins' delay the designed loops run the gains of (s): the executed cycle period,
+        filtered and bounded (``BodyConfig.schedule``); the design delay unscheduled."""
+        return self._delay if self._scheduled else DESIGN_DELAY
+
+    def _schedule(self, delay: float) -> None:
+        """The designed loops' gains for the fins' ``delay`` (s): the configured ones scaled by
+        ``control.body_design.gain_schedule``; nothing changes while the delay stays the same."""
+        if delay == self._delay:
+            return
+        self._delay = delay
+        scale = gain_schedule(self.cfg.hull, delay, DESIGN_DELAY, DESIGN_FACTOR)
+        for pid, loop in ((self.velocity_pid, "velocity"), (self.depth_pid, "depth"), (self.yaw_pid, "heading")):
+            g = scale[loop]
+            pid.schedule((g.kp, g.ki, g.kd))
+
+    def _cycle_began(self, fin: int, t: float) -> None:
+        """Paper fin ``fin`` began a cycle at ``t``: the time since its last one is an executed
+        period, bounded. The scheduled delay follows it low-passed, a longer one quickly
+        (``schedule_rise``), a shorter one slowly (``schedule_filter``): the loops stay
+        scheduled for the longest of the fins' recent cycles, and their gains move smoothly."""
+        cfg = self.cfg
+        last, self._cycle_start[fin] = self._cycle_start[fin], t
+        if not t > last:  # the first cycle, or not after the last
+            return
+        sample = min(cfg.schedule_max_delay, max(cfg.schedule_min_delay, t - last))
+        tau = cfg.schedule_rise if sample > self._period else cfg.schedule_filter
+        dt = t - last if math.isnan(self._period_t) else max(0.0, t - self._period_t)
+        self._period += (1.0 if tau == 0.0 else 1.0 - math.exp(-dt / tau)) * (sample - self._period)
+        if abs(self._period - sample) < PERIOD_SNAP:  # arrived (an exponential never quite does)
+            self._period = sample
+        self._period_t = t
+        self._schedule(self._period)
 
     @property
     def dvl_missing(self) -> int:
@@ -653,11 +704,15 @@ class BodyController:
         if reading.quaternion is not None:
             self.set_heading(reading.quaternion)
 
-    def on_cycle(self, fin: int, target: tuple[float, float], force: tuple[float, float]) -> None:
-        """Paper fin ``fin`` begins a cycle asked for ``target`` whose plan makes ``force`` by
-        the fin model (N): the designed layer feeds the difference forward."""
+    def on_cycle(self, fin: int, target: tuple[float, float], force: tuple[float, float], t: float) -> None:
+        """Paper fin ``fin`` begins a cycle at ``t`` (s) asked for ``target`` whose plan makes
+        ``force`` by the fin model (N): the designed layer feeds the difference forward, and
+        schedules its loops on the fins' executed cycle period."""
         body_on_cycle(self.state, fin, finite("target[0]", target[0]), finite("target[1]", target[1]),
                       finite("force[0]", force[0]), finite("force[1]", force[1]))
+        t = finite("t", t)
+        if self._scheduled:
+            self._cycle_began(fin, t)
 
     def on_executed(self, fin: int, planned: tuple[float, float], executed: tuple[float, float]) -> None:
         """Paper fin ``fin`` finished a cycle whose plan made ``planned`` and whose executed

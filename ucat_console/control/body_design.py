@@ -48,6 +48,26 @@ rad/s the rear-synchronised MPC swings 20-27 degrees after a 0.25 N m push of 2 
   took a minute to find (3-7 cm off 45 s after a 1 m step; 2-5 cm at 3/8, overshoot under
   5 %; at 6/8 the MPC's depth overshoots 5-7 %).
 
+The fins' cycles are not always 1.25 s: the MPC's run up to 3 s at 0.1 m/s, a slow baseline
+gait (0.5 Hz) 2 s, and loops designed for 1.25 s then get their fins' force later than they
+were designed for. The body layer can therefore schedule its loops on the period of the
+cycles the fins actually execute (``BodyConfig.schedule``, off by default: measured, it
+steadies slow gaits but costs the MPC modes heading; ``docs/control.md``): each fin's time
+from one cycle's first stroke to the next's, bounded (``schedule_min_delay``,
+``schedule_max_delay``), is followed by the delay ``tau`` low-passed, a longer one within
+seconds (``schedule_rise``), a shorter one slowly (``schedule_filter``), so that the loops
+are designed for the longest of the fins' recent cycles and their gains move smoothly;
+before any cycle is known ``tau`` is the longest (a loop designed for a longer delay stays
+stable with a shorter one). Each loop's
+configured gains are scaled by :func:`gain_schedule` (the gains designed for ``tau`` over
+those designed for the shipped 1.25 s); with the shortest delay at the design delay (the
+default), cycles of 1.25 s or shorter run the configured gains. Moving what the proportional
+and damping terms lose into the integral at each change (bumpless transfer) was measured
+worse: the slow integral then holds that push for tens of seconds, a heading offset of up
+to 14 degrees at 0.1 m/s. The speed low-pass is not scheduled: following the bandwidth
+(1.6 s at 2 s cycles) it put a 0.5 Hz baseline's speed within its band 82 % of the time at
+0.1 m/s, against 95 % with the 1-s low-pass.
+
 With the defaults (eeUVsim's hull, 1.25 s, k = 4: ``w_b`` = 0.2 rad/s; the heading's 0.35
 rad/s) the depth loop is kp 5.16 N/m, ki 0.387 N/(m s); the heading loop kp 0.364 N m/rad,
 kd 1.78 N m s/rad, ki 0.016 N m/(rad s); the velocity loop kp 17.1 N s/m, ki 2.48 N/m
@@ -136,6 +156,20 @@ def speed_filter(delay: float, factor: float) -> float:
     """The speed low-pass's time constant (s) for an actuation ``delay`` and bandwidth
     ``factor`` (module docstring): its corner at SPEED_FILTER_CORNER times the bandwidth."""
     return factor * delay / SPEED_FILTER_CORNER
+
+
+def gain_schedule(hull: HullModel, delay: float, design_delay: float, factor: float) -> dict[str, AxisGains]:
+    """Each loop's gains designed for an actuation ``delay`` as multiples of those designed
+    for ``design_delay`` (a gain designed 0 at ``design_delay`` keeps its multiple 1): how
+    the body layer scales its configured gains when the fins' cycles run longer than the
+    delay they were designed for (``BodyConfig.schedule``)."""
+    now, ref = designed_gains(hull, delay, factor), designed_gains(hull, design_delay, factor)
+
+    def ratio(a: float, b: float) -> float:
+        return a / b if b > 0.0 else 1.0
+
+    return {k: AxisGains(kp=ratio(now[k].kp, g.kp), ki=ratio(now[k].ki, g.ki), kd=ratio(now[k].kd, g.kd))
+            for k, g in ref.items()}
 
 
 def designed_gains(hull: HullModel, delay: float, factor: float) -> dict[str, AxisGains]:

@@ -214,6 +214,33 @@ class BodyConfig(Config):
         "loop closes on (0: none): the fins sample their force targets once a cycle, so DVL noise in the "
         "surge demand would reach each fin at a different time and turn the robot",
     )
+    schedule: bool = param(
+        False, doc="designed layer: the loops' gains follow the period of the cycles the fins execute (the "
+        "configured gains are for the design delay, 1.25 s; control.body_design), between schedule_min_delay and "
+        "schedule_max_delay, the period low-passed (schedule_rise, schedule_filter) so that the gains move smoothly; "
+        "off by default: it steadies slow gaits (a 0.5 Hz baseline) but costs the MPC modes heading in the "
+        "disturbance cases (docs/control.md)",
+    )
+    schedule_min_delay: float = param(
+        DESIGN_DELAY, lo=0.1, hi=4.0, unit="s",
+        doc="designed layer: the shortest fin delay the loops are scheduled for (the design delay: shorter "
+        "cycles keep the configured gains)",
+    )
+    schedule_max_delay: float = param(
+        2.0, lo=0.1, hi=4.0, unit="s",
+        doc="designed layer: the longest fin delay the loops are scheduled for (longer cycles keep its gains; "
+        "beyond 4 s the designed velocity loop would have no proportional gain)",
+    )
+    schedule_rise: float = param(
+        2.0, lo=0.0, hi=600.0, unit="s",
+        doc="designed layer: time constant with which the scheduled delay follows a fin's cycle longer than it "
+        "(0: at once)",
+    )
+    schedule_filter: float = param(
+        20.0, lo=0.0, hi=600.0, unit="s",
+        doc="designed layer: time constant with which the scheduled delay follows a fin's cycle shorter than it "
+        "(0: at once): slow, so the loops stay scheduled for the longest of the fins' recent cycles",
+    )
     max_fin_force: float = param(
         0.0, lo=0.0, hi=100.0, unit="N",
         doc="designed layer: the most force the allocation asks of a fin by the fin model (0: what the drives "
@@ -258,6 +285,11 @@ class BodyConfig(Config):
     )
 
     def _check(self) -> None:
+        if self.schedule_min_delay > self.schedule_max_delay:
+            raise ValueError(
+                f"schedule_min_delay: {self.schedule_min_delay!r} s is above schedule_max_delay "
+                f"({self.schedule_max_delay!r} s); allowed: at most schedule_max_delay"
+            )
         if self.layer == "designed":
             for loop in ("velocity", "depth", "yaw_rate"):
                 if getattr(self, loop).kp <= 0.0:

@@ -14,6 +14,7 @@ saturation on the first step at which the error changes sign enough to pull it b
 
 ``preset(output)`` sets the integral so that the next output, with unchanged error and
 measurement, equals ``output`` (bumpless transfer when a loop is switched on).
+``schedule(scale)`` runs the gains times ``scale`` from now on (a gain schedule).
 """
 
 from __future__ import annotations
@@ -123,11 +124,14 @@ def _pid_finish(s: np.ndarray, e: float, d: float, y: float, t: float, dt: float
     return out
 
 
-def set_pid_gains(s: np.ndarray, gains: PidGains, cap: float = math.inf) -> None:
-    """New gains in the PID ``s``, keeping the integral (clipped to the new limit); the
-    limit is the gains' or ``cap``, whichever is smaller."""
+def set_pid_gains(s: np.ndarray, gains: PidGains, cap: float = math.inf,
+                  scale: tuple[float, float, float] = (1.0, 1.0, 1.0)) -> None:
+    """New gains in the PID ``s`` (``gains`` times ``scale``: kp, ki, kd), keeping the
+    integral (clipped to the new limit); the limit is the gains' or ``cap``, whichever is
+    smaller."""
     limit = min(gains.limit, cap)
-    s[PID_KP], s[PID_KI], s[PID_KD], s[PID_LIMIT] = gains.kp, gains.ki, gains.kd, limit
+    s[PID_KP], s[PID_KI], s[PID_KD] = gains.kp * scale[0], gains.ki * scale[1], gains.kd * scale[2]
+    s[PID_LIMIT] = limit
     s[PID_INTEGRAL] = min(limit, max(-limit, float(s[PID_INTEGRAL])))
 
 
@@ -140,6 +144,7 @@ class Pid:
         self.state = np.zeros(NPID) if state is None else state
         self.gains = gains
         self.cap = cap  # the output never exceeds this either (what the actuators can do)
+        self.scale = (1.0, 1.0, 1.0)  # the gains run are ``gains`` times this (kp, ki, kd)
         set_pid_gains(self.state, gains, cap)
         self.reset()
 
@@ -167,7 +172,16 @@ class Pid:
     def set_gains(self, gains: PidGains) -> None:
         """New gains, keeping the integral (clipped to the new limit)."""
         self.gains = gains
-        set_pid_gains(self.state, gains, self.cap)
+        set_pid_gains(self.state, gains, self.cap, self.scale)
+
+    def schedule(self, scale: tuple[float, float, float]) -> None:
+        """Run the gains times ``scale`` (kp, ki, kd; each >= 0) from now on, the integral
+        kept (it is in output units: a new ki does not move the output)."""
+        for name, x in zip(("kp", "ki", "kd"), scale):
+            if not (math.isfinite(x) and x >= 0.0):
+                raise ValueError(f"scale.{name}: {x!r} is out of range; allowed: a finite number >= 0")
+        self.scale = (float(scale[0]), float(scale[1]), float(scale[2]))
+        set_pid_gains(self.state, self.gains, self.cap, self.scale)
 
     def preset(self, output: float) -> None:
         """Make the next output equal ``output`` for the same inputs (bumpless transfer)."""

@@ -161,7 +161,8 @@ class ClosedLoop:
         # looked up at each call: a caller may wrap the robot's command_fin or replace driving
         self.fins = Actuators(cfg, self._s, members, watches, self._planning, self.outbox, self._command_fin,
                               self.clock.wall_deadline, lambda: self._driving(), mpc_planner,
-                              on_cycle=self.body.on_cycle, on_executed=self.body.on_executed)
+                              on_cycle=lambda fin, target, force: self.body.on_cycle(fin, target, force, self._t),
+                              on_executed=self.body.on_executed)
         # the set-points the fins are actually sent: the robot's report (the arming gate:
         # those it passes on, and its stops), else each command as given
         self._sent_as_given = not io.report_sent(self.fins.sent)
