@@ -31,7 +31,8 @@ from ucat_console.backend.loop.clock import PacedClock
 from ucat_console.backend.loop.closed_loop import ClosedLoop
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.backend.sim_robot_io import SimRobotIO
-from ucat_console.backend.rig import build_robot_io, connect_events, rig_of
+from ucat_console.backend.rig import connect_events, rig_of
+from ucat_console.backend.robots import build_robot_io
 from ucat_console.cli.devices import synthetic_depth, synthetic_dvl, synthetic_imu
 from ucat_console.control.allocation import BodySetpoints
 from ucat_console.telemetry import channels as ch

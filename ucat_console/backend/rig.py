@@ -1,4 +1,5 @@
-"""The robot behind the closed loop, built from configuration: :func:`build_robot_io`.
+"""The built-in robots behind the closed loop, built from configuration (``backend.robots``
+registers them; ``robots.build_robot_io`` builds any registered one).
 
 The built-in robots (``backend.robots``, the registry the configuration's ``robot`` names
 one of) share one interface (``robot.interface.RobotIO``)::
@@ -17,7 +18,6 @@ from __future__ import annotations
 import logging
 from typing import Callable
 
-from ucat_console.backend import robots
 from ucat_console.backend.devices.config import DevicesConfig
 from ucat_console.backend.devices.device_robot_io import DeviceRobotIO
 from ucat_console.backend.sim_rig import SimRig
@@ -29,27 +29,6 @@ from ucat_console.telemetry.events import EventSink
 log = logging.getLogger(__name__)
 
 Close = Callable[[], None]
-
-
-def build_robot_io(
-    robot: str,
-    devices: DevicesConfig,
-    *,
-    plant: PlantConfig | None = None,
-    event_sink: EventSink | None = None,
-) -> tuple[RobotIO, Close]:
-    """The registered robot ``robot`` (``AppConfig.robot``, :mod:`~ucat_console.backend.robots`)
-    with the devices ``devices``, started, and the function that shuts it down: for the
-    built-in ones, :func:`build_sim`, :func:`build_sim_devices` or :func:`build_hardware`.
-
-    ``plant`` configures the simulated plant. ``event_sink`` receives
-    the robot's fault events from the start (more sinks: :func:`connect_events`). Bad configuration fails here with a
-    ValueError naming the key (see :meth:`DeviceRobotIO.start`); nothing is left running.
-    """
-    entry = robots.robot(robot)
-    if not isinstance(devices, DevicesConfig):
-        raise ValueError(f"devices: expected a DevicesConfig, got {type(devices).__name__}")
-    return entry.build(devices, plant if plant is not None else PlantConfig(), event_sink)
 
 
 def build_sim(devices: DevicesConfig, plant: PlantConfig, event_sink: EventSink | None) -> tuple[RobotIO, Close]:

@@ -73,6 +73,27 @@ def robot_names() -> tuple[str, ...]:
     return tuple(ROBOTS)
 
 
+def build_robot_io(
+    name: str,
+    devices: DevicesConfig,
+    *,
+    plant: PlantConfig | None = None,
+    event_sink: EventSink | None = None,
+) -> tuple[RobotIO, Close]:
+    """The registered robot ``name`` (``AppConfig.robot``) with the devices ``devices``,
+    started, and the function that shuts it down (the built-in ones: ``backend.rig``'s
+    ``build_sim``, ``build_sim_devices`` or ``build_hardware``).
+
+    ``plant`` configures the simulated plant. ``event_sink`` receives
+    the robot's fault events from the start (more sinks: ``backend.rig.connect_events``). Bad configuration fails here with a
+    ValueError naming the key (the drivers' ``start``); nothing is left running.
+    """
+    entry = robot(name)
+    if not isinstance(devices, DevicesConfig):
+        raise ValueError(f"devices: expected a DevicesConfig, got {type(devices).__name__}")
+    return entry.build(devices, plant if plant is not None else PlantConfig(), event_sink)
+
+
 def _rig(kind: str) -> Build:
     def build(devices: DevicesConfig, plant: PlantConfig, event_sink: EventSink | None) -> tuple[RobotIO, Close]:
         from ucat_console.backend import rig

@@ -1,3 +1,4 @@
+# Over 600 lines: both body layers (the paper's and the designed one) and their schedule run in one compiled step over one state row.
 """The body-frame layer: the loops on speed, depth and heading, and their allocation.
 
 Control.md section 7; ``BodyConfig.layer`` picks one of two layers over the same readings:

@@ -1,3 +1,4 @@
+# Over 600 lines: the loop's per-sample step is one compiled, allocation-free function over the rows declared here.
 """The closed loop's per-sample core, compiled: readings in, body control, stroke ends out.
 
 The closed loop (``backend/loop/closed_loop.py``) runs on the robot's readings: 100 IMU and

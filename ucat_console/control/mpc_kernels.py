@@ -1,3 +1,4 @@
+# Over 600 lines: both cost formulations, their analytic gradients, the sampler and the quasi-Newton solver compile together as one planner.
 """Compiled MPC kernels: cost with analytic gradient, sampler, bounded quasi-Newton.
 
 Everything here is numba ``njit(cache=True)`` and allocation-free: the caller owns every
