@@ -106,7 +106,7 @@ def crowd(rounds: int, pages: int) -> dict[str, Any]:
 
     broken_per_round: list[int] = []
     with tempfile.TemporaryDirectory() as tmp:
-        sup, app, events = start_console(tmp, 2.0)
+        sup, app, events = start_console(tmp, 2.0, pages=pages + 1)
         try:
             for r in range(rounds):
                 opened: list[RawPage] = []

@@ -10,7 +10,9 @@ from typing import Any
 TOKEN = "safety-bench-token"
 
 
-def start_console(tmp: str, pilot_gone: float, port: int = 0) -> tuple[Any, Any, list]:
+def start_console(tmp: str, pilot_gone: float, port: int = 0, pages: int = 0) -> tuple[Any, Any, list]:
+    """A console on the simulated robot with :data:`TOKEN`; ``pages``: at least this many
+    pages may come from one address (the bench's pages all come from 127.0.0.1)."""
     from ucat_console.backend.supervisor import Supervisor
     from ucat_console.backend.access import AccessConfig
     from ucat_console.backend.failsafe_config import FailsafeConfig, FailsafeRule
@@ -20,7 +22,8 @@ def start_console(tmp: str, pilot_gone: float, port: int = 0) -> tuple[Any, Any,
 
     cfg = load_config("sim-tuned").replace(
         access=AccessConfig(token=TOKEN),
-        console=ConsoleConfig(port=port, record_on_arm=False),
+        console=ConsoleConfig(port=port, record_on_arm=False,
+                              max_pages_per_address=max(pages, ConsoleConfig().max_pages_per_address)),
         failsafe=FailsafeConfig(pilot_gone=FailsafeRule("hold", pilot_gone)),
     )
     sup = Supervisor(cfg, sessions_dir=tmp)
