@@ -87,12 +87,13 @@ def test_the_bench_writes_its_figures_and_judges_them(tmp_path: Path) -> None:
 
 def test_the_verdicts_compare_as_the_goals_say() -> None:
     figures = {"depth_step": {"t90": 30.0, "overshoot": 0.2, "settled_error": math.inf},
-               "force": {"model": {"share_over_90": 0.05}}}
+               "force": {"model": {"share_over_90": 0.05}}, "e5": {}}
     v = T.verdicts(figures)
     assert v["depth_step/t90"]["met"] and not v["depth_step/overshoot"]["met"]
     assert not v["depth_step/settled_error"]["met"]
     assert not v["force/model/share_over_90"]["met"]  # < 0.05 is strict
-    assert not v["e5/within"]["met"] and np.isnan(v["e5/within"]["value"])  # missing: not met
+    assert not v["e5/within"]["met"] and np.isnan(v["e5/within"]["value"])  # a run's figure missing: not met
+    assert "turn/rate_error" not in v  # a manoeuvre the mode did not run: no verdict
 
 
 def test_over_seeds_judges_the_worst_case_and_names_its_seed() -> None:
