@@ -149,9 +149,9 @@ def test_the_folder_is_listed_again_only_when_it_changed(session_file: Path, tmp
     calls = [0]
     real = index.scan
 
-    def counted(directory: object = None) -> index.Listing:
+    def counted(directory: object = None, budget: object = None) -> index.Listing:
         calls[0] += 1
-        return real(directory)
+        return real(directory, budget)
 
     monkeypatch.setattr(index, "scan", counted)
     listing = SessionList(tmp_path)
