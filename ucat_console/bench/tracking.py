@@ -37,8 +37,10 @@ error from :data:`DEPTH_FROM` s on at a constant depth setpoint (``depth_dev``).
 ``--seeds N`` runs seeds ``--seed`` ... ``--seed`` + N - 1 and reports each figure's median and
 worst case over them; the goals are judged on the worst case. ``--cases`` names the nominal
 robot and disturbance cases (:data:`CASES`: the robot 1 % light or heavy, 25 % heavier, one fin's drive at half
-speed), each on the manoeuvres and goals of :data:`CASE_GOALS`; ``--manoeuvres`` keeps some
-manoeuvres only. ``--jobs`` runs that many processes. The goals (:data:`GOALS`); each figure is printed with its goal
+speed, a 0.05 m/s current across its path, the still-water and eeUVsim plants), each on the
+manoeuvres of its own goals; ``--manoeuvres`` keeps some manoeuvres only. ``--jobs`` runs that
+many processes (default: one per CPU). 20 seeds by default; ``--seeds 1`` prints every figure
+of one seed and can write the plots. The goals (:data:`GOALS`); each figure is printed with its goal
 and whether it is met. ``--json`` writes everything, ``--plots DIR`` the step responses and
 the turns as PNG (matplotlib, the ``experiments`` extra).
 """
@@ -48,6 +50,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -101,20 +104,37 @@ GOALS: dict[str, tuple[str, float]] = {
     "gait_change/heading_all_deg": ("<=", 5.0),
 }
 
-#: the disturbance cases: name -> (buoyancy / weight, mass factor, the weak fin's speed factor)
-CASES: dict[str, tuple[float, float, float]] = {
-    "light_1pc": (1.01, 1.0, 1.0),
-    "heavy_1pc": (0.99, 1.0, 1.0),
-    "mass_x1.25": (1.0, 1.25, 1.0),
-    "weak_fin": (1.0, 1.0, 0.5),
-}
-#: each case's manoeuvres and goals
-CASE_GOALS: dict[str, dict[str, tuple[str, float]]] = {
-    "light_1pc": {"straight/depth_dev": ("<=", 0.10), "depth_step/heading_all_deg": ("<=", 5.0)},
-    "heavy_1pc": {"straight/depth_dev": ("<=", 0.10), "depth_step/heading_all_deg": ("<=", 5.0)},
-    "mass_x1.25": {"depth_step/heading_all_deg": ("<=", 5.0), "straight/heading_all_deg": ("<=", 3.0),
-                   "straight/depth_dev": ("<=", 0.10)},
-    "weak_fin": {"depth_step/heading_all_deg": ("<=", 10.0), "straight/heading_all_deg": ("<=", 10.0)},
+CROSS_CURRENT = (0.0, 0.05, 0.0)  # m/s NED: across a northward run (a guess: a pool's return flow)
+
+
+@dataclass(frozen=True)
+class Case:
+    """A disturbance case: the robot or its water off the nominal, and the goals judged in it
+    (their manoeuvres are the ones run)."""
+
+    goals: dict[str, tuple[str, float]]
+    buoyancy: float = 1.0  # buoyancy / weight
+    mass: float = 1.0  # factor on the vehicle's mass
+    weak: float = 1.0  # the weak fin's (:data:`WEAK_FIN`) drive speed factor
+    current: tuple[float, float, float] | None = None  # NED m/s, instead of the manoeuvre's own
+    plant: str | None = None  # a plant variant (``backend/sim/variants.py``) instead of the default
+
+
+_HEADING = {"depth_step/heading_all_deg": ("<=", 5.0), "straight/heading_all_deg": ("<=", 3.0)}
+#: the disturbance cases by name
+CASES: dict[str, Case] = {
+    "light_1pc": Case({"straight/depth_dev": ("<=", 0.10), "depth_step/heading_all_deg": ("<=", 5.0)},
+                      buoyancy=1.01),
+    "heavy_1pc": Case({"straight/depth_dev": ("<=", 0.10), "depth_step/heading_all_deg": ("<=", 5.0)},
+                      buoyancy=0.99),
+    "mass_x1.25": Case({**_HEADING, "straight/depth_dev": ("<=", 0.10)}, mass=1.25),
+    "weak_fin": Case({"depth_step/heading_all_deg": ("<=", 10.0), "straight/heading_all_deg": ("<=", 10.0)},
+                     weak=0.5),
+    "current": Case({**_HEADING, "straight/depth_dev": ("<=", 0.10)}, current=CROSS_CURRENT),
+    "still_water": Case({**_HEADING, "depth_step/t90": ("<=", 30.0), "speed_0.2/within": (">=", 0.90)},
+                        plant="still_water"),
+    "eeuvsim": Case({**_HEADING, "depth_step/t90": ("<=", 30.0), "speed_0.2/within": (">=", 0.90)},
+                    plant="eeuvsim"),
 }
 
 
@@ -183,14 +203,14 @@ def run_manoeuvre(app: Any, mode: str, formulation: str, m: Manoeuvre, seed: int
     if m.gait_to is not None:
         cfg = cfg.replace(baseline=cfg.baseline.replace(frequency=GAIT_FROM))
     z0 = m.depth if m.start_depth is None else m.start_depth
-    plant = plant_config(DEFAULT_PLANT, seed, m.current)
-    buoyancy, mass, weak = CASES[case] if case is not None else (1.0, 1.0, 1.0)
-    if (buoyancy, mass) != (1.0, 1.0):
-        plant = plant.replace(vehicle=plant.vehicle.replace(buoyancy_ratio=buoyancy,
-                                                            mass=plant.vehicle.mass * mass))
+    c = CASES[case] if case is not None else Case({})
+    plant = plant_config(c.plant or DEFAULT_PLANT, seed, m.current if c.current is None else c.current)
+    if (c.buoyancy, c.mass) != (1.0, 1.0):
+        plant = plant.replace(vehicle=plant.vehicle.replace(buoyancy_ratio=c.buoyancy,
+                                                            mass=plant.vehicle.mass * c.mass))
     io = SimRobotIO(plant, depth=z0, velocity=m.start_velocity)
-    if weak != 1.0:
-        _weaken(io, WEAK_FIN, weak, plant.servo.max_rate)
+    if c.weak != 1.0:
+        _weaken(io, WEAK_FIN, c.weak, plant.servo.max_rate)
     io.plant.reset(position_ned=(0.0, 0.0, z0), body_velocity=(m.start_velocity, 0.0, 0.0, 0.0, 0.0, 0.0),
                    fin_angles=(START_FIN_ANGLE,) * 4, seed=seed)
     stream = TelemetryStream(validate=False)
@@ -318,7 +338,7 @@ def run_mode(app: Any, label: str, mode: str, formulation: str, quick: bool = Fa
     model_err: list[float] = []
     true_err: list[float] = []
     ratio: list[float] = []
-    wanted = None if case is None else {k.split("/")[0] for k in CASE_GOALS[case]}
+    wanted = None if case is None else {k.split("/")[0] for k in CASES[case].goals}
     for m in manoeuvres(quick):
         if (wanted is not None and m.name not in wanted) or (only is not None and m.name not in only) \
                 or (m.gait_to is not None and mode != "baseline"):
@@ -426,10 +446,12 @@ def register_bench(kinds: argparse._SubParsersAction) -> None:
     p.add_argument("--modes", nargs="+", choices=[m[0] for m in MODES], default=[m[0] for m in MODES])
     p.add_argument("--quick", action="store_true", help="half-length manoeuvres (a smoke run)")
     p.add_argument("--seed", type=int, default=0, help="plant and planner seed (the first of --seeds)")
-    p.add_argument("--seeds", type=int, default=1, help="how many seeds, from --seed on (median and worst case)")
+    p.add_argument("--seeds", type=int, default=20,
+                   help="how many seeds, from --seed on (median and worst case; default 20)")
     p.add_argument("--cases", nargs="+", choices=["nominal", *CASES], default=["nominal"],
                    help="the nominal robot and the disturbance cases to run (default: the nominal robot)")
-    p.add_argument("--jobs", type=int, default=1, help="processes running the runs (default 1)")
+    p.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
+                   help="processes running the runs (default: one per CPU)")
     p.add_argument("--manoeuvres", nargs="+", choices=[m.name for m in manoeuvres()], default=None,
                    help="only these manoeuvres (default: all)")
     p.add_argument("--json", type=Path, default=None, help="write the figures as JSON")
@@ -479,7 +501,7 @@ def run_bench(args: argparse.Namespace) -> int:
     results: dict[str, Any] = {"config": str(args.config), "seeds": seeds, "quick": args.quick, "cases": {}}
     for case in cases:
         name = case or "nominal"
-        goals = GOALS if case is None else CASE_GOALS[case]
+        goals = GOALS if case is None else CASES[case].goals
         results["cases"][name] = {}
         for label, _, _ in modes:
             ran = set(next(iter(per[name][label].values())))
