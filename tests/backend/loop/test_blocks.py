@@ -140,6 +140,27 @@ def test_the_supervisor_checks_journals_and_undoes_a_registered_block(trim: Appl
         console.stop()
 
 
+def test_a_block_registered_while_the_console_runs_is_tuned_and_reverted(tmp_path: Path) -> None:
+    console = Console(console_config(), tmp_path)
+    sup = console.sup
+    got: list[Trim] = []
+    register(Block("late", Trim, "Late", ("gain",), initial=lambda c: Trim(gain=2.0),
+                   apply=lambda loop, cfg: got.append(cfg)))
+    try:
+        sup.client_connected(PILOT)
+        assert sup.take_control(PILOT, TOKEN)
+        assert sup.tuning()["late"] == sup.saved_tuning()["late"] == Trim(gain=2.0)  # where it starts
+        sup.set_params(PILOT, {"late.gain": 5.0})
+        sup.step(0.2)
+        sup.revert_tuning(PILOT)
+        sup.step(0.2)
+        assert got == [Trim(gain=5.0), Trim(gain=2.0)]
+    finally:
+        unregister("late")
+        console.stop()
+    assert "late" not in sup.tuning() and "late" not in sup.saved_tuning()
+
+
 def test_a_built_in_block_goes_into_the_configuration_in_force(tmp_path: Path) -> None:
     console = Console(console_config(), tmp_path)
     sup = console.sup

@@ -119,8 +119,12 @@ class Tuning:
         return {name: self.loop.block_config(name) for name in tunable.block_names()}
 
     def saved(self) -> dict[str, Any]:
+        """The tuning to revert to, of each registered block (one registered since it was
+        saved: where the loop started it)."""
         with self._lock:
-            return dict(self._saved)
+            saved = dict(self._saved)
+        start = tunable.initial_blocks(self.loop.cfg)
+        return {name: saved.get(name, value) for name, value in start.items()}
 
     def value(self, key: str) -> Any:
         block, name = split_key(key)
