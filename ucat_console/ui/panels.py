@@ -17,8 +17,9 @@ runs is not an error: what the callback would still show goes nowhere, quietly.
 
 Values typed into inputs are drafts until applied ("Apply setpoints", "Apply tuning"),
 so a half-typed number never reaches the robot. The tuning inputs are built from the
-typed configuration: :data:`~ucat_console.backend.supervisor.TUNABLE` names the fields,
-and each field's ``param`` metadata gives the label's range, the unit, the hint and the step.
+typed configuration: the loop's registered blocks (``backend.loop.blocks``) name the
+fields and their folders' titles, and each field's ``param`` metadata gives the label's
+range, the unit, the hint and the step.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ import time
 from typing import Any, Callable, Protocol
 
 from ucat_console.backend.access import MAX_NAME, AccessDenied, actor_name
+from ucat_console.backend.loop.blocks import block as tuning_block
 from ucat_console.backend.loop.modes import MODES
 from ucat_console.backend.supervisor import SETPOINTS, CommandRefused, Supervisor
 from ucat_console.telemetry.events import Event
@@ -36,7 +38,7 @@ from ucat_console.ui.driving import KEY_MAP, KEYS, Driving
 from ucat_console.ui.markdown import _set, esc, events_markdown, within
 from ucat_console.ui.identify_inputs import IdentifyInputs
 from ucat_console.ui.rig_faults import RigFaultInputs
-from ucat_console.ui.tuning_inputs import BLOCK_TITLES, param_specs
+from ucat_console.ui.tuning_inputs import param_specs
 
 log = logging.getLogger(__name__)
 
@@ -131,7 +133,7 @@ class ControlPanel:
                 self.tuning_message = gui.add_markdown("")
                 tuning = sup.tuning()
                 for block, specs in param_specs(tuning).items():
-                    with gui.add_folder(BLOCK_TITLES.get(block, block), expand_by_default=block == "mpc"):
+                    with gui.add_folder(tuning_block(block).title, expand_by_default=block == "mpc"):
                         for s in specs:
                             value = getattr(tuning[block], s.key.rpartition(".")[2])
                             if s.choices is not None:

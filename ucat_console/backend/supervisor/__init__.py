@@ -8,7 +8,7 @@ from ucat_console.backend.loop.commands import CommandRefused
 from ucat_console.backend.supervisor.health import Health
 from ucat_console.backend.supervisor.robots import RobotFactory, SteadyPacedClock
 from ucat_console.backend.supervisor.supervisor import SETPOINTS, Supervisor
-from ucat_console.backend.supervisor.tuning import TUNABLE, JournalEntry
+from ucat_console.backend.supervisor.tuning import JournalEntry
 
-__all__ = ["CommandRefused", "Health", "RobotFactory", "SETPOINTS", "SteadyPacedClock", "Supervisor", "TUNABLE",
+__all__ = ["CommandRefused", "Health", "RobotFactory", "SETPOINTS", "SteadyPacedClock", "Supervisor",
            "JournalEntry"]

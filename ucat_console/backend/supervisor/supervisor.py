@@ -62,7 +62,7 @@ from ucat_console.backend.access import LOCAL, AccessControl, AccessDenied, Acce
 from ucat_console.backend.arming import ArmingGate
 from ucat_console.backend.devices.leak import LeakEmulator, LeakInput
 from ucat_console.backend.loop.clock import Clock, PacedClock
-from ucat_console.backend.loop.closed_loop import PID_LOOPS, ClosedLoop
+from ucat_console.backend.loop.closed_loop import ClosedLoop
 from ucat_console.backend.loop.commands import (
     SETPOINTS,
     CommandRefused,
@@ -89,7 +89,7 @@ from ucat_console.backend.supervisor.recording import SessionRecording
 from ucat_console.backend.supervisor.rig_control import RigControl, RigHost
 from ucat_console.backend.robots import robot
 from ucat_console.backend.supervisor.robots import RobotFactory, SteadyPacedClock, simulated_rig
-from ucat_console.backend.supervisor.tuning import Journal, JournalEntry, Tuning, fmt
+from ucat_console.backend.supervisor.tuning import Journal, JournalEntry, Tuning, configured, fmt, is_tuning_key
 from ucat_console.backend.supervisor.watchdog import LoopWatchdog
 from ucat_console.config import AppConfig
 from ucat_console.control.allocation import BodySetpoints
@@ -436,7 +436,7 @@ class Supervisor:
         return self.loop.setpoints
 
     def tuning(self) -> dict[str, Any]:
-        """The commanded tuning: block -> config (MpcConfig, PidGains, BaselineConfig)."""
+        """The commanded tuning: each tunable block (``backend.loop.blocks``) -> its config."""
         return self.tuning_state.blocks()
 
     def param_value(self, key: str) -> Any:
@@ -463,10 +463,8 @@ class Supervisor:
 
     def current_config(self) -> AppConfig:
         """The configuration in force (the file's, with the live tuning applied)."""
-        t = self.tuning()
-        body = self.cfg.body.replace(**{loop: t[f"pid.{loop}"] for loop in PID_LOOPS})
-        return self.cfg.replace(mpc=t["mpc"], baseline=t["baseline"], body=body,
-                                loop=self.cfg.loop.replace(mode=self.loop.mode))
+        cfg = configured(self.cfg, self.tuning())
+        return cfg.replace(loop=cfg.loop.replace(mode=self.loop.mode))
 
     def _weights(self) -> dict[str, float]:
         m = self.tuning()["mpc"]
@@ -757,7 +755,7 @@ class Supervisor:
         """The latest tuning change undone in one step: the parameters it changed back to
         their values before it (journalled like any change, so a second undo redoes it)."""
         self.access.require_pilot(who, "undo tuning")
-        changes = [e for e in self.journal() if e.key.split(".", 1)[0] in ("mpc", "baseline", "pid")]
+        changes = [e for e in self.journal() if is_tuning_key(e.key)]
         if not changes:
             raise CommandRefused("undo: no tuning change to undo")
         last = changes[-1]
