@@ -16,7 +16,7 @@ and shows in full in the next snapshot.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 from ucat_console.backend.access import Actor
@@ -159,7 +159,7 @@ class ConsoleState:
     safety: SafetyView
     manoeuvre: ManoeuvreView | None  # None: none started yet
     limits: Limits
-    effects: tuple[Effect, ...]  # the latest changes and their figures, newest first (copies)
+    effects: tuple[Effect, ...]  # the latest changes and their figures, newest first
 
     @property
     def failsafes(self) -> tuple[str, ...]:
@@ -201,5 +201,5 @@ def build_state(sup: Any) -> ConsoleState:
         manoeuvre=None if run is None else ManoeuvreView(run.session, run.finished, run.progress),
         limits=Limits(cfg.loop.max_velocity, cfg.loop.max_depth, cfg.loop.max_yaw_rate,
                       cfg.access.handover_timeout),
-        effects=tuple(replace(e) for e in sup.effects.entries()),
+        effects=tuple(sup.effects.entries()),
     )
