@@ -197,7 +197,7 @@ class ControlPanel:
 
         self._wire()
         self._register_inputs()
-        self.refresh(force=True, state=st)
+        self.refresh(force=True)
 
     def _register_inputs(self) -> None:
         allow = self._allow

@@ -34,6 +34,9 @@
   stop), and a disarmed loop publishes no stroke timeouts.
 * Telemetry time ``t`` is the loop's time, seconds from the start; the recorder's epoch
   offset is the wall-clock time of ``t = 0``.
+* The page reads the console through :meth:`Supervisor.state`, one immutable snapshot of
+  values (:mod:`~.console_state`), and never through the parts; it commands through the
+  methods here.
 
 Who owns what: the supervisor owns the commanded mode and setpoints and the arming state
 of the gate; :class:`~.tuning.Tuning` the commanded tuning and its journal;
