@@ -46,7 +46,7 @@ def _surfaced(sup, events) -> None:
     ev = next(e for e in events if e.source == "failsafe" and e.code == "leak")
     assert ev.data["action"] == "surface" and "water" in ev.data["cause"]
     assert sup.setpoints.depth == 0.0 and sup.armed
-    assert next(x for x in vehicle_parts(sup) if x.name == "Leak").state == "bad"
+    assert next(x for x in vehicle_parts(sup.state()) if x.name == "Leak").state == "bad"
 
 
 def test_water_at_the_simulators_emulated_detector_surfaces_the_robot(tmp_path) -> None:
@@ -56,7 +56,7 @@ def test_water_at_the_simulators_emulated_detector_surfaces_the_robot(tmp_path) 
     try:
         wait_for(lambda: sup.safety.leak() == "dry", what="the emulated detector read dry")
         sup.step(1.0)
-        assert next(x for x in vehicle_parts(sup) if x.name == "Leak").state == "ok"
+        assert next(x for x in vehicle_parts(sup.state()) if x.name == "Leak").state == "ok"
         sup.arm(LOCAL)
         sup.set_setpoints(LOCAL, depth=1.0)
         sup.inject_leak(LOCAL, True)

@@ -34,6 +34,9 @@
   stop), and a disarmed loop publishes no stroke timeouts.
 * Telemetry time ``t`` is the loop's time, seconds from the start; the recorder's epoch
   offset is the wall-clock time of ``t = 0``.
+* The page reads the console through :meth:`Supervisor.state`, one immutable snapshot of
+  values (:mod:`~.console_state`), and never through the parts; it commands through the
+  methods here.
 
 Who owns what: the supervisor owns the commanded mode and setpoints and the arming state
 of the gate; :class:`~.tuning.Tuning` the commanded tuning and its journal;
@@ -82,6 +85,7 @@ from ucat_console.backend.sessions.foxglove import robot_geometry
 from ucat_console.backend.sessions.recorder import Recorder
 from ucat_console.backend.supervisor.arm_requests import ArmRequests
 from ucat_console.backend.supervisor.bursts import BurstFolder
+from ucat_console.backend.supervisor.console_state import ConsoleState, build_state
 from ucat_console.backend.supervisor.forwarding import LoopOutlet
 from ucat_console.backend.supervisor.health import Health
 from ucat_console.backend.supervisor.manoeuvre import ManoeuvreHost, ManoeuvreRun
@@ -461,6 +465,16 @@ class Supervisor:
             recording_failed=self.recording.failed, stalls=self.loop.stalls,
         )
 
+    def state(self) -> ConsoleState:
+        """The console as the page shows it, now: an immutable snapshot of values
+        (:mod:`~.console_state`; built on each call, taking no lock of the supervisor's)."""
+        return build_state(self)
+
+    @property
+    def sessions_dir(self) -> Path:
+        """Where the recorder writes its sessions."""
+        return self.recorder.directory
+
     def current_config(self) -> AppConfig:
         """The configuration in force (the file's, with the live tuning applied)."""
         cfg = configured(self.cfg, self.tuning())
@@ -500,6 +514,35 @@ class Supervisor:
             self._publish_event("access", "request_lapsed",
                                 f"client {lapsed}'s request for control lapsed: not handed over within "
                                 f"{self.cfg.access.handover_timeout:g} s", "info", {"client": lapsed})
+
+    def is_pilot(self, who: Actor) -> bool:
+        """Whether ``who`` is the pilot (or the console itself), now."""
+        return self.access.is_pilot(who)
+
+    def require_pilot(self, who: Actor, action: str) -> None:
+        """AccessDenied unless ``who`` is the pilot: the check of a page's own pilot-only
+        action (its plots' window, repairing a session file)."""
+        self.access.require_pilot(who, action)
+
+    def set_name(self, client: int, name: object) -> None:
+        """Page ``client``'s own name, shown to the others when it flies."""
+        self.access.set_name(client, name)
+
+    def note_gamepad(self, who: Actor, driving: bool) -> None:
+        """Journal the start (``driving``) or the end of the pilot's gamepad driving (its
+        setpoints are not journalled one by one)."""
+        self.access.require_pilot(who, "gamepad")
+        name = actor_name(who)
+        self.journal_log.add(name, "gamepad", *(("off", "driving") if driving else ("driving", "off")))
+
+    def may_replay(self, who: Actor) -> bool:
+        """CommandRefused unless ``who`` may start a counterfactual replay now: any page while
+        the robot is disarmed, only the pilot while it is armed (the replay takes CPU); True
+        for the pilot (whose replay cancels another page's running one)."""
+        pilot = who is not None and self.access.is_pilot(who)
+        if self.gate.armed and not pilot:
+            raise CommandRefused("counterfactual replay: while the robot is armed only the pilot may start one")
+        return pilot
 
     def take_control(self, client: int, token: object) -> bool:
         """True: ``client`` is the pilot now; False: waiting for the pilot's hand-over."""
@@ -826,6 +869,11 @@ class Supervisor:
     def has_drives(self) -> bool:
         """The fins are moved by motor drives (the robot, or the rig's emulated EPOS2s)."""
         return self.gate.has_drives
+
+    def fault_tables(self) -> tuple[dict[str, tuple[str, ...]], int]:
+        """(the faults each emulated device takes, the default EMCY code); CommandRefused
+        when the robot is not the simulated rig."""
+        return self.rig_control.fault_tables()
 
     def inject_fault(self, who: Actor, device: object, fault: object, **kw: Any) -> Event:
         return self.rig_control.inject_fault(who, device, fault, **kw)
