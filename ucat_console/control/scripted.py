@@ -84,7 +84,7 @@ class Script:
 
     def __post_init__(self) -> None:
         if not self.segments:
-            raise ScriptError(f"{self.name}: no segment; at least one [[segment]] is needed", None, "segment")
+            raise ScriptError("segment: none; a manoeuvre needs at least one [[segment]]", None, "segment")
 
     @property
     def duration(self) -> float:
