@@ -39,8 +39,9 @@ Who owns what: the supervisor owns the commanded mode and setpoints and the armi
 of the gate; :class:`~.tuning.Tuning` the commanded tuning and its journal;
 :class:`~.recording.SessionRecording` the recording; :class:`~.rig_control.RigControl` the
 drive and fault commands; :class:`~.manoeuvre.ManoeuvreRun` an identification manoeuvre;
+:class:`~.scripted_run.ScriptRun` a scripted manoeuvre (docs/manoeuvres.md);
 the closed loop owns what it has applied. The parts live in the modules of this package
-and get what they use passed in (``RigHost``, ``ManoeuvreHost``: the few commands and
+and get what they use passed in (``RigHost``, ``ManoeuvreHost``, ``ScriptHost``: the few commands and
 readings each needs), never the supervisor itself.
 
 The module is over 500 lines because :class:`Supervisor` is the one entry point for
