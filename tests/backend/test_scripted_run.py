@@ -132,3 +132,18 @@ def test_a_disarm_stops_it_at_once_and_puts_back_the_setpoints(make_console: Cal
     sup.step(5.0)  # nothing more happens
     assert sup.setpoints == before and [e.message for e in c.events if e.code == "marker"][-1] == \
         "short: end (the robot is disarmed)"
+
+
+def test_it_stops_when_its_pilot_is_gone(make_console: Callable[..., Console]) -> None:
+    c = make_console(console_config(base="sim-tuned"))
+    sup = c.sup
+    sup.client_connected(1)
+    assert sup.take_control(1, sup.access.token)
+    sup.arm(1)
+    run = sup.start_script(1, parse_script(SHORT, "short", sup.cfg.loop))
+    sup.step(1.5)
+    assert not run.finished and sup.setpoints.velocity == 0.1
+    sup.client_disconnected(1)
+    sup.step(0.2)
+    assert run.finished and run.reason in ("its pilot is no longer the pilot", "failsafe pilot_gone")
+    assert sup.setpoints.velocity == 0.0  # what it found
