@@ -634,9 +634,9 @@ class Supervisor:
         if at_once and self.gate.has_drives and not self.gate.stop_drives():
             log.error("a fin drive did not confirm its stop (see its events)")
         self.arm_requests.clear()
+        self._poll_script()  # a scripted manoeuvre stops at once, before the recording's tail counts
         if was:
             self._armed_at = None
-            self._poll_script()  # it stops at once, before the recording's tail counts
             self.recording.disarmed(self.loop.time)
             self._publish_event("supervisor", "disarmed", f"motors disarmed ({reason})", "warning",
                                 {"who": str(who), "reason": reason})
