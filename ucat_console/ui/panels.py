@@ -37,6 +37,7 @@ from ucat_console.telemetry.events import Event
 from ucat_console.ui.driving import KEY_MAP, KEYS, Driving
 from ucat_console.ui.markdown import _set, esc, events_markdown, within
 from ucat_console.ui.identify_inputs import IdentifyInputs
+from ucat_console.ui.manoeuvre_inputs import ManoeuvreInputs
 from ucat_console.ui.rig_faults import RigFaultInputs
 from ucat_console.ui.tuning_inputs import param_specs
 
@@ -123,6 +124,7 @@ class ControlPanel:
                 # the page's script sends the gamepad's sticks and the theme switch here
                 self.drive_input = gui.add_text("gamepad", "", visible=False)
                 self.theme_button = gui.add_button("theme", visible=False)
+            self.manoeuvres = ManoeuvreInputs(gui, sup, client_id, lambda fn: self.act(fn), self._allow, self.show)
 
         self.params: dict[str, Any] = {}
         with within(c.get("tuning")):
@@ -209,7 +211,7 @@ class ControlPanel:
         pilot = [self.release, self.handover, self.decline, self.arm, self.mode,
                  *self.sp_inputs.values(), self.apply_sp, self.apply_tuning, self.revert, self.undo, self.save,
                  *self.params.values(), self.history, self.rec_start, self.rec_stop, self.marker,
-                 self.reset_drives, self.zero_depth, *self.identify.handles()]
+                 self.reset_drives, self.zero_depth, *self.identify.handles(), *self.manoeuvres.handles()]
         if self.faults is not None:
             f = self.faults
             pilot += [f.device, f.fault, f.fin, f.code, f.duration, f.inject, f.clear]
@@ -266,6 +268,8 @@ class ControlPanel:
         if self.reset_drives is not None:
             self.reset_drives.on_click(self._guard(self._reset_drive_faults))
             self.zero_depth.on_click(self._guard(self._zero_depth))
+        self.manoeuvres.start.on_click(self._guard(self.manoeuvres.request_start))
+        self.manoeuvres.stop.on_click(self._guard(self.manoeuvres.stop_run))
         ident = self.identify
         ident.run.on_click(self._guard(ident.start))
         ident.stop.on_click(self._guard(ident.stop_run))
@@ -613,6 +617,7 @@ class ControlPanel:
             else:  # (listed by the page jobs)
                 submit(self.cid, "list sessions", lambda: self._list_sessions(others), coalesce=True)
         self.identify.refresh(pilot, st)
+        self.manoeuvres.refresh(pilot, st)
 
     def _list_sessions(self, others: bool = False) -> None:
         """The identification's list of sessions, and with ``others`` the page's other lists."""

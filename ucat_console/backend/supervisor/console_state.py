@@ -123,6 +123,23 @@ class ManoeuvreView:
 
 
 @dataclass(frozen=True)
+class ScriptView:
+    """The scripted manoeuvre last started."""
+
+    name: str
+    finished: bool
+    progress: float  # share done, 0-1
+    segment: int  # the segment running, from 0
+    segments: int  # how many it has
+    reason: str  # why it ended ("" while it runs)
+    lines: tuple[str, ...]  # each measured segment: its label and figures
+
+    @property
+    def running(self) -> bool:
+        return not self.finished
+
+
+@dataclass(frozen=True)
 class Limits:
     """The limits the page shows beside its inputs."""
 
@@ -158,6 +175,7 @@ class ConsoleState:
     recording: RecordingView
     safety: SafetyView
     manoeuvre: ManoeuvreView | None  # None: none started yet
+    script: ScriptView | None  # None: no scripted manoeuvre started yet
     limits: Limits
     effects: tuple[Effect, ...]  # the latest changes and their figures, newest first
 
@@ -180,6 +198,7 @@ def build_state(sup: Any) -> ConsoleState:
     innovation, estimate_t = safety.estimate()
     cut, off = safety.control()
     run = sup.manoeuvre
+    script = sup.script_run
     leak = sup.leak
     return ConsoleState(
         t=now, robot=cfg.robot, armed=sup.gate.armed, mode=sup.loop.mode,
@@ -199,6 +218,9 @@ def build_state(sup: Any) -> ConsoleState:
             cut=tuple(cut), off_track=tuple(off),
         ),
         manoeuvre=None if run is None else ManoeuvreView(run.session, run.finished, run.progress),
+        script=None if script is None else ScriptView(
+            script.name, script.finished, script.progress, script.segment, len(script.script.segments),
+            script.reason, tuple(script.lines)),
         limits=Limits(cfg.loop.max_velocity, cfg.loop.max_depth, cfg.loop.max_yaw_rate,
                       cfg.access.handover_timeout),
         effects=tuple(sup.effects.entries()),

@@ -42,8 +42,9 @@ Who owns what: the supervisor owns the commanded mode and setpoints and the armi
 of the gate; :class:`~.tuning.Tuning` the commanded tuning and its journal;
 :class:`~.recording.SessionRecording` the recording; :class:`~.rig_control.RigControl` the
 drive and fault commands; :class:`~.manoeuvre.ManoeuvreRun` an identification manoeuvre;
+:class:`~.scripted_run.ScriptRun` a scripted manoeuvre (docs/manoeuvres.md);
 the closed loop owns what it has applied. The parts live in the modules of this package
-and get what they use passed in (``RigHost``, ``ManoeuvreHost``: the few commands and
+and get what they use passed in (``RigHost``, ``ManoeuvreHost``, ``ScriptHost``: the few commands and
 readings each needs), never the supervisor itself.
 
 The module is over 500 lines because :class:`Supervisor` is the one entry point for
@@ -90,6 +91,7 @@ from ucat_console.backend.supervisor.forwarding import LoopOutlet
 from ucat_console.backend.supervisor.health import Health
 from ucat_console.backend.supervisor.manoeuvre import ManoeuvreHost, ManoeuvreRun
 from ucat_console.backend.supervisor.recording import SessionRecording
+from ucat_console.backend.supervisor.scripted_run import ScriptHost, ScriptRun
 from ucat_console.backend.supervisor.rig_control import RigControl, RigHost
 from ucat_console.backend.robots import robot
 from ucat_console.backend.supervisor.robots import RobotFactory, SteadyPacedClock, simulated_rig
@@ -97,6 +99,7 @@ from ucat_console.backend.supervisor.tuning import Journal, JournalEntry, Tuning
 from ucat_console.backend.supervisor.watchdog import LoopWatchdog
 from ucat_console.config import AppConfig
 from ucat_console.control.allocation import BodySetpoints
+from ucat_console.control.scripted import Script
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.messages import BodyState, Status
@@ -208,6 +211,18 @@ class Supervisor:
             start_recording=self.start_recording, stop_recording=self.stop_recording,
             add_marker=self.add_marker, time=lambda: self.loop.time, duration=cfg.loop.manoeuvre.duration,
         )
+        #: what a scripted manoeuvre uses: the operator's commands, checked as any
+        self.script_host = ScriptHost(
+            require_pilot=self.access.require_pilot, is_pilot=self.access.is_pilot, armed=lambda: self.gate.armed,
+            failsafes=self.safety.active, mode=lambda: self.loop.mode, set_mode=self.set_mode,
+            setpoints=lambda: self.loop.setpoints, set_setpoints=self.set_setpoints,
+            recording=lambda: self.recording.session_id, start_recording=self.start_recording,
+            stop_recording=self.stop_recording, add_marker=self.add_marker,
+            publish_event=lambda ev: self.stream.publish(ch.EVENTS, ev), subscribe=self.stream.subscribe,
+            time=lambda: self.loop.time, metrics=cfg.metrics,
+        )
+        #: the scripted manoeuvre last started (None: none yet)
+        self.script_run: ScriptRun | None = None
         #: each tuning, mode or setpoint change with the figures before and after it
         self.effects = ChangeEffects(cfg.metrics, lambda ev: self.stream.publish(ch.EVENTS, ev))
         self._thread: threading.Thread | None = None
@@ -378,6 +393,18 @@ class Supervisor:
                 run.poll()
             except Exception:
                 log.exception("finishing the identification manoeuvre failed")
+        self._poll_script()
+
+    def _poll_script(self) -> None:
+        run = self.script_run
+        if run is not None and not run.finished:
+            try:
+                if run.poll():
+                    self._notify()
+            except Exception as e:  # a segment's command refused: the manoeuvre ends there
+                log.exception("the scripted manoeuvre failed")
+                run.finish(f"failed: {e}")
+                self._notify()
 
     # ================================================================== telemetry
     def _on_bodies(self, items: Any) -> None:
@@ -648,6 +675,7 @@ class Supervisor:
         if at_once and self.gate.has_drives and not self.gate.stop_drives():
             log.error("a fin drive did not confirm its stop (see its events)")
         self.arm_requests.clear()
+        self._poll_script()  # a scripted manoeuvre stops at once, before the recording's tail counts
         if was:
             self._armed_at = None
             self.recording.disarmed(self.loop.time)
@@ -848,6 +876,8 @@ class Supervisor:
         with self._lock:
             if self.manoeuvre is not None and not self.manoeuvre.finished:
                 raise CommandRefused("identification manoeuvre: one is running")
+            if self.script_run is not None and not self.script_run.finished:
+                raise CommandRefused(f"identification manoeuvre: manoeuvre {self.script_run.name} is running")
             run = ManoeuvreRun(self.manoeuvre_host, who)
             run.start()
             self.manoeuvre = run
@@ -861,6 +891,32 @@ class Supervisor:
         if run is None or run.finished:
             raise CommandRefused("identification manoeuvre: none is running")
         paths = run.finish()
+        self._notify()
+        return paths
+
+    # ================================================================== scripted manoeuvres
+    def start_script(self, who: Actor, script: Script) -> ScriptRun:
+        """A scripted manoeuvre (pilot, armed, no failsafe active; one at a time, not beside
+        the identification manoeuvre), recorded; it ends by itself (its segments done, or
+        the robot disarmed, a failsafe, the pilot gone: ``ScriptRun.reason`` says which)."""
+        self.access.require_pilot(who, f"manoeuvre {script.name}")
+        with self._lock:
+            for running in (self.script_run, self.manoeuvre):
+                if running is not None and not running.finished:
+                    raise CommandRefused(f"manoeuvre {script.name}: a manoeuvre is running; stop it first")
+            run = ScriptRun(self.script_host, who, script)
+            run.start()
+            self.script_run = run
+        self._notify()
+        return run
+
+    def stop_script(self, who: Actor) -> list[Path]:
+        """End the running scripted manoeuvre now (pilot): what it found put back."""
+        self.access.require_pilot(who, "manoeuvre")
+        run = self.script_run
+        if run is None or run.finished:
+            raise CommandRefused("manoeuvre: none is running")
+        paths = run.finish(f"stopped by {actor_name(who)}")
         self._notify()
         return paths
 
