@@ -1,7 +1,7 @@
 """What the fixed status bar shows: armed state, mode, pilot, recording, failsafes, a light for
 each sensor, the drives, the planner, the control, the recording, and the vehicle (one light
-for the loop watchdog, the depth limits, the battery, the leak detector, the estimate and the
-fins' pace), and the battery's figure.
+for the loop watchdog, the depth limits, the battery, the registered auxiliary sensors (the
+leak detector first), the estimate and the fins' pace), and the battery's figure.
 
 :func:`bar_state` builds it from the supervisor for one page (the pilot reads "you"); the
 page's script (:mod:`ucat_console.ui.page_script`) draws it. Lights are ``ok`` (green),
@@ -21,7 +21,7 @@ from ucat_console.backend.safety import SENSORS
 LIGHTS = {"imu": "IMU", "dvl": "DVL", "depth": "Depth", "drives": "Drives", "planner": "Planner",
           "control": "Control", "recording": "Recording", "loop_watchdog": "Loop",
           "limits": "Limits", "battery": "Battery",
-          "leak": "Leak", "estimate": "Estimate", "fins": "Fins", "vehicle": "Vehicle"}
+          "estimate": "Estimate", "fins": "Fins", "vehicle": "Vehicle"}
 ACTIONS = {"hold": "stops and holds its depth", "surface": "stops and rises to the surface",
            "disarm": "turns its motors off", "warn": "goes on (warn only)"}
 
@@ -81,8 +81,9 @@ def lights(sup: Any, loading: str = "") -> list[Light]:
 
 
 def vehicle_parts(sup: Any) -> list[Light]:
-    """The parts of the Vehicle light: the loop watchdog, the depth limits, the battery, the
-    leak detector, the estimate and the fins' pace, each its state and reason."""
+    """The parts of the Vehicle light: the loop watchdog, the depth limits, the battery, each
+    registered auxiliary sensor (:func:`sensor_lights`), the estimate and the fins' pace, each
+    its state and reason."""
     safety = sup.safety
     now = sup.loop.time
     active = {s.name: s for s in safety.states() if s.active}
@@ -98,7 +99,7 @@ def vehicle_parts(sup: Any) -> list[Light]:
     volts, _used = safety.battery()
     parts.append(failsafes_light(active, "battery", ("battery_critical", "battery_low"),
                                "ok" if volts is not None else "off", battery_text(safety, now)))
-    parts.append(failsafes_light(active, "leak", ("leak",), *leak_state(sup)))
+    parts += sensor_lights(sup, active)
     innovation, t_state = safety.estimate()
     parts.append(failsafes_light(active, "estimate", ("estimate",), "ok", (
         f"attitude {innovation[1]:.3f} rad off the accelerometer's gravity" if innovation else
@@ -123,7 +124,7 @@ _WORST = {"off": 0, "ok": 1, "warn": 2, "bad": 3}
 
 
 def vehicle_light(parts: list[Light]) -> Light:
-    """One light for the loop watchdog, the depth limits, the battery, the leak detector, the
+    """One light for the loop watchdog, the depth limits, the battery, the auxiliary sensors, the
     estimate and the fins' pace (a bar of 1280 px keeps DISARM on screen): the worst of them,
     and each one's reason, the ones not green first."""
     worst = max(parts, key=lambda x: _WORST[x.state]).state
@@ -133,22 +134,34 @@ def vehicle_light(parts: list[Light]) -> Light:
 
 def failsafes_light(active: dict[str, Any], light: str, names: tuple[str, ...], state: str, why: str) -> Light:
     """The light of failsafes of their own: red with their causes while one is active (amber
-    when all of those only warn), else ``state`` and ``why``."""
+    when all of those only warn), else ``state`` and ``why``; ``light`` is one of
+    :data:`LIGHTS` or a sensor's label."""
+    label = LIGHTS.get(light, light)
     on = [active[n] for n in names if n in active]
     if on:
-        return Light(LIGHTS[light], "warn" if all(s.action == "warn" for s in on) else "bad",
+        return Light(label, "warn" if all(s.action == "warn" for s in on) else "bad",
                      "; ".join(f"failsafe {s.name}: {s.cause}" for s in on))
-    return Light(LIGHTS[light], state, why)
+    return Light(label, state, why)
 
 
-def leak_state(sup: Any) -> tuple[str, str]:
-    """The leak detector's light and reason while its failsafe is not active."""
-    if sup.leak is None:
-        return "off", "no leak detector (devices.leak.path)"
-    return {"dry": ("ok", f"dry ({sup.leak.path})"),
-            "water": ("warn", f"water at {sup.leak.path} (failsafe after {sup.safety.rule('leak').timeout:g} s)"),
-            "unreadable": ("warn", f"leak detector {sup.leak.path} unreadable: a leak would not be seen"),
-            }.get(sup.safety.leak(), ("warn", "leak detector not read yet"))
+def sensor_lights(sup: Any, active: dict[str, Any]) -> list[Light]:
+    """Each registered auxiliary sensor's light (``backend.sensors``, as the supervisor's
+    poller reads them): red while its failsafe is active, else what its entry's ``light``
+    makes of its latest reading; grey, with the entry's ``absent``, on a robot without it."""
+    out: list[Light] = []
+    for entry, status in sup.sensors.statuses(sup.loop.time, sup.safety.rule):
+        if status is None:
+            state, why = "off", entry.absent
+        else:
+            try:
+                state, why = entry.light(status)
+            except Exception as e:  # a broken light must not take the bar down
+                state, why = "warn", f"its light failed: {type(e).__name__}: {e}"
+            if state not in ("ok", "warn", "bad"):
+                state, why = "warn", f"its light gave {state!r} (not ok, warn or bad): {why}"
+        fs = entry.failsafe
+        out.append(failsafes_light(active, entry.label, (fs.name,) if fs is not None else (), state, str(why)))
+    return out
 
 
 def battery_text(safety: Any, now: float) -> str:
