@@ -138,6 +138,13 @@ def test_a_registered_sensor_is_streamed_recorded_shown_and_watched(thermometer,
         assert CHANNEL in r.channels
     assert {m.celsius for m in recorded} == {21.5, 72.0, 30.0}
     assert all(isinstance(m, HullTemperature) for m in recorded)
+    entry = sensors.sensor(NAME)
+    sensors.unregister(NAME)  # a console without the sensor opens the file, that channel unread
+    try:
+        with SessionReader(paths[0], tmp_path) as r:
+            assert CHANNEL not in r.channels and next(r.messages([ch.BODY_STATE]), None) is not None
+    finally:
+        sensors.register(entry)
 
 
 def test_the_configuration_sets_a_registered_sensors_rule(thermometer) -> None:

@@ -292,10 +292,6 @@ class SafetyMonitor:
             raise ValueError(f"failsafe: {name!r} is not one of {', '.join(names)}")
         return self.cfg.rule(name)
 
-    def warn_only(self) -> tuple[str, ...]:
-        """The protective failsafes configured only to warn (``FailsafeConfig.warn_only``)."""
-        return self.cfg.warn_only()
-
     def sensors_open(self, names: tuple[str, ...], now: float | None = None) -> None:
         """The registered sensors ``names`` are open (at ``now``; default: the last check's
         time): a failsafe with a ``stale_after`` counts their silence from here."""
