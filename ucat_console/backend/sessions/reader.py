@@ -41,16 +41,12 @@ from ucat_console.backend.sessions.schema import (
     NONFINITE,
     SCHEMA_ENCODING,
     field_specs,
-    SCHEMA_PREFIX,
     schema_encoding,
     schema_name,
 )
-from ucat_console.backend import sensors as _sensors  # noqa: F401  the built-in sensors' channels, registered
 from ucat_console.telemetry.channels import CHANNELS, EVENTS
 from ucat_console.telemetry.events import LEVELS, Event
 
-#: the channels of the registered auxiliary sensors (``sensors/<name>``, ``backend.sensors``)
-SENSOR_PREFIX = "sensors/"
 #: the message decoder of each schema encoding (schema.schema_encoding)
 _DECODERS = {1: legacy.decode, 2: codec.decode}
 
@@ -101,8 +97,6 @@ def _check_schema(topic: str, schema: Schema | None, channel: Channel, path: Pat
         if schema is None or schema.name != name:
             raise ValueError(f"{path}: not a session file: channel {codec.short(topic)} is not {name}")
         return 0
-    if topic.startswith(SENSOR_PREFIX) and schema is not None and schema.name.startswith(SCHEMA_PREFIX):
-        return 0  # a sensor this console has not registered (backend.sensors): left unread
     raise ValueError(f"{path}: not a session file: foreign channel {codec.short(topic)}"
                      + (f" (schema {codec.short(schema.name)})" if schema is not None else ""))
 
@@ -293,7 +287,8 @@ class SessionReader(McapFile, _Recording):
         self._decoders: dict[str, Any] = {}
         for cid, ch in channels.items():
             schema = summary.schemas.get(ch.schema_id) if ch.schema_id else None
-            encoding = _check_schema(ch.topic, schema, ch, p)
+            unknown_sensor = ch.topic.startswith("sensors/") and ch.topic not in CHANNELS  # not registered here: unread
+            encoding = 0 if unknown_sensor else _check_schema(ch.topic, schema, ch, p)
             self._topic_ids[ch.topic] = cid
             if encoding:
                 self._decoders[ch.topic] = _DECODERS[encoding]
