@@ -36,6 +36,7 @@ import logging
 import math
 import re
 import threading
+import time
 from dataclasses import dataclass, fields, is_dataclass
 from typing import TYPE_CHECKING, Any, Callable
 
@@ -50,8 +51,6 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-#: the states a sensor's light may give (the status bar's colours: green, amber, red)
-LIGHT_STATES = ("ok", "warn", "bad")
 _NAME = re.compile(r"^[a-z][a-z0-9_]*$")
 
 
@@ -203,9 +202,9 @@ def sensor_failsafe(name: str) -> SensorFailsafe:
 
 # ---------------------------------------------------------------------- the poller
 class SensorPoller:
-    """Opens every registered sensor and reads them in a thread of its own (one for all, every
-    shortest ``period_s`` of them), publishing what they return on their channels. A source that raises is logged
-    once and read again at its next period."""
+    """Opens every registered sensor and reads each every its ``period_s`` in a thread of its
+    own (one for all), publishing what they return on their channels. A source that raises
+    is logged once and read again at its next period."""
 
     def __init__(self, context: OpenContext, publish: Callable[[str, Any], None]) -> None:
         self._context = context
@@ -215,17 +214,16 @@ class SensorPoller:
         self._failing: set[str] = set()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        #: the sensors open on this robot (name -> entry, source), in registration order
         self.sources: dict[str, tuple[Sensor, Source]] = {}
-        self.absent: list[Sensor] = []
         try:
             for entry in SENSORS.values():
                 src = entry.open(context)
                 if src is None:
-                    self.absent.append(entry)
-                elif not isinstance(src, Source):
+                    continue  # not on this robot
+                if not isinstance(src, Source):
                     raise ValueError(f"sensor {entry.name!r}: open returned {type(src).__name__}, not a Source")
-                else:
-                    self.sources[entry.name] = (entry, src)
+                self.sources[entry.name] = (entry, src)
         except BaseException:
             self.close()
             raise
@@ -235,10 +233,12 @@ class SensorPoller:
         opened = self.sources.get(name)
         return opened[1].emulator if opened is not None else None
 
-    def read_all(self) -> None:
-        """Read every source once and publish what they return."""
+    def read_all(self, names: list[str] | None = None) -> None:
+        """Read every source (those of ``names``) once and publish what they return."""
         t = self._context.clock()
         for name, (entry, src) in self.sources.items():
+            if names is not None and name not in names:
+                continue
             try:
                 reading = src.read(t)
                 if reading is not None and type(reading) is not entry.reading:
@@ -283,9 +283,15 @@ class SensorPoller:
         self._thread.start()
 
     def _run(self) -> None:
-        period = min(src.period_s for _e, src in self.sources.values())
-        while not self._stop.wait(period):
-            self.read_all()
+        periods = {name: src.period_s for name, (_e, src) in self.sources.items()}
+        start = time.monotonic()
+        due = {name: start + p for name, p in periods.items()}
+        while not self._stop.wait(max(0.0, min(due.values()) - time.monotonic())):
+            now = time.monotonic()
+            names = [name for name, t in due.items() if t <= now]
+            self.read_all(names)
+            for name in names:  # on its period; after a late read, from now
+                due[name] = max(due[name] + periods[name], now)
 
     def close(self) -> None:
         """Stop the thread and close every source."""

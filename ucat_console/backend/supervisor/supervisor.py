@@ -137,7 +137,7 @@ class Supervisor:
         redaction.keep_out_of_logs(self._secrets)
         self.safety = SafetyMonitor(cfg.failsafe)
         for name in cfg.failsafe.warn_only():
-            log.warning("failsafe %s is set to warn: it will not act on the robot (failsafe.%s.action)", name, name)
+            log.warning("failsafe %s is set to warn: it will not act on the robot (its action under [failsafe])", name)
         # the compiled solver first: a compile holds the interpreter for a minute or more,
         # which the drivers' heartbeat supervision would read as silent drives
         mine = (cfg.mpc.formulation,) if planner_ready is not None else None
