@@ -1,7 +1,7 @@
 """What the fixed status bar shows: armed state, mode, pilot, recording, failsafes, a light for
 each sensor, the drives, the planner, the control, the recording, and the vehicle (one light
-for the loop watchdog, the depth limits, the battery, the leak detector, the estimate and the
-fins' pace), and the battery's figure.
+for the loop watchdog, the depth limits, the battery, the registered auxiliary sensors (the
+leak detector first), the estimate and the fins' pace), and the battery's figure.
 
 :func:`bar_state` builds it from the console's snapshot
 (:class:`~ucat_console.backend.supervisor.ConsoleState`, ``Supervisor.state()``) for one page
@@ -23,7 +23,7 @@ from ucat_console.backend.supervisor.console_state import ConsoleState, SafetyVi
 LIGHTS = {"imu": "IMU", "dvl": "DVL", "depth": "Depth", "drives": "Drives", "planner": "Planner",
           "control": "Control", "recording": "Recording", "loop_watchdog": "Loop",
           "limits": "Limits", "battery": "Battery",
-          "leak": "Leak", "estimate": "Estimate", "fins": "Fins", "vehicle": "Vehicle"}
+          "estimate": "Estimate", "fins": "Fins", "vehicle": "Vehicle"}
 ACTIONS = {"hold": "stops and holds its depth", "surface": "stops and rises to the surface",
            "disarm": "turns its motors off", "warn": "goes on (warn only)"}
 
@@ -83,7 +83,8 @@ def lights(st: ConsoleState, loading: str = "") -> list[Light]:
 
 def vehicle_parts(st: ConsoleState) -> list[Light]:
     """The parts of the Vehicle light: the loop watchdog, the depth limits, the battery, the
-    leak detector, the estimate and the fins' pace, each its state and reason."""
+    registered auxiliary sensors (:func:`sensor_lights`), the estimate and the fins' pace,
+    each its state and reason."""
     safety = st.safety
     now = st.t
     active = safety.active_states()
@@ -99,7 +100,7 @@ def vehicle_parts(st: ConsoleState) -> list[Light]:
     volts = safety.volts
     parts.append(failsafes_light(active, "battery", ("battery_critical", "battery_low"),
                                "ok" if volts is not None else "off", battery_text(safety, now)))
-    parts.append(failsafes_light(active, "leak", ("leak",), *leak_state(st)))
+    parts += sensor_lights(st, active)
     innovation, t_state = safety.innovation, safety.estimate_t
     parts.append(failsafes_light(active, "estimate", ("estimate",), "ok", (
         f"attitude {innovation[1]:.3f} rad off the accelerometer's gravity" if innovation else
@@ -124,7 +125,7 @@ _WORST = {"off": 0, "ok": 1, "warn": 2, "bad": 3}
 
 
 def vehicle_light(parts: list[Light]) -> Light:
-    """One light for the loop watchdog, the depth limits, the battery, the leak detector, the
+    """One light for the loop watchdog, the depth limits, the battery, the auxiliary sensors, the
     estimate and the fins' pace (a bar of 1280 px keeps DISARM on screen): the worst of them,
     and each one's reason, the ones not green first."""
     worst = max(parts, key=lambda x: _WORST[x.state]).state
@@ -134,23 +135,22 @@ def vehicle_light(parts: list[Light]) -> Light:
 
 def failsafes_light(active: dict[str, Any], light: str, names: tuple[str, ...], state: str, why: str) -> Light:
     """The light of failsafes of their own: red with their causes while one is active (amber
-    when all of those only warn), else ``state`` and ``why``."""
+    when all of those only warn), else ``state`` and ``why``; ``light`` is one of
+    :data:`LIGHTS` or a sensor's label."""
+    label = LIGHTS.get(light, light)
     on = [active[n] for n in names if n in active]
     if on:
-        return Light(LIGHTS[light], "warn" if all(s.action == "warn" for s in on) else "bad",
+        return Light(label, "warn" if all(s.action == "warn" for s in on) else "bad",
                      "; ".join(f"failsafe {s.name}: {s.cause}" for s in on))
-    return Light(LIGHTS[light], state, why)
+    return Light(label, state, why)
 
 
-def leak_state(st: ConsoleState) -> tuple[str, str]:
-    """The leak detector's light and reason while its failsafe is not active."""
-    path = st.leak_path
-    if not path:
-        return "off", "no leak detector (devices.leak.path)"
-    return {"dry": ("ok", f"dry ({path})"),
-            "water": ("warn", f"water at {path} (failsafe after {st.safety.rule('leak').timeout:g} s)"),
-            "unreadable": ("warn", f"leak detector {path} unreadable: a leak would not be seen"),
-            }.get(st.safety.leak, ("warn", "leak detector not read yet"))
+def sensor_lights(st: ConsoleState, active: dict[str, Any]) -> list[Light]:
+    """Each registered auxiliary sensor's light (``backend.sensors``, in the snapshot): red
+    while its failsafe is active, else what its entry's ``light`` made of its latest reading;
+    grey on a robot without it."""
+    return [failsafes_light(active, s.label, (s.failsafe,) if s.failsafe else (), s.state, s.why)
+            for s in st.sensor_lights]
 
 
 def battery_text(safety: SafetyView, now: float) -> str:

@@ -22,7 +22,7 @@ from typing import Any
 from ucat_console.backend.access import Actor
 from ucat_console.backend.failsafe_config import FailsafeConfig, FailsafeRule
 from ucat_console.backend.review.effects import Effect
-from ucat_console.backend.safety import FAILSAFES, SENSORS, FailsafeState
+from ucat_console.backend.safety import SENSORS, FailsafeState
 from ucat_console.control.allocation import BodySetpoints
 
 
@@ -81,16 +81,13 @@ class SafetyView:
     energy_used: float  # Wh the drives drew since the start
     innovation: tuple[float, float] | None  # the last attitude innovation at rest (time, rad)
     estimate_t: float | None  # the last body state's time
-    leak: str  # the leak detector's last report: water, dry, unreadable ("" none yet)
     slow_fins: tuple[str, ...]
     cut: tuple[str, ...]  # the axes the allocation cuts
     off_track: tuple[str, ...]  # the tracked axes off their band
 
     def rule(self, name: str) -> FailsafeRule:
-        """Failsafe ``name``'s rule as configured."""
-        if name not in FAILSAFES:
-            raise ValueError(f"failsafe: {name!r} is not one of {', '.join(FAILSAFES)}")
-        return getattr(self.config, name)
+        """Failsafe ``name``'s rule as configured (ValueError naming the failsafes for another)."""
+        return self.config.rule(name)
 
     @property
     def active(self) -> tuple[str, ...]:
@@ -107,6 +104,36 @@ class SafetyView:
     def warn_only(self) -> tuple[str, ...]:
         """The protective failsafes configured only to warn."""
         return self.config.warn_only()
+
+
+@dataclass(frozen=True)
+class SensorLight:
+    """A registered auxiliary sensor's light (``backend.sensors``) while its failsafe is not
+    active: what its entry's ``light`` made of its latest reading."""
+
+    label: str
+    failsafe: str  # its failsafe's name ("" none)
+    state: str  # ok, warn, bad; off on a robot without it
+    why: str
+
+
+def sensor_lights(sensors: Any, now: float, rule: Any) -> tuple[SensorLight, ...]:
+    """Each registered sensor's light from the poller ``sensors`` (a broken light function
+    is said on the light, never takes the snapshot down)."""
+    out = []
+    for entry, status in sensors.statuses(now, rule):
+        if status is None:
+            state, why = "off", entry.absent
+        else:
+            try:
+                state, why = entry.light(status)
+            except Exception as e:  # noqa: BLE001: a registered entry's own code
+                state, why = "warn", f"its light failed: {type(e).__name__}: {e}"
+            if state not in ("ok", "warn", "bad"):
+                state, why = "warn", f"its light gave {state!r} (not ok, warn or bad): {why}"
+        fs = entry.failsafe
+        out.append(SensorLight(entry.label, fs.name if fs is not None else "", state, str(why)))
+    return tuple(out)
 
 
 @dataclass(frozen=True)
@@ -169,7 +196,6 @@ class ConsoleState:
     plan_overruns: int
     has_drives: bool  # the fins are moved by motor drives
     has_rig: bool  # the robot is the simulated rig (faults may be injected)
-    leak_path: str  # the leak detector's input ("" when there is none)
     start_depth: float  # where the simulated robot starts (m, positive down)
     access: AccessView
     recording: RecordingView
@@ -178,6 +204,7 @@ class ConsoleState:
     script: ScriptView | None  # None: no scripted manoeuvre started yet
     limits: Limits
     effects: tuple[Effect, ...]  # the latest changes and their figures, newest first
+    sensor_lights: tuple[SensorLight, ...]  # the registered auxiliary sensors', in registration order
 
     @property
     def failsafes(self) -> tuple[str, ...]:
@@ -199,13 +226,12 @@ def build_state(sup: Any) -> ConsoleState:
     cut, off = safety.control()
     run = sup.manoeuvre
     script = sup.script_run
-    leak = sup.leak
     return ConsoleState(
         t=now, robot=cfg.robot, armed=sup.gate.armed, mode=sup.loop.mode,
         formulation=str(sup.param_value("mpc.formulation")), setpoints=sup.loop.setpoints,
         fault=sup.fault, late_plans=sup.loop.late_plans, plan_overruns=sup.loop.plan_overruns,
         has_drives=sup.gate.has_drives, has_rig=sup.rig is not None,
-        leak_path=str(leak.path) if leak is not None else "", start_depth=sup.start_depth,
+        start_depth=sup.start_depth,
         access=AccessView(pilot=pilot, pilot_name=access.name(pilot) if isinstance(pilot, int) else "",
                           pending=access.pending, clients=len(access.clients)),
         recording=RecordingView(session_id=sup.recording.session_id, failed=sup.recording.failed),
@@ -214,7 +240,7 @@ def build_state(sup: Any) -> ConsoleState:
             sensors=tuple(SensorView(s, *safety.sensor_silence(s, now)) for s in SENSORS),
             motor_faults=tuple(safety.motor_faults()), recent_late_plans=safety.recent_late_plans(),
             depth=depth, altitude=altitude, volts=volts, energy_used=used, innovation=innovation,
-            estimate_t=estimate_t, leak=safety.leak(), slow_fins=tuple(safety.slow_fins()),
+            estimate_t=estimate_t, slow_fins=tuple(safety.slow_fins()),
             cut=tuple(cut), off_track=tuple(off),
         ),
         manoeuvre=None if run is None else ManoeuvreView(run.session, run.finished, run.progress),
@@ -224,4 +250,5 @@ def build_state(sup: Any) -> ConsoleState:
         limits=Limits(cfg.loop.max_velocity, cfg.loop.max_depth, cfg.loop.max_yaw_rate,
                       cfg.access.handover_timeout),
         effects=tuple(sup.effects.entries()),
+        sensor_lights=sensor_lights(sup.sensors, now, safety.rule),
     )

@@ -64,7 +64,6 @@ from typing import TYPE_CHECKING, Any, Callable, Mapping
 from ucat_console.backend import redaction
 from ucat_console.backend.access import LOCAL, AccessControl, AccessDenied, AccessState, Actor, actor_name
 from ucat_console.backend.arming import ArmingGate
-from ucat_console.backend.devices.leak import LeakEmulator, LeakInput
 from ucat_console.backend.loop.clock import Clock, PacedClock
 from ucat_console.backend.loop.closed_loop import ClosedLoop
 from ucat_console.backend.loop.commands import (
@@ -78,8 +77,9 @@ from ucat_console.backend.loop.commands import (
 )
 from ucat_console.backend.loop.kernels_warm_up import warm_up
 from ucat_console.backend.review.effects import ChangeEffects
-from ucat_console.backend.safety import CHANNELS as SAFETY_CHANNELS
 from ucat_console.backend.safety import SafetyMonitor, Transition
+from ucat_console.backend.safety import channels as safety_channels
+from ucat_console.backend.sensors import OpenContext, SensorPoller
 from ucat_console.backend.sessions.limits import MemoryBudget
 from ucat_console.backend.sessions.shared import SharedReaders
 from ucat_console.backend.sessions.foxglove import robot_geometry
@@ -144,7 +144,7 @@ class Supervisor:
         redaction.keep_out_of_logs(self._secrets)
         self.safety = SafetyMonitor(cfg.failsafe)
         for name in cfg.failsafe.warn_only():
-            log.warning("failsafe %s is set to warn: it will not act on the robot (failsafe.%s.action)", name, name)
+            log.warning("failsafe %s is set to warn: it will not act on the robot (its action under [failsafe])", name)
         # the compiled solver first: a compile holds the interpreter for a minute or more,
         # which the drivers' heartbeat supervision would read as silent drives
         mine = (cfg.mpc.formulation,) if planner_ready is not None else None
@@ -194,11 +194,12 @@ class Supervisor:
             weights=self._weights, on_arm=cfg.console.record_on_arm, tail=cfg.console.record_tail,
             tail_max=cfg.console.record_tail_max, notify=self._notify,
         )
-        # the leak detector, read by the console on any robot; a simulated one's is emulated
-        leak = cfg.devices.leak
-        self.leak_emulator = LeakEmulator(leak.active_high) if entry.simulated and not leak.path else None
-        path = leak.path or (str(self.leak_emulator.path) if self.leak_emulator is not None else "")
-        self.leak = LeakInput(leak, path, self.report_event, lambda: self.loop.time) if path else None
+        #: the registered auxiliary sensors (``backend.sensors``: the leak detector first), read by
+        #: the console on any robot, published on their channels
+        self.sensors = SensorPoller(OpenContext(cfg.devices, entry.simulated, inner, self.report_event,
+                                                lambda: self.loop.time), self.stream.publish)
+        #: the emulated leak detector of a simulated robot without devices.leak.path (fault injection)
+        self.leak_emulator = self.sensors.emulator("leak")
         self.rig_control = RigControl(RigHost(
             robot=cfg.robot, rig=self.rig, gate=self.gate, require_pilot=self.access.require_pilot,
             in_loop=self._in_loop, publish_event=self._publish_event, notify=self._notify,
@@ -233,7 +234,7 @@ class Supervisor:
         self._closed = False
         self._chunks = 0
         self._unsubs = [
-            self.stream.subscribe_batches(self.safety.on_messages, SAFETY_CHANNELS),
+            self.stream.subscribe_batches(self.safety.on_messages, safety_channels()),
             self.stream.subscribe_batches(self._on_bodies, [ch.BODY_STATE]),
             self.stream.subscribe(self.effects.on_message, self.effects.channels),
         ]
@@ -241,8 +242,8 @@ class Supervisor:
         if add_telemetry is not None:
             self._unsubs.append(add_telemetry(self.stream.publish))
         self.access.add_listener(self._on_access)
-        if self.leak is not None:  # once the failsafes hear its events
-            self.leak.start()
+        self.safety.sensors_open(tuple(self.sensors.sources), self.loop.time)
+        self.sensors.start()  # once the failsafes hear them
 
     # ================================================================== lifecycle
     @property
@@ -293,10 +294,7 @@ class Supervisor:
         finally:
             for unsub in self._unsubs:
                 unsub()
-            if self.leak is not None:
-                self.leak.stop()
-            if self.leak_emulator is not None:
-                self.leak_emulator.close()
+            self.sensors.close()
             try:
                 self.loop.close()
             finally:
