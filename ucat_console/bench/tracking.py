@@ -199,7 +199,7 @@ def run_manoeuvre(app: Any, mode: str, formulation: str, m: Manoeuvre, seed: int
     from ucat_console.telemetry import channels as ch
     from ucat_console.telemetry.stream import TelemetryStream
 
-    cfg = app.loop.replace(mode=mode, planner_seed=seed, mpc=app.mpc.replace(formulation=formulation))
+    cfg = app.loop.replace(mode=mode, planner_seed=seed, mpc=app.loop.mpc.replace(formulation=formulation))
     if m.gait_to is not None:
         cfg = cfg.replace(baseline=cfg.baseline.replace(frequency=GAIT_FROM))
     z0 = m.depth if m.start_depth is None else m.start_depth
