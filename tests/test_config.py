@@ -66,6 +66,7 @@ def test_partial_file_keeps_defaults_elsewhere(tmp_path: Path) -> None:
         ("[loop.mpc]\nlam_st = -1.0\n", "loop.mpc.lam_st"),
         ("[loop.body.hull]\nsurge_mass = 0.0\n", "loop.body.hull.surge_mass"),
         ("[mpc]\nlam_st = -1.0\n", "loop.mpc.lam_st"),  # an older file's table: the key it loads as
+        ("loop = 3\n[mpc]\nlam_st = 2.0\n", "loop: expected a table"),
         ('robot = "boat"\n', "robot"),
         ("[console]\nnope = 1\n", "console.nope"),
         # a page is gone after three unanswered heartbeats: they must fit in the pilot's timeout

@@ -275,9 +275,11 @@ def migrate_loop_blocks(data: dict[str, Any]) -> dict[str, Any]:
     warning naming the tables to rewrite; ValueError naming both keys when a key is given in
     both places with different values."""
     old = [name for name in OLD_LOOP_TABLES if name in data]
+    if not old:
+        return data
     loop = data.get("loop", {})
-    if not old or not isinstance(loop, dict):
-        return data  # a loop that is not a table: from_dict names it
+    if not isinstance(loop, dict):
+        raise ValueError(f"loop: expected a table, got {loop!r}")
     merged = dict(loop)
     for name in old:
         merged[name] = _merged(data[name], loop[name], name, f"loop.{name}") if name in loop else data[name]
