@@ -273,12 +273,13 @@ def test_tracking_counts_only_while_driving_and_restarts_its_time_when_back_in_b
 
 
 def test_the_control_light_names_what_the_allocation_cuts() -> None:
+    from ucat_console.backend.supervisor.console_state import safety_view
     from ucat_console.telemetry.messages import BodyAllocation
     from ucat_console.ui.status_bar import control_light
 
     m = SafetyMonitor(FailsafeConfig())
-    assert control_light(m, {}).state == "ok"
+    assert control_light(safety_view(m, 0.0), {}).state == "ok"
     m.on_message(ch.BODY_ALLOCATION, BodyAllocation(0.0, 3.0, 6.0, 0.1, 0.0, 4.7, 0.1, ("heave", "surge")))
-    light = control_light(m, {})
+    light = control_light(safety_view(m, 0.0), {})
     assert light.state == "warn"
     assert "heave: 4.70 of 6.00 N" in light.why and "surge: 0.00 of 3.00 N" in light.why

@@ -212,6 +212,22 @@ class ConsoleState:
         return self.safety.active
 
 
+def safety_view(safety: Any, now: float) -> SafetyView:
+    """What the safety monitor ``safety`` holds at loop time ``now``, as values."""
+    depth, altitude = safety.envelope()
+    volts, used = safety.battery()
+    innovation, estimate_t = safety.estimate()
+    cut, off = safety.control()
+    return SafetyView(
+        config=safety.cfg, failsafes=tuple(safety.states()),
+        sensors=tuple(SensorView(s, *safety.sensor_silence(s, now)) for s in SENSORS),
+        motor_faults=tuple(safety.motor_faults()), recent_late_plans=safety.recent_late_plans(),
+        depth=depth, altitude=altitude, volts=volts, energy_used=used, innovation=innovation,
+        estimate_t=estimate_t, slow_fins=tuple(safety.slow_fins()),
+        cut=tuple(cut), off_track=tuple(off),
+    )
+
+
 def build_state(sup: Any) -> ConsoleState:
     """The snapshot of supervisor ``sup`` now (the one place that reads its parts for the
     page; ``Any``: this module is the supervisor's, which imports it)."""
@@ -220,10 +236,6 @@ def build_state(sup: Any) -> ConsoleState:
     safety = sup.safety
     access = sup.access
     pilot = access.pilot
-    depth, altitude = safety.envelope()
-    volts, used = safety.battery()
-    innovation, estimate_t = safety.estimate()
-    cut, off = safety.control()
     run = sup.manoeuvre
     script = sup.script_run
     return ConsoleState(
@@ -235,14 +247,7 @@ def build_state(sup: Any) -> ConsoleState:
         access=AccessView(pilot=pilot, pilot_name=access.name(pilot) if isinstance(pilot, int) else "",
                           pending=access.pending, clients=len(access.clients)),
         recording=RecordingView(session_id=sup.recording.session_id, failed=sup.recording.failed),
-        safety=SafetyView(
-            config=safety.cfg, failsafes=tuple(safety.states()),
-            sensors=tuple(SensorView(s, *safety.sensor_silence(s, now)) for s in SENSORS),
-            motor_faults=tuple(safety.motor_faults()), recent_late_plans=safety.recent_late_plans(),
-            depth=depth, altitude=altitude, volts=volts, energy_used=used, innovation=innovation,
-            estimate_t=estimate_t, slow_fins=tuple(safety.slow_fins()),
-            cut=tuple(cut), off_track=tuple(off),
-        ),
+        safety=safety_view(safety, now),
         manoeuvre=None if run is None else ManoeuvreView(run.session, run.finished, run.progress),
         script=None if script is None else ScriptView(
             script.name, script.finished, script.progress, script.segment, len(script.script.segments),
