@@ -49,7 +49,7 @@ class SeekConfig(Config):
         DEFAULT_PARAMS, doc="the parameters the seeker may vary and their bounds ([[seek.params]] tables)")
     settle_s: float = param(10.0, lo=0.0, hi=600.0, unit="s",
                             doc="after each change, this long before the measure window starts")
-    window_s: float = param(30.0, lo=2.0, hi=3600.0, unit="s",
+    window_s: float = param(30.0, lo=0.5, hi=3600.0, unit="s",
                             doc="each candidate's measure window (energy per metre with its bootstrap interval)")
     max_candidates: int = param(20, lo=1, hi=1000, doc="candidates measured in one search (the start's included)")
     seed: int = param(0, lo=0, hi=2**31 - 1, doc="seed of the search's sampler (the same seed suggests the same)")
