@@ -910,6 +910,8 @@ class Supervisor:
                 raise CommandRefused("identification manoeuvre: one is running")
             if self.script_run is not None and not self.script_run.finished:
                 raise CommandRefused(f"identification manoeuvre: manoeuvre {self.script_run.name} is running")
+            if self.seek_run is not None and not self.seek_run.finished:
+                raise CommandRefused("identification manoeuvre: a seek is running")
             run = ManoeuvreRun(self.manoeuvre_host, who)
             run.start()
             self.manoeuvre = run
@@ -933,9 +935,11 @@ class Supervisor:
         the robot disarmed, a failsafe, the pilot gone: ``ScriptRun.reason`` says which)."""
         self.access.require_pilot(who, f"manoeuvre {script.name}")
         with self._lock:
-            for running in (self.script_run, self.manoeuvre, self.seek_run):
+            for running in (self.script_run, self.manoeuvre):
                 if running is not None and not running.finished:
-                    raise CommandRefused(f"manoeuvre {script.name}: a manoeuvre or a seek is running; stop it first")
+                    raise CommandRefused(f"manoeuvre {script.name}: a manoeuvre is running; stop it first")
+            if self.seek_run is not None and not self.seek_run.finished:
+                raise CommandRefused(f"manoeuvre {script.name}: a seek is running; stop it first")
             run = ScriptRun(self.script_host, who, script)
             run.start()
             self.script_run = run
