@@ -1,4 +1,4 @@
-"""The Control tab's Seek efficiency folder without a browser: the pilot's only (the server
+"""The Drive tab's Seek efficiency folder without a browser: the pilot's only (the server
 checks again), the configuration's parameters only, progress from the snapshot, Stop & keep
 best / Stop & revert, DISARM stops it."""
 

@@ -1,4 +1,4 @@
-"""Seek efficiency from the Control tab: the parameters to vary (of the configuration's
+"""Seek efficiency from the Drive tab (beside the Manoeuvre folder): the parameters to vary (of the configuration's
 ``[[seek.params]]``), Start seek, Stop & keep best, Stop & revert (docs/seek.md).
 
 Every control here is the pilot's, and the server checks it again:
