@@ -153,6 +153,7 @@ class SeekRun:
         self._search: Search | None = None
         self._trial: Any = None
         self._values: dict[str, float] = {}
+        self._home: dict[str, float] = {}  # the values the present search began from
         self._in_search = 0  # candidates measured in the present search
         self._window = (math.nan, math.nan)
         self._due = math.nan
@@ -205,8 +206,8 @@ class SeekRun:
         with self._lock:
             self._dims = check_space(self.params, host.param_field)
             self.start_values = {p.name: float(host.param_value(p.name)) for p in self.params}
-            self._unsubscribe = host.subscribe(self._on_message, TABLE_CHANNELS)
             self._begin_search(self.start_values, host.time())
+            self._unsubscribe = host.subscribe(self._on_message, TABLE_CHANNELS)
             host.journal(actor_name(self.who), "seek", "", f"started over {', '.join(d.name for d in self._dims)}")
 
     def _on_message(self, channel: str, msg: Any) -> None:
@@ -242,6 +243,7 @@ class SeekRun:
         self._search = Search(self._dims, self.cfg.seed + self.searches - 1, self.cfg.startup)
         self._trial = None
         self._values = dict(values)
+        self._home = dict(values)
         self._in_search = 0
         self._settle(now)
 
@@ -321,7 +323,8 @@ class SeekRun:
         self._next(now)
 
     def _fallback(self) -> dict[str, float]:
-        return dict(self.best.values) if self.best is not None else dict(self.start_values)
+        """The best so far, else the values the search began from."""
+        return dict(self.best.values) if self.best is not None else dict(self._home)
 
     def _set(self, values: Mapping[str, float]) -> None:
         changes = {k: v for k, v in values.items() if self.host.param_value(k) != v}
