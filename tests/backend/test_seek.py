@@ -264,3 +264,42 @@ def test_a_headless_seek_on_the_simulated_robot_finds_a_best_with_its_interval(t
     assert "mpc.lam_f: not one of the seeker's parameters" not in out
     assert main(["seek", "--params", "mpc.lam_f", "--fast"]) == 2
     assert "mpc.lam_f: not one of the seeker's parameters" in capsys.readouterr().err
+
+
+def test_bounds_outside_a_parameters_own_range_or_a_candidate_its_block_refuses_never_reach_the_loop(
+        make_console: Callable[..., Console], monkeypatch: pytest.MonkeyPatch) -> None:
+    params = (SeekParam("mpc.st_opt", 0.001, 0.3), SeekParam("mpc.formulation", 0.0, 1.0),
+              SeekParam("mpc.st_low", 0.2, 0.6))
+    c = seek_console(make_console, params=params, max_candidates=8, startup=8)
+    sup = c.sup
+    with pytest.raises(CommandRefused, match=r"mpc.st_opt: the bounds \[0.001, 0.3\] leave the parameter's own "
+                                             r"range \[0.01, 2.0\]"):
+        sup.start_seek(LOCAL, ("mpc.st_opt",))
+    with pytest.raises(CommandRefused, match="mpc.formulation is not a number"):
+        sup.start_seek(LOCAL, ("mpc.formulation",))
+    assert sup.seek_run is None
+    fake_rows(monkeypatch, sup, lambda v, t: 50.0)
+    high = sup.param_value("mpc.st_high")
+    in_force: list[float] = []
+    run = sup.start_seek(LOCAL, ("mpc.st_low",))
+    run_until(sup, lambda: in_force.append(sup.param_value("mpc.st_low")) or run.finished, limit=120.0)
+    refused = [cand for cand in run.candidates if cand.verdict.startswith("refused")]
+    assert refused and all(dict(cand.values)["mpc.st_low"] >= high for cand in refused)
+    assert "st_low/st_high: need st_low < st_high" in refused[0].verdict
+    assert max(in_force) < high  # the MPC's own check kept every refused one out of the loop
+    assert all(cand.accepted for cand in run.candidates if dict(cand.values)["mpc.st_low"] < high)
+
+
+def test_it_stops_when_its_pilot_is_gone(make_console: Callable[..., Console], monkeypatch: pytest.MonkeyPatch) -> None:
+    c = make_console(console_config(base="sim-tuned").replace(seek=SEEK))
+    sup = c.sup
+    sup.client_connected(1)
+    assert sup.take_control(1, sup.access.token)
+    sup.arm(1)
+    fake_rows(monkeypatch, sup, lambda v, t: 100.0 * abs(v - 0.35))
+    run = sup.start_seek(1)
+    run_until(sup, lambda: len(run.candidates) >= 2)
+    sup.client_disconnected(1)
+    sup.step(0.2)
+    assert run.finished and run.reason in ("its pilot is no longer the pilot", "failsafe pilot_gone")
+    assert sup.param_value("mpc.st_opt") == pytest.approx(0.3)

@@ -9,7 +9,8 @@ the parameter's own range, its block's check; journalled, its effect measured), 
 battery's (``power/electrical``) energy per metre with its bootstrap interval, and the
 speed, depth and heading tracking errors. A candidate whose tracking error is larger than
 its band is rejected (never rewarded; the best values are put back before the next), as is
-one without electrical readings. The search (:class:`~ucat_console.backend.seek.search.Search`,
+one without electrical readings or without an interval (a window of fewer than two fin
+cycles). The search (:class:`~ucat_console.backend.seek.search.Search`,
 Optuna's TPE) is told each result and suggests the next; the first candidate is the values
 in force at the start. Each candidate is an event (source ``"seek"``, code
 ``"candidate"``) and a journal entry with its figures and verdict.
@@ -263,6 +264,10 @@ class SeekRun:
                 self._data.drop_before(t1 - 1.0)
         if row.source != ELECTRICAL:
             return row, f"no figures (the window has no electrical readings: {row.source_label})"
+        e = row.figures["energy_per_metre"]
+        if not (math.isfinite(e.value) and math.isfinite(e.lo) and math.isfinite(e.hi)):
+            return row, (f"no figures (no energy per metre with an interval over {row.cycles} fin cycles: "
+                         "lengthen seek.window_s)")
         return row, ""
 
     def _off_track(self, row: TableRow) -> str:
