@@ -3,7 +3,8 @@
 :class:`AppConfig` composes the blocks defined beside the code that uses them (the
 closed loop's ``loop``, which holds the controller's ``mpc``, ``body``, ``baseline``,
 ``executor``, ``power``; the simulated robot's ``plant``; the ``recorder``; the limits on reading session
-files, ``review``; the efficiency figures and their comparison, ``metrics``; the drivers' ``devices``; the pilot's ``access``, beside
+files, ``review``; the efficiency figures and their comparison, ``metrics``; the efficiency seeker, ``seek``;
+the drivers' ``devices``; the pilot's ``access``, beside
 the access control; the ``failsafe`` rules, beside the safety monitor) with the console's own
 blocks defined here: ``console`` (web server, plots, supervision) and ``foxglove`` (the live
 Foxglove server). This module composes; it is imported by the supervisor and the tools
@@ -55,6 +56,7 @@ from ucat_console.backend.robots import robot as registered_robot
 from ucat_console.backend.robots import robot_names
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.backend.review.metrics import MetricsConfig
+from ucat_console.backend.seek.config import SeekConfig
 from ucat_console.backend.sessions.limits import ReviewConfig
 from ucat_console.backend.sessions.recorder import RecorderConfig
 from ucat_console.backend.sim.params import PlantConfig
@@ -185,6 +187,7 @@ class AppConfig(Config):
     recorder: RecorderConfig = RecorderConfig()
     review: ReviewConfig = ReviewConfig()
     metrics: MetricsConfig = MetricsConfig()
+    seek: SeekConfig = SeekConfig()
     console: ConsoleConfig = ConsoleConfig()
     access: AccessConfig = AccessConfig()
     failsafe: FailsafeConfig = FailsafeConfig()

@@ -38,6 +38,7 @@ from ucat_console.ui.driving import KEY_MAP, KEYS, Driving
 from ucat_console.ui.markdown import _set, esc, events_markdown, within
 from ucat_console.ui.identify_inputs import IdentifyInputs
 from ucat_console.ui.manoeuvre_inputs import ManoeuvreInputs
+from ucat_console.ui.seek_inputs import SeekInputs
 from ucat_console.ui.rig_faults import RigFaultInputs
 from ucat_console.ui.tuning_inputs import param_specs
 
@@ -125,6 +126,7 @@ class ControlPanel:
                 self.drive_input = gui.add_text("gamepad", "", visible=False)
                 self.theme_button = gui.add_button("theme", visible=False)
             self.manoeuvres = ManoeuvreInputs(gui, sup, client_id, lambda fn: self.act(fn), self._allow, self.show)
+            self.seek = SeekInputs(gui, sup, client_id, self.show)
 
         self.params: dict[str, Any] = {}
         with within(c.get("tuning")):
@@ -211,7 +213,8 @@ class ControlPanel:
         pilot = [self.release, self.handover, self.decline, self.arm, self.mode,
                  *self.sp_inputs.values(), self.apply_sp, self.apply_tuning, self.revert, self.undo, self.save,
                  *self.params.values(), self.history, self.rec_start, self.rec_stop, self.marker,
-                 self.reset_drives, self.zero_depth, *self.identify.handles(), *self.manoeuvres.handles()]
+                 self.reset_drives, self.zero_depth, *self.identify.handles(), *self.manoeuvres.handles(),
+                 *self.seek.handles()]
         if self.faults is not None:
             f = self.faults
             pilot += [f.device, f.fault, f.fin, f.code, f.duration, f.inject, f.clear]
@@ -270,6 +273,9 @@ class ControlPanel:
             self.zero_depth.on_click(self._guard(self._zero_depth))
         self.manoeuvres.start.on_click(self._guard(self.manoeuvres.request_start))
         self.manoeuvres.stop.on_click(self._guard(self.manoeuvres.stop_run))
+        self.seek.start.on_click(self._guard(self.seek.start_seek))
+        self.seek.keep.on_click(self._guard(lambda: self.seek.stop(True)))
+        self.seek.revert.on_click(self._guard(lambda: self.seek.stop(False)))
         ident = self.identify
         ident.run.on_click(self._guard(ident.start))
         ident.stop.on_click(self._guard(ident.stop_run))
@@ -618,6 +624,7 @@ class ControlPanel:
                 submit(self.cid, "list sessions", lambda: self._list_sessions(others), coalesce=True)
         self.identify.refresh(pilot, st)
         self.manoeuvres.refresh(pilot, st)
+        self.seek.refresh(pilot, st)
 
     def _list_sessions(self, others: bool = False) -> None:
         """The identification's list of sessions, and with ``others`` the page's other lists."""

@@ -167,6 +167,38 @@ class ScriptView:
 
 
 @dataclass(frozen=True)
+class SeekView:
+    """The seek of efficiency last started (docs/seek.md)."""
+
+    finished: bool
+    reason: str  # why it ended ("" while it runs)
+    phase: str  # settle, measure, recover, watch, done
+    candidates: int  # measured so far
+    max_candidates: int  # of one search
+    searches: int  # searches begun (the first and each re-seek)
+    best: tuple[tuple[str, float], ...]  # the best accepted candidate's values (empty: none yet)
+    best_energy: tuple[float, float, float] | None  # its energy per metre and interval (J/m)
+    time_left: float  # s of loop time until the present search ends (0: watching or ended)
+    lines: tuple[str, ...]  # the latest candidates, each in a line
+
+    @property
+    def running(self) -> bool:
+        return not self.finished
+
+
+def seek_view(run: Any) -> SeekView | None:
+    """The snapshot of a :class:`~.seek_run.SeekRun` (None: none)."""
+    if run is None:
+        return None
+    best = run.best
+    e = None if best is None or best.energy is None else (best.energy.value, best.energy.lo, best.energy.hi)
+    lines = tuple(f"#{c.index}: {c.verdict} ({', '.join(f'{k} {v:.4g}' for k, v in c.values)})"
+                  + (f": {c.energy.value:.1f} J/m" if c.energy is not None else "") for c in run.candidates[-8:])
+    return SeekView(run.finished, run.reason, run.phase, len(run.candidates), run.cfg.max_candidates,
+                    run.searches, () if best is None else best.values, e, run.time_left(), lines)
+
+
+@dataclass(frozen=True)
 class Limits:
     """The limits the page shows beside its inputs."""
 
@@ -202,6 +234,7 @@ class ConsoleState:
     safety: SafetyView
     manoeuvre: ManoeuvreView | None  # None: none started yet
     script: ScriptView | None  # None: no scripted manoeuvre started yet
+    seek: SeekView | None  # None: no seek started yet
     limits: Limits
     effects: tuple[Effect, ...]  # the latest changes and their figures, newest first
     sensor_lights: tuple[SensorLight, ...]  # the registered auxiliary sensors', in registration order
@@ -252,6 +285,7 @@ def build_state(sup: Any) -> ConsoleState:
         script=None if script is None else ScriptView(
             script.name, script.finished, script.progress, script.segment, len(script.script.segments),
             script.reason, tuple(script.lines)),
+        seek=seek_view(sup.seek_run),
         limits=Limits(cfg.loop.max_velocity, cfg.loop.max_depth, cfg.loop.max_yaw_rate,
                       cfg.access.handover_timeout),
         effects=tuple(sup.effects.entries()),

@@ -43,8 +43,9 @@ of the gate; :class:`~.tuning.Tuning` the commanded tuning and its journal;
 :class:`~.recording.SessionRecording` the recording; :class:`~.rig_control.RigControl` the
 drive and fault commands; :class:`~.manoeuvre.ManoeuvreRun` an identification manoeuvre;
 :class:`~.scripted_run.ScriptRun` a scripted manoeuvre (docs/manoeuvres.md);
+:class:`~.seek_run.SeekRun` a seek of efficiency (docs/seek.md);
 the closed loop owns what it has applied. The parts live in the modules of this package
-and get what they use passed in (``RigHost``, ``ManoeuvreHost``, ``ScriptHost``: the few commands and
+and get what they use passed in (``RigHost``, ``ManoeuvreHost``, ``ScriptHost``, ``SeekHost``: the few commands and
 readings each needs), never the supervisor itself.
 
 The module is over 500 lines because :class:`Supervisor` is the one entry point for
@@ -92,10 +93,19 @@ from ucat_console.backend.supervisor.health import Health
 from ucat_console.backend.supervisor.manoeuvre import ManoeuvreHost, ManoeuvreRun
 from ucat_console.backend.supervisor.recording import SessionRecording
 from ucat_console.backend.supervisor.scripted_run import ScriptHost, ScriptRun
+from ucat_console.backend.supervisor.seek_run import SeekHost, SeekRun
 from ucat_console.backend.supervisor.rig_control import RigControl, RigHost
 from ucat_console.backend.robots import robot
 from ucat_console.backend.supervisor.robots import RobotFactory, SteadyPacedClock, simulated_rig
-from ucat_console.backend.supervisor.tuning import Journal, JournalEntry, Tuning, configured, fmt, is_tuning_key
+from ucat_console.backend.supervisor.tuning import (
+    Journal,
+    JournalEntry,
+    Tuning,
+    configured,
+    fmt,
+    is_tuning_key,
+    param_field,
+)
 from ucat_console.backend.supervisor.watchdog import LoopWatchdog
 from ucat_console.config import AppConfig
 from ucat_console.control.allocation import BodySetpoints
@@ -224,6 +234,16 @@ class Supervisor:
         )
         #: the scripted manoeuvre last started (None: none yet)
         self.script_run: ScriptRun | None = None
+        #: what a seek of efficiency uses: the pilot's tuning, checked as any
+        self.seek_host = SeekHost(
+            require_pilot=self.access.require_pilot, is_pilot=self.access.is_pilot, armed=lambda: self.gate.armed,
+            failsafes=self.safety.active, param_field=param_field, param_value=self.param_value,
+            set_params=self.set_params, journal=self.journal_log.add,
+            publish_event=lambda ev: self.stream.publish(ch.EVENTS, ev), subscribe=self.stream.subscribe,
+            time=lambda: self.loop.time, metrics=cfg.metrics,
+        )
+        #: the seek of efficiency last started (None: none yet)
+        self.seek_run: SeekRun | None = None
         #: each tuning, mode or setpoint change with the figures before and after it
         self.effects = ChangeEffects(cfg.metrics, lambda ev: self.stream.publish(ch.EVENTS, ev))
         self._thread: threading.Thread | None = None
@@ -392,6 +412,18 @@ class Supervisor:
             except Exception:
                 log.exception("finishing the identification manoeuvre failed")
         self._poll_script()
+        self._poll_seek()
+
+    def _poll_seek(self) -> None:
+        run = self.seek_run
+        if run is not None and not run.finished:
+            try:
+                if run.poll():
+                    self._notify()
+            except Exception as e:  # a candidate's change refused past its check: the seek ends there
+                log.exception("the seek failed")
+                run.finish(f"failed: {e}", keep=False)
+                self._notify()
 
     def _poll_script(self) -> None:
         run = self.script_run
@@ -674,6 +706,7 @@ class Supervisor:
             log.error("a fin drive did not confirm its stop (see its events)")
         self.arm_requests.clear()
         self._poll_script()  # a scripted manoeuvre stops at once, before the recording's tail counts
+        self._poll_seek()
         if was:
             self._armed_at = None
             self.recording.disarmed(self.loop.time)
@@ -742,6 +775,7 @@ class Supervisor:
                 else:
                     depth = 0.0
                 self._submit_setpoints(SetSetpoints(0.0, depth, 0.0), f"failsafe {tr.name}")
+            self._poll_seek()  # a seek stops at once
         else:
             self._publish_event("failsafe", "cleared", f"{tr.name} cleared", "info", {"failsafe": tr.name})
         self._publish_status()
@@ -876,6 +910,8 @@ class Supervisor:
                 raise CommandRefused("identification manoeuvre: one is running")
             if self.script_run is not None and not self.script_run.finished:
                 raise CommandRefused(f"identification manoeuvre: manoeuvre {self.script_run.name} is running")
+            if self.seek_run is not None and not self.seek_run.finished:
+                raise CommandRefused("identification manoeuvre: a seek is running")
             run = ManoeuvreRun(self.manoeuvre_host, who)
             run.start()
             self.manoeuvre = run
@@ -902,6 +938,8 @@ class Supervisor:
             for running in (self.script_run, self.manoeuvre):
                 if running is not None and not running.finished:
                     raise CommandRefused(f"manoeuvre {script.name}: a manoeuvre is running; stop it first")
+            if self.seek_run is not None and not self.seek_run.finished:
+                raise CommandRefused(f"manoeuvre {script.name}: a seek is running; stop it first")
             run = ScriptRun(self.script_host, who, script)
             run.start()
             self.script_run = run
@@ -917,6 +955,49 @@ class Supervisor:
         paths = run.finish(f"stopped by {actor_name(who)}")
         self._notify()
         return paths
+
+    # ================================================================== seeking efficiency
+    def start_seek(self, who: Actor, params: tuple[str, ...] = (), candidates: int | None = None,
+                   seed: int | None = None) -> SeekRun:
+        """Seek efficiency over ``params`` (the configured ``[[seek.params]]`` names; all
+        when empty), ``candidates`` and ``seed`` overriding the configuration's (pilot, armed,
+        no failsafe active; one at a time, not beside a manoeuvre); docs/seek.md."""
+        self.access.require_pilot(who, "seek")
+        cfg = self.cfg.seek
+        try:
+            names = tuple(params)
+            if not all(isinstance(n, str) for n in names):
+                raise ValueError(f"params: expected parameter names, got {params!r}")
+            changes: dict[str, Any] = {}
+            if candidates is not None:
+                changes["max_candidates"] = number("candidates", candidates, True)
+            if seed is not None:
+                changes["seed"] = number("seed", seed, True)
+            cfg = cfg.replace(**changes)
+            cfg.only(names)
+        except (TypeError, ValueError) as e:
+            raise CommandRefused(f"seek: {e}") from None
+        with self._lock:
+            for running in (self.script_run, self.manoeuvre, self.seek_run):
+                if running is not None and not running.finished:
+                    raise CommandRefused("seek: a manoeuvre or a seek is running; stop it first")
+            run = SeekRun(self.seek_host, who, cfg, names)
+            run.start()
+            self.seek_run = run
+        self._notify()
+        return run
+
+    def stop_seek(self, who: Actor, keep: bool) -> None:
+        """End the running seek now (pilot): the best in force (``keep``), else the values
+        it found."""
+        self.access.require_pilot(who, "seek")
+        if not isinstance(keep, bool):
+            raise CommandRefused(f"seek: keep must be true or false, got {keep!r}")
+        run = self.seek_run
+        if run is None or run.finished:
+            raise CommandRefused("seek: none is running")
+        run.finish(f"stopped by {actor_name(who)}", keep=keep)
+        self._notify()
 
     # ================================================================== the robot's devices
     @property

@@ -82,6 +82,12 @@ def split_key(key: object) -> tuple[str, str]:
     return block, name
 
 
+def param_field(key: object) -> dataclasses.Field:
+    """The field of tunable parameter ``key`` (its range and kind), or CommandRefused."""
+    block, name = split_key(key)
+    return next(f for f in fields(tunable.block(block).config) if f.name == name)
+
+
 def is_tuning_key(key: str) -> bool:
     """Whether journal key ``key`` is a tunable parameter's (``"pid.depth.kp"``)."""
     return key.rpartition(".")[0] in tunable.BLOCKS
