@@ -15,7 +15,7 @@ from ucat_console.backend.dependencies import UnsupportedVersion
 
 #: sub-command modules under ucat_console.cli
 COMMANDS = ["bench", "devices", "sessions", "replay", "identify", "experiment", "sweep", "run", "manoeuvres", "seek", "prepare",
-            "paths"]
+            "paths", "config"]
 
 
 def build_parser() -> argparse.ArgumentParser:

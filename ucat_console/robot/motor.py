@@ -34,11 +34,11 @@ planetary gearheads are rated 0.7-0.75), a bridge at 0.95 and 0.5 W for the driv
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 from numba.extending import register_jitable
 
-from ucat_console.robot.units import GEAR_RATIO
+from ucat_console.robot.units import GEAR_RATIO, bounded, check_bounded
 
 
 @dataclass(frozen=True)
@@ -48,40 +48,22 @@ class FinMotor:
     A configuration block; its checks are here because this package imports nothing of the
     configuration machinery. Every default is an assumption (module docstring)."""
 
-    #: motor torque constant k_t (N m/A); the back-EMF constant in V s/rad is the same number
-    torque_constant: float = 0.036
-    #: terminal resistance R (ohm)
-    resistance: float = 0.942
-    #: no-load current I_0 (A): the motor's friction and iron losses, k_t I_0
-    no_load_current: float = 0.238
-    #: rotor inertia J_r (kg m2)
-    rotor_inertia: float = 1.35e-5
-    #: motor turns per fin turn N
-    gear_ratio: float = GEAR_RATIO
-    #: gearhead efficiency eta_g
-    gear_efficiency: float = 0.7
-    #: bridge efficiency eta_b
-    bridge_efficiency: float = 0.95
-    #: the drive's own consumption, P_q (W)
-    quiescent_power: float = 0.5
-    #: the supply (battery) voltage at the drives (V)
-    supply_voltage: float = 24.0
+    torque_constant: float = bounded(
+        0.036, 0.0, 10.0, lo_open=True, unit="N m/A",
+        doc="motor torque constant k_t; the back-EMF constant in V s/rad is the same number")
+    resistance: float = bounded(0.942, 0.0, 1000.0, lo_open=True, unit="ohm", doc="terminal resistance R")
+    no_load_current: float = bounded(
+        0.238, 0.0, 100.0, unit="A", doc="no-load current I_0: the motor's friction and iron losses, k_t I_0")
+    rotor_inertia: float = bounded(1.35e-5, 0.0, 1.0, unit="kg m2", doc="rotor inertia J_r")
+    gear_ratio: float = bounded(GEAR_RATIO, 0.0, 10_000.0, lo_open=True, doc="motor turns per fin turn N")
+    gear_efficiency: float = bounded(0.7, 0.0, 1.0, lo_open=True, doc="gearhead efficiency eta_g")
+    bridge_efficiency: float = bounded(0.95, 0.0, 1.0, lo_open=True, doc="bridge efficiency eta_b")
+    quiescent_power: float = bounded(0.5, 0.0, 1000.0, unit="W", doc="the drive's own consumption, P_q")
+    supply_voltage: float = bounded(
+        24.0, 0.0, 100.0, lo_open=True, unit="V", doc="the supply (battery) voltage at the drives")
 
     def __post_init__(self) -> None:
-        # (lowest, highest, whether the lowest itself is allowed)
-        limits = {"torque_constant": (0.0, 10.0, False), "resistance": (0.0, 1000.0, False),
-                  "no_load_current": (0.0, 100.0, True), "rotor_inertia": (0.0, 1.0, True),
-                  "gear_ratio": (0.0, 10_000.0, False), "gear_efficiency": (0.0, 1.0, False),
-                  "bridge_efficiency": (0.0, 1.0, False), "quiescent_power": (0.0, 1000.0, True),
-                  "supply_voltage": (0.0, 100.0, False)}
-        for f in fields(self):
-            v = getattr(self, f.name)
-            lo, hi, closed = limits[f.name]
-            ok = (not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v)
-                  and (lo <= v if closed else lo < v) and v <= hi)
-            if not ok:
-                raise ValueError(f"{f.name}: {v!r} is out of range; allowed: {'[' if closed else '('}{lo}, {hi}]")
-            object.__setattr__(self, f.name, float(v))
+        check_bounded(self)
 
     def constants(self) -> tuple[float, float, float, float, float, float, float, float]:
         """The values the compiled functions take, in this order (not the supply voltage)."""

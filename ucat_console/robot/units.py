@@ -22,7 +22,8 @@ has. A rig whose drives differ sets ``[devices.epos2.units]``.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import Field, dataclass, field, fields
+from typing import Any
 
 from numba.extending import register_jitable
 
@@ -108,6 +109,39 @@ def rpm_to_rad_s(rpm: float, gear_ratio: float) -> float:
     return rpm * _TWO_PI / (gear_ratio * _SECONDS_PER_MINUTE)
 
 
+def bounded(default: Any, lo: float, hi: float, *, lo_open: bool = False, unit: str = "",
+            doc: str = "") -> Any:
+    """A dataclass field with its range, unit and description in the field's metadata,
+    under the keys the configuration machinery reads (``typedconf.param``'s): the blocks of
+    this package are configuration blocks too (their range shows in the configuration's
+    schema and is checked on load), and this package imports nothing of that machinery."""
+    return field(default=default, metadata={"lo": lo, "hi": hi, "lo_open": lo_open, "hi_open": False,
+                                            "choices": None, "unit": unit, "doc": doc, "secret": False})
+
+
+def check_bounded(obj: Any) -> None:
+    """Check every :func:`bounded` field of a frozen dataclass instance (an ``int`` field
+    takes integers only; a ``float`` field takes any number, made a float); ValueError
+    naming the field and its range."""
+    for f in fields(obj):
+        v = getattr(obj, f.name)
+        integer = f.type in ("int", int)
+        kind_ok = not isinstance(v, bool) and isinstance(v, int if integer else (int, float))
+        if not (kind_ok and math.isfinite(v) and _inside(f, v)):
+            m = f.metadata
+            unit = f" {m['unit']}" if m["unit"] else ""
+            what = "an integer in " if integer else ""
+            raise ValueError(f"{f.name}: {v!r} is out of range; allowed: {what}{'(' if m['lo_open'] else '['}"
+                             f"{m['lo']}, {m['hi']}]{unit}")
+        if not integer:
+            object.__setattr__(obj, f.name, float(v))
+
+
+def _inside(f: Field, v: float) -> bool:
+    m = f.metadata
+    return (m["lo"] < v if m["lo_open"] else m["lo"] <= v) and v <= m["hi"]
+
+
 @dataclass(frozen=True)
 class DriveUnits:
     """Encoder and gearhead of one fin drive (the same on all four fins).
@@ -117,19 +151,14 @@ class DriveUnits:
     this package imports nothing of the configuration machinery.
     """
 
-    #: encoder lines per motor turn (quadcounts = 4 x lines); set to the installed encoder
-    encoder_lines: int = ENCODER_LINES
-    #: motor turns per fin turn; set to the installed gearhead
-    gear_ratio: float = GEAR_RATIO
+    encoder_lines: int = bounded(
+        ENCODER_LINES, 1, 1_000_000, unit="lines/turn",
+        doc="encoder lines per motor turn (quadcounts = 4 x lines); set to the installed encoder")
+    gear_ratio: float = bounded(
+        GEAR_RATIO, 0.0, 10_000.0, lo_open=True, doc="motor turns per fin turn; set to the installed gearhead")
 
     def __post_init__(self) -> None:
-        n = self.encoder_lines
-        if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= 1_000_000:
-            raise ValueError(f"encoder_lines: {n!r} is not allowed; allowed: an integer in [1, 1000000] lines/turn")
-        g = self.gear_ratio
-        if isinstance(g, bool) or not isinstance(g, (int, float)) or not (0.0 < g <= 10_000.0):
-            raise ValueError(f"gear_ratio: {g!r} is out of range; allowed: (0.0, 10000.0]")
-        object.__setattr__(self, "gear_ratio", float(g))
+        check_bounded(self)
 
     @property
     def quadcounts_per_rad(self) -> float:
