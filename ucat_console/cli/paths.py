@@ -1,5 +1,6 @@
 """``ucat-console paths``: where the console writes its recordings and where the files it
-ships are (the configurations ``--config`` takes by name, the Foxglove layout).
+ships are (the configurations ``--config`` takes by name and their JSON Schema, the Foxglove
+layout).
 
     ucat-console paths
     ucat-console paths --config my-pool.toml     # the sessions folder that configuration uses
@@ -22,6 +23,7 @@ def run(args: argparse.Namespace) -> int:
     from ucat_console import shipped
     from ucat_console.backend.sessions import files
     from ucat_console.config import load_config
+    from ucat_console.config_schema import schema_path
 
     configured = load_config(args.config).console.sessions_dir
     if configured:
@@ -32,6 +34,7 @@ def run(args: argparse.Namespace) -> int:
         why = f"the user's data folder; ${files.SESSIONS_ENV} or run --sessions-dir choose another"
     rows = [("sessions", f"{files.sessions_dir(configured or None)}  ({why})")]
     rows += [(f"config {name}", str(shipped.config_path(name))) for name in shipped.config_names()]
+    rows.append(("config schema", str(schema_path())))
     rows.append(("foxglove layout", str(shipped.foxglove_layout())))
     width = max(len(label) for label, _ in rows) + 2
     for label, value in rows:
