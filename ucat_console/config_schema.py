@@ -26,11 +26,12 @@ import inspect
 import json
 import types
 import typing
+from pathlib import Path
 from typing import Any
 
 from ucat_console import shipped
 from ucat_console.config import AppConfig
-from ucat_console.typedconf import _field_types, check_value, choices_of
+from ucat_console.typedconf import check_value, choices_of
 
 DRAFT = "https://json-schema.org/draft/2020-12/schema"
 
@@ -40,7 +41,7 @@ SCHEMA_NAME = "ucat-console.schema.json"
 
 def schema_of(cls: type) -> dict[str, Any]:
     """The JSON Schema of a config dataclass as a TOML table (its fields, nested tables)."""
-    hints = _field_types(cls)
+    hints = typing.get_type_hints(cls)
     props: dict[str, Any] = {}
     required: list[str] = []
     for f in dataclasses.fields(cls):
@@ -72,7 +73,7 @@ def schema_text() -> str:
     return json.dumps(app_schema(), indent=2, allow_nan=False) + "\n"
 
 
-def schema_path() -> Any:
+def schema_path() -> Path:
     """The shipped schema's file, beside the shipped configurations."""
     return shipped.configs_dir() / SCHEMA_NAME
 

@@ -33,7 +33,6 @@ planetary gearheads are rated 0.7-0.75), a bridge at 0.95 and 0.5 W for the driv
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 from numba.extending import register_jitable
