@@ -117,8 +117,10 @@ def _type_schema(tp: Any) -> dict[str, Any]:
     if origin is tuple:
         if len(args) == 2 and args[1] is Ellipsis:
             return {"type": "array", "items": _type_schema(args[0])}
-        return {"type": "array", "prefixItems": [_type_schema(a) for a in args],
-                "minItems": len(args), "maxItems": len(args), "items": False}
+        kinds = [_type_schema(a) for a in args]
+        # one kind for all: "items" (read alike by every draft; taplo's reader knows no prefixItems)
+        each = {"items": kinds[0]} if all(k == kinds[0] for k in kinds) else {"prefixItems": kinds}
+        return {"type": "array", **each, "minItems": len(args), "maxItems": len(args)}
     if origin is typing.Literal:
         return {"enum": [_json_value(a) for a in args]}
     simple = {float: "number", int: "integer", bool: "boolean", str: "string"}
