@@ -5,9 +5,10 @@ The TalTech eeUVsim U-CAT model (Centre-for-Biorobotics/eeUVsim_Gazebo,
 the paper's Table II. The plant takes the mass and the inertias (about the centre of gravity)
 as the whole robot's: it gives the fins no mass of their own (the URDF, ``robot/urdf.py``,
 splits them between the hull and the fins). Fossen's signs: added-mass and damping
-coefficients are negative (resistive). The simulated plant takes them as its defaults (``backend/sim/params.py``)
-and the controller's model of the hull as its own (``control.params.HullModel``); either
-may be configured to other values without the other seeing it.
+coefficients are negative (resistive). The simulated plant takes them as its defaults
+(``backend/sim/params.py``) and the controller's model of the hull as its own
+(``control.params.HullModel``); either may be configured to other values without the other
+seeing it.
 """
 
 from __future__ import annotations
