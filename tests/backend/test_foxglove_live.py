@@ -108,7 +108,7 @@ def test_run_serves_the_live_robot_to_a_foxglove_client_read_only(tmp_path):
         assert body["schema"] == json_schema_bytes(BodyState).decode()
         assert client.channels["foxglove/scene"]["schemaName"] == "foxglove.SceneUpdate"
         topics = {C.BODY_STATE, C.fin_state(0), C.fin_plan(0), C.fin_strouhal(0), C.SETPOINTS,
-                  "foxglove/tf/base_link_frd", "foxglove/tf/fin0", "foxglove/scene",
+                  "foxglove/tf/base_link", "foxglove/tf/fin0", "foxglove/scene",
                   "foxglove/tf/odom"}
         client.subscribe(*topics)
         got = client.receive(topics)
@@ -116,7 +116,7 @@ def test_run_serves_the_live_robot_to_a_foxglove_client_read_only(tmp_path):
         assert states and all(isinstance(s, BodyState) for s in states)
         assert all(ns > 1_600_000_000 * 10**9 for _, ns, _ in got)  # UNIX nanoseconds
         tf = [json.loads(d) for t, _, d in got if t.startswith("foxglove/tf/")]
-        assert {x["child_frame_id"] for x in tf} & {"base_link_frd", "fin0"}
+        assert {x["child_frame_id"] for x in tf} & {"base_link", "fin0"}
         for topic in topics:  # in log-time order on every channel
             ns = [n for t, n, _ in got if t == topic]
             assert ns == sorted(ns), topic
@@ -191,7 +191,8 @@ def test_the_server_serves_the_robots_urdf_and_mesh_and_nothing_else():
             assert "assets" in client.info["capabilities"]
             assert _fetch(client, urdf.URDF_URI, 1) == (0, "", urdf.URDF_PATH.read_bytes())
             assert _fetch(client, urdf.MESH_URI, 2) == (0, "", urdf.MESH_PATH.read_bytes())
-            for k, uri in enumerate(("package://ucat_console/robot/urdf/../urdf.py",
+            for k, uri in enumerate(("package://ucat_description/urdf/../../urdf.py",
+                                     "package://ucat_description/package.xml",
                                      "file:///etc/passwd", "package://ucat_console/config.py"), 3):
                 status, error, data = _fetch(client, uri, k)
                 assert status == 1 and data == b"", uri

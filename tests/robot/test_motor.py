@@ -93,3 +93,15 @@ def test_the_simulated_robot_reports_the_plant_s_battery_energy() -> None:
     # the messages cover the run from the first one to the last
     assert reported == pytest.approx(battery * (got[-1].t - first.t) / tr.t, rel=0.15)
     assert battery > sum(tr.fin_energy) + 4 * P_Q * tr.t * 0.99
+
+
+def test_the_shaft_torque_of_a_current_is_what_needs_that_current() -> None:
+    """The inverse of the drive model at a steady rate; at the nominal 2.52 A by hand:
+    0.036 x (2.52 - 0.238) x 35 x 0.7 = 2.0127 N m (the URDF's fin effort limit)."""
+    from ucat_console.robot.motor import NOMINAL_CURRENT
+
+    for current in (0.5, 1.0, NOMINAL_CURRENT, 4.0):
+        for w in (0.3, 5.0):
+            assert _current(M.shaft_torque(current), w) == pytest.approx(current)
+    assert M.shaft_torque(NOMINAL_CURRENT) == pytest.approx(K_T * (2.52 - I_0) * N * ETA_G)
+    assert M.shaft_torque(NOMINAL_CURRENT) == pytest.approx(2.0127, abs=1e-4)

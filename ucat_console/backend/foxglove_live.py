@@ -13,7 +13,8 @@ parameters or services), so Foxglove offers no control, and whatever else a clie
 is answered with an error status and ignored; it never touches the supervisor. Like the
 console, it binds 127.0.0.1 unless told otherwise. The one thing a client may fetch is the
 robot's URDF and its mesh (for the layout's URDF layer:
-``package://ucat_console/robot/urdf/ucat.urdf``); any other URI gets nothing.
+``package://ucat_description/urdf/ucat.urdf``, and the URI layouts saved before used); any
+other URI gets nothing.
 
 Origin: any web page open on the operator's computer may open a websocket to a port of
 that computer, and its browser names the page's origin in the handshake. The server takes

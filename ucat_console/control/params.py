@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ucat_console.control.body_design import HullModel, designed_gains, speed_filter
+from ucat_console.robot.geometry import FIN_AREA
 from ucat_console.robot.servo import FIN_ACCELERATION, FIN_MAX_RATE
 from ucat_console.typedconf import Config, param, require_below
 
@@ -64,7 +65,7 @@ class MpcConfig(Config):
     table_n_w: int = param(121, lo=2, hi=4001, doc="force table nodes along the rate w")
     # fluid and fin (Table I)
     rho: float = param(1000.0, lo=1.0, hi=2000.0, lo_open=True, unit="kg/m3", doc="water density")
-    fin_area: float = param(0.020, lo=0.0, hi=1.0, lo_open=True, unit="m2", doc="fin planform A_f")
+    fin_area: float = param(FIN_AREA, lo=0.0, hi=1.0, lo_open=True, unit="m2", doc="fin planform A_f")
     fin_length: float = param(0.10, lo=0.0, hi=2.0, lo_open=True, unit="m", doc="effective fin length L_f")
     r_c: float = param(0.10, lo=0.0, hi=2.0, lo_open=True, unit="m", doc="radius of gyration r_c")
     c_d: float = param(0.70, lo=0.0, hi=20.0, doc="drag coefficient C_D")
@@ -346,7 +347,7 @@ class PowerConfig(Config):
 
     fin_inertia: float = param(2.8e-5, lo=0.0, hi=1.0, unit="kg m2", doc="fin inertia I")
     rho: float = param(1000.0, lo=1.0, hi=2000.0, lo_open=True, unit="kg/m3", doc="water density")
-    fin_area: float = param(0.020, lo=0.0, hi=1.0, lo_open=True, unit="m2", doc="fin planform A_f")
+    fin_area: float = param(FIN_AREA, lo=0.0, hi=1.0, lo_open=True, unit="m2", doc="fin planform A_f")
     r_c: float = param(0.10, lo=0.0, hi=2.0, lo_open=True, unit="m", doc="fin radius of gyration r_c")
     c_d: float = param(0.70, lo=0.0, hi=20.0, doc="the fin's drag coefficient C_D (of the drag power)")
     filter_tau: float = param(

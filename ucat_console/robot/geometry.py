@@ -36,6 +36,8 @@ ARM_PITCH = 0.25753
 ARM_YAW = 0.2981
 #: effective fin length L_f (m, paper Table I)
 FIN_LENGTH = 0.10
+#: fin planform area A_f (m2, paper Table I)
+FIN_AREA = 0.020
 
 
 @dataclass(frozen=True)

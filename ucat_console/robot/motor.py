@@ -39,6 +39,11 @@ from numba.extending import register_jitable
 
 from ucat_console.robot.units import GEAR_RATIO, bounded, check_bounded
 
+#: the default motor's nominal current, its largest continuous one (A; maxon catalogue, EC 45
+#: flat 50 W 24 V: 2.52 A at its nominal torque of 91.1 mN m): what the URDF's fin joints
+#: give as their effort limit, through :meth:`FinMotor.shaft_torque`
+NOMINAL_CURRENT = 2.52
+
 
 @dataclass(frozen=True)
 class FinMotor:
@@ -68,6 +73,13 @@ class FinMotor:
         """The values the compiled functions take, in this order (not the supply voltage)."""
         return (self.torque_constant, self.resistance, self.no_load_current, self.rotor_inertia,
                 self.gear_ratio, self.gear_efficiency, self.bridge_efficiency, self.quiescent_power)
+
+    def shaft_torque(self, current: float) -> float:
+        """The torque (N m) a motor current gives the fin's shaft at a steady rate: the
+        inverse of :func:`motor_current` driving the fin with no acceleration,
+        ``(k_t I - k_t I_0) N eta_g``."""
+        return (self.torque_constant * (current - self.no_load_current) * self.gear_ratio
+                * self.gear_efficiency)
 
     def battery_power(self, current: float, rate: float) -> float:
         """:func:`battery_power` with this drive's values (W)."""

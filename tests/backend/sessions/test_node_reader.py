@@ -83,10 +83,10 @@ def test_a_closed_loop_recording_is_one_transform_tree(node, sessions):
     code, out, err = read(node, path)
     assert code == 0, err
     counts = out["counts"]
-    assert counts["foxglove/tf/base_link_frd"] == counts[C.BODY_STATE]
+    assert counts["foxglove/tf/base_link"] == counts[C.BODY_STATE]
     assert all(counts[f"foxglove/tf/fin{i}"] == counts[C.fin_state(i)] for i in range(4))
     assert all(counts[C.fin_strouhal(i)] > 0 for i in range(4))
-    assert counts["foxglove/scene"] == counts["foxglove/tf/odom"] == counts["foxglove/tf/base_link"] == 1
+    assert counts["foxglove/scene"] == counts["foxglove/tf/odom"] == counts["foxglove/tf/base_link_frd"] == 1
     assert out["root"] == "map" and set(out["frames"]) == FRAMES
     # every channel in log-time order, as the reader met the messages in the file
     assert out["out_of_order"] == []

@@ -115,18 +115,21 @@ def test_file_checked_with_plain_mcap_reader_and_jsonschema(sessions):
                 # nanoseconds since the UNIX epoch: (t + offset) * 1e9, both times
                 t = obj["t"]
                 assert message.log_time == message.publish_time == round((t + OFFSET) * 1e9)
-    # the static map -> odom -> odom_ned and base_link_frd -> base_link first, then one
+    # the static map -> odom -> odom_ned and base_link -> base_link_frd first, then one
     # transform per finite body pose (the example pose has a NaN: no transform) and one per
     # fin state with a finite angle
     assert [(x["parent_frame_id"], x["child_frame_id"]) for x in tf[:3]] == [
-        ("map", "odom"), ("odom", "odom_ned"), ("base_link_frd", "base_link")]
-    poses = [x for x in tf if x["child_frame_id"] == "base_link_frd"]
+        ("map", "odom"), ("odom", "odom_ned"), ("base_link", "base_link_frd")]
+    poses = [x for x in tf if x["child_frame_id"] == "base_link"]
     assert len(poses) == 1
-    assert poses[0]["parent_frame_id"] == "odom_ned"
-    assert poses[0]["translation"] == {"x": 1.5, "y": 2.0, "z": 3.0}
-    assert poses[0]["rotation"] == {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}
+    # the pose in ENU and FLU axes: NED (1.5, 2, 3) is ENU (2, 1.5, -3); the identity attitude
+    # (body axes along north, east, down) is base_link's x north, y west, z up: a quarter
+    # turn about z from ENU, (w, z) = (cos, sin) of pi/4
+    assert poses[0]["parent_frame_id"] == "odom"
+    assert poses[0]["translation"] == {"x": 2.0, "y": 1.5, "z": -3.0}
+    assert poses[0]["rotation"] == pytest.approx({"x": 0.0, "y": 0.0, "z": math.sqrt(0.5), "w": math.sqrt(0.5)})
     assert poses[0]["timestamp"] == {"sec": 1_700_000_020, "nsec": 0}
-    fins = {x["child_frame_id"] for x in tf if x["parent_frame_id"] == "base_link_frd"} - {"base_link"}
+    fins = {x["child_frame_id"] for x in tf if x["parent_frame_id"] == "base_link_frd"}
     assert fins == {f"fin{c.split('/')[1]}" for c, m in items  # the channel's fin
                     if c.endswith("/state") and c.startswith("fin/") and math.isfinite(m.angle)}
     assert len(fins) >= 2
@@ -427,7 +430,7 @@ def test_every_channel_is_written_in_log_time_order(sessions):
             times[channel.topic].append(message.log_time)
             if channel.topic == C.EVENTS and json.loads(message.data)["message"] in ("late", "later still"):
                 late_events.append(message)
-    assert {C.EVENTS, "foxglove/log", "foxglove/tf/base_link_frd", "foxglove/tf/fin0"} <= set(times)
+    assert {C.EVENTS, "foxglove/log", "foxglove/tf/base_link", "foxglove/tf/fin0"} <= set(times)
     for topic, ns in times.items():
         assert ns == sorted(ns), topic
     assert [m.publish_time for m in late_events] == [round((e.t + OFFSET) * 1e9) for e in late]

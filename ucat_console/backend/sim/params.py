@@ -72,8 +72,8 @@ class VehicleConfig(Config):
     k_pp: float = param(H.K_PP, lo=-100.0, hi=0.0, unit="N m s2", doc="quadratic roll damping K_pp")
     m_qq: float = param(H.M_QQ, lo=-100.0, hi=0.0, unit="N m s2", doc="quadratic pitch damping M_qq")
     n_rr: float = param(H.N_RR, lo=-100.0, hi=0.0, unit="N m s2", doc="quadratic yaw damping N_rr")
-    cg: tuple[float, float, float] = param((0.0, 0.0, 0.1), unit="m", doc="centre of gravity, body FRD")
-    cb: tuple[float, float, float] = param((0.0, 0.0, 0.0), unit="m", doc="centre of buoyancy, body FRD")
+    cg: tuple[float, float, float] = param(H.CG, unit="m", doc="centre of gravity, body FRD")
+    cb: tuple[float, float, float] = param(H.CB, unit="m", doc="centre of buoyancy, body FRD")
     buoyancy_ratio: float = param(
         1.0, lo=0.5, hi=1.5, doc="buoyancy / weight (1.0: neutral, the default)"
     )
@@ -110,7 +110,7 @@ class FinGeometryConfig(Config):
     arm_pitch: float = param(G.ARM_PITCH, lo=0.0, hi=2.0, unit="m", doc="pitch moment arm of the vertical force")
     arm_yaw: float = param(G.ARM_YAW, lo=0.0, hi=2.0, unit="m", doc="yaw moment arm of the horizontal force")
     fin_inertia: float = param(
-        2.8e-5, lo=0.0, hi=1.0, unit="kg m2", doc="fin inertia about its axis (true shaft power)"
+        H.FIN_INERTIA, lo=0.0, hi=1.0, unit="kg m2", doc="fin inertia about its axis (true shaft power)"
     )
 
 
@@ -124,7 +124,7 @@ class FinCoefficients(Config):
     rho: float = param(1000.0, lo=1.0, hi=2000.0, lo_open=True, unit="kg/m3", doc="water density")
     c_d: float = param(0.70, lo=0.0, hi=20.0, lo_open=True, doc="drag coefficient C_D (the plate's normal force)")
     c_l: float = param(0.25, lo=0.0, hi=20.0, doc="lift coefficient C_L")
-    area: float = param(0.020, lo=0.0, hi=1.0, lo_open=True, unit="m2", doc="fin planform area A_f")
+    area: float = param(G.FIN_AREA, lo=0.0, hi=1.0, lo_open=True, unit="m2", doc="fin planform area A_f")
     r_c: float = param(0.10, lo=0.0, hi=2.0, lo_open=True, unit="m", doc="radius of gyration r_c")
     fin_length: float = param(G.FIN_LENGTH, lo=0.0, hi=2.0, lo_open=True, unit="m", doc="fin length L_f (Strouhal)")
 
