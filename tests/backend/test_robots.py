@@ -31,7 +31,7 @@ def outside():
 
     robots.register(Robot(NAME, "the simulator, registered by a test", build, simulated=True, computed_readings=True))
     yield built
-    del robots.ROBOTS[NAME]
+    robots.unregister(NAME)
 
 
 def test_a_registered_robot_is_taken_by_the_configuration_and_the_supervisor(outside, tmp_path: Path) -> None:
@@ -91,7 +91,7 @@ def test_an_older_files_sim_depth_loads_as_the_start_depth_with_a_warning(caplog
 
 
 def test_a_name_taken_or_not_a_robot_is_refused() -> None:
-    with pytest.raises(ValueError, match="'sim' is already registered"):
+    with pytest.raises(ValueError, match="'sim' is registered already"):
         robots.register(Robot("sim", "again", robots.robot("sim").build, simulated=True))
     with pytest.raises(ValueError, match="expected a Robot"):
         robots.register("sim")  # type: ignore[arg-type]

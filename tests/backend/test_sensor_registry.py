@@ -156,7 +156,7 @@ def test_the_configuration_sets_a_registered_sensors_rule(thermometer) -> None:
         AppConfig.from_dict({"failsafe": {"sensors": [{"name": "hull"}]}})
     with pytest.raises(ValueError, match=f"sensors: '{NAME}' is set more than once"):
         FailsafeConfig(sensors=(SensorRule(name=NAME), SensorRule(name=NAME)))
-    with pytest.raises(ValueError, match=f"sensor: '{NAME}' is already registered"):
+    with pytest.raises(ValueError, match=f"sensor: '{NAME}' is registered already"):
         sensors.register(sensors.sensor(NAME))
 
 

@@ -26,6 +26,7 @@ from ucat_console.backend.devices.config import DevicesConfig
 from ucat_console.backend.sim.params import PlantConfig
 from ucat_console.robot.interface import RobotIO
 from ucat_console.telemetry.events import EventSink
+from ucat_console.registry import Registry
 
 Close = Callable[[], None]
 #: ``build(devices, plant, event_sink) -> (robot_io, close)``: the robot, started
@@ -47,30 +48,15 @@ class Robot:
         return devices.start.depth if self.simulated else 0.0
 
 
-ROBOTS: dict[str, Robot] = {}
-
-
-def register(robot: Robot) -> Robot:
-    """Add ``robot`` to the registry (ValueError if its name is taken)."""
-    if not isinstance(robot, Robot):
-        raise ValueError(f"robot: expected a Robot, got {type(robot).__name__}")
-    if robot.name in ROBOTS:
-        raise ValueError(f"robot: {robot.name!r} is already registered")
-    ROBOTS[robot.name] = robot
-    return robot
-
-
-def robot(name: str) -> Robot:
-    """The registered robot ``name``, else ValueError naming the robots there are."""
-    try:
-        return ROBOTS[name]
-    except (KeyError, TypeError):
-        raise ValueError(f"robot: {name!r} is not one of {', '.join(ROBOTS)}") from None
-
-
-def robot_names() -> tuple[str, ...]:
-    """The registered robots' names, in the order registered (read live)."""
-    return tuple(ROBOTS)
+ROBOTS: Registry[Robot] = Registry("robot", Robot)
+#: add a robot (ValueError if its name is taken); returns it
+register = ROBOTS.register
+#: take a robot out (a test's, or a plug-in's going away)
+unregister = ROBOTS.unregister
+#: the registered robot ``name``, else ValueError naming the robots there are
+robot = ROBOTS.get_entry
+#: the registered robots' names, in the order registered (read live)
+robot_names = ROBOTS.names
 
 
 def build_robot_io(

@@ -42,6 +42,7 @@ from typing import TYPE_CHECKING, Any, Callable
 
 from ucat_console.backend.devices.leak import LeakEmulator, LeakInput, LeakReading
 from ucat_console.backend.failsafe_rule import FIXED_FAILSAFES, FailsafeRule
+from ucat_console.registry import Registry
 from ucat_console.robot.interface import RobotIO
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import EventSink
@@ -140,50 +141,40 @@ class Sensor:
         return f"sensors/{self.name}"
 
 
-SENSORS: dict[str, Sensor] = {}
+SENSORS: Registry[Sensor] = Registry("sensor", Sensor)
+#: the registered sensor ``name``, else ValueError naming the sensors there are
+sensor = SENSORS.get_entry
+#: the registered sensors' names, in the order registered (read live)
+sensor_names = SENSORS.names
 
 
-def register(sensor: Sensor) -> Sensor:
-    """Add ``sensor`` to the registry and its channel to the telemetry's (ValueError naming
-    what is wrong: a taken name, channel or failsafe, a reading type without ``t``)."""
-    if not isinstance(sensor, Sensor):
-        raise ValueError(f"sensor: expected a Sensor, got {type(sensor).__name__}")
-    if not isinstance(sensor.name, str) or not _NAME.match(sensor.name):
-        raise ValueError(f"sensor: name {sensor.name!r} must be lower case letters, digits and _")
-    if sensor.name in SENSORS:
-        raise ValueError(f"sensor: {sensor.name!r} is already registered")
-    if not (is_dataclass(sensor.reading) and "t" in {f.name for f in fields(sensor.reading)}):
-        raise ValueError(f"sensor {sensor.name!r}: its reading must be a dataclass with a time field t")
-    fs = sensor.failsafe
-    if fs is not None:
-        if fs.name in FIXED_FAILSAFES or fs.name in sensor_failsafe_names():
-            raise ValueError(f"sensor {sensor.name!r}: failsafe {fs.name!r} is already one of the failsafes")
-        if not _NAME.match(fs.name):
-            raise ValueError(f"sensor {sensor.name!r}: failsafe name {fs.name!r} must be lower case letters, "
-                             "digits and _")
-    ch.add_channel(sensor.channel, sensor.reading)  # ValueError if taken
-    SENSORS[sensor.name] = sensor
-    return sensor
+def register(entry: Sensor) -> Sensor:
+    """Add sensor ``entry`` to the registry and its channel to the telemetry's (ValueError
+    naming what is wrong: a taken name, channel or failsafe, a reading type without ``t``)."""
+    if isinstance(entry, Sensor) and (not isinstance(entry.name, str) or not _NAME.match(entry.name)):
+        raise ValueError(f"sensor: name {entry.name!r} must be lower case letters, digits and _")
+    taken = sensor_failsafe_names()
+    SENSORS.register(entry)  # ValueError for another type or a taken name
+    try:
+        if not (is_dataclass(entry.reading) and "t" in {f.name for f in fields(entry.reading)}):
+            raise ValueError(f"sensor {entry.name!r}: its reading must be a dataclass with a time field t")
+        fs = entry.failsafe
+        if fs is not None:
+            if fs.name in FIXED_FAILSAFES or fs.name in taken:
+                raise ValueError(f"sensor {entry.name!r}: failsafe {fs.name!r} is already one of the failsafes")
+            if not _NAME.match(fs.name):
+                raise ValueError(f"sensor {entry.name!r}: failsafe name {fs.name!r} must be lower case "
+                                 "letters, digits and _")
+        ch.add_channel(entry.channel, entry.reading)  # ValueError if taken
+    except ValueError:
+        SENSORS.unregister(entry.name)
+        raise
+    return entry
 
 
 def unregister(name: str) -> None:
     """Take ``name`` out of the registry and its channel out of the telemetry's."""
-    entry = sensor(name)
-    del SENSORS[name]
-    ch.remove_channel(entry.channel)
-
-
-def sensor(name: str) -> Sensor:
-    """The registered sensor ``name``, else ValueError naming the sensors there are."""
-    try:
-        return SENSORS[name]
-    except (KeyError, TypeError):
-        raise ValueError(f"sensor: {name!r} is not one of {', '.join(SENSORS) or 'none'}") from None
-
-
-def sensor_names() -> tuple[str, ...]:
-    """The registered sensors' names, in the order registered (read live)."""
-    return tuple(SENSORS)
+    ch.remove_channel(SENSORS.unregister(name).channel)
 
 
 def sensor_failsafe_names() -> tuple[str, ...]:

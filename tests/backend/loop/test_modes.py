@@ -34,11 +34,9 @@ def echo():
         made.append(s)
         return MpcFinPlanner(s.mpc, s.seed, s.executor)
 
-    before = dict(MODES)
     register(Mode("echo", "the MPC, registered by a test", "echo", INDEPENDENT_FINS, planner))
     yield made
-    MODES.clear()
-    MODES.update(before)
+    MODES.unregister("echo")
 
 
 def test_the_built_in_modes_are_registered_in_the_page_order() -> None:

@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any, Callable, Protocol
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.control.mpc import check_config
 from ucat_console.control.params import BaselineConfig, MpcConfig, PidGains
+from ucat_console.registry import Registry
 
 if TYPE_CHECKING:
     from ucat_console.backend.loop.actuators import Actuators
@@ -80,36 +81,15 @@ class Block:
 
 
 #: every tunable block by name, in the order the page lists them
-BLOCKS: dict[str, Block] = {}
-
-
-def register(entry: Block) -> Block:
-    """Add ``entry`` (its name must be new); returns it."""
-    if not isinstance(entry, Block):
-        raise ValueError(f"block: expected a Block, got {type(entry).__name__}")
-    if entry.name in BLOCKS:
-        raise ValueError(f"block: {entry.name!r} is registered already")
-    BLOCKS[entry.name] = entry
-    return entry
-
-
-def unregister(name: str) -> None:
-    """Remove the block ``name`` (a test's, or a plug-in's going away)."""
-    block(name)
-    del BLOCKS[name]
-
-
-def block(name: str) -> Block:
-    """The block called ``name``, else ValueError naming the blocks there are."""
-    try:
-        return BLOCKS[name]
-    except (KeyError, TypeError):
-        raise ValueError(f"block: {name!r} is not one of {', '.join(BLOCKS)}") from None
-
-
-def block_names() -> tuple[str, ...]:
-    """The registered blocks' names, in the order registered (read live)."""
-    return tuple(BLOCKS)
+BLOCKS: Registry[Block] = Registry("block", Block)
+#: add a block (its name must be new); returns it
+register = BLOCKS.register
+#: take a block out (a test's, or a plug-in's going away)
+unregister = BLOCKS.unregister
+#: the block called ``name``, else ValueError naming the blocks there are
+block = BLOCKS.get_entry
+#: the registered blocks' names, in the order registered (read live)
+block_names = BLOCKS.names
 
 
 def initial_blocks(cfg: LoopConfig) -> dict[str, Any]:

@@ -22,6 +22,7 @@ from typing import Callable
 from ucat_console.backend.loop.planners import BaselineFinPlanner, ManoeuvreFinPlanner, MpcFinPlanner, Planner
 from ucat_console.control.allocation import INDEPENDENT_FINS, SYNC_FINS
 from ucat_console.control.params import BaselineConfig, ExecutorConfig, ManoeuvreConfig, MpcConfig
+from ucat_console.registry import Registry
 
 #: the configuration blocks a planner may be made from (the loop's tunable blocks)
 BLOCKS = ("mpc", "baseline", "manoeuvre")
@@ -67,23 +68,13 @@ class Mode:
 
 
 #: every fin controller by name, in the order the page lists them
-MODES: dict[str, Mode] = {}
-
-
-def register(mode: Mode) -> Mode:
-    """Add ``mode`` (its name must be new); returns it."""
-    if mode.name in MODES:
-        raise ValueError(f"mode: {mode.name!r} is registered already")
-    MODES[mode.name] = mode
-    return mode
-
-
-def mode(name: str) -> Mode:
-    """The mode called ``name``, else ValueError naming the modes there are."""
-    try:
-        return MODES[name]
-    except (KeyError, TypeError):
-        raise ValueError(f"mode: {name!r} is not one of {', '.join(MODES)}") from None
+MODES: Registry[Mode] = Registry("mode", Mode)
+#: add a mode (its name must be new); returns it
+register = MODES.register
+#: take a mode out (a test's, or a plug-in's going away)
+unregister = MODES.unregister
+#: the mode called ``name``, else ValueError naming the modes there are
+mode = MODES.get_entry
 
 
 def mode_names(*, follows_targets: bool | None = None) -> tuple[str, ...]:
