@@ -183,7 +183,6 @@ def _apply(loop: Any, values: tuple[tuple[str, float], ...]) -> Any:
 def run_job(job: Job) -> dict[str, Any]:
     """One run on the console (module docstring): its figures, for a seeker its candidates,
     its best values and their time to converge."""
-    from ucat_console import compiled
     from ucat_console.backend.access import LOCAL
     from ucat_console.backend.loop.clock import SimulatedClock
     from ucat_console.backend.review.metrics import TABLE_CHANNELS, RunData, table_row
@@ -209,9 +208,9 @@ def run_job(job: Job) -> dict[str, Any]:
         held.append(io)
         return io, close
 
-    prep = compiled.prepare(cfg, compiled.needed_steps(cfg))
-    sup = Supervisor(cfg, clock=SimulatedClock(), robot_factory=factory,
-                     planner_ready=lambda f: prep.done(compiled.planner_step(f)))
+    # the compiled code is prepared before the runs (``ucat-console experiment`` does it):
+    # a dask worker is a daemon process and cannot prepare it in processes of its own
+    sup = Supervisor(cfg, clock=SimulatedClock(), robot_factory=factory)
     data = RunData()
     events: list[Any] = []
     sup.stream.subscribe(data.feed, TABLE_CHANNELS)
@@ -263,7 +262,6 @@ def run_job(job: Job) -> dict[str, Any]:
         out["fault"] = str(sup.fault or "")
     finally:
         sup.stop()
-        prep.cancel()
     return out
 
 
