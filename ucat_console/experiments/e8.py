@@ -162,6 +162,18 @@ def tracks(figs: dict[str, Any]) -> bool:
     return all(figs.get(k) is not None and math.isfinite(figs[k]) and figs[k] <= b for k, b in BANDS.items())
 
 
+def _window(data: Any, t0: float, t1: float, metrics: Any, label: str) -> dict[str, Any]:
+    """The figures of ``[t0, t1]``; a window without readings (the loop stopped: its fault is
+    the run's ``fault``) has NaN figures, which do not track."""
+    from ucat_console.backend.review.metrics import table_row
+
+    try:
+        return _figures(table_row(data, t0, t1, metrics, label))
+    except ValueError as e:
+        return {k: math.nan for k in ("energy_per_metre", "lo", "hi", "power", "speed", "speed_mae", "depth_mae",
+                                      "heading_mae")} | {"source": f"no figures ({e})"}
+
+
 def _figures(row: Any) -> dict[str, Any]:
     f = row.figures
     e = f["energy_per_metre"]
@@ -185,7 +197,7 @@ def run_job(job: Job) -> dict[str, Any]:
     its best values and their time to converge."""
     from ucat_console.backend.access import LOCAL
     from ucat_console.backend.loop.clock import SimulatedClock
-    from ucat_console.backend.review.metrics import TABLE_CHANNELS, RunData, table_row
+    from ucat_console.backend.review.metrics import TABLE_CHANNELS, RunData
     from ucat_console.backend.robots import robot
     from ucat_console.backend.supervisor import Supervisor
     from ucat_console.config import load_config
@@ -236,13 +248,13 @@ def run_job(job: Job) -> dict[str, Any]:
         if not seeking:
             m0 = t0 + t.hold_s
             wait(lambda: sup.loop.time >= m0 + t.window_s)
-            out["window"] = _figures(table_row(data, m0, m0 + t.window_s, cfg.metrics, "fixed"))
+            out["window"] = _window(data, m0, m0 + t.window_s, cfg.metrics, "fixed")
             if job.change:
                 tc = change()
                 out["t_change"] = tc
                 end = tc + t.after_change_s
                 wait(lambda: sup.loop.time >= end)
-                out["after_change"] = _figures(table_row(data, end - t.seek_window_s, end, cfg.metrics, "after"))
+                out["after_change"] = _window(data, end - t.seek_window_s, end, cfg.metrics, "after")
         else:
             wait(lambda: sup.loop.time >= t0 + t.hold_s)
             run = sup.start_seek(LOCAL)
@@ -252,7 +264,9 @@ def run_job(job: Job) -> dict[str, Any]:
             if not job.change:  # the best, in force, measured as the fixed controllers are
                 m0 = sup.loop.time + t.seek_settle_s
                 wait(lambda: sup.loop.time >= m0 + t.window_s)
-                out["window"] = _figures(table_row(data, m0, m0 + t.window_s, cfg.metrics, "best"))
+                out["window"] = _window(data, m0, m0 + t.window_s, cfg.metrics, "best")
+            elif not sup.running:  # the loop stopped in the nominal search: no second one
+                out["after_change"] = {"reason": "the loop stopped", "candidates": [], "converged_s": math.nan}
             else:
                 tc = change()
                 out["t_change"] = tc
