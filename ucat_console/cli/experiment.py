@@ -16,7 +16,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Run experiments of experiments.md headless on the simulated U-CAT and write "
                     "DIR/report.md, DIR/results.json and PNG figures.",
     )
-    p.add_argument("names", nargs="+", metavar="NAME", help=f"{', '.join(EXPERIMENTS + NAMED_ONLY)} or all (all: not E7)")
+    p.add_argument("names", nargs="+", metavar="NAME", help=f"{', '.join(EXPERIMENTS + NAMED_ONLY)} or all (all: not E7, E8)")
     p.add_argument("--quick", action="store_true", help="reduced runs (short, fewer seeds and targets)")
     p.add_argument("--out", type=Path, default=Path("experiments-out"), help="output directory DIR")
     p.add_argument("--seed", type=int, default=0, help="base seed of planners and sensor noise")
@@ -26,7 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="E4 reference velocities (m/s; default 0.1 0.2 0.3 0.4)")
     p.add_argument("--depth", type=float, default=None, help="depth setpoint of E4 / E5 (m)")
     p.add_argument("--seeds", type=int, default=None, metavar="N",
-                   help="E7 only: its declared reduced design, the first N of its 10 seeds")
+                   help="E7 and E8 only: their declared reduced design, the first N of their 10 seeds")
     p.set_defaults(func=run)
 
 

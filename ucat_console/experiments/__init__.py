@@ -10,5 +10,6 @@ from __future__ import annotations
 __all__ = ["EXPERIMENTS", "NAMED_ONLY"]
 
 EXPERIMENTS = ("E1", "E2", "E3", "E4", "E4R", "E5", "E6")
-#: experiments run only when named (not by "all"): E7 (docs/experiments/e7-declaration.md)
-NAMED_ONLY = ("E7",)
+#: experiments run only when named (not by "all"): E7 and E8 (docs/experiments/e7-declaration.md,
+#: e8-declaration.md)
+NAMED_ONLY = ("E7", "E8")

@@ -18,6 +18,7 @@ TITLES = {
     "E4R": "E4R: E4 from rest, the paper's settings and the shipped sim-tuned",
     "E6": "E6: where St-awareness pays: a family of plants, each with its identified model",
     "E7": "E7: St-awareness on plants whose efficiency depends on the flow (declared)",
+    "E8": "E8: the efficiency seeker against the tuned and the paper's gaits (declared)",
     "E5": "E5: field-style circle at 3 m with a current (paper Fig. 8)",
     "sweep": "Weight sweep over the E4 protocol",
 }
@@ -377,7 +378,40 @@ def _e7(res: dict[str, Any]) -> str:
     return "".join(out)
 
 
-_SECTIONS = {"E1": _e1, "E2": _e2, "E3": _e3, "E4": _e4, "E4R": _e4r, "E5": _e5, "E6": _e6, "E7": _e7, "sweep": _sweep}
+def _e8(res: dict[str, Any]) -> str:
+    p, t = res["protocol"], res["protocol"]["timing"]
+    seekers = "; ".join(f"`{k}`: mode {v['mode']} over " + ", ".join(f"{n} [{lo:g}, {hi:g}]" for n, lo, hi in v["params"])
+                        for k, v in p["seek_params"].items())
+    out = [f"Declared before it was run (docs/experiments/e8-declaration.md); plants hash **{p['plant_hash']}** "
+           f"(declared {p['declared_hash']}). Plants {', '.join(p['plants'])}; "
+           f"{', '.join(str(v) for v in p['speeds'])} m/s; test seeds {', '.join(str(s) for s in p['seeds'])}"
+           f"{' (the declared reduced design)' if p['reduced'] else ''}; fixed frequency tuned on seed "
+           f"{p['held_out']} over {', '.join(f'{f:g}' for f in p['frequencies'])} Hz. From rest, "
+           f"{t['hold_s']:g} s held, then {t['window_s']:g} s measured (a seeker: {t['candidates']} candidates of "
+           f"{t['seek_settle_s']:g} s settle and {t['seek_window_s']:g} s measure, then its best measured so). "
+           f"Seekers: {seekers}. Changes ({', '.join(p['changes'])}) on {p['change_plant']} at "
+           f"{p['change_speed']:g} m/s, {t['after_change_s']:g} s after each ({p['reseek_candidates']} candidates). "
+           f"Savings of the battery's energy per metre, A against B, over the seeds where both track, with paired "
+           f"bootstrap 95 % intervals; (n) = pairs.\n\n",
+           "Tuned fixed frequency (held-out seed):\n\n",
+           table(["plant", "v (m/s)", "frequency (Hz)", "a tracking frequency found"],
+                 [[r["plant"], num(r["v_ref"], 1), num(r["frequency"], 2), yes_no(r["tracks"])] for r in res["tuning"]]),
+           "\nEvery comparison (saving % [95 % CI] (pairs)):\n\n",
+           table(["plant", "v (m/s)", "A", "B", "saving of A against B"],
+                 [[c["plant"], num(c["v_ref"], 1), c["a"], c["b"], _ci(c)] for c in res["comparisons"]]),
+           "\nAfter a change (the seeker against the baseline tuned before it):\n\n",
+           table(["change", "A", "tracking held", "saving % [95 % CI] (pairs)"],
+                 [[c["change"], c["a"], f"{c['held']}/{c['runs']}", _ci(c)] for c in res["change_comparisons"]]),
+           "\nTime to converge (s from the search's start; per run):\n\n",
+           table(["plant", "v (m/s)", "seeker", "seed", "change", "converged (s)", "after the change (s)"],
+                 [[c["plant"], num(c["v_ref"], 1), c["controller"], str(c["seed"]), c["change"] or "-",
+                   num(c["converged_s"], 0), num(c["after_change_converged_s"], 0)] for c in res["convergence"]]),
+           "\nEvery run is in e8_runs.csv.\n"]
+    return "".join(out)
+
+
+_SECTIONS = {"E1": _e1, "E2": _e2, "E3": _e3, "E4": _e4, "E4R": _e4r, "E5": _e5, "E6": _e6, "E7": _e7, "E8": _e8,
+             "sweep": _sweep}
 
 
 def render(doc: dict[str, Any]) -> str:

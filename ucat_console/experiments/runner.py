@@ -21,13 +21,13 @@ from typing import Any
 
 from ucat_console.experiments import EXPERIMENTS, NAMED_ONLY, figures, open_loop
 from ucat_console.experiments import closed_loop_runs as closed
-from ucat_console.experiments import e7
+from ucat_console.experiments import e7, e8
 from ucat_console.experiments.distributed import task_client
 from ucat_console.experiments.report import render
 
 log = logging.getLogger(__name__)
 
-_CLOSED = ("E4", "E4R", "E5", "E6", "E7")
+_CLOSED = ("E4", "E4R", "E5", "E6", "E7", "E8")
 
 
 def parse_names(names: Sequence[str]) -> list[str]:
@@ -102,7 +102,7 @@ def run_experiments(
     depth: float | None = None, progress: bool = True, command: str = "", e7_seeds: int | None = None,
 ) -> dict[str, Any]:
     """Run ``names`` and write DIR = ``out``; returns the JSON document (``e7_seeds``: E7's
-    declared reduced design, its first seeds only)."""
+    and E8's declared reduced design, their first seeds only)."""
     ids = parse_names(names)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ValueError(f"--seed: expected a non-negative integer, got {seed!r}")
@@ -115,6 +115,10 @@ def run_experiments(
         closed.e5_scenarios(quick, seed, 3.0 if depth is None else depth)
     if "E7" in ids:
         e7.e7_design(quick, seed, e7_seeds)
+    if "E8" in ids:
+        if quick:
+            raise ValueError("--quick: E8 has no quick form (its reduced design is --seeds N)")
+        e8.design(seed, e7_seeds)
     tmp = prepare_output(out)
     try:
         doc: dict[str, Any] = {"meta": {
@@ -130,6 +134,8 @@ def run_experiments(
                 t0 = time.perf_counter()
                 if name == "E7":
                     res = _run_e7(tmp, quick, seed, client, progress, e7_seeds)
+                elif name == "E8":
+                    res = run_e8_into(tmp, seed, client, progress, e7_seeds)
                 else:
                     res = _run_one(name, tmp, quick, seed, client, speeds, depth, progress)
                 res["runtime_s"] = time.perf_counter() - t0
@@ -207,6 +213,18 @@ def _run_e7(tmp: Path, quick: bool, seed: int, client: Any, progress: bool, n_se
     res["findings"] = e7.findings(res)
     _write_csv(tmp / "e7_runs.csv", res["rows"])
     _write_csv(tmp / "e7_comparisons.csv", res["comparisons"])
+    return res
+
+
+def run_e8_into(tmp: Path, seed: int, client: Any, progress: bool, n_seeds: int | None,
+                d: dict[str, Any] | None = None) -> dict[str, Any]:
+    """E8 with its findings, its runs and comparisons as CSV in ``tmp``."""
+    res = e8.run_e8(client, seed, progress, n_seeds, d)
+    res["figures"] = []
+    res["findings"] = e8.findings(res)
+    _write_csv(tmp / "e8_runs.csv", res["rows"])
+    _write_csv(tmp / "e8_comparisons.csv", res["comparisons"] + res["change_comparisons"])
+    _write_csv(tmp / "e8_convergence.csv", [{k: v for k, v in c.items() if k != "best"} for c in res["convergence"]])
     return res
 
 

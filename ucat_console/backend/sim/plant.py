@@ -44,7 +44,7 @@ from ucat_console.backend.sim.fin_hydro import (
     fin_strouhal,
     hydro_params,
 )
-from ucat_console.backend.sim.params import PlantConfig
+from ucat_console.backend.sim.params import PlantConfig, VehicleConfig
 from ucat_console.backend.sim.plate import NP, fin_load
 from ucat_console.backend.sim.sensors import SensorSuite, sample_rows, sense
 from ucat_console.backend.sim.vehicle import (
@@ -343,6 +343,19 @@ class Plant:
         """A constant extra wrench at the body origin, body frame (tests and experiments)."""
         self._tau_ext = _finite("force", force, 3) + _finite("moment", moment, 3)
         self._pv = vehicle_params(self._cfg.vehicle, self._tau_ext)
+
+    def change_vehicle(self, vehicle: VehicleConfig) -> None:
+        """The hull becomes ``vehicle`` from the next step on (a robot that changes while it
+        runs: added drag, added mass, a current); the state and the fins are kept. The arrays
+        a compiled caller holds (:meth:`kernel_arrays`) are updated in place."""
+        if not isinstance(vehicle, VehicleConfig):
+            raise ValueError(f"vehicle: expected a VehicleConfig, got {type(vehicle).__name__}")
+        mrb, ma, minv = vehicle_matrices(vehicle)
+        pv = vehicle_params(vehicle, self._tau_ext)
+        self._cfg = self._cfg.replace(vehicle=vehicle)
+        self._mrb[...], self._ma[...], self._minv[...] = mrb, ma, minv
+        self._mats[M_RB], self._mats[M_A], self._mats[M_INV] = mrb, ma, minv
+        self._pv[...] = pv
 
     # ---------------------------------------------------------------- stepping
     def advance(self, duration_s: float) -> None:
