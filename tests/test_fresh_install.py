@@ -51,7 +51,8 @@ def test_the_wheel_installs_in_a_fresh_venv_and_runs_from_another_folder(tmp_pat
     with zipfile.ZipFile(wheel) as z:
         names = set(z.namelist())
     shipped = {"ucat_console/configs/robot.toml", "ucat_console/configs/sim-devices.toml",
-               "ucat_console/configs/sim-tuned.toml", "ucat_console/foxglove-layout.json"}
+               "ucat_console/configs/sim-tuned.toml", "ucat_console/foxglove-layout.json",
+               *(f"ucat_console/manoeuvres/{n}.toml" for n in ("e4_ladder", "fig8_circle", "depth_step", "ab_modes"))}
     assert shipped <= names
     assert any(n.endswith(".dist-info/licenses/LICENSE") for n in names)
     assert not any(n.endswith((".mcap", ".nbi", ".nbc")) for n in names)

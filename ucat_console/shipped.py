@@ -6,6 +6,8 @@ They are package data (installed with the package, found wherever it is installe
   (:func:`config_path`): ``sim-tuned`` (the simulated robot with controller settings under
   which it swims from rest), ``sim-devices`` (the same drivers as the robot's, against the
   device emulators) and ``robot`` (the U-CAT's devices);
+* ``manoeuvres/<name>.toml``: scripted manoeuvres a run names by their name,
+  ``--manoeuvre e4_ladder`` (:func:`manoeuvre_path`; docs/manoeuvres.md);
 * ``foxglove-layout.json``: the layout for a session or the live robot in Foxglove and
   Lichtblick (*Layouts*, *Import from file*).
 
@@ -48,13 +50,33 @@ def config_path(value: str | Path) -> Path:
 
     A name (:func:`is_name`) that is not shipped is an error listing the shipped ones; a
     path is returned as given (the loader says when it does not exist)."""
+    return _named(value, configs_dir(), "config", "configuration", "my-config")
+
+
+def manoeuvres_dir() -> Path:
+    """The folder holding the shipped manoeuvres."""
+    return _package_file("manoeuvres")
+
+
+def manoeuvre_names() -> list[str]:
+    """The shipped manoeuvres' names, sorted."""
+    return sorted(p.stem for p in manoeuvres_dir().glob("*.toml"))
+
+
+def manoeuvre_path(value: str | Path) -> Path:
+    """The file of a manoeuvre given by name (a shipped one) or by path (as :func:`config_path`)."""
+    return _named(value, manoeuvres_dir(), "manoeuvre", "manoeuvre", "my-manoeuvre")
+
+
+def _named(value: str | Path, folder: Path, key: str, what: str, example: str) -> Path:
     if not is_name(value):
         return Path(value)
-    path = configs_dir() / f"{value}.toml"
+    path = folder / f"{value}.toml"
     if not path.is_file():
-        raise ValueError(f"config: {str(value)!r} is neither a shipped configuration ("
-                         f"{', '.join(config_names())}) nor a file (give a file with its "
-                         "folder or its .toml suffix, e.g. ./my-config.toml)")
+        names = sorted(p.stem for p in folder.glob("*.toml"))
+        raise ValueError(f"{key}: {str(value)!r} is neither a shipped {what} ("
+                         f"{', '.join(names)}) nor a file (give a file with its "
+                         f"folder or its .toml suffix, e.g. ./{example}.toml)")
     return path
 
 

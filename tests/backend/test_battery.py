@@ -74,7 +74,7 @@ def _surfaced(sup, events: list) -> None:
                   what="the battery_critical event")
     assert ev.data["action"] == "surface" and "battery: " in ev.data["cause"]
     assert sup.setpoints.depth == 0.0
-    assert next(x for x in vehicle_parts(sup) if x.name == "Battery").state == "bad"
+    assert next(x for x in vehicle_parts(sup.state()) if x.name == "Battery").state == "bad"
 
 
 def test_a_simulated_robot_that_uses_up_its_capacity_surfaces(tmp_path) -> None:
@@ -85,7 +85,7 @@ def test_a_simulated_robot_that_uses_up_its_capacity_surfaces(tmp_path) -> None:
     sup = c.sup
     try:
         sup.step(1.0)
-        assert next(x for x in vehicle_parts(sup) if x.name == "Battery").state == "ok"
+        assert next(x for x in vehicle_parts(sup.state()) if x.name == "Battery").state == "ok"
         sup.arm(LOCAL)
         sup.set_setpoints(LOCAL, velocity=0.2, depth=1.0)
         for _ in range(120):
@@ -93,7 +93,7 @@ def test_a_simulated_robot_that_uses_up_its_capacity_surfaces(tmp_path) -> None:
             if sup.safety.is_active("battery_critical"):
                 break
         _surfaced(sup, c.events)
-        assert "Wh used" in bar_state(sup, None, dark=False, uuids={})["battery"]
+        assert "Wh used" in bar_state(sup.state(), None, dark=False, uuids={})["battery"]
     finally:
         c.stop()
 
@@ -114,7 +114,7 @@ def test_a_sagging_supply_injected_in_an_emulated_drive_surfaces_the_rig(tmp_pat
         sup.inject_fault(PILOT, "epos2", "low_voltage", fin=2, volts=20.0)
         _surfaced(sup, c.events)
         assert sup.safety.is_active("battery_low")
-        assert "20.0 V" in next(x for x in vehicle_parts(sup) if x.name == "Battery").why
+        assert "20.0 V" in next(x for x in vehicle_parts(sup.state()) if x.name == "Battery").why
         sup.clear_fault(PILOT, "epos2", "low_voltage")
         wait_for(lambda: not sup.safety.is_active("battery_critical"), what="the failsafe clearing")
     finally:

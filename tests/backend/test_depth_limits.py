@@ -78,7 +78,7 @@ def _surfaced(sup, name: str, events: list) -> None:
     ev = next(e for e in events if e.source == "failsafe" and e.code == name)
     assert ev.data["action"] == "surface"
     assert sup.setpoints.depth == 0.0 and sup.armed
-    light = next(x for x in vehicle_parts(sup) if x.name == "Limits")
+    light = next(x for x in vehicle_parts(sup.state()) if x.name == "Limits")
     assert light.state == "bad" and f"failsafe {name}" in light.why
 
 
@@ -88,7 +88,7 @@ def test_the_simulated_robot_diving_past_a_limit_surfaces_until_it_is_back_withi
     sup = c.sup
     try:
         sup.step(1.0)
-        assert next(x for x in vehicle_parts(sup) if x.name == "Limits").state == "ok"
+        assert next(x for x in vehicle_parts(sup.state()) if x.name == "Limits").state == "ok"
         sup.arm(LOCAL)
         sup.set_setpoints(LOCAL, depth=2.0)
         for _ in range(120):

@@ -94,7 +94,7 @@ def test_an_accelerometer_reading_a_tilt_the_estimate_lacks_makes_the_rig_hold(t
         c.fly(PILOT, TOKEN)
         wait_for(lambda: sup.loop.time > 1.0 and not sup.safety.active() and sup.safety.estimate()[0],
                  what="the rig running, no failsafe, the attitude checked")
-        assert next(x for x in vehicle_parts(sup) if x.name == "Estimate").state == "ok"
+        assert next(x for x in vehicle_parts(sup.state()) if x.name == "Estimate").state == "ok"
         sup.arm(PILOT)
         sup.set_setpoints(PILOT, velocity=0.1)
         # the IMU's accelerometer streams 30 degrees of pitch (1 g: within every plausibility
@@ -104,7 +104,7 @@ def test_an_accelerometer_reading_a_tilt_the_estimate_lacks_makes_the_rig_hold(t
         ev = wait_for(lambda: c.event("failsafe", "estimate"), what="its event")
         assert ev.data["action"] == "hold" and "off the accelerometer's gravity" in ev.data["cause"]
         wait_for(lambda: sup.setpoints.velocity == 0.0, what="the hold")
-        assert sup.armed and next(x for x in vehicle_parts(sup) if x.name == "Estimate").state == "bad"
+        assert sup.armed and next(x for x in vehicle_parts(sup.state()) if x.name == "Estimate").state == "bad"
         sup.clear_fault(PILOT, "imu", "implausible")
         wait_for(lambda: not sup.safety.is_active("estimate"), what="the failsafe clearing")
     finally:

@@ -28,17 +28,17 @@ def test_a_slow_fin_lights_the_vehicle_light_with_its_reason_and_is_recorded(
     sup = make_console().sup
     sup.start_recording(LOCAL, "slow fin")
     sup.step(0.5)
-    fins = next(x for x in vehicle_parts(sup) if x.name == "Fins")
+    fins = next(x for x in vehicle_parts(sup.state()) if x.name == "Fins")
     assert fins.state == "ok" and "every fin keeps its plans' pace" in fins.why
     loop_event(sup, "fin_slow", SLOW, "warning", 3.01)
     sup.step(0.5)
-    fins = next(x for x in vehicle_parts(sup) if x.name == "Fins")
+    fins = next(x for x in vehicle_parts(sup.state()) if x.name == "Fins")
     assert fins.state == "warn" and fins.why == SLOW
-    vehicle = next(x for x in lights(sup) if x.name == "Vehicle")
+    vehicle = next(x for x in lights(sup.state()) if x.name == "Vehicle")
     assert vehicle.state == "warn" and vehicle.why.startswith(f"Fins: {SLOW}")
     loop_event(sup, "fin_slow_cleared", "fin 2's cycles keep their plans' pace again (1.02)", "info", 1.02)
     sup.step(0.5)
-    assert next(x for x in vehicle_parts(sup) if x.name == "Fins").state == "ok"
+    assert next(x for x in vehicle_parts(sup.state()) if x.name == "Fins").state == "ok"
     paths = sup.stop_recording(LOCAL)
     with SessionReader(paths[0], tmp_path) as r:
         codes = [(e.source, e.code, e.data.get("fin")) for e in r.events()]

@@ -42,11 +42,17 @@ def test_the_input_reports_water_dry_and_an_unreadable_file(tmp_path, active_hig
     assert events.codes()[-1] == "water"
 
 
+def _leak(sup) -> str:
+    """The leak detector's latest reading as its state: water, dry, unreadable ("": none yet)."""
+    r = sup.sensors.latest("leak")
+    return "" if r is None else "unreadable" if not r.readable else "water" if r.water else "dry"
+
+
 def _surfaced(sup, events) -> None:
     ev = next(e for e in events if e.source == "failsafe" and e.code == "leak")
     assert ev.data["action"] == "surface" and "water" in ev.data["cause"]
     assert sup.setpoints.depth == 0.0 and sup.armed
-    assert next(x for x in vehicle_parts(sup) if x.name == "Leak").state == "bad"
+    assert next(x for x in vehicle_parts(sup.state()) if x.name == "Leak").state == "bad"
 
 
 def test_water_at_the_simulators_emulated_detector_surfaces_the_robot(tmp_path) -> None:
@@ -54,19 +60,19 @@ def test_water_at_the_simulators_emulated_detector_surfaces_the_robot(tmp_path) 
     c = Console(cfg.replace(console=cfg.console.replace(record_on_arm=False)), tmp_path)
     sup = c.sup
     try:
-        wait_for(lambda: sup.safety.leak() == "dry", what="the emulated detector read dry")
+        wait_for(lambda: _leak(sup) == "dry", what="the emulated detector read dry")
         sup.step(1.0)
-        assert next(x for x in vehicle_parts(sup) if x.name == "Leak").state == "ok"
+        assert next(x for x in vehicle_parts(sup.state()) if x.name == "Leak").state == "ok"
         sup.arm(LOCAL)
         sup.set_setpoints(LOCAL, depth=1.0)
         sup.inject_leak(LOCAL, True)
-        wait_for(lambda: sup.safety.leak() == "water", what="the detector reading water")
+        wait_for(lambda: _leak(sup) == "water", what="the detector reading water")
         sup.step(0.1)
         _surfaced(sup, c.events)
         with pytest.raises(CommandRefused, match="leak"):
             sup.inject_leak(LOCAL, "yes")
         sup.inject_leak(LOCAL, False)
-        wait_for(lambda: sup.safety.leak() == "dry", what="the detector reading dry")
+        wait_for(lambda: _leak(sup) == "dry", what="the detector reading dry")
         sup.step(0.1)
         assert not sup.safety.is_active("leak")
     finally:

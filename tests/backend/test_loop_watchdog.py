@@ -63,7 +63,7 @@ def _console(tmp_path, base: str, **failsafes: FailsafeRule) -> Supervisor:
 
 
 def _light(sup: Supervisor, name: str):
-    return next(x for x in vehicle_parts(sup) if x.name == name)
+    return next(x for x in vehicle_parts(sup.state()) if x.name == name)
 
 
 @pytest.mark.slow
@@ -87,7 +87,7 @@ def test_a_stuck_loop_is_disarmed_by_the_watchdog_and_the_failsafe_clears_when_i
         wait_for(lambda: any(e.source == "supervisor" and e.code == "disarmed" for e in events),
                  what="the disarmed event")
         assert _light(sup, "Loop").state == "bad"
-        vehicle = next(x for x in lights(sup) if x.name == "Vehicle")  # the bar's one light for it
+        vehicle = next(x for x in lights(sup.state()) if x.name == "Vehicle")  # the bar's one light for it
         assert vehicle.state == "bad" and vehicle.why.startswith("Loop: failsafe loop_watchdog")
         with pytest.raises(CommandRefused, match="loop_watchdog"):
             sup.request_arm(PILOT)

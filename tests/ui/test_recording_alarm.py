@@ -99,7 +99,7 @@ def test_a_full_disk_raises_the_alarm_everywhere_and_recording_starts_again(tmp_
         assert "No space left on device" in failed.message and "sessions repair" in failed.message
         # the status bar, the health line, the Session tab
         assert not sup.recorder.recording and "No space left" in sup.recording.failed
-        bar = bar_state(sup, None, dark=True, uuids={})
+        bar = bar_state(sup.state(), None, dark=True, uuids={})
         assert bar["recording"] == "" and "No space left" in bar["recording_failed"]
         assert "recording" in bar["failsafes"]
         [light] = [x for x in bar["lights"] if x["name"] == "Recording"]
@@ -193,7 +193,7 @@ def test_a_full_tmpfs_sessions_folder_raises_the_alarm_and_leaves_a_readable_fil
             [failed] = [e for e in events if e.code == "write_failed"]
             assert "ENOSPC" in failed.data["error"] or "No space left" in failed.data["error"]
             assert sup.safety.is_active("recording") and not sup.recorder.recording
-            assert "recording" in bar_state(sup, None, dark=True, uuids={})["failsafes"]
+            assert "recording" in bar_state(sup.state(), None, dark=True, uuids={})["failsafes"]
             filler.unlink()  # space returns
             check_the_file(sup.recorder.paths[-1], folder, failed.data["kept_until"], bodies)
             sup.start_recording(LOCAL)

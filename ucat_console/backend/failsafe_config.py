@@ -1,10 +1,11 @@
 """The failsafes' configuration, ``[failsafe]``: one rule per failsafe and the thresholds they judge.
 
-Each :class:`FailsafeRule` says what the failsafe does when its cause has lasted ``timeout`` s
+Each :class:`FailsafeRule` (:mod:`~ucat_console.backend.failsafe_rule`) says what the failsafe does when its cause has lasted ``timeout`` s
 (hold, surface, disarm or warn) and what it does when the cause lasts on; :class:`FailsafeConfig`
 holds every rule and the thresholds (depth and altitude limits, battery, estimate, the tracking
-alarm's expected response). :mod:`~ucat_console.backend.safety` acts on it; docs/safety.md
-describes each failsafe.
+alarm's expected response), and the rules set for the registered sensors' failsafes
+(``sensors``, ``[[failsafe.sensors]]``; :mod:`~ucat_console.backend.sensors`).
+:mod:`~ucat_console.backend.safety` acts on it; docs/safety.md describes each failsafe.
 """
 
 from __future__ import annotations
@@ -15,56 +16,24 @@ from typing import ClassVar
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.control.body_design import HEADING_FACTOR
 from ucat_console.control.params import DESIGN_DELAY, DESIGN_FACTOR, BodyConfig
+from ucat_console.backend.failsafe_rule import (
+    ESCALATE_DOC,
+    ESCALATIONS,
+    FIXED_FAILSAFES,
+    FailsafeRule,
+)
+from ucat_console.backend.sensors import sensor_failsafe, sensor_failsafe_names
 from ucat_console.typedconf import Config, param
 
 #: the body layer's defaults, the tracking failsafe's expected response's limits
 _BODY = BodyConfig()
-
-#: what a failsafe does when it triggers
-FAILSAFE_ACTIONS = ("hold", "surface", "disarm", "warn")
-#: how strongly each action acts: an escalation acts more strongly than the action before it
-ACTION_STRENGTH = {"warn": 0, "hold": 1, "surface": 2, "disarm": 3}
-#: what a failsafe may do when its cause lasts on (``none``: nothing more)
-ESCALATIONS = ("none", "hold", "surface", "disarm")
-
-
-_ESCALATE_DOC = ("what the failsafe does when its cause lasts escalate_after s after it triggered: "
-                 "none (nothing more), hold, surface or disarm")
-_ESCALATE_AFTER_DOC = "how long the failsafe acts before it escalates"
-
-
-@dataclass(frozen=True)
-class FailsafeRule(Config):
-    """What one failsafe does, after how long its cause triggers it, and what it does when the
-    cause lasts on (``escalate``, ``escalate_after`` s after it triggered)."""
-
-    action: str = param(
-        "hold", choices=FAILSAFE_ACTIONS,
-        doc="hold: stop and hold the present depth; surface: stop and rise to 0 m; "
-        "disarm: motors off; warn: show and record only",
-    )
-    timeout: float = param(2.0, lo=0.0, hi=3600.0, unit="s", doc="how long the cause lasts before it triggers")
-    escalate: str = param("none", choices=ESCALATIONS, doc=_ESCALATE_DOC)
-    escalate_after: float = param(30.0, lo=0.0, hi=3600.0, unit="s", doc=_ESCALATE_AFTER_DOC)
-
-    def _check(self) -> None:
-        if self.escalate != "none" and ACTION_STRENGTH[self.escalate] < ACTION_STRENGTH[self.action]:
-            stronger = [a for a in ESCALATIONS[1:] if ACTION_STRENGTH[a] >= ACTION_STRENGTH[self.action]]
-            raise ValueError(f"escalate: {self.escalate!r} would act less strongly than action "
-                             f"{self.action!r}; allowed: none, {', '.join(stronger)}")
-
-    @property
-    def escalates(self) -> bool:
-        """Whether the escalation acts more strongly than the action (otherwise it is none)."""
-        return self.escalate != "none" and ACTION_STRENGTH[self.escalate] > ACTION_STRENGTH[self.action]
-
 
 @dataclass(frozen=True)
 class PilotGoneRule(FailsafeRule):
     """The pilot-gone failsafe: hold where the robot is, then, if no pilot has come back
     after 30 s, disarm (ArduSub's default GCS failsafe disarms after 5 s)."""
 
-    escalate: str = param("disarm", choices=ESCALATIONS, doc=_ESCALATE_DOC)
+    escalate: str = param("disarm", choices=ESCALATIONS, doc=ESCALATE_DOC)
 
 
 @dataclass(frozen=True)
@@ -85,6 +54,19 @@ class LoopWatchdogRule(FailsafeRule):
         if self.escalate != "none":
             raise ValueError(f"escalate: the loop watchdog acts once (disarm or warn); got {self.escalate!r}, "
                              "allowed: none")
+
+
+@dataclass(frozen=True)
+class SensorRule(FailsafeRule):
+    """A registered sensor's failsafe (``backend.sensors``) as set in the configuration: its
+    name and the rule in full (a field left out takes :class:`FailsafeRule`'s default, not the
+    sensor's)."""
+
+    name: str = param("", choices=sensor_failsafe_names, doc="the sensor's failsafe (one registered)")
+
+    def rule(self) -> FailsafeRule:
+        """The rule without its name."""
+        return FailsafeRule(self.action, self.timeout, self.escalate, self.escalate_after)
 
 
 @dataclass(frozen=True)
@@ -118,8 +100,6 @@ class FailsafeConfig(Config):
         doc="altitude: the DVL's distance to the floor shorter than this (0: off); an invalid altitude "
         "(none, NaN, not above 0) is not counted",
     )
-    #: water in the hull (devices.leak): surface at once, under control, while the electronics work
-    leak: FailsafeRule = FailsafeRule("surface", 0.0)
     #: the attitude estimate disagrees with the accelerometer, or the estimate stopped: hold
     #: (stop; the depth is the pressure sensor's, the heading and speed loops are the estimate's)
     estimate: FailsafeRule = FailsafeRule("hold", 2.0)
@@ -189,12 +169,21 @@ class FailsafeConfig(Config):
         LoopConfig().max_yaw_rate, lo=0.001, hi=10.0, unit="rad/s",
         doc="tracking: the expected heading's fastest change (loop.max_yaw_rate's default)",
     )
+    #: the registered sensors' failsafes set here (``[[failsafe.sensors]]``); the others keep the
+    #: rule their registration names (``backend.sensors``; the leak detector's: surface at once)
+    sensors: tuple[SensorRule, ...] = ()
 
+    #: the failsafes this block has a field for (the registered sensors' are in ``sensors``)
+    FIXED: ClassVar[tuple[str, ...]] = FIXED_FAILSAFES
     #: the rules whose default acts on the robot (the others warn by default)
     PROTECTIVE: ClassVar[tuple[str, ...]] = ("pilot_gone", "imu", "dvl", "depth", "motor", "planner_late",
-                                              "loop_watchdog", "depth_limit", "altitude", "battery_critical", "leak", "estimate")
+                                              "loop_watchdog", "depth_limit", "altitude", "battery_critical", "estimate")
 
     def _check(self) -> None:
+        names = [r.name for r in self.sensors]
+        twice = sorted({n for n in names if names.count(n) > 1})
+        if twice:
+            raise ValueError(f"sensors: {twice[0]!r} is set more than once")
         if self.battery_critical_voltage >= self.battery_low_voltage:
             raise ValueError(f"battery_critical_voltage: {self.battery_critical_voltage:g} V must be below "
                              f"battery_low_voltage {self.battery_low_voltage:g} V")
@@ -202,7 +191,19 @@ class FailsafeConfig(Config):
             raise ValueError(f"battery_critical_reserve: {self.battery_critical_reserve:g} must be below "
                              f"battery_low_reserve {self.battery_low_reserve:g}")
 
+    def rule(self, name: str) -> FailsafeRule:
+        """The rule of failsafe ``name``: a field of this block, or a registered sensor's (set in
+        ``sensors``, else its registration's default); ValueError naming the failsafes there are."""
+        if name in self.FIXED:
+            return getattr(self, name)
+        default = sensor_failsafe(name)  # ValueError naming them
+        set_here = next((r for r in self.sensors if r.name == name), None)
+        return default.rule if set_here is None else set_here.rule()
+
     def warn_only(self) -> tuple[str, ...]:
-        """The protective rules configured only to warn: the console logs them at start and the
+        """The protective rules configured only to warn (the fixed ones of :attr:`PROTECTIVE`
+        and the registered sensors' whose default acts): the console logs them at start and the
         Safety tab lists them, since such a rule no longer protects the robot."""
-        return tuple(name for name in self.PROTECTIVE if getattr(self, name).action == "warn")
+        protective = self.PROTECTIVE + tuple(n for n in sensor_failsafe_names()
+                                             if sensor_failsafe(n).rule.action != "warn")
+        return tuple(name for name in protective if self.rule(name).action == "warn")

@@ -64,9 +64,6 @@ Failsafes (``FailsafeConfig`` has one rule, action and timeout, for each):
   failsafe's), or, with a ``battery_capacity``, the energy the drives drew since the start
   leaving less than ``battery_low_reserve`` / ``battery_critical_reserve`` of it (at once;
   it never comes back). A voltage back above the threshold clears it.
-* ``leak``: the leak detector (``devices.leak``, Events of source ``leak``) reported water
-  ``timeout`` s ago and not dry since; an unreadable detector is shown
-  (:meth:`SafetyMonitor.leak`), not counted as water.
 * ``estimate``: the attitude estimate (the body state's orientation) disagrees with the
   accelerometer: every IMU reading taken at rest (the specific force within the EKF's
   ``accel_gate`` of g0; the others measure no gravity and are skipped) for ``timeout`` s
@@ -75,6 +72,16 @@ Failsafes (``FailsafeConfig`` has one rule, action and timeout, for each):
   or the estimate stopped: IMU readings for ``timeout`` s past the last body state (a
   stalled loop, whose readings and states resume together, is not one). Clears with a
   reading within the bound and a body state.
+
+Then each registered sensor's failsafe (:mod:`~ucat_console.backend.sensors`, its rule
+``FailsafeConfig.rule(name)``): its readings (channel ``sensors/<name>``) tripping its
+condition for ``timeout`` s (the cause is the condition's, from the first such reading's
+time), or, when it has a ``stale_after``, no reading for ``stale_after`` + ``timeout`` s
+since the sensor was opened (:meth:`SafetyMonitor.sensors_open`) or last read; clears with a
+reading that does not trip it.
+The first is the leak detector's, ``leak``: water at the probe (surface at once); an
+unreadable detector keeps the last level read and is shown by its light, not counted as
+water.
 
 Times are the supervisor's clock (the loop's time). A valid sensor reading counts at its
 own time ``t`` (the robot stamps readings with the loop's time; one more than a minute away
@@ -95,15 +102,18 @@ from ucat_console.backend.devices.reporting import READING_FAULTS
 from ucat_console.backend.tracking_alarm import AxisModel, Envelope
 from ucat_console.robot.readings import DepthReading, DvlVelocity, ImuReading
 from ucat_console.backend.failsafe_config import FailsafeConfig, FailsafeRule
+from ucat_console.backend.failsafe_rule import FIXED_FAILSAFES
+from ucat_console.backend.sensors import SENSORS as REGISTERED
+from ucat_console.backend.sensors import sensor_failsafe_names
 from ucat_console.control.estimation import AttitudeConfig, gravity_innovation
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event
 
 log = logging.getLogger(__name__)
 
-#: every failsafe, in display order
-FAILSAFES = ("pilot_gone", "imu", "dvl", "depth", "motor", "planner_late", "tracking", "recording",
-             "loop_watchdog", "depth_limit", "altitude", "battery_low", "battery_critical", "leak", "estimate")
+#: the console's own failsafes, in display order (the registered sensors' come after them:
+#: :func:`failsafe_names`)
+FAILSAFES = FIXED_FAILSAFES
 SENSORS = ("imu", "dvl", "depth")
 #: motor controller event codes that start a fault (a ``quick_stop`` event is the other
 #: drives' safe-state reaction to one of these, which the failsafe already counts)
@@ -114,9 +124,20 @@ MOTOR_CLEARS: dict[str, frozenset[str]] = {
     "emcy_reset": frozenset({"emcy"}),
     "heartbeat_restored": frozenset({"heartbeat_lost"}),
 }
-#: the channels the monitor subscribes to
+#: the channels the monitor subscribes to (and the registered sensors': :func:`channels`)
 CHANNELS = (ch.IMU, ch.DVL, ch.DEPTH, ch.EVENTS, ch.BODY_TRACKING, ch.BODY_ALLOCATION, ch.POWER_ELECTRICAL,
             ch.BODY_STATE, *(ch.fin_strouhal(i) for i in range(ch.N_FINS)))
+
+
+def failsafe_names() -> tuple[str, ...]:
+    """Every failsafe, in display order: the console's own, then the registered sensors' (read live)."""
+    return FAILSAFES + sensor_failsafe_names()
+
+
+def channels() -> tuple[str, ...]:
+    """The channels the monitor takes: :data:`CHANNELS` and those of the registered sensors
+    with a failsafe (read live)."""
+    return CHANNELS + tuple(s.channel for s in REGISTERED.values() if s.failsafe is not None)
 #: the channels whose messages mark a fin's stroke starting
 _STROKES = frozenset(ch.fin_strouhal(i) for i in range(ch.N_FINS))
 #: the specific force's largest departure from g0 at which it measures gravity's direction (g0)
@@ -256,18 +277,28 @@ class SafetyMonitor:
         self._volts: tuple[float, float] | None = None  # the last lowest supply voltage: (time, V)
         self._power: tuple[float, float] | None = None  # the last battery power: (time, W)
         self._energy = 0.0  # J drawn by the drives since the start
-        self._water: tuple[float, str] | None = None  # the leak detector's water: (since, message)
-        self._leak_state = ""  # the leak detector's last report: water, dry, unreadable ("": none)
+        #: the registered sensors' failsafes: what trips each, (since, cause); the last reading's time
+        self._tripped: dict[str, tuple[float, str]] = {}
+        self._sensor_seen: dict[str, float] = {}
         self._estimate: tuple[float, Any] | None = None  # the last body state: (time, orientation)
         self._innovation: tuple[float, float] | None = None  # the last finite innovation: (time, rad)
         self._active: dict[str, float] = {}  # name -> since
         self._escalated: set[str] = set()  # active failsafes whose escalation acted
-        self._cause: dict[str, str] = {n: "" for n in FAILSAFES}
+        self._cause: dict[str, str] = {}
 
     def rule(self, name: str) -> FailsafeRule:
-        if name not in FAILSAFES:
-            raise ValueError(f"failsafe: {name!r} is not one of {', '.join(FAILSAFES)}")
-        return getattr(self.cfg, name)
+        names = failsafe_names()
+        if name not in names:
+            raise ValueError(f"failsafe: {name!r} is not one of {', '.join(names)}")
+        return self.cfg.rule(name)
+
+    def sensors_open(self, names: tuple[str, ...], now: float | None = None) -> None:
+        """The registered sensors ``names`` are open (at ``now``; default: the last check's
+        time): a failsafe with a ``stale_after`` counts their silence from here."""
+        with self._lock:
+            t = self._now if now is None else float(now)
+            for name in names:
+                self._sensor_seen.setdefault(name, t)
 
     # ------------------------------------------------------------------ inputs
     def on_message(self, channel: str, msg: Any) -> None:
@@ -282,7 +313,9 @@ class SafetyMonitor:
             for channel, msg in items:
                 sensor = _SENSOR_OF.get(channel)
                 if sensor is None:
-                    if channel == ch.EVENTS and isinstance(msg, Event):
+                    if channel.startswith("sensors/") and channel[8:] in REGISTERED:
+                        self._sensor_reading(REGISTERED[channel[8:]], msg)
+                    elif channel == ch.EVENTS and isinstance(msg, Event):
                         events.append(msg)
                     elif channel == ch.BODY_TRACKING:
                         self._track(msg)
@@ -325,6 +358,24 @@ class SafetyMonitor:
                         self._limit("altitude", alt < self.cfg.min_altitude, t, alt)
         for ev in events:
             self.on_event(ev)
+
+    def _sensor_reading(self, entry: Any, msg: Any) -> None:
+        """A registered sensor's reading: whether it trips its failsafe, since when (the lock is held)."""
+        fs = entry.failsafe
+        if fs is None:
+            return
+        t = _stamp(getattr(msg, "t", None), self._now)
+        self._sensor_seen[entry.name] = max(t, self._sensor_seen.get(entry.name, t))
+        try:
+            cause = fs.trips(msg) if fs.trips is not None else None
+        except Exception:
+            log.exception("sensor %s: its failsafe's condition failed", entry.name)
+            cause = f"{entry.name}: its failsafe's condition could not be judged"
+        if cause:
+            since = self._tripped[fs.name][0] if fs.name in self._tripped else t
+            self._tripped[fs.name] = (since, str(cause))
+        else:
+            self._tripped.pop(fs.name, None)
 
     def _limit(self, name: str, beyond: bool, t: float, value: float) -> None:
         """A reading beyond (or within) failsafe ``name``'s limit at ``t`` (the lock is held)."""
@@ -393,12 +444,6 @@ class SafetyMonitor:
                         faults.pop(code, None)
                 elif ev.code == "recovered" and isinstance(ev.data.get("fault"), str):
                     faults.pop(ev.data["fault"], None)
-            elif ev.source == "leak":
-                self._leak_state = ev.code
-                if ev.code == "water":
-                    self._water = self._water or (self._now, ev.message)
-                elif ev.code == "dry":
-                    self._water = None
             elif ev.source == "loop" and ev.code == "late_plan":
                 self._late.append(self._now)
             elif ev.source == "loop" and ev.code in ("fin_slow", "fin_slow_cleared"):
@@ -465,8 +510,8 @@ class SafetyMonitor:
         with self._lock:
             self._now = float(now)
             causes = self._causes(now)
-            for name in FAILSAFES:
-                rule: FailsafeRule = getattr(self.cfg, name)
+            for name in failsafe_names():
+                rule: FailsafeRule = self.cfg.rule(name)
                 cause = causes.get(name)
                 if cause is not None:
                     self._cause[name] = cause
@@ -478,7 +523,7 @@ class SafetyMonitor:
                     del self._active[name]
                     action = rule.escalate if name in self._escalated else rule.action
                     self._escalated.discard(name)
-                    out.append(Transition(name, False, now, action, self._cause[name]))
+                    out.append(Transition(name, False, now, action, self._cause.get(name, "")))
                 elif (cause is not None and rule.escalates and name not in self._escalated
                       and now - self._active[name] >= rule.escalate_after):
                     self._escalated.add(name)
@@ -536,8 +581,16 @@ class SafetyMonitor:
             since, alt = beyond["altitude"]
             causes["altitude"] = (f"altitude {alt:.2f} m above the floor, below the minimum {cfg.min_altitude:g} m, "
                                   f"for {now - since:.1f} s")
-        if self._water is not None and now - self._water[0] >= cfg.leak.timeout:
-            causes["leak"] = self._water[1]
+        for entry in REGISTERED.values():
+            fs = entry.failsafe
+            if fs is None:
+                continue
+            timeout = cfg.rule(fs.name).timeout
+            tripped, seen = self._tripped.get(fs.name), self._sensor_seen.get(entry.name)
+            if tripped is not None and now - tripped[0] >= timeout:
+                causes[fs.name] = f"{tripped[1]} for {now - tripped[0]:.1f} s" if timeout else tripped[1]
+            elif fs.stale_after and seen is not None and now - seen >= fs.stale_after + timeout:
+                causes[fs.name] = f"{entry.label}: no reading for {now - seen:.1f} s"
         est, timeout = self._estimate, cfg.estimate.timeout
         if "estimate" in beyond and now - beyond["estimate"][0] >= timeout:
             since, rad = beyond["estimate"]
@@ -587,11 +640,6 @@ class SafetyMonitor:
         with self._lock:
             return self._innovation, None if self._estimate is None else self._estimate[0]
 
-    def leak(self) -> str:
-        """The leak detector's last report: water, dry, unreadable; "" when none came."""
-        with self._lock:
-            return self._leak_state
-
     def recent_late_plans(self) -> int:
         """Late plans within the planner_late window (at the last check)."""
         with self._lock:
@@ -629,7 +677,7 @@ class SafetyMonitor:
 
     def active(self) -> tuple[str, ...]:
         with self._lock:
-            return tuple(n for n in FAILSAFES if n in self._active)
+            return tuple(n for n in failsafe_names() if n in self._active)
 
     def is_active(self, name: str) -> bool:
         with self._lock:
@@ -638,12 +686,12 @@ class SafetyMonitor:
     def states(self) -> list[FailsafeState]:
         with self._lock:
             out = []
-            for name in FAILSAFES:
-                rule: FailsafeRule = getattr(self.cfg, name)
+            for name in failsafe_names():
+                rule: FailsafeRule = self.cfg.rule(name)
                 out.append(FailsafeState(
                     name=name, action=rule.escalate if name in self._escalated else rule.action,
                     timeout=rule.timeout,
                     active=name in self._active, since=self._active.get(name),
-                    cause=self._cause[name],
+                    cause=self._cause.get(name, ""),
                 ))
             return out

@@ -104,12 +104,12 @@ class EventCount:
 
     @staticmethod
     def is_fault(ev: Any) -> bool:
-        from ucat_console.backend.safety import FAILSAFES
+        from ucat_console.backend.safety import failsafe_names
 
         device = ev.source.startswith("epos2") or ev.source in SENSORS
         # the tracking alarm judges the control (a start from rest may lag its reference),
         # not a device or the timing: counted in ``events``, not as a fault
-        judged = ev.source == "failsafe" and ev.code in FAILSAFES and ev.code != "tracking"
+        judged = ev.source == "failsafe" and ev.code in failsafe_names() and ev.code != "tracking"
         return (device and ev.level in FAULT_LEVELS) or judged
 
     def drive_faults(self) -> int:

@@ -37,7 +37,8 @@ error from :data:`DEPTH_FROM` s on at a constant depth setpoint (``depth_dev``).
 ``--seeds N`` runs seeds ``--seed`` ... ``--seed`` + N - 1 and reports each figure's median and
 worst case over them; the goals are judged on the worst case. ``--cases`` names the nominal
 robot and disturbance cases (:data:`CASES`: the robot 1 % light or heavy, 25 % heavier, one fin's drive at half
-speed, a 0.05 m/s current across its path, the still-water and eeUVsim plants), each on the
+speed, a 0.05 m/s current across its path, the still-water and eeUVsim plants, the latter
+also with the controller's fin model set to its coefficients, as identification finds them), each on the
 manoeuvres of its own goals; ``--manoeuvres`` keeps some manoeuvres only. ``--jobs`` runs that
 many processes (default: one per CPU). 20 seeds by default; ``--seeds 1`` prints every figure
 of one seed and can write the plots. The goals (:data:`GOALS`); each figure is printed with its goal
@@ -118,6 +119,7 @@ class Case:
     weak: float = 1.0  # the weak fin's (:data:`WEAK_FIN`) drive speed factor
     current: tuple[float, float, float] | None = None  # NED m/s, instead of the manoeuvre's own
     plant: str | None = None  # a plant variant (``backend/sim/variants.py``) instead of the default
+    model: str | None = None  # the controller's fin model set to these coefficients (as identified)
 
 
 _HEADING = {"depth_step/heading_all_deg": ("<=", 5.0), "straight/heading_all_deg": ("<=", 3.0)}
@@ -135,6 +137,8 @@ CASES: dict[str, Case] = {
                         plant="still_water"),
     "eeuvsim": Case({**_HEADING, "depth_step/t90": ("<=", 30.0), "speed_0.2/within": (">=", 0.90)},
                     plant="eeuvsim"),
+    "eeuvsim_identified": Case({**_HEADING, "depth_step/t90": ("<=", 30.0), "speed_0.2/within": (">=", 0.90)},
+                               plant="eeuvsim", model="eeuvsim"),
 }
 
 
@@ -199,11 +203,17 @@ def run_manoeuvre(app: Any, mode: str, formulation: str, m: Manoeuvre, seed: int
     from ucat_console.telemetry import channels as ch
     from ucat_console.telemetry.stream import TelemetryStream
 
-    cfg = app.loop.replace(mode=mode, planner_seed=seed, mpc=app.mpc.replace(formulation=formulation))
+    c = CASES[case] if case is not None else Case({})
+    mpc = app.mpc.replace(formulation=formulation)
+    if c.model is not None:
+        from ucat_console.backend.sim.params import FinHydroConfig
+
+        k = FinHydroConfig(coefficients=c.model).resolved()
+        mpc = mpc.replace(rho=k.rho, c_d=k.c_d, c_l=k.c_l, fin_length=k.fin_length)
+    cfg = app.loop.replace(mode=mode, planner_seed=seed, mpc=mpc)
     if m.gait_to is not None:
         cfg = cfg.replace(baseline=cfg.baseline.replace(frequency=GAIT_FROM))
     z0 = m.depth if m.start_depth is None else m.start_depth
-    c = CASES[case] if case is not None else Case({})
     plant = plant_config(c.plant or DEFAULT_PLANT, seed, m.current if c.current is None else c.current)
     if (c.buoyancy, c.mass) != (1.0, 1.0):
         plant = plant.replace(vehicle=plant.vehicle.replace(buoyancy_ratio=c.buoyancy,

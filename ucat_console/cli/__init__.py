@@ -14,7 +14,7 @@ import sys
 from ucat_console.backend.dependencies import UnsupportedVersion
 
 #: sub-command modules under ucat_console.cli
-COMMANDS = ["bench", "devices", "sessions", "replay", "identify", "experiment", "sweep", "run", "prepare",
+COMMANDS = ["bench", "devices", "sessions", "replay", "identify", "experiment", "sweep", "run", "manoeuvres", "prepare",
             "paths"]
 
 

@@ -5,11 +5,15 @@
     ucat-console run --config pool.toml --port 0
     ucat-console run --headless --duration 60 --mode mpc_sync --velocity 0.2 --depth 1 --record
     ucat-console run --foxglove-port 8765     # and the live robot in Foxglove / Lichtblick
+    ucat-console run --headless --manoeuvre e4_ladder   # a scripted manoeuvre (docs/manoeuvres.md)
 
 With the page, the motors stay disarmed until the pilot (the page that entered the token
 printed below) arms them. ``--headless`` runs without a page and arms at once with the
 given setpoints, for ``--duration`` seconds of robot time from arming (real time; ``--fast``
 runs the simulator as fast as it goes). Ctrl-C disarms, stops the motors and closes the files.
+``--manoeuvre NAME|FILE`` (headless) runs a scripted manoeuvre once armed, recorded, for
+its own length unless ``--duration`` says otherwise, and prints each segment's figures at
+its end (``ucat-console manoeuvres list`` lists the shipped ones).
 
 The compiled code is prepared first in child processes (:mod:`ucat_console.compiled`: the first run on a
 machine compiles it, with its progress on the terminal and on the loading page, whose
@@ -45,6 +49,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--velocity", type=float, default=None, help="forward velocity setpoint, m/s")
     p.add_argument("--depth", type=float, default=None, help="depth setpoint, m")
     p.add_argument("--yaw-rate", type=float, default=None, help="yaw rate setpoint, rad/s")
+    p.add_argument("--manoeuvre", default=None, metavar="NAME|FILE",
+                   help="headless: run this scripted manoeuvre (a shipped one's name or a TOML file; "
+                        "`ucat-console manoeuvres list`), recorded; the run lasts as long as it unless --duration")
     p.add_argument("--record", action="store_true", help="record the whole run")
     p.add_argument("--sessions-dir", type=Path, default=None, metavar="DIR",
                    help="where recordings go (default: the configuration's console.sessions_dir, "
@@ -138,7 +145,14 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--playback: only with the web page (not --headless)")
     if args.fast and not args.headless:
         raise ValueError("--fast: only with --headless")
+    if args.manoeuvre is not None and not args.headless:
+        raise ValueError("--manoeuvre: only with --headless (on the page: the Drive tab's Manoeuvre folder)")
     cfg = _config(args)
+    script = None
+    if args.manoeuvre is not None:  # a bad file is said before anything starts
+        from ucat_console.backend.manoeuvre_files import load_script
+
+        script = load_script(args.manoeuvre, cfg.loop)
     if args.fast and not robot(cfg.robot).computed_readings:
         raise ValueError(f"--fast: only with a robot whose readings the console computes (sim), not {cfg.robot!r}")
     if not args.headless and not is_loopback(cfg.console.host):
@@ -177,6 +191,7 @@ def run(args: argparse.Namespace) -> int:
         raise
     started = False  # the run has begun: from here on its recording is kept
     app = None
+    scripted = None
     fox = None
     last_power: list[Any] = [None]
     sup.stream.subscribe(lambda c, m: last_power.__setitem__(0, m), [ch.POWER])
@@ -215,6 +230,8 @@ def run(args: argparse.Namespace) -> int:
             if args.duration is not None:
                 # counted from arming: a fast loop runs on while the command reaches it
                 t_stop = sup.loop.time + args.duration
+            if script is not None:
+                scripted = _start_script(sup, script)
         started = True
         period = cfg.console.health_period
         next_health = time.monotonic() + period
@@ -224,6 +241,8 @@ def run(args: argparse.Namespace) -> int:
         announced = prep.complete
         while sup.running:
             if t_stop is not None and sup.loop.time >= t_stop:
+                break
+            if scripted is not None and t_stop is None and scripted.finished:
                 break
             time.sleep(0.1 if not args.fast else 0.02)
             now = time.monotonic()
@@ -263,9 +282,30 @@ def run(args: argparse.Namespace) -> int:
         print(f"distance {p.distance:.2f} m; the fins' shaft (encoders, while armed): energy {p.energy:.1f} J, "
               f"energy per metre {epm}, mean power {p.mean_total:.2f} W")
     print(battery.line())
+    if scripted is not None:
+        print(f"manoeuvre {scripted.name}: {scripted.reason or 'not finished'}; "
+              f"{len(scripted.results)} of {len(scripted.script.segments)} segments measured")
     for path in paths:
         print(f"recorded {path}")
     return 1 if sup.fault else 0
+
+
+def _start_script(sup: Any, script: Any) -> Any:
+    """The scripted manoeuvre started (its plan printed); each segment's figures are printed
+    as they come."""
+    from ucat_console.backend.access import LOCAL
+    from ucat_console.control.scripted import plan
+    from ucat_console.telemetry import channels as ch
+
+    def on_event(channel: str, ev: Any) -> None:
+        if ev.source == "manoeuvre":
+            print(f"{ev.t:8.1f} s  {ev.message}", flush=True)
+
+    sup.stream.subscribe(on_event, [ch.EVENTS])
+    print(plan(script), flush=True)
+    run = sup.start_script(LOCAL, script)
+    print(f"manoeuvre {script.name} started, recording session {run.session}", flush=True)
+    return run
 
 
 class BatteryEnergy:

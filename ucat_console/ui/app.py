@@ -53,7 +53,7 @@ from typing import TYPE_CHECKING, Any, Callable, Iterator
 import viser
 
 from ucat_console.backend.sessions.replay_job import ReplaySlot
-from ucat_console.backend.supervisor import CommandRefused, Supervisor
+from ucat_console.backend.supervisor import CommandRefused, ConsoleState, Supervisor
 from ucat_console.robot.fins import N_FINS
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event
@@ -137,7 +137,7 @@ class ConsoleApp:
         self._next_follow = 0.0
         #: a session every new page opens in its Review tab (``run --playback``)
         self.initial_session: str | None = None
-        self.sessions_dir = supervisor.recorder.directory
+        self.sessions_dir = supervisor.sessions_dir
         self.session_list = SessionList(self.sessions_dir, supervisor.readers.budget)
         self.jobs = PageJobs()  # what reads session files, for every page
         self.replay_slot = ReplaySlot(supervisor.readers.budget.config)
@@ -148,7 +148,7 @@ class ConsoleApp:
         self.run_id = {"id": f"{time.time_ns():x}", "started": time.strftime("%H:%M:%S")}
 
         pages = dict(
-            is_pilot=supervisor.access.is_pilot,
+            is_pilot=supervisor.is_pilot,
             pilot_timeout=lambda: supervisor.cfg.failsafe.pilot_gone.timeout,
             on_connect=supervisor.client_connected,
             on_disconnect=supervisor.client_disconnected,
@@ -359,12 +359,12 @@ class ConsoleApp:
             trail_points=cfg.trail_points, trail_spacing=cfg.trail_spacing,
             container=self.tab_review, plot_container=self.review_plot_tab,
             allow=self._allow(cid) if cid is not None else None,
-            replay_slot=self.replay_slot, may_replay=lambda: self._may_replay(cid), plot_height=PLOT_HEIGHT,
+            replay_slot=self.replay_slot, may_replay=lambda: self.sup.may_replay(cid), plot_height=PLOT_HEIGHT,
             metrics=self.sup.cfg.metrics, readers=self.sup.readers,
             jobs=self._jobs_of(cid) if cid is not None else None,
             present=(lambda: self.page_present(cid)) if cid is not None else (lambda: True),
             sessions=lambda: self.session_list.listing(),
-            may_repair=(lambda: self.sup.access.require_pilot(cid, "repair")) if cid is not None else (lambda: None),
+            may_repair=(lambda: self.sup.require_pilot(cid, "repair")) if cid is not None else (lambda: None),
         )
 
     def submit_job(self, cid: int, what: str, job: Callable[[], Any], coalesce: bool = False) -> str | None:
@@ -381,15 +381,6 @@ class ConsoleApp:
     def _jobs_of(self, cid: int) -> Callable[[str, Callable[[], Any], bool], str | None]:
         """``jobs(what, job, coalesce)`` of page ``cid``'s panels (:meth:`submit_job`)."""
         return lambda what, job, coalesce: self.submit_job(cid, what, job, coalesce)
-
-    def _may_replay(self, cid: int | None) -> bool:
-        """CommandRefused unless page ``cid`` may start a counterfactual replay now: any page
-        while the robot is disarmed; only the pilot while it is armed (the replay takes CPU).
-        True for the pilot's page, whose replay cancels another page's running one."""
-        pilot = cid is not None and self.sup.access.is_pilot(cid)
-        if self.sup.armed and not pilot:
-            raise CommandRefused("counterfactual replay: while the robot is armed only the pilot may start one")
-        return pilot
 
     def _on_disconnect(self, client: viser.ClientHandle) -> None:
         cid = client.client_id
@@ -417,7 +408,7 @@ class ConsoleApp:
 
     def set_history(self, who: Any, seconds: object) -> None:
         """The plots' time window (the pilot's choice; every page shows the same plots)."""
-        self.sup.access.require_pilot(who, "plot history")
+        self.sup.require_pilot(who, "plot history")
         if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not math.isfinite(seconds):
             raise CommandRefused(f"history: expected a number of seconds, got {seconds!r}")
         if not 5.0 <= seconds <= self.cfg.max_history:
@@ -489,12 +480,12 @@ class ConsoleApp:
         self._notify_pages()
         self.metrics.refresh()
         sup = self.sup
-        h = sup.health()
-        _set(self.introspection, markdown.introspection_markdown(list(self._plans), h.late_plans,
-                                                              h.plan_overruns, h.mode))
-        _set(self.failsafes, self.failsafe_text(h.t))
+        st = sup.state()  # one snapshot for every page of this tick
+        _set(self.introspection, markdown.introspection_markdown(list(self._plans), st.late_plans,
+                                                              st.plan_overruns, st.mode))
+        _set(self.failsafes, self.failsafe_text(st))
         _set(self.journal, markdown.journal_markdown(sup.journal(12)))
-        _set(self.effects, effects_markdown(sup.effects.entries(), sup.loop.time))
+        _set(self.effects, effects_markdown(list(st.effects), st.t))
         with self._lock:
             pages = list(self.pages.items())
             ps = dict(self.panels)
@@ -509,7 +500,7 @@ class ConsoleApp:
                 uuids = {f"{name}_uuid": viser_compat.handle_uuid(handle) for name, handle in
                          (("disarm", panel.disarm), ("drive", panel.drive_input), ("theme", panel.theme_button),
                           ("token", panel.token), ("take", panel.take))}
-                state = bar_state(sup, cid, dark=page.dark, uuids=uuids, loading=self.loading,
+                state = bar_state(st, cid, dark=page.dark, uuids=uuids, loading=self.loading,
                                   link_slow=self.guard.link_slow(cid),
                                   review=review.reviewing if review is not None else "", console=self.run_id)
                 # what the pilot must see first (ahead of the telemetry on a slow link)
@@ -517,10 +508,11 @@ class ConsoleApp:
             except Exception:
                 log.debug("the status bar of client %s was not sent", cid, exc_info=True)
 
-    def failsafe_text(self, now: float) -> str:
+    @staticmethod
+    def failsafe_text(st: ConsoleState) -> str:
         """The Safety tab's text: the failsafes' table, and the protective ones set only to warn."""
-        text = markdown.failsafe_markdown(self.sup.safety.states(), now)
-        warn_only = self.sup.cfg.failsafe.warn_only()
+        text = markdown.failsafe_markdown(list(st.safety.failsafes), st.t)
+        warn_only = st.safety.warn_only
         if warn_only:
             text += ("\n\n**Set to warn only** (they will not act on the robot): "
                      + ", ".join(warn_only) + ".")
@@ -565,9 +557,10 @@ class ConsoleApp:
         live = set(self.guard.clients)
         with self._lock:
             ps = [p for cid, p in self.panels.items() if cid in live]
+        st = self.sup.state() if ps else None  # one snapshot for every page
         for p in ps:
             try:
-                p.refresh()
+                p.refresh(state=st)
             except Exception:
                 if p.cid not in self.guard.clients:  # the page went while it was refreshed
                     log.debug("client %s left during a refresh", p.cid)

@@ -20,9 +20,10 @@ keys and stick before they reach here.
 from __future__ import annotations
 
 import time
-from typing import Any, Callable
+from typing import Any, Callable, Protocol
 
-from ucat_console.backend.access import actor_name
+from ucat_console.backend.supervisor import ConsoleState
+from ucat_console.control.allocation import BodySetpoints
 from ucat_console.ui.page_script import parse_drive
 
 #: key -> (what, direction); the labels are the key map the page shows
@@ -42,21 +43,34 @@ def clamp(x: float, lo: float, hi: float) -> float:
     return min(max(x, lo), hi)
 
 
+class DrivingHost(Protocol):
+    """What manual driving uses of the supervisor: its configuration, its snapshot (the
+    envelope), the setpoints in force, and two commands."""
+
+    cfg: Any  # the AppConfig the console started with
+
+    @property
+    def setpoints(self) -> BodySetpoints: ...
+    def state(self) -> ConsoleState: ...
+    def set_setpoints(self, who: Any, velocity: object = None, depth: object = None,
+                      yaw_rate: object = None, quiet: bool = False) -> None: ...
+    def note_gamepad(self, who: Any, driving: bool) -> None: ...
+
+
 class Driving:
     """One page's manual driving (module docstring); ``act(fn)`` runs a command for the page
     (refusals shown there)."""
 
-    def __init__(self, sup: Any, client: int, act: Callable[[Callable[[], Any]], Any]) -> None:
+    def __init__(self, sup: DrivingHost, client: int, act: Callable[[Callable[[], Any]], Any]) -> None:
         self.sup = sup
         self.client = client
         self.act = act
+        self._envelope = sup.state().limits.envelope()
         self._pad_last = 0.0
         self._pad_active = False
 
     def envelope(self) -> dict[str, tuple[float, float]]:
-        lc = self.sup.cfg.loop
-        return {"velocity": (-lc.max_velocity, lc.max_velocity), "yaw_rate": (-lc.max_yaw_rate, lc.max_yaw_rate),
-                "depth": (0.0, lc.max_depth)}
+        return dict(self._envelope)
 
     def step(self, key: str) -> None:
         """One key press."""
@@ -82,11 +96,8 @@ class Driving:
             lo, hi = env["depth"]
             depth = round(clamp(depth + dz * self.sup.cfg.console.drive_depth_rate * dt, lo, hi), 4)
         moving = bool(v or r or dz) and not stop
-        who = actor_name(self.client)
-        if moving and not self._pad_active:
-            self.sup.journal_log.add(who, "gamepad", "off", "driving")
-        elif not moving and self._pad_active:
-            self.sup.journal_log.add(who, "gamepad", "driving", "off")
+        if moving != self._pad_active:
+            self.sup.note_gamepad(self.client, moving)
         self._pad_active = moving
         self.sup.set_setpoints(self.client, velocity=round(v * env["velocity"][1], 4),
                                yaw_rate=round(r * env["yaw_rate"][1], 4), depth=depth,

@@ -13,19 +13,37 @@ Every control here is the pilot's.
 from __future__ import annotations
 
 import threading
-from typing import Any, Callable
+from typing import Any, Callable, Mapping, Protocol
 
 from ucat_console.backend.identification import IdentifyReport, identify_sessions
 from ucat_console.backend.sessions import index
+from ucat_console.backend.sessions.shared import SharedReaders
+from ucat_console.backend.supervisor import ConsoleState
+from ucat_console.backend.supervisor.manoeuvre import ManoeuvreRun
 from ucat_console.ui.markdown import esc
 
 NO_SESSION = "(no recorded session)"
 
 
+class IdentifyHost(Protocol):
+    """What the identification folder uses of the supervisor: its configuration and session
+    readers, its snapshot, and its commands."""
+
+    cfg: Any  # the AppConfig the console started with
+    readers: SharedReaders
+
+    def state(self) -> ConsoleState: ...
+    def current_config(self) -> Any: ...
+    def require_pilot(self, who: Any, action: str) -> None: ...
+    def start_manoeuvre(self, who: Any) -> ManoeuvreRun: ...
+    def stop_manoeuvre(self, who: Any) -> Any: ...
+    def set_params(self, who: Any, changes: Mapping[str, object]) -> None: ...
+
+
 class IdentifyInputs:
     """The Session tab's identification folder of one page (module docstring)."""
 
-    def __init__(self, gui: Any, sup: Any, cid: int, directory: Any,
+    def __init__(self, gui: Any, sup: IdentifyHost, cid: int, directory: Any,
                  show: Callable[..., None], changed: Callable[[], None],
                  sessions: Callable[[], list[index.SessionInfo]] | None = None) -> None:
         """``sessions()``: the sessions folder's listing (default: read it each time)."""
@@ -69,7 +87,7 @@ class IdentifyInputs:
         names = tuple(s.session_id for s in self._sessions() if not s.truncated)
         current = self.session.value
         self.session.options = names or (NO_SESSION,)
-        run = self.sup.manoeuvre
+        run = self.sup.state().manoeuvre
         if run is not None and run.finished and run.session in names:
             self.session.value = run.session
         elif current in names:
@@ -79,7 +97,7 @@ class IdentifyInputs:
 
     def start_fit(self) -> threading.Thread:
         """Fit the chosen session in a thread (the pilot's; one fit at a time per page)."""
-        self.sup.access.require_pilot(self.cid, "identification")
+        self.sup.require_pilot(self.cid, "identification")
         name = self.session.value
         if name == NO_SESSION or not isinstance(name, str) or not name:
             raise ValueError("identification: no recorded session to fit")
@@ -108,17 +126,17 @@ class IdentifyInputs:
         self._show(f"MPC fin model: C_D {r.c_d:.4g}, C_L {r.c_l:.4g}")
 
     # ------------------------------------------------------------------ state -> page
-    def refresh(self, pilot: bool) -> None:
-        """Show the run and the fit; a property is set only when it changes (a refresh of an
-        unchanged page sends nothing)."""
-        run = self.sup.manoeuvre
+    def refresh(self, pilot: bool, st: ConsoleState) -> None:
+        """Show the run and the fit as of snapshot ``st``; a property is set only when it
+        changes (a refresh of an unchanged page sends nothing)."""
+        run = st.manoeuvre
         running = run is not None and not run.finished
         _prop(self.fit, "disabled", not pilot)
         _prop(self.session, "disabled", not pilot)
-        _prop(self.run, "disabled", not pilot or running or not self.sup.armed)
+        _prop(self.run, "disabled", not pilot or running or not st.armed)
         _prop(self.stop, "visible", running and pilot)
         _prop(self.progress, "visible", running)
-        if running:
+        if run is not None and running:
             _prop(self.progress, "value", round(100.0 * run.progress, 1))
         text = self.result.content
         if self.error:

@@ -17,8 +17,9 @@ runs is not an error: what the callback would still show goes nowhere, quietly.
 
 Values typed into inputs are drafts until applied ("Apply setpoints", "Apply tuning"),
 so a half-typed number never reaches the robot. The tuning inputs are built from the
-typed configuration: :data:`~ucat_console.backend.supervisor.TUNABLE` names the fields,
-and each field's ``param`` metadata gives the label's range, the unit, the hint and the step.
+typed configuration: the loop's registered blocks (``backend.loop.blocks``) name the
+fields and their folders' titles, and each field's ``param`` metadata gives the label's
+range, the unit, the hint and the step.
 """
 
 from __future__ import annotations
@@ -29,14 +30,16 @@ import time
 from typing import Any, Callable, Protocol
 
 from ucat_console.backend.access import MAX_NAME, AccessDenied, actor_name
+from ucat_console.backend.loop.blocks import block as tuning_block
 from ucat_console.backend.loop.modes import MODES
-from ucat_console.backend.supervisor import SETPOINTS, CommandRefused, Supervisor
+from ucat_console.backend.supervisor import SETPOINTS, CommandRefused, ConsoleState, Supervisor
 from ucat_console.telemetry.events import Event
 from ucat_console.ui.driving import KEY_MAP, KEYS, Driving
 from ucat_console.ui.markdown import _set, esc, events_markdown, within
 from ucat_console.ui.identify_inputs import IdentifyInputs
+from ucat_console.ui.manoeuvre_inputs import ManoeuvreInputs
 from ucat_console.ui.rig_faults import RigFaultInputs
-from ucat_console.ui.tuning_inputs import BLOCK_TITLES, param_specs
+from ucat_console.ui.tuning_inputs import param_specs
 
 log = logging.getLogger(__name__)
 
@@ -88,7 +91,8 @@ class ControlPanel:
         self.messages: list[str] = []
         c = containers or {}
         sup = self.sup
-        env = sup.cfg.loop
+        st = sup.state()
+        env = st.limits
 
         with within(c.get("pilot")):
             with gui.add_folder("Pilot", order=1.0):
@@ -101,9 +105,9 @@ class ControlPanel:
                 self.arm = gui.add_button("Arm motors", color="green")
                 # the status bar's DISARM button (and Esc) press this one; it is not drawn here
                 self.disarm = gui.add_button("DISARM", color="red", visible=False)
-                self.mode = gui.add_dropdown("Mode", tuple(MODES), initial_value=sup.mode,
+                self.mode = gui.add_dropdown("Mode", tuple(MODES), initial_value=st.mode,
                                              hint=", ".join(f"{m.name}: {m.label}" for m in MODES.values()))
-                sp = sup.setpoints
+                sp = st.setpoints
                 self.sp_inputs = {
                     "velocity": gui.add_number(f"Velocity m/s [-{env.max_velocity:g}, {env.max_velocity:g}]",
                                                float(sp.velocity), step=0.01, hint="forward velocity setpoint"),
@@ -120,6 +124,7 @@ class ControlPanel:
                 # the page's script sends the gamepad's sticks and the theme switch here
                 self.drive_input = gui.add_text("gamepad", "", visible=False)
                 self.theme_button = gui.add_button("theme", visible=False)
+            self.manoeuvres = ManoeuvreInputs(gui, sup, client_id, lambda fn: self.act(fn), self._allow, self.show)
 
         self.params: dict[str, Any] = {}
         with within(c.get("tuning")):
@@ -131,7 +136,7 @@ class ControlPanel:
                 self.tuning_message = gui.add_markdown("")
                 tuning = sup.tuning()
                 for block, specs in param_specs(tuning).items():
-                    with gui.add_folder(BLOCK_TITLES.get(block, block), expand_by_default=block == "mpc"):
+                    with gui.add_folder(tuning_block(block).title, expand_by_default=block == "mpc"):
                         for s in specs:
                             value = getattr(tuning[block], s.key.rpartition(".")[2])
                             if s.choices is not None:
@@ -156,7 +161,7 @@ class ControlPanel:
                                             "(the live one, or the one this page reviews) from behind and above")
             listing = getattr(app, "session_list", None)
             self.identify = IdentifyInputs(gui, sup, client_id, getattr(app, "sessions_dir", None) or
-                                           sup.recorder.directory, self.show,
+                                           sup.sessions_dir, self.show,
                                            getattr(app, "request_refresh", lambda: None),
                                            sessions=(lambda: listing.sessions()) if listing is not None else None)
             with gui.add_folder("Events", order=30.0):
@@ -164,7 +169,7 @@ class ControlPanel:
                                                  hint="which events the list shows")
                 self.events = gui.add_markdown("No events yet.")
         self.reset_drives = self.zero_depth = None
-        if sup.has_drives:  # the robot's devices (or the rig's emulated ones)
+        if st.has_drives:  # the robot's devices (or the rig's emulated ones)
             with within(c.get("safety")):
                 with gui.add_folder("Devices", order=40.0):
                     self.reset_drives = gui.add_button(
@@ -174,9 +179,9 @@ class ControlPanel:
                         "Zero depth at the surface",
                         hint="with the robot floating at the surface, disarmed: its pressure becomes depth 0")
         self.faults: RigFaultInputs | None = None
-        if sup.rig is not None:
+        if st.has_rig:
             with within(c.get("safety")):
-                self.faults = RigFaultInputs(gui, sup.rig_control.fault_tables())
+                self.faults = RigFaultInputs(gui, sup.fault_tables())
 
         # the one-key marker (the note typed above goes with it)
         self.marker_key = gui.add_command("Add marker", description="a marker with the note typed in 'Marker note'",
@@ -206,7 +211,7 @@ class ControlPanel:
         pilot = [self.release, self.handover, self.decline, self.arm, self.mode,
                  *self.sp_inputs.values(), self.apply_sp, self.apply_tuning, self.revert, self.undo, self.save,
                  *self.params.values(), self.history, self.rec_start, self.rec_stop, self.marker,
-                 self.reset_drives, self.zero_depth, *self.identify.handles()]
+                 self.reset_drives, self.zero_depth, *self.identify.handles(), *self.manoeuvres.handles()]
         if self.faults is not None:
             f = self.faults
             pilot += [f.device, f.fault, f.fin, f.code, f.duration, f.inject, f.clear]
@@ -236,7 +241,7 @@ class ControlPanel:
         sup, cid = self.sup, self.cid
         self.take.on_click(self._guard(lambda: self._take_control()))
         self.release.on_click(self._guard(lambda: sup.release(cid)))
-        self.handover.on_click(self._guard(lambda: sup.hand_over(cid, sup.access.pending)))  # type: ignore[arg-type]
+        self.handover.on_click(self._guard(lambda: sup.hand_over(cid, sup.state().access.pending)))  # type: ignore[arg-type]
         self.decline.on_click(self._guard(lambda: sup.decline(cid)))
         self.arm.on_click(self._guard(self._request_arm))
         self.disarm.on_click(self._guard(self._disarm_now, direct=True))
@@ -256,13 +261,15 @@ class ControlPanel:
         self.stop_key.on_trigger(self._guard(self._stop_now, direct=True))
         self.disarm_key.on_trigger(self._guard(self._disarm_now, direct=True))
         self.drive_input.on_update(self._guard(lambda: self.driving.gamepad(self.drive_input.value)))
-        self.name.on_update(self._guard(lambda: sup.access.set_name(cid, self.name.value)))
+        self.name.on_update(self._guard(lambda: sup.set_name(cid, self.name.value)))
         self.severity.on_update(self._quiet(lambda _: self.show_events(force=True)))
         self.theme_button.on_click(self._guard(self._toggle_theme))
         self.frame.on_click(self._guard(lambda: self.app.frame_robot(cid)))
         if self.reset_drives is not None:
             self.reset_drives.on_click(self._guard(self._reset_drive_faults))
             self.zero_depth.on_click(self._guard(self._zero_depth))
+        self.manoeuvres.start.on_click(self._guard(self.manoeuvres.request_start))
+        self.manoeuvres.stop.on_click(self._guard(self.manoeuvres.stop_run))
         ident = self.identify
         ident.run.on_click(self._guard(ident.start))
         ident.stop.on_click(self._guard(ident.stop_run))
@@ -355,9 +362,10 @@ class ControlPanel:
         if granted:
             self.show("control taken")
         else:
-            pilot = actor_name(self.sup.access.pilot)  # type: ignore[arg-type]
+            st = self.sup.state()
+            pilot = actor_name(st.access.pilot)  # type: ignore[arg-type]
             self.show(f"{pilot} flies: asked it to hand over control; the request lapses after "
-                      f"{self.sup.cfg.access.handover_timeout:g} s. Once the pilot's page is gone, the token "
+                      f"{st.limits.handover_timeout:g} s. Once the pilot's page is gone, the token "
                       "takes control at once")
 
     def _request_arm(self) -> None:
@@ -405,7 +413,8 @@ class ControlPanel:
         self.sup.set_setpoints(self.cid, **changed)
         self.show("setpoints applied: " + ", ".join(f"{k} {v:g}" for k, v in changed.items()))
         # the line follows every setpoint from here on (a key, the gamepad, a failsafe)
-        self._applied = {f"sp.{k}": self._in_force(f"sp.{k}") for k in SETPOINTS}
+        sp = self.sup.setpoints
+        self._applied = {f"sp.{k}": self._in_force(f"sp.{k}", sp) for k in SETPOINTS}
 
     def _apply_tuning(self) -> None:
         changes = {}
@@ -470,7 +479,8 @@ class ControlPanel:
         self.show("reverted to the saved baseline: " + (", ".join(
             f"{k} {_value(now)} → {_value(was)}" for k, (now, was) in unsaved.items()) or "nothing differed"),
             tuning=True)
-        self._applied = {k: self._in_force(k) for k in unsaved}
+        sp = self.sup.setpoints
+        self._applied = {k: self._in_force(k, sp) for k in unsaved}
 
     def _set_history(self) -> None:
         self.app.set_history(self.cid, self.history.value)
@@ -506,10 +516,10 @@ class ControlPanel:
             handle.value = value
             self._pushed[key] = value
 
-    def _in_force(self, key: str) -> Any:
-        """The value in force of input ``key`` (``sp.<setpoint>`` or a tuning key)."""
+    def _in_force(self, key: str, sp: Any) -> Any:
+        """The value in force of input ``key`` (``sp.<setpoint>``: of setpoints ``sp``, or a tuning key)."""
         if key.startswith("sp."):
-            return round(float(getattr(self.sup.setpoints, key[3:])), 4)
+            return round(float(getattr(sp, key[3:])), 4)
         v = self.sup.param_value(key)
         return v if isinstance(v, str) else float(v)
 
@@ -519,19 +529,19 @@ class ControlPanel:
             return a == b
         return abs(float(a) - float(b)) <= 1e-9 * max(1.0, abs(float(b)))
 
-    def _mark_draft(self, key: str, handle: Any) -> None:
+    def _mark_draft(self, key: str, handle: Any, sp: Any) -> None:
         """An input whose value is not the one in force says so in its label."""
         base = self._labels.setdefault(key, handle.label)
-        drafted = not self._same(handle.value, self._in_force(key))
+        drafted = not self._same(handle.value, self._in_force(key, sp))
         self._set_prop(handle, "label", base + (DRAFT_MARK if drafted else ""))
 
-    def _follow_applied(self) -> None:
+    def _follow_applied(self, sp: Any) -> None:
         """The feedback line of the last apply is replaced whenever what it says is no longer
         in force (reverted, undone, a key or the gamepad, a failsafe or another pilot), and
         follows those values from then on."""
         if not self._applied:
             return
-        now = {k: self._in_force(k) for k in self._applied}
+        now = {k: self._in_force(k, sp) for k in self._applied}
         if all(self._same(v, now[k]) for k, v in self._applied.items()):
             return
         tuning = not any(k.startswith("sp.") for k in self._applied)
@@ -539,18 +549,20 @@ class ControlPanel:
         self.show("now in force: " + ", ".join(f"{k.removeprefix('sp.')} = {v:g}" if not isinstance(v, str)
                                               else f"{k} = {v}" for k, v in now.items()), tuning=tuning)
 
-    def refresh(self, force: bool = False) -> None:
-        """Show the supervisor's state: values in force, which controls this page may use."""
+    def refresh(self, force: bool = False, state: ConsoleState | None = None) -> None:
+        """Show the console's state (``state``, else the supervisor's snapshot now): values in
+        force, which controls this page may use."""
         sup, cid = self.sup, self.cid
-        pilot = sup.access.is_pilot(cid)
-        pending = sup.access.pending
-        p = sup.access.pilot
+        st = state if state is not None else sup.state()
+        pilot = st.access.is_pilot(cid)
+        pending = st.access.pending
+        p = st.access.pilot
         if pilot:
             role = "You are **the pilot**."
             if pending is not None:
                 role += f" Client {pending} asks for control."
         else:
-            who = "none" if p is None else (f"{esc(sup.access.name(p))} (client {p})" if sup.access.name(p)
+            who = "none" if p is None else (f"{esc(st.access.pilot_name)} (client {p})" if st.access.pilot_name
                                             else f"client {p}")
             role = f"Read-only (client {cid}). Pilot: {who}."
             if pending == cid:
@@ -563,38 +575,38 @@ class ControlPanel:
         self._set_prop(self.decline, "visible", pilot and pending is not None)
         if pending is not None:
             self._set_prop(self.handover, "label", f"Hand over to client {pending}")
-        armed, recording = sup.armed, sup.recorder.recording
+        armed, recording = st.armed, st.recording.recording
         self._set_prop(self.arm, "disabled", not pilot or armed)
         self._set_prop(self.disarm, "disabled", not pilot or not armed)
         self._set_prop(self.mode, "disabled", not pilot)
-        self._push("mode", self.mode, sup.mode, force)
-        sp = sup.setpoints
+        self._push("mode", self.mode, st.mode, force)
+        sp = st.setpoints
         for k in SETPOINTS:
             self._set_prop(self.sp_inputs[k], "disabled", not pilot)
             self._push(f"sp.{k}", self.sp_inputs[k], round(float(getattr(sp, k)), 4), force)
-            self._mark_draft(f"sp.{k}", self.sp_inputs[k])
+            self._mark_draft(f"sp.{k}", self.sp_inputs[k], sp)
         for key, handle in self.params.items():
             self._set_prop(handle, "disabled", not pilot)
             v = sup.param_value(key)
             self._push(key, handle, v if isinstance(v, str) else float(v), force)
-            self._mark_draft(key, handle)
-        self._follow_applied()
+            self._mark_draft(key, handle, sp)
+        self._follow_applied(sp)
         for h in (self.apply_sp, self.apply_tuning, self.revert, self.undo, self.save, self.history, self.note, self.marker,
                   self.marker_key, self.stop_key, self.disarm_key, *self.key_commands.values()):
             self._set_prop(h, "disabled", not pilot)
-        failed = sup.recorder.failed
+        failed = st.recording.failed
         self._set_prop(self.rec_start, "disabled", not pilot or recording)
         self._set_prop(self.rec_stop, "disabled", not pilot or not (recording or failed))
         self._push("history", self.history, float(self.app.history), force)
         _set(self.rec_status, f"**Recording FAILED:** {esc(failed)}. Start recording again once there is space "
                               "(a new session), or Stop recording to acknowledge." if failed
-             else f"Recording **{esc(sup.recorder.session_id)}**" if recording else "Not recording")
+             else f"Recording **{esc(st.recording.session_id)}**" if recording else "Not recording")
         if self.reset_drives is not None:
             self._set_prop(self.reset_drives, "disabled", not pilot or armed)
             self._set_prop(self.zero_depth, "disabled", not pilot or armed)
         if self.faults is not None:
             self.faults.enable(pilot)
-        run = sup.manoeuvre
+        run = st.manoeuvre
         listed = (recording, run is not None and run.finished)
         if force or listed != self._listed:  # a recording ended: it may be fitted, reviewed, compared
             others = self._listed is not None and listed != self._listed
@@ -604,7 +616,8 @@ class ControlPanel:
                 self._list_sessions(others)
             else:  # (listed by the page jobs)
                 submit(self.cid, "list sessions", lambda: self._list_sessions(others), coalesce=True)
-        self.identify.refresh(pilot)
+        self.identify.refresh(pilot, st)
+        self.manoeuvres.refresh(pilot, st)
 
     def _list_sessions(self, others: bool = False) -> None:
         """The identification's list of sessions, and with ``others`` the page's other lists."""

@@ -1,7 +1,9 @@
 """The live-tuning inputs' specifications: which parameters, labelled and stepped how.
 
-Built from the typed configuration's field metadata (``typedconf.param``): the label shows
-the allowed range, the hint the field's description, and a choice field is a dropdown.
+The parameters are the tunable fields of the loop's registered blocks
+(``backend.loop.blocks``, read at each call); each is built from the typed configuration's
+field metadata (``typedconf.param``): the label shows the allowed range, the hint the field's
+description, and a choice field is a dropdown.
 """
 
 from __future__ import annotations
@@ -10,7 +12,7 @@ import math
 from dataclasses import dataclass, fields
 from typing import Any
 
-from ucat_console.backend.supervisor import TUNABLE
+from ucat_console.backend.loop import blocks as tunable
 from ucat_console.typedconf import choices_of, describe_range
 
 
@@ -35,13 +37,17 @@ class ParamSpec:
 
 
 def param_specs(tuning: dict[str, Any]) -> dict[str, list[ParamSpec]]:
-    """Block -> input specs, from the typed configuration's field metadata."""
+    """Block -> input specs, from the typed configuration's field metadata, for each
+    registered block in ``tuning`` (block -> its config), in the registry's order."""
     out: dict[str, list[ParamSpec]] = {}
-    for block, names in TUNABLE.items():
+    for block in tunable.block_names():
+        if block not in tuning:
+            continue
+        entry = tunable.block(block)
         cfg = tuning[block]
         by_name = {f.name: f for f in fields(cfg)}
         specs = []
-        for name in names:
+        for name in entry.fields:
             f = by_name[name]
             value = getattr(cfg, name)
             allowed = choices_of(f)
@@ -50,19 +56,9 @@ def param_specs(tuning: dict[str, Any]) -> dict[str, list[ParamSpec]]:
                 continue
 
             is_int = isinstance(value, int)
-            prefix = block.split(".", 1)[1] + " " if block.startswith("pid.") else ""
-            label = f"{prefix}{name} {describe_range(f)}"
+            label = f"{entry.label}{name} {describe_range(f)}"
             doc = f.metadata.get("doc", "")
             hint = f"{doc} (allowed {describe_range(f)})"
             specs.append(ParamSpec(f"{block}.{name}", label, hint, step_for(value, is_int), is_int))
         out[block] = specs
     return out
-
-
-BLOCK_TITLES = {
-    "mpc": "MPC weights and horizon",
-    "pid.velocity": "Velocity PID",
-    "pid.depth": "Depth PID",
-    "pid.yaw_rate": "Yaw-rate PID",
-    "baseline": "Baseline",
-}

@@ -13,7 +13,7 @@ from ucat_console.robot.readings import DvlVelocity
 from ucat_console.backend.arming import STOP_RATE, ArmingGate
 from ucat_console.backend.loop.clock import PacedClock
 from ucat_console.backend.loop.closed_loop import ClosedLoop
-from ucat_console.backend.loop.commands import SetBlock, SetGains, SetMode, SetSetpoints
+from ucat_console.backend.loop.commands import SetBlock, SetMode, SetSetpoints
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.backend.loop.planners import BaselineFinPlanner, PlanInputs
 from ucat_console.backend.sim_robot_io import SimRobotIO
@@ -262,7 +262,7 @@ def test_tuning_changes_apply_from_the_next_plan_and_are_events() -> None:
     loop.run_until(1.0)
     loop.submit(SetBlock("mpc", loop.mpc_config.replace(lam_st=2.0)))
     depth = loop.pid_gains("depth")
-    loop.submit(SetGains("depth", depth.replace(kp=6.0)))
+    loop.submit(SetBlock("pid.depth", depth.replace(kp=6.0)))
     loop.run_until(3.0)
     ev = log.events("tuning")
     assert [e.data["changes"] for e in ev] == [{"lam_st": [5.0, 2.0]}, {"kp": [depth.kp, 6.0]}]
@@ -282,8 +282,8 @@ def test_bad_setpoints_and_commands_are_refused() -> None:
         loop.submit(SetSetpoints(depth=-1.0))
     with pytest.raises(ValueError, match="mode"):
         SetMode("turbo")
-    with pytest.raises(ValueError, match="loop"):
-        SetGains("pitch", PidGains())
+    with pytest.raises(ValueError, match="block: 'pid.pitch'"):
+        SetBlock("pid.pitch", PidGains())
     with pytest.raises(ValueError, match="depth"):
         SimRobotIO(depth=-0.5)
     assert loop.setpoints == BodySetpoints(velocity=0.2, depth=1.0)

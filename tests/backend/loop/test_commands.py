@@ -14,7 +14,6 @@ from ucat_console.backend.loop.commands import (
     LoopWork,
     Restart,
     SetBlock,
-    SetGains,
     SetMode,
     SetSetpoints,
 )
@@ -45,10 +44,7 @@ class Target:
         return old
 
     def apply_block(self, block: str, cfg: Any, t: float, who: str) -> None:
-        self.applied.append(("block", block, t, who))
-
-    def apply_gains(self, loop: str, gains: PidGains, t: float, who: str) -> None:
-        self.applied.append(("gains", loop, gains, t, who))
+        self.applied.append(("block", block, cfg, t, who))
 
     def apply_restart(self, t: float) -> None:
         self.applied.append(("restart", t))
@@ -66,9 +62,9 @@ BAD: list[tuple[str, Callable[[], Any]]] = [
     ("mode", lambda: SetMode("turbo")),
     ("mpc config", lambda: SetBlock("mpc", BaselineConfig())),  # type: ignore[arg-type]
     ("block", lambda: SetBlock("pid", MpcConfig())),
+    ("block: 'pid.pitch' is not one of mpc, pid.velocity", lambda: SetBlock("pid.pitch", PidGains())),
     ("mpc: /nonexistent", lambda: SetBlock("mpc", MpcConfig(force_model="table", table_path="/nonexistent.npz"))),
-    ("loop", lambda: SetGains("pitch", PidGains())),
-    ("gains", lambda: SetGains("depth", {"kp": 1.0})),  # type: ignore[arg-type]
+    ("pid.depth config: expected a PidGains", lambda: SetBlock("pid.depth", {"kp": 1.0})),
     ("loop work", lambda: LoopWork(None)),  # type: ignore[arg-type]
 ]
 
@@ -102,20 +98,20 @@ def test_a_command_is_commanded_at_once_and_applied_only_at_the_drain_in_submiss
         ch.submit(SetSetpoints(velocity=0.2)),
         ch.submit(SetMode("baseline", "pilot")),
         ch.submit(SetSetpoints(depth=2.0)),  # merged with the velocity commanded just before
-        ch.submit(SetGains("depth", PidGains(kp=6.0), "pilot")),
+        ch.submit(SetBlock("pid.depth", PidGains(kp=6.0), "pilot")),
         ch.submit(Restart()),
         ch.submit(LoopWork(lambda: "done", "work")),
     ]
     assert ch.commanded.mode == "baseline"
     assert ch.commanded.setpoints == BodySetpoints(velocity=0.2, depth=2.0)
-    assert ch.commanded.pid["depth"] == PidGains(kp=6.0)
+    assert ch.commanded.blocks["pid.depth"] == PidGains(kp=6.0)
     assert target.applied == [] and not any(f.done() for f in futures)  # nothing in force yet
     ch.drain(1.5)
     assert target.applied == [
         ("setpoints", BodySetpoints(velocity=0.2, depth=1.0), 1.5),
         ("mode", "baseline", 1.5, "pilot"),
         ("setpoints", BodySetpoints(velocity=0.2, depth=2.0), 1.5),
-        ("gains", "depth", PidGains(kp=6.0), 1.5, "pilot"),
+        ("block", "pid.depth", PidGains(kp=6.0), 1.5, "pilot"),
         ("restart", 1.5),
     ]
     # each Future answers what its command returns: what was in force before

@@ -1,8 +1,10 @@
 """The leak detector: a digital input on the robot's computer, and its emulator.
 
 :class:`LeakInput` reads a GPIO's value file (the sysfs ``/sys/class/gpio/gpioN/value``,
-or any file a gpiod-style exporter keeps at "0" or "1") every ``period_s`` in a thread of
-its own and reports, as Events of source ``leak``:
+or any file a gpiod-style exporter keeps at "0" or "1") each time it is asked
+(:meth:`LeakInput.reading`: the console's sensor poller asks every ``period_s``, the leak
+being the first registered sensor, ``backend.sensors``), returns a :class:`LeakReading` and
+reports, as Events of source ``leak``:
 
 * ``water`` (error): the input is at its active level (``active_high``): water at the probe;
 * ``dry`` (info): at the other level, at the first read and after ``water`` or ``unreadable``;
@@ -20,10 +22,12 @@ from __future__ import annotations
 import logging
 import shutil
 import tempfile
-import threading
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Annotated
 
+from ucat_console.robot.fields import Doc
+from ucat_console.robot.readings import Time
 from ucat_console.telemetry.events import Event, EventSink
 from ucat_console.typedconf import Config, param
 
@@ -44,8 +48,19 @@ class LeakConfig(Config):
     period_s: float = param(0.05, lo=0.005, hi=5.0, unit="s", doc="how often the input is read")
 
 
+@dataclass(frozen=True)
+class LeakReading:
+    """The leak detector's input as read."""
+
+    t: Time
+    water: Annotated[bool, Doc("water at the probe: the input at its active level (the last level read, "
+                               "held while the input is unreadable)")]
+    readable: Annotated[bool, Doc("the input was read (false: the file cannot be read or holds something "
+                                  "else than 0 or 1)")]
+
+
 class LeakInput:
-    """Reads the input in a thread; see the module docstring. ``clock()`` stamps the events
+    """Reads the input when asked; see the module docstring. ``clock()`` stamps the events
     (the loop's time)."""
 
     def __init__(self, cfg: LeakConfig, path: str, on_event: EventSink, clock) -> None:
@@ -54,9 +69,8 @@ class LeakInput:
         self._on_event = on_event
         self._clock = clock
         self.wet: bool | None = None  # None: not read yet, or unreadable
+        self._water = False  # the last level read
         self._unreadable = False
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
 
     def read(self) -> None:
         """Read the input once and report a change."""
@@ -71,7 +85,7 @@ class LeakInput:
                 self._emit("unreadable", f"leak detector {self.path} unreadable: {e}", "error")
             return
         wet = (text == "1") == self.cfg.active_high
-        was, self.wet, self._unreadable = self.wet, wet, False
+        was, self.wet, self._water, self._unreadable = self.wet, wet, wet, False
         if wet and was is not True:
             self._emit("water", f"leak detector {self.path}: water", "error")
         elif not wet and was is not False:  # the first read, or after water or an unreadable spell
@@ -84,20 +98,10 @@ class LeakInput:
         except Exception:
             log.exception("leak event sink failed")
 
-    def start(self) -> None:
+    def reading(self, t: float) -> LeakReading:
+        """Read the input once (:meth:`read`) and return it as a reading at time ``t``."""
         self.read()
-        self._thread = threading.Thread(target=self._run, name="leak-input", daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        while not self._stop.wait(self.cfg.period_s):
-            self.read()
-
-    def stop(self) -> None:
-        self._stop.set()
-        t, self._thread = self._thread, None
-        if t is not None:
-            t.join(timeout=2.0)
+        return LeakReading(t, self._water, not self._unreadable)
 
 
 class LeakEmulator:

@@ -56,9 +56,9 @@ assumed either (a DVL without bottom lock counts as reported: its fault is then 
 the depth loop runs).
 
 Mode switches are bumpless (``actuators``): a fin's stroke in flight is never interrupted.
-Tuning (MPC weights, PID gains) applies from the next plan / PID step. Commands may be
-submitted from any thread: they are validated at once and applied by the loop's thread at
-its next event (``command_channel``).
+Tuning (a tunable block of ``blocks``: MPC weights, PID gains, ...) applies from the next
+plan / PID step. Commands may be submitted from any thread: they are validated at once and
+applied by the loop's thread at its next event (``command_channel``).
 
 Estimation: the attitude comes from the IMU's own filter, or from the core's EKF
 (``control.estimation``, run here on each IMU reading when configured); dead reckoning is
@@ -77,10 +77,11 @@ from typing import Any, Callable
 
 import numpy as np
 
+from ucat_console.backend.loop import blocks as tunable
 from ucat_console.backend.loop.actuators import Actuators, kept_waiting
 from ucat_console.backend.loop.clock import Clock, SimulatedClock
 from ucat_console.backend.loop.command_channel import CommandChannel
-from ucat_console.backend.loop.commands import PID_LOOPS, LoopCommand, check_setpoints, pid_loop
+from ucat_console.backend.loop.commands import LoopCommand, check_setpoints, pid_loop
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.backend.loop.modes import MODES
 from ucat_console.backend.loop.outbox import Outbox
@@ -100,7 +101,7 @@ from ucat_console.robot.readings import DepthReading, ImuReading, Reading
 from ucat_console.telemetry.messages import Status
 from ucat_console.telemetry.stream import TelemetryStream
 
-__all__ = ["PID_LOOPS", "ClosedLoop", "check_setpoints", "kept_waiting"]
+__all__ = ["ClosedLoop", "check_setpoints", "kept_waiting"]
 
 
 class ClosedLoop:
@@ -136,6 +137,7 @@ class ClosedLoop:
         # in force (the loop's thread); the commanded ones are the channel's
         self._setpoints = self.commands.commanded.setpoints
         self._mode = cfg.mode
+        self._blocks = dict(self.commands.commanded.blocks)  # tunable block -> config in force
         self._stop = False
         self._power = PowerBank(cfg.power, N_FINS)  # rows: robot order
         # the executors' stroke-end table (rows: paper order) and, per fin, the rows of the
@@ -208,17 +210,24 @@ class ClosedLoop:
     def setpoints(self) -> BodySetpoints:
         return self.commands.commanded.setpoints
 
+    def block_config(self, name: str) -> Any:
+        """The commanded configuration of the tunable block ``name`` (``blocks``); a block
+        registered after this loop was made: its value in the loop's configuration."""
+        entry = tunable.block(name)
+        now = self.commands.commanded.blocks
+        return now[name] if name in now else entry.initial(self.cfg)
+
     @property
     def mpc_config(self) -> MpcConfig:
-        return self.commands.commanded.mpc
+        return self.block_config("mpc")
 
     @property
     def baseline_config(self) -> BaselineConfig:
-        return self.commands.commanded.baseline
+        return self.block_config("baseline")
 
     def pid_gains(self, loop: str) -> PidGains:
         """The gains of the body-frame PID ``loop`` ("velocity", "depth" or "yaw_rate")."""
-        return self.commands.commanded.pid[pid_loop(loop)]
+        return self.block_config(f"pid.{pid_loop(loop)}")
 
     @property
     def planner_threads(self) -> int:
@@ -238,8 +247,8 @@ class ClosedLoop:
 
     # ------------------------------------------------------------------ commands (``commands``)
     def submit(self, command: LoopCommand) -> Future:
-        """Queue ``command`` (``commands``: SetSetpoints, SetMode, SetBlock, SetGains,
-        Restart, LoopWork) for the loop's thread, from any thread: checked now (a refused one
+        """Queue ``command`` (``commands``: SetSetpoints, SetMode, SetBlock, Restart,
+        LoopWork) for the loop's thread, from any thread: checked now (a refused one
         raises CommandRefused and changes nothing), commanded from now, applied at the next
         event; the Future answers what it returns (SetSetpoints, SetMode: what was in force
         before). Restart starts the body loops and every fin afresh, as at start-up (an
@@ -283,17 +292,11 @@ class ClosedLoop:
         return old
 
     def apply_block(self, block: str, cfg: Any, t: float, who: str) -> None:
-        old = self.fins.blocks[block]
-        if block == "mpc":
-            self.body.set_fin_model(cfg)
-        self.fins.retune(block, cfg)
+        entry = tunable.block(block)
+        old = self._blocks[block] if block in self._blocks else entry.initial(self.cfg)
+        entry.apply(self, cfg)
+        self._blocks[block] = cfg
         self.outbox.tuning_event(t, block, old, cfg, who)
-
-    def apply_gains(self, loop: str, gains: PidGains, t: float, who: str) -> None:
-        pid = self.body.pid(loop)
-        old = pid.gains
-        pid.set_gains(gains)
-        self.outbox.tuning_event(t, f"pid.{loop}", old, gains, who)
 
     def apply_restart(self, t: float) -> None:
         self.body.reset()

@@ -2,8 +2,8 @@
 
 Each command is a frozen dataclass that checks its own values once, when it is made (a bad
 one raises :class:`CommandRefused`, a ValueError naming the field, and nothing changes):
-:class:`SetSetpoints`, :class:`SetMode`, :class:`SetBlock` (the MPC or baseline
-configuration), :class:`SetGains` (one body-frame PID), :class:`Restart`, and
+:class:`SetSetpoints`, :class:`SetMode`, :class:`SetBlock` (a tunable block of
+``blocks``: the MPC, a body-frame PID, the baseline, ...), :class:`Restart`, and
 :class:`LoopWork` (the supervisor's work that must run in the loop's thread: arming, drive
 resets). At submission (``command_channel``) a command is resolved against what is
 commanded (:meth:`LoopCommand.resolve`: the setpoints left as they are where None, then
@@ -20,13 +20,12 @@ import math
 from dataclasses import dataclass
 from typing import Any, Callable, Mapping, Protocol
 
+from ucat_console.backend.loop import blocks as tunable
+from ucat_console.backend.loop.blocks import PID_LOOPS
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.backend.loop.modes import MODES
 from ucat_console.control.allocation import BodySetpoints
-from ucat_console.control.mpc import check_config
-from ucat_console.control.params import BaselineConfig, MpcConfig, PidGains
 
-PID_LOOPS = ("velocity", "depth", "yaw_rate")
 #: the setpoints the operator sets
 SETPOINTS = ("velocity", "depth", "yaw_rate")
 
@@ -60,14 +59,11 @@ class Commanded:
 
     mode: str
     setpoints: BodySetpoints
-    mpc: MpcConfig
-    baseline: BaselineConfig
-    pid: Mapping[str, PidGains]  # loop -> gains
+    blocks: Mapping[str, Any]  # tunable block (``blocks``) -> its config
 
     @classmethod
     def of(cls, cfg: LoopConfig, setpoints: BodySetpoints) -> Commanded:
-        return cls(mode=cfg.mode, setpoints=check_setpoints(cfg, setpoints), mpc=cfg.mpc, baseline=cfg.baseline,
-                   pid={loop: getattr(cfg.body, loop) for loop in PID_LOOPS})
+        return cls(mode=cfg.mode, setpoints=check_setpoints(cfg, setpoints), blocks=tunable.initial_blocks(cfg))
 
 
 class CommandTarget(Protocol):
@@ -76,7 +72,6 @@ class CommandTarget(Protocol):
     def apply_setpoints(self, sp: BodySetpoints, t: float) -> BodySetpoints: ...
     def apply_mode(self, mode: str, t: float, who: str) -> str: ...
     def apply_block(self, block: str, cfg: Any, t: float, who: str) -> None: ...
-    def apply_gains(self, loop: str, gains: PidGains, t: float, who: str) -> None: ...
     def apply_restart(self, t: float) -> None: ...
 
 
@@ -155,55 +150,36 @@ class SetMode(LoopCommand):
         return target.apply_mode(self.name, t, self.who)
 
 
-_BLOCK_TYPES: dict[str, type] = {"mpc": MpcConfig, "baseline": BaselineConfig}
-
-
 @dataclass(frozen=True)
 class SetBlock(LoopCommand):
-    """A new MPC configuration (from the next plan; one the planner refuses is refused
-    here) or baseline configuration."""
+    """A new configuration of a tunable block (``blocks``: "mpc", "pid.depth", "baseline",
+    ...), in force from the loop's next event (the MPC: from the next plan); one of the
+    wrong type, or one the block's own check refuses (an MPC configuration the planner does
+    not accept), is refused here."""
 
     block: str
-    cfg: MpcConfig | BaselineConfig
+    cfg: Any
     who: str = ""
 
     def __post_init__(self) -> None:
-        kind = _BLOCK_TYPES.get(self.block)
-        if kind is None:
-            raise CommandRefused(f"block: {self.block!r} is not one of {', '.join(_BLOCK_TYPES)}")
-        if not isinstance(self.cfg, kind):
-            raise CommandRefused(f"{self.block} config: expected a {kind.__name__}, got {type(self.cfg).__name__}")
-        if isinstance(self.cfg, MpcConfig):
+        try:
+            entry = tunable.block(self.block)
+        except ValueError as e:
+            raise CommandRefused(str(e)) from None
+        if not isinstance(self.cfg, entry.config):
+            raise CommandRefused(f"{self.block} config: expected a {entry.config.__name__}, "
+                                 f"got {type(self.cfg).__name__}")
+        if entry.check is not None:
             try:
-                check_config(self.cfg)
+                entry.check(self.cfg)
             except ValueError as e:
-                raise CommandRefused(f"mpc: {e}") from None
+                raise CommandRefused(f"{self.block}: {e}") from None
 
     def commanded(self, now: Commanded) -> Commanded:
-        return dataclasses.replace(now, **{self.block: self.cfg})
+        return dataclasses.replace(now, blocks={**now.blocks, self.block: self.cfg})
 
     def apply(self, target: CommandTarget, t: float) -> None:
         target.apply_block(self.block, self.cfg, t, self.who)
-
-
-@dataclass(frozen=True)
-class SetGains(LoopCommand):
-    """New gains of one body-frame PID ("velocity", "depth" or "yaw_rate")."""
-
-    loop: str
-    gains: PidGains
-    who: str = ""
-
-    def __post_init__(self) -> None:
-        pid_loop(self.loop)
-        if not isinstance(self.gains, PidGains):
-            raise CommandRefused(f"gains: expected PidGains, got {type(self.gains).__name__}")
-
-    def commanded(self, now: Commanded) -> Commanded:
-        return dataclasses.replace(now, pid={**now.pid, self.loop: self.gains})
-
-    def apply(self, target: CommandTarget, t: float) -> None:
-        target.apply_gains(self.loop, self.gains, t, self.who)
 
 
 @dataclass(frozen=True)
@@ -228,13 +204,6 @@ class LoopWork(LoopCommand):
 
     def apply(self, target: CommandTarget, t: float) -> Any:
         return self.fn()
-
-
-def tuning_command(block: str, cfg: Any, who: str = "") -> SetBlock | SetGains:
-    """The command setting tuning block ``block`` ("mpc", "baseline", "pid.<loop>") to ``cfg``."""
-    if block.startswith("pid."):
-        return SetGains(block.split(".", 1)[1], cfg, who)
-    return SetBlock(block, cfg, who)
 
 
 def pid_loop(loop: str) -> str:

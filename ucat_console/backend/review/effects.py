@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 import threading
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Callable
 
 from ucat_console.backend.review.metrics import (
@@ -45,10 +45,11 @@ NOT_IN_BOTH = "electrical readings not in both windows"
 _KEEP = 50
 
 
-@dataclass
+@dataclass(frozen=True)
 class Effect:
     """One change and the figures before and after it (``after`` None until its window
-    passed); the power figures of ``source``, labelled ``source_label``."""
+    passed); the power figures of ``source``, labelled ``source_label``. A value: the
+    figures filled in make a new one."""
 
     t: float
     code: str
@@ -95,21 +96,24 @@ class ChangeEffects:
         cfg = self.cfg
         done = []
         with self._lock:
+            pending = []
             for e in self._pending:
                 if not e.before:
-                    e.source = power_source(self._data, e.t - cfg.before, e.t)
-                    e.source_label = default_label(e.source)
-                    e.before = self._figures(e, e.t - cfg.before, e.t, closed=False)
+                    source = power_source(self._data, e.t - cfg.before, e.t)
+                    e = replace(e, source=source, source_label=default_label(source))
+                    e = replace(e, before=self._figures(e, e.t - cfg.before, e.t, closed=False))
                 if now >= e.due:
                     if power_source(self._data, e.t, e.due) != e.source:  # like with like: the estimate's
-                        e.source_label = source_label(MECHANICAL, NOT_IN_BOTH)
+                        e = replace(e, source_label=source_label(MECHANICAL, NOT_IN_BOTH))
                         if e.source == ELECTRICAL:
-                            e.source = MECHANICAL
-                            e.before = self._figures(e, e.t - cfg.before, e.t, closed=False)
-                    e.after = self._figures(e, e.t, e.due)
+                            e = replace(e, source=MECHANICAL)
+                            e = replace(e, before=self._figures(e, e.t - cfg.before, e.t, closed=False))
+                    e = replace(e, after=self._figures(e, e.t, e.due))
                     done.append(e)
+                else:
+                    pending.append(e)
+            self._pending = pending
             if done:
-                self._pending = [e for e in self._pending if e.after is None]
                 self._done = (self._done + done)[-_KEEP:]
                 oldest = min([e.t for e in self._pending], default=now)
                 self._data.drop_before(min(oldest, now) - cfg.before - 1.0)

@@ -22,3 +22,5 @@ writes what is published, the player publishes what was written.
     player     Player: file -> stream, with its own clock
     replay     counterfactual replay of recorded fin plans with other MPC weights
 """
+
+from ucat_console.backend import sensors as _sensors  # noqa: F401  the built-in sensors' channels, before a file is read

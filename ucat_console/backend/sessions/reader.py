@@ -287,7 +287,8 @@ class SessionReader(McapFile, _Recording):
         self._decoders: dict[str, Any] = {}
         for cid, ch in channels.items():
             schema = summary.schemas.get(ch.schema_id) if ch.schema_id else None
-            encoding = _check_schema(ch.topic, schema, ch, p)
+            unknown_sensor = ch.topic.startswith("sensors/") and ch.topic not in CHANNELS  # not registered here: unread
+            encoding = 0 if unknown_sensor else _check_schema(ch.topic, schema, ch, p)
             self._topic_ids[ch.topic] = cid
             if encoding:
                 self._decoders[ch.topic] = _DECODERS[encoding]

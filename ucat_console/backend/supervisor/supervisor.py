@@ -34,13 +34,17 @@
   stop), and a disarmed loop publishes no stroke timeouts.
 * Telemetry time ``t`` is the loop's time, seconds from the start; the recorder's epoch
   offset is the wall-clock time of ``t = 0``.
+* The page reads the console through :meth:`Supervisor.state`, one immutable snapshot of
+  values (:mod:`~.console_state`), and never through the parts; it commands through the
+  methods here.
 
 Who owns what: the supervisor owns the commanded mode and setpoints and the arming state
 of the gate; :class:`~.tuning.Tuning` the commanded tuning and its journal;
 :class:`~.recording.SessionRecording` the recording; :class:`~.rig_control.RigControl` the
 drive and fault commands; :class:`~.manoeuvre.ManoeuvreRun` an identification manoeuvre;
+:class:`~.scripted_run.ScriptRun` a scripted manoeuvre (docs/manoeuvres.md);
 the closed loop owns what it has applied. The parts live in the modules of this package
-and get what they use passed in (``RigHost``, ``ManoeuvreHost``: the few commands and
+and get what they use passed in (``RigHost``, ``ManoeuvreHost``, ``ScriptHost``: the few commands and
 readings each needs), never the supervisor itself.
 
 The module is over 500 lines because :class:`Supervisor` is the one entry point for
@@ -60,9 +64,8 @@ from typing import TYPE_CHECKING, Any, Callable, Mapping
 from ucat_console.backend import redaction
 from ucat_console.backend.access import LOCAL, AccessControl, AccessDenied, AccessState, Actor, actor_name
 from ucat_console.backend.arming import ArmingGate
-from ucat_console.backend.devices.leak import LeakEmulator, LeakInput
 from ucat_console.backend.loop.clock import Clock, PacedClock
-from ucat_console.backend.loop.closed_loop import PID_LOOPS, ClosedLoop
+from ucat_console.backend.loop.closed_loop import ClosedLoop
 from ucat_console.backend.loop.commands import (
     SETPOINTS,
     CommandRefused,
@@ -74,25 +77,29 @@ from ucat_console.backend.loop.commands import (
 )
 from ucat_console.backend.loop.kernels_warm_up import warm_up
 from ucat_console.backend.review.effects import ChangeEffects
-from ucat_console.backend.safety import CHANNELS as SAFETY_CHANNELS
 from ucat_console.backend.safety import SafetyMonitor, Transition
+from ucat_console.backend.safety import channels as safety_channels
+from ucat_console.backend.sensors import OpenContext, SensorPoller
 from ucat_console.backend.sessions.limits import MemoryBudget
 from ucat_console.backend.sessions.shared import SharedReaders
 from ucat_console.backend.sessions.foxglove import robot_geometry
 from ucat_console.backend.sessions.recorder import Recorder
 from ucat_console.backend.supervisor.arm_requests import ArmRequests
 from ucat_console.backend.supervisor.bursts import BurstFolder
+from ucat_console.backend.supervisor.console_state import ConsoleState, build_state
 from ucat_console.backend.supervisor.forwarding import LoopOutlet
 from ucat_console.backend.supervisor.health import Health
 from ucat_console.backend.supervisor.manoeuvre import ManoeuvreHost, ManoeuvreRun
 from ucat_console.backend.supervisor.recording import SessionRecording
+from ucat_console.backend.supervisor.scripted_run import ScriptHost, ScriptRun
 from ucat_console.backend.supervisor.rig_control import RigControl, RigHost
 from ucat_console.backend.robots import robot
 from ucat_console.backend.supervisor.robots import RobotFactory, SteadyPacedClock, simulated_rig
-from ucat_console.backend.supervisor.tuning import Journal, JournalEntry, Tuning, fmt
+from ucat_console.backend.supervisor.tuning import Journal, JournalEntry, Tuning, configured, fmt, is_tuning_key
 from ucat_console.backend.supervisor.watchdog import LoopWatchdog
 from ucat_console.config import AppConfig
 from ucat_console.control.allocation import BodySetpoints
+from ucat_console.control.scripted import Script
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.messages import BodyState, Status
@@ -137,7 +144,7 @@ class Supervisor:
         redaction.keep_out_of_logs(self._secrets)
         self.safety = SafetyMonitor(cfg.failsafe)
         for name in cfg.failsafe.warn_only():
-            log.warning("failsafe %s is set to warn: it will not act on the robot (failsafe.%s.action)", name, name)
+            log.warning("failsafe %s is set to warn: it will not act on the robot (its action under [failsafe])", name)
         # the compiled solver first: a compile holds the interpreter for a minute or more,
         # which the drivers' heartbeat supervision would read as silent drives
         mine = (cfg.mpc.formulation,) if planner_ready is not None else None
@@ -187,11 +194,12 @@ class Supervisor:
             weights=self._weights, on_arm=cfg.console.record_on_arm, tail=cfg.console.record_tail,
             tail_max=cfg.console.record_tail_max, notify=self._notify,
         )
-        # the leak detector, read by the console on any robot; a simulated one's is emulated
-        leak = cfg.devices.leak
-        self.leak_emulator = LeakEmulator(leak.active_high) if entry.simulated and not leak.path else None
-        path = leak.path or (str(self.leak_emulator.path) if self.leak_emulator is not None else "")
-        self.leak = LeakInput(leak, path, self.report_event, lambda: self.loop.time) if path else None
+        #: the registered auxiliary sensors (``backend.sensors``: the leak detector first), read by
+        #: the console on any robot, published on their channels
+        self.sensors = SensorPoller(OpenContext(cfg.devices, entry.simulated, inner, self.report_event,
+                                                lambda: self.loop.time), self.stream.publish)
+        #: the emulated leak detector of a simulated robot without devices.leak.path (fault injection)
+        self.leak_emulator = self.sensors.emulator("leak")
         self.rig_control = RigControl(RigHost(
             robot=cfg.robot, rig=self.rig, gate=self.gate, require_pilot=self.access.require_pilot,
             in_loop=self._in_loop, publish_event=self._publish_event, notify=self._notify,
@@ -204,6 +212,18 @@ class Supervisor:
             start_recording=self.start_recording, stop_recording=self.stop_recording,
             add_marker=self.add_marker, time=lambda: self.loop.time, duration=cfg.loop.manoeuvre.duration,
         )
+        #: what a scripted manoeuvre uses: the operator's commands, checked as any
+        self.script_host = ScriptHost(
+            require_pilot=self.access.require_pilot, is_pilot=self.access.is_pilot, armed=lambda: self.gate.armed,
+            failsafes=self.safety.active, mode=lambda: self.loop.mode, set_mode=self.set_mode,
+            setpoints=lambda: self.loop.setpoints, set_setpoints=self.set_setpoints,
+            recording=lambda: self.recording.session_id, start_recording=self.start_recording,
+            stop_recording=self.stop_recording, add_marker=self.add_marker,
+            publish_event=lambda ev: self.stream.publish(ch.EVENTS, ev), subscribe=self.stream.subscribe,
+            time=lambda: self.loop.time, metrics=cfg.metrics,
+        )
+        #: the scripted manoeuvre last started (None: none yet)
+        self.script_run: ScriptRun | None = None
         #: each tuning, mode or setpoint change with the figures before and after it
         self.effects = ChangeEffects(cfg.metrics, lambda ev: self.stream.publish(ch.EVENTS, ev))
         self._thread: threading.Thread | None = None
@@ -214,7 +234,7 @@ class Supervisor:
         self._closed = False
         self._chunks = 0
         self._unsubs = [
-            self.stream.subscribe_batches(self.safety.on_messages, SAFETY_CHANNELS),
+            self.stream.subscribe_batches(self.safety.on_messages, safety_channels()),
             self.stream.subscribe_batches(self._on_bodies, [ch.BODY_STATE]),
             self.stream.subscribe(self.effects.on_message, self.effects.channels),
         ]
@@ -222,8 +242,8 @@ class Supervisor:
         if add_telemetry is not None:
             self._unsubs.append(add_telemetry(self.stream.publish))
         self.access.add_listener(self._on_access)
-        if self.leak is not None:  # once the failsafes hear its events
-            self.leak.start()
+        self.safety.sensors_open(tuple(self.sensors.sources), self.loop.time)
+        self.sensors.start()  # once the failsafes hear them
 
     # ================================================================== lifecycle
     @property
@@ -274,10 +294,7 @@ class Supervisor:
         finally:
             for unsub in self._unsubs:
                 unsub()
-            if self.leak is not None:
-                self.leak.stop()
-            if self.leak_emulator is not None:
-                self.leak_emulator.close()
+            self.sensors.close()
             try:
                 self.loop.close()
             finally:
@@ -374,6 +391,18 @@ class Supervisor:
                 run.poll()
             except Exception:
                 log.exception("finishing the identification manoeuvre failed")
+        self._poll_script()
+
+    def _poll_script(self) -> None:
+        run = self.script_run
+        if run is not None and not run.finished:
+            try:
+                if run.poll():
+                    self._notify()
+            except Exception as e:  # a segment's command refused: the manoeuvre ends there
+                log.exception("the scripted manoeuvre failed")
+                run.finish(f"failed: {e}")
+                self._notify()
 
     # ================================================================== telemetry
     def _on_bodies(self, items: Any) -> None:
@@ -436,7 +465,7 @@ class Supervisor:
         return self.loop.setpoints
 
     def tuning(self) -> dict[str, Any]:
-        """The commanded tuning: block -> config (MpcConfig, PidGains, BaselineConfig)."""
+        """The commanded tuning: each tunable block (``backend.loop.blocks``) -> its config."""
         return self.tuning_state.blocks()
 
     def param_value(self, key: str) -> Any:
@@ -461,12 +490,20 @@ class Supervisor:
             recording_failed=self.recording.failed, stalls=self.loop.stalls,
         )
 
+    def state(self) -> ConsoleState:
+        """The console as the page shows it, now: an immutable snapshot of values
+        (:mod:`~.console_state`; built on each call, taking no lock of the supervisor's)."""
+        return build_state(self)
+
+    @property
+    def sessions_dir(self) -> Path:
+        """Where the recorder writes its sessions."""
+        return self.recorder.directory
+
     def current_config(self) -> AppConfig:
         """The configuration in force (the file's, with the live tuning applied)."""
-        t = self.tuning()
-        body = self.cfg.body.replace(**{loop: t[f"pid.{loop}"] for loop in PID_LOOPS})
-        return self.cfg.replace(mpc=t["mpc"], baseline=t["baseline"], body=body,
-                                loop=self.cfg.loop.replace(mode=self.loop.mode))
+        cfg = configured(self.cfg, self.tuning())
+        return cfg.replace(loop=cfg.loop.replace(mode=self.loop.mode))
 
     def _weights(self) -> dict[str, float]:
         m = self.tuning()["mpc"]
@@ -502,6 +539,35 @@ class Supervisor:
             self._publish_event("access", "request_lapsed",
                                 f"client {lapsed}'s request for control lapsed: not handed over within "
                                 f"{self.cfg.access.handover_timeout:g} s", "info", {"client": lapsed})
+
+    def is_pilot(self, who: Actor) -> bool:
+        """Whether ``who`` is the pilot (or the console itself), now."""
+        return self.access.is_pilot(who)
+
+    def require_pilot(self, who: Actor, action: str) -> None:
+        """AccessDenied unless ``who`` is the pilot: the check of a page's own pilot-only
+        action (its plots' window, repairing a session file)."""
+        self.access.require_pilot(who, action)
+
+    def set_name(self, client: int, name: object) -> None:
+        """Page ``client``'s own name, shown to the others when it flies."""
+        self.access.set_name(client, name)
+
+    def note_gamepad(self, who: Actor, driving: bool) -> None:
+        """Journal the start (``driving``) or the end of the pilot's gamepad driving (its
+        setpoints are not journalled one by one)."""
+        self.access.require_pilot(who, "gamepad")
+        name = actor_name(who)
+        self.journal_log.add(name, "gamepad", *(("off", "driving") if driving else ("driving", "off")))
+
+    def may_replay(self, who: Actor) -> bool:
+        """CommandRefused unless ``who`` may start a counterfactual replay now: any page while
+        the robot is disarmed, only the pilot while it is armed (the replay takes CPU); True
+        for the pilot (whose replay cancels another page's running one)."""
+        pilot = who is not None and self.access.is_pilot(who)
+        if self.gate.armed and not pilot:
+            raise CommandRefused("counterfactual replay: while the robot is armed only the pilot may start one")
+        return pilot
 
     def take_control(self, client: int, token: object) -> bool:
         """True: ``client`` is the pilot now; False: waiting for the pilot's hand-over."""
@@ -607,6 +673,7 @@ class Supervisor:
         if at_once and self.gate.has_drives and not self.gate.stop_drives():
             log.error("a fin drive did not confirm its stop (see its events)")
         self.arm_requests.clear()
+        self._poll_script()  # a scripted manoeuvre stops at once, before the recording's tail counts
         if was:
             self._armed_at = None
             self.recording.disarmed(self.loop.time)
@@ -757,7 +824,7 @@ class Supervisor:
         """The latest tuning change undone in one step: the parameters it changed back to
         their values before it (journalled like any change, so a second undo redoes it)."""
         self.access.require_pilot(who, "undo tuning")
-        changes = [e for e in self.journal() if e.key.split(".", 1)[0] in ("mpc", "baseline", "pid")]
+        changes = [e for e in self.journal() if is_tuning_key(e.key)]
         if not changes:
             raise CommandRefused("undo: no tuning change to undo")
         last = changes[-1]
@@ -807,6 +874,8 @@ class Supervisor:
         with self._lock:
             if self.manoeuvre is not None and not self.manoeuvre.finished:
                 raise CommandRefused("identification manoeuvre: one is running")
+            if self.script_run is not None and not self.script_run.finished:
+                raise CommandRefused(f"identification manoeuvre: manoeuvre {self.script_run.name} is running")
             run = ManoeuvreRun(self.manoeuvre_host, who)
             run.start()
             self.manoeuvre = run
@@ -823,11 +892,42 @@ class Supervisor:
         self._notify()
         return paths
 
+    # ================================================================== scripted manoeuvres
+    def start_script(self, who: Actor, script: Script) -> ScriptRun:
+        """A scripted manoeuvre (pilot, armed, no failsafe active; one at a time, not beside
+        the identification manoeuvre), recorded; it ends by itself (its segments done, or
+        the robot disarmed, a failsafe, the pilot gone: ``ScriptRun.reason`` says which)."""
+        self.access.require_pilot(who, f"manoeuvre {script.name}")
+        with self._lock:
+            for running in (self.script_run, self.manoeuvre):
+                if running is not None and not running.finished:
+                    raise CommandRefused(f"manoeuvre {script.name}: a manoeuvre is running; stop it first")
+            run = ScriptRun(self.script_host, who, script)
+            run.start()
+            self.script_run = run
+        self._notify()
+        return run
+
+    def stop_script(self, who: Actor) -> list[Path]:
+        """End the running scripted manoeuvre now (pilot): what it found put back."""
+        self.access.require_pilot(who, "manoeuvre")
+        run = self.script_run
+        if run is None or run.finished:
+            raise CommandRefused("manoeuvre: none is running")
+        paths = run.finish(f"stopped by {actor_name(who)}")
+        self._notify()
+        return paths
+
     # ================================================================== the robot's devices
     @property
     def has_drives(self) -> bool:
         """The fins are moved by motor drives (the robot, or the rig's emulated EPOS2s)."""
         return self.gate.has_drives
+
+    def fault_tables(self) -> tuple[dict[str, tuple[str, ...]], int]:
+        """(the faults each emulated device takes, the default EMCY code); CommandRefused
+        when the robot is not the simulated rig."""
+        return self.rig_control.fault_tables()
 
     def inject_fault(self, who: Actor, device: object, fault: object, **kw: Any) -> Event:
         return self.rig_control.inject_fault(who, device, fault, **kw)

@@ -1,33 +1,31 @@
-"""Live tuning and its journal: what the operator may tune, the tuning in force, the saved
-tuning to revert to, and who changed what when.
+"""Live tuning and its journal: the tuning in force, the saved tuning to revert to, and who
+changed what when.
 
-:class:`Tuning` owns the commanded tuning (block -> frozen config: ``mpc``, ``baseline``,
-``pid.<loop>``). A change is checked whole before anything changes
-(:meth:`Tuning.check`: every key tunable, every value of its field's kind and range, then
-each changed block made into the loop's command, which refuses an MPC configuration the
-planner does not accept), then submitted to the closed loop, which applies it from its next
-plan or PID step, and journalled (:class:`Journal`).
+What the operator may tune is the loop's registry of tunable blocks
+(``backend.loop.blocks``: ``mpc``, ``pid.<loop>``, ``baseline`` and any block registered
+there), read at each use. :class:`Tuning` reads the commanded tuning (block -> frozen config)
+from the loop. A change is checked whole before anything changes (:meth:`Tuning.check`:
+every key a tunable field of a registered block, every value of its field's kind and range,
+then each changed block made into the loop's command, which refuses a configuration its
+block's own check refuses, e.g. an MPC configuration the planner does not accept), then
+submitted to the closed loop, which applies it from its next event, and journalled
+(:class:`Journal`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 import time
 from dataclasses import dataclass, fields
 from typing import Any, Callable, Mapping
 
-from ucat_console.backend.loop.closed_loop import PID_LOOPS, ClosedLoop
-from ucat_console.backend.loop.commands import CommandRefused, SetBlock, SetGains, number, tuning_command
+from ucat_console.backend.loop import blocks as tunable
+from ucat_console.backend.loop.closed_loop import ClosedLoop
+from ucat_console.backend.loop.commands import CommandRefused, SetBlock, number
 from ucat_console.config import AppConfig
 from ucat_console.typedconf import check_value, choices_of
 
-#: what the operator may tune live: block -> fields (PID blocks are "pid.<loop>")
-TUNABLE: dict[str, tuple[str, ...]] = {
-    "mpc": ("formulation", "lam_f", "lam_st", "lam_a", "lam_d", "lam_c", "lam_e", "st_opt", "st_low",
-            "st_high", "n_samples", "c_d", "c_l"),
-    **{f"pid.{loop}": ("kp", "ki", "kd", "limit") for loop in PID_LOOPS},
-    "baseline": ("frequency",),
-}
 _JOURNAL_KEEP = 500
 
 
@@ -77,17 +75,32 @@ def split_key(key: object) -> tuple[str, str]:
     if not isinstance(key, str) or "." not in key:
         raise CommandRefused(f"parameter: {key!r} is not a tunable parameter")
     block, _, name = key.rpartition(".")
-    if name not in TUNABLE.get(block, ()):
-        raise CommandRefused(f"{key}: not a tunable parameter")
+    entry = tunable.BLOCKS.get(block)
+    if entry is None or name not in entry.fields:
+        raise CommandRefused(f"{key}: not a tunable parameter (the tunable blocks: "
+                             f"{', '.join(tunable.block_names())})")
     return block, name
+
+
+def is_tuning_key(key: str) -> bool:
+    """Whether journal key ``key`` is a tunable parameter's (``"pid.depth.kp"``)."""
+    return key.rpartition(".")[0] in tunable.BLOCKS
 
 
 def tuning_blocks(cfg: AppConfig) -> dict[str, Any]:
     """The tunable blocks of a configuration: block -> frozen config."""
-    blocks: dict[str, Any] = {"mpc": cfg.mpc, "baseline": cfg.baseline}
-    for name in PID_LOOPS:
-        blocks[f"pid.{name}"] = getattr(cfg.body, name)
-    return blocks
+    return tunable.initial_blocks(cfg.loop)
+
+
+def configured(cfg: AppConfig, blocks: Mapping[str, Any]) -> AppConfig:
+    """``cfg`` with the tunable blocks ``blocks`` (block -> config) in its loop configuration
+    (a block that is not part of it, as its entry says, is left out)."""
+    loop = cfg.loop
+    for name, value in blocks.items():
+        configure = tunable.block(name).configure
+        if configure is not None:
+            loop = configure(loop, value)
+    return cfg.replace(loop=loop)
 
 
 class Tuning:
@@ -103,19 +116,21 @@ class Tuning:
 
     def blocks(self) -> dict[str, Any]:
         """The tuning commanded now (held by the loop, its one owner)."""
-        loop = self.loop
-        return {"mpc": loop.mpc_config, "baseline": loop.baseline_config,
-                **{f"pid.{name}": loop.pid_gains(name) for name in PID_LOOPS}}
+        return {name: self.loop.block_config(name) for name in tunable.block_names()}
 
     def saved(self) -> dict[str, Any]:
+        """The tuning to revert to, of each registered block (one registered since it was
+        saved: where the loop started it)."""
         with self._lock:
-            return dict(self._saved)
+            saved = dict(self._saved)
+        start = tunable.initial_blocks(self.loop.cfg)
+        return {name: saved.get(name, value) for name, value in start.items()}
 
     def value(self, key: str) -> Any:
         block, name = split_key(key)
         return getattr(self.blocks()[block], name)
 
-    def check(self, changes: Mapping[str, object], who: str = "") -> dict[str, SetBlock | SetGains]:
+    def check(self, changes: Mapping[str, object], who: str = "") -> dict[str, SetBlock]:
         """The loop's commands giving the tuning blocks ``changes`` asks (block -> command),
         or CommandRefused; changes nothing."""
         if not isinstance(changes, Mapping) or not changes:
@@ -139,13 +154,13 @@ class Tuning:
             except ValueError as e:
                 raise CommandRefused(str(e)) from None
             per_block.setdefault(block, {})[name] = v
-        out: dict[str, SetBlock | SetGains] = {}
+        out: dict[str, SetBlock] = {}
         for block, vals in per_block.items():
             try:
-                new = current[block].replace(**vals)
+                new = dataclasses.replace(current[block], **vals)
             except ValueError as e:
                 raise CommandRefused(f"{block}.{e}" if not str(e).startswith(block) else str(e)) from None
-            out[block] = tuning_command(block, new, who)  # an MPC configuration the planner refuses fails here
+            out[block] = SetBlock(block, new, who)  # an MPC configuration the planner refuses fails here
             if block == "mpc":
                 f = new.formulation
                 if f != current["mpc"].formulation and not self.planner_ready(f):
@@ -155,11 +170,11 @@ class Tuning:
                         "console's terminal says it is compiled")
         return out
 
-    def commands(self, blocks: Mapping[str, Any], who: str) -> dict[str, SetBlock | SetGains]:
+    def commands(self, blocks: Mapping[str, Any], who: str) -> dict[str, SetBlock]:
         """The loop's commands giving ``blocks`` (block -> config, e.g. the saved tuning)."""
-        return {block: tuning_command(block, cfg, who) for block, cfg in blocks.items()}
+        return {block: SetBlock(block, cfg, who) for block, cfg in blocks.items()}
 
-    def apply(self, commands: Mapping[str, SetBlock | SetGains], who: str) -> dict[str, list[Any]]:
+    def apply(self, commands: Mapping[str, SetBlock], who: str) -> dict[str, list[Any]]:
         """Submit checked commands (:meth:`check`) to the loop and journal them; the changed
         fields (key -> [old, new])."""
         diffs: dict[str, list[Any]] = {}
@@ -167,7 +182,7 @@ class Tuning:
             current = self.blocks()
             for block, command in commands.items():
                 old = current[block]
-                new = command.gains if isinstance(command, SetGains) else command.cfg
+                new = command.cfg
                 if new == old:
                     continue
                 self.loop.submit(command)
