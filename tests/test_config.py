@@ -21,23 +21,25 @@ def test_defaults_are_the_blocks_defaults() -> None:
     assert app.failsafe.imu == FailsafeRule("disarm", 1.0, "none")
 
 
-def test_loop_always_runs_the_top_level_controller_blocks() -> None:
-    app = AppConfig()
-    changed = app.replace(mpc=app.mpc.replace(lam_st=2.0), body=app.body.replace(median_window=7))
-    assert changed.loop.mpc.lam_st == 2.0
-    assert changed.loop.body.median_window == 7
+def test_a_files_tables_follow_the_object_tree(tmp_path: Path) -> None:
+    path = tmp_path / "run.toml"
+    path.write_text("[loop]\nmode = \"baseline\"\n[loop.mpc]\nlam_st = 2.0\n[loop.body.hull]\nsurge_mass = 30.0\n")
+    app = load_config(path)
+    assert (app.loop.mode, app.loop.mpc.lam_st, app.loop.body.hull.surge_mass) == ("baseline", 2.0, 30.0)
+    d = app.to_dict()
+    assert d["loop"]["mpc"]["lam_st"] == 2.0 and d["loop"]["body"]["hull"]["surge_mass"] == 30.0
+    assert not {"mpc", "baseline", "body", "executor", "power"} & set(d)  # no table outside the tree
 
 
 def test_toml_round_trip_keeps_every_value(tmp_path: Path) -> None:
     app = AppConfig().replace(robot="hardware")
-    app = app.replace(mpc=app.mpc.replace(lam_f=3.0), console=app.console.replace(port=0))
+    app = app.replace(loop=app.loop.replace(mpc=app.loop.mpc.replace(lam_f=3.0)), console=app.console.replace(port=0))
     path = tmp_path / "run.toml"
     path.write_text(app.to_toml())
     back = load_config(path)
     assert back == app
     assert back.loop.mpc.lam_f == 3.0
-    # the loop's table holds only its own values
-    assert "[loop.mpc]" not in app.to_toml()
+    assert "\n[loop.mpc]\n" in app.to_toml() and "\n[mpc]\n" not in app.to_toml()
 
 
 def test_partial_file_keeps_defaults_elsewhere(tmp_path: Path) -> None:
@@ -61,7 +63,10 @@ def test_partial_file_keeps_defaults_elsewhere(tmp_path: Path) -> None:
         ("[console]\nsupervise_period = 0.0\n", "console.supervise_period"),
         ('[console]\nplot_rate = "fast"\n', "console.plot_rate"),
         ("[access]\ntoken = \"short\"\n", "token"),
-        ("[loop.mpc]\nlam_st = 1.0\n", "loop.mpc"),
+        ("[loop.mpc]\nlam_st = -1.0\n", "loop.mpc.lam_st"),
+        ("[loop.body.hull]\nsurge_mass = 0.0\n", "loop.body.hull.surge_mass"),
+        ("[mpc]\nlam_st = -1.0\n", "loop.mpc.lam_st"),  # an older file's table: the key it loads as
+        ("loop = 3\n[mpc]\nlam_st = 2.0\n", "loop: expected a table"),
         ('robot = "boat"\n', "robot"),
         ("[console]\nnope = 1\n", "console.nope"),
         # a page is gone after three unanswered heartbeats: they must fit in the pilot's timeout
@@ -102,7 +107,8 @@ def test_the_emulated_rig_ships_the_simulated_robots_controller() -> None:
     from ucat_console.config import load_config
 
     tuned, rig = load_config("sim-tuned"), load_config("sim-devices")
-    assert rig.mpc == tuned.mpc and rig.body == tuned.body and rig.baseline == tuned.baseline
+    assert rig.loop.mpc == tuned.loop.mpc and rig.loop.body == tuned.loop.body \
+        and rig.loop.baseline == tuned.loop.baseline
 
 
 @pytest.mark.parametrize("text, robot, keys", [
@@ -125,4 +131,38 @@ def test_an_older_files_robot_keys_that_meant_nothing_are_refused(tmp_path: Path
     path = tmp_path / "old.toml"
     path.write_text('robot = "rig"\n[devices]\nrobot = "sim"\n')
     with pytest.raises(ValueError, match="^.*devices.robot: 'sim' is the in-process simulator"):
+        load_config(path)
+
+
+def test_an_older_files_controller_tables_load_into_the_loop_with_a_warning(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    path = tmp_path / "old.toml"
+    path.write_text('[mpc]\nlam_st = 2.0\n[body]\nheave_trim = -1.5\n[body.hull]\nsurge_mass = 30.0\n'
+                    '[loop]\nmode = "baseline"\n[loop.mpc]\nlam_f = 4.0\n')
+    with caplog.at_level("WARNING", logger="ucat_console.config"):
+        app = load_config(path)
+    assert (app.loop.mpc.lam_st, app.loop.mpc.lam_f, app.loop.mode) == (2.0, 4.0, "baseline")
+    assert (app.loop.body.heave_trim, app.loop.body.hull.surge_mass) == (-1.5, 30.0)
+    assert app.loop.executor == AppConfig().loop.executor
+    assert ("[mpc], [body]: the controller blocks are tables of [loop] now; loaded as [loop.mpc], [loop.body] "
+            "(write those instead)") in caplog.text
+    assert "mpc" not in app.to_dict() and app.to_dict()["loop"]["mpc"]["lam_st"] == 2.0  # written back in the tree
+
+
+def test_an_older_files_controller_table_that_agrees_with_the_loops_loads(tmp_path: Path) -> None:
+    path = tmp_path / "old.toml"
+    path.write_text("[mpc]\nlam_st = 2.0\n[loop.mpc]\nlam_st = 2.0\nlam_f = 4.0\n")
+    assert (load_config(path).loop.mpc.lam_st, load_config(path).loop.mpc.lam_f) == (2.0, 4.0)
+
+
+@pytest.mark.parametrize("text, old, new", [
+    ("[mpc]\nlam_st = 2.0\n[loop.mpc]\nlam_st = 3.0\n", "mpc.lam_st", "loop.mpc.lam_st"),
+    ("[body.hull]\nsurge_mass = 30.0\n[loop.body.hull]\nsurge_mass = 31.0\n",
+     "body.hull.surge_mass", "loop.body.hull.surge_mass"),
+])
+def test_an_older_files_controller_key_that_differs_from_the_loops_is_refused_naming_both(
+        tmp_path: Path, text: str, old: str, new: str) -> None:
+    path = tmp_path / "old.toml"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=rf"{old.replace('.', '[.]')}: .* and {new.replace('.', '[.]')} .*both give it"):
         load_config(path)

@@ -103,7 +103,7 @@ def test_the_wheel_installs_in_a_fresh_venv_and_runs_from_another_folder(tmp_pat
                            "print(e4r_settings()['sim_tuned'][0].lam_f)"],
                           cwd=elsewhere, env=env, capture_output=True, text=True, timeout=120)
     with open(ROOT / "ucat_console" / "configs" / "sim-tuned.toml", "rb") as fh:
-        lam_f = tomllib.load(fh)["mpc"]["lam_f"]
+        lam_f = tomllib.load(fh)["loop"]["mpc"]["lam_f"]
     assert proc.stdout.split() == [repr(float(lam_f))], proc.stderr
 
     # the experiments say what to install rather than failing on an import

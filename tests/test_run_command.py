@@ -74,8 +74,8 @@ def test_the_sessions_folder_flag_wins_and_a_failed_start_leaves_no_session_file
 def test_a_configuration_is_named_or_given_as_a_file(tmp_path: Path, monkeypatch) -> None:
     tuned = load_config("sim-tuned")
     with open(ROOT / "ucat_console" / "configs" / "sim-tuned.toml", "rb") as fh:
-        lam_f = tomllib.load(fh)["mpc"]["lam_f"]
-    assert tuned.mpc.lam_f == lam_f != AppConfig().mpc.lam_f  # the repository's file, by name
+        lam_f = tomllib.load(fh)["loop"]["mpc"]["lam_f"]
+    assert tuned.loop.mpc.lam_f == lam_f != AppConfig().loop.mpc.lam_f  # the repository's file, by name
     copy = tmp_path / "mine.toml"
     copy.write_text(shipped.config_path("sim-tuned").read_text())
     assert load_config(copy) == tuned

@@ -43,14 +43,14 @@ def console_steps(cfg: Any) -> list[Any]:
     from ucat_console.control.params import FORMULATIONS
 
     here = __name__
-    mine = cfg.mpc.formulation
+    mine = cfg.loop.mpc.formulation
     steps = [Step(planner_step(mine), f"{_formulation_text(mine)} and the baseline", True,
                   f"{here}:compile_planner", (mine,)),
              Step("loop", "the closed loop's per-sample kernels", True, f"{here}:compile_loop")]
     if cfg.simulated:
         steps.append(Step("plant", "the simulated robot", True, f"{here}:compile_plant"))
     steps.append(Step("page", "the page's plot series", True, f"{here}:compile_page"))
-    if cfg.mpc.solver == "numba":
+    if cfg.loop.mpc.solver == "numba":
         steps += [Step(planner_step(f), _formulation_text(f), False, f"{here}:compile_planner", (f,))
                   for f in FORMULATIONS if f != mine]
     return steps

@@ -1,8 +1,8 @@
 """The whole application's configuration: one frozen :class:`AppConfig`, TOML in and out.
 
 :class:`AppConfig` composes the blocks defined beside the code that uses them (the
-controller's ``mpc``, ``body``, ``baseline``, ``executor``, ``power``; the closed loop's
-``loop``; the simulated robot's ``plant``; the ``recorder``; the limits on reading session
+closed loop's ``loop``, which holds the controller's ``mpc``, ``body``, ``baseline``,
+``executor``, ``power``; the simulated robot's ``plant``; the ``recorder``; the limits on reading session
 files, ``review``; the efficiency figures and their comparison, ``metrics``; the drivers' ``devices``; the pilot's ``access``, beside
 the access control; the ``failsafe`` rules, beside the safety monitor) with the console's own
 blocks defined here: ``console`` (web server, plots, supervision) and ``foxglove`` (the live
@@ -16,13 +16,14 @@ A file of an older version (and the configuration an older recording holds) name
 robot with two keys, ``robot = "sim" | "rig"`` and ``devices.robot``; it loads as the one
 selector they meant, with a warning naming the keys to replace (:func:`migrate_robot`).
 
-One TOML file configures a run; every table is optional::
+One TOML file configures a run; every table is optional, and its tables follow the object
+tree (``[loop.mpc]`` is ``app.loop.mpc``)::
 
     robot = "sim"
-    [mpc]
-    lam_st = 2.0
     [loop]
     mode = "mpc_sync"
+    [loop.mpc]
+    lam_st = 2.0
     [failsafe.pilot_gone]
     action = "hold"
     timeout = 3.0
@@ -31,17 +32,14 @@ One TOML file configures a run; every table is optional::
 
 One tree, each value held once: the controller blocks (``mpc``, ``body``, ``baseline``,
 ``executor``, ``power``) live in the closed loop's :class:`LoopConfig` (``app.loop``, what
-the loop is handed), and ``app.mpc`` and the others read them there. In a TOML file they
-are top-level tables only (``[loop]`` holds the loop's own values; ``[loop.mpc]`` is
-refused, naming the key); :meth:`AppConfig.replace` takes them by name as well. Errors
-name the dotted key and the allowed range.
+the loop is handed). An older file wrote them as top-level tables (``[mpc]``); it loads, with
+a warning naming the tables to rewrite (:func:`migrate_loop_blocks`). Errors name the dotted
+key and the allowed range.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import logging
-import typing
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Self
@@ -60,12 +58,12 @@ from ucat_console.backend.review.metrics import MetricsConfig
 from ucat_console.backend.sessions.limits import ReviewConfig
 from ucat_console.backend.sessions.recorder import RecorderConfig
 from ucat_console.backend.sim.params import PlantConfig
-from ucat_console.typedconf import Config, coerce, from_dict, param, to_dict
+from ucat_console.typedconf import Config, from_dict, param, to_dict
 
 log = logging.getLogger(__name__)
 
-#: the controller blocks: held by the loop's configuration, top-level tables in a file
-LOOP_BLOCKS = ("mpc", "baseline", "body", "executor", "power")
+#: the controller blocks an older file wrote as top-level tables (``[mpc]``), now ``[loop.mpc]``
+OLD_LOOP_TABLES = ("mpc", "baseline", "body", "executor", "power")
 
 
 @dataclass(frozen=True)
@@ -193,13 +191,6 @@ class AppConfig(Config):
     devices: DevicesConfig = DevicesConfig()
     foxglove: FoxgloveConfig = FoxgloveConfig()
 
-    # the controller blocks, read where they are held (the loop's configuration)
-    mpc = property(lambda self: self.loop.mpc, doc="the fin MPC (``loop.mpc``)")
-    baseline = property(lambda self: self.loop.baseline, doc="the baseline (``loop.baseline``)")
-    body = property(lambda self: self.loop.body, doc="the body-frame layer (``loop.body``)")
-    executor = property(lambda self: self.loop.executor, doc="the executors (``loop.executor``)")
-    power = property(lambda self: self.loop.power, doc="the power estimate (``loop.power``)")
-
     def _check(self) -> None:
         deepest, envelope = self.devices.plausibility.max_depth, self.loop.max_depth
         if deepest < envelope:
@@ -214,36 +205,15 @@ class AppConfig(Config):
                 f"{gone:g} s: a page is asked for a heartbeat every period and is gone after "
                 f"three unanswered ones at the least; allowed: at most {gone / 3.0:g} s")
 
-    def replace(self, **changes: Any) -> Self:
-        """A copy with ``changes``; a controller block given by name (``mpc=...``) goes into
-        the loop's configuration (after a ``loop`` given in the same call)."""
-        blocks = {name: changes.pop(name) for name in LOOP_BLOCKS if name in changes}
-        loop = changes.pop("loop", self.loop)
-        if blocks:
-            loop = loop.replace(**blocks)
-        return dataclasses.replace(self, loop=loop, **changes)
-
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Self:
-        if not isinstance(data, dict):
-            return from_dict(cls, data)
-        data = migrate_sim_depth(migrate_robot(data))
-        loop = data.get("loop")
-        if isinstance(loop, dict):
-            for name in LOOP_BLOCKS:
-                if name in loop:
-                    raise ValueError(f"loop.{name}: set it in the top-level [{name}] table")
-        rest = {k: v for k, v in data.items() if k not in LOOP_BLOCKS}
-        hints = typing.get_type_hints(LoopConfig)
-        blocks = {name: coerce(hints[name], data[name], name) for name in LOOP_BLOCKS if name in data}
-        return from_dict(cls, rest).replace(**blocks)
+        if isinstance(data, dict):
+            data = migrate_loop_blocks(migrate_sim_depth(migrate_robot(data)))
+        return from_dict(cls, data)
 
     def to_dict(self, redact: bool = False) -> dict[str, Any]:
         """The configuration as TOML tables; ``redact`` leaves the secret fields out."""
-        d = to_dict(self, redact)
-        for name in LOOP_BLOCKS:
-            d[name] = d["loop"].pop(name)
-        return d
+        return to_dict(self, redact)
 
     def to_toml(self, redact: bool = False) -> str:
         return tomli_w.dumps(self.to_dict(redact))
@@ -297,6 +267,36 @@ def migrate_sim_depth(data: dict[str, Any]) -> dict[str, Any]:
                 "devices.start.depth = %r (write that instead)", depth)
     return {**data, "console": {k: v for k, v in console.items() if k != "sim_depth"},
             "devices": {**devices, "start": {**start, "depth": depth}}}
+
+
+def migrate_loop_blocks(data: dict[str, Any]) -> dict[str, Any]:
+    """``data`` with an older version's top-level controller tables (``[mpc]``, ``[body]``,
+    ...) moved into the loop's table, where the object tree holds them (``[loop.mpc]``), with a
+    warning naming the tables to rewrite; ValueError naming both keys when a key is given in
+    both places with different values."""
+    old = [name for name in OLD_LOOP_TABLES if name in data]
+    if not old:
+        return data
+    loop = data.get("loop", {})
+    if not isinstance(loop, dict):
+        raise ValueError(f"loop: expected a table, got {loop!r}")
+    merged = dict(loop)
+    for name in old:
+        merged[name] = _merged(data[name], loop[name], name, f"loop.{name}") if name in loop else data[name]
+    log.warning("configuration: %s: the controller blocks are tables of [loop] now; loaded as %s "
+                "(write those instead)", ", ".join(f"[{n}]" for n in old), ", ".join(f"[loop.{n}]" for n in old))
+    return {**{k: v for k, v in data.items() if k not in old}, "loop": merged}
+
+
+def _merged(old: Any, new: Any, old_key: str, new_key: str) -> Any:
+    """One value given at ``old_key`` and ``new_key``: tables merged key by key, equal values
+    kept; ValueError naming both keys when they differ."""
+    if isinstance(old, dict) and isinstance(new, dict):
+        return {**old, **new, **{k: _merged(old[k], new[k], f"{old_key}.{k}", f"{new_key}.{k}")
+                                 for k in old.keys() & new.keys()}}
+    if old != new:
+        raise ValueError(f"{old_key}: {old!r} and {new_key} {new!r} both give it; keep {new_key} only")
+    return new
 
 
 def load_config(path: str | Path | None) -> AppConfig:

@@ -73,12 +73,12 @@ def test_manoeuvre_recording_recovers_the_plants_coefficients(tmp_path: Path, pl
     assert "recorded" in rep.config_source  # the hull came from the recording's configuration
     fragment = tmp_path / "identified.toml"
     fragment.write_text(rep.toml)
-    loaded = AppConfig.from_toml(fragment).mpc
+    loaded = AppConfig.from_toml(fragment).loop.mpc
     assert loaded.c_d == pytest.approx(r.c_d, rel=1e-5) and loaded.c_l == pytest.approx(r.c_l, rel=1e-5)
     # the command line does the same and writes the fragment, the figures and the residual plot
     out = tmp_path / "out"
     assert main(["identify", path.name, "--dir", str(tmp_path), "--out", str(out)]) == 0
-    assert AppConfig.from_toml(out / "identified.toml").mpc.c_d == pytest.approx(r.c_d, rel=1e-5)
+    assert AppConfig.from_toml(out / "identified.toml").loop.mpc.c_d == pytest.approx(r.c_d, rel=1e-5)
     doc = json.loads((out / "identify.json").read_text())
     assert doc["result"]["c_d"] == pytest.approx(r.c_d, rel=1e-9) and len(doc["windows"]) == len(r.windows)
     assert (out / "residuals.png").stat().st_size > 1000
@@ -144,7 +144,7 @@ def test_the_heave_trim_is_identified_from_a_recorded_hover(tmp_path: Path, caps
     out = tmp_path / "out"
     assert main(["identify", "--trim", session, "--dir", str(tmp_path), "--out", str(out)]) == 0
     text = (out / "identified.toml").read_text()
-    trim = AppConfig.from_toml(out / "identified.toml").body.heave_trim
+    trim = AppConfig.from_toml(out / "identified.toml").loop.body.heave_trim
     assert trim == pytest.approx(net_buoyancy, rel=0.15)  # down, against the buoyancy
     assert "heave_trim" in text and "heave trim from" in capsys.readouterr().out
 

@@ -574,14 +574,15 @@ def test_the_planners_are_compiled_before_the_robot_starts(make_console: Callabl
 
     def spy(cfg, formulations=None):
         order.append("planners")
-        assert cfg.mpc == cfg_in.mpc and cfg.baseline == cfg_in.baseline
+        assert cfg.mpc == cfg_in.loop.mpc and cfg.baseline == cfg_in.loop.baseline
         return warm_up(cfg, formulations)
 
     def robot(c, ev):
         order.append("robot")
         return SimRobotIO(c.plant), lambda: None
 
-    cfg_in = make_config().replace(mpc=MpcConfig(n_samples=200))
+    cfg_in = make_config()
+    cfg_in = cfg_in.replace(loop=cfg_in.loop.replace(mpc=MpcConfig(n_samples=200)))
     monkeypatch.setattr(supervisor_module, "warm_up", spy)
     sup = make_console(cfg_in, robot_factory=robot).sup
     sup.stop()

@@ -136,7 +136,7 @@ def identify_sessions(sessions: Sequence[str | Path], directory: str | Path | No
             src.close()
     if app is None:
         app, source_of_config = AppConfig(), "the defaults"
-    result = identify(recs, app.mpc, hull_of(app), cfg)
+    result = identify(recs, app.loop.mpc, hull_of(app), cfg)
     toml = result.toml_fragment(", ".join(names))
     return IdentifyReport(result, tuple(names), source_of_config, toml)
 

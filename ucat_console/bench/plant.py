@@ -202,7 +202,7 @@ def cruise_check(quick: bool = False) -> list[dict[str, Any]]:
     rows = []
     for ctrl in ("baseline", "mpc"):
         for v in speeds:
-            runs = [run_scenario(Scenario(mode=ctrl, v_ref=v, seed=s, mpc=app.mpc, body=app.body,
+            runs = [run_scenario(Scenario(mode=ctrl, v_ref=v, seed=s, mpc=app.loop.mpc, body=app.loop.body,
                                           settle_s=10.0 if quick else 30.0, window_s=10.0 if quick else 60.0))
                     for s in seeds]
             row = {"controller": ctrl, "v_ref": v, "runs": len(runs)}

@@ -204,7 +204,7 @@ def run_manoeuvre(app: Any, mode: str, formulation: str, m: Manoeuvre, seed: int
     from ucat_console.telemetry.stream import TelemetryStream
 
     c = CASES[case] if case is not None else Case({})
-    mpc = app.mpc.replace(formulation=formulation)
+    mpc = app.loop.mpc.replace(formulation=formulation)
     if c.model is not None:
         from ucat_console.backend.sim.params import FinHydroConfig
 

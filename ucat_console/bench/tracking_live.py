@@ -58,7 +58,7 @@ def run_mode(mode: str, formulation: str, *, seconds: float, step_at: float, dep
     from ucat_console.telemetry import channels as ch
 
     cfg = load_config(config)
-    cfg = cfg.replace(loop=cfg.loop.replace(mode=mode), mpc=cfg.mpc.replace(formulation=formulation))
+    cfg = cfg.replace(loop=cfg.loop.replace(mode=mode, mpc=cfg.loop.mpc.replace(formulation=formulation)))
     failsafes: list[str] = []
     with tempfile.TemporaryDirectory() as tmp:
         cfg = cfg.replace(console=cfg.console.replace(record_on_arm=False))

@@ -141,7 +141,7 @@ def run_mpc(args: argparse.Namespace) -> int:
     if args.shipped != "none":
         from ucat_console.config import load_config
 
-        mpc_cfg = load_config(args.shipped).mpc
+        mpc_cfg = load_config(args.shipped).loop.mpc
         FinMpc(mpc_cfg).plan((-0.5, 0.5), 0.3, 0.0, B.U_PREV0)  # its kernels loaded before timing
         shipped = B.run_protocol(mpc_cfg, refine=True, seed=0).row()
         shipped.update(config=args.shipped, centre_rate=mpc_cfg.centre_rate, centre_grid=mpc_cfg.centre_grid)

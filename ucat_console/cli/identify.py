@@ -5,7 +5,7 @@ the simulated fin's plate model, ``control.plate_model``: C_D, C_L and the profi
 to the recorded encoder angles and rates, DVL velocity and IMU of the sessions (ids or part
 files), with the hull's damping and added mass from ``--config`` (default: the configuration the first
 session recorded), prints the coefficients with 95 % intervals and writes, into ``--out``,
-``identified.toml`` (the ``[mpc]`` fragment to load), ``identify.json`` (every window) and
+``identified.toml`` (the ``[loop.mpc]`` fragment to load), ``identify.json`` (every window) and
 ``residuals.png`` (with the ``experiments`` extra).
 
 ``--run`` first runs the identification manoeuvre (mode "identify") on the configured robot
@@ -13,7 +13,7 @@ and records it: on the simulated robot as fast as it computes (``--realtime`` fo
 time), on the device rig in real time; the manoeuvre's steps are ``[loop.manoeuvre]``.
 ``ucat-console run --headless --mode identify --record --duration S`` records the same.
 
-``--trim`` identifies the designed body layer's heave trim instead (``[body] heave_trim``):
+``--trim`` identifies the designed body layer's heave trim instead (``[loop.body] heave_trim``):
 the heave force the fins gave while the robot hovered at its depth in the sessions
 (``control.identification.hover_trim``); record a hover with ``ucat-console run --headless
 --record --velocity 0 --depth D --duration S`` (or at the pool), then run it on the session.
@@ -80,7 +80,7 @@ def _trim(args: argparse.Namespace) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "identified.toml").write_text(toml)
     print(f"heave trim from {trim.seconds:.0f} s of hover: {trim.heave_trim:.3f} +- {trim.ci:.3f} N (95 %, down > 0)")
-    print(f"wrote {args.out / 'identified.toml'} (its [body] table: load it with --config)")
+    print(f"wrote {args.out / 'identified.toml'} (its [loop.body] table: load it with --config)")
     return 0
 
 

@@ -168,7 +168,7 @@ class Identification:
         return sum(w.steady for w in self.windows)
 
     def toml_fragment(self, sources: str = "") -> str:
-        """The ``[mpc]`` table to load (``--config``), with the fit in comments."""
+        """The ``[loop.mpc]`` table to load (``--config``), with the fit in comments."""
         lines = ["# fin coefficients identified by `ucat-console identify`"
                  + (f" from {sources}" if sources else ""),
                  f"# fit {self.fit}: {len(self.windows)} windows ({self.steady_windows} steady), "
@@ -177,7 +177,7 @@ class Identification:
         if self.fit == "plate":
             lines.append(f"# plate: profile drag c_d0 {self.c_d0:.4f} +- {self.c_d0_ci:.4f} (the plate's lift "
                          "held at its ratio to the normal force)")
-        lines += ["[mpc]", f"c_d = {self.c_d:.6g}", f"c_l = {self.c_l:.6g}", ""]
+        lines += ["[loop.mpc]", f"c_d = {self.c_d:.6g}", f"c_l = {self.c_l:.6g}", ""]
         return "\n".join(lines)
 
 
@@ -408,7 +408,7 @@ class HoverTrim:
 
     def toml_fragment(self, source: str) -> str:
         return (f"# the heave trim from {self.seconds:.0f} s of hover in {source}: "
-                f"{self.heave_trim:.3f} +- {self.ci:.3f} N (95 %)\n[body]\nheave_trim = {self.heave_trim:.4f}\n")
+                f"{self.heave_trim:.3f} +- {self.ci:.3f} N (95 %)\n[loop.body]\nheave_trim = {self.heave_trim:.4f}\n")
 
 
 def hover_trim(t: ArrayLike, driving: ArrayLike, depth_error: ArrayLike, speed_ref: ArrayLike,

@@ -201,7 +201,7 @@ def e4r_settings() -> dict[str, tuple[MpcConfig, BodyConfig]]:
     from ucat_console.config import load_config
 
     tuned = load_config(SIM_TUNED)
-    return {"paper": (MpcConfig(), PAPER_BODY), "sim_tuned": (tuned.mpc, tuned.body)}
+    return {"paper": (MpcConfig(), PAPER_BODY), "sim_tuned": (tuned.loop.mpc, tuned.loop.body)}
 
 
 #: each E4R setting's baseline

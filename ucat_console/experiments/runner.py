@@ -234,7 +234,7 @@ def _e4_findings(res: dict[str, Any]) -> list[str]:
                    "model's thrust (and the plate's, calibrated to it) is a few hundredths of a newton against "
                    "the hull's 0.7-3 N: the corridor cannot make the thrust (docs/fin-plant.md), the force term "
                    "(lam_f 1.5) does not win, and the L1 smoothness term (lam_d 1) holds the plan near u_prev.")
-    out.append("Body layer: the console's designed layer (the shipped sim-tuned's [body]: loops designed on "
+    out.append("Body layer: the console's designed layer (the shipped sim-tuned's [loop.body]: loops designed on "
                "the hull's model, allocation with limits and priorities, thrust gain 1, the plate's identified "
                "scale); baseline: the fin-model inverse, not eq 19 (which asks for 1/4.65 of the force the fin "
                "model gives, docs/control.md); MPC: the paper's weights (Table I), as Table V.")

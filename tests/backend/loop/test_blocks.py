@@ -169,8 +169,8 @@ def test_a_built_in_block_goes_into_the_configuration_in_force(tmp_path: Path) -
         assert sup.take_control(PILOT, TOKEN)
         sup.set_params(PILOT, {"pid.yaw_rate.ki": 0.25, "baseline.frequency": 1.5})
         cfg = sup.current_config()
-        assert cfg.body.yaw_rate.ki == 0.25 and cfg.baseline.frequency == 1.5
-        assert cfg.body.depth == sup.cfg.body.depth and cfg.mpc == sup.cfg.mpc
+        assert cfg.loop.body.yaw_rate.ki == 0.25 and cfg.loop.baseline.frequency == 1.5
+        assert cfg.loop.body.depth == sup.cfg.loop.body.depth and cfg.loop.mpc == sup.cfg.loop.mpc
     finally:
         console.stop()
 

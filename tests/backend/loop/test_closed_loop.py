@@ -65,8 +65,8 @@ def make_loop(mode: str = "mpc", v: float = 0.2, depth: float = 1.0, clock=None,
 # plant is controllable, the shipped sim-tuned's (the paper's defaults and what they do are
 # the experiments' subject).
 _TUNED = load_config("sim-tuned")
-TUNED_MPC = _TUNED.mpc
-STRONG_BODY = _TUNED.body
+TUNED_MPC = _TUNED.loop.mpc
+STRONG_BODY = _TUNED.loop.body
 
 
 @pytest.mark.parametrize("mode,v,changes", [

@@ -99,7 +99,7 @@ def test_replay_command_prints_a_table_and_writes_csv(sessions, tmp_path, capsys
                    (0.6, -0.6, 3.0, 3.0), (0.6, 3.0, 0.0, 3.0), 1.0, 0.1, 0.1, 0.0, 0.1, 0.3,
                    (-0.3, 0.1), 0.002, False)
     [path] = record(sessions, [(C.fin_plan(1), plan)],
-                    config_toml="[mpc]\nn_samples = 32\nmax_iter = 5\n")
+                    config_toml="[loop.mpc]\nn_samples = 32\nmax_iter = 5\n")
     out_csv = tmp_path / "cf.csv"
     assert main(["replay", str(path), "--weights", "lam_st=2.0", "--out", str(out_csv),
                  "--dir", str(sessions)]) == 0
@@ -121,7 +121,7 @@ def _split_session(sessions):
     items += [(C.fin_plan(1), p) for p in plans]
     items.sort(key=lambda x: x[1].t)
     paths = record(sessions, items, RecorderConfig(split_duration=1.0), label="split",
-                   config_toml="[mpc]\nn_samples = 32\nmax_iter = 5\n", wall_time=1_700_000_000.0)
+                   config_toml="[loop.mpc]\nn_samples = 32\nmax_iter = 5\n", wall_time=1_700_000_000.0)
     assert len(paths) >= 3
     return paths, plans
 
@@ -167,7 +167,7 @@ def test_a_replay_process_reads_under_the_consoles_review_limits(sessions):
     plan = FinPlan(0.0, 1, "mpc" + " " * 6000, (-0.4, 0.1), 0.3, 0.0, (0.5, -0.5, 2.0, 2.0),
                    (0.6, -0.6, 3.0, 3.0), (0.6, 3.0, 0.0, 3.0), 1.0, 0.1, 0.1, 0.0, 0.1, 0.3,
                    (-0.3, 0.1), 0.002, False)
-    [path] = record(sessions, [(C.fin_plan(1), plan)], config_toml="[mpc]\nn_samples = 32\nmax_iter = 5\n")
+    [path] = record(sessions, [(C.fin_plan(1), plan)], config_toml="[loop.mpc]\nn_samples = 32\nmax_iter = 5\n")
     job = ReplayJob(path.name, sessions, {"lam_st": 2.0}, nice=0, review=limits.ReviewConfig(max_message=4096))
     assert job.wait(120.0)
     assert "review.max_message" in job.error and job.result is None

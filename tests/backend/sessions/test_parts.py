@@ -79,7 +79,7 @@ def part_spans(paths: list[Path], directory: Path) -> list[tuple[float, float]]:
 def split(sessions):
     items = make_items()
     paths = record(sessions, items, SPLIT, epoch_offset=OFFSET, notes="split session",
-                   config_toml="[mpc]\nlam_st = 4.0\n", weights={"lam_st": 4.0})
+                   config_toml="[loop.mpc]\nlam_st = 4.0\n", weights={"lam_st": 4.0})
     assert len(paths) >= 3
     sid = files.parse_part_name(paths[0])[0]
     return sid, paths, items
@@ -164,7 +164,7 @@ def test_metadata_config_and_weights_of_the_first_part_notes_of_the_latest(sessi
     items = [(C.SETPOINTS, Setpoints(0.125 * k, float(k), 1.0, 0.0)) for k in range(30)]
     stream = TelemetryStream()
     rec = Recorder(stream, SPLIT, directory=sessions, epoch_offset=OFFSET)
-    sid = rec.start(notes="before", config_toml="[mpc]\nlam_f = 2.0\n", weights={"lam_f": 2.0})
+    sid = rec.start(notes="before", config_toml="[loop.mpc]\nlam_f = 2.0\n", weights={"lam_f": 2.0})
     for c, m in items[:20]:
         stream.publish(c, m)
     rec.set_notes("after")  # queued behind the messages: written once part 3 is open
@@ -177,7 +177,7 @@ def test_metadata_config_and_weights_of_the_first_part_notes_of_the_latest(sessi
     with SessionParts(sid, sessions) as s:
         assert s.notes == "after"
         assert s.metadata[files.META_NOTES] == {"text": "after"}
-        assert s.config_toml == "[mpc]\nlam_f = 2.0\n"
+        assert s.config_toml == "[loop.mpc]\nlam_f = 2.0\n"
         assert s.weights == {"lam_f": 2.0}
         assert s.metadata[files.META_SESSION]["id"] == sid
         assert s.version and s.epoch_offset == OFFSET
@@ -317,7 +317,7 @@ def test_counterfactual_replay_covers_every_part(sessions):
 
     times = [0.25 * k for k in range(13)]
     paths = record(sessions, [(C.fin_plan(1), plan(t)) for t in times], SPLIT,
-                   config_toml="[mpc]\nn_samples = 32\nmax_iter = 5\n")
+                   config_toml="[loop.mpc]\nn_samples = 32\nmax_iter = 5\n")
     assert len(paths) >= 3
     with SessionParts(paths[0], sessions) as s:
         res = counterfactual(s, {"lam_st": 2.0})
@@ -402,7 +402,7 @@ def test_unknown_session_and_missing_file_are_refused(sessions, tmp_path):
 def test_a_one_part_session_reads_as_its_file(sessions):
     items = make_items()
     [path] = record(sessions, items, RecorderConfig(chunk_size=4096), epoch_offset=OFFSET,
-                    notes="one part", config_toml="[mpc]\nlam_a = 2.0\n", weights={"lam_a": 2.0})
+                    notes="one part", config_toml="[loop.mpc]\nlam_a = 2.0\n", weights={"lam_a": 2.0})
     sid = files.parse_part_name(path)[0]
     with SessionReader(path, sessions) as r, SessionParts(sid, sessions) as s:
         assert s.paths == (path,) and s.path == r.path and s.session_id == r.session_id

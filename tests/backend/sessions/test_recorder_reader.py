@@ -62,7 +62,7 @@ def test_file_checked_with_plain_mcap_reader_and_jsonschema(sessions):
     bodies.append(body(20.0, x=1.5))
     items.append((C.BODY_STATE, bodies[-1]))
     [path] = record(sessions, items, epoch_offset=OFFSET, notes="pool day",
-                    config_toml="[mpc]\nlam_st = 5.0\n", weights={"lam_st": 5.0, "lam_f": 1.5})
+                    config_toml="[loop.mpc]\nlam_st = 5.0\n", weights={"lam_st": 5.0, "lam_f": 1.5})
     fox_tf = json.loads((FIXTURES / "foxglove" / "FrameTransform.json").read_text())
     fox_log = json.loads((FIXTURES / "foxglove" / "Log.json").read_text())
     with open(path, "rb") as fh:
@@ -83,7 +83,7 @@ def test_file_checked_with_plain_mcap_reader_and_jsonschema(sessions):
         assert all(ci.uncompressed_size <= 256 * 1024 for ci in summary.chunk_indexes)
         meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
         assert meta["notes"] == {"text": "pool day"}
-        assert meta["config"] == {"toml": "[mpc]\nlam_st = 5.0\n"}
+        assert meta["config"] == {"toml": "[loop.mpc]\nlam_st = 5.0\n"}
         assert meta["weights"] == {"lam_st": "5.0", "lam_f": "1.5"}
         assert meta["version"]["ucat_console"] == ucat_console.__version__
         assert meta["session"]["epoch_offset"] == repr(OFFSET)

@@ -14,6 +14,7 @@ from ucat_console.backend.sessions.replay import (
     parse_weights,
     predicted_power,
     recorded_config,
+    recorded_drive,
     replay_config,
 )
 from ucat_console.control import FinMpc, MpcConfig
@@ -57,7 +58,7 @@ def plans():
 
 @pytest.fixture
 def session(sessions, plans):
-    [path] = record(sessions, plans, config_toml="[mpc]\n" + CFG.to_toml(),
+    [path] = record(sessions, plans, config_toml="[loop.mpc]\n" + CFG.to_toml(),
                     weights=dict(zip(("lam_f", "lam_st", "lam_a", "lam_d"), CFG.weights)))
     return path
 
@@ -65,6 +66,22 @@ def session(sessions, plans):
 def test_recorded_configuration_is_read_back(session, sessions):
     with SessionReader(session, sessions) as r:
         assert recorded_config(r) == CFG
+
+
+@pytest.mark.parametrize("loop", ["loop.", ""])  # this version's tables, an older recording's
+def test_the_recorded_mpc_and_drive_are_read_from_the_loops_tables_or_an_older_recordings(sessions, loop):
+    from ucat_console.control.params import ExecutorConfig
+
+    drive = ExecutorConfig(acceleration=40.0)
+    [path] = record(sessions, [], config_toml=f"[{loop}mpc]\n{CFG.to_toml()}\n[{loop}executor]\n{drive.to_toml()}")
+    with SessionReader(path, sessions) as r:
+        assert recorded_config(r) == CFG and recorded_drive(r) == drive
+
+
+def test_a_bad_recorded_mpc_value_is_refused_naming_its_key(sessions):
+    [path] = record(sessions, [], config_toml="[loop.mpc]\nlam_st = -1.0\n")
+    with SessionReader(path, sessions) as r, pytest.raises(ValueError, match=r"recorded configuration: loop\.mpc\.lam_st"):
+        recorded_config(r)
 
 
 def test_replay_with_the_recorded_weights_reproduces_the_recorded_plans(session, sessions, plans):
@@ -142,7 +159,7 @@ def test_a_long_session_with_wound_up_fin_angles_replays_without_refusals(sessio
                 solve_time=o.solve_time, late=False, seed=o.seed,
             )))
     assert any(abs(m.theta0) > 4 * math.pi for _, m in items)  # FinMpc alone refuses these
-    [path] = record(sessions, items, config_toml="[mpc]\n" + CFG.to_toml(),
+    [path] = record(sessions, items, config_toml="[loop.mpc]\n" + CFG.to_toml(),
                     weights=dict(zip(("lam_f", "lam_st", "lam_a", "lam_d"), CFG.weights)))
     with SessionReader(path, sessions) as r:
         res = counterfactual(r, {})
@@ -165,7 +182,7 @@ def test_refused_plans_are_summarised_in_one_log_line(sessions, caplog):
 
 
 def test_plans_timed_by_the_drive_replay_exactly_with_the_recorded_drive(sessions):
-    """A session whose planners timed strokes by the drives (its recorded [executor] has the
+    """A session whose planners timed strokes by the drives (its recorded [loop.executor] has the
     drives' acceleration, as every session of this version does) replays with that timing."""
     from ucat_console.control.params import ExecutorConfig
 
@@ -183,7 +200,7 @@ def test_plans_timed_by_the_drive_replay_exactly_with_the_recorded_drive(session
             cost_amplitude=c.amplitude, cost_smoothness=c.smoothness, st=c.st, mean_force=c.mean_force,
             solve_time=0.0, late=False)))
         u_prev, theta = plan.u, plan.commands[2]
-    [path] = record(sessions, items, config_toml="[mpc]\n" + cfg.to_toml() + "\n[executor]\n" + drive.to_toml())
+    [path] = record(sessions, items, config_toml="[loop.mpc]\n" + cfg.to_toml() + "\n[loop.executor]\n" + drive.to_toml())
     with SessionReader(path, sessions) as r:
         res = counterfactual(r, {}, seed=SEED)
     assert [row.u for row in sorted(res.rows, key=lambda x: x.t)] == [m.u for _, m in items]

@@ -4,7 +4,8 @@ weights, side by side with what was recorded.
 Each recorded :class:`~ucat_console.telemetry.messages.FinPlan` holds every input of the
 planner (target force, measured forward speed, start angle, previous plan). For each one,
 ``FinMpc(config).plan(target, v_body, theta0, u_prev, seed=seed)`` is run with the
-session's MPC configuration (the ``[mpc]`` table of its recorded configuration, then its
+session's MPC configuration (the ``[loop.mpc]`` table of its recorded configuration, an older
+recording's ``[mpc]``, then its
 recorded weights) changed by the requested weights, and the drives' timing the session's
 planners used (:func:`recorded_drive`). The recorded start angle is the fin's
 measured angle, which winds up over whole turns in a long session; like the live planner
@@ -27,7 +28,7 @@ import math
 import statistics
 import tomllib
 from dataclasses import dataclass
-from typing import Callable, Iterable, Mapping, Sequence
+from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
@@ -86,29 +87,38 @@ def _recorded_doc(reader: SessionSource) -> dict:
         raise ValueError(f"{reader.path}: recorded configuration is not valid TOML: {e}") from None
 
 
+def _recorded_block(doc: dict, name: str) -> tuple[Any, str]:
+    """The recorded controller block ``name`` and its dotted key: the loop's table
+    (``[loop.mpc]``), or an older recording's top-level one (``[mpc]``, ``config.migrate_loop_blocks``)."""
+    loop = doc.get("loop")
+    if isinstance(loop, dict) and name in loop:
+        return loop[name], f"loop.{name}"
+    return doc.get(name), name
+
+
 def recorded_drive(reader: SessionSource) -> ExecutorConfig | None:
     """The fin drives' timing the session's planners made their plans with: the recorded
-    ``[executor]`` table when it has the drives' ``acceleration`` (written by the versions
+    ``[loop.executor]`` table when it has the drives' ``acceleration`` (written by the versions
     whose planners time strokes by the drive), else None (plans as solved)."""
-    ex = _recorded_doc(reader).get("executor")
+    ex, key = _recorded_block(_recorded_doc(reader), "executor")
     if not isinstance(ex, dict) or "acceleration" not in ex:
         return None
     try:
         return ExecutorConfig.from_dict(ex)
     except ValueError as e:
-        raise ValueError(f"{reader.path}: recorded configuration: executor.{e}") from None
+        raise ValueError(f"{reader.path}: recorded configuration: {key}.{e}") from None
 
 
 def recorded_config(reader: SessionSource) -> MpcConfig:
     """The MPC configuration in force when the session was recorded (defaults for what
     the file does not say; of a split session, its first part's)."""
     cfg = MpcConfig()
-    doc = _recorded_doc(reader)
-    if isinstance(doc.get("mpc"), dict):
+    mpc, key = _recorded_block(_recorded_doc(reader), "mpc")
+    if isinstance(mpc, dict):
         try:
-            cfg = MpcConfig.from_dict(doc["mpc"])
+            cfg = MpcConfig.from_dict(mpc)
         except ValueError as e:
-            raise ValueError(f"{reader.path}: recorded configuration: mpc.{e}") from None
+            raise ValueError(f"{reader.path}: recorded configuration: {key}.{e}") from None
     recorded = {k: v for k, v in reader.weights.items() if k in WEIGHT_NAMES}
     return cfg.replace(**recorded) if recorded else cfg
 

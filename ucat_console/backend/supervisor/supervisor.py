@@ -147,7 +147,7 @@ class Supervisor:
             log.warning("failsafe %s is set to warn: it will not act on the robot (its action under [failsafe])", name)
         # the compiled solver first: a compile holds the interpreter for a minute or more,
         # which the drivers' heartbeat supervision would read as silent drives
-        mine = (cfg.mpc.formulation,) if planner_ready is not None else None
+        mine = (cfg.loop.mpc.formulation,) if planner_ready is not None else None
         log.debug("planners warmed up in %.2f s", warm_up(cfg.loop, formulations=mine))
         entry = robot(cfg.robot)
         factory = robot_factory or (lambda c, events: entry.build(c.devices, c.plant, events))
