@@ -208,3 +208,25 @@ def test_the_centred_cycle_is_chosen_by_its_own_cost():
     assert chosen.cost.total <= solver.cost.total
     assert chosen.cost.mean_force[0] <= 0.6 * target[0]
     assert _direction_error(chosen.cost.mean_force, target) <= math.radians(15.0)
+
+
+def _duration(u) -> float:
+    return abs(u[0]) / u[2] + abs(u[1]) / u[3]
+
+
+def test_a_centred_plan_takes_at_most_max_cycle():
+    """Near 0.1 m/s the cycle of least cost for a small forward force can be a fast stroke
+    and a return at the slowest rate, over 2 s (a plan met cruising at 0.09 m/s). With
+    ``max_cycle`` the plan is the cheapest among the cycles that take no longer; a limit no
+    candidate meets leaves the shortest one."""
+    target, v, theta, u_prev = (-0.189, -0.0006), 0.088, -1.522, (0.485, -0.587, 2.349, 0.5)
+    free = FinMpc(CENTRED, seed=1, drive=ExecutorConfig()).plan(target, v, theta, u_prev, seed=3)
+    assert _duration(free.u) > 1.5  # the case the limit is for
+    bounded = FinMpc(CENTRED.replace(max_cycle=1.5), seed=1, drive=ExecutorConfig()).plan(
+        target, v, theta, u_prev, seed=3)
+    assert _duration(bounded.u) <= 1.5 + 1e-9
+    assert bounded.cost.total >= free.cost.total
+    assert _direction_error(bounded.cost.mean_force, target) <= math.radians(15.0)
+    tight = FinMpc(CENTRED.replace(max_cycle=0.01), seed=1, drive=ExecutorConfig()).plan(
+        target, v, theta, u_prev, seed=3)
+    assert 0.01 < _duration(tight.u) <= _duration(bounded.u)

@@ -281,6 +281,18 @@ class FinMpc:
         """:meth:`_timed` of every plan of ``u`` (shape (..., 4))."""
         return u if self._drive is None else timed_rates(u, self.config, self._drive)
 
+    def _bounded(self, cycles: np.ndarray, cost: np.ndarray) -> np.ndarray:
+        """``cost`` with the cycles longer than ``max_cycle`` out of the running (all of them
+        but the shortest when none is within it)."""
+        limit = self.config.max_cycle
+        if limit <= 0.0:
+            return cost
+        duration = np.abs(cycles[:, 0]) / cycles[:, 2] + np.abs(cycles[:, 1]) / cycles[:, 3]
+        ok = duration <= limit
+        if not ok.any():
+            ok = duration <= duration.min()
+        return np.where(ok, cost, np.inf)
+
     def _executable(self, u: list[float], f: tuple, v: float, th: float, up: tuple) -> tuple[list[float], CostBreakdown]:
         """The solved plan as it will run (beyond the paper; module docstring): centred on
         the oscillation centre the target's direction asks for, with the amplitude and rates
@@ -293,12 +305,11 @@ class FinMpc:
             return out, self.score(tuple(out), f, v, th, up)
         rows = np.vstack([np.asarray(u, dtype=float)[None], self._grid])
         cycles = self._timed_all(centred_cycles(rows, f, th, up, cfg))
-        j = cost_terms(cycles, f, v, th, up, cfg, self.table)["total"]
-        k = int(np.argmin(j))
+        k = int(np.argmin(self._bounded(cycles, cost_terms(cycles, f, v, th, up, cfg, self.table)["total"])))
         fine = fine_grid(rows[k], *self._steps)
         if len(fine):  # the fine grid about the best, which stays if none is better
             cycles = np.vstack([cycles[k][None], self._timed_all(centred_cycles(fine, f, th, up, cfg))])
-            k = int(np.argmin(cost_terms(cycles, f, v, th, up, cfg, self.table)["total"]))
+            k = int(np.argmin(self._bounded(cycles, cost_terms(cycles, f, v, th, up, cfg, self.table)["total"])))
         out = cycles[k].tolist()
         return out, self.score(tuple(out), f, v, th, up)
 

@@ -91,6 +91,11 @@ class MpcConfig(Config):
         doc="turn each planned cycle (its oscillation centre) so its mean force points along the "
         "target, at most this fast (0: the paper's MPC, the cycle as solved)",
     )
+    max_cycle: float = param(
+        0.0, lo=0.0, hi=60.0, unit="s",
+        doc="with centre_rate > 0: the longest cycle the centred plan may take, as the drives time it "
+        "(0: no limit; the shortest candidate when none is within it)",
+    )
     centre_grid: int = param(
         12, lo=0, hi=64,
         doc="with centre_rate > 0: the centred cycle is the one of least cost among the solver's and a grid of "
