@@ -270,6 +270,10 @@ def test_tracking_counts_only_while_driving_and_restarts_its_time_when_back_in_b
         assert not [tr for tr in m.check(t) if tr.name == "tracking"]
     cut, off = m.control()
     assert off == ["heading +0.50 rad for 3 s"] and cut == []
+    since, what = m.off_track(10.9)  # what the seeker reads: off since 8.1 s
+    assert since == pytest.approx(2.8) and what == "heading +0.50 rad"
+    m.on_message(ch.BODY_TRACKING, tracking(11.0))
+    assert m.off_track(11.0) == (0.0, "")
 
 
 def test_the_control_light_names_what_the_allocation_cuts() -> None:

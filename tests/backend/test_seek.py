@@ -303,3 +303,43 @@ def test_it_stops_when_its_pilot_is_gone(make_console: Callable[..., Console], m
     sup.step(0.2)
     assert run.finished and run.reason in ("its pilot is no longer the pilot", "failsafe pilot_gone")
     assert sup.param_value("mpc.st_opt") == pytest.approx(0.3)
+
+
+def test_a_candidate_under_which_the_robot_loses_its_track_is_rejected_before_the_failsafe(
+        make_console: Callable[..., Console], monkeypatch: pytest.MonkeyPatch) -> None:
+    import dataclasses
+
+    c = seek_console(make_console, max_candidates=8, settle_s=2.0, window_s=4.0, abort_s=1.0)
+    sup = c.sup
+    fake_rows(monkeypatch, sup, lambda v, t: 100.0 * v)
+    lost: dict[str, float] = {}  # since when the robot is off its track under the present value
+
+    def off_track(now: float) -> tuple[float, str]:  # the lowest values cannot hold the speed
+        if sup.param_value("mpc.st_opt") >= 0.28:
+            lost.clear()
+            return 0.0, ""
+        since = lost.setdefault("since", now)
+        return now - since, "speed -0.06 m/s"
+
+    sup.seek_host = dataclasses.replace(sup.seek_host, off_track=off_track)
+    run = sup.start_seek(LOCAL)
+    run_until(sup, lambda: run.finished, limit=120.0)
+    assert run.reason == "completed" and len(run.candidates) == 8
+    low = [cand for cand in run.candidates if dict(cand.values)["mpc.st_opt"] < 0.28]
+    assert low, "the search tried no value that loses the track"
+    for cand in low:
+        assert cand.verdict.startswith("rejected: lost its track (speed -0.06 m/s off its expected response")
+        assert cand.energy is None
+    ends = {ev.data["index"]: ev.data["t1"] - ev.data["t0"] for ev in c.events if ev.source == "seek" and ev.code == "candidate"}
+    for cand in low:  # ended a second into it, not after its settle and window
+        assert ends[cand.index] < 2.0 + 4.0 - 1.0
+    assert dict(run.best.values)["mpc.st_opt"] >= 0.28
+    assert "tracking" not in sup.state().failsafes
+    assert sup.param_value("mpc.st_opt") == dict(run.best.values)["mpc.st_opt"]
+
+
+def test_an_abort_time_not_shorter_than_the_tracking_failsafes_is_refused(
+        make_console: Callable[..., Console]) -> None:
+    c = seek_console(make_console, abort_s=10.0)  # the tracking failsafe's timeout: 10 s
+    with pytest.raises(CommandRefused, match=r"seek.abort_s \(10 s\) must be shorter than the tracking failsafe"):
+        c.sup.start_seek(LOCAL)

@@ -665,6 +665,18 @@ class SafetyMonitor:
                    for since, err in (self._off_track[axis],)]
             return cut, off
 
+    def off_track(self, now: float) -> tuple[float, str]:
+        """(how long, at ``now``, the tracked axis off its expected response the longest has
+        been off, s (0 when none is); that axis's error as "axis error unit")."""
+        with self._lock:
+            worst = (0.0, "")
+            for axis, _f, _b, unit in TRACKED:
+                if axis in self._off_track:
+                    since, err = self._off_track[axis]
+                    if now - since >= worst[0]:
+                        worst = (max(0.0, now - since), f"{axis} {err:+.2f} {unit}")
+            return worst
+
     def slow_fins(self) -> list[str]:
         """What was reported of each fin reported slow and not recovered since (paper fin order)."""
         with self._lock:

@@ -60,6 +60,10 @@ class SeekConfig(Config):
                               doc="a candidate whose depth error (mean |error| over its window) is larger is rejected")
     heading_band: float = param(0.15, lo=0.0, hi=3.2, unit="rad",
                                 doc="a candidate whose heading error (mean |error| over its window) is larger is rejected")
+    abort_s: float = param(5.0, lo=0.5, hi=600.0, unit="s",
+                           doc="a candidate whose speed, depth or heading has been off its expected response "
+                               "(the tracking failsafe's measure) this long is rejected at once and the best put "
+                               "back; shorter than the tracking failsafe's timeout")
     drift_check: bool = param(True, doc="after a search, keep measuring the best and seek again when a "
                                         "window's energy per metre falls outside the best's interval")
     max_seeks: int = param(3, lo=1, hi=100, doc="searches in one run at most (the first and the re-seeks)")

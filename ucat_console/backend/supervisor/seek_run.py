@@ -10,7 +10,10 @@ battery's (``power/electrical``) energy per metre with its bootstrap interval, a
 speed, depth and heading tracking errors. A candidate whose tracking error is larger than
 its band is rejected (never rewarded; the best values are put back before the next), as is
 one without electrical readings or without an interval (a window of fewer than two fin
-cycles). The search (:class:`~ucat_console.backend.seek.search.Search`,
+cycles). A candidate under which the robot loses its track (an axis off its expected
+response, the tracking failsafe's measure, for ``abort_s``) is rejected at once, before the
+failsafe's timeout, and the best put back, so that a gait that cannot hold the speed ends
+its candidate, not the seek. The search (:class:`~ucat_console.backend.seek.search.Search`,
 Optuna's TPE) is told each result and suggests the next; the first candidate is the values
 in force at the start. Each candidate is an event (source ``"seek"``, code
 ``"candidate"``) and a journal entry with its figures and verdict.
@@ -82,6 +85,11 @@ class SeekHost:
     #: the loop's time (s)
     time: Callable[[], float]
     metrics: MetricsConfig
+    #: ``off_track(now)``: how long the axis furthest off its expected response has been off (s,
+    #: 0 when none is) and its error in words (``Safety.off_track``)
+    off_track: Callable[[float], tuple[float, str]]
+    #: the tracking failsafe's timeout (s): a candidate is rejected before it
+    tracking_timeout: float
 
 
 @dataclass(frozen=True)
@@ -204,6 +212,9 @@ class SeekRun:
         active = host.failsafes()
         if active:
             raise CommandRefused(f"seek: refused while failsafe {', '.join(active)} is active")
+        if self.cfg.abort_s >= host.tracking_timeout:
+            raise CommandRefused(f"seek: seek.abort_s ({self.cfg.abort_s:g} s) must be shorter than the tracking "
+                                 f"failsafe's timeout ({host.tracking_timeout:g} s)")
         with self._lock:
             self._dims = check_space(self.params, host.param_field)
             self.start_values = {p.name: float(host.param_value(p.name)) for p in self.params}
@@ -226,6 +237,11 @@ class SeekRun:
                 self.finish(why, keep=self.cfg.on_stop == "best")
                 return True
             now = self.host.time()
+            if self.phase in ("settle", "measure"):
+                off, what = self.host.off_track(now)
+                if off >= self.cfg.abort_s:
+                    self._reject(now, f"rejected: lost its track ({what} off its expected response for {off:.0f} s)")
+                    return self._finished
             if now + 1e-9 < self._due:
                 return False
             if self.phase == "settle":
@@ -292,7 +308,20 @@ class SeekRun:
         verdict = why or (self._off_track(row) if row is not None else "") or "accepted"
         energy = row.figures["energy_per_metre"] if row is not None and not why else None
         line = segment_line(row) if row is not None else why
-        cand = Candidate(k, self.searches - 1, values, energy, verdict, line)
+        self._record(Candidate(k, self.searches - 1, values, energy, verdict, line), row, now)
+
+    def _reject(self, now: float, verdict: str) -> None:
+        """The candidate under test rejected before its window ends (``verdict`` says why)."""
+        k = len(self.candidates)
+        with self._data_lock:
+            self._data.drop_before(now - 1.0)
+        values = tuple((d.name, self._values[d.name]) for d in self._dims)
+        self._window = (self._window[0], min(self._window[1], now))
+        self._record(Candidate(k, self.searches - 1, values, None, verdict, verdict), None, now)
+
+    def _record(self, cand: Candidate, row: TableRow | None, now: float) -> None:
+        """``cand`` measured: the search told, its event and journal entry; then the next step."""
+        k, values, energy, verdict = cand.index, cand.values, cand.energy, cand.verdict
         self.candidates.append(cand)
         search = self._search
         assert search is not None

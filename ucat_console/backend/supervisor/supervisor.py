@@ -240,7 +240,8 @@ class Supervisor:
             failsafes=self.safety.active, param_field=param_field, param_value=self.param_value,
             set_params=self.set_params, journal=self.journal_log.add,
             publish_event=lambda ev: self.stream.publish(ch.EVENTS, ev), subscribe=self.stream.subscribe,
-            time=lambda: self.loop.time, metrics=cfg.metrics,
+            time=lambda: self.loop.time, metrics=cfg.metrics, off_track=self.safety.off_track,
+            tracking_timeout=cfg.failsafe.tracking.timeout,
         )
         #: the seek of efficiency last started (None: none yet)
         self.seek_run: SeekRun | None = None
