@@ -197,6 +197,7 @@ def run_job(job: Job) -> dict[str, Any]:
     its best values and their time to converge."""
     from ucat_console.backend.access import LOCAL
     from ucat_console.backend.loop.clock import SimulatedClock
+    from ucat_console.backend.loop.commands import CommandRefused
     from ucat_console.backend.review.metrics import TABLE_CHANNELS, RunData
     from ucat_console.backend.robots import robot
     from ucat_console.backend.supervisor import Supervisor
@@ -270,9 +271,14 @@ def run_job(job: Job) -> dict[str, Any]:
             else:
                 tc = change()
                 out["t_change"] = tc
-                again = sup.start_seek(LOCAL, candidates=t.reseek_candidates, seed=job.seed + 1)
-                wait(lambda: again.finished)
-                out["after_change"] = _search(again, tc, events)
+                try:
+                    again = sup.start_seek(LOCAL, candidates=t.reseek_candidates, seed=job.seed + 1)
+                except CommandRefused as e:  # a failsafe ended the nominal search: tracking not held
+                    out["after_change"] = {"reason": f"no second search: {e}", "candidates": [],
+                                           "converged_s": math.nan}
+                else:
+                    wait(lambda: again.finished)
+                    out["after_change"] = _search(again, tc, events)
         out["fault"] = str(sup.fault or "")
     finally:
         sup.stop()
