@@ -73,3 +73,25 @@ def test_at_a_slow_beat_a_surge_beyond_the_fins_is_cut_and_the_yaw_moment_kept()
         assert all(np.hypot(*f) <= loop.body.fin_force * (1 + 1e-9) for f in a.allocation.per_fin())
     finally:
         loop.close()
+
+
+def test_the_body_loops_follow_the_fins_cycles_under_the_baseline_only() -> None:
+    from ucat_console.control.params import DESIGN_DELAY
+    from ucat_console.control.pid import PID_KP
+
+    cfg = LoopConfig(mode="baseline", baseline=BaselineConfig(frequency=0.5))
+    loop = ClosedLoop(cfg, SimRobotIO(depth=1.0, velocity=0.1, seed=0), TelemetryStream(),
+                      setpoints=BodySetpoints(velocity=0.1, depth=1.0))
+    try:
+        loop.run_until(20.0)  # 2-s cycles: the loops run the gains of a 2-s delay
+        assert loop.body.delay == pytest.approx(cfg.body.schedule_max_delay, rel=0.05)
+        kp_slow = loop.body.yaw_pid.state[PID_KP]
+        loop.submit(SetMode("mpc", "pilot"))
+        loop.run_until(20.5)
+        assert loop.body.delay == DESIGN_DELAY  # the MPC holds its cycles: the configured gains
+        assert loop.body.yaw_pid.scale == (1.0, 1.0, 1.0) and loop.body.yaw_pid.state[PID_KP] != kp_slow
+        loop.submit(SetMode("baseline", "pilot"))
+        loop.run_until(21.0)
+        assert loop.body.delay == pytest.approx(cfg.body.schedule_max_delay)  # from the longest, as after a reset
+    finally:
+        loop.close()

@@ -294,9 +294,11 @@ class ClosedLoop:
         return old
 
     def limit_fins(self) -> None:
-        """The body layer's allocation limits for the fin model and the mode's planners in
-        force (a fixed beat frequency makes less than the fin model's deliverable force)."""
+        """The body layer fitted to the mode's planners in force: its allocation limits (a
+        fixed beat frequency makes less than the fin model's deliverable force) and whether
+        its loops follow the fins' cycle periods (``Mode.schedules_body``)."""
         self.body.set_fin_model(self.fins.blocks["mpc"], self.fins.force_limit(self._mode))
+        self.body.set_scheduled(MODES[self._mode].schedules_body)
 
     def apply_block(self, block: str, cfg: Any, t: float, who: str) -> None:
         entry = tunable.block(block)

@@ -58,6 +58,11 @@ class Mode:
     #: follow it, so that an axis the fins cannot serve is cut in priority order rather than
     #: lost in the strokes' saturation; None: the fin model's deliverable force
     fin_force: Callable[[PlannerSetting], float] | None = None
+    #: the body loops follow the fins' executed cycle periods under this mode
+    #: (``BodyConfig.schedule``): its beat frequency is the operator's choice, so its cycles
+    #: may run far longer than the delay the loops are designed for (the MPC modes hold
+    #: theirs within ``MpcConfig.max_cycle`` and run the designed gains)
+    schedules_body: bool = False
 
     def __post_init__(self) -> None:
         if self.fins not in (INDEPENDENT_FINS, SYNC_FINS):
@@ -95,7 +100,7 @@ register(Mode("mpc_sync", "MPC, rear fins synchronised", "MPC sync", SYNC_FINS,
 register(Mode("baseline", "baseline inverse model", "baseline", INDEPENDENT_FINS,
               lambda s: BaselineFinPlanner(s.mpc, s.baseline, s.executor), reads=("mpc", "baseline"),
               fin_force=lambda s: fin_model_inverse(s.mpc, s.baseline, s.executor.acceleration,
-                                                    s.executor.max_rate).peak_force))
+                                                    s.executor.max_rate).peak_force, schedules_body=True))
 register(Mode("identify", "the identification manoeuvre (Session tab)", "identify", INDEPENDENT_FINS,
               lambda s: ManoeuvreFinPlanner(s.manoeuvre, s.mpc), reads=("mpc", "manoeuvre"),
               follows_targets=False))
