@@ -138,6 +138,11 @@ class FinModelInverse:
         self.peak = 0.5 * (lo + hi)
         self._peak_force = self.force(self.peak)
 
+    @property
+    def peak_force(self) -> float:
+        """The largest mean force (N) a beat at this frequency makes (at :attr:`peak`)."""
+        return self._peak_force
+
     def force(self, amplitude: float) -> float:
         """The mean force (N) of a symmetric beat of ``amplitude`` (rad)."""
         return _beat_force(amplitude, self._q, self._frequency, *self._drive)

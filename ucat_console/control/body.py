@@ -591,13 +591,37 @@ class BodyController:
         self._scheduled = cfg.layer == "designed" and cfg.schedule
         self.reset()
 
-    def set_fin_model(self, mpc: MpcConfig) -> None:
-        """The fin model the designed layer's limits come from (the MPC's configuration)."""
+    def set_scheduled(self, on: bool) -> None:
+        """Whether the designed loops follow the fins' executed cycle periods now (the mode's
+        planners' beat is the operator's choice: ``backend.loop.modes.Mode.schedules_body``),
+        when ``BodyConfig.schedule`` allows it: on, from the longest delay as after a reset;
+        off, the configured gains (the integrals kept)."""
+        on = bool(on) and self.cfg.layer == "designed" and self.cfg.schedule
+        if on == self._scheduled:
+            return
+        self._scheduled = on
+        self._delay = math.nan
+        if on:
+            self._period = self.cfg.schedule_max_delay
+            self._period_t = math.nan
+            self._schedule(self._period)
+        else:
+            for pid in (self.velocity_pid, self.depth_pid, self.yaw_pid):
+                pid.schedule((1.0, 1.0, 1.0))
+
+    def set_fin_model(self, mpc: MpcConfig, planner_force: float | None = None) -> None:
+        """The fin model the designed layer's limits come from (the MPC's configuration),
+        and the largest force the fins' planners make, when less (a fixed beat frequency's
+        peak, ``backend.loop.modes.Mode.fin_force``; None: the fin model's deliverable force)."""
         cfg = self.cfg
         ex = self._executor
         self.fin_force = deliverable_force(mpc, ex.acceleration, ex.max_rate)
         if cfg.max_fin_force > 0.0:
             self.fin_force = min(self.fin_force, cfg.max_fin_force)
+        if planner_force is not None:
+            if not (math.isfinite(planner_force) and planner_force > 0.0):
+                raise ValueError(f"planner_force: expected a finite force > 0 N, got {planner_force!r}")
+            self.fin_force = min(self.fin_force, planner_force)
         self.state[B_ALLOC:B_ALLOC + NA] = wrench_params(
             self.fin_force, cfg.thrust_gain, MOUNTING_ANGLE_DEG, ARM_YAW, cfg.heave_rear_share, cfg.yaw_on_rear)
         lim = axis_limits(cfg, self.fin_force)

@@ -221,11 +221,12 @@ class BodyConfig(Config):
         "surge demand would reach each fin at a different time and turn the robot",
     )
     schedule: bool = param(
-        False, doc="designed layer: the loops' gains follow the period of the cycles the fins execute (the "
-        "configured gains are for the design delay, 1.25 s; control.body_design), between schedule_min_delay and "
-        "schedule_max_delay, the period low-passed (schedule_rise, schedule_filter) so that the gains move smoothly; "
-        "off by default: it steadies slow gaits (a 0.5 Hz baseline) but costs the MPC modes heading in the "
-        "disturbance cases (docs/control.md)",
+        True, doc="designed layer, under a mode whose beat frequency is the operator's choice (the baseline: "
+        "backend.loop.modes.Mode.schedules_body): the loops' gains follow the period of the cycles the fins execute "
+        "(the configured gains are for the design delay, 1.25 s; control.body_design), between schedule_min_delay "
+        "and schedule_max_delay, the period low-passed (schedule_rise, schedule_filter) so that the gains move "
+        "smoothly; it steadies slow gaits (a 0.5 Hz baseline). The MPC modes hold their cycles within "
+        "mpc.max_cycle and run the configured gains (scheduled, they lost heading: docs/control.md)",
     )
     schedule_min_delay: float = param(
         DESIGN_DELAY, lo=0.1, hi=4.0, unit="s",

@@ -368,6 +368,15 @@ class Actuators:
         seed = int(np.random.SeedSequence([self.cfg.planner_seed, self._generation, index]).generate_state(1)[0])
         return MODES[mode].planner(PlannerSetting(b["mpc"], b["baseline"], self.cfg.executor, b["manoeuvre"], seed))
 
+    def force_limit(self, mode: str) -> float | None:
+        """The largest mean force (N) a fin's planner of ``mode`` makes with the blocks in
+        force (``Mode.fin_force``; None: the fin model's deliverable force)."""
+        limit = MODES[mode].fin_force
+        if limit is None:
+            return None
+        b = self.blocks
+        return float(limit(PlannerSetting(b["mpc"], b["baseline"], self.cfg.executor, b["manoeuvre"], 0)))
+
     def _new(self, mode: str) -> list[Actuator]:
         self._generation += 1
         out = []

@@ -98,8 +98,7 @@ def initial_blocks(cfg: LoopConfig) -> dict[str, Any]:
 
 
 def _apply_mpc(loop: BlockTarget, cfg: MpcConfig) -> None:
-    loop.body.set_fin_model(cfg)  # the body-frame layer's limits come from the fin model
-    loop.fins.retune("mpc", cfg)
+    loop.fins.retune("mpc", cfg)  # the loop then sets the body layer's limits (``ClosedLoop.limit_fins``)
 
 
 def _pid(name: str, title: str) -> Block:

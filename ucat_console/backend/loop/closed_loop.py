@@ -168,6 +168,7 @@ class ClosedLoop:
         # the set-points the fins are actually sent: the robot's report (the arming gate:
         # those it passes on, and its stops), else each command as given
         self._sent_as_given = not io.report_sent(self.fins.sent)
+        self.limit_fins()
 
     # ------------------------------------------------------------------ public state
     @property
@@ -285,17 +286,26 @@ class ClosedLoop:
         self._mode = mode
         lc.retarget(self._s, self.body.state, self._sync)
         self.fins.switch(mode, t)
+        self.limit_fins()
         self.outbox.event(t, "mode", f"{who + ': ' if who else ''}controller {old} -> {mode}", "info",
                           {"from": old, "to": mode, **({"who": who} if who else {})})
         self.fins.check_handovers(t)
         self._publish_status(t)
         return old
 
+    def limit_fins(self) -> None:
+        """The body layer fitted to the mode's planners in force: its allocation limits (a
+        fixed beat frequency makes less than the fin model's deliverable force) and whether
+        its loops follow the fins' cycle periods (``Mode.schedules_body``)."""
+        self.body.set_fin_model(self.fins.blocks["mpc"], self.fins.force_limit(self._mode))
+        self.body.set_scheduled(MODES[self._mode].schedules_body)
+
     def apply_block(self, block: str, cfg: Any, t: float, who: str) -> None:
         entry = tunable.block(block)
         old = self._blocks[block] if block in self._blocks else entry.initial(self.cfg)
         entry.apply(self, cfg)
         self._blocks[block] = cfg
+        self.limit_fins()
         self.outbox.tuning_event(t, block, old, cfg, who)
 
     def apply_restart(self, t: float) -> None:

@@ -21,6 +21,7 @@ from typing import Callable
 
 from ucat_console.backend.loop.planners import BaselineFinPlanner, ManoeuvreFinPlanner, MpcFinPlanner, Planner
 from ucat_console.control.allocation import INDEPENDENT_FINS, SYNC_FINS
+from ucat_console.control.baseline import fin_model_inverse
 from ucat_console.control.params import BaselineConfig, ExecutorConfig, ManoeuvreConfig, MpcConfig
 from ucat_console.registry import Registry
 
@@ -52,6 +53,16 @@ class Mode:
     reads: tuple[str, ...] = ("mpc",)  # blocks of BLOCKS its planners are made from
     follows_targets: bool = True  # False: its fins ignore the body loops (no tracking to judge)
     mpc: bool = False  # its planner is the MPC (an experiment's ``mpc_planner`` stands in for it)
+    #: the largest mean force (N) one fin's planner can make, where it is less than the fin
+    #: model's deliverable force (a fixed beat frequency): the body layer's allocation limits
+    #: follow it, so that an axis the fins cannot serve is cut in priority order rather than
+    #: lost in the strokes' saturation; None: the fin model's deliverable force
+    fin_force: Callable[[PlannerSetting], float] | None = None
+    #: the body loops follow the fins' executed cycle periods under this mode
+    #: (``BodyConfig.schedule``): its beat frequency is the operator's choice, so its cycles
+    #: may run far longer than the delay the loops are designed for (the MPC modes hold
+    #: theirs within ``MpcConfig.max_cycle`` and run the designed gains)
+    schedules_body: bool = False
 
     def __post_init__(self) -> None:
         if self.fins not in (INDEPENDENT_FINS, SYNC_FINS):
@@ -87,7 +98,9 @@ register(Mode("mpc", "MPC", "MPC", INDEPENDENT_FINS,
 register(Mode("mpc_sync", "MPC, rear fins synchronised", "MPC sync", SYNC_FINS,
               lambda s: MpcFinPlanner(s.mpc, s.seed, s.executor), mpc=True))
 register(Mode("baseline", "baseline inverse model", "baseline", INDEPENDENT_FINS,
-              lambda s: BaselineFinPlanner(s.mpc, s.baseline, s.executor), reads=("mpc", "baseline")))
+              lambda s: BaselineFinPlanner(s.mpc, s.baseline, s.executor), reads=("mpc", "baseline"),
+              fin_force=lambda s: fin_model_inverse(s.mpc, s.baseline, s.executor.acceleration,
+                                                    s.executor.max_rate).peak_force, schedules_body=True))
 register(Mode("identify", "the identification manoeuvre (Session tab)", "identify", INDEPENDENT_FINS,
               lambda s: ManoeuvreFinPlanner(s.manoeuvre, s.mpc), reads=("mpc", "manoeuvre"),
               follows_targets=False))
