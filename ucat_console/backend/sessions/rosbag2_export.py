@@ -27,7 +27,7 @@ The NED/FRD telemetry becomes ENU/FLU (REP 103/105) through the one conversion t
 files' transforms use (``foxglove.enu_position``, ``enu_flu_orientation``, ``flu_vector``).
 Times: each message's ``header.stamp`` (``Log.stamp``) is the message's own time ``t`` on the
 recorded stream's clock made UNIX time by the session's ``epoch_offset`` (wall-clock UNIX time
-for live runs; for a simulated run, simulated time from the recording's start); the bag's
+for live runs; for a simulated run, simulated time offset by the run's wall-clock start); the bag's
 receive time of each message is its log time in the session file (the same, except for a
 message that came late on its channel, which is logged at the channel's last time). The
 latched messages carry the first exported message's time.
