@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 from pathlib import Path
 from typing import Any
 
@@ -195,13 +196,13 @@ def test_static_frames_the_urdf_and_fin_transforms_follow_the_urdf(simulated):
     np.testing.assert_allclose(_matrix((frd.w, frd.x, frd.y, frd.z)), FLU_FROM_FRD, atol=1e-12)
     [(_, description)] = msgs["/robot_description"]
     assert description.data == urdf.URDF_PATH.read_text()  # the default robot's, as shipped
-    links = set(__import__("re").findall(r'<link name="([^"]+)"', description.data))
+    links = set(re.findall(r'<link name="([^"]+)"', description.data))
     frames = {t.child_frame_id for _, m in msgs["/tf"] for t in m.transforms}
     parents = {t.header.frame_id for _, m in msgs["/tf"] for t in m.transforms}
     assert frames == {"base_link", "fin0", "fin1", "fin2", "fin3"} and frames <= links
     assert parents == {"odom", "base_link_frd"}
     names = {n for _, m in msgs["/joint_states"] for n in m.name}
-    assert names == set(__import__("re").findall(r'<joint name="(fin\d_joint)"', description.data))
+    assert names == set(re.findall(r'<joint name="(fin\d_joint)"', description.data))
 
 
 def test_our_messages_carry_every_field_of_their_channels():
