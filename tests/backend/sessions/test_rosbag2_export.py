@@ -316,3 +316,31 @@ def test_the_command_line(sessions, tmp_path, capsys):
     not_mcap.write_bytes(b"not an mcap file")
     assert main(["sessions", "export", str(not_mcap), "--rosbag2", str(tmp_path / "b4")]) == 2
     assert not_mcap.name in capsys.readouterr().err and not (tmp_path / "b4").exists()
+
+
+def test_the_urdf_is_the_recorded_robots(sessions, tmp_path):
+    """A session recorded with another hull: the bag's URDF is that robot's, not the shipped one."""
+    cfg = AppConfig.from_dict({"plant": {"vehicle": {"hull_size": [0.7, 0.3, 0.25]}}})
+    items = [(C.BODY_STATE, BodyState(0.1 * k, (0.0, 0.0, 0.5), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
+                                      (0.0, 0.0, 0.0), 0.5)) for k in range(3)]
+    [path] = record(sessions, items, label="hull", wall_time=1_700_000_000.0, config_toml=cfg.to_toml(redact=True))
+    bag = tmp_path / "bag"
+    assert main(["sessions", "export", str(path), "--rosbag2", str(bag)]) == 0
+    [(_, description)] = read_bag(bag)[0]["/robot_description"]
+    assert '<box size="0.7 0.3 0.25"/>' in description.data
+    assert description.data != urdf.URDF_PATH.read_text()
+
+
+def test_the_bag_file_is_ros2_mcap(simulated):
+    """The storage file as the MCAP library reads it: the ros2 profile, ros2msg schemas, CDR."""
+    from mcap.reader import make_reader
+
+    _, bag = simulated
+    [file] = list(bag.glob("*.mcap"))
+    assert file.name == f"{bag.name}.mcap"
+    with open(file, "rb") as fh:
+        reader = make_reader(fh)
+        assert reader.get_header().profile == "ros2"
+        summary = reader.get_summary()
+    assert {s.encoding for s in summary.schemas.values()} == {"ros2msg"}
+    assert {c.message_encoding for c in summary.channels.values()} == {"cdr"}
