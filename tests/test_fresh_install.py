@@ -55,7 +55,10 @@ def test_the_wheel_installs_in_a_fresh_venv_and_runs_from_another_folder(tmp_pat
                "ucat_console/foxglove-layout.json",
                *(f"ucat_console/manoeuvres/{n}.toml" for n in ("e4_ladder", "fig8_circle", "depth_step", "ab_modes")),
                *(f"ucat_console/robot/ucat_description/{n}" for n in ("package.xml", "CMakeLists.txt",
-                                                                       "urdf/ucat.urdf", "meshes/hull.stl"))}
+                                                                       "urdf/ucat.urdf", "meshes/hull.stl")),
+               *(f"ucat_console/robot/ucat_msgs/{n}" for n in ("package.xml", "CMakeLists.txt", "msg/FinState.msg",
+                                                                "msg/FinStrouhal.msg", "msg/Power.msg",
+                                                                "msg/ElectricalPower.msg"))}
     assert shipped <= names
     assert any(n.endswith(".dist-info/licenses/LICENSE") for n in names)
     assert not any(n.endswith((".mcap", ".nbi", ".nbc")) for n in names)

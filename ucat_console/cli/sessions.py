@@ -36,12 +36,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     _add_dir(p)
     p.set_defaults(func=run_info)
 
-    p = kinds.add_parser("export", help="CSV files of a set of channels (every part)")
+    p = kinds.add_parser("export", help="CSV files of a set of channels, or a rosbag2 bag (every part)")
     p.add_argument("file", metavar="SESSION", help="session id or any part file of it")
-    p.add_argument("--topics", nargs="+", required=True, metavar="CHANNEL",
-                   help="channels to export (e.g. body/state fin/0/state; 'all' for every one)")
-    p.add_argument("--format", choices=("csv",), default="csv", help="output format")
-    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory")
+    p.add_argument("--topics", nargs="+", default=None, metavar="CHANNEL",
+                   help="CSV: channels to export (e.g. body/state fin/0/state; 'all' for every one)")
+    p.add_argument("--format", choices=("csv",), default="csv", help="output format of --out")
+    p.add_argument("--out", type=Path, default=None, metavar="DIR", help="CSV: output directory")
+    p.add_argument("--rosbag2", type=Path, default=None, metavar="DIR",
+                   help="write a ROS 2 bag (MCAP storage, standard and ucat_msgs types) into DIR, "
+                        "a new or empty directory (docs/sessions.md, 'rosbag2')")
     p.add_argument("--start", type=float, default=None, help="from this time (stream s)")
     p.add_argument("--end", type=float, default=None, help="before this time (stream s)")
     _add_dir(p)
@@ -162,6 +165,13 @@ def run_info(args: argparse.Namespace) -> int:
 
 
 def run_export(args: argparse.Namespace) -> int:
+    if args.rosbag2 is not None:
+        if args.topics is not None or args.out is not None:
+            raise ValueError("export: --rosbag2 writes every topic it knows into its own directory; "
+                             "give it without --topics and --out")
+        return _export_rosbag2(args)
+    if args.topics is None or args.out is None:
+        raise ValueError("export: give --topics and --out (CSV), or --rosbag2 DIR")
     from ucat_console.backend.sessions.export import export_csv
     from ucat_console.backend.sessions.reader import SessionParts
     from ucat_console.telemetry.channels import CHANNELS
@@ -173,6 +183,22 @@ def run_export(args: argparse.Namespace) -> int:
         result = export_csv(s, topics, args.out, args.start, args.end)
     for channel, (path, rows) in result.items():
         print(f"{channel:<20} {rows:>9} rows -> {path}")
+    return 0
+
+
+def _export_rosbag2(args: argparse.Namespace) -> int:
+    from ucat_console.backend.identification import recorded_app_config
+    from ucat_console.backend.sessions.reader import SessionParts
+    from ucat_console.backend.sessions.rosbag2_export import check_destination, export_rosbag2
+
+    check_destination(args.rosbag2)  # before reading anything
+    with SessionParts(args.file, args.dir, confined=False) as s:
+        cfg = recorded_app_config(s, str(s.path))  # the recorded robot's geometry
+        counts = export_rosbag2(s, args.rosbag2, args.start, args.end,
+                                plant=cfg.plant if cfg is not None else None)
+    for topic, n in counts.items():
+        print(f"{topic:<20} {n:>9} messages")
+    print(f"rosbag2 bag -> {args.rosbag2} (ros2 bag info {args.rosbag2})")
     return 0
 
 
