@@ -167,7 +167,7 @@ def test_imu_pressure_and_fins_are_the_recorded_readings(simulated):
         np.testing.assert_allclose([a.x, a.y, a.z], [r.accel[0], -r.accel[1], -r.accel[2]], atol=1e-15)
     # at rest, level: the specific force points up in FLU (+g)
     assert msgs["/imu"][0][1].linear_acceleration.z == pytest.approx(9.8, abs=0.3)
-    assert [m.fluid_pressure for _, m in msgs["/pressure"]] == [r.pressure_pa for r in depth]
+    assert [m.fluid_pressure for _, m in msgs["/pressure"]] == [r.pressure_pa + 101_325.0 for r in depth]  # absolute
     assert all(m.header.frame_id == "base_link" for _, m in msgs["/pressure"])
     states = [m for _, m in msgs["/fin1/state"]]
     assert [(m.fin, m.angle, m.rate, m.angle_cmd, m.rate_cmd) for m in states] == \
@@ -243,7 +243,7 @@ def test_a_crafted_session_and_a_time_range(sessions, tmp_path):
             for _, m in msgs["/odom"]] == [(2.0, 1.0 + k, -0.5) for k in range(3, 8)]  # east, north, up
     # the latched messages carry the range's first time
     assert msgs["/tf_static"][0][0] == to_ns(0.25) == _ns(msgs["/tf_static"][0][1].transforms[0].header.stamp)
-    assert [m.fluid_pressure for _, m in msgs["/pressure"]] == [106_325.0 + k for k in range(3, 8)]
+    assert [m.fluid_pressure for _, m in msgs["/pressure"]] == [106_325.0 + k + 101_325.0 for k in range(3, 8)]
     imu = msgs["/imu"][0][1]
     assert imu.orientation_covariance[0] == -1.0 and math.isnan(imu.orientation.w)
     # fin 0's angle is NaN at t 0.3: on /fin0/state and /joint_states as recorded, not on /tf

@@ -15,7 +15,7 @@ files' transforms, ``foxglove.py``, name them)::
                                                 base_link (FLU)
     /imu                sensor_msgs/Imu         sensors/imu, in base_link (FLU; orientation
                                                 of base_link in ENU)
-    /pressure           sensor_msgs/FluidPressure  sensors/depth's pressure (Pa)
+    /pressure           sensor_msgs/FluidPressure  sensors/depth's gauge pressure + the standard atmosphere (Pa)
     /joint_states       sensor_msgs/JointState  fin/<i>/state: fin<i>_joint's angle and rate
     /fin<i>/state       ucat_msgs/FinState      fin/<i>/state, every field
     /fin<i>/strouhal    ucat_msgs/FinStrouhal   fin/<i>/strouhal
@@ -64,6 +64,7 @@ from rosbags.typesys import Stores, get_typestore, get_types_from_msg
 from ucat_console.backend.sessions import foxglove
 from ucat_console.backend.sessions.reader import SessionSource
 from ucat_console.robot import urdf
+
 from ucat_console.telemetry import channels as C
 from ucat_console.telemetry.events import Event
 
@@ -73,6 +74,9 @@ ROS_DISTRO = Stores.ROS2_JAZZY
 BAG_VERSION = 9
 MSG_PACKAGE = "ucat_msgs"
 MSG_PACKAGE_DIR = Path(urdf.__file__).with_name(MSG_PACKAGE)
+#: the standard atmosphere (Pa, ISO 2533): the depth transducer (Gems 3101P) is a gauge type,
+#: reading above the atmosphere, and FluidPressure is absolute
+STANDARD_ATMOSPHERE_PA = 101_325.0
 #: the IMU's and the pressure sensor's frame: the URDF has no sensor links, and the sensors'
 #: axes are the body's (the IMU's readings are converted from FRD to FLU)
 SENSOR_FRAME = foxglove.BASE_LINK_FRAME
@@ -233,7 +237,7 @@ class _Maker:
 
     def pressure(self, m: Any, ns: int) -> Any:
         return self._t["sensor_msgs/msg/FluidPressure"](
-            header=self.header(ns, SENSOR_FRAME), fluid_pressure=float(m.pressure_pa), variance=0.0)
+            header=self.header(ns, SENSOR_FRAME), fluid_pressure=float(m.pressure_pa) + STANDARD_ATMOSPHERE_PA, variance=0.0)
 
     def joint_state(self, m: Any, ns: int) -> Any:
         return self._t["sensor_msgs/msg/JointState"](
