@@ -81,12 +81,14 @@ def test_the_wheel_installs_in_a_fresh_venv_and_runs_from_another_folder(tmp_pat
     assert (site / "ucat_console" / "configs" / "sim-tuned.toml").is_file()
 
     # a headless recorded run from a folder of its own: the compiled code is made on this
-    # first run (an empty cache beside the new install), with its progress shown; the
-    # recording goes where the environment says, nowhere near the package
+    # first run (an empty cache: the user's cache folder, here a new one), with its progress
+    # shown; the recording goes where the environment says; nothing is written into the package
     elsewhere, data, xdg = tmp_path / "elsewhere", tmp_path / "recordings", tmp_path / "xdg"
+    cache = tmp_path / "cache"
     elsewhere.mkdir()
+    package_files = {f for f in (site / "ucat_console").rglob("*") if "__pycache__" not in f.parts}
     env = {k: v for k, v in os.environ.items() if not k.startswith(("UCAT_", "NUMBA_", "PYTHON"))}
-    env.update(UCAT_CONSOLE_SESSIONS=str(data), XDG_DATA_HOME=str(xdg))
+    env.update(UCAT_CONSOLE_SESSIONS=str(data), XDG_DATA_HOME=str(xdg), XDG_CACHE_HOME=str(cache))
     proc = subprocess.run([venv / "bin" / "ucat-console", "run", "--config", "sim-tuned", "--headless",
                            "--duration", "5", "--record", "--mode", "baseline", "--velocity", "0.2"],
                           cwd=elsewhere, env=env, capture_output=True, text=True, timeout=1500)
@@ -100,6 +102,9 @@ def test_the_wheel_installs_in_a_fresh_venv_and_runs_from_another_folder(tmp_pat
         assert r.duration >= 5.0 - 0.05
     assert not list(venv.rglob("*.mcap")) and not (site / "sessions").exists()
     assert not list(elsewhere.iterdir()) and not xdg.exists()
+    assert list((cache / "ucat-console").glob("ucat-numba-*/**/*.nbi"))
+    assert {f for f in (site / "ucat_console").rglob("*") if "__pycache__" not in f.parts} == package_files
+    assert not [f for f in (site / "ucat_console").rglob("*") if f.suffix in (".nbi", ".nbc") or f.name.startswith("ucat-numba-")]
 
     # E4R's second setting is the shipped sim-tuned, found in the installed package
     proc = subprocess.run([py, "-c", "from ucat_console.experiments.closed_loop_runs import e4r_settings; "
