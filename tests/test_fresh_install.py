@@ -1,5 +1,5 @@
 """The wheel, installed in a fresh virtual environment with constraints.txt: it holds the
-shipped configurations, the Foxglove layout and the licence; every package at its pinned
+shipped configurations, the Foxglove layout, the licence and the third-party notices; every package at its pinned
 version, consistent (pip check), none of the experiments' libraries (the ``experiments``
 extra); and a headless recorded run from another folder compiles on its first start,
 showing its progress, and records into the folder the environment names."""
@@ -41,7 +41,7 @@ def _norm(name: str) -> str:
 def test_the_wheel_installs_in_a_fresh_venv_and_runs_from_another_folder(tmp_path):
     src = tmp_path / "src"  # a copy: building writes into the source tree
     src.mkdir()
-    for name in ("pyproject.toml", "README.md", "LICENSE", "constraints.txt"):
+    for name in ("pyproject.toml", "README.md", "LICENSE", "THIRD_PARTY_NOTICES.md", "constraints.txt"):
         shutil.copy(ROOT / name, src / name)
     shutil.copytree(ROOT / "ucat_console", src / "ucat_console",
                     ignore=shutil.ignore_patterns("__pycache__"))
@@ -58,6 +58,7 @@ def test_the_wheel_installs_in_a_fresh_venv_and_runs_from_another_folder(tmp_pat
                                                                        "urdf/ucat.urdf", "meshes/hull.stl"))}
     assert shipped <= names
     assert any(n.endswith(".dist-info/licenses/LICENSE") for n in names)
+    assert any(n.endswith(".dist-info/licenses/THIRD_PARTY_NOTICES.md") for n in names)
     assert not any(n.endswith((".mcap", ".nbi", ".nbc")) for n in names)
 
     venv = tmp_path / "venv"
