@@ -1,8 +1,9 @@
 """The wheel, installed in a fresh virtual environment with constraints.txt: it holds the
-shipped configurations, the Foxglove layout, the licence and the third-party notices; every package at its pinned
-version, consistent (pip check), none of the experiments' libraries (the ``experiments``
-extra); and a headless recorded run from another folder compiles on its first start,
-showing its progress, and records into the folder the environment names."""
+shipped configurations, the Foxglove layout, the licence and the third-party notices; every
+package at its pinned version, consistent (pip check), none of the experiments' libraries
+(the ``experiments`` extra); and a headless recorded run from another folder compiles on its
+first start, showing its progress, into the user's cache folder (nothing into the package),
+and records into the folder the environment names."""
 
 from __future__ import annotations
 
