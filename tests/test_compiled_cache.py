@@ -8,7 +8,10 @@ import os
 import shutil
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
+
+import pytest
 
 import ucat_console
 from ucat_console import compiled_cache
@@ -143,15 +146,18 @@ def test_the_cache_folder_setting_is_honoured_and_numbas_own_wins(tmp_path: Path
     assert compiled_cache.cache_dir().parent == tmp_path / "numba"
 
 
-def test_an_unwritable_cache_folder_falls_back_to_the_temporary_directory(tmp_path: Path, monkeypatch) -> None:
+@pytest.mark.parametrize("setting", ["XDG_CACHE_HOME", compiled_cache.CACHE_ENV, "NUMBA_CACHE_DIR"])
+def test_an_unwritable_cache_folder_falls_back_to_the_temporary_directory(setting: str, tmp_path: Path,
+                                                                          monkeypatch) -> None:
+    """Never numba's own fallback, the package's __pycache__."""
     for name in ("NUMBA_CACHE_DIR", compiled_cache.CACHE_ENV):
         monkeypatch.delenv(name, raising=False)
     blocker = tmp_path / "a-file"
     blocker.write_text("")  # a folder cannot be made under a file, even as root
-    monkeypatch.setenv("XDG_CACHE_HOME", str(blocker))
+    monkeypatch.setenv(setting, str(blocker / "cache"))
     base, why = compiled_cache.base_and_reason()
     assert blocker not in base.parents and PACKAGE not in base.parents
-    assert "not writable" in why
+    assert base.parent == Path(tempfile.gettempdir()) and "not writable" in why
 
 
 def test_importing_compiling_and_pruning_write_nothing_inside_the_package(tmp_path: Path) -> None:

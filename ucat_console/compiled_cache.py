@@ -15,9 +15,11 @@ before any kernel is defined):
   share a directory); ``<base>`` (:func:`cache_base`) the ``NUMBA_CACHE_DIR`` the user set,
   else the folder ``UCAT_CONSOLE_CACHE_DIR`` names, else the user's cache folder
   (platformdirs' ``user_cache_dir("ucat-console")``: ``~/.cache/ucat-console`` on Linux,
-  ``$XDG_CACHE_HOME/ucat-console`` when that is set), else (not writable) a folder of the
-  user's in the temporary directory. Nothing is written inside the installed package: a
-  package under site-packages (a Debian package, a read-only image) stays as installed.
+  ``$XDG_CACHE_HOME/ucat-console`` when that is set); where the one chosen is not writable,
+  a folder of the user's in the temporary directory, with a warning (numba would otherwise
+  fall back to the package's ``__pycache__``). Nothing is written inside the installed
+  package: a package under site-packages (a Debian package, a read-only image) stays as
+  installed.
 
 An edit to any compiled source, or a pull of a new version, gives a new directory: the next
 run compiles afresh (``ucat-console prepare`` does it ahead and removes the directories of
@@ -137,23 +139,29 @@ def default_cache_base() -> Path:
 def base_and_reason() -> tuple[Path, str]:
     """:func:`cache_base` and what chose it (for ``ucat-console paths``)."""
     user = _user_base()
-    if user:
-        return Path(user), "$NUMBA_CACHE_DIR"
     named = os.environ.get(CACHE_ENV, "")
-    if named:
-        return Path(named), f"${CACHE_ENV}"
-    base = default_cache_base()
+    if user:
+        base, why = Path(user), "$NUMBA_CACHE_DIR"
+    elif named:
+        base, why = Path(named).expanduser().absolute(), f"${CACHE_ENV}"
+    else:
+        base, why = default_cache_base(), f"the user's cache folder; ${CACHE_ENV} chooses another"
     if _writable(base):
-        return base, f"the user's cache folder; ${CACHE_ENV} chooses another"
-    fallback = Path(tempfile.gettempdir()) / f"ucat-console-{os.getuid() if hasattr(os, 'getuid') else 'user'}"
-    log.warning("the cache folder %s is not writable: numba's compiled code goes to %s", base, fallback)
-    return fallback, f"{base} is not writable; ${CACHE_ENV} chooses another"
+        return base, why
+    # numba itself would fall back to the package's own __pycache__ (a write into the
+    # installed package, and a cache not keyed by the compiled sources): a folder of the
+    # user's in the temporary directory instead
+    uid = os.getuid() if hasattr(os, "getuid") else "user"
+    fallback = Path(tempfile.gettempdir()) / f"ucat-console-{uid}"
+    log.warning("the compiled-code cache folder %s (%s) is not writable: using %s", base, why.split(";")[0], fallback)
+    return fallback, f"{base} ({why.split(';')[0]}) is not writable"
 
 
 def cache_base(root: Path = PACKAGE) -> Path:
     """Where the per-sources directories live: the user's ``NUMBA_CACHE_DIR``, else
-    ``UCAT_CONSOLE_CACHE_DIR``, else the user's cache folder, else (that one not writable, e.g.
-    a read-only home) ``<tmp>/ucat-console-<uid>``. ``root`` is unused: never inside a package."""
+    ``UCAT_CONSOLE_CACHE_DIR``, else the user's cache folder; ``<tmp>/ucat-console-<uid>`` when
+    the one chosen is not writable (a read-only home, an image run as another user). ``root``
+    is unused: never inside a package."""
     return base_and_reason()[0]
 
 
