@@ -176,3 +176,14 @@ def test_importing_compiling_and_pruning_write_nothing_inside_the_package(tmp_pa
     cache = Path(out[-1])
     assert cache.parent == xdg / "ucat-console"
     assert list(cache.rglob("*.nbi")) and list(cache.rglob("*.nbc"))
+
+
+def test_paths_shows_the_compiled_cache_and_what_chose_it(tmp_path: Path, monkeypatch, capsys) -> None:
+    from ucat_console.cli import main
+
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    monkeypatch.setenv(compiled_cache.CACHE_ENV, str(tmp_path / "ours"))
+    assert main(["paths"]) == 0
+    line = next(s for s in capsys.readouterr().out.splitlines() if s.startswith("compiled code"))
+    assert line.split()[2] == str(compiled_cache.cache_dir()) and f"${compiled_cache.CACHE_ENV}" in line
+    assert compiled_cache.cache_dir().parent == tmp_path / "ours"
