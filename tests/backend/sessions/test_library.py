@@ -297,3 +297,61 @@ def test_sessions_find_json_tag_and_trend_from_the_command_line(folder, capsys, 
     assert lines[0] == "session,start_utc,loop.mpc.lam_st,speed"
     by_group = {line.split(",")[0]: line.split(",")[2] for line in lines[1:]}
     assert by_group == {ids["slow"]: "0.5", ids["fast"]: "2.0", ids["plain"]: "2.0"}  # idle: no speed
+
+
+def test_the_documentation_names_every_field_a_query_may_use() -> None:
+    from ucat_console.backend.sessions.library_query import FIELDS
+
+    text = (Path(__file__).resolve().parents[3] / "docs" / "library.md").read_text()
+    assert [f for f in FIELDS if f"`{f}`" not in text] == []
+
+
+def test_the_configuration_is_named_by_the_recording_else_by_a_known_hash(folder, tmp_path) -> None:
+    d, ids = folder
+    [path] = record(d, run_items(2.0), epoch_offset=DAY2, label="named", wall_time=DAY2,
+                    config_toml=_toml("mpc"), config_name="sim-tuned")
+    named = path.name.removesuffix("_001.mcap")
+    slow_hash = library_read.config_hash(_toml("baseline", "closed_stroke", c_d0=0.3))
+    with Library(d, known_configs={slow_hash: "slow-one", library_read.config_hash(_toml("mpc")): "x"}) as lib:
+        lib.refresh()
+        assert lib.get(named).config == "sim-tuned"  # the recording's own name wins
+        assert lib.get(ids["slow"]).config == "slow-one" and lib.get(ids["fast"]).config == "x"
+        assert lib.get(ids["plain"]).config == ""  # a text no name is known for
+        assert _ids(lib, "config=sim-tuned") == {named} and _ids(lib, "slow-one") == {ids["slow"]}
+    with Library(d) as lib:  # opened without the names: they are gone at the next refresh
+        lib.refresh()
+        assert lib.get(ids["slow"]).config == "" and lib.get(named).config == "sim-tuned"
+
+
+MANOEUVRE = """\
+depth = 0.5
+settle = 1.0
+measure = 2.0
+
+[[segment]]
+label = "slow"
+velocity = 0.1
+
+[[segment]]
+label = "fast"
+velocity = 0.25
+mode = "baseline"
+"""
+
+
+@pytest.mark.slow
+def test_a_manoeuvre_recorded_by_the_simulated_console_is_indexed(tmp_path, monkeypatch, capsys) -> None:
+    from ucat_console.backend.sessions import files
+
+    monkeypatch.setenv(files.SESSIONS_ENV, str(tmp_path))
+    script = tmp_path / "short.toml"
+    script.write_text(MANOEUVRE)
+    assert main(["run", "--config", "sim-tuned", "--headless", "--fast", "--manoeuvre", str(script)]) == 0
+    capsys.readouterr()
+    assert main(["sessions", "find", "manoeuvre=short", "--json"]) == 0
+    [row] = json.loads(capsys.readouterr().out)
+    assert row["status"] == "ok" and row["config"] == "sim-tuned" and row["robot"] == "sim"
+    assert row["segments"] == ["slow", "fast"] and "baseline" in row["modes"]
+    assert row["plant"] == "plate_cd0.05" and row["markers"] >= 4
+    f = row["figures"]
+    assert f["epm"] > 0.0 and f["epm_lo"] <= f["epm"] <= f["epm_hi"] and f["speed"] > 0.0

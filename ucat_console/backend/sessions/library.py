@@ -238,7 +238,7 @@ class Library:
             self._conn = None
         for suffix in ("", "-journal", "-wal", "-shm"):
             Path(str(self.db_path) + suffix).unlink(missing_ok=True)
-        log.info("run library %s: built from the files (%s)", self.db_path, why)
+        log.debug("run library %s: built from the files (%s)", self.db_path, why)
         conn = sqlite3.connect(self.db_path, timeout=10.0, check_same_thread=False)
         conn.executescript(_SCHEMA)
         self._conn = conn
