@@ -294,9 +294,13 @@ def known_configs() -> dict[str, str]:
 
 
 def open_library(directory: Path | None) -> Any:
+    from ucat_console.backend.sessions import files
     from ucat_console.backend.sessions.library import Library
 
-    lib = Library(directory, known_configs=known_configs())
+    root = files.sessions_dir(directory)
+    if not root.is_dir():
+        raise ValueError(f"{root}: no such sessions folder")
+    lib = Library(root, known_configs=known_configs())
     report = lib.refresh()
     if report.rebuilt and report.added:
         print(f"run library: indexed {report.added} sessions ({report.rebuilt}) in {report.seconds:.1f} s",

@@ -354,4 +354,5 @@ def test_a_manoeuvre_recorded_by_the_simulated_console_is_indexed(tmp_path, monk
     assert row["segments"] == ["slow", "fast"] and "baseline" in row["modes"]
     assert row["plant"] == "plate_cd0.05" and row["markers"] >= 4
     f = row["figures"]
-    assert f["epm"] > 0.0 and f["epm_lo"] <= f["epm"] <= f["epm_hi"] and f["speed"] > 0.0
+    # a percentile interval of a ratio need not hold the ratio itself on a short run: its ends only
+    assert f["epm"] > 0.0 and 0.0 < f["epm_lo"] <= f["epm_hi"] and f["speed"] > 0.0

@@ -174,9 +174,6 @@ def read_facts(session_id: str, paths: list[Path], directory: Path, *,
     bad = [f"{i.path.name}: {i.error}" for i in infos if i.error]
     if bad:
         return Facts(status="unreadable", error="; ".join(bad), **base)
-    expected = list(range(1, len(infos) + 1))
-    if [i.part for i in infos] != expected and files.parse_part_name(paths[0]) is not None:
-        return Facts(status="unreadable", error=f"parts {[i.part for i in infos]}: a part is missing", **base)
     try:
         with SessionParts(paths[0], directory, budget=budget) as s:
             meta = s.metadata

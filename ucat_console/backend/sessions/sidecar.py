@@ -68,6 +68,8 @@ def read(directory: Path, session_id: str) -> Sidecar:
     """The session's sidecar (an empty one when there is no file); ValueError naming the file
     when it cannot be read or is not one."""
     p = path_of(directory, session_id)
+    if p.is_symlink():
+        raise ValueError(f"{p}: a symbolic link: not followed (a sidecar is a file beside the session)")
     try:
         with open(p, "rb") as fh:
             raw = fh.read(MAX_FILE_BYTES + 1)
