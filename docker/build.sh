@@ -118,7 +118,10 @@ if [ -f "$host_ca" ]; then
   printf '[global]\ncert = /etc/ssl/certs/build-host-ca.crt\n' > "$pipconf"
   build_args+=(-v "$host_ca:/etc/ssl/certs/build-host-ca.crt:ro" -v "$pipconf:/etc/pip.conf:ro")
 fi
-log "building $tag from docker/Dockerfile"
+# the image's version label: the package's (pyproject.toml)
+version="$(sed -n 's/^version *= *"\(.*\)"/\1/p' "$ROOT/pyproject.toml" | head -n1)"
+build_args+=(--build-arg "UCAT_CONSOLE_VERSION=$version")
+log "building $tag (ucat-console $version) from docker/Dockerfile"
 old_id="$(buildah images -q "$tag" 2>/dev/null || true)"
 t_build=$(date +%s)
 buildah bud --isolation chroot --arch "$arch" "${from_args[@]}" "${build_args[@]}" \
@@ -140,9 +143,17 @@ if [ "$smoke" = 1 ]; then
             | sed -n 's/^UCAT_CONSOLE_SESSIONS=//p')"
   ctr="$(buildah from "$tag")"
   trap 'buildah rm "$ctr" >/dev/null 2>&1 || true' EXIT
-  log "smoke test: ucat-console run --headless --duration 5 --record (recordings: $sessions)"
+  # the image runs as its own user (not root): the recordings folder must be its
+  chown "$(buildah run --isolation chroot "$ctr" -- id -u):$(buildah run --isolation chroot "$ctr" -- id -g)" "$sessions"
+  log "smoke test as $(buildah run --isolation chroot "$ctr" -- id -un) ($(buildah run --isolation chroot "$ctr" -- id -Gn)):" \
+      "ucat-console run --headless --duration 5 --record (recordings: $sessions)"
+  buildah run --isolation chroot "$ctr" -- touch /tmp/.smoke-start
   buildah run --isolation chroot -v "$sessions:$inside" "$ctr" -- \
     ucat-console run --headless --duration 5 --record
+  # the run loaded every kernel from the cache the build prepared (generic CPU): it wrote none
+  written="$(buildah run --isolation chroot "$ctr" -- sh -c \
+    'find "$UCAT_CONSOLE_CACHE_DIR" -newer /tmp/.smoke-start -name "*.nbc" | wc -l')"
+  log "smoke test: $written compiled-code files written by the run (0: the image's prepared cache served it)"
   # the recording, read back by the image's own reader: 5 s of the robot's state
   buildah run --isolation chroot -v "$sessions:$inside" "$ctr" -- python -c '
 import os, sys

@@ -6,6 +6,10 @@
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
+# numba's compiled cache of this checkout: in it (.cache/, ignored by git), so that a clone
+# and its cache go together (CI's fresh clones leave none behind in the user's cache folder);
+# UCAT_CONSOLE_CACHE_DIR or NUMBA_CACHE_DIR set beforehand choose another (docs/install.md)
+export UCAT_CONSOLE_CACHE_DIR="${UCAT_CONSOLE_CACHE_DIR:-$ROOT/.cache/numba}"
 PY="${PYTHON:-python3}"
 VENV="${VENV:-.venv}"
 

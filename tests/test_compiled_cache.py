@@ -8,7 +8,10 @@ import os
 import shutil
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
+
+import pytest
 
 import ucat_console
 from ucat_console import compiled_cache
@@ -47,6 +50,7 @@ def _copy(tmp: Path) -> Path:
 def _run(root: Path) -> dict:
     env = dict(os.environ)  # this process set NUMBA_CACHE_DIR: the copy must not take it for its own
     env["PYTHONPATH"] = str(root.parent)
+    env[compiled_cache.CACHE_ENV] = str(root.parent / "numba-cache")  # removed with tmp_path
     out = subprocess.run([sys.executable, "-c", RUN], env=env, cwd=root.parent, capture_output=True,
                          text=True, timeout=240, check=True)
     got = json.loads(out.stdout.strip().splitlines()[-1])
@@ -114,3 +118,72 @@ def test_a_cache_directory_the_user_sets_is_the_base(tmp_path: Path, monkeypatch
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "user"))
     d = compiled_cache.cache_dir()
     assert d.parent == tmp_path / "user" and d.name.startswith("ucat-numba-")
+
+
+def _clean_env(**extra: str) -> dict[str, str]:
+    """This environment without the cache settings this process (or the user) made."""
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("NUMBA_CACHE_DIR", compiled_cache.CACHE_ENV, "XDG_CACHE_HOME")
+           and not k.startswith("UCAT_CONSOLE_NUMBA_")}
+    env.update(extra)
+    return env
+
+
+def test_the_default_base_is_the_users_cache_folder_never_the_package(tmp_path: Path, monkeypatch) -> None:
+    for name in ("NUMBA_CACHE_DIR", compiled_cache.CACHE_ENV):
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    d = compiled_cache.cache_dir()
+    assert d.parent == tmp_path / "xdg" / "ucat-console"
+    assert PACKAGE not in d.parents
+
+
+def test_the_cache_folder_setting_is_honoured_and_numbas_own_wins(tmp_path: Path, monkeypatch) -> None:
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    monkeypatch.setenv(compiled_cache.CACHE_ENV, str(tmp_path / "ours"))
+    assert compiled_cache.cache_dir().parent == tmp_path / "ours"
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba"))
+    assert compiled_cache.cache_dir().parent == tmp_path / "numba"
+
+
+@pytest.mark.parametrize("setting", ["XDG_CACHE_HOME", compiled_cache.CACHE_ENV, "NUMBA_CACHE_DIR"])
+def test_an_unwritable_cache_folder_falls_back_to_the_temporary_directory(setting: str, tmp_path: Path,
+                                                                          monkeypatch) -> None:
+    """Never numba's own fallback, the package's __pycache__."""
+    for name in ("NUMBA_CACHE_DIR", compiled_cache.CACHE_ENV):
+        monkeypatch.delenv(name, raising=False)
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")  # a folder cannot be made under a file, even as root
+    monkeypatch.setenv(setting, str(blocker / "cache"))
+    base, why = compiled_cache.base_and_reason()
+    assert blocker not in base.parents and PACKAGE not in base.parents
+    assert base.parent == Path(tempfile.gettempdir()) and "not writable" in why
+
+
+def test_importing_compiling_and_pruning_write_nothing_inside_the_package(tmp_path: Path) -> None:
+    """A copy of the package, as installed: a kernel compiled and the cache pruned (what
+    ``prepare`` does) leave its files as they were; the compiled code is in the user's cache."""
+    root = _copy(tmp_path)
+    before = {f.relative_to(root): f.stat().st_mtime_ns for f in root.rglob("*")}
+    xdg = tmp_path / "xdg"
+    env = _clean_env(PYTHONPATH=str(root.parent), XDG_CACHE_HOME=str(xdg), PYTHONDONTWRITEBYTECODE="1")
+    code = RUN + "\nfrom ucat_console import compiled_cache\ncompiled_cache.prune()\nprint(compiled_cache.cache_dir())"
+    out = subprocess.run([sys.executable, "-c", code], env=env, cwd=tmp_path, capture_output=True,
+                         text=True, timeout=240, check=True).stdout.strip().splitlines()
+    got = json.loads(out[-2])
+    assert got["misses"] == 1 and Path(got["package"]).resolve().parent == root
+    assert {f.relative_to(root): f.stat().st_mtime_ns for f in root.rglob("*")} == before
+    cache = Path(out[-1])
+    assert cache.parent == xdg / "ucat-console"
+    assert list(cache.rglob("*.nbi")) and list(cache.rglob("*.nbc"))
+
+
+def test_paths_shows_the_compiled_cache_and_what_chose_it(tmp_path: Path, monkeypatch, capsys) -> None:
+    from ucat_console.cli import main
+
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    monkeypatch.setenv(compiled_cache.CACHE_ENV, str(tmp_path / "ours"))
+    assert main(["paths"]) == 0
+    line = next(s for s in capsys.readouterr().out.splitlines() if s.startswith("compiled code"))
+    assert line.split()[2] == str(compiled_cache.cache_dir()) and f"${compiled_cache.CACHE_ENV}" in line
+    assert compiled_cache.cache_dir().parent == tmp_path / "ours"

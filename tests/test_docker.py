@@ -6,8 +6,10 @@ from __future__ import annotations
 
 import json
 import re
+import shlex
 import shutil
 import subprocess
+import tomllib
 from pathlib import Path
 
 import pytest
@@ -33,6 +35,17 @@ def dockerfile_env() -> dict[str, str]:
     text = (DOCKER / "Dockerfile").read_text().replace("\\\n", " ")
     (env,) = re.findall(r"^ENV\s+(.+)$", text, flags=re.MULTILINE)
     return dict(item.split("=", 1) for item in env.split())
+
+
+def dockerfile_labels() -> dict[str, str]:
+    text = (DOCKER / "Dockerfile").read_text().replace("\\\n", " ")
+    (labels,) = re.findall(r"^LABEL\s+(.+)$", text, flags=re.MULTILINE)
+    return dict(item.split("=", 1) for item in shlex.split(labels))
+
+
+def dockerfile_args() -> dict[str, str]:
+    text = (DOCKER / "Dockerfile").read_text()
+    return dict(re.findall(r"^ARG\s+(\w+)=(\S+)$", text, flags=re.MULTILINE))
 
 
 def compose_service() -> dict:
@@ -85,6 +98,43 @@ def test_the_image_installs_the_pinned_package_and_records_into_its_volume() -> 
     assert any(v.endswith(f":{sessions}") for v in compose_service()["volumes"])
 
 
+def test_the_image_is_labelled_with_the_projects_metadata() -> None:
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    labels = dockerfile_labels()
+    # the version label is the build argument docker/build.sh sets from pyproject.toml; its
+    # default (a plain `docker build`) is the same
+    assert labels["org.opencontainers.image.version"] == "${UCAT_CONSOLE_VERSION}"
+    assert dockerfile_args()["UCAT_CONSOLE_VERSION"] == project["version"]
+    assert 'UCAT_CONSOLE_VERSION=$version' in (DOCKER / "build.sh").read_text()
+    assert labels["org.opencontainers.image.title"] == project["name"]
+    assert labels["org.opencontainers.image.source"] == project["urls"]["Source"]
+    assert labels["org.opencontainers.image.licenses"] == project["license"]
+    assert labels["org.opencontainers.image.description"]
+
+
+def test_the_image_runs_as_a_user_in_the_serial_group_on_a_prepared_generic_cache() -> None:
+    text = (DOCKER / "Dockerfile").read_text()
+    user = dockerfile_instruction("USER")
+    assert user not in ("root", "0")
+    (useradd,) = re.findall(r"useradd .*", text)
+    assert "--groups dialout" in useradd and useradd.rstrip("\\ ").endswith(f" {user}")
+    env = dockerfile_env()
+    cache = env["UCAT_CONSOLE_CACHE_DIR"]
+    # numba's code for any CPU of the architecture, at the build's prepare and at every run
+    assert env["NUMBA_CPU_NAME"] == "generic" and "NUMBA_CACHE_DIR" not in env
+    # the cache and the sessions folder are the user's, made before the user prepares the cache
+    assert re.search(rf"install -d -o {user} -g {user} .*{re.escape(cache)}", text)
+    assert re.search(rf"install -d -o {user} -g {user} .*{re.escape(env['UCAT_CONSOLE_SESSIONS'])}", text)
+    assert text.index(f"USER {user}") < text.index("RUN ucat-console prepare")
+
+
+def test_the_image_carries_the_licence_and_the_third_party_notices() -> None:
+    text = (DOCKER / "Dockerfile").read_text()
+    assert re.search(r"/usr/share/doc/ucat-console\s+\\?\s*/tmp/ucat-console/LICENSE /tmp/ucat-console/THIRD_PARTY_NOTICES.md", text)
+    ignored = (DOCKER / "Dockerfile.dockerignore").read_text().split()
+    assert "THIRD_PARTY_NOTICES.md" not in ignored and "LICENSE" not in ignored
+
+
 @pytest.mark.image
 @pytest.mark.timeout(3600)
 def test_the_image_builds_and_a_recorded_headless_run_works_in_it(tmp_path: Path) -> None:
@@ -103,5 +153,8 @@ def test_the_image_builds_and_a_recorded_headless_run_works_in_it(tmp_path: Path
         assert r.duration >= 5.0 - 0.05
         assert r.message_counts()["body/state"] > 0
         assert any(e.code == "armed" for e in r.events())
+    # run as the image's user, not root, and served by the cache prepared at build time
+    assert re.search(r"smoke test as ucat \(.*\bdialout\b.*\)", proc.stdout), proc.stdout[-2000:]
+    assert "smoke test: 0 compiled-code files written" in proc.stdout, proc.stdout[-2000:]
     size = re.search(r"image ucat-console:test \((\w+)\): (\S+ \w+)", proc.stdout)
     assert size, proc.stdout[-2000:]

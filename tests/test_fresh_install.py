@@ -1,8 +1,9 @@
 """The wheel, installed in a fresh virtual environment with constraints.txt: it holds the
-shipped configurations, the Foxglove layout and the licence; every package at its pinned
-version, consistent (pip check), none of the experiments' libraries (the ``experiments``
-extra); and a headless recorded run from another folder compiles on its first start,
-showing its progress, and records into the folder the environment names."""
+shipped configurations, the Foxglove layout, the licence and the third-party notices; every
+package at its pinned version, consistent (pip check), none of the experiments' libraries
+(the ``experiments`` extra); and a headless recorded run from another folder compiles on its
+first start, showing its progress, into the user's cache folder (nothing into the package),
+and records into the folder the environment names."""
 
 from __future__ import annotations
 
@@ -41,7 +42,7 @@ def _norm(name: str) -> str:
 def test_the_wheel_installs_in_a_fresh_venv_and_runs_from_another_folder(tmp_path):
     src = tmp_path / "src"  # a copy: building writes into the source tree
     src.mkdir()
-    for name in ("pyproject.toml", "README.md", "LICENSE", "constraints.txt"):
+    for name in ("pyproject.toml", "README.md", "LICENSE", "THIRD_PARTY_NOTICES.md", "constraints.txt"):
         shutil.copy(ROOT / name, src / name)
     shutil.copytree(ROOT / "ucat_console", src / "ucat_console",
                     ignore=shutil.ignore_patterns("__pycache__"))
@@ -55,9 +56,13 @@ def test_the_wheel_installs_in_a_fresh_venv_and_runs_from_another_folder(tmp_pat
                "ucat_console/foxglove-layout.json",
                *(f"ucat_console/manoeuvres/{n}.toml" for n in ("e4_ladder", "fig8_circle", "depth_step", "ab_modes")),
                *(f"ucat_console/robot/ucat_description/{n}" for n in ("package.xml", "CMakeLists.txt",
-                                                                       "urdf/ucat.urdf", "meshes/hull.stl"))}
+                                                                       "urdf/ucat.urdf", "meshes/hull.stl")),
+               *(f"ucat_console/robot/ucat_msgs/{n}" for n in ("package.xml", "CMakeLists.txt", "msg/FinState.msg",
+                                                                "msg/FinStrouhal.msg", "msg/Power.msg",
+                                                                "msg/ElectricalPower.msg"))}
     assert shipped <= names
     assert any(n.endswith(".dist-info/licenses/LICENSE") for n in names)
+    assert any(n.endswith(".dist-info/licenses/THIRD_PARTY_NOTICES.md") for n in names)
     assert not any(n.endswith((".mcap", ".nbi", ".nbc")) for n in names)
 
     venv = tmp_path / "venv"
@@ -81,12 +86,14 @@ def test_the_wheel_installs_in_a_fresh_venv_and_runs_from_another_folder(tmp_pat
     assert (site / "ucat_console" / "configs" / "sim-tuned.toml").is_file()
 
     # a headless recorded run from a folder of its own: the compiled code is made on this
-    # first run (an empty cache beside the new install), with its progress shown; the
-    # recording goes where the environment says, nowhere near the package
+    # first run (an empty cache: the user's cache folder, here a new one), with its progress
+    # shown; the recording goes where the environment says; nothing is written into the package
     elsewhere, data, xdg = tmp_path / "elsewhere", tmp_path / "recordings", tmp_path / "xdg"
+    cache = tmp_path / "cache"
     elsewhere.mkdir()
+    package_files = {f for f in (site / "ucat_console").rglob("*") if "__pycache__" not in f.parts}
     env = {k: v for k, v in os.environ.items() if not k.startswith(("UCAT_", "NUMBA_", "PYTHON"))}
-    env.update(UCAT_CONSOLE_SESSIONS=str(data), XDG_DATA_HOME=str(xdg))
+    env.update(UCAT_CONSOLE_SESSIONS=str(data), XDG_DATA_HOME=str(xdg), XDG_CACHE_HOME=str(cache))
     proc = subprocess.run([venv / "bin" / "ucat-console", "run", "--config", "sim-tuned", "--headless",
                            "--duration", "5", "--record", "--mode", "baseline", "--velocity", "0.2"],
                           cwd=elsewhere, env=env, capture_output=True, text=True, timeout=1500)
@@ -100,6 +107,9 @@ def test_the_wheel_installs_in_a_fresh_venv_and_runs_from_another_folder(tmp_pat
         assert r.duration >= 5.0 - 0.05
     assert not list(venv.rglob("*.mcap")) and not (site / "sessions").exists()
     assert not list(elsewhere.iterdir()) and not xdg.exists()
+    assert list((cache / "ucat-console").glob("ucat-numba-*/**/*.nbi"))
+    assert {f for f in (site / "ucat_console").rglob("*") if "__pycache__" not in f.parts} == package_files
+    assert not [f for f in (site / "ucat_console").rglob("*") if f.suffix in (".nbi", ".nbc") or f.name.startswith("ucat-numba-")]
 
     # E4R's second setting is the shipped sim-tuned, found in the installed package
     proc = subprocess.run([py, "-c", "from ucat_console.experiments.closed_loop_runs import e4r_settings; "

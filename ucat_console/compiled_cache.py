@@ -12,12 +12,18 @@ before any kernel is defined):
   whose code or constants a kernel can compile in (a superset of the compiled call graph);
 * the directory is ``<base>/ucat-numba-<place>-<sources>``: ``<sources>`` a hash of those
   files' contents, ``<place>`` one of the package's path (two copies of the package never
-  share a directory); ``<base>`` the ``NUMBA_CACHE_DIR`` the user set, else the package's
-  ``__pycache__``, else (not writable) ``~/.cache/ucat-console``.
+  share a directory); ``<base>`` (:func:`cache_base`) the ``NUMBA_CACHE_DIR`` the user set,
+  else the folder ``UCAT_CONSOLE_CACHE_DIR`` names, else the user's cache folder
+  (platformdirs' ``user_cache_dir("ucat-console")``: ``~/.cache/ucat-console`` on Linux,
+  ``$XDG_CACHE_HOME/ucat-console`` when that is set); where the one chosen is not writable,
+  a folder of the user's in the temporary directory, with a warning (numba would otherwise
+  fall back to the package's ``__pycache__``). Nothing is written inside the installed
+  package: a package under site-packages (a Debian package, a read-only image) stays as
+  installed.
 
 An edit to any compiled source, or a pull of a new version, gives a new directory: the next
 run compiles afresh (``ucat-console prepare`` does it ahead and removes the directories of
-older sources, :func:`prune`). An edit anywhere else (the page, the CLI) keeps the cache.
+older sources, and those an older version kept in the package's ``__pycache__``: :func:`prune`). An edit anywhere else (the page, the CLI) keeps the cache.
 numba's own check (the defining file's contents) still applies inside a directory.
 
 Every numba user in the process shares the one directory (numba has one cache setting).
@@ -31,7 +37,10 @@ import os
 import re
 import shutil
 import sys
+import tempfile
 from pathlib import Path
+
+import platformdirs
 
 log = logging.getLogger(__name__)
 
@@ -118,15 +127,42 @@ def _user_base() -> str:
     return user
 
 
-def cache_base(root: Path = PACKAGE) -> Path:
-    """Where the per-sources directories live (module docstring)."""
+#: the environment variable naming the base folder of the package's compiled cache
+CACHE_ENV = "UCAT_CONSOLE_CACHE_DIR"
+
+
+def default_cache_base() -> Path:
+    """The user's cache folder for the package (platformdirs), where nothing else is set."""
+    return Path(platformdirs.user_cache_dir("ucat-console", appauthor=False))
+
+
+def base_and_reason() -> tuple[Path, str]:
+    """:func:`cache_base` and what chose it (for ``ucat-console paths``)."""
     user = _user_base()
+    named = os.environ.get(CACHE_ENV, "")
     if user:
-        return Path(user)
-    inside = root / "__pycache__"
-    if _writable(inside):
-        return inside
-    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "ucat-console"
+        base, why = Path(user), "$NUMBA_CACHE_DIR"
+    elif named:
+        base, why = Path(named).expanduser().absolute(), f"${CACHE_ENV}"
+    else:
+        base, why = default_cache_base(), f"the user's cache folder; ${CACHE_ENV} chooses another"
+    if _writable(base):
+        return base, why
+    # numba itself would fall back to the package's own __pycache__ (a write into the
+    # installed package, and a cache not keyed by the compiled sources): a folder of the
+    # user's in the temporary directory instead
+    uid = os.getuid() if hasattr(os, "getuid") else "user"
+    fallback = Path(tempfile.gettempdir()) / f"ucat-console-{uid}"
+    log.warning("the compiled-code cache folder %s (%s) is not writable: using %s", base, why.split(";")[0], fallback)
+    return fallback, f"{base} ({why.split(';')[0]}) is not writable"
+
+
+def cache_base(root: Path = PACKAGE) -> Path:
+    """Where the per-sources directories live: the user's ``NUMBA_CACHE_DIR``, else
+    ``UCAT_CONSOLE_CACHE_DIR``, else the user's cache folder; ``<tmp>/ucat-console-<uid>`` when
+    the one chosen is not writable (a read-only home, an image run as another user). ``root``
+    is unused: never inside a package."""
+    return base_and_reason()[0]
 
 
 def cache_dir(root: Path = PACKAGE) -> Path:
@@ -146,14 +182,22 @@ def use_source_keyed_cache(root: Path = PACKAGE) -> Path:
 
 
 def prune(root: Path = PACKAGE) -> list[Path]:
-    """Remove this package copy's cache directories of older sources, and the cache files
-    numba kept next to the sources before (``__pycache__/*.nbi``, ``*.nbc``); what was removed."""
+    """Remove this package copy's cache directories of older sources, those an older version
+    kept inside the package (``__pycache__/ucat-numba-*``), and the cache files numba kept next
+    to the sources before (``__pycache__/*.nbi``, ``*.nbc``); what was removed."""
     current = cache_dir(root)
     removed: list[Path] = []
     base = current.parent
     if base.is_dir():
         for d in base.glob(f"{_PREFIX}{_place(root)}-*"):
             if d != current and d.is_dir():
+                shutil.rmtree(d, ignore_errors=True)
+                removed.append(d)
+    # where an older version of the package kept them: its own __pycache__
+    inside = root / "__pycache__"
+    if inside.is_dir() and inside != base:
+        for d in inside.glob(f"{_PREFIX}*"):
+            if d.is_dir():
                 shutil.rmtree(d, ignore_errors=True)
                 removed.append(d)
     for pattern in ("*.nbi", "*.nbc"):

@@ -213,9 +213,21 @@ def _pages(d: dict[str, Any]) -> list[Row]:
                 f"{d['rss_before_mb']:.0f} -> {d['rss_after_mb']:.0f} MB", "0 / < 10 MB", "`bench pages`")]
 
 
+def _library(d: dict[str, Any]) -> list[Row]:
+    w, cmd = d["warm"], "`bench library`"
+    out = [Row(f"run library, {w['sessions']:,} sessions: refresh with nothing changed / list all / "
+               f"filter of 5 terms / sorted", f"{w['refresh_unchanged_s'] * 1e3:.0f} / {w['list_s'] * 1e3:.0f} / "
+               f"{w['filter_s'] * 1e3:.0f} / {w['sort_s'] * 1e3:.0f} ms", "< 1 s each", cmd)]
+    c = d.get("cold")
+    if c:
+        out.append(Row(f"run library: a new {c['seconds_each']:.0f}-s session indexed (its figures computed)",
+                       f"{c['per_session_s'] * 1e3:.0f} ms", "", cmd))
+    return out
+
+
 #: each benchmark's file (in ``benchmarks/``) and the rows made from it, in the table's order
 SOURCES: dict[str, Callable[[dict[str, Any]], list[Row]]] = {
-    "mpc": _mpc, "sim": _sim, "compile": _compile, "sessions": _sessions, "ui": _ui,
+    "mpc": _mpc, "sim": _sim, "compile": _compile, "sessions": _sessions, "library": _library, "ui": _ui,
     "safety": _safety, "link": _safety, "pages": _pages, "load": _load, "tracking": _tracking,
     "tracking_seeds": _tracking_seeds, "tracking_cases": _tracking_cases,
 }

@@ -73,7 +73,7 @@ MIX: dict[str, tuple[float, Callable[[float], Any]]] = {
 def record_synthetic(directory: Path, duration: float, epoch_offset: float = 1.7e9) -> Path:
     """Record :func:`synthetic_messages` of ``duration`` s into ``directory``; the file."""
     stream = TelemetryStream(validate=False)
-    n_total = sum(int(duration * rate) for rate, _ in MIX.values())
+    n_total = sum(math.ceil(duration * rate) for rate, _ in MIX.values())
     cfg = RecorderConfig(queue_size=200_000, split_duration=max(1.0, duration + 1.0))
     rec = Recorder(stream, cfg, directory=directory, epoch_offset=epoch_offset)
     rec.start(label="synthetic", notes=f"synthetic {duration:.0f} s session")

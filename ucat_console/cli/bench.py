@@ -42,6 +42,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     q.add_argument("--json", type=Path, default=None, help="write the results as JSON")
     q.set_defaults(func=run_sim)
 
+    from ucat_console.bench import library as bench_library
     from ucat_console.bench import load as bench_load
     from ucat_console.bench import pages as bench_pages
     from ucat_console.bench import plant as bench_plant
@@ -53,6 +54,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     from ucat_console.bench import ui as bench_ui
 
     bench_sessions.register(kinds)
+    bench_library.register(kinds)
     bench_ui.register_bench(kinds)
     bench_safety.register_bench(kinds)
     bench_tracking.register_bench(kinds)

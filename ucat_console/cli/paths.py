@@ -1,5 +1,5 @@
-"""``ucat-console paths``: where the console writes its recordings and where the files it
-ships are (the configurations ``--config`` takes by name and their JSON Schema, the Foxglove
+"""``ucat-console paths``: where the console writes its recordings and its compiled code, and
+where the files it ships are (the configurations ``--config`` takes by name and their JSON Schema, the Foxglove
 layout).
 
     ucat-console paths
@@ -13,14 +13,14 @@ import os
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("paths", help="where recordings go; the shipped configurations and Foxglove layout")
+    p = sub.add_parser("paths", help="where recordings and compiled code go; the shipped configurations and Foxglove layout")
     p.add_argument("--config", default=None, metavar="NAME|FILE",
                    help="the configuration whose sessions folder to show")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from ucat_console import shipped
+    from ucat_console import compiled_cache, shipped
     from ucat_console.backend.sessions import files
     from ucat_console.config import load_config
     from ucat_console.config_schema import schema_path
@@ -33,6 +33,8 @@ def run(args: argparse.Namespace) -> int:
     else:
         why = f"the user's data folder; ${files.SESSIONS_ENV} or run --sessions-dir choose another"
     rows = [("sessions", f"{files.sessions_dir(configured or None)}  ({why})")]
+    _, base_why = compiled_cache.base_and_reason()
+    rows.append(("compiled code", f"{compiled_cache.cache_dir()}  ({base_why})"))
     rows += [(f"config {name}", str(shipped.config_path(name))) for name in shipped.config_names()]
     rows.append(("config schema", str(schema_path())))
     rows.append(("foxglove layout", str(shipped.foxglove_layout())))

@@ -64,6 +64,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def config_name(value: str | None) -> str:
+    """The name a recording gives its configuration: a shipped one's name, a file's name
+    (``mine.toml``), ``default`` for the defaults."""
+    from ucat_console import shipped
+
+    if value is None:
+        return "default"
+    return str(value) if shipped.is_name(value) else Path(value).name
+
+
 def _config(args: argparse.Namespace) -> Any:
     from ucat_console.config import load_config
 
@@ -182,7 +192,8 @@ def run(args: argparse.Namespace) -> int:
               + " (switching to it waits for this)", flush=True)
     try:
         sup = Supervisor(cfg, clock=SimulatedClock() if args.fast else None,
-                         planner_ready=lambda f: prep.done(compiled.planner_step(f)), sessions_dir=args.sessions_dir)
+                         planner_ready=lambda f: prep.done(compiled.planner_step(f)), sessions_dir=args.sessions_dir,
+                         config_name=config_name(args.config))
     except BaseException:
         prep.cancel()
         if loading is not None:

@@ -69,13 +69,14 @@ def run(args: argparse.Namespace) -> int:
     from ucat_console.backend.access import LOCAL
     from ucat_console.backend.loop.clock import SimulatedClock
     from ucat_console.backend.supervisor import Supervisor
-    from ucat_console.cli.run import _wait_first_step
+    from ucat_console.cli.run import _wait_first_step, config_name
     from ucat_console.telemetry import channels as ch
 
     cfg = _config(args)
     prep = compiled.prepare(cfg, compiled.needed_steps(cfg))
     sup = Supervisor(cfg, clock=SimulatedClock() if args.fast else None, sessions_dir=args.sessions_dir,
-                     planner_ready=lambda f: prep.done(compiled.planner_step(f)))
+                     planner_ready=lambda f: prep.done(compiled.planner_step(f)),
+                     config_name=config_name(args.config))
     events: list[Any] = []
 
     def on_event(channel: str, ev: Any) -> None:

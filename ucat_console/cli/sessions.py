@@ -1,4 +1,6 @@
-"""``ucat-console sessions list|info|export|repair|compare``: the recorded sessions.
+"""``ucat-console sessions list|info|export|repair|compare|find|tag|note|trend``: the recorded
+sessions, and the run library over them (docs/library.md: ``find`` a query, ``tag`` and
+``note`` a session, the ``trend`` of a figure).
 
 SESSION is a session id or any one of its part files (a path, or a file name inside the
 sessions directory): ``info`` and ``export`` cover every part of the session, in order, as
@@ -13,8 +15,11 @@ the shell, is confined to the sessions directory).
 from __future__ import annotations
 
 import argparse
+import json
+import sys
 import time
 from pathlib import Path
+from typing import Any
 
 
 def _add_dir(p: argparse.ArgumentParser) -> None:
@@ -24,7 +29,8 @@ def _add_dir(p: argparse.ArgumentParser) -> None:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    sessions = sub.add_parser("sessions", help="recorded sessions: list, info, export, repair, compare")
+    sessions = sub.add_parser("sessions", help="recorded sessions: list, info, export, repair, compare, "
+                              "find, tag, note, trend")
     kinds = sessions.add_subparsers(dest="sessions", required=True, metavar="ACTION")
 
     p = kinds.add_parser("list", help="every session: start, duration, size, events, notes")
@@ -36,12 +42,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     _add_dir(p)
     p.set_defaults(func=run_info)
 
-    p = kinds.add_parser("export", help="CSV files of a set of channels (every part)")
+    p = kinds.add_parser("export", help="CSV files of a set of channels, or a rosbag2 bag (every part)")
     p.add_argument("file", metavar="SESSION", help="session id or any part file of it")
-    p.add_argument("--topics", nargs="+", required=True, metavar="CHANNEL",
-                   help="channels to export (e.g. body/state fin/0/state; 'all' for every one)")
-    p.add_argument("--format", choices=("csv",), default="csv", help="output format")
-    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory")
+    p.add_argument("--topics", nargs="+", default=None, metavar="CHANNEL",
+                   help="CSV: channels to export (e.g. body/state fin/0/state; 'all' for every one)")
+    p.add_argument("--format", choices=("csv",), default="csv", help="output format of --out")
+    p.add_argument("--out", type=Path, default=None, metavar="DIR", help="CSV: output directory")
+    p.add_argument("--rosbag2", type=Path, default=None, metavar="DIR",
+                   help="write a ROS 2 bag (MCAP storage, standard and ucat_msgs types) into DIR, "
+                        "a new or empty directory (docs/sessions.md, 'rosbag2')")
     p.add_argument("--start", type=float, default=None, help="from this time (stream s)")
     p.add_argument("--end", type=float, default=None, help="before this time (stream s)")
     _add_dir(p)
@@ -67,6 +76,41 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory")
     _add_dir(p)
     p.set_defaults(func=run_compare)
+
+    p = kinds.add_parser("find", help="the run library: sessions matching a query (docs/library.md)",
+                         description="QUERY: terms all of which match, e.g. 'mode=mpc speed>0.15 tag:pool-3 "
+                                     "date>=2026-12-01 notes~\"weak fin\"'. Fields: " + _fields())
+    p.add_argument("query", nargs="?", default="", metavar="QUERY", help="the query (default: every session)")
+    p.add_argument("--json", action="store_true", help="the rows as JSON")
+    p.add_argument("--sort", default=None, metavar="FIELD", help="sort by this field (default: start)")
+    p.add_argument("--desc", action="store_true", help="largest (latest) first")
+    _add_dir(p)
+    p.set_defaults(func=run_find)
+
+    p = kinds.add_parser("tag", help="add (+TAG) or remove (-TAG) tags of a session")
+    p.add_argument("session", metavar="SESSION", help="session id")
+    # REMAINDER: a removal (-draft) is a change, not an option
+    p.add_argument("changes", nargs=argparse.REMAINDER, metavar="+TAG|-TAG",
+                   help="tags to add (+pool-3) or remove (-draft)")
+    _add_dir(p)
+    p.set_defaults(func=run_tag)
+
+    p = kinds.add_parser("note", help="replace a session's notes (kept beside it in SESSION.meta.json)")
+    p.add_argument("session", metavar="SESSION", help="session id")
+    p.add_argument("text", nargs="?", default=None, metavar="TEXT", help="the notes")
+    p.add_argument("--operator", default=None, metavar="NAME", help="also (or only) set the operator's name")
+    _add_dir(p)
+    p.set_defaults(func=run_note)
+
+    p = kinds.add_parser("trend", help="a figure of the library's sessions by day or by a configuration key")
+    p.add_argument("field", metavar="FIELD", help="a number field (epm, cot, speed, speed_mae, st_in ...)")
+    p.add_argument("query", nargs="?", default="", metavar="QUERY", help="only the sessions matching it")
+    p.add_argument("--by", default="date", metavar="date|KEY",
+                   help="group by day (date) or by a key of the recorded configuration (loop.mpc.lam_st)")
+    p.add_argument("--out", type=Path, required=True, metavar="FILE.png|FILE.csv",
+                   help="the figure (PNG, with the CSV beside it; CSV alone without matplotlib or for .csv)")
+    _add_dir(p)
+    p.set_defaults(func=run_trend)
 
 
 def resolve(arg: str, directory: Path | None) -> list[Path]:
@@ -141,7 +185,7 @@ def run_list(args: argparse.Namespace) -> int:
 
 
 def run_info(args: argparse.Namespace) -> int:
-    from ucat_console.backend.sessions import files
+    from ucat_console.backend.sessions import files, sidecar
     from ucat_console.backend.sessions.reader import SessionParts
 
     with SessionParts(args.file, args.dir, confined=False) as s:
@@ -151,8 +195,16 @@ def run_info(args: argparse.Namespace) -> int:
               f"(t {s.start:.3f} .. {s.end:.3f}), epoch offset {s.epoch_offset!r}")
         if s.weights:
             print("  weights: " + ", ".join(f"{k}={v:g}" for k, v in s.weights.items()))
-        if s.notes:
+        side = sidecar.read(s.directory, s.session_id)
+        if side.notes is not None:
+            print(f"  notes: {files.printable(side.notes)} (from {sidecar.path_of(s.directory, s.session_id).name}"
+                  + (f"; recorded: {files.printable(s.notes)})" if s.notes else ")"))
+        elif s.notes:
             print(f"  notes: {files.printable(s.notes)}")
+        if side.tags:
+            print(f"  tags: {', '.join(side.tags)}")
+        if side.operator:
+            print(f"  operator: {files.printable(side.operator)}")
         for n, r in enumerate(s.parts, 1):
             print(f"  part {n}: {r.path.name}, {r.message_count} messages, "
                   f"{r.duration:.1f} s (t {r.start:.3f} .. {r.end:.3f})")
@@ -162,6 +214,13 @@ def run_info(args: argparse.Namespace) -> int:
 
 
 def run_export(args: argparse.Namespace) -> int:
+    if args.rosbag2 is not None:
+        if args.topics is not None or args.out is not None:
+            raise ValueError("export: --rosbag2 writes every topic it knows into its own directory; "
+                             "give it without --topics and --out")
+        return _export_rosbag2(args)
+    if args.topics is None or args.out is None:
+        raise ValueError("export: give --topics and --out (CSV), or --rosbag2 DIR")
     from ucat_console.backend.sessions.export import export_csv
     from ucat_console.backend.sessions.reader import SessionParts
     from ucat_console.telemetry.channels import CHANNELS
@@ -173,6 +232,22 @@ def run_export(args: argparse.Namespace) -> int:
         result = export_csv(s, topics, args.out, args.start, args.end)
     for channel, (path, rows) in result.items():
         print(f"{channel:<20} {rows:>9} rows -> {path}")
+    return 0
+
+
+def _export_rosbag2(args: argparse.Namespace) -> int:
+    from ucat_console.backend.identification import recorded_app_config
+    from ucat_console.backend.sessions.reader import SessionParts
+    from ucat_console.backend.sessions.rosbag2_export import check_destination, export_rosbag2
+
+    check_destination(args.rosbag2)  # before reading anything
+    with SessionParts(args.file, args.dir, confined=False) as s:
+        cfg = recorded_app_config(s, str(s.path))  # the recorded robot's geometry
+        counts = export_rosbag2(s, args.rosbag2, args.start, args.end,
+                                plant=cfg.plant if cfg is not None else None)
+    for topic, n in counts.items():
+        print(f"{topic:<20} {n:>9} messages")
+    print(f"rosbag2 bag -> {args.rosbag2} (ros2 bag info {args.rosbag2})")
     return 0
 
 
@@ -219,4 +294,132 @@ def run_compare(args: argparse.Namespace) -> int:
               f" CoT {export.cell(r, 'cost_of_transport')}{flag}")
     for kind, path in paths.items():
         print(f"{kind:<9} -> {path}")
+    return 0
+
+
+def _fields() -> str:
+    from ucat_console.backend.sessions.library_query import FIELDS
+
+    return ", ".join(FIELDS)
+
+
+def known_configs() -> dict[str, str]:
+    """The shipped configurations' (and the defaults') names by the hash of their TOML text,
+    as a recording stores it: a recording naming none is named by an exact match."""
+    from ucat_console import shipped
+    from ucat_console.backend.sessions.library_read import config_hash
+    from ucat_console.config import AppConfig, load_config
+
+    out = {config_hash(AppConfig().to_toml(redact=True)): "default"}
+    for name in shipped.config_names():
+        try:
+            out[config_hash(load_config(name).to_toml(redact=True))] = name
+        except ValueError:  # a shipped file this version cannot read: it names nothing
+            continue
+    return out
+
+
+def open_library(directory: Path | None) -> Any:
+    from ucat_console.backend.sessions import files
+    from ucat_console.backend.sessions.library import Library
+
+    root = files.sessions_dir(directory)
+    if not root.is_dir():
+        raise ValueError(f"{root}: no such sessions folder")
+    lib = Library(root, known_configs=known_configs())
+    report = lib.refresh()
+    if report.rebuilt and report.added:
+        print(f"run library: indexed {report.added} sessions ({report.rebuilt}) in {report.seconds:.1f} s",
+              file=sys.stderr)
+    return lib
+
+
+def _fmt_figure(v: float | None, lo: float | None = None, hi: float | None = None) -> str:
+    if v is None:
+        return "-"
+    if lo is None or hi is None:
+        return f"{v:.3g}"
+    return f"{v:.3g} [{lo:.3g}, {hi:.3g}]"
+
+
+def _cut(text: str, n: int) -> str:
+    from ucat_console.backend.sessions import files
+
+    text = files.printable(text.replace("\n", " "))
+    return text if len(text) <= n else text[: n - 1] + "…"
+
+
+def run_find(args: argparse.Namespace) -> int:
+    with open_library(args.dir) as lib:
+        rows = lib.find(args.query, args.sort, args.desc)
+    if args.json:
+        print(json.dumps([r.to_json() for r in rows], indent=1, allow_nan=False))
+        return 0
+    if not rows:
+        print(f"no sessions match {args.query!r}" if args.query else "no sessions")
+        return 0
+    print(f"{'session':<28} {'started (UTC)':<19} {'duration':>8}  {'mode':<16} {'config':<12} "
+          f"{'manoeuvre':<12} {'J/m [lo, hi]':<24} {'tags':<16} notes")
+    for r in rows:
+        f = r.figures
+        epm = _fmt_figure(f["epm"], f["epm_lo"], f["epm_hi"]) if r.status == "ok" else f"({r.status})"
+        print(f"{_cut(r.id, 28):<28} {_fmt_time(r.start):<19} {_fmt_duration(r.duration):>8}  "
+              f"{_cut(','.join(r.modes) or '-', 16):<16} {_cut(r.config or (r.config_hash[:8] or '-'), 12):<12} "
+              f"{_cut(r.manoeuvre or '-', 12):<12} {epm:<24} {_cut(','.join(r.tags) or '-', 16):<16} "
+              f"{_cut(r.notes, 40)}")
+    print(f"{len(rows)} session{'s' if len(rows) != 1 else ''}")
+    return 0
+
+
+def run_tag(args: argparse.Namespace) -> int:
+    changes = list(args.changes)
+    for k, c in enumerate(changes):  # --dir after the changes (REMAINDER took it)
+        if c == "--dir" and k + 1 < len(changes):
+            args.dir = Path(changes[k + 1])
+            del changes[k:k + 2]
+            break
+        if c.startswith("--dir="):
+            args.dir = Path(c.removeprefix("--dir="))
+            del changes[k]
+            break
+    if not changes:
+        raise ValueError("tag: give the tags to add (+TAG) or remove (-TAG)")
+    args.changes = changes
+    with open_library(args.dir) as lib:
+        tags = lib.set_tags(args.session, args.changes)
+    print(f"{args.session}: tags {', '.join(tags) or '(none)'}")
+    return 0
+
+
+def run_note(args: argparse.Namespace) -> int:
+    if args.text is None and args.operator is None:
+        raise ValueError("note: give the notes TEXT, --operator NAME, or both")
+    with open_library(args.dir) as lib:
+        row = lib.set_notes(args.session, args.text, args.operator)
+    print(f"{row.id}: notes {row.notes!r}" + (f", operator {row.operator!r}" if row.operator else ""))
+    return 0
+
+
+def run_trend(args: argparse.Namespace) -> int:
+    from ucat_console.backend.review import trend
+    from ucat_console.backend.sessions.library_query import field
+
+    unit = field(args.field, "trend: field").unit
+    if not args.out.parent.is_dir():
+        raise ValueError(f"--out: directory {args.out.parent} does not exist")
+    with open_library(args.dir) as lib:
+        points = lib.trend(args.field, args.by, args.query)
+    if not points:
+        raise ValueError(f"trend: no session{' matching ' + repr(args.query) if args.query else ''} has {args.field}")
+    csv_path = args.out if args.out.suffix == ".csv" else args.out.with_suffix(".csv")
+    csv_path.write_text(trend.csv_text(points, args.field, args.by))
+    for g in trend.groups(points):
+        print(f"{g.group:<24} n={g.n:<4} mean {g.mean:.4g}  range {g.low:.4g} .. {g.high:.4g}")
+    print(f"csv -> {csv_path}")
+    if args.out.suffix != ".csv":
+        if trend.can_plot():
+            trend.write_png(points, args.field, unit, args.by, args.out)
+            print(f"png -> {args.out}")
+        else:
+            print("png: needs matplotlib (pip install 'ucat-console[experiments]'); wrote the CSV only")
     return 0

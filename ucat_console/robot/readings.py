@@ -68,7 +68,7 @@ class DepthReading:
 
     t: Time
     depth_m: Annotated[float, Doc("depth below the zeroed surface", "m")]
-    pressure_pa: Annotated[float, Doc("absolute pressure", "Pa")]
+    pressure_pa: Annotated[float, Doc("gauge pressure (the transducer reads above the atmosphere)", "Pa")]
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,9 @@ writes what is published, the player publishes what was written.
                recording): decoded messages, time ranges, state_at, events
     repair     rewrite a truncated file fully indexed
     index      list sessions from their summaries
+    library    the run library: an SQLite index of every session with its facts and
+               figures (library_read), queried in a small language (library_query); tags
+               and notes given after recording in a sidecar beside the session (sidecar)
     export     CSV per channel
     markers    review markers in a sidecar file
     player     Player: file -> stream, with its own clock

@@ -15,7 +15,8 @@ rewrote as ``<name>.orig.mcap`` (``<session id>_001.orig.mcap``): listed, read a
 Metadata records (MCAP metadata, string values), written at the start of every part:
 
     session   id, part, started_ns (wall clock), epoch_offset (s, repr), clock
-    config    toml: the run's configuration as TOML text
+    config    toml: the run's configuration as TOML text; name: the name it was loaded by
+              (a shipped configuration's, a file's name, ``default``; absent when unknown)
     weights   one key per MPC weight (lam_f, lam_st, lam_a, lam_d), values repr(float)
     version   ucat_console, mcap, python
     notes     text: the operator's notes (a later record replaces an earlier one)

@@ -180,16 +180,34 @@ def _transform(parent: str, child: str, ns: int, translation: Sequence[float],
     }
 
 
+def enu_position(position: Sequence[float]) -> Vec3:
+    """A position in NED axes (north, east, down) in ENU axes (east, north, up)."""
+    n, e, d = position
+    return (e, n, -d)
+
+
+def enu_flu_orientation(q: Quat) -> Quat:
+    """An attitude rotating FRD body vectors into NED, as the one rotating FLU body vectors
+    into ENU (w, x, y, z): the telemetry's orientation as REP 103 has it."""
+    w, x, y, z = q
+    # q_enu_ned * q * q_frd_flu, written out: q_enu_ned = (0, h, h, 0) (STATIC_TRANSFORMS'
+    # odom_ned) and q_frd_flu = (0, 1, 0, 0) (base_link_frd's)
+    h = _HALF
+    return (h * (w + z), h * (x + y), h * (x - y), h * (w - z))
+
+
+def flu_vector(v: Sequence[float]) -> Vec3:
+    """A vector in FRD axes (x forward, y starboard, z down) in FLU axes: half a turn about
+    x (STATIC_TRANSFORMS' base_link_frd)."""
+    x, y, z = v
+    return (x, -y, -z)
+
+
 def frame_transform(state: BodyState, ns: int) -> dict[str, Any] | None:
     """The body pose as a foxglove.FrameTransform odom -> base_link, None when it is not
     finite: the telemetry's NED position and FRD attitude in ENU and FLU axes."""
-    n, e, d = state.position
-    w, x, y, z = state.orientation
-    # q_enu_ned * q * q_frd_flu, written out: q_enu_ned = (0, h, h, 0) (STATIC_TRANSFORMS'
-    # odom_ned) and q_frd_flu = (0, 1, 0, 0)
-    h = _HALF
-    return _transform(ODOM_FRAME, BASE_LINK_FRAME, ns, (e, n, -d),
-                      (h * (w + z), h * (x + y), h * (x - y), h * (w - z)))
+    return _transform(ODOM_FRAME, BASE_LINK_FRAME, ns, enu_position(state.position),
+                      enu_flu_orientation(state.orientation))
 
 
 def static_transforms(ns: int) -> list[tuple[str, dict[str, Any]]]:

@@ -297,11 +297,13 @@ class Recorder:
         config_toml: str = "",
         weights: Mapping[str, float] | None = None,
         wall_time: float | None = None,
+        config_name: str = "",
     ) -> str:
         """Open a new session and start recording; returns the session id.
 
-        ``config_toml`` (the run's configuration), ``weights`` (the MPC weights in force)
-        and ``notes`` are stored as metadata records of every part.
+        ``config_toml`` (the run's configuration) and ``config_name`` (the name it was
+        loaded by, "" when none), ``weights`` (the MPC weights in force) and ``notes`` are
+        stored as metadata records of every part.
         """
         with self._lock:
             failed = self._error
@@ -322,7 +324,7 @@ class Recorder:
                 if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
                     raise ValueError(f"weights.{k}: expected a finite number, got {v!r}")
                 w[str(k)] = repr(float(v))
-            for name, text in (("notes", notes), ("config_toml", config_toml)):
+            for name, text in (("notes", notes), ("config_toml", config_toml), ("config_name", config_name)):
                 if not isinstance(text, str):
                     raise ValueError(f"{name}: expected text, got {type(text).__name__}")
             self._meta = {
@@ -333,7 +335,7 @@ class Recorder:
                     "epoch_offset": repr(self.epoch_offset),
                     "clock": "wall" if self.epoch_offset == 0.0 else "offset",
                 },
-                files.META_CONFIG: {"toml": config_toml},
+                files.META_CONFIG: {"toml": config_toml, **({"name": config_name} if config_name else {})},
                 files.META_WEIGHTS: w,
                 files.META_VERSION: {
                     "ucat_console": ucat_console.__version__,

@@ -25,14 +25,17 @@ MAX_NOTES = 2000
 
 
 class SessionRecording:
-    """``config_toml()`` and ``weights()`` give what a new recording stores; ``tail`` is how
+    """``config_toml()``, ``weights()`` and ``config_name`` (the name the configuration was
+    loaded by) give what a new recording stores; ``tail`` is how
     long an automatic recording runs on after disarming and after the last fault cleared,
     ``tail_max`` how long at most after disarming; ``on_arm``: record on arming."""
 
     def __init__(self, recorder: Recorder, *, config_toml: Callable[[], str], weights: Callable[[], dict],
-                 on_arm: bool, tail: float, notify: Callable[[], None], tail_max: float = math.inf) -> None:
+                 on_arm: bool, tail: float, notify: Callable[[], None], tail_max: float = math.inf,
+                 config_name: str = "") -> None:
         self.recorder = recorder
         self._config_toml = config_toml
+        self.config_name = config_name
         self._weights = weights
         self.on_arm = on_arm
         self.tail = tail
@@ -58,7 +61,7 @@ class SessionRecording:
 
     def _start(self, label: str = "", notes: str = "") -> str:
         return self.recorder.start(label=label, notes=notes, config_toml=self._config_toml(),
-                                   weights=self._weights())
+                                   weights=self._weights(), config_name=self.config_name)
 
     def start(self, notes: object = "") -> str:
         """The operator's recording; CommandRefused when one runs or the notes are bad."""

@@ -138,10 +138,12 @@ class Supervisor:
         clock: Clock | None = None,
         sessions_dir: str | Path | None = None,
         planner_ready: Callable[[str], bool] | None = None,
+        config_name: str = "",
     ) -> None:
         """``planner_ready(formulation)``: whether that formulation's planner is compiled
         (a preparation running in child processes, ``backend.prepare``); without it every
-        formulation is loaded, or compiled here, before the robot starts."""
+        formulation is loaded, or compiled here, before the robot starts. ``config_name``:
+        the name ``cfg`` was loaded by (its recordings say so; "" when none)."""
         self.cfg = cfg = cfg or AppConfig()
         self.stream = TelemetryStream()
         #: plan overruns and the loop's stalls, one event per burst
@@ -202,7 +204,7 @@ class Supervisor:
         self.recording = SessionRecording(
             self.recorder, config_toml=lambda: self.current_config().to_toml(redact=True),
             weights=self._weights, on_arm=cfg.console.record_on_arm, tail=cfg.console.record_tail,
-            tail_max=cfg.console.record_tail_max, notify=self._notify,
+            tail_max=cfg.console.record_tail_max, notify=self._notify, config_name=config_name,
         )
         #: the registered auxiliary sensors (``backend.sensors``: the leak detector first), read by
         #: the console on any robot, published on their channels
