@@ -169,3 +169,16 @@ def test_every_value_is_checked_before_anything_is_written(tmp_path: Path) -> No
         assert runs.set_notes(sid, "line one\nline two")[1].notes == "line one\nline two"
     finally:
         runs.close()
+
+
+def test_open_report_sends_the_runs_report_and_says_when_there_is_none(
+        make_console: Callable[..., Console], two_runs: tuple[str, str], tmp_path: Path) -> None:
+    a, b = two_runs
+    (tmp_path / f"{a}.report.html").write_text("<html>report of a</html>")
+    review = Review(make_console(console_config(**SETTINGS), serve=True))
+    review.choose(b)
+    review.press(review.runs.report_button)
+    assert "no report file" in review.refused(f"{b}: no report")
+    review.choose(a)
+    review.press(review.runs.report_button)
+    review.refused(f"report {a}.report.html sent")

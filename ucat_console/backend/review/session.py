@@ -214,7 +214,7 @@ class ReviewSession:
         """The session's report file (name, content); ValueError when it has none."""
         p = self._runs().report(session_id)
         if p is None:
-            raise ValueError(f"{session_id}: no report file (make one with the report command)")
+            raise ValueError(f"{session_id}: no report file beside it")
         with open(p, "rb") as fh:
             content = fh.read(MAX_REPORT_BYTES + 1)
         if len(content) > MAX_REPORT_BYTES:
