@@ -171,6 +171,29 @@ def test_every_value_is_checked_before_anything_is_written(tmp_path: Path) -> No
         runs.close()
 
 
+def test_each_run_carries_the_mpc_weights_its_recording_holds(tmp_path: Path) -> None:
+    from ucat_console.config import AppConfig
+
+    cfg = AppConfig()
+    cfg = cfg.replace(loop=cfg.loop.replace(mpc=cfg.loop.mpc.replace(lam_st=7.5)))
+    stream = TelemetryStream()
+    rec = Recorder(stream, RecorderConfig(), directory=tmp_path)
+    sid = rec.start(label="w", config_toml=cfg.to_toml(redact=True))
+    stream.publish(ch.SETPOINTS, Setpoints(0.0, 0.1, 1.0, 0.0))
+    rec.stop()
+    bare = recorded(tmp_path, "bare", "")
+    runs = RunLibrary(tmp_path)
+    try:
+        runs.refresh()
+        views = {v.id: v for v in runs.find("", "start", False)}
+        assert dict(views[sid].weights) == {"lam_f": cfg.loop.mpc.lam_f, "lam_st": 7.5,
+                                            "lam_a": cfg.loop.mpc.lam_a, "lam_d": cfg.loop.mpc.lam_d}
+        assert "lam_st=7.5" in views[sid].weights_text()
+        assert views[bare].weights == ()  # no configuration recorded: no weights, not zeros
+    finally:
+        runs.close()
+
+
 def test_open_report_sends_the_runs_report_and_says_when_there_is_none(
         make_console: Callable[..., Console], two_runs: tuple[str, str], tmp_path: Path) -> None:
     a, b = two_runs
