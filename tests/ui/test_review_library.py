@@ -67,7 +67,7 @@ class Review:
     def choose(self, sid: str) -> None:
         wait_for(lambda: sid in self.options(), what=f"{sid} in the chooser")
         self.send(self.panel.choice, sid)
-        wait_for(lambda: self.panel.choice.value == sid, what=f"{sid} chosen")
+        wait_for(lambda: self.panel.choice.value == sid and self.runs._filled_for == sid, what=f"{sid} chosen")
 
 
 @pytest.fixture

@@ -52,7 +52,6 @@ from typing import TYPE_CHECKING, Any, Callable, Iterator
 
 import viser
 
-from ucat_console.backend.review.session import RunsAccess
 from ucat_console.backend.sessions.replay_job import ReplaySlot
 from ucat_console.backend.access import LOCAL
 from ucat_console.backend.supervisor import CommandRefused, ConsoleState, Supervisor
@@ -67,6 +66,7 @@ from ucat_console.ui.guard import Burst, PageGuard
 from ucat_console.ui.metrics_panel import MetricsPanel, effects_markdown
 from ucat_console.ui.page_jobs import PageJobs
 from ucat_console.ui.playback import PlaybackPanel
+from ucat_console.ui.run_list import describe_run, runs_access
 from ucat_console.ui.scene import add_pool
 from ucat_console.ui.session_list import SessionList
 from ucat_console.ui.status_bar import bar_state
@@ -291,7 +291,7 @@ class ConsoleApp:
                         client.gui, self.tab_review, self.sessions_dir, cfg=self.sup.cfg.metrics,
                         sessions=self.session_list.sessions, allow=self._allow(cid), client=client,
                         jobs=self._jobs_of(cid), present=lambda: self.page_present(cid),
-                        budget=self.sup.readers.budget, describe=self.describe_run)
+                        budget=self.sup.readers.budget, describe=lambda sid: describe_run(self.sup, sid))
                     # a recording that ends shows in the page's lists by itself
                     panel.session_lists += [lambda: review.act(review.refresh_sessions),
                                             lambda: compare.act(compare.refresh)]
@@ -367,23 +367,7 @@ class ConsoleApp:
             present=(lambda: self.page_present(cid)) if cid is not None else (lambda: True),
             sessions=lambda: self.session_list.listing(),
             may_repair=(lambda: self.sup.require_pilot(cid, "repair")) if cid is not None else (lambda: None),
-            runs=self.runs_of(cid),
-        )
-
-    def describe_run(self, session_id: str) -> str:
-        """A run's modes and MPC weights, as the comparison names them (ValueError: not in the library)."""
-        v = self.sup.run_view(session_id)
-        return "; ".join(x for x in ("/".join(v.row.modes), v.weights_text()) if x)
-
-    def runs_of(self, cid: int | None) -> RunsAccess:
-        """The run library as page ``cid`` uses it (None: the console's own page, as the pilot)."""
-        sup = self.sup
-        who: Any = cid if cid is not None else LOCAL
-        return RunsAccess(
-            find=sup.find_runs, refresh=sup.refresh_runs,
-            set_tags=lambda sid, changes: sup.set_run_tags(who, sid, changes),
-            set_notes=lambda sid, notes: sup.set_run_notes(who, sid, notes),
-            report=sup.run_report,
+            runs=runs_access(self.sup, cid if cid is not None else LOCAL),
         )
 
     def submit_job(self, cid: int, what: str, job: Callable[[], Any], coalesce: bool = False) -> str | None:

@@ -17,6 +17,7 @@ import math
 import time
 from typing import Any, Callable, Sequence
 
+from ucat_console.backend.review.session import RunsAccess
 from ucat_console.backend.sessions.sidecar import MAX_NOTES
 from ucat_console.ui.markdown import esc
 
@@ -29,6 +30,23 @@ MAX_SHOWN = 60
 NOTES_SHOWN = 80
 QUERY_HINT = ("the library's query language: mode=mpc speed>0.15 tag:pool-3 date>=2026-12-01 "
               'notes~"weak fin" -tag:draft; a word matches notes, id, manoeuvre, configuration')
+
+
+def runs_access(sup: Any, who: Any) -> RunsAccess:
+    """The run library as page ``who`` (a client id, or the console's LOCAL) uses it: the
+    supervisor's methods, the writes in ``who``'s name."""
+    return RunsAccess(
+        find=sup.find_runs, refresh=sup.refresh_runs,
+        set_tags=lambda sid, changes: sup.set_run_tags(who, sid, changes),
+        set_notes=lambda sid, notes: sup.set_run_notes(who, sid, notes),
+        report=sup.run_report,
+    )
+
+
+def describe_run(sup: Any, session_id: str) -> str:
+    """A run's modes and MPC weights, as the comparison names them (ValueError: not in the library)."""
+    v = sup.run_view(session_id)
+    return "; ".join(x for x in ("/".join(v.row.modes), v.weights_text()) if x)
 
 
 def _num(v: float | None, fmt: str = ".1f") -> str:
@@ -92,6 +110,7 @@ class RunList:
         self.listed = listed
         self.show = show
         self.views: list[Any] = []
+        self._filled_for: str | None = None  # the run whose notes the Notes input was given
         with gui.add_folder("Runs", order=0.5):
             self.search = gui.add_text("Search", "", hint=QUERY_HINT)
             self.sort = gui.add_dropdown("Sort by", SORT_CHOICES, initial_value="start",
@@ -138,7 +157,11 @@ class RunList:
         return next((v.row for v in self.views if v.id == session_id), None)
 
     def chose(self, session_id: str) -> None:
-        """The chooser names ``session_id``: its notes in the Notes input."""
+        """The chooser names ``session_id``: its notes in the Notes input, when it names
+        another run than before (a list shown again keeps what is being typed)."""
+        if session_id == self._filled_for:
+            return
+        self._filled_for = session_id
         row = self.row(session_id)
         notes = row.notes if row is not None else ""
         if self.notes.value != notes:
