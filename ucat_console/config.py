@@ -306,3 +306,18 @@ def load_config(path: str | Path | None) -> AppConfig:
     """The configuration in ``path``, a file or the name of a shipped configuration
     (``sim-tuned``: :mod:`ucat_console.shipped`); defaults everywhere when None."""
     return AppConfig() if path is None else AppConfig.from_toml(shipped.config_path(path))
+
+
+def known_configs() -> dict[str, str]:
+    """The shipped configurations' (and the defaults') names by the hash of their TOML text,
+    as a recording stores it: the run library names a recording that names none by an exact
+    match (the shell's ``sessions`` commands and the console's Review tab)."""
+    from ucat_console.backend.sessions.library_read import config_hash
+
+    out = {config_hash(AppConfig().to_toml(redact=True)): "default"}
+    for name in shipped.config_names():
+        try:
+            out[config_hash(load_config(name).to_toml(redact=True))] = name
+        except ValueError:  # a shipped file this version cannot read: it names nothing
+            continue
+    return out

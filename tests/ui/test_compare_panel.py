@@ -85,3 +85,19 @@ def test_the_table_says_its_power_is_the_batterys(tmp_path: Path):
     rows = compare.table(compare.windows(run), MetricsConfig(resamples=50))
     text = page_table(rows)
     assert text.startswith(esc("Power: electrical (battery)")) and "| 60 " in text  # 12 W at 0.2 m/s
+
+
+def test_the_table_names_each_runs_modes_and_weights(tmp_path: Path):
+    import viser
+
+    _record_two(tmp_path)
+    about = {SLOW: "mpc; lam_st=2", FAST: "baseline"}
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        p = ComparePanel(server.gui, None, tmp_path, cfg=MetricsConfig(resamples=200),
+                         sessions=SessionList(tmp_path).sessions, describe=lambda sid: about[sid])
+        p.run([SLOW, FAST, NONE, NONE], NONE, "start")
+    finally:
+        server.stop()
+    assert f"- #1: {esc(SLOW)} ({esc(about[SLOW])})" in p.table.content
+    assert f"- #2: {esc(FAST)} ({esc(about[FAST])})" in p.table.content

@@ -304,19 +304,9 @@ def _fields() -> str:
 
 
 def known_configs() -> dict[str, str]:
-    """The shipped configurations' (and the defaults') names by the hash of their TOML text,
-    as a recording stores it: a recording naming none is named by an exact match."""
-    from ucat_console import shipped
-    from ucat_console.backend.sessions.library_read import config_hash
-    from ucat_console.config import AppConfig, load_config
+    from ucat_console.config import known_configs as names
 
-    out = {config_hash(AppConfig().to_toml(redact=True)): "default"}
-    for name in shipped.config_names():
-        try:
-            out[config_hash(load_config(name).to_toml(redact=True))] = name
-        except ValueError:  # a shipped file this version cannot read: it names nothing
-            continue
-    return out
+    return names()
 
 
 def open_library(directory: Path | None) -> Any:

@@ -53,6 +53,7 @@ from typing import TYPE_CHECKING, Any, Callable, Iterator
 import viser
 
 from ucat_console.backend.sessions.replay_job import ReplaySlot
+from ucat_console.backend.access import LOCAL
 from ucat_console.backend.supervisor import CommandRefused, ConsoleState, Supervisor
 from ucat_console.robot.fins import N_FINS
 from ucat_console.telemetry import channels as ch
@@ -65,6 +66,7 @@ from ucat_console.ui.guard import Burst, PageGuard
 from ucat_console.ui.metrics_panel import MetricsPanel, effects_markdown
 from ucat_console.ui.page_jobs import PageJobs
 from ucat_console.ui.playback import PlaybackPanel
+from ucat_console.ui.run_list import describe_run, runs_access
 from ucat_console.ui.scene import add_pool
 from ucat_console.ui.session_list import SessionList
 from ucat_console.ui.status_bar import bar_state
@@ -289,7 +291,7 @@ class ConsoleApp:
                         client.gui, self.tab_review, self.sessions_dir, cfg=self.sup.cfg.metrics,
                         sessions=self.session_list.sessions, allow=self._allow(cid), client=client,
                         jobs=self._jobs_of(cid), present=lambda: self.page_present(cid),
-                        budget=self.sup.readers.budget)
+                        budget=self.sup.readers.budget, describe=lambda sid: describe_run(self.sup, sid))
                     # a recording that ends shows in the page's lists by itself
                     panel.session_lists += [lambda: review.act(review.refresh_sessions),
                                             lambda: compare.act(compare.refresh)]
@@ -365,6 +367,7 @@ class ConsoleApp:
             present=(lambda: self.page_present(cid)) if cid is not None else (lambda: True),
             sessions=lambda: self.session_list.listing(),
             may_repair=(lambda: self.sup.require_pilot(cid, "repair")) if cid is not None else (lambda: None),
+            runs=runs_access(self.sup, cid if cid is not None else LOCAL),
         )
 
     def submit_job(self, cid: int, what: str, job: Callable[[], Any], coalesce: bool = False) -> str | None:

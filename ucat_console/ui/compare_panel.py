@@ -36,16 +36,18 @@ ALIGN_CHOICES = ("start", *compare.SEGMENT_CODES)
 PAGE_COLUMNS = ("power", "energy_per_metre", "cost_of_transport", "speed_mae", "st_mae", "st_in")
 
 
-def page_table(rows: Sequence[TableRow]) -> str:
+def page_table(rows: Sequence[TableRow], about: Sequence[str] = ()) -> str:
     """The table in Markdown, after a line saying which power its P, J/m and CoT are of: a row
-    per figure and a column per run (``#1`` ... named in a list above it), so that it fits the
-    docked panel however long the runs' names are."""
+    per figure and a column per run (``#1`` ... named in a list above it, each with ``about``
+    it: its modes and MPC weights), so that it fits the docked panel however long the runs'
+    names are."""
     heads = ("P (W)", "J/m", "CoT", "speed MAE", "St MAE", "St in %")
     source = rows[0].source_label if rows else "–"
     out = [esc(f"Power: {source}. The downloads have the {LABELS[MECHANICAL]} figures too."), ""]
     for k, r in enumerate(rows):
         flag = f" **not comparable**: {esc(r.not_comparable)}" if r.not_comparable else ""
-        out.append(f"- #{k + 1}: {esc(r.label)}{flag}")
+        what = f" ({esc(about[k])})" if k < len(about) and about[k] else ""
+        out.append(f"- #{k + 1}: {esc(r.label)}{what}{flag}")
     out += ["", "| | " + " | ".join(f"#{k + 1}" for k in range(len(rows))) + " |", "|---" * (len(rows) + 1) + "|"]
     for head, key in zip(heads, PAGE_COLUMNS):
         out.append(f"| {head} | " + " | ".join(esc(export.cell(r, key)) for r in rows) + " |")
@@ -71,10 +73,14 @@ class ComparePanel:
                  sessions: Callable[[], list[Any]],
                  jobs: Callable[[str, Callable[[], Any], bool], str | None] | None = None,
                  allow: Callable[..., None] | None = None, client: Any = None,
-                 present: Callable[[], bool] = lambda: True, budget: MemoryBudget | None = None) -> None:
+                 present: Callable[[], bool] = lambda: True, budget: MemoryBudget | None = None,
+                 describe: Callable[[str], str] = lambda name: "") -> None:
         """``present()``: whether the page is still connected (a job that ends after its page
         went ends quietly: its elements have gone with the page); ``budget``: the console's
-        memory budget for reading session files (default: the panel's own)."""
+        memory budget for reading session files (default: the panel's own); ``describe(id)``:
+        what the table says of a run beside its name (the console: its modes and MPC weights
+        from the run library)."""
+        self.describe = describe
         self.gui = gui
         self.present = present
         self.directory = directory
@@ -191,7 +197,13 @@ class ComparePanel:
             "CSV": (f"{name}.csv", export.csv_text(rows, wins).encode()),
             "PNG": (f"{name}.png", png),
         }
-        self.table.content = page_table(rows)
+        about = []
+        for w in wins:
+            try:
+                about.append(self.describe(w.run.name))
+            except ValueError:  # not in the library (yet): the run is shown by its name alone
+                about.append("")
+        self.table.content = page_table(rows, about)
         self.image.image = _image(png)
         self.image.visible = True
         for b in self.download.values():

@@ -196,7 +196,7 @@ class ControlPanel:
         self.disarm_key = gui.add_command("DISARM", description="motors off now", hotkey="escape")
         self._events_shown = ""
         self._events_seen: tuple[int, str] | None = None
-        self._listed: tuple[bool, bool] | None = None
+        self._listed: tuple[bool, bool, int] | None = None
         #: the page's other lists of the sessions (its Review tab's, its comparison's runs):
         #: listed again, with the identification's, whenever a recording ends
         self.session_lists: list[Callable[[], Any]] = []
@@ -613,8 +613,9 @@ class ControlPanel:
         if self.faults is not None:
             self.faults.enable(pilot)
         run = st.manoeuvre
-        listed = (recording, run is not None and run.finished)
-        if force or listed != self._listed:  # a recording ended: it may be fitted, reviewed, compared
+        listed = (recording, run is not None and run.finished, sup.runs_version)
+        # a recording ended (it may be fitted, reviewed, compared), or a page wrote a run's tags or notes
+        if force or listed != self._listed:
             others = self._listed is not None and listed != self._listed
             self._listed = listed
             submit = getattr(self.app, "submit_job", None)

@@ -54,7 +54,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from ucat_console.backend.review.metrics import MetricsConfig
-from ucat_console.backend.review.session import ReviewSession
+from ucat_console.backend.review.session import ReviewSession, RunsAccess
 from ucat_console.backend.sessions import index
 from ucat_console.backend.sessions.markers import MAX_NOTE_BYTES, Marker
 from ucat_console.backend.sessions.player import MAX_SPEED, MIN_SPEED, Player
@@ -69,6 +69,7 @@ from ucat_console.telemetry.stream import TelemetryStream
 from ucat_console.ui.markdown import _describe, esc, replay_markdown, sessions_markdown, within
 from ucat_console.ui.metrics_panel import MetricsPanel
 from ucat_console.ui.plots import CHANNELS as PLOT_CHANNELS
+from ucat_console.ui.run_list import RunList
 from ucat_console.ui.scene import LIVE_ROOT, REVIEW_ROOT
 from ucat_console.ui.view import StreamSampler, StreamView, from_page
 from ucat_console.ui.viser_compat import set_slider_marks
@@ -125,13 +126,15 @@ class PlaybackPanel:
         sessions: Callable[[], index.Listing] | None = None,
         may_repair: Callable[[], None] = lambda: None,
         readers: SharedReaders | None = None,
+        runs: RunsAccess | None = None,
     ) -> None:
         """``jobs(what, job, coalesce)``: queue an action that reads files (None when queued,
         else why not; None: run it in the callback); ``present()``: whether the page is
         still connected; ``sessions()``: the folder's listing, with what it skipped (default:
         read it each time); ``may_repair()``: raises (PermissionError) when this page may not
         repair (the console: unless it is the pilot's); ``readers``: the console's open
-        readers, within its memory budget (default: readers of the panel's own)."""
+        readers, within its memory budget (default: readers of the panel's own); ``runs``:
+        the run library (the Runs list above the chooser, which then holds the runs found)."""
         self.gui = gui
         self.jobs = jobs
         self.present = present
@@ -139,7 +142,7 @@ class PlaybackPanel:
         #: what this page reviews, without the page
         self.session = ReviewSession(directory, self.stream, readers=readers, replay_slot=replay_slot,
                                      may_repair=may_repair, may_replay=may_replay, sessions=sessions,
-                                     on_play_error=self._play_failed)
+                                     on_play_error=self._play_failed, runs=runs)
         self.directory = self.session.directory
         self.replay_slot = self.session.replay_slot
         self.plot_rate = float(plot_rate)
@@ -204,6 +207,11 @@ class PlaybackPanel:
                 self.replay_progress = gui.add_progress_bar(0.0, visible=False)
                 self.cancel_button = gui.add_button("Cancel replay", visible=False)
                 self.replay_table = gui.add_markdown("")
+            # above the Sessions folder (order), made after it: a page's "Open" is the chooser's
+            self.run_list: RunList | None = None
+            if runs is not None:
+                self.run_list = RunList(gui, self.session, chosen=lambda: self.choice.value, job=self._job,
+                                        show=self.show, listed=self._runs_listed, allow=allow)
         self._wire()
         if allow is not None:
             for h in (self.choice, self.refresh_list, self.open_button, self.repair_button, self.close_button,
@@ -226,6 +234,9 @@ class PlaybackPanel:
         self.open_button.on_click(self._job("Open", lambda: self.open(self.choice.value)))
         self.repair_button.on_click(self._job("Repair", lambda: self.repair(self.choice.value)))
         self.close_button.on_click(self._page(self.close_session))
+        if self.run_list is not None:
+            self.choice.on_update(self._page(lambda: self.run_list and self.run_list.chose(self.choice.value)))
+            self.run_list.report_button.on_click(self._report)
         # a dragged timeline: the latest position wins; the value the page sent, read now (by
         # the time the job runs, the timeline may show the player's position again)
         self.timeline.on_update(self._job("Seek", self.seek, coalesce=True, value=lambda: self.timeline.value))
@@ -272,6 +283,13 @@ class PlaybackPanel:
             self._job("Export CSV", lambda: self.export_csv(
                 lambda name, content: client.send_file_download(name, content, save_immediately=True)))(event)
 
+    def _report(self, event: Any) -> None:
+        """Open report: the chosen run's report file goes to the page that asked."""
+        client, runs = getattr(event, "client", None), self.run_list
+        if client is not None and runs is not None:
+            self._job("Open report", lambda name: runs.send_report(name, lambda n, content: client.send_file_download(
+                n, content, save_immediately=False)), value=lambda: self.choice.value)(event)
+
     def act(self, fn: Callable[[], Any]) -> bool:
         """Run one command; a refusal (ValueError) is shown and the inputs show the state.
         When the page has gone meanwhile, nothing is shown and nothing is an error."""
@@ -305,12 +323,24 @@ class PlaybackPanel:
         listing = self.session.listing()
         sessions = listing.sessions
         self.browser.content = sessions_markdown(sessions, listing.skipped)
-        names = tuple(s.session_id for s in sessions) or ("",)
-        current = self.choice.value
-        self.choice.options = names
-        self.choice.value = current if current in names else names[-1]
         self.repair_button.disabled = not any(p.repairable for s in sessions for p in s.parts)
+        if self.run_list is not None:  # the chooser holds the runs the library finds
+            self.run_list.find(refresh=True)
+        else:
+            self._runs_listed(tuple(s.session_id for s in sessions))
         return sessions
+
+    def _runs_listed(self, ids: tuple[str, ...]) -> None:
+        """The Session chooser's options: ``ids`` (the one chosen stays when it is among them)."""
+        names = ids or ("",)
+        current = self.choice.value
+        if self.choice.options != names:
+            self.choice.options = names
+        chosen = current if current in names else names[0] if self.run_list is not None else names[-1]
+        if self.choice.value != chosen:
+            self.choice.value = chosen
+        if self.run_list is not None:
+            self.run_list.chose(chosen)
 
     def repair(self, name: str) -> list[RepairReport]:
         """Repair the truncated files of a session (or one named part file); only the pilot's

@@ -20,6 +20,11 @@ runs in a child process at a lower CPU priority
 (:class:`~ucat_console.backend.sessions.replay_job.ReplayJob`), one at a time per console
 (its :class:`~ucat_console.backend.sessions.replay_job.ReplaySlot`).
 
+With the console's run library (:class:`RunsAccess`, the supervisor's methods for this page)
+it lists the runs a query finds, sorted (:meth:`ReviewSession.find_runs`; a bad query is
+refused with the library's error and the last list stands), writes a run's tags and notes,
+and reads a run's report file for the page to download.
+
 The page (``ui.playback.PlaybackPanel``) renders it: the inputs, the plots and the robot of
 the stream; it runs the commands that read files in the page's jobs. Tests drive it directly.
 """
@@ -62,6 +67,22 @@ class Export:
     end: float
 
 
+#: the largest report file a page downloads (bytes)
+MAX_REPORT_BYTES = 64 * 1024 * 1024
+
+
+@dataclass(frozen=True)
+class RunsAccess:
+    """What a page's review may do with the run library: the supervisor's methods, bound
+    to the page (who writes is checked there)."""
+
+    find: Callable[[object, object, object], list[Any]]  # (query, sort, desc) -> RunView list
+    refresh: Callable[[], Any]
+    set_tags: Callable[[object, object], tuple[str, ...]]  # (session id, changes)
+    set_notes: Callable[[object, object], str]  # (session id, notes)
+    report: Callable[[object], Path | None]  # session id -> its report file
+
+
 @dataclass(frozen=True)
 class ReplayEnd:
     """How this review's counterfactual replay ended."""
@@ -88,7 +109,7 @@ class ReviewSession:
                  may_replay: Callable[[], bool | None] = lambda: None,
                  sessions: Callable[[], index.Listing] | None = None,
                  on_play_error: Callable[[str], None] = lambda text: None,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.monotonic, runs: RunsAccess | None = None) -> None:
         self.directory = files.sessions_dir(directory)
         self.stream = stream
         self.readers = readers if readers is not None else SharedReaders()
@@ -107,6 +128,9 @@ class ReviewSession:
         self.job_weights: dict[str, float] = {}
         self._last_marker = -math.inf
         self.said = ""
+        self.runs = runs
+        #: the run list's query, sort field and direction last accepted
+        self.query: tuple[str, str, bool] = ("", "start", True)
 
     # ------------------------------------------------------------------ the folder
     def listing(self) -> index.Listing:
@@ -146,6 +170,57 @@ class ReviewSession:
                                + (f", the original kept as {r.original.name}" if r.original else "")
                                for r in done) if done else f"{name} was complete; nothing to repair")
         return reports
+
+    # ------------------------------------------------------------------ the run library
+    def _runs(self) -> RunsAccess:
+        if self.runs is None:
+            raise ValueError("the run library is not available here")
+        return self.runs
+
+    def find_runs(self, query: object = None, sort: object = None, desc: object = None,
+                  refresh: bool = False) -> list[Any]:
+        """The runs ``query`` finds, sorted by ``sort`` (``desc``: largest or latest first);
+        None: the last accepted. ``refresh``: bring the library up to the folder first. A
+        refusal (ValueError, the library's text) leaves the last accepted query."""
+        runs = self._runs()
+        q0, s0, d0 = self.query
+        q = q0 if query is None else query
+        s = s0 if sort is None else sort
+        d = d0 if desc is None else desc
+        if refresh:
+            runs.refresh()
+        rows = runs.find(q, s, d)
+        self.query = (q, s, d)  # type: ignore[assignment]  # checked by find
+        return rows
+
+    @staticmethod
+    def tag_changes(text: object) -> list[str]:
+        """``"+pool-3 -draft"`` (spaces or commas between) -> ``["+pool-3", "-draft"]``."""
+        if not isinstance(text, str):
+            raise ValueError(f"tags: expected text such as +pool-3 -draft, got {type(text).__name__}")
+        return [c for c in text.replace(",", " ").split() if c]
+
+    def set_tags(self, session_id: object, text: object) -> tuple[str, ...]:
+        tags = self._runs().set_tags(session_id, self.tag_changes(text))
+        self.said = f"{session_id}: tags now {' '.join(tags) or '(none)'}"
+        return tags
+
+    def set_notes(self, session_id: object, notes: object) -> str:
+        text = self._runs().set_notes(session_id, notes)
+        self.said = f"{session_id}: notes saved"
+        return text
+
+    def report(self, session_id: object) -> tuple[str, bytes]:
+        """The session's report file (name, content); ValueError when it has none."""
+        p = self._runs().report(session_id)
+        if p is None:
+            raise ValueError(f"{session_id}: no report file beside it")
+        with open(p, "rb") as fh:
+            content = fh.read(MAX_REPORT_BYTES + 1)
+        if len(content) > MAX_REPORT_BYTES:
+            raise ValueError(f"{p.name}: larger than {MAX_REPORT_BYTES // 2**20} MiB: open it from the folder")
+        self.said = f"report {p.name} sent"
+        return p.name, content
 
     # ------------------------------------------------------------------ open / close
     def open(self, name: str) -> tuple[SessionParts, Player]:

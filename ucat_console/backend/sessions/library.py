@@ -438,6 +438,12 @@ class Library:
             raise ValueError(f"session {session_id!r}: not in the library of {self.directory}")
         return self._row(r)
 
+    def config_text(self, config_hash: str) -> str:
+        """The recorded configuration's TOML text of that hash ("" when the index has none)."""
+        with self._lock:
+            row = self._connect().execute("SELECT toml FROM configs WHERE hash = ?", (config_hash,)).fetchone()
+        return row[0] if row else ""
+
     # ------------------------------------------------------------------ tags and notes
     def _known(self, session_id: str) -> None:
         self.refresh()

@@ -92,6 +92,7 @@ from ucat_console.backend.supervisor.forwarding import LoopOutlet
 from ucat_console.backend.supervisor.health import Health
 from ucat_console.backend.supervisor.manoeuvre import ManoeuvreHost, ManoeuvreRun
 from ucat_console.backend.supervisor.recording import SessionRecording
+from ucat_console.backend.supervisor.run_library import RunLibrary, RunView
 from ucat_console.backend.supervisor.scripted_run import ScriptHost, ScriptRun
 from ucat_console.backend.supervisor.seek_run import SeekHost, SeekRun
 from ucat_console.backend.supervisor.rig_control import RigControl, RigHost
@@ -107,7 +108,7 @@ from ucat_console.backend.supervisor.tuning import (
     param_field,
 )
 from ucat_console.backend.supervisor.watchdog import LoopWatchdog
-from ucat_console.config import AppConfig
+from ucat_console.config import AppConfig, known_configs
 from ucat_console.control.allocation import BodySetpoints
 from ucat_console.control.scripted import Script
 from ucat_console.telemetry import channels as ch
@@ -206,6 +207,10 @@ class Supervisor:
             weights=self._weights, on_arm=cfg.console.record_on_arm, tail=cfg.console.record_tail,
             tail_max=cfg.console.record_tail_max, notify=self._notify, config_name=config_name,
         )
+        #: the sessions folder's run library, as the pages find and annotate runs
+        self.run_library = RunLibrary(self.recorder.directory, self.readers.budget, known_configs)
+        #: counts the writes of tags and notes: a page lists its runs again when it changes
+        self.runs_version = 0
         #: the registered auxiliary sensors (``backend.sensors``: the leak detector first), read by
         #: the console on any robot, published on their channels
         self.sensors = SensorPoller(OpenContext(cfg.devices, entry.simulated, inner, self.report_event,
@@ -318,6 +323,7 @@ class Supervisor:
             for unsub in self._unsubs:
                 unsub()
             self.sensors.close()
+            self.run_library.close()
             try:
                 self.loop.close()
             finally:
@@ -892,6 +898,56 @@ class Supervisor:
         self._notify()
         return paths
 
+    # ================================================================== the run library
+    def refresh_runs(self) -> None:
+        """Bring the run library up to the sessions folder (reads the new sessions' files:
+        call it off the page's message handler)."""
+        self.run_library.refresh()
+
+    def find_runs(self, query: object = "", sort: object = "start", desc: object = False) -> list[RunView]:
+        """The runs matching ``query`` (the library's query language), sorted; ValueError
+        naming a bad query, sort or direction (any page may search)."""
+        return self.run_library.find(query, sort, desc)
+
+    def run_view(self, session_id: object) -> RunView:
+        """One run of the library (ValueError when it has none)."""
+        return self.run_library.view(self.run_library.get(session_id))
+
+    def _run_editor(self, who: Actor, action: str) -> str:
+        """Who writes tags or notes, as the journal names them: the pilot, or a page that has
+        given its name (AccessDenied for any other)."""
+        if self.access.is_pilot(who):
+            name = self.access.name(who) if isinstance(who, int) else ""
+            return f"{name} ({actor_name(who)})" if name else actor_name(who)
+        name = self.access.name(who) if isinstance(who, int) else ""
+        if not name:
+            raise AccessDenied(f"{action}: give your name first (Your name), or take control")
+        return f"{name} ({actor_name(who)})"
+
+    def set_run_tags(self, who: Actor, session_id: object, changes: object) -> tuple[str, ...]:
+        """Add (``+tag``) and remove (``-tag``) tags of a recorded session (the pilot, or a page
+        with a name); journalled; the tags now."""
+        name = self._run_editor(who, "tags")
+        old, new = self.run_library.set_tags(session_id, changes)
+        self.journal_log.add(name, f"session {session_id} tags", " ".join(old) or "(none)", " ".join(new) or "(none)")
+        self.runs_version += 1
+        self._notify()
+        return new
+
+    def set_run_notes(self, who: Actor, session_id: object, notes: object) -> str:
+        """Replace a recorded session's notes (the pilot, or a page with a name); journalled;
+        the notes now."""
+        name = self._run_editor(who, "notes")
+        old, row = self.run_library.set_notes(session_id, notes)
+        self.journal_log.add(name, f"session {session_id} notes", _short(old), _short(row.notes))
+        self.runs_version += 1
+        self._notify()
+        return row.notes
+
+    def run_report(self, session_id: object) -> Path | None:
+        """The report file of a recorded session (None: it has none)."""
+        return self.run_library.report(session_id)
+
     def add_marker(self, who: Actor, note: object = "") -> Event:
         """A marker with a note on the events channel (recorded when recording)."""
         self.access.require_pilot(who, "marker")
@@ -1025,3 +1081,8 @@ class Supervisor:
     def zero_depth(self, who: Actor) -> float:
         return self.rig_control.zero_depth(who)
 
+
+def _short(text: str, most: int = 60) -> str:
+    """Notes as the journal shows them (the first ``most`` characters)."""
+    one = " ".join(text.split())
+    return "(none)" if not one else one if len(one) <= most else one[: most - 1] + "…"
