@@ -196,3 +196,41 @@ def test_a_discarded_recording_gets_no_report(sessions: Path) -> None:
     sid = rec.start(label="kept")
     rec.stop()
     assert called == [sid]
+
+
+SHORT_LADDER = """\
+depth = 0.5
+settle = 1.0
+measure = 2.0
+
+[[segment]]
+label = "slow"
+velocity = 0.1
+
+[[segment]]
+label = "fast"
+velocity = 0.25
+mode = "baseline"
+"""
+
+
+@pytest.mark.slow
+def test_the_simulated_console_writes_the_report_of_its_recording(tmp_path: Path, monkeypatch, capsys) -> None:
+    from ucat_console.backend.sessions import files
+
+    monkeypatch.setenv(files.SESSIONS_ENV, str(tmp_path))
+    script = tmp_path / "short.toml"
+    script.write_text(SHORT_LADDER)
+    assert main(["run", "--config", "sim-tuned", "--headless", "--fast", "--manoeuvre", str(script)]) == 0
+    capsys.readouterr()
+    [part] = tmp_path.glob("*_001.mcap")
+    sid = part.name.removesuffix("_001.mcap")
+    path = report_path(sid, tmp_path)
+    _wait_for(path.is_file, "the report")  # written as the recording stopped
+    text = _parse(path).all_text
+    with SessionParts(sid, tmp_path) as s:
+        segments = [e.data["label"] for e in s.events() if e.code == "segment"]
+        name = s.metadata["config"]["name"]
+    assert segments == ["slow", "fast"] and name == "sim-tuned"
+    for want in (sid, name, "#1 slow", "#2 fast", "baseline"):
+        assert want in text, want

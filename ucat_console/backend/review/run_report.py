@@ -18,9 +18,10 @@ power messages, never driven, no configuration, no matplotlib) is said in the re
 naming its file. The file is written to a temporary file beside it and renamed, so a
 report is whole or absent.
 
-:class:`ReportWriter` writes a report in a background thread when a recording stops
-(the supervisor hands it the recorder's stops): never in the loop's, the page's or DISARM's
-thread; a failure is logged once and goes no further.
+:class:`ReportWriter` writes a report when a recording stops (the supervisor hands it the
+recorder's stops): a background thread waits for a child process that writes it, so it
+never runs in, nor holds the interpreter from, the loop's, the page's or DISARM's thread; a
+failure is logged once and goes no further.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ import html
 import io
 import logging
 import math
+import multiprocessing as mp
 import os
 import tempfile
 import threading
@@ -43,6 +45,7 @@ import numpy as np
 from ucat_console.backend.review import compare
 from ucat_console.backend.review.export import FIN_COLUMNS, ROBOT_COLUMNS, cell
 from ucat_console.backend.review.metrics import FIGURES, MetricsConfig, RunData, TableRow, fin_energies
+from ucat_console.backend.review.trend import can_plot
 from ucat_console.backend.sessions import files, sidecar
 from ucat_console.backend.sessions.library_read import Facts, read_facts, recorded_metrics
 from ucat_console.backend.sessions.markers import MarkerStore
@@ -463,9 +466,7 @@ def render(session: str | Path, directory: str | Path | None = None, *, confined
         missing.append("electrical power: no power/electrical messages (the figures are of the shaft estimate)")
     items = timeline(got.events, origin, review)
     pngs: dict[str, str] = {}
-    try:
-        import matplotlib  # noqa: F401
-    except ImportError:
+    if not can_plot():
         missing.append("the plots: matplotlib is not installed (pip install 'ucat-console[experiments]')")
     else:
         pngs["timeline"] = timeline_png(items, end - origin)
@@ -521,16 +522,38 @@ def write_report(session: str | Path, out: str | Path | None = None, directory: 
     return Report(path, sid, missing, time.perf_counter() - t0)
 
 
-class ReportWriter:
-    """Writes a session's report in a background thread when its recording stops
-    (:meth:`submit`, any thread; it returns at once). A failure is logged once, never raised;
-    ``on_done(report_or_None, error)`` is told either way. The thread runs at a lower CPU
-    priority where the system allows."""
+#: how much lower than the console's the report's CPU priority is (os.nice steps)
+NICE = 10
+#: s, the longest a report may take before its process is ended
+REPORT_TIMEOUT = 600.0
 
-    def __init__(self, known_configs: Callable[[], Mapping[str, str]] | None = None,
-                 on_done: Callable[[Report | None, str], None] = lambda r, e: None) -> None:
-        self._known = known_configs
+
+def _child(conn: Any, first: str, out: str, nice: int) -> None:
+    try:
+        os.nice(nice)
+    except OSError:
+        pass
+    try:
+        conn.send(("ok", write_report(first, out, Path(first).parent)))
+    except Exception as e:  # the parent says it
+        conn.send(("error", str(e) if isinstance(e, ValueError) else f"{type(e).__name__}: {e}"))
+    finally:
+        conn.close()
+
+
+class ReportWriter:
+    """Writes a session's report when its recording stops (:meth:`submit`, any thread; it
+    returns at once): a background thread waits for a child process that writes it (started
+    with ``spawn``, lowered by :data:`NICE` steps), so the report's reading, bootstrap and
+    plotting never hold the console's interpreter (in a thread of the console's own process
+    they stalled its other threads by up to half a second: docs/review.md). A failure is logged
+    once, never raised; ``on_done(report_or_None, error)`` is told either way."""
+
+    def __init__(self, on_done: Callable[[Report | None, str], None] = lambda r, e: None, *,
+                 nice: int = NICE, timeout: float = REPORT_TIMEOUT) -> None:
         self._on_done = on_done
+        self._nice = nice
+        self._timeout = timeout
         self._lock = threading.Lock()
         self._threads: list[threading.Thread] = []
 
@@ -543,20 +566,36 @@ class ReportWriter:
             self._threads = [x for x in self._threads if x.is_alive()] + [t]
         t.start()
 
+    def _run_child(self, session_id: str, first: Path) -> tuple[Report | None, str]:
+        ctx = mp.get_context("spawn")
+        parent, child = ctx.Pipe(duplex=False)
+        proc = ctx.Process(target=_child, args=(child, str(first), str(report_path(session_id, first.parent)),
+                                                self._nice), name=f"run-report-{session_id}", daemon=True)
+        proc.start()
+        child.close()
+        try:
+            if not parent.poll(self._timeout):
+                proc.kill()
+                return None, f"not written within {self._timeout:g} s"
+            kind, value = parent.recv()
+        except EOFError:
+            proc.join()
+            return None, f"the report's process ended without a word (exit code {proc.exitcode})"
+        finally:
+            parent.close()
+        proc.join()
+        return (value, "") if kind == "ok" else (None, str(value))
+
     def _write(self, session_id: str, first: Path) -> None:
         try:
-            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 10)
-        except (AttributeError, OSError):  # not Linux, or not allowed: at the process's priority
-            pass
-        try:
-            known = self._known() if self._known is not None else None
-            report = write_report(first, report_path(session_id, first.parent), first.parent, known_configs=known)
-        except Exception as e:  # a bad session, a full disk: said once, never raised
-            log.warning("the report of session %s was not written: %s", session_id, e)
-            self._on_done(None, str(e))
-            return
-        log.info("report of session %s written to %s in %.1f s", session_id, report.path, report.seconds)
-        self._on_done(report, "")
+            report, error = self._run_child(session_id, first)
+        except Exception as e:  # the process could not be started
+            report, error = None, f"{type(e).__name__}: {e}"
+        if report is None:
+            log.warning("the report of session %s was not written: %s", session_id, error)
+        else:
+            log.info("report of session %s written to %s in %.1f s", session_id, report.path, report.seconds)
+        self._on_done(report, error)
 
     def join(self, timeout: float | None = None) -> bool:
         """Wait for the reports being written (at most ``timeout`` s in all); whether all ended."""
@@ -566,4 +605,3 @@ class ReportWriter:
         for t in threads:
             t.join(None if deadline is None else max(0.0, deadline - time.monotonic()))
         return not any(t.is_alive() for t in threads)
-
