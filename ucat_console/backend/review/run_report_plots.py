@@ -72,7 +72,8 @@ def timeline_png(items: Sequence[TimelineItem], duration: float) -> str:
         if its:
             ax.plot([i.t for i in its], [y] * len(its), "|", color=f"C{row}", ms=12, mew=1.5)
     ax.set_yticks(range(len(KINDS)), list(reversed(KINDS)), fontsize=8)
-    ax.set_xlim(0.0, max(duration, 1e-3))
+    pad = 0.01 * max(duration, 1e-3)
+    ax.set_xlim(-pad, max(duration, 1e-3) + pad)
     ax.set_ylim(-0.7, len(KINDS) - 0.3)
     ax.set_xlabel("session time (s)")
     ax.grid(axis="x", alpha=0.3)
