@@ -128,6 +128,10 @@ class ConsoleConfig(Config):
         doc="a recording started by arming stops this long after disarming at the latest, "
         "whether or not the faults have cleared",
     )
+    write_reports: bool = param(
+        True, doc="write a run's HTML report (<session id>.report.html, beside its parts) in the "
+        "background when its recording stops (docs/review.md)",
+    )
     sessions_dir: str = param(
         "", doc="where recordings go; empty: $UCAT_CONSOLE_SESSIONS, else the user's data folder "
         "(ucat-console paths prints it)",

@@ -27,7 +27,7 @@ import statistics
 import tempfile
 import time
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Iterable
 
 from ucat_console.backend.sessions import files, sidecar
 from ucat_console.backend.sessions.library import Library
@@ -71,9 +71,11 @@ FIGURE_MIX: dict[str, tuple[float, Callable[[float], Any]]] = {
 }
 
 
-def record_run(directory: Path, seconds: float, epoch_offset: float = 1.7e9) -> Path:
-    """A session of the live mix and :data:`FIGURE_MIX` over ``seconds``; its file."""
-    items = [(t, c, m) for t, c, m in synthetic_messages_between(0.0, seconds)]
+def record_run(directory: Path, seconds: float, epoch_offset: float = 1.7e9,
+               extra: Iterable[tuple[float, str, Any]] = ()) -> Path:
+    """A session of the live mix and :data:`FIGURE_MIX` over ``seconds``, and ``extra``
+    (t, channel, message) items; its file."""
+    items = [(t, c, m) for t, c, m in synthetic_messages_between(0.0, seconds)] + list(extra)
     for channel, (rate, make) in FIGURE_MIX.items():
         items += [(k / rate, channel, make(k / rate)) for k in range(math.ceil(seconds * rate))]
     items.sort(key=lambda x: x[0])

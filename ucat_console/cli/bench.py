@@ -47,6 +47,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     from ucat_console.bench import pages as bench_pages
     from ucat_console.bench import plant as bench_plant
     from ucat_console.bench import report as bench_report
+    from ucat_console.bench import run_report as bench_run_report
     from ucat_console.bench import safety as bench_safety
     from ucat_console.bench import sessions as bench_sessions
     from ucat_console.bench import tracking as bench_tracking
@@ -63,6 +64,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     bench_plant.register_bench(kinds)
     bench_pages.register_bench(kinds)
     bench_report.register_bench(kinds)
+    bench_run_report.register_bench(kinds)
     c = kinds.add_parser("compile", help="cold compile of every preparation step, serial and in parallel")
     c.add_argument("--config", default=None, metavar="NAME|FILE", help="the configuration to compile for")
     c.add_argument("--workers", type=int, nargs="+", default=[1, 2], help="process counts to measure")

@@ -1,6 +1,6 @@
-"""``ucat-console sessions list|info|export|repair|compare|find|tag|note|trend``: the recorded
-sessions, and the run library over them (docs/library.md: ``find`` a query, ``tag`` and
-``note`` a session, the ``trend`` of a figure).
+"""``ucat-console sessions list|info|export|repair|compare|report|find|tag|note|trend``: the
+recorded sessions, a run's HTML report (docs/review.md), and the run library over them
+(docs/library.md: ``find`` a query, ``tag`` and ``note`` a session, the ``trend`` of a figure).
 
 SESSION is a session id or any one of its part files (a path, or a file name inside the
 sessions directory): ``info`` and ``export`` cover every part of the session, in order, as
@@ -30,7 +30,7 @@ def _add_dir(p: argparse.ArgumentParser) -> None:
 
 def register(sub: argparse._SubParsersAction) -> None:
     sessions = sub.add_parser("sessions", help="recorded sessions: list, info, export, repair, compare, "
-                              "find, tag, note, trend")
+                              "report, find, tag, note, trend")
     kinds = sessions.add_subparsers(dest="sessions", required=True, metavar="ACTION")
 
     p = kinds.add_parser("list", help="every session: start, duration, size, events, notes")
@@ -76,6 +76,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory")
     _add_dir(p)
     p.set_defaults(func=run_compare)
+
+    p = kinds.add_parser("report", help="one self-contained HTML report of a run (docs/review.md)")
+    p.add_argument("file", metavar="SESSION", help="session id or any part file of it")
+    p.add_argument("--out", type=Path, default=None, metavar="FILE",
+                   help="the report (default: beside the session's parts, <session id>.report.html)")
+    _add_dir(p)
+    p.set_defaults(func=run_report)
 
     p = kinds.add_parser("find", help="the run library: sessions matching a query (docs/library.md)",
                          description="QUERY: terms all of which match, e.g. 'mode=mpc speed>0.15 tag:pool-3 "
@@ -294,6 +301,16 @@ def run_compare(args: argparse.Namespace) -> int:
               f" CoT {export.cell(r, 'cost_of_transport')}{flag}")
     for kind, path in paths.items():
         print(f"{kind:<9} -> {path}")
+    return 0
+
+
+def run_report(args: argparse.Namespace) -> int:
+    from ucat_console.backend.review.run_report import write_report
+
+    report = write_report(args.file, args.out, args.dir, known_configs=known_configs())
+    for m in report.missing:
+        print(f"missing: {m}")
+    print(f"report of {report.session_id} -> {report.path} ({report.seconds:.1f} s)")
     return 0
 
 

@@ -375,6 +375,17 @@ def window_figures(data: RunData, t0: float, t1: float, mass: float, closed: boo
     return {k: s.value(k) * (100.0 if k in _PERCENT else 1.0) for k in FIGURES}
 
 
+def fin_energies(data: RunData, t0: float, t1: float, source: str | None = None) -> tuple[float, ...]:
+    """Each fin's energy over ``[t0, t1]`` (J; the energy of the module docstring, of
+    ``source``'s power, None: :func:`power_source`); NaN for a fin without samples there."""
+    source = source or power_source(data, t0, t1)
+    if source not in LABELS:
+        raise ValueError(f"power source {source!r} is not one of {', '.join(LABELS)}")
+    a = (data.electrical if source == ELECTRICAL else data.power).array()
+    edges = np.array([t0, t1])
+    return tuple(float(_energy(a[:, 0], a[:, 2 + i], edges)[0][0]) for i in range(N_FINS))
+
+
 def robot_now(data: RunData, t1: float, cfg: MetricsConfig) -> RobotNow:
     """The robot's figures over ``[t1 - cfg.window, t1]``, of the battery's power where
     there are electrical readings, else of the estimate, labelled so."""

@@ -24,17 +24,20 @@ import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 import numpy as np
 
 from ucat_console.backend.review.metrics import TABLE_CHANNELS, MetricsConfig, RunData, table_row
 from ucat_console.backend.sessions import files, index
 from ucat_console.backend.sessions.limits import MemoryBudget
-from ucat_console.backend.sessions.reader import SessionParts
+from ucat_console.backend.sessions.reader import Record, SessionParts
 from ucat_console.backend.sim.params import FinHydroConfig
 from ucat_console.backend.sim.variants import PLANT_VARIANTS, cd0_name, family_hydro
 from ucat_console.telemetry.channels import EVENTS, STATUS
+
+#: the channels :func:`read_facts` reads (its ``on_record`` sees each of their records)
+FACT_CHANNELS: tuple[str, ...] = (*TABLE_CHANNELS, EVENTS, STATUS)
 
 #: the figures the library keeps: (column, key of metrics.FIGURES, with its interval)
 FIGURE_COLUMNS: tuple[tuple[str, str, bool], ...] = (
@@ -141,10 +144,7 @@ def _figures(data: RunData, metrics: Mapping[str, Any], label: str) -> tuple[dic
     window = driven_window(data)
     if window is None:
         return {}, "no figures: the fins were never driven", None
-    try:
-        cfg = MetricsConfig.from_dict(dict(metrics))
-    except (ValueError, TypeError):
-        cfg = MetricsConfig()
+    cfg = metrics_config(metrics)
     try:
         row = table_row(data, window[0], window[1], cfg, label)
     except ValueError as e:
@@ -157,11 +157,32 @@ def _figures(data: RunData, metrics: Mapping[str, Any], label: str) -> tuple[dic
     return out, f"power: {row.source_label}", window
 
 
+def metrics_config(metrics: Mapping[str, Any]) -> MetricsConfig:
+    """The figures' settings of a recorded configuration's ``[metrics]`` table (the
+    defaults when it cannot be read: the figures are still made, on the defaults)."""
+    try:
+        return MetricsConfig.from_dict(dict(metrics))
+    except (ValueError, TypeError):
+        return MetricsConfig()
+
+
+def recorded_metrics(toml_text: str) -> MetricsConfig:
+    """The figures' settings a recorded configuration's TOML text names (defaults where none)."""
+    try:
+        metrics = _config_facts(toml_text)["metrics"] if toml_text else {}
+    except ValueError:
+        metrics = {}
+    return metrics_config(metrics if isinstance(metrics, Mapping) else {})
+
+
 def read_facts(session_id: str, paths: list[Path], directory: Path, *,
-               known_configs: Mapping[str, str] | None = None, budget: MemoryBudget | None = None) -> Facts:
+               known_configs: Mapping[str, str] | None = None, budget: MemoryBudget | None = None,
+               on_record: Callable[[Record], None] | None = None) -> Facts:
     """The facts of the session ``session_id`` whose part files are ``paths`` (in part order)
     in ``directory`` (module docstring); ``known_configs``: configuration names by the hash
-    of their TOML text."""
+    of their TOML text; ``on_record``: called with each record read (of
+    :data:`FACT_CHANNELS`, in time order), so that a caller needing more of the same
+    messages (the run report) reads the session once."""
     budget = budget if budget is not None else MemoryBudget()
     infos = [index.part_info(p, directory, budget) for p in paths]
     base = dict(session_id=session_id, start=infos[0].start if infos else None,
@@ -181,7 +202,9 @@ def read_facts(session_id: str, paths: list[Path], directory: Path, *,
             data = RunData()
             events = []
             statuses = []
-            for r in s.records((*TABLE_CHANNELS, EVENTS, STATUS)):
+            for r in s.records(FACT_CHANNELS):
+                if on_record is not None:
+                    on_record(r)
                 if r.channel == EVENTS:
                     events.append(r.message)
                 elif r.channel == STATUS:

@@ -234,7 +234,14 @@ class Recorder:
         self._lock = threading.Lock()
         self._thread: threading.Thread | None = None
         self._unsubscribe: Callable[[], None] | None = None
+        self._stop_listeners: list[Callable[[str, list[Path]], None]] = []
         self._reset()
+
+    def add_stop_listener(self, listener: Callable[[str, list[Path]], None]) -> None:
+        """Call ``listener(session_id, parts)`` each time a recording is stopped whole (in the
+        thread that stopped it, after the files are closed; not for a recording that failed).
+        It should return at once (start a thread for long work); what it raises is logged."""
+        self._stop_listeners.append(listener)
 
     def _reset(self) -> None:
         self._queue: collections.deque = collections.deque()
@@ -373,6 +380,9 @@ class Recorder:
 
     def stop(self, notes: str | None = None) -> list[Path]:
         """Stop recording, write everything queued, close the file; returns its parts."""
+        return self._stop(notes, notify=True)
+
+    def _stop(self, notes: str | None, notify: bool) -> list[Path]:
         with self._lock:
             failed = self._error
             if failed:
@@ -395,7 +405,15 @@ class Recorder:
                 "session %s stopped: %d messages, %d dropped, %d rejected",
                 self._session_id, self._written, self._dropped, self._rejected,
             )
-            return list(self._paths)
+            sid, paths = self._session_id, list(self._paths)
+            error = self._error
+        if notify and not error:
+            for listener in list(self._stop_listeners):
+                try:
+                    listener(sid, list(paths))
+                except Exception:
+                    log.exception("a listener of session %s's end failed", sid)
+        return paths
 
     def _end_failed(self) -> None:
         """Let go of a writer thread that stopped on a failure (the lock is held)."""
@@ -409,8 +427,8 @@ class Recorder:
 
     def discard(self) -> list[Path]:
         """Stop recording and delete the session's files (what a run that never began
-        recorded); returns the paths deleted."""
-        paths = self.stop()
+        recorded); returns the paths deleted (its stop listeners are not called)."""
+        paths = self._stop(None, notify=False)
         for path in paths:
             path.unlink(missing_ok=True)
         if paths:

@@ -78,6 +78,7 @@ from ucat_console.backend.loop.commands import (
 )
 from ucat_console.backend.loop.kernels_warm_up import warm_up
 from ucat_console.backend.review.effects import ChangeEffects
+from ucat_console.backend.review.run_report import ReportWriter
 from ucat_console.backend.safety import SafetyMonitor, Transition
 from ucat_console.backend.safety import channels as safety_channels
 from ucat_console.backend.sensors import OpenContext, SensorPoller
@@ -126,6 +127,8 @@ log = logging.getLogger(__name__)
 WAIT_LOOP = 5.0
 #: the longest note of a live marker (characters)
 MAX_MARKER_NOTE = 500
+#: s, how long stopping the supervisor waits for the last recording's report (a headless run's)
+REPORT_WAIT = 60.0
 
 
 class Supervisor:
@@ -202,6 +205,10 @@ class Supervisor:
             directory=sessions_dir if sessions_dir is not None else (cfg.console.sessions_dir or None),
             epoch_offset=self.wall0, geometry=robot_geometry(cfg.plant),
         )
+        #: each stopped recording's HTML report, written in the background (``[console] write_reports``)
+        self.reports = ReportWriter() if cfg.console.write_reports else None
+        if self.reports is not None:
+            self.recorder.add_stop_listener(self.reports.submit)
         self.recording = SessionRecording(
             self.recorder, config_toml=lambda: self.current_config().to_toml(redact=True),
             weights=self._weights, on_arm=cfg.console.record_on_arm, tail=cfg.console.record_tail,
@@ -319,6 +326,8 @@ class Supervisor:
         self.loop.commands.fail_all("the supervisor is stopping")
         try:
             self.recorder.stop()
+            if self.reports is not None and not self.reports.join(REPORT_WAIT):
+                log.warning("the run report was not written within %g s of stopping; left unfinished", REPORT_WAIT)
         finally:
             for unsub in self._unsubs:
                 unsub()
