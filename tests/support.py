@@ -126,14 +126,16 @@ class FakeClock(Clock):
 def console_config(token: str = TOKEN, pilot_gone: Any = None, base: str | None = None, **console: Any) -> Any:
     """The tests' console configuration: the simulated robot (the defaults, or the shipped
     configuration ``base``: "sim-tuned" for a robot that swims), a fixed pilot token, a free
-    port, no recording at arming (unless given), ``console`` settings and, when given, the
-    pilot-gone failsafe rule (a FailsafeRule, or its timeout in s: hold)."""
+    port, no recording at arming and no report after a recording (unless given), ``console``
+    settings and, when given, the pilot-gone failsafe rule (a FailsafeRule, or its timeout in
+    s: hold)."""
     from ucat_console.backend.failsafe_config import FailsafeRule
     from ucat_console.config import load_config
 
     cfg = load_config(base)
     cfg = cfg.replace(access=cfg.access.replace(token=token),
-                      console=cfg.console.replace(**{"port": 0, "record_on_arm": False, **console}))
+                      console=cfg.console.replace(**{"port": 0, "record_on_arm": False, "write_reports": False,
+                                                     **console}))
     if pilot_gone is not None:
         rule = pilot_gone if isinstance(pilot_gone, FailsafeRule) else FailsafeRule("hold", float(pilot_gone))
         cfg = cfg.replace(failsafe=cfg.failsafe.replace(pilot_gone=rule))
