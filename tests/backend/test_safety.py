@@ -276,6 +276,25 @@ def test_tracking_counts_only_while_driving_and_restarts_its_time_when_back_in_b
     assert m.off_track(11.0) == (0.0, "")
 
 
+def test_a_restarted_expected_response_counts_the_time_off_again_from_the_robots_state() -> None:
+    m = SafetyMonitor(FailsafeConfig(tracking=FailsafeRule("warn", 3.0)))
+    for k in range(40):  # driving, 0.3 m/s short of the reference from t = 1 s: off since about 1 s
+        t = 0.1 * k
+        feed_all(m, t)
+        m.on_message(ch.BODY_TRACKING, tracking(t, speed_err=-0.3 if t >= 1.0 else 0.0))
+        m.check(t)
+    assert m.off_track(3.9)[0] > 2.5
+    m.restart_expected()  # the seeker put its best back: judged again from the robot's state
+    assert m.off_track(3.9) == (0.0, "")
+    seen = []
+    for k in range(40, 100):  # still short, closing in on the reference at 0.05 m/s per s
+        t = 0.1 * k
+        feed_all(m, t)
+        m.on_message(ch.BODY_TRACKING, tracking(t, speed_err=min(0.0, -0.3 + 0.05 * (t - 4.0))))
+        seen += [tr.name for tr in m.check(t) if tr.name == "tracking" and tr.active]
+    assert seen == []  # its way back is within the expected response: no alarm (without the restart: one)
+
+
 def test_the_control_light_names_what_the_allocation_cuts() -> None:
     from ucat_console.backend.supervisor.console_state import safety_view
     from ucat_console.telemetry.messages import BodyAllocation

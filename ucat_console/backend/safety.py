@@ -665,6 +665,16 @@ class SafetyMonitor:
                    for since, err in (self._off_track[axis],)]
             return cut, off
 
+    def restart_expected(self) -> None:
+        """Every axis's expected response starts again from the next measured value, and no
+        axis is off any more: a deliberate change of what the fins do (the seeker putting its
+        best back after a candidate that lost the track) is a new command to judge the robot
+        against. A robot still off its track after it is found so after ``timeout`` again."""
+        with self._lock:
+            for env in self._expected.values():
+                env.stop()
+            self._off_track.clear()
+
     def off_track(self, now: float) -> tuple[float, str]:
         """(how long, at ``now``, the tracked axis off its expected response the longest has
         been off, s (0 when none is); that axis's error as "axis error unit")."""

@@ -273,10 +273,10 @@ def run(args: argparse.Namespace) -> int:
         print("\nstopping: disarming and closing files", file=sys.stderr)
     finally:
         paths = sup.recorder.paths
-        sup.stop()
-        if not started:  # a start that failed or was stopped: no session file
+        if not started:  # a start that failed or was stopped: no session file (nor its report)
             sup.recorder.discard()
             paths = []
+        sup.stop()
         h = sup.health()  # after stopping: disarmed
         if fox is not None:
             fox.stop()

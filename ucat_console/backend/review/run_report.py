@@ -433,9 +433,9 @@ class ReportWriter:
             return
         t = threading.Thread(target=self._write, args=(session_id, Path(paths[0])), daemon=True,
                              name=f"run-report-{session_id}")
-        with self._lock:
+        with self._lock:  # started before it is listed: a join never meets an unstarted thread
+            t.start()
             self._threads = [x for x in self._threads if x.is_alive()] + [t]
-        t.start()
 
     def _run_child(self, session_id: str, first: Path) -> tuple[Report | None, str]:
         ctx = mp.get_context("spawn")

@@ -3,7 +3,11 @@
 A live loop measures one candidate at a time, minutes apart: :class:`Search` asks Optuna's
 TPE sampler (seeded, in-memory study) for the next candidate, and is told the candidate's
 measured energy per metre, or that it failed (rejected for its tracking, no figures),
-which the sampler then never rewards. The candidates are always inside the bounds given
+which the sampler then never rewards: a failed candidate is told as infeasible (TPE's
+constraints: it always ranks below every feasible one, whatever the placeholder value it is
+told with; ``Trial.set_constraint``), so that the sampler learns where not to go. Told as a failure instead
+(Optuna's FAIL state, which TPE leaves out of its model), the sampler kept drawing gaits
+too slow to hold the speed (docs/seek.md). The candidates are always inside the bounds given
 (Optuna draws from the distributions made of them); an integer field gets integers.
 
 Optuna is imported when a search is made, never with the console.
@@ -16,6 +20,12 @@ from dataclasses import dataclass
 from typing import Any, Mapping
 
 from ucat_console.backend.seek.config import SeekParam
+
+
+#: the constraint every candidate carries (``Trial.set_constraint``): > 0, infeasible (it failed)
+CONSTRAINT = "rejected"
+#: the value a failed candidate is told with (ranked by its infeasibility, never by this)
+FAILED_VALUE = 1e9
 
 
 @dataclass(frozen=True)
@@ -59,10 +69,9 @@ class Search:
 
     def tell(self, trial: Any, value: float | None) -> None:
         """The candidate's energy per metre (J/m), or None: it failed (never rewarded)."""
-        if value is None or not math.isfinite(value):
-            self.study.tell(trial, state=self._optuna.trial.TrialState.FAIL)
-        else:
-            self.study.tell(trial, value)
+        failed = value is None or not math.isfinite(value)
+        trial.set_constraint(CONSTRAINT, 1.0 if failed else 0.0)
+        self.study.tell(trial, FAILED_VALUE if failed else value)
 
     def add(self, values: Mapping[str, float], value: float | None) -> bool:
         """A candidate measured outside the search (the values in force at the start): added
@@ -71,5 +80,6 @@ class Search:
                 d.holds(values[d.name]) for d in self.dims):
             return False
         params = {d.name: (int(values[d.name]) if d.integer else float(values[d.name])) for d in self.dims}
-        self.study.add_trial(self._optuna.trial.create_trial(params=params, distributions=self._dists, value=value))
+        self.study.add_trial(self._optuna.trial.create_trial(params=params, distributions=self._dists, value=value,
+                                                             constraints={CONSTRAINT: 0.0}))
         return True

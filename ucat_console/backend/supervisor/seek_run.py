@@ -13,7 +13,9 @@ one without electrical readings or without an interval (a window of fewer than t
 cycles). A candidate under which the robot loses its track (an axis off its expected
 response, the tracking failsafe's measure, for ``abort_s``) is rejected at once, before the
 failsafe's timeout, and the best put back, so that a gait that cannot hold the speed ends
-its candidate, not the seek. The search (:class:`~ucat_console.backend.seek.search.Search`,
+its candidate, not the seek; with the best back, the tracking failsafe's expected response
+starts again from the robot's present state (it is judged on its way back, and a robot that
+does not come back raises the failsafe after its timeout). The search (:class:`~ucat_console.backend.seek.search.Search`,
 Optuna's TPE) is told each result and suggests the next; the first candidate is the values
 in force at the start. Each candidate is an event (source ``"seek"``, code
 ``"candidate"``) and a journal entry with its figures and verdict.
@@ -90,6 +92,9 @@ class SeekHost:
     off_track: Callable[[float], tuple[float, str]]
     #: the tracking failsafe's timeout (s): a candidate is rejected before it
     tracking_timeout: float
+    #: the tracking failsafe's expected response starts again from the robot's present
+    #: state (``Safety.restart_expected``): after the best is put back
+    restart_expected: Callable[[], None]
 
 
 @dataclass(frozen=True)
@@ -218,8 +223,10 @@ class SeekRun:
         with self._lock:
             self._dims = check_space(self.params, host.param_field)
             self.start_values = {p.name: float(host.param_value(p.name)) for p in self.params}
-            self._begin_search(self.start_values, host.time())
+            # measuring from now on; the first window is timed once the search is made (its
+            # first one imports Optuna: seconds, which the loop does not wait for)
             self._unsubscribe = host.subscribe(self._on_message, TABLE_CHANNELS)
+            self._begin_search(self.start_values)
             host.journal(actor_name(self.who), "seek", "", f"started over {', '.join(d.name for d in self._dims)}")
 
     def _on_message(self, channel: str, msg: Any) -> None:
@@ -254,15 +261,16 @@ class SeekRun:
                 self._watch(now)
             return self._finished
 
-    def _begin_search(self, values: dict[str, float], now: float) -> None:
-        """A new search whose first candidate is ``values`` (in force now)."""
+    def _begin_search(self, values: dict[str, float]) -> None:
+        """A new search whose first candidate is ``values`` (in force now), settling from the
+        loop's time once the search is made."""
         self.searches += 1
         self._search = Search(self._dims, self.cfg.seed + self.searches - 1, self.cfg.startup)
         self._trial = None
         self._values = dict(values)
         self._home = dict(values)
         self._in_search = 0
-        self._settle(now)
+        self._settle(self.host.time())
 
     def _settle(self, now: float) -> None:
         m0 = now + self.cfg.settle_s
@@ -351,6 +359,7 @@ class SeekRun:
             back = self._fallback()
             if back != self._values:
                 self._set(back)
+                self.host.restart_expected()  # judged again from here, on the values put back
                 self._settle(now)
                 self.phase, self._due = "recover", self._window[0]
                 return
@@ -419,7 +428,7 @@ class SeekRun:
                     self.host.publish_event(Event(now, "seek", "drift", message + "; seeking again", "warning",
                                                   {"value": v, "lo": e.lo, "hi": e.hi}))
                     self.best = None  # the robot changed: what was measured before no longer holds
-                    self._begin_search(dict(best.values), now)
+                    self._begin_search(dict(best.values))
                     return
                 self.host.publish_event(Event(now, "seek", "drift", message + f"; {self.cfg.max_seeks} searches "
                                               "done, not seeking again", "warning", {"value": v}))

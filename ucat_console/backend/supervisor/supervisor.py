@@ -255,7 +255,7 @@ class Supervisor:
             set_params=self.set_params, journal=self.journal_log.add,
             publish_event=lambda ev: self.stream.publish(ch.EVENTS, ev), subscribe=self.stream.subscribe,
             time=lambda: self.loop.time, metrics=cfg.metrics, off_track=self.safety.off_track,
-            tracking_timeout=cfg.failsafe.tracking.timeout,
+            tracking_timeout=cfg.failsafe.tracking.timeout, restart_expected=self.safety.restart_expected,
         )
         #: the seek of efficiency last started (None: none yet)
         self.seek_run: SeekRun | None = None
