@@ -33,7 +33,7 @@ from typing import IO, Any, Iterable, Iterator, Self, Sequence
 from mcap.records import Channel, Message, Schema
 from mcap.summary import Summary
 
-from ucat_console.backend.sessions import codec, files, foxglove, legacy
+from ucat_console.backend.sessions import codec, files, foxglove, images, legacy
 from ucat_console.backend.sessions.limits import MemoryBudget
 from ucat_console.backend.sessions.mcap_read import MAGIC, BudgetHolder, McapFile
 from ucat_console.backend.sessions.schema import (
@@ -48,7 +48,7 @@ from ucat_console.telemetry.channels import CHANNELS, EVENTS
 from ucat_console.telemetry.events import LEVELS, Event
 
 #: the message decoder of each schema encoding (schema.schema_encoding)
-_DECODERS = {1: legacy.decode, 2: codec.decode}
+_DECODERS = {1: legacy.decode, 2: codec.decode, images.ENCODING: images.decode}
 
 
 @dataclass(frozen=True)
@@ -63,6 +63,11 @@ class Record:
 def _check_schema(topic: str, schema: Schema | None, channel: Channel, path: Path) -> int:
     """The encoding of ``channel`` (0 for a derived Foxglove channel); ValueError unless it
     is one of ours with our schema."""
+    if topic in CHANNELS and images.is_image(CHANNELS[topic]):
+        want = images.TYPES[CHANNELS[topic]]
+        if schema is None or schema.name != want or channel.message_encoding != MESSAGE_ENCODING:
+            raise ValueError(f"{path}: not a session file: channel {codec.short(topic)} is not {want} (json)")
+        return images.ENCODING
     if topic in CHANNELS:
         cls = CHANNELS[topic]
         want = schema_name(cls)
