@@ -47,7 +47,8 @@ class CameraPanel:
     """One page's camera picture (module docstring)."""
 
     def __init__(self, gui: Any, *, width: int, height: int, rate: float = RATE, order: float = 0.8,
-                 allow: Callable[..., None] | None = None, label: str = "Camera") -> None:
+                 allow: Callable[..., None] | None = None, label: str = "Camera",
+                 show_label: str = "Show camera") -> None:
         if not rate > 0.0:
             raise ValueError(f"camera panel: rate {rate!r} must be positive")
         self.period = 1.0 / rate
@@ -59,7 +60,7 @@ class CameraPanel:
         self.skipped = 0  # ticks with a new frame not sent (link slow, hidden)
         self.folder = gui.add_folder(label, order=order)
         with self.folder:
-            self.show = gui.add_checkbox("Show camera", True, hint="hide or show the camera's picture on this page")
+            self.show = gui.add_checkbox(show_label, True, hint="hide or show the camera's picture on this page")
             self.caption = gui.add_markdown("No frame yet.")
             self.image = gui.add_image(np.zeros((height, width, 3), dtype=np.uint8), format="jpeg")
         if allow is not None:

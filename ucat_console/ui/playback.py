@@ -166,7 +166,8 @@ class PlaybackPanel:
         self.feeder = self.view.feeder
         self.plots = self.view.plots
         with within(container):  # the recorded camera's frame at the playhead
-            self.camera = CameraPanel(gui, width=320, height=180, order=2.5, allow=allow, label="Camera")
+            self.camera = CameraPanel(gui, width=320, height=180, order=2.5, allow=allow, label="Camera",
+                                      show_label="Show recorded camera")
         self._unsubs = [*self.view.subscribe(self.stream), self.metrics.subscribe(self.stream),
                         self.camera.subscribe(self.stream)]
 
