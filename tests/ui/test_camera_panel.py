@@ -3,7 +3,6 @@ hides it with its checkbox; Review shows the recorded frame at the playhead."""
 
 from __future__ import annotations
 
-import pytest
 import viser
 from support import Console, wait_for
 

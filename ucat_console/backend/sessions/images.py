@@ -72,3 +72,15 @@ def decode(cls: type, data: bytes) -> CameraImage:
 
 def is_image(cls: Any) -> bool:
     return cls in TYPES
+
+
+def check_schema(topic: str, schema: Any, channel: Any, path: Any) -> int:
+    """For the session reader: :data:`ENCODING` when ``topic`` is an image channel with its
+    schema, 0 when it is no image channel; ValueError for an image channel with another."""
+    from ucat_console.telemetry.channels import CHANNELS
+    want = TYPES.get(CHANNELS.get(topic))  # type: ignore[arg-type]
+    if want is None:
+        return 0
+    if schema is None or schema.name != want or channel.message_encoding != "json":
+        raise ValueError(f"{path}: not a session file: channel {topic} is not {want} (json)")
+    return ENCODING

@@ -63,11 +63,6 @@ class Record:
 def _check_schema(topic: str, schema: Schema | None, channel: Channel, path: Path) -> int:
     """The encoding of ``channel`` (0 for a derived Foxglove channel); ValueError unless it
     is one of ours with our schema."""
-    if topic in CHANNELS and images.is_image(CHANNELS[topic]):
-        want = images.TYPES[CHANNELS[topic]]
-        if schema is None or schema.name != want or channel.message_encoding != MESSAGE_ENCODING:
-            raise ValueError(f"{path}: not a session file: channel {codec.short(topic)} is not {want} (json)")
-        return images.ENCODING
     if topic in CHANNELS:
         cls = CHANNELS[topic]
         want = schema_name(cls)
@@ -293,7 +288,7 @@ class SessionReader(McapFile, _Recording):
         for cid, ch in channels.items():
             schema = summary.schemas.get(ch.schema_id) if ch.schema_id else None
             unknown_sensor = ch.topic.startswith("sensors/") and ch.topic not in CHANNELS  # not registered here: unread
-            encoding = 0 if unknown_sensor else _check_schema(ch.topic, schema, ch, p)
+            encoding = 0 if unknown_sensor else images.check_schema(ch.topic, schema, ch, p) or _check_schema(ch.topic, schema, ch, p)
             self._topic_ids[ch.topic] = cid
             if encoding:
                 self._decoders[ch.topic] = _DECODERS[encoding]
