@@ -20,12 +20,14 @@ from ucat_console.backend.sessions.schema import (
     schema_encoding,
     schema_name,
 )
+from ucat_console.backend.sessions import images
 from ucat_console.telemetry.channels import CHANNELS
 from ucat_console.telemetry.events import Event
 from ucat_console.robot.fields import field_docs
 from ucat_console.telemetry.messages import BodyState, FinPlan, FinState, Power, Setpoints, Status
 
-TYPES = sorted(set(CHANNELS.values()), key=lambda c: c.__name__)
+# the channels written with a derived schema (the camera's pictures are foxglove.CompressedImage)
+TYPES = sorted({c for c in CHANNELS.values() if not images.is_image(c)}, key=lambda c: c.__name__)
 BIG_SEED = 17029223188912930816  # > 2^53: a JavaScript number would round it
 
 
