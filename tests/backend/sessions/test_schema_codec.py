@@ -391,3 +391,12 @@ def test_an_imu_reading_recorded_in_standard_gravities_opens_in_metres_per_secon
                        "gyro": {"x": 0.0, "y": 0.0, "z": 0.0}}).encode()
     with pytest.raises(ValueError, match="accel_g"):
         codec.decode(ImuReading, both)
+
+
+def test_the_camera_channel_has_the_official_compressed_image_schema():
+    schema = json.loads(images.schema_bytes())
+    assert schema["title"] == images.SCHEMA == "foxglove.CompressedImage"
+    assert schema == json.loads((FIXTURES / "foxglove" / "CompressedImage.json").read_text())
+    assert schema["properties"]["data"]["contentEncoding"] == "base64"
+    jsonschema.Draft202012Validator.check_schema(schema)
+    _foxglove_readable(schema, "camera/image")
