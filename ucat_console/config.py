@@ -4,7 +4,7 @@
 closed loop's ``loop``, which holds the controller's ``mpc``, ``body``, ``baseline``,
 ``executor``, ``power``; the simulated robot's ``plant``; the ``recorder``; the limits on reading session
 files, ``review``; the efficiency figures and their comparison, ``metrics``; the efficiency seeker, ``seek``;
-the drivers' ``devices``; the pilot's ``access``, beside
+the drivers' ``devices``; the vehicle's ``camera``; the pilot's ``access``, beside
 the access control; the ``failsafe`` rules, beside the safety monitor) with the console's own
 blocks defined here: ``console`` (web server, plots, supervision) and ``foxglove`` (the live
 Foxglove server). This module composes; it is imported by the supervisor and the tools
@@ -50,6 +50,7 @@ import tomli_w
 
 from ucat_console import shipped
 from ucat_console.backend.access import AccessConfig
+from ucat_console.backend.camera.config import CameraConfig
 from ucat_console.backend.devices.config import DevicesConfig
 from ucat_console.backend.failsafe_config import FailsafeConfig
 from ucat_console.backend.robots import robot as registered_robot
@@ -196,6 +197,7 @@ class AppConfig(Config):
     access: AccessConfig = AccessConfig()
     failsafe: FailsafeConfig = FailsafeConfig()
     devices: DevicesConfig = DevicesConfig()
+    camera: CameraConfig = CameraConfig()
     foxglove: FoxgloveConfig = FoxgloveConfig()
 
     def _check(self) -> None:

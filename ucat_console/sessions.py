@@ -35,6 +35,7 @@ from typing import Any, Iterator
 
 import numpy as np
 
+from ucat_console.backend.sessions import images
 from ucat_console.backend.sessions.export import TIME_COLUMN, column_specs
 from ucat_console.backend.sessions.reader import SessionParts, open_session
 from ucat_console.backend.sessions.schema import BOOL, FLOAT, FLOATS, INT, SEQ, field_specs
@@ -96,14 +97,18 @@ class Recording:
 
     @property
     def channels(self) -> list[str]:
-        """The telemetry channels that hold messages, in the definitions' order."""
+        """The telemetry channels that hold messages, in the definitions' order (columns of
+        numbers: the camera's pictures, ``camera/image``, are read with the session reader)."""
         counts = self._parts.message_counts()
-        return [c for c in CHANNELS if counts.get(c, 0) > 0]
+        return [c for c in CHANNELS if counts.get(c, 0) > 0 and not images.is_image(CHANNELS[c])]
 
     def __getitem__(self, channel: str) -> Channel:
         if channel not in self._cache:
             if channel not in CHANNELS:
                 raise KeyError(f"{channel!r} is not a telemetry channel (channels: {', '.join(CHANNELS)})")
+            if images.is_image(CHANNELS[channel]):
+                raise KeyError(f"{channel!r} holds pictures, not columns: read its frames with "
+                               "ucat_console.backend.sessions.reader.SessionReader.records")
             self._cache[channel] = _read(self._parts, channel)
         return self._cache[channel]
 

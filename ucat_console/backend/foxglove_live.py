@@ -64,7 +64,7 @@ from urllib.parse import urlsplit
 from websockets.asyncio.server import Server, ServerConnection, serve
 from websockets.exceptions import ConnectionClosed
 
-from ucat_console.backend.sessions import codec, foxglove
+from ucat_console.backend.sessions import codec, foxglove, images
 from ucat_console.backend.sessions.schema import (
     MESSAGE_ENCODING,
     SCHEMA_ENCODING,
@@ -186,7 +186,10 @@ class FoxgloveServer:
         self._backlog = backlog
         self._channels: dict[str, dict[str, Any]] = {}  # topic -> its advertisement
         for topic, cls in CHANNELS.items():
-            self._advertise(topic, schema_name(cls), json_schema_bytes(cls))
+            if images.is_image(cls):  # a Foxglove well-known message (sessions/images.py)
+                self._advertise(topic, images.TYPES[cls], images.schema_bytes())
+            else:
+                self._advertise(topic, schema_name(cls), json_schema_bytes(cls))
         for topic, name in foxglove.DERIVED:
             self._advertise(topic, name, foxglove.official_schema_bytes(name))
         self._ids = {c["id"] for c in self._channels.values()}
@@ -366,7 +369,9 @@ class FoxgloveServer:
         targets = [(c, sid) for c in self._clients if (sid := c.subs.get(cid)) is not None]
         if not targets:
             return
-        if not isinstance(data, bytes):
+        if images.is_image(type(data)):
+            data = images.encode(data, ns)
+        elif not isinstance(data, bytes):
             data = codec.encode(data)
         log_time = self._log_time(topic, ns)
         for c, sid in targets:

@@ -20,6 +20,7 @@ from ucat_console.telemetry.messages import (
     BodyCommand,
     BodyState,
     BodyTracking,
+    CameraImage,
     ElectricalPower,
     FinCycle,
     FinPlan,
@@ -43,6 +44,7 @@ EVENTS = "events"
 IMU = "sensors/imu"
 DVL = "sensors/dvl"
 DEPTH = "sensors/depth"
+CAMERA_IMAGE = "camera/image"
 
 
 def fin_state(fin: int) -> str:
@@ -75,6 +77,7 @@ CHANNELS: dict[str, type] = {
     IMU: ImuReading,
     DVL: DvlVelocity,
     DEPTH: DepthReading,
+    CAMERA_IMAGE: CameraImage,
     **{fin_state(i): FinState for i in range(N_FINS)},
     **{fin_plan(i): FinPlan for i in range(N_FINS)},
     **{fin_strouhal(i): FinStrouhal for i in range(N_FINS)},

@@ -221,3 +221,14 @@ class Status:
     failsafes: Annotated[tuple[str, ...], Doc("active failsafe names")]
     late_plans: Annotated[int, Doc("plans that arrived after their fin went idle")]
     source: Annotated[str, Doc('"sim", "robot" or "playback"')]
+
+
+@dataclass(frozen=True)
+class CameraImage:
+    """One frame of the vehicle's camera, compressed (what ``foxglove.CompressedImage``
+    holds: a session file writes it with that schema, its data in base64)."""
+
+    t: Time
+    frame_id: Annotated[str, Doc("the camera's frame of reference")]
+    format: Annotated[str, Doc("the compression: jpeg")]
+    data: Annotated[bytes, Doc("the compressed picture")]

@@ -70,6 +70,7 @@ from ucat_console.ui.run_list import describe_run, runs_access
 from ucat_console.ui.scene import add_pool
 from ucat_console.ui.session_list import SessionList
 from ucat_console.ui.status_bar import bar_state
+from ucat_console.ui.camera_panel import PageCameras
 from ucat_console.ui.view import StreamView
 
 if TYPE_CHECKING:
@@ -210,6 +211,7 @@ class ConsoleApp:
             self.metrics.subscribe(supervisor.stream),
             supervisor.stream.subscribe(self._on_message, [ch.EVENTS, *(ch.fin_plan(i) for i in range(N_FINS))]),
         ]
+        self.cameras = PageCameras(supervisor.stream, supervisor.cfg.camera)  # each page's camera picture
         supervisor.add_listener(self.request_refresh)
         server.on_client_connect(self._on_connect)
         server.on_client_disconnect(self._on_disconnect)
@@ -240,6 +242,7 @@ class ConsoleApp:
         self.view.stop()
         for unsub in self._unsubs:
             unsub()
+        self.cameras.close()
         self.guard.stop()
         self.jobs.stop()
         with self._build_lock:
@@ -286,6 +289,7 @@ class ConsoleApp:
             try:
                 with client.atomic():
                     panel = panels.ControlPanel(self, cid, client.gui, client, containers, allow=self._allow(cid))
+                    self.cameras.add(cid, client.gui, self._allow(cid))
                     review = self.build_review(client.gui, client.scene, cid)
                     compare = ComparePanel(
                         client.gui, self.tab_review, self.sessions_dir, cfg=self.sup.cfg.metrics,
@@ -399,6 +403,7 @@ class ConsoleApp:
         """Everything the console keeps of a page that has gone: its review, its jobs, the
         guard's rules for its inputs, its elements in the shared tabs."""
         cid = client.client_id
+        self.cameras.remove(cid)
         if review is not None:
             review.stop(page_gone=True)
         self.jobs.forget(cid)
@@ -455,6 +460,7 @@ class ConsoleApp:
                              f'data-wall="{self.view.body_wall * 1e3:.1f}" data-t="{body.t:.3f}"></span>')
 
     def _tick(self) -> None:
+        self.cameras.tick(self.guard.link_slow)
         if self._dirty.is_set():
             self._dirty.clear()
             self._refresh_panels()

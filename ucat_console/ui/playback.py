@@ -66,6 +66,7 @@ from ucat_console.backend.sessions.shared import SharedReaders
 from ucat_console.robot.geometry import Geometry
 from ucat_console.telemetry.events import Event
 from ucat_console.telemetry.stream import TelemetryStream
+from ucat_console.ui.camera_panel import CameraPanel
 from ucat_console.ui.markdown import _describe, esc, replay_markdown, sessions_markdown, within
 from ucat_console.ui.metrics_panel import MetricsPanel
 from ucat_console.ui.plots import CHANNELS as PLOT_CHANNELS
@@ -164,7 +165,11 @@ class PlaybackPanel:
         self.sampler = self.view.sampler
         self.feeder = self.view.feeder
         self.plots = self.view.plots
-        self._unsubs = [*self.view.subscribe(self.stream), self.metrics.subscribe(self.stream)]
+        with within(container):  # the recorded camera's frame at the playhead
+            self.camera = CameraPanel(gui, width=320, height=180, order=2.5, allow=allow, label="Camera",
+                                      show_label="Show recorded camera")
+        self._unsubs = [*self.view.subscribe(self.stream), self.metrics.subscribe(self.stream),
+                        self.camera.subscribe(self.stream)]
 
         with within(container):
             with gui.add_folder("Sessions", order=1.0):
@@ -400,6 +405,7 @@ class PlaybackPanel:
         self.view.hide()
         self.view.reset()
         self.metrics.reset()
+        self.camera.reset()
         self._mark_times([])
         if self.job is None:
             self.replay_table.content = ""
@@ -608,6 +614,7 @@ class PlaybackPanel:
             log.debug("timeline marks not shown", exc_info=True)
 
     def _tick_slow(self) -> None:
+        self.camera.tick()
         self._sync_inputs()
         self.metrics.refresh()
         self._tick_job()

@@ -28,6 +28,10 @@ def _value(tp: Any, name: str, k: int, nan: bool) -> Any:
         return k % 2 == 0
     if tp is int:
         return k % 4
+    if tp is bytes:  # a picture's compressed bytes (every byte value, some each time)
+        return bytes((k * 7 + i) % 256 for i in range(300))
+    if tp is str and name == "format":
+        return "jpeg"
     if tp is str:
         return LEVELS[k % len(LEVELS)] if name == "level" else f"{name}-{k}"
     if origin is tuple:

@@ -16,11 +16,12 @@ from session_helpers import BIG_SEED, FIXTURES, awkward_items, record, same
 from ucat_console.backend.loop.closed_loop import ClosedLoop
 from ucat_console.backend.loop.config import LoopConfig
 from ucat_console.backend.sim_robot_io import SimRobotIO
-from ucat_console.backend.sessions import codec, foxglove
+from ucat_console.backend.sessions import codec, foxglove, images
 from ucat_console.backend.sessions.recorder import Recorder
 from ucat_console.backend.sessions.schema import json_schema_bytes
 from ucat_console.control.allocation import BodySetpoints
 from ucat_console.telemetry import channels as C
+from ucat_console.telemetry.messages import CameraImage
 from ucat_console.telemetry.messages import Setpoints
 from ucat_console.telemetry.stream import TelemetryStream
 
@@ -62,7 +63,8 @@ def test_every_message_validates_and_the_awkward_values_come_through(node, sessi
     assert out["entity_frames"] == ["base_link_frd", "fin0", "fin1", "fin2", "fin3"]
     # what JavaScript parsed, decoded here: the same messages (infinities, the seed beyond
     # 2^53, the empty pilot and failsafe list, the missing orientation)
-    got = [(d["topic"], codec.from_json_obj(C.CHANNELS[d["topic"]], d["message"]))
+    got = [(d["topic"], images.decode(CameraImage, json.dumps(d["message"]).encode())
+            if d["topic"] == C.CAMERA_IMAGE else codec.from_json_obj(C.CHANNELS[d["topic"]], d["message"]))
            for d in out["dumped"]]
     want = sorted(items, key=lambda item: item[1].t)
     assert len(got) == len(want)

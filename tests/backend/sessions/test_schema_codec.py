@@ -20,12 +20,14 @@ from ucat_console.backend.sessions.schema import (
     schema_encoding,
     schema_name,
 )
+from ucat_console.backend.sessions import images
 from ucat_console.telemetry.channels import CHANNELS
 from ucat_console.telemetry.events import Event
 from ucat_console.robot.fields import field_docs
 from ucat_console.telemetry.messages import BodyState, FinPlan, FinState, Power, Setpoints, Status
 
-TYPES = sorted(set(CHANNELS.values()), key=lambda c: c.__name__)
+# the channels written with a derived schema (the camera's pictures are foxglove.CompressedImage)
+TYPES = sorted({c for c in CHANNELS.values() if not images.is_image(c)}, key=lambda c: c.__name__)
 BIG_SEED = 17029223188912930816  # > 2^53: a JavaScript number would round it
 
 
@@ -389,3 +391,12 @@ def test_an_imu_reading_recorded_in_standard_gravities_opens_in_metres_per_secon
                        "gyro": {"x": 0.0, "y": 0.0, "z": 0.0}}).encode()
     with pytest.raises(ValueError, match="accel_g"):
         codec.decode(ImuReading, both)
+
+
+def test_the_camera_channel_has_the_official_compressed_image_schema():
+    schema = json.loads(images.schema_bytes())
+    assert schema["title"] == images.SCHEMA == "foxglove.CompressedImage"
+    assert schema == json.loads((FIXTURES / "foxglove" / "CompressedImage.json").read_text())
+    assert schema["properties"]["data"]["contentEncoding"] == "base64"
+    jsonschema.Draft202012Validator.check_schema(schema)
+    _foxglove_readable(schema, "camera/image")

@@ -41,7 +41,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Collection
 
-from ucat_console.backend.sessions import export, files, index, repair
+from ucat_console.backend.sessions import export, files, images, index, repair
 from ucat_console.backend.sessions.markers import Marker, check_note
 from ucat_console.backend.sessions.player import Player, check_speed
 from ucat_console.backend.sessions.reader import SessionParts
@@ -332,7 +332,7 @@ class ReviewSession:
         name = f"{r.session_id}_{start - p.start:.1f}-{end - p.start:.1f}s_csv"
         buf = io.BytesIO()
         with tempfile.TemporaryDirectory() as d:
-            got = export.export_csv(r, [c for c in CHANNELS if c in r.channels], d, start,
+            got = export.export_csv(r, [c for c in CHANNELS if c in r.channels and not images.is_image(CHANNELS[c])], d, start,
                                     math.nextafter(end, math.inf))
             with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
                 for f in sorted(Path(d).iterdir()):

@@ -46,6 +46,7 @@ import json
 from pathlib import Path
 from typing import Any, Iterable, Sequence
 
+from ucat_console.backend.sessions import images
 from ucat_console.backend.sessions.reader import SessionParts, SessionReader, SessionSource
 from ucat_console.backend.sessions.schema import (
     BOOL,
@@ -194,6 +195,10 @@ def export_csv(
     if not chans:
         raise ValueError("topics: no channel given")
     types = {c: message_type(c) for c in chans}  # ValueError for an unknown name
+    pictures = [c for c, cls in types.items() if images.is_image(cls)]
+    if pictures:
+        raise ValueError(f"topics: {', '.join(pictures)} holds pictures, which a CSV file cannot "
+                         "(Foxglove shows them from the session file)")
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out: {out} exists and is not a directory")

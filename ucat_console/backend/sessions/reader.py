@@ -33,7 +33,7 @@ from typing import IO, Any, Iterable, Iterator, Self, Sequence
 from mcap.records import Channel, Message, Schema
 from mcap.summary import Summary
 
-from ucat_console.backend.sessions import codec, files, foxglove, legacy
+from ucat_console.backend.sessions import codec, files, foxglove, images, legacy
 from ucat_console.backend.sessions.limits import MemoryBudget
 from ucat_console.backend.sessions.mcap_read import MAGIC, BudgetHolder, McapFile
 from ucat_console.backend.sessions.schema import (
@@ -48,7 +48,7 @@ from ucat_console.telemetry.channels import CHANNELS, EVENTS
 from ucat_console.telemetry.events import LEVELS, Event
 
 #: the message decoder of each schema encoding (schema.schema_encoding)
-_DECODERS = {1: legacy.decode, 2: codec.decode}
+_DECODERS = {1: legacy.decode, 2: codec.decode, images.ENCODING: images.decode}
 
 
 @dataclass(frozen=True)
@@ -288,7 +288,7 @@ class SessionReader(McapFile, _Recording):
         for cid, ch in channels.items():
             schema = summary.schemas.get(ch.schema_id) if ch.schema_id else None
             unknown_sensor = ch.topic.startswith("sensors/") and ch.topic not in CHANNELS  # not registered here: unread
-            encoding = 0 if unknown_sensor else _check_schema(ch.topic, schema, ch, p)
+            encoding = 0 if unknown_sensor else images.check_schema(ch.topic, schema, ch, p) or _check_schema(ch.topic, schema, ch, p)
             self._topic_ids[ch.topic] = cid
             if encoding:
                 self._decoders[ch.topic] = _DECODERS[encoding]

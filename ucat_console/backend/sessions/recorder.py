@@ -43,7 +43,7 @@ import mcap
 from mcap.writer import CompressionType
 
 import ucat_console
-from ucat_console.backend.sessions import codec, files, foxglove, writing
+from ucat_console.backend.sessions import codec, files, foxglove, images, writing
 from ucat_console.backend.dependencies import require
 from ucat_console.backend.sessions.mcap_writer import ChunkedWriter
 from ucat_console.backend.sessions.schema import (
@@ -107,6 +107,7 @@ class RecorderStats:
     queued: int
     error: str  # the writer's failure, "" when none
     kept_until: float  # every message of the open part before this time is in its complete chunks
+    image_bytes: int = 0  # the camera's frames written (their compressed bytes, before base64)
 
 
 class _Part:
@@ -138,9 +139,12 @@ class _Part:
         schema_ids: dict[type, int] = {}
         for topic, cls in CHANNELS.items():
             if cls not in schema_ids:
-                schema_ids[cls] = w.register_schema(
-                    schema_name(cls), SCHEMA_ENCODING, json_schema_bytes(cls)
-                )
+                if images.is_image(cls):  # a Foxglove well-known message (images.py)
+                    schema_ids[cls] = w.register_schema(images.TYPES[cls], SCHEMA_ENCODING, images.schema_bytes())
+                else:
+                    schema_ids[cls] = w.register_schema(
+                        schema_name(cls), SCHEMA_ENCODING, json_schema_bytes(cls)
+                    )
             self.channel_ids[topic] = w.register_channel(topic, MESSAGE_ENCODING, schema_ids[cls])
         if foxglove_channels:
             names: dict[str, int] = {}
@@ -252,6 +256,7 @@ class Recorder:
         self._rejected = 0
         self._rejected_reported = 0
         self._written = 0
+        self._image_bytes = 0
         self._stopping = False
         self._wake = threading.Event()  # set by stop(): the writer stops polling at once
         self._error = ""
@@ -294,6 +299,7 @@ class Recorder:
             queued=len(self._queue),
             error=self._error,
             kept_until=self._kept_until(),
+            image_bytes=self._image_bytes,
         )
 
     def start(
@@ -555,8 +561,12 @@ class Recorder:
 
     def _write(self, part: _Part, channel: str, msg: Any) -> int | None:
         try:
-            data = codec.encode(msg)
             t = msg.t
+            if images.is_image(type(msg)):
+                data = images.encode(msg, codec.to_ns(t, self.epoch_offset))
+                self._image_bytes += len(msg.data)
+            else:
+                data = codec.encode(msg)
         except Exception as e:
             self._rejected += 1
             if self._rejected == 1:

@@ -136,6 +136,14 @@ def sensor_lights(sensors: Any, now: float, rule: Any) -> tuple[SensorLight, ...
     return tuple(out)
 
 
+def camera_lights(camera: Any, now: float) -> tuple[SensorLight, ...]:
+    """The camera's light (none without a camera): never a failsafe's."""
+    if camera is None:
+        return ()
+    state, why = camera.light(now)
+    return (SensorLight("Camera", "", state, why),)
+
+
 @dataclass(frozen=True)
 class ManoeuvreView:
     """The identification manoeuvre last started."""
@@ -289,5 +297,5 @@ def build_state(sup: Any) -> ConsoleState:
         limits=Limits(cfg.loop.max_velocity, cfg.loop.max_depth, cfg.loop.max_yaw_rate,
                       cfg.access.handover_timeout),
         effects=tuple(sup.effects.entries()),
-        sensor_lights=sensor_lights(sup.sensors, now, safety.rule),
+        sensor_lights=sensor_lights(sup.sensors, now, safety.rule) + camera_lights(sup.camera, now),
     )

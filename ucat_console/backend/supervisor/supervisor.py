@@ -81,6 +81,7 @@ from ucat_console.backend.review.effects import ChangeEffects
 from ucat_console.backend.review.run_report import ReportWriter
 from ucat_console.backend.safety import SafetyMonitor, Transition
 from ucat_console.backend.safety import channels as safety_channels
+from ucat_console.backend.camera.source import CameraThread
 from ucat_console.backend.sensors import OpenContext, SensorPoller
 from ucat_console.backend.sessions.limits import MemoryBudget
 from ucat_console.backend.sessions.shared import SharedReaders
@@ -222,6 +223,9 @@ class Supervisor:
         #: the console on any robot, published on their channels
         self.sensors = SensorPoller(OpenContext(cfg.devices, entry.simulated, inner, self.report_event,
                                                 lambda: self.loop.time), self.stream.publish)
+        #: the vehicle's camera (``[camera]``; None: none), read in its own thread onto camera/image
+        self.camera = CameraThread(cfg.camera, self.stream.publish, self.report_event,
+                                   lambda: self.loop.time) if cfg.camera.enabled else None
         #: the emulated leak detector of a simulated robot without devices.leak.path (fault injection)
         self.leak_emulator = self.sensors.emulator("leak")
         self.rig_control = RigControl(RigHost(
@@ -279,6 +283,8 @@ class Supervisor:
         self.access.add_listener(self._on_access)
         self.safety.sensors_open(tuple(self.sensors.sources), self.loop.time)
         self.sensors.start()  # once the failsafes hear them
+        if self.camera is not None:
+            self.camera.start()
 
     # ================================================================== lifecycle
     @property
@@ -332,6 +338,8 @@ class Supervisor:
             for unsub in self._unsubs:
                 unsub()
             self.sensors.close()
+            if self.camera is not None:
+                self.camera.close()
             self.run_library.close()
             try:
                 self.loop.close()

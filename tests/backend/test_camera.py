@@ -1,0 +1,186 @@
+"""The camera: the emulated picture, the PyAV path on a file PyAV writes, the camera thread's
+frames, loss and recovery (an event and a light, never a failsafe), and camera/image recorded
+as foxglove.CompressedImage and read back."""
+
+from __future__ import annotations
+
+import base64
+import io
+import json
+
+import jsonschema
+import pytest
+from mcap.reader import make_reader
+from PIL import Image, ImageChops
+from support import Collector, Console, wait_for
+
+from ucat_console.backend.camera.config import CameraConfig
+from ucat_console.backend.camera.emulated import EmulatedCamera, bar_x
+from ucat_console.backend.camera.source import CameraThread
+from ucat_console.backend.sessions.reader import SessionReader
+from ucat_console.backend.sessions.recorder import Recorder, RecorderConfig
+from ucat_console.config import AppConfig, load_config
+from ucat_console.telemetry import channels as ch
+from ucat_console.telemetry.messages import CameraImage
+from ucat_console.telemetry.stream import TelemetryStream
+from ucat_console.ui.status_bar import vehicle_parts
+
+SMALL = CameraConfig(source="emulated", fps=20.0, width=160, height=90, jpeg_quality=80, lost_after=0.3)
+
+
+def _decode(data: bytes) -> Image.Image:
+    img = Image.open(io.BytesIO(data))
+    assert img.format == "JPEG"
+    img.load()
+    return img.convert("RGB")
+
+
+def test_config_refuses_a_source_it_cannot_open() -> None:
+    with pytest.raises(ValueError, match="camera.source: 'ftp://x' is not a camera source"):
+        AppConfig.from_dict({"camera": {"source": "ftp://x"}})
+    with pytest.raises(ValueError, match="camera.fps"):
+        AppConfig.from_dict({"camera": {"fps": 60}})
+    assert AppConfig.from_dict({"camera": {"source": "v4l2:/dev/video0"}}).camera.enabled
+    assert not load_config("robot").camera.enabled
+    assert load_config("sim-tuned").camera.source == "emulated"
+
+
+def test_emulated_frames_are_jpeg_of_the_size_asked_with_the_time_burned_in() -> None:
+    cam = EmulatedCamera(SMALL)
+    a, b, a2 = _decode(cam.frame(1.0)), _decode(cam.frame(2.0)), _decode(cam.frame(1.0))
+    assert a.size == (160, 90)
+    # the same time draws the same picture; another time changes the time text and the bar
+    assert ImageChops.difference(a, a2).getbbox() is None or \
+        max(ImageChops.difference(a, a2).getextrema()[0]) < 8
+    diff = ImageChops.difference(a, b).convert("L").point(lambda v: 255 if v > 60 else 0)
+    box = diff.getbbox()
+    assert box is not None
+    text_changed = diff.crop((0, 0, 160, 30)).getbbox() is not None  # the corner with t = ...
+    assert text_changed
+    # the white bar sits where bar_x puts it at each time
+    for t, img in ((1.0, a), (2.0, b)):
+        x = bar_x(t, 160) + 1
+        assert min(img.getpixel((x, 80))) > 200, (t, img.getpixel((x, 80)))
+    cam.fail = True
+    assert cam.frame(3.0) is None
+
+
+def test_pyav_reads_a_video_file_pyav_wrote() -> None:
+    av = pytest.importorskip("av")
+    from ucat_console.backend.camera.pyav import PyAVCamera
+    import tempfile, os
+    cam = EmulatedCamera(SMALL)
+    with tempfile.TemporaryDirectory() as d:
+        path = os.path.join(d, "clip.mkv")
+        out = av.open(path, "w")
+        s = out.add_stream("mjpeg", rate=10)
+        s.width, s.height, s.pix_fmt = 160, 90, "yuvj420p"
+        for i in range(4):
+            for p in s.encode(av.VideoFrame.from_image(cam.picture(0.5 * i))):
+                out.mux(p)
+        for p in s.encode():
+            out.mux(p)
+        out.close()
+        src = PyAVCamera(CameraConfig(source="http://unused", width=80, height=45), source=path)
+        frames = []
+        with pytest.raises(StopIteration):
+            while True:
+                frames.append(_decode(src.frame(0.0)))
+        src.close()
+    assert len(frames) == 4 and all(f.size == (80, 45) for f in frames)
+
+
+def test_a_missing_pyav_is_named(monkeypatch) -> None:
+    import builtins
+    from ucat_console.backend.camera import pyav
+    real = builtins.__import__
+
+    def no_av(name, *a, **k):
+        if name == "av":
+            raise ImportError("no av")
+        return real(name, *a, **k)
+    monkeypatch.setattr(builtins, "__import__", no_av)
+    with pytest.raises(ImportError, match=r"'rtsp://cam/1' needs PyAV, the optional extra 'camera'"):
+        pyav.PyAVCamera(CameraConfig(source="rtsp://cam/1"))
+
+
+def test_loss_and_recovery_are_events_and_a_light() -> None:
+    now = [0.0]
+    frames, events = Collector(), Collector()
+    cam = CameraThread(SMALL, lambda c, m: frames((c, m)), events, lambda: now[0])
+    assert cam.light(0.0)[0] == "warn"
+    assert cam.take()
+    [(channel, msg)] = frames.items
+    assert channel == ch.CAMERA_IMAGE and msg.t == 0.0 and msg.format == "jpeg"
+    assert cam.light(0.0)[0] == "ok"
+    cam.camera.fail = True
+    now[0] = 0.2
+    assert not cam.take() and not events.items  # not yet lost_after
+    now[0] = 0.4
+    cam.take()
+    [lost] = events.items
+    assert (lost.source, lost.code, lost.level) == ("camera", "lost", "warning")
+    state, why = cam.light(0.4)
+    assert state == "bad" and "camera lost" in why
+    cam.camera.fail = False
+    now[0] = 0.5
+    assert cam.take()
+    assert [e.code for e in events.items] == ["lost", "recovered"]
+    assert cam.light(0.5)[0] == "ok"
+
+
+def test_the_thread_publishes_frames_stamped_with_the_clock() -> None:
+    stream = TelemetryStream()
+    got = Collector()
+    stream.subscribe(lambda c, m: got(m), [ch.CAMERA_IMAGE])
+    cam = CameraThread(SMALL, stream.publish, Collector(), lambda: 42.0)
+    cam.start()
+    try:
+        wait_for(lambda: len(got.items) >= 3, what="three frames")
+    finally:
+        cam.close()
+    assert all(isinstance(m, CameraImage) and m.t == 42.0 for m in got.items)
+    assert cam.frames >= 3 and cam.bytes > 0
+
+
+def test_camera_loss_on_the_console_is_a_light_and_an_event_not_a_failsafe(tmp_path) -> None:
+    cfg = load_config("sim-tuned")
+    cfg = cfg.replace(camera=SMALL, console=cfg.console.replace(record_on_arm=False))
+    c = Console(cfg, tmp_path)
+    sup = c.sup
+    try:
+        wait_for(lambda: sup.camera.frames > 0, what="a frame")
+        light = lambda: next(x for x in vehicle_parts(sup.state()) if x.name == "Camera")  # noqa: E731
+        assert light().state == "ok"
+        sup.camera.camera.fail = True
+        sup.step(0.5)  # the loop's clock moves on past lost_after with no frame
+        wait_for(lambda: sup.camera.lost, what="the camera judged lost")
+        wait_for(lambda: c.event("camera", "lost"), what="the camera lost event")
+        assert light().state == "bad"
+        assert not sup.safety.active()
+    finally:
+        c.stop()
+
+
+def test_recorded_as_compressed_image_and_read_back(tmp_path) -> None:
+    stream = TelemetryStream()
+    rec = Recorder(stream, RecorderConfig(), directory=tmp_path, epoch_offset=1_700_000_000.0)
+    rec.start()
+    cam = EmulatedCamera(SMALL)
+    sent = [CameraImage(t=0.1 * i, frame_id="camera", format="jpeg", data=cam.frame(0.1 * i)) for i in range(5)]
+    for m in sent:
+        stream.publish(ch.CAMERA_IMAGE, m)
+    [path] = rec.stop()
+    assert rec.stats().image_bytes == sum(len(m.data) for m in sent)
+    with SessionReader(path, tmp_path) as r:
+        back = [rec_.message for rec_ in r.records([ch.CAMERA_IMAGE])]
+    assert [m.t for m in back] == [m.t for m in sent]
+    assert [m.data for m in back] == [m.data for m in sent]
+    with open(path, "rb") as fh:  # as Foxglove reads it: its schema, base64 data, a timestamp
+        reader = make_reader(fh)
+        for schema, channel, message in reader.iter_messages(topics=[ch.CAMERA_IMAGE]):
+            assert schema.name == "foxglove.CompressedImage"
+            obj = json.loads(message.data)
+            jsonschema.validate(obj, json.loads(schema.data))
+            assert _decode(base64.b64decode(obj["data"])).size == (160, 90)
+            assert obj["timestamp"]["sec"] * 10**9 + obj["timestamp"]["nsec"] == message.log_time
