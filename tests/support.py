@@ -220,3 +220,20 @@ def sim_config(directory: Path) -> Path:
     cfg.write_text(shipped.config_path("sim-tuned").read_text()
                    + f"\n[console]\nsessions_dir = {json.dumps(str(directory))}\n")
     return cfg
+
+
+#: a short scripted manoeuvre for the tests that record one (two segments, the second in the baseline)
+SHORT_LADDER = """\
+depth = 0.5
+settle = 1.0
+measure = 2.0
+
+[[segment]]
+label = "slow"
+velocity = 0.1
+
+[[segment]]
+label = "fast"
+velocity = 0.25
+mode = "baseline"
+"""

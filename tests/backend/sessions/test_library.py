@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 from session_helpers import record
 from synthetic_run import run_items
+from support import SHORT_LADDER
 
 from ucat_console.backend.sessions import library_read, sidecar
 from ucat_console.backend.sessions.library import DB_NAME, SCHEMA_VERSION, Library
@@ -323,20 +324,6 @@ def test_the_configuration_is_named_by_the_recording_else_by_a_known_hash(folder
         assert lib.get(ids["slow"]).config == "" and lib.get(named).config == "sim-tuned"
 
 
-MANOEUVRE = """\
-depth = 0.5
-settle = 1.0
-measure = 2.0
-
-[[segment]]
-label = "slow"
-velocity = 0.1
-
-[[segment]]
-label = "fast"
-velocity = 0.25
-mode = "baseline"
-"""
 
 
 @pytest.mark.slow
@@ -345,7 +332,7 @@ def test_a_manoeuvre_recorded_by_the_simulated_console_is_indexed(tmp_path, monk
 
     monkeypatch.setenv(files.SESSIONS_ENV, str(tmp_path))
     script = tmp_path / "short.toml"
-    script.write_text(MANOEUVRE)
+    script.write_text(SHORT_LADDER)
     assert main(["run", "--config", "sim-tuned", "--headless", "--fast", "--manoeuvre", str(script)]) == 0
     capsys.readouterr()
     assert main(["sessions", "find", "manoeuvre=short", "--json"]) == 0

@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 from session_helpers import record
 from synthetic_run import run_items
+from support import SHORT_LADDER
 
 from ucat_console.backend.review.run_report import SUFFIX, ReportWriter, report_path, write_report
 from ucat_console.backend.sessions import sidecar
@@ -198,20 +199,6 @@ def test_a_discarded_recording_gets_no_report(sessions: Path) -> None:
     assert called == [sid]
 
 
-SHORT_LADDER = """\
-depth = 0.5
-settle = 1.0
-measure = 2.0
-
-[[segment]]
-label = "slow"
-velocity = 0.1
-
-[[segment]]
-label = "fast"
-velocity = 0.25
-mode = "baseline"
-"""
 
 
 @pytest.mark.slow
