@@ -159,7 +159,7 @@ def test_a_recorded_session_is_reviewed_in_the_page(console: Console) -> None:
     session_id = path.name.rsplit("_", 1)[0]  # <session id>_001.mcap
     assert session_id in panel.choice.options  # the chooser lists sessions, not part files
     panel.choice.value = session_id
-    a.get_by_role("button", name="Open").click()
+    a.get_by_role("button", name="Open", exact=True).click()
     wait_for(lambda: panel.player is not None, what="the session opening")
     expect(a.get_by_text(f"opened {session_id}").first).to_be_visible()
     a.wait_for_function(  # the review vehicle is drawn by the live scene code
