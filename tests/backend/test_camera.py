@@ -90,6 +90,73 @@ def test_pyav_reads_a_video_file_pyav_wrote() -> None:
     assert len(frames) == 4 and all(f.size == (80, 45) for f in frames)
 
 
+class _MjpegStream:
+    """An HTTP MJPEG camera (multipart/x-mixed-replace, as IP cameras and mjpg-streamer
+    serve it) on this machine: ``count`` flat grey frames (frame i is grey 4 i), then the
+    connection held open until ``end`` is set."""
+
+    def __init__(self, count: int) -> None:
+        import threading
+        from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+        self.count, self.sent, self.end = count, threading.Event(), threading.Event()
+        stream = self
+
+        class Handler(BaseHTTPRequestHandler):
+            def do_GET(self) -> None:
+                self.send_response(200)
+                self.send_header("Content-Type", "multipart/x-mixed-replace; boundary=frame")
+                self.end_headers()
+                for i in range(stream.count):
+                    buf = io.BytesIO()
+                    Image.new("RGB", (64, 48), (4 * i,) * 3).save(buf, "JPEG")
+                    d = buf.getvalue()
+                    self.wfile.write(b"--frame\r\nContent-Type: image/jpeg\r\nContent-Length: %d\r\n\r\n"
+                                     % len(d) + d + b"\r\n")
+                self.wfile.flush()
+                stream.sent.set()
+                stream.end.wait(30.0)
+
+            def log_message(self, *args) -> None:
+                pass
+
+        self.server = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+        self.url = f"http://127.0.0.1:{self.server.server_address[1]}/stream"
+        threading.Thread(target=self.server.serve_forever, daemon=True).start()
+
+    def close(self) -> None:
+        self.end.set()
+        self.server.shutdown()
+        self.server.server_close()
+
+
+def test_a_live_stream_gives_its_newest_frame_not_a_queue() -> None:
+    """A source sending faster than the camera takes frames: each take is the newest frame,
+    the ones in between are skipped (counted), not queued behind it; the stream's end is a
+    failure the camera thread reopens from."""
+    pytest.importorskip("av")
+    from ucat_console.backend.camera.pyav import PyAVCamera
+    stream = _MjpegStream(60)
+    try:
+        cam = PyAVCamera(CameraConfig(source=stream.url, width=64, height=48, fps=5.0))
+        assert cam.live
+        wait_for(lambda: stream.sent.is_set() and cam.skipped == 59, 30.0, "the reader to read every frame")
+        first = Image.open(io.BytesIO(cam.frame(0.0)))
+        assert round(first.getpixel((32, 24))[0] / 4) == 59  # the newest, not the first sent
+        assert cam.frame(0.0) is None  # nothing newer has come
+        stream.end.set()  # the camera hangs up
+
+        def fails() -> bool:
+            try:
+                cam.frame(0.0)
+            except Exception:
+                return True
+            return False
+        wait_for(fails, 30.0, "the ended stream to fail")
+        cam.close()
+    finally:
+        stream.close()
+
+
 def test_a_missing_pyav_is_named(monkeypatch) -> None:
     import builtins
     from ucat_console.backend.camera import pyav
