@@ -20,6 +20,7 @@ from session_helpers import record
 
 from ucat_console.backend.loop.clock import SimulatedClock
 from ucat_console.backend.access import LOCAL, AccessConfig
+from ucat_console.backend.sessions import ros_messages as rm
 from ucat_console.backend.sessions import rosbag2_export as rb
 from ucat_console.backend.sessions.reader import SessionParts
 from ucat_console.backend.supervisor import Supervisor
@@ -206,12 +207,12 @@ def test_static_frames_the_urdf_and_fin_transforms_follow_the_urdf(simulated):
 
 
 def test_our_messages_carry_every_field_of_their_channels():
-    for topic in (*rb.FIN_STATES, *rb.FIN_STROUHALS, rb.POWER, rb.ELECTRICAL):
+    for topic in (*rm.FIN_STATES, *rm.FIN_STROUHALS, rm.POWER, rm.ELECTRICAL):
         cls = C.message_type(topic.source)
-        assert rb.own_fields(topic.msgtype) == [f.name for f in dataclasses.fields(cls) if f.name != "t"]
-    assert {p.stem for p in rb.msg_files()} == {"FinState", "FinStrouhal", "Power", "ElectricalPower"}
-    cmake = (rb.MSG_PACKAGE_DIR / "CMakeLists.txt").read_text()
-    assert all(f'"msg/{p.name}"' in cmake for p in rb.msg_files())
+        assert rm.own_fields(topic.msgtype) == [f.name for f in dataclasses.fields(cls) if f.name != "t"]
+    assert {p.stem for p in rm.msg_files()} == {"FinState", "FinStrouhal", "Power", "ElectricalPower"}
+    cmake = (rm.MSG_PACKAGE_DIR / "CMakeLists.txt").read_text()
+    assert all(f'"msg/{p.name}"' in cmake for p in rm.msg_files())
 
 
 def _crafted(sessions: Path) -> Path:
@@ -284,7 +285,7 @@ def test_a_failure_while_writing_leaves_nothing(sessions, tmp_path, monkeypatch)
     def broken(*args: Any, **kwargs: Any) -> Any:
         raise OSError("disk full")
 
-    monkeypatch.setattr(rb._Maker, "pressure", broken)
+    monkeypatch.setattr(rm.MessageBuilder, "pressure", broken)
     with SessionParts(path, sessions) as s, pytest.raises(OSError, match="disk full"):
         rb.export_rosbag2(s, tmp_path / "bag")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["sessions"]
