@@ -4,7 +4,7 @@
 closed loop's ``loop``, which holds the controller's ``mpc``, ``body``, ``baseline``,
 ``executor``, ``power``; the simulated robot's ``plant``; the ``recorder``; the limits on reading session
 files, ``review``; the efficiency figures and their comparison, ``metrics``; the efficiency seeker, ``seek``;
-the drivers' ``devices``; the vehicle's ``camera``; the pilot's ``access``, beside
+the drivers' ``devices``; the vehicle's ``camera``; the live ROS 2 topics, ``ros2``; the pilot's ``access``, beside
 the access control; the ``failsafe`` rules, beside the safety monitor) with the console's own
 blocks defined here: ``console`` (web server, plots, supervision) and ``foxglove`` (the live
 Foxglove server). This module composes; it is imported by the supervisor and the tools
@@ -53,6 +53,7 @@ from ucat_console.backend.access import AccessConfig
 from ucat_console.backend.camera.config import CameraConfig
 from ucat_console.backend.devices.config import DevicesConfig
 from ucat_console.backend.failsafe_config import FailsafeConfig
+from ucat_console.backend.ros_config import Ros2Config
 from ucat_console.backend.robots import robot as registered_robot
 from ucat_console.backend.robots import robot_names
 from ucat_console.backend.loop.config import LoopConfig
@@ -199,6 +200,7 @@ class AppConfig(Config):
     devices: DevicesConfig = DevicesConfig()
     camera: CameraConfig = CameraConfig()
     foxglove: FoxgloveConfig = FoxgloveConfig()
+    ros2: Ros2Config = Ros2Config()
 
     def _check(self) -> None:
         deepest, envelope = self.devices.plausibility.max_depth, self.loop.max_depth
