@@ -5,6 +5,7 @@
     ucat-console run --config pool.toml --port 0
     ucat-console run --headless --duration 60 --mode mpc_sync --velocity 0.2 --depth 1 --record
     ucat-console run --foxglove-port 8765     # and the live robot in Foxglove / Lichtblick
+    ucat-console run --ros2                   # and the live robot as ROS 2 topics (rmw_zenoh)
     ucat-console run --headless --manoeuvre e4_ladder   # a scripted manoeuvre (docs/manoeuvres.md)
 
 With the page, the motors stay disarmed until the pilot (the page that entered the token
@@ -61,6 +62,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--foxglove-port", type=int, default=None, metavar="P",
                    help="also serve the live telemetry to Foxglove / Lichtblick (read-only "
                         "WebSocket on --host, port P; 0: any free port)")
+    p.add_argument("--ros2", action="store_true",
+                   help="also publish the live telemetry as ROS 2 topics through zenoh, for ROS 2 nodes on "
+                        "rmw_zenoh (the configuration's [ros2]: domain, node, router endpoint; the 'ros' extra)")
     p.set_defaults(func=run)
 
 
@@ -84,7 +88,8 @@ def _config(args: argparse.Namespace) -> Any:
     if args.port is not None:
         console = console.replace(port=args.port)
     loop = cfg.loop if args.mode is None else cfg.loop.replace(mode=args.mode)
-    return cfg.replace(console=console, loop=loop)
+    ros2 = cfg.ros2.replace(enabled=True) if args.ros2 else cfg.ros2
+    return cfg.replace(console=console, loop=loop, ros2=ros2)
 
 
 def _foxglove_server(port: int, cfg: Any, sup: Any) -> Any:
@@ -102,6 +107,32 @@ def _foxglove_server(port: int, cfg: Any, sup: Any) -> Any:
     print(f"Foxglove server on {fox.url}  (port {fox.port}; open it in Foxglove or Lichtblick: "
           f"Open connection, Foxglove WebSocket; read-only)", flush=True)
     return fox
+
+
+def _check_ros2(cfg: Any) -> None:
+    """ValueError naming the extra to install when the ROS 2 topics are on and zenoh is missing
+    (said before anything starts)."""
+    if not cfg.ros2.enabled:
+        return
+    from ucat_console.backend.ros_live import import_zenoh
+
+    try:
+        import_zenoh()
+    except ImportError as e:
+        raise ValueError(f"--ros2 / ros2.enabled: {e}") from None
+
+
+def _ros2_publisher(cfg: Any, sup: Any) -> Any:
+    """The live ROS 2 publisher (its node and endpoints printed)."""
+    from ucat_console.backend.ros_live import Ros2Publisher
+
+    ros = Ros2Publisher(sup.stream, cfg.ros2, epoch_offset=sup.wall0, plant=cfg.plant)
+    r = cfg.ros2
+    odom = next(name for name in ros.topics if name.endswith("/odom"))
+    print(f"ROS 2 node {ros.node_name} on domain {r.domain_id}: {len(ros.topics)} topics through zenoh "
+          f"({r.mode}, connecting to {', '.join(r.connect) or 'nothing'}; read them with "
+          f"RMW_IMPLEMENTATION=rmw_zenoh_cpp, e.g. ros2 topic echo {odom})", flush=True)
+    return ros
 
 
 #: how often the page's address and the pilot token are printed again on a terminal (s)
@@ -158,6 +189,7 @@ def run(args: argparse.Namespace) -> int:
     if args.manoeuvre is not None and not args.headless:
         raise ValueError("--manoeuvre: only with --headless (on the page: the Drive tab's Manoeuvre folder)")
     cfg = _config(args)
+    _check_ros2(cfg)
     script = None
     if args.manoeuvre is not None:  # a bad file is said before anything starts
         from ucat_console.backend.manoeuvre_files import load_script
@@ -204,6 +236,7 @@ def run(args: argparse.Namespace) -> int:
     app = None
     scripted = None
     fox = None
+    ros = None
     last_power: list[Any] = [None]
     sup.stream.subscribe(lambda c, m: last_power.__setitem__(0, m), [ch.POWER])
     battery = BatteryEnergy()
@@ -227,6 +260,8 @@ def run(args: argparse.Namespace) -> int:
                 app.initial_session = name  # every page opens it in its Review tab
         if args.foxglove_port is not None:
             fox = _foxglove_server(args.foxglove_port, cfg, sup)
+        if cfg.ros2.enabled:
+            ros = _ros2_publisher(cfg, sup)
         sup.start()
         if args.record:
             print(f"recording session {sup.start_recording(LOCAL)}")
@@ -280,6 +315,8 @@ def run(args: argparse.Namespace) -> int:
         h = sup.health()  # after stopping: disarmed
         if fox is not None:
             fox.stop()
+        if ros is not None:
+            ros.close()
         if app is not None:
             app.stop()
         elif loading is not None:  # the console did not take its server over
