@@ -260,9 +260,9 @@ def run(args: argparse.Namespace) -> int:
                 app.initial_session = name  # every page opens it in its Review tab
         if args.foxglove_port is not None:
             fox = _foxglove_server(args.foxglove_port, cfg, sup)
-        if cfg.ros2.enabled:
-            ros = _ros2_publisher(cfg, sup)
         sup.start()
+        if cfg.ros2.enabled:  # after start: the stream's clock is then set to the wall clock (wall0)
+            ros = _ros2_publisher(cfg, sup)
         if args.record:
             print(f"recording session {sup.start_recording(LOCAL)}")
         if app is not None:
