@@ -133,7 +133,6 @@ def _expected_key(topic: Any) -> str:
     return f"0/{topic.name[1:]}/{pkg}::msg::dds_::{name}_/{store.hash_rihs01(topic.msgtype)}"
 
 
-@pytest.mark.slow
 def test_the_simulated_console_is_published_as_rmw_zenoh_publishes(console, tmp_path):
     sup = console
     port = free_port()
