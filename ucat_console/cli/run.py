@@ -261,6 +261,8 @@ def run(args: argparse.Namespace) -> int:
         if args.foxglove_port is not None:
             fox = _foxglove_server(args.foxglove_port, cfg, sup)
         sup.start()
+        if fox is not None:  # the stream's clock is set to the wall clock at start, as the recorder's
+            fox.epoch_offset = sup.wall0
         if cfg.ros2.enabled:  # after start: the stream's clock is then set to the wall clock (wall0)
             ros = _ros2_publisher(cfg, sup)
         if args.record:
