@@ -17,12 +17,17 @@ shorter one, while one designed for the baseline's delay rings with the MPC's.
 Each loop is designed for the closed-loop bandwidth ``w_b = 1 / (k tau)`` (``k`` = 4 by
 default, ``control.params.DESIGN_FACTOR``): at ``w_b`` the delay costs ``1/k`` rad (14
 degrees) of phase, so the delay does not make the loop ring or limit-cycle. The heading
-loop is faster, ``k`` = :data:`HEADING_FACTOR` (2.3: 0.35 rad/s, 25 degrees of the delay's
+loop is faster, ``k`` = :data:`HEADING_FACTOR` (1.7: 0.47 rad/s, 34 degrees of the delay's
 phase): the fins' cycles make yaw moments the body layer does not model (each stroke of the
-simulated fin pushes across its cycle's direction in turn, and uneven or open cycles turn
-their force by up to 20 degrees), and the 0.2 rad/s loop let them turn the robot 5-8 degrees
-going straight under the paper's MPC (``bench tracking``). Faster still rings: at 0.4-0.5
-rad/s the rear-synchronised MPC swings 20-27 degrees after a 0.25 N m push of 2 s.
+simulated fin pushes across its cycle's direction in turn, uneven or open cycles turn their
+force by up to 20 degrees, and fins of a pair running cycles of different lengths make
+different true forces for the same modelled one), and only the loop's stiffness holds them:
+at 0.2 rad/s they turned the robot 5-8 degrees going straight under the paper's MPC, at 0.35
+rad/s up to 3.2 going straight and 7.0 at 0.3 m/s (the worst of 20 seeds, ``bench
+tracking``); at 0.47 rad/s 2.6 and 3.3. Measured from 2.3 down to 1.6 (``docs/control.md``),
+each step faster held the MPC modes' worst cases closer and none rang: a 0.25 N m push of 2 s
+at 0.2 m/s turns the robot 6.4-6.7 degrees at 0.47 rad/s (7.8-8.4 at 0.35) and it is back
+within 2.1 degrees 40 s on.
 
 * Position loops (depth, heading), ``u = kp e - kd x' + ki int e``: when the hull damps the
   axis enough by itself (``D >= 2 M w_b``: heave) the loop is proportional, with the slower
@@ -68,9 +73,9 @@ to 14 degrees at 0.1 m/s. The speed low-pass is not scheduled: following the ban
 (1.6 s at 2 s cycles) it put a 0.5 Hz baseline's speed within its band 82 % of the time at
 0.1 m/s, against 95 % with the 1-s low-pass.
 
-With the defaults (eeUVsim's hull, 1.25 s, k = 4: ``w_b`` = 0.2 rad/s; the heading's 0.35
-rad/s) the depth loop is kp 5.16 N/m, ki 0.387 N/(m s); the heading loop kp 0.364 N m/rad,
-kd 1.78 N m s/rad, ki 0.016 N m/(rad s); the velocity loop kp 17.1 N s/m, ki 2.48 N/m
+With the defaults (eeUVsim's hull, 1.25 s, k = 4: ``w_b`` = 0.2 rad/s; the heading's 0.47
+rad/s) the depth loop is kp 5.16 N/m, ki 0.387 N/(m s); the heading loop kp 0.666 N m/rad,
+kd 2.52 N m s/rad, ki 0.039 N m/(rad s); the velocity loop kp 17.1 N s/m, ki 2.48 N/m
 (:func:`designed_gains`; ``docs/control.md`` works them through).
 """
 
@@ -123,7 +128,7 @@ DESIGN_SPEED = 0.2
 INTEGRAL_ZERO = 1.0 / 8.0
 DEPTH_INTEGRAL_ZERO = 3.0 / 8.0
 #: the heading loop's bandwidth factor (the others': the caller's)
-HEADING_FACTOR = 2.3
+HEADING_FACTOR = 1.7
 
 
 @dataclass(frozen=True)
