@@ -92,7 +92,7 @@ def test_review_shows_the_frame_at_or_before_the_playhead(tmp_path) -> None:
                 s = panel.camera.shown
                 return s is not None and abs(s.t - (start + want)) < 1e-9
             wait_for(shown, what=f"the frame of {want} s at the playhead {pos} s")
-            assert panel.camera.caption.content.startswith("t = ")
+            assert panel.camera.caption.content.startswith(f"frame at {want:.3f} s of the session")
     finally:
         panel.stop()
         server.stop()
