@@ -79,6 +79,9 @@ def test_the_library_is_searched_a_report_downloaded_and_a_run_played_with_its_v
     expect(runs_table).not_to_contain_text(calm)
     chooser = gui_input(page, "Session")
     expect(chooser).to_have_value(video)
+    ARTIFACTS.mkdir(exist_ok=True)
+    runs_table.scroll_into_view_if_needed()
+    page.screenshot(path=str(ARTIFACTS / "review-table-1280x800.png"))
 
     # the report: viser offers it as a link in a notification; the file is the run's report HTML
     page.get_by_role("button", name="Open report").click()
@@ -108,6 +111,6 @@ def test_the_library_is_searched_a_report_downloaded_and_a_run_played_with_its_v
     wait_for(frame_at_playhead, what="the page's frame within one frame period of its playhead", timeout=30.0)
     at = _seconds(page, r"paused at ([0-9.]+) /")
     assert 1.5 < at < DURATION  # a paused position inside the run, not its start or end
-    ARTIFACTS.mkdir(exist_ok=True)
+    page.get_by_text(re.compile(r"frame at [0-9.]+ s of the session")).first.scroll_into_view_if_needed()
     page.screenshot(path=str(ARTIFACTS / "review-video-1280x800.png"))
     page.close()
