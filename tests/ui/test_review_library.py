@@ -18,6 +18,7 @@ from ucat_console.backend.supervisor.run_library import MAX_TAG_CHANGES, RunLibr
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.messages import Setpoints
 from ucat_console.telemetry.stream import TelemetryStream
+from ucat_console.ui.markdown import esc
 from ucat_console.ui.viser_compat import handle_uuid
 
 SETTINGS = {"scene_rate": 10.0, "plot_rate": 2.0}
