@@ -18,6 +18,7 @@ from ucat_console.backend.supervisor.run_library import MAX_TAG_CHANGES, RunLibr
 from ucat_console.telemetry import channels as ch
 from ucat_console.telemetry.messages import Setpoints
 from ucat_console.telemetry.stream import TelemetryStream
+from ucat_console.ui.markdown import esc
 from ucat_console.ui.viser_compat import handle_uuid
 
 SETTINGS = {"scene_rate": 10.0, "plot_rate": 2.0}
@@ -113,7 +114,8 @@ def test_a_bad_tag_from_a_raw_page_is_refused_and_nothing_is_written(
     review.press(review.runs.save_tags)
     wait_for(lambda: sidecar.read(tmp_path, a).tags == ("pool-3",), what="the tag written")
     wait_for(lambda: [e for e in console.sup.journal() if e.key == f"session {a} tags"], what="the journal")
-    wait_for(lambda: "tags pool-3" in review.runs.table.content, what="the list showing the tag")
+    wait_for(lambda: any(line.startswith(f"| **{esc(a)}** |") and "| pool-3 |" in line
+                         for line in review.runs.table.content.splitlines()), what="the table showing the tag")
 
 
 def test_a_viewer_without_a_name_cannot_edit_and_with_one_can(

@@ -7,6 +7,13 @@
 - Seek latency: a synthetic session of ``hours`` at a realistic channel mix
   (:data:`MIX`, about 400 messages/s) is recorded, then ``state_at`` is timed at random
   times (the target is <= 50 ms in a one-hour session).
+- Real time (``--realtime`` s): the :data:`MIX` published at its own rates, as the loop
+  does, into a recorder of the console's default settings, with ``--camera FPS`` the
+  emulated camera's frames too (its default size and quality, 640x360 at JPEG quality 75,
+  encoded beforehand: the camera's own thread encodes them in the console); the messages dropped, the bytes written
+  a second and the process's CPU. With ``--camera`` the throughput run carries the frames
+  as well, at their share of the mix. The target: the camera at up to 30 fps recorded
+  with no telemetry dropped.
 """
 
 from __future__ import annotations
@@ -32,6 +39,7 @@ from ucat_console.telemetry.messages import (
     BodyState,
     FinPlan,
     FinState,
+    CameraImage,
     Power,
     Setpoints,
     Status,
@@ -103,10 +111,25 @@ def synthetic_messages_between(t0: float, t1: float) -> list[tuple[float, str, A
     return out
 
 
-def recorder_throughput(n: int = 100_000, directory: Path | None = None) -> dict[str, Any]:
-    """Messages/s through a recorder whose queue holds them all (drops reported)."""
-    per_s = sum(rate for rate, _ in MIX.values())
-    msgs = synthetic_messages_between(0.0, n / per_s + 1.0)[:n]
+def camera_frames(fps: float, seconds: float) -> list[tuple[float, str, Any]]:
+    """(t, channel, message) of the emulated camera at ``fps`` for ``seconds`` (the default
+    camera's size and quality; each picture its own, with its time burned in)."""
+    from ucat_console.backend.camera.config import CameraConfig
+    from ucat_console.backend.camera.emulated import EmulatedCamera
+
+    cam = EmulatedCamera(CameraConfig(source="emulated", fps=fps))
+    return [(k / fps, C.CAMERA_IMAGE, CameraImage(k / fps, "camera", "jpeg", cam.frame(k / fps)))
+            for k in range(int(seconds * fps))]
+
+
+def recorder_throughput(n: int = 100_000, directory: Path | None = None, camera: float | None = None) -> dict[str, Any]:
+    """Messages/s through a recorder whose queue holds them all (drops reported); with
+    ``camera`` (fps) the camera's frames among them at that rate."""
+    per_s = sum(rate for rate, _ in MIX.values()) + (camera or 0.0)
+    msgs = synthetic_messages_between(0.0, n / per_s + 1.0)
+    if camera:
+        msgs = sorted([*msgs, *camera_frames(camera, n / per_s + 1.0)], key=lambda m: m[0])
+    msgs = msgs[:n]
     tmp = Path(tempfile.mkdtemp(prefix="bench-sessions-", dir=directory))
     try:
         stream = TelemetryStream()
@@ -131,6 +154,58 @@ def recorder_throughput(n: int = 100_000, directory: Path | None = None) -> dict
         "rate_msgs_per_s": len(msgs) / (t2 - t0),
         "publish_us_per_msg": (t1 - t0) / len(msgs) * 1e6,
         "bytes": size,
+        "camera_fps": camera,
+        "frames": sum(1 for _, c, _m in msgs if c == C.CAMERA_IMAGE),
+        "megabytes_per_s": size / (t2 - t0) / 1e6,
+    }
+
+
+def realtime_recording(seconds: float = 20.0, camera: float | None = None,
+                       directory: Path | None = None) -> dict[str, Any]:
+    """The :data:`MIX` (and with ``camera``, frames at that fps) published in real time into
+    a recorder of the default settings for ``seconds``: drops, bytes and CPU."""
+    import os
+
+    msgs = synthetic_messages_between(0.0, seconds)
+    if camera:
+        msgs = sorted([*msgs, *camera_frames(camera, seconds)], key=lambda m: m[0])
+    tmp = Path(tempfile.mkdtemp(prefix="bench-sessions-rt-", dir=directory))
+    try:
+        stream = TelemetryStream()
+        rec = Recorder(stream, RecorderConfig(), directory=tmp, epoch_offset=1.7e9)
+        rec.start(label="realtime")
+        most_queued = 0
+        cpu0, t0 = os.times(), time.perf_counter()
+        k = 0
+        while k < len(msgs):
+            now = time.perf_counter() - t0
+            while k < len(msgs) and msgs[k][0] <= now:
+                _, channel, msg = msgs[k]
+                stream.publish(channel, msg)
+                k += 1
+            most_queued = max(most_queued, rec.stats().queued)
+            time.sleep(0.005)
+        paths = rec.stop()
+        elapsed = time.perf_counter() - t0
+        cpu1 = os.times()
+        stats = rec.stats()
+        size = sum(p.stat().st_size for p in paths)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    frames = sum(1 for _, c, _m in msgs if c == C.CAMERA_IMAGE)
+    return {
+        "seconds": seconds,
+        "camera_fps": camera,
+        "telemetry_messages": len(msgs) - frames,
+        "frames": frames,
+        "written": stats.written,
+        "dropped": stats.dropped,
+        "rejected": stats.rejected,
+        "most_queued": most_queued,
+        "image_bytes": stats.image_bytes,
+        "bytes": size,
+        "megabytes_per_s": size / elapsed / 1e6,
+        "cpu_percent": 100.0 * ((cpu1.user - cpu0.user) + (cpu1.system - cpu0.system)) / elapsed,
     }
 
 
@@ -224,6 +299,10 @@ def register(kinds: argparse._SubParsersAction) -> None:
     p.add_argument("--messages", type=int, default=100_000, help="throughput run length")
     p.add_argument("--hours", type=float, default=1.0, help="synthetic session length")
     p.add_argument("--seeks", type=int, default=50, help="state_at calls timed")
+    p.add_argument("--realtime", type=float, default=20.0,
+                   help="seconds of the live mix recorded in real time (0: none)")
+    p.add_argument("--camera", type=float, nargs="?", const=30.0, default=None, metavar="FPS",
+                   help="with the emulated camera's frames at FPS (default 30) in the throughput and real-time runs")
     p.add_argument("--dir", type=Path, default=None, help="scratch directory (default: /tmp)")
     p.add_argument("--json", type=Path, default=None, help="write the results as JSON")
     p.set_defaults(func=run)
@@ -236,10 +315,23 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--hours: {args.hours} must be in (0, 24]")
     if args.seeks < 1:
         raise ValueError(f"--seeks: {args.seeks} must be at least 1")
-    thr = recorder_throughput(args.messages, args.dir)
-    print(f"recorder: {thr['rate_msgs_per_s']:,.0f} messages/s "
-          f"({thr['messages']} messages, {thr['dropped']} dropped, "
+    if not 0.0 <= args.realtime <= 600.0:
+        raise ValueError(f"--realtime: {args.realtime} must be in [0, 600] s")
+    if args.camera is not None and not 0.1 <= args.camera <= 30.0:
+        raise ValueError(f"--camera: {args.camera} fps must be in [0.1, 30] (camera.fps' range)")
+    thr = recorder_throughput(args.messages, args.dir, args.camera)
+    with_camera = f", {thr['frames']} camera frames at {args.camera:g} fps among them" if args.camera else ""
+    print(f"recorder: {thr['rate_msgs_per_s']:,.0f} messages/s, {thr['megabytes_per_s']:.1f} MB/s "
+          f"({thr['messages']} messages{with_camera}, {thr['dropped']} dropped, "
           f"{thr['publish_us_per_msg']:.1f} us per publish)")
+    realtime = None
+    if args.realtime > 0.0:
+        realtime = realtime_recording(args.realtime, args.camera, args.dir)
+        cam = (f" and {realtime['frames']} camera frames at {args.camera:g} fps "
+               f"({realtime['image_bytes'] / 1e6:.1f} MB of JPEG)") if args.camera else " (no camera)"
+        print(f"real time, {realtime['seconds']:g} s: {realtime['telemetry_messages']:,} telemetry messages{cam}; "
+              f"{realtime['dropped']} dropped, at most {realtime['most_queued']} queued; "
+              f"{realtime['megabytes_per_s']:.2f} MB/s written; process CPU {realtime['cpu_percent']:.0f} % of a core")
     append = mcap_append()
     print(f"MCAP append (in memory, uncompressed chunks, {append['messages']:,} messages, median of "
           f"{append['rounds']}): mcap's Writer {append['mcap_writer_us']:.2f} us, the recorder's "
@@ -253,6 +345,7 @@ def run(args: argparse.Namespace) -> int:
     machine = machine_info(None)
     print(speed_line(machine))
     if args.json:
-        args.json.write_text(json.dumps({"throughput": thr, "mcap_append": append, "seek": seek, "machine": machine}, indent=2))
+        args.json.write_text(json.dumps({"throughput": thr, "realtime": realtime, "mcap_append": append, "seek": seek,
+                                              "machine": machine}, indent=2))
         print(f"wrote {args.json}")
     return 0

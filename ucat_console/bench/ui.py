@@ -22,6 +22,10 @@ pages open on it. After a warm-up, for ``duration`` seconds:
   recorder (recording starts on arming, as at the pool); measured again for another
   ``duration`` seconds with the probe off (its element updated with every pose and sent to
   every page is the benchmark's, not the console's), the pages still drawing;
+* with ``--camera FPS`` the emulated camera runs at that rate (recorded with the rest): the
+  bytes sent to each page (the guard's count of its socket's bytes) and the camera pictures
+  sent to the pages (at most 5 a second each) say what the video adds, beside the recorder's
+  frames and its drops;
 * browser CPU (Linux): the same for the Chromium processes started for the pages, split
   into the GPU process (where software GL draws the 3-D view when there is no GPU), the
   page renderers and the rest; with the supervisor's share it tells whether the machine
@@ -160,9 +164,25 @@ def _descendant_cpu_seconds() -> dict[str, float]:
     return out
 
 
+def _sent_bytes(app: Any) -> dict[int, int]:
+    """Bytes written to each page's socket so far, by client id."""
+    out = {}
+    for cid in list(app.pages):
+        state = app.guard.link_state(cid)
+        if state is not None:
+            out[cid] = int(state["sent"])
+    return out
+
+
+def _pictures_sent(app: Any) -> int:
+    return sum(p.sent for p in list(app.cameras.panels.values()))
+
+
 def measure_ui(duration: float = 20.0, pages: int = 2, warmup: float = 5.0, velocity: float = 0.2,
-               chromium: str = CHROMIUM, viewport: tuple[int, int] = (1400, 900)) -> dict[str, Any]:
-    """Run the console with ``pages`` headless pages and measure (module docstring)."""
+               chromium: str = CHROMIUM, viewport: tuple[int, int] = (1400, 900),
+               camera: float | None = None) -> dict[str, Any]:
+    """Run the console with ``pages`` headless pages and measure (module docstring); with
+    ``camera`` (fps) the emulated camera on, at its default size and quality."""
     from playwright.sync_api import sync_playwright
 
     from ucat_console.backend.access import LOCAL
@@ -172,7 +192,10 @@ def measure_ui(duration: float = 20.0, pages: int = 2, warmup: float = 5.0, velo
 
     if duration <= 0 or pages < 1:
         raise ValueError(f"duration must be > 0 and pages >= 1, got {duration}, {pages}")
-    cfg = AppConfig(console=ConsoleConfig(port=0))
+    from ucat_console.backend.camera.config import CameraConfig
+
+    cam = CameraConfig(source="emulated", fps=camera) if camera else CameraConfig()
+    cfg = AppConfig(console=ConsoleConfig(port=0), camera=cam)
     with tempfile.TemporaryDirectory() as tmp:
         sup = Supervisor(cfg, sessions_dir=tmp)
         app = ConsoleApp(sup, probe=True)
@@ -199,11 +222,15 @@ def measure_ui(duration: float = 20.0, pages: int = 2, warmup: float = 5.0, velo
                     page.evaluate(_START_COUNTING)
                 scene0, plots0 = app.scene.updates, app.plots.updates
                 cpu0, wall0 = time.process_time(), time.perf_counter()
+                bytes0, pictures0 = _sent_bytes(app), _pictures_sent(app)
+                image0 = sup.recorder.stats().image_bytes
                 browser0 = _descendant_cpu_seconds()
                 threads0 = _thread_cpu_seconds()
                 load0 = os.getloadavg()[0]
                 time.sleep(duration)
                 cpu1, wall1 = time.process_time(), time.perf_counter()
+                bytes1, pictures1 = _sent_bytes(app), _pictures_sent(app)
+                image1, dropped = sup.recorder.stats().image_bytes, sup.recorder.stats().dropped
                 browser1 = _descendant_cpu_seconds()
                 threads1 = _thread_cpu_seconds()
                 scene1, plots1 = app.scene.updates, app.plots.updates
@@ -253,6 +280,11 @@ def measure_ui(duration: float = 20.0, pages: int = 2, warmup: float = 5.0, velo
         "configured_scene_rate": cfg.console.scene_rate,
         "configured_plot_rate": cfg.console.plot_rate,
         "supervisor_cpu_percent": 100.0 * (cpu1 - cpu0) / elapsed,
+        "camera_fps": camera,
+        "page_kbytes_per_s": [(bytes1.get(c, 0) - b) / elapsed / 1e3 for c, b in bytes0.items()],
+        "camera_pictures_to_pages_per_s": (pictures1 - pictures0) / elapsed,
+        "recorded_image_kbytes_per_s": (image1 - image0) / elapsed / 1e3,
+        "recorder_dropped": dropped,
         "supervisor_cpu_percent_without_probe": 100.0 * (cpu3 - cpu2) / (wall3 - wall2),
         "supervisor_threads_cpu_percent_without_probe": _thread_percent(threads2, threads3, wall3 - wall2),
         "probe_last_seq_when_off": probe_last_seq,
@@ -301,7 +333,8 @@ def _threads(percent: dict[str, float]) -> str:
 def format_result(r: dict[str, Any]) -> str:
     lines = [
         f"console page benchmark: {len(r['pages'])} headless pages, {r['duration_s']:.0f} s, "
-        f"{r['cpus']} CPUs, load average {r['load_average_1min']:.1f}",
+        f"{r['cpus']} CPUs, load average {r['load_average_1min']:.1f}; "
+        + (f"the emulated camera at {r['camera_fps']:g} fps" if r.get("camera_fps") else "no camera"),
         f"server pushes: scene {r['server_scene_updates_per_s']:.1f}/s (configured {r['configured_scene_rate']:g}), "
         f"plots {r['server_plot_updates_per_s']:.1f}/s (configured {r['configured_plot_rate']:g})",
         "pose updates per second: delivered to the page / displayed in a rendered frame",
@@ -320,6 +353,11 @@ def format_result(r: dict[str, Any]) -> str:
     lines.append("supervisor CPU by thread: " + _threads(r["supervisor_threads_cpu_percent"]))
     lines.append(f"supervisor CPU without the benchmark's probe {r['supervisor_cpu_percent_without_probe']:.0f} %"
                  " of one core; by thread: " + _threads(r["supervisor_threads_cpu_percent_without_probe"]))
+    if "page_kbytes_per_s" in r:
+        lines.append("sent to each page: " + ", ".join(f"{k:.0f} kB/s" for k in r["page_kbytes_per_s"])
+                     + f"; camera pictures to the pages {r['camera_pictures_to_pages_per_s']:.1f}/s; "
+                     f"recorded {r['recorded_image_kbytes_per_s']:.0f} kB/s of camera frames, "
+                     f"{r['recorder_dropped']} messages dropped by the recorder")
     p = r["page_parts"]
     lines.append(f"in a tight loop: the plots' series of a refresh {p['plot_series_us']:.0f} us "
                  f"({p['plot_series_points']} points)")
@@ -333,6 +371,8 @@ def register_bench(kinds: argparse._SubParsersAction) -> None:
     p.add_argument("--pages", type=int, default=2, help="headless pages open on the console")
     p.add_argument("--warmup", type=float, default=5.0, help="seconds before measuring")
     p.add_argument("--chromium", default=CHROMIUM, help="Chromium executable")
+    p.add_argument("--camera", type=float, nargs="?", const=30.0, default=None, metavar="FPS",
+                   help="the emulated camera on at FPS (default 30; without the option: no camera)")
     p.add_argument("--json", type=Path, default=None, help="write the results as JSON")
     p.set_defaults(func=run_ui)
 
@@ -345,8 +385,11 @@ def run_ui(args: argparse.Namespace) -> int:
     from ucat_console.bench.machine import machine_info, speed_line
     from ucat_console.compiled import prepare_all
 
+    if args.camera is not None and not 0.1 <= args.camera <= 30.0:
+        raise ValueError(f"--camera: {args.camera} fps must be in [0.1, 30] (camera.fps' range)")
     prepare_all()
-    r = measure_ui(duration=args.duration, pages=args.pages, warmup=args.warmup, chromium=args.chromium)
+    r = measure_ui(duration=args.duration, pages=args.pages, warmup=args.warmup, chromium=args.chromium,
+                   camera=args.camera)
     r["machine"] = machine_info(None)
     print(format_result(r))
     print(speed_line(r["machine"]))

@@ -9,6 +9,11 @@ The live console ticks every page's panel from its UI thread (:class:`PageCamera
 review ticks its own from the review view's thread, so the frame shown is the one at the
 playhead (the player publishes, on a seek, the latest frame at or before the position).
 
+The caption under the picture gives the frame's time: ``t = 12.34 s`` (its stream time) live;
+in a review also where it is in the session, ``frame at 3.217 s of the session (t = 15.3 s)``,
+on the same clock as the playback's position (``origin()``: the session's start in stream
+time), so an operator sees which moment the picture shows against the playhead.
+
 The picture is decoded from its JPEG by Pillow and handed to viser's public
 ``gui.add_image`` element, which encodes it again for the page. Nothing here touches the
 pilot's commands or DISARM's path."""
@@ -48,10 +53,12 @@ class CameraPanel:
 
     def __init__(self, gui: Any, *, width: int, height: int, rate: float = RATE, order: float = 0.8,
                  allow: Callable[..., None] | None = None, label: str = "Camera",
-                 show_label: str = "Show camera") -> None:
+                 show_label: str = "Show camera", origin: Callable[[], float | None] | None = None) -> None:
+        """``origin()``: the session's start in stream time, for a review's caption (None: live)."""
         if not rate > 0.0:
             raise ValueError(f"camera panel: rate {rate!r} must be positive")
         self.period = 1.0 / rate
+        self.origin = origin
         self._lock = threading.Lock()
         self._latest: CameraImage | None = None
         self._shown: CameraImage | None = None
@@ -105,10 +112,18 @@ class CameraPanel:
             self._shown = frame
             return False
         self.image.image = picture
-        self.caption.content = f"t = {frame.t:.2f} s"
+        self.caption.content = self.describe(frame)
         self._shown = frame
         self.sent += 1
         return True
+
+
+    def describe(self, frame: CameraImage) -> str:
+        """The caption of ``frame`` (module docstring)."""
+        start = self.origin() if self.origin is not None else None
+        if start is None:
+            return f"t = {frame.t:.2f} s"
+        return f"frame at {frame.t - start:.3f} s of the session (t = {frame.t:.2f} s)"
 
 
 class PageCameras:

@@ -167,7 +167,7 @@ class PlaybackPanel:
         self.plots = self.view.plots
         with within(container):  # the recorded camera's frame at the playhead
             self.camera = CameraPanel(gui, width=320, height=180, order=2.5, allow=allow, label="Camera",
-                                      show_label="Show recorded camera")
+                                      show_label="Show recorded camera", origin=self._start)
         self._unsubs = [*self.view.subscribe(self.stream), self.metrics.subscribe(self.stream),
                         self.camera.subscribe(self.stream)]
 
@@ -486,6 +486,11 @@ class PlaybackPanel:
         self.note.value = ""
         self.show(self.session.said)
         return m
+
+    def _start(self) -> float | None:
+        """The open session's start (stream seconds; None: none open)."""
+        p = self.session.player
+        return None if p is None else p.start
 
     def position(self) -> float | None:
         """The playback position in seconds from the session's start (None: none open)."""

@@ -343,3 +343,47 @@ def test_a_manoeuvre_recorded_by_the_simulated_console_is_indexed(tmp_path, monk
     f = row["figures"]
     # a percentile interval of a ratio need not hold the ratio itself on a short run: its ends only
     assert f["epm"] > 0.0 and 0.0 < f["epm_lo"] <= f["epm_hi"] and f["speed"] > 0.0
+
+
+def test_a_trend_carries_each_runs_interval_and_charts_by_weight_and_by_date(folder) -> None:
+    from ucat_console.backend.review import trend
+
+    d, ids = folder
+    with Library(d) as lib:
+        lib.refresh()
+        points = lib.trend("epm", "loop.mpc.lam_st")
+        by_id = {p.session_id: p for p in points}
+        assert set(by_id) == {ids["fast"], ids["slow"], ids["plain"]}  # idle was never driven
+        for p in points:  # the library's interval, around the value
+            assert p.lo is not None and p.hi is not None and p.lo <= p.value <= p.hi
+        assert all(p.lo is None and p.hi is None for p in lib.trend("speed", "date"))  # no interval kept
+        # 4 W at 0.2, 0.1 and 0.15 m/s; lam_st 2.0 (paper) for fast and plain, 0.5 for slow
+        c = trend.chart(points, "loop.mpc.lam_st")
+        assert list(c.x) == [0.5, 2.0, 2.0] and c.groups == 2 and c.left_out == 0 and c.has_interval
+        assert c.value[0] == pytest.approx(40.0, rel=1e-5)
+        assert sorted(c.value[1:]) == pytest.approx([20.0, 4.0 / 0.15], rel=1e-5)
+        assert c.mean[1] == c.mean[2] == pytest.approx((20.0 + 4.0 / 0.15) / 2, rel=1e-5)
+        assert (c.lo <= c.value).all() and (c.value <= c.hi).all()
+        by_day = trend.chart(lib.trend("epm", "date"), "date")
+        assert by_day.x[0] == pytest.approx(DAY1, abs=60.0) and by_day.groups == 2  # slow ran first
+        # a run whose configuration has no such key has no place on the axis: left out, counted
+        none = trend.chart(lib.trend("epm", "loop.mpc.lam_d"), "loop.mpc.lam_d")
+        assert len(none.x) == 0 and none.left_out == 3
+
+
+@pytest.mark.parametrize(("figure", "by", "words"), [
+    ("password", "date", "trend figure 'password'"),
+    ("epm_lo", "date", "trend figure 'epm_lo'"),
+    (3, "date", "trend figure '3'"),
+    ("epm", "loop.mpc.nope", "trend axis 'loop.mpc.nope'"),
+    ("epm", "plant.hydro.c_d0", "trend axis 'plant.hydro.c_d0'"),
+    ("epm", None, "trend axis 'None'"),
+])
+def test_a_trend_choice_outside_the_pages_choices_is_refused_by_name(figure, by, words) -> None:
+    from ucat_console.backend.review import trend
+
+    with pytest.raises(ValueError, match="not one of") as e:
+        trend.check_choice(figure, by)
+    assert words in str(e.value)
+    assert trend.check_choice("energy per metre (J/m)", "date") == ("epm", "date")  # the page's label
+    assert trend.check_choice("st_in", "loop.mpc.lam_st") == ("st_in", "loop.mpc.lam_st")

@@ -23,7 +23,8 @@ runs in a child process at a lower CPU priority
 With the console's run library (:class:`RunsAccess`, the supervisor's methods for this page)
 it lists the runs a query finds, sorted (:meth:`ReviewSession.find_runs`; a bad query is
 refused with the library's error and the last list stands), writes a run's tags and notes,
-and reads a run's report file for the page to download.
+reads a run's report file for the page to download, and gives a figure's trend over the runs
+found (:meth:`ReviewSession.trend`).
 
 The page (``ui.playback.PlaybackPanel``) renders it: the inputs, the plots and the robot of
 the stream; it runs the commands that read files in the page's jobs. Tests drive it directly.
@@ -41,6 +42,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Collection
 
+from ucat_console.backend.review import trend as trends
 from ucat_console.backend.sessions import export, files, images, index, repair
 from ucat_console.backend.sessions.markers import Marker, check_note
 from ucat_console.backend.sessions.player import Player, check_speed
@@ -81,6 +83,8 @@ class RunsAccess:
     set_tags: Callable[[object, object], tuple[str, ...]]  # (session id, changes)
     set_notes: Callable[[object, object], str]  # (session id, notes)
     report: Callable[[object], Path | None]  # session id -> its report file
+    #: (query, figure, axis) -> the library's TrendPoint list (None: no trends here)
+    trend: Callable[[object, object, object], list[Any]] | None = None
 
 
 @dataclass(frozen=True)
@@ -209,6 +213,16 @@ class ReviewSession:
         text = self._runs().set_notes(session_id, notes)
         self.said = f"{session_id}: notes saved"
         return text
+
+    def trend(self, figure: object, by: object) -> tuple[str, str, list[Any]]:
+        """(field, axis, points): ``figure`` of the runs the last accepted query finds against
+        ``by``; a figure or axis not among the trend's choices is refused (ValueError naming
+        it) before the library is asked."""
+        name, axis = trends.check_choice(figure, by)
+        runs = self._runs()
+        if runs.trend is None:
+            raise ValueError("trends are not available here")
+        return name, axis, runs.trend(self.query[0], name, axis)
 
     def report(self, session_id: object) -> tuple[str, bytes]:
         """The session's report file (name, content); ValueError when it has none."""

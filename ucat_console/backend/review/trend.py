@@ -1,9 +1,16 @@
-"""A figure's trend over the run library's sessions: CSV, a summary per group, and a PNG
+"""A figure's trend over the run library's sessions: CSV, a summary per group, a PNG
 (matplotlib, the Agg backend as ``sessions compare``'s; only where matplotlib is installed,
-the ``experiments`` extra).
+the ``experiments`` extra), and the arrays the Review tab's trend chart draws.
 
 The points are :class:`~ucat_console.backend.sessions.library.TrendPoint`: one session's
-value and its group (its day, or a configuration key's value).
+value and its group (its day, or a configuration key's value), with the figure's interval
+where the library keeps one.
+
+The page offers a fixed choice: the figures of :data:`FIGURES` against the axes of
+:data:`AXES` (the day, or one of the recorded MPC weights); :func:`check_choice` refuses
+anything else a page sends with a message naming it and the choices, before the library is
+asked. :func:`chart` turns the points into the chart's x and series (a run without a start,
+or without a number for the configuration key, is left out and counted).
 """
 
 from __future__ import annotations
@@ -18,7 +25,78 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
+import numpy as np
+
 from ucat_console.backend.sessions.library import TrendPoint
+from ucat_console.backend.sessions.replay import WEIGHT_NAMES
+
+#: the figures the page's trend offers: library field -> what the page calls it
+FIGURES: dict[str, str] = {
+    "epm": "energy per metre (J/m)",
+    "cot": "cost of transport (J/(kg m))",
+    "speed_mae": "speed error, mean |e| (m/s)",
+    "depth_mae": "depth error, mean |e| (m)",
+    "heading_mae": "heading error, mean |e| (rad)",
+    "st_mae": "St error, mean |St - St_opt|",
+    "st_in": "strokes in the St corridor (%)",
+}
+#: the axes the page's trend offers: the day, or a recorded MPC weight (its configuration key)
+DATE = "date"
+AXES: tuple[str, ...] = (DATE, *(f"loop.mpc.{w}" for w in WEIGHT_NAMES))
+
+
+def check_choice(figure: object, by: object) -> tuple[str, str]:
+    """(library field, axis) of a page's choice: ``figure`` a field of :data:`FIGURES` or
+    its label, ``by`` one of :data:`AXES`; ValueError naming the one refused."""
+    labels = {v: k for k, v in FIGURES.items()}
+    if not isinstance(figure, str) or (figure not in FIGURES and figure not in labels):
+        raise ValueError(f"trend figure {str(figure)[:60]!r}: not one of " + "; ".join(FIGURES.values()))
+    if not isinstance(by, str) or by not in AXES:
+        raise ValueError(f"trend axis {str(by)[:60]!r}: not one of " + ", ".join(AXES))
+    return labels.get(figure, figure), by
+
+
+@dataclass(frozen=True)
+class Chart:
+    """A trend as the page's chart draws it: ``x`` (UNIX s by date, else the key's value)
+    ascending, and per point its value, interval (NaN: none) and its group's mean."""
+
+    x: np.ndarray  # float64
+    value: np.ndarray  # float32, as each series below
+    lo: np.ndarray
+    hi: np.ndarray
+    mean: np.ndarray
+    left_out: int  # points without a place on the axis
+    groups: int
+    has_interval: bool
+
+
+def chart(points: Sequence[TrendPoint], by: str) -> Chart:
+    """The chart of ``points`` against ``by`` (module docstring)."""
+    placed: list[tuple[float, TrendPoint]] = []
+    for p in points:
+        if by == DATE:
+            x = p.start
+        else:
+            try:
+                x = float(p.group)
+            except ValueError:
+                x = None
+        if x is not None and math.isfinite(x) and math.isfinite(p.value):
+            placed.append((x, p))
+    placed.sort(key=lambda xp: xp[0])
+    kept = [p for _, p in placed]
+    means = {g.group: g.mean for g in groups(kept)}
+    nan = math.nan
+    return Chart(
+        x=np.array([x for x, _ in placed], dtype=np.float64),
+        value=np.array([p.value for p in kept], dtype=np.float32),
+        lo=np.array([nan if p.lo is None else p.lo for p in kept], dtype=np.float32),
+        hi=np.array([nan if p.hi is None else p.hi for p in kept], dtype=np.float32),
+        mean=np.array([means[p.group] for p in kept], dtype=np.float32),
+        left_out=len(points) - len(kept), groups=len(means),
+        has_interval=any(p.lo is not None or p.hi is not None for p in kept),
+    )
 
 
 @dataclass(frozen=True)

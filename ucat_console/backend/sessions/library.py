@@ -122,10 +122,15 @@ class RefreshReport:
 
 @dataclass(frozen=True)
 class TrendPoint:
+    """One session's value of a trend's figure, in its group; ``lo``/``hi``: the figure's
+    interval where the library has one (energy per metre, cost of transport), else None."""
+
     session_id: str
     start: float | None
     group: str
     value: float
+    lo: float | None = None
+    hi: float | None = None
 
 
 def _sig(stats: Iterable[PartStat]) -> str:
@@ -477,7 +482,8 @@ class Library:
         """Field ``name`` (a number) of the sessions matching ``query``, each with its group:
         its day (``by="date"``), or the value of a key of its recorded configuration
         (``by="loop.mpc.lam_st"``; ``(none)`` when it has none). Sessions without the value
-        are left out. In start order."""
+        are left out. In start order; each point with the figure's interval when the library
+        keeps one (``epm_lo``/``epm_hi`` ...)."""
         f = field(name, "trend: field")
         if f.kind != "number":
             raise QueryError(f"trend: {name!r} is not a number; numbers: "
@@ -508,7 +514,9 @@ class Library:
                 for key in by.split("."):
                     node = node.get(key) if isinstance(node, dict) else None
                 group = "(none)" if node is None or isinstance(node, dict) else str(node)
-            out.append(TrendPoint(r.id, r.start, group, float(v)))
+            lo, hi = r.figures.get(f.column + "_lo"), r.figures.get(f.column + "_hi")
+            out.append(TrendPoint(r.id, r.start, group, float(v), None if lo is None else float(lo),
+                                  None if hi is None else float(hi)))
         return out
 
     @staticmethod

@@ -3,7 +3,9 @@ as the pages find, tag and annotate runs through the supervisor, every value a p
 
 :class:`RunLibrary` holds one ``Library`` for the console (opened at its first use, with the
 names of the shipped configurations, ``config.known_configs``, which the supervisor hands it) and answers the supervisor's
-``find_runs``, ``refresh_runs``, ``set_run_tags``, ``set_run_notes`` and ``run_report``.
+``find_runs``, ``refresh_runs``, ``set_run_tags``, ``set_run_notes``, ``run_report`` and
+``trend_runs`` (a figure of the runs a query finds, by day or by a recorded MPC weight: the
+choices of :mod:`~ucat_console.backend.review.trend`).
 Values come from a page as it sent them: each is checked for its type, its length and its
 characters before anything is read or written (:func:`check_query`, :func:`check_tag_changes`,
 :func:`check_notes`); a refusal is a ValueError naming the value, and nothing is written then.
@@ -22,8 +24,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
+from ucat_console.backend.review import trend as trends
 from ucat_console.backend.sessions import sidecar
-from ucat_console.backend.sessions.library import Library, RefreshReport, Row
+from ucat_console.backend.sessions.library import Library, RefreshReport, Row, TrendPoint
 from ucat_console.backend.sessions.library_query import FIELDS, MANY
 from ucat_console.backend.sessions.limits import MemoryBudget
 from ucat_console.backend.sessions.replay import WEIGHT_NAMES
@@ -189,6 +192,13 @@ class RunLibrary:
         lib = self.library
         old = lib.get(sid).notes
         return old, lib.set_notes(sid, text)
+
+    def trend(self, query: object, figure: object, by: object) -> list[TrendPoint]:
+        """``figure`` of the runs ``query`` finds against ``by`` (each checked first: one of
+        the trend's choices; ValueError naming the one refused)."""
+        q, _, _ = check_query(query, "start", False)
+        name, axis = trends.check_choice(figure, by)
+        return self.library.trend(name, axis, q)
 
     def report(self, session_id: object) -> Path | None:
         """The session's report file when there is one (None: none)."""

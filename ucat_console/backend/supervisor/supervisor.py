@@ -961,6 +961,12 @@ class Supervisor:
         self._notify()
         return row.notes
 
+    def trend_runs(self, query: object, figure: object, by: object) -> list[Any]:
+        """A figure of the runs matching ``query`` by day or by a recorded MPC weight
+        (``backend.review.trend``'s choices); ValueError naming a bad query, figure or axis
+        (any page may look)."""
+        return self.run_library.trend(query, figure, by)
+
     def run_report(self, session_id: object) -> Path | None:
         """The report file of a recorded session (None: it has none)."""
         return self.run_library.report(session_id)
