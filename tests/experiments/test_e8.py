@@ -159,6 +159,10 @@ def test_a_tiny_e8_writes_its_report(tmp_path: Path) -> None:
     assert {c["change"] for c in e["change_comparisons"]} == {"drag_x1.3"}
     assert set(e["decisions"]) == set(e8.SEEKERS)
     assert len(e["rows"]) == 5 + 3
+    # each seeker's row says why its search ended and, from rest, the values it ended on
+    seekers = [r for r in e["rows"] if r["controller"] in e8.SEEKERS]
+    assert seekers and all(r["search_end"] for r in seekers)
+    assert all(r["values"] for r in seekers if not r["change"])
     assert len(e["convergence"]) == 2 + 2
     report = (tmp_path / "report.md").read_text()
     assert "Not the declared timing" in report and "rule 3" in report

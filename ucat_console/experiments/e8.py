@@ -397,10 +397,17 @@ def decisions(comparisons: list[dict[str, Any]], changes: list[dict[str, Any]]) 
 
 def rows_of(runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """One row per run: the figure the rules read (a seeker's best re-measured from rest is
-    its own run: ``window``)."""
+    its own run: ``window``); for a seeker, the values it ended on (its search's best; after a
+    change, the candidate whose figure is read) and why its search ended (``search_end``)."""
     rows = []
     for r in runs:
         j = r["job"]
+        values, reason = j["values"], ""
+        search = r.get("after_change") if j["change"] else r.get("search")
+        if j["controller"] in SEEKERS and search is not None:  # what the seeker ended on, and why
+            reason = search.get("reason", "")
+            best = best_after_change(r) if j["change"] else search.get("best")
+            values = best["values"] if best else {}
         if j["change"]:
             if j["controller"] in SEEKERS:
                 b = best_after_change(r)
@@ -413,8 +420,8 @@ def rows_of(runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
             w = r["window"]
             e, ok = w["energy_per_metre"], tracks(w)
         rows.append({"plant": j["plant"], "v_ref": j["v_ref"], "controller": j["controller"], "seed": j["seed"],
-                     "change": j["change"], "values": j["values"], "energy_per_metre": e, "tracks": bool(ok),
-                     "fault": r.get("fault", "")})
+                     "change": j["change"], "values": values, "energy_per_metre": e, "tracks": bool(ok),
+                     "fault": r.get("fault", ""), "search_end": reason})
     return rows
 
 
