@@ -76,7 +76,6 @@ LATCHED = rmw_zenoh.Qos(transient_local=True, depth=1)
 GLOBAL_TOPICS = frozenset({TF.name, TF_STATIC.name, ROSOUT.name})
 #: s between a latched publisher's sporadic heartbeats (rmw_zenoh's sample miss detection period)
 HEARTBEAT_PERIOD = 0.5
-_IDLE_SLEEP = 0.005  # s, the thread's poll period when the queue is empty
 
 
 def import_zenoh() -> Any:
@@ -170,6 +169,7 @@ class Ros2Publisher:
         self._put(TF_STATIC, self._make.static_tf(latched_ns))
         self._put(ROBOT_DESCRIPTION, self._make.string(description))
         self._stopping = False
+        self._wake = threading.Event()  # set when the queue gets messages (or on close)
         self._closed = False
         self._thread = threading.Thread(target=self._run, name="ros2-publisher", daemon=True)
         self._thread.start()
@@ -233,6 +233,7 @@ class Ros2Publisher:
         self._closed = True
         self._unsubscribe()
         self._stopping = True
+        self._wake.set()
         self._thread.join()
         for p in self._publishers.values():
             for entity in (p.liveliness, p.publisher):
@@ -261,6 +262,7 @@ class Ros2Publisher:
         if over > 0:
             self._dropped += min(over, q.maxlen)  # type: ignore[type-var]
         q.extend(items)
+        self._wake.set()
 
     # ------------------------------------------------------------------ the publisher's thread
     def _run(self) -> None:
@@ -271,7 +273,10 @@ class Ros2Publisher:
             except IndexError:
                 if self._stopping:
                     return
-                time.sleep(_IDLE_SLEEP)
+                # the messages are queued before the wake-up is set: one set between the
+                # wait and the clear is found by the next popleft
+                self._wake.wait()
+                self._wake.clear()
                 continue
             t = getattr(msg, "t", None)
             if isinstance(t, (int, float)) and math.isfinite(t):
