@@ -512,6 +512,8 @@ def format_result(r: dict[str, Any]) -> str:
                    if x["applied"] else "")
         lines.append(f"DISARM through {x['delay_each_way_s']:g} s each way: applied {x['applied']} of "
                      f"{x['trials']} {applied}".rstrip())
+        if x.get("disarmed_otherwise"):
+            lines.append(f"  disarmed before the click's DISARM arrived: {', '.join(x['disarmed_otherwise'])}")
     if "restart" in r:
         x = r["restart"]
         lines.append(f"console restarted {x['restarts']} times under {x['spinners']} spinning processes: the "

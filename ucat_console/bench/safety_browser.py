@@ -176,7 +176,9 @@ def slow_connect(delay: float, trials: int) -> dict[str, Any]:
                 loaded.append(time.monotonic() - t0)
                 page.wait_for_function("() => window.__ucat && window.__ucat.state !== null", timeout=120_000)
                 connect.append(time.monotonic() - t0)
-                socket.append(opened[0] - t0 if opened else connect[-1])
+                # the console message reaches here after the page logged it, at times after the
+                # first state it preceded (Playwright delivers it once its text is resolved)
+                socket.append(min(opened[0] - t0, connect[-1]) if opened else connect[-1])
                 t1 = time.monotonic()
                 _take_control(page)
                 page.wait_for_function(_YOU_PILOT, timeout=120_000)
@@ -201,7 +203,8 @@ def slow_connect(delay: float, trials: int) -> dict[str, Any]:
 def slow_disarm(delay: float, trials: int) -> dict[str, Any]:
     """The pilot's Chromium page through a link delaying every chunk ``delay`` s each way, the
     robot armed: from the click on the bar's DISARM (its event in the page, by the page's
-    wall clock) to the supervisor disarmed."""
+    wall clock) to the supervisor disarmed; a disarm by anything else first (a failsafe) is
+    counted apart, with its reason."""
     from playwright.sync_api import sync_playwright
 
     from ucat_console.backend.access import LOCAL
@@ -209,10 +212,11 @@ def slow_disarm(delay: float, trials: int) -> dict[str, Any]:
     from ucat_console.bench.ui import CHROMIUM, CHROMIUM_ARGS
 
     times: list[float] = []
+    otherwise: list[str] = []  # the reasons of disarms that came before the click's
     lost = 0
     with tempfile.TemporaryDirectory() as tmp, sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        sup, app, _ = start_console(tmp, 2.0)
+        sup, app, events = start_console(tmp, 2.0)
         proxy = DelayProxy(app.port, delay)
         try:
             page = _chromium_page(browser, proxy.url)
@@ -228,6 +232,7 @@ def slow_disarm(delay: float, trials: int) -> dict[str, Any]:
                 page.wait_for_function("() => document.getElementById('ucat-disarm').disabled", timeout=120_000)
                 sup.arm(LOCAL)
                 page.wait_for_function("() => !document.getElementById('ucat-disarm').disabled", timeout=120_000)
+                n = len(events)
                 page.locator("#ucat-disarm").click()
                 try:
                     wait_until(lambda: not sup.armed, 20.0, "DISARM through the slow link")
@@ -238,6 +243,12 @@ def slow_disarm(delay: float, trials: int) -> dict[str, Any]:
                     page.wait_for_function(_YOU_PILOT, timeout=120_000)  # back as the pilot (its kept token)
                     continue
                 applied = time.time()
+                reason = next((e.data.get("reason", "") for _, e in events[n:] if e.code == "disarmed"), "")
+                if reason != "operator":  # something else disarmed (a failsafe): not the click's time
+                    otherwise.append(reason or "unknown")
+                    log.warning("DISARM through %.1f s each way, trial %d: disarmed by %s first", delay,
+                                trial + 1, otherwise[-1])
+                    continue
                 times.append(applied - page.evaluate("() => window.__disarmAt") / 1e3)
                 log.info("DISARM through %.1f s each way, trial %d: %.2f s", delay, trial + 1, times[-1])
         finally:
@@ -246,6 +257,7 @@ def slow_disarm(delay: float, trials: int) -> dict[str, Any]:
             app.stop()
             browser.close()
     return {"delay_each_way_s": delay, "trials": trials, "applied": len(times), "not_applied": lost,
+            "disarmed_otherwise": otherwise,
             "disarm_median_s": statistics.median(times) if times else None,
             "disarm_max_s": max(times) if times else None, "disarm_s": times}
 
