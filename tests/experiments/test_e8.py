@@ -168,3 +168,27 @@ def test_a_tiny_e8_writes_its_report(tmp_path: Path) -> None:
     assert "Not the declared timing" in report and "rule 3" in report
     assert (tmp_path / "e8_runs.csv").read_text().count("\n") == 1 + 8
     json.loads((tmp_path / "results.json").read_text())
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(1800)
+def test_a_seekers_run_gives_the_same_figures_every_time() -> None:
+    """Its commands come at the timing's simulated times, whatever the machine does meanwhile:
+    the same job twice, one of them beside a spinning process, gives the same candidates,
+    the same best and the same window."""
+    import subprocess
+    import sys
+
+    t = e8.Timing(hold_s=3.0, window_s=4.0, seek_settle_s=1.0, seek_window_s=4.0, candidates=3)
+    job = e8.Job(e8.CHANGE_PLANT, e8.CHANGE_SPEED, 0, "seek_baseline", timing=t)
+    first = e8.run_job(job)
+    hog = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+    try:
+        second = e8.run_job(job)
+    finally:
+        hog.kill()
+        hog.wait()
+    assert first["fault"] == "" and len(first["search"]["candidates"]) == 3
+    for k in ("candidates", "ends", "start_time", "best"):
+        assert first["search"][k] == second["search"][k], k
+    assert first["window"] == second["window"]

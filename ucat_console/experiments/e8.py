@@ -3,7 +3,8 @@
 Declared before it was run (docs/experiments/e8-declaration.md, which prints the plants'
 hash, :func:`~ucat_console.experiments.efficiency_curves.plant_hash`). Every run is the
 console itself (``backend.supervisor.Supervisor`` on the simulated robot in simulated time,
-as ``ucat-console seek --fast`` runs it) on one of E7's energy-consistent plates
+its loop stepped in the run's own thread, so that every command comes at the simulated time
+the timing says and a job gives the same figures every time) on one of E7's energy-consistent plates
 (:data:`E8_PLANTS`), measured by the seeker's own figures (``review.metrics.table_row``:
 the battery's energy per metre with its bootstrap interval over the fin cycles, the speed,
 depth and heading tracking errors). A run is a function of its :class:`Job` (a plant, a
@@ -26,7 +27,6 @@ declaration's, evaluated mechanically.
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -231,9 +231,17 @@ def run_job(job: Job) -> dict[str, Any]:
                          [ch.EVENTS])
     out: dict[str, Any] = {"job": _job_dict(job)}
 
+    # the loop steps in this thread (``Supervisor.step``): each command below is given at the
+    # simulated time the run's timing says, so a job gives the same figures every time
+    fault: list[str] = []
+    period = cfg.console.supervise_period
+
     def wait(until: Any) -> None:
-        while sup.running and not until():
-            time.sleep(0.02)
+        while not fault and not until():
+            try:
+                sup.step(period)
+            except Exception as e:  # the loop failed: the run's fault, its windows without figures
+                fault.append(f"{type(e).__name__}: {e}")
 
     def change() -> float:
         plant = held[0].plant
@@ -242,8 +250,6 @@ def run_job(job: Job) -> dict[str, Any]:
 
     try:
         sup.set_setpoints(LOCAL, velocity=job.v_ref, depth=1.0, yaw_rate=0.0)
-        sup.start()
-        wait(lambda: sup.loop.time > 0.0)
         sup.arm(LOCAL)
         t0 = sup.loop.time
         if not seeking:
@@ -266,7 +272,7 @@ def run_job(job: Job) -> dict[str, Any]:
                 m0 = sup.loop.time + t.seek_settle_s
                 wait(lambda: sup.loop.time >= m0 + t.window_s)
                 out["window"] = _window(data, m0, m0 + t.window_s, cfg.metrics, "best")
-            elif not sup.running:  # the loop stopped in the nominal search: no second one
+            elif fault:  # the loop stopped in the nominal search: no second one
                 out["after_change"] = {"reason": "the loop stopped", "candidates": [], "converged_s": math.nan}
             else:
                 tc = change()
@@ -279,7 +285,7 @@ def run_job(job: Job) -> dict[str, Any]:
                 else:
                     wait(lambda: again.finished)
                     out["after_change"] = _search(again, tc, events)
-        out["fault"] = str(sup.fault or "")
+        out["fault"] = fault[0] if fault else ""
     finally:
         sup.stop()
     return out
