@@ -75,7 +75,7 @@ def test_the_same_seed_suggests_the_same() -> None:
 
 # ---------------------------------------------------------------- on the console
 SEEK = SeekConfig(params=(SeekParam("mpc.st_opt", 0.2, 0.45),), settle_s=0.5, window_s=1.0,
-                  max_candidates=6, seed=1, startup=2, drift_check=False)
+                  max_candidates=6, confirm=0, seed=1, startup=2, drift_check=False)
 
 
 def seek_console(make_console: Callable[..., Console], **seek: Any) -> Console:
@@ -162,6 +162,59 @@ def test_each_candidate_is_journalled_and_one_off_its_tracking_band_is_rejected_
     assert view.best == run.best.values and view.best_energy[0] == run.best.energy.value
 
 
+def test_the_search_best_are_measured_again_and_the_least_second_measure_is_the_best(
+        make_console: Callable[..., Console], monkeypatch: pytest.MonkeyPatch) -> None:
+    """A first measure that was lucky (the least of the search by far) does not win when its
+    second measure is what its values give: the least second measure does."""
+    c = seek_console(make_console, confirm=3)
+    sup = c.sup
+    measured: dict[float, int] = {}
+    lucky: list[float] = []  # the value whose first measure is low by chance
+
+    def energy(v: float, t: float) -> float:
+        n = measured[v] = measured.get(v, 0) + 1
+        if not lucky and v != 0.3:
+            lucky.append(v)
+        return 1.0 if (n == 1 and lucky and v == lucky[0]) else 10.0 + 100.0 * abs(v - 0.35)
+
+    fake_rows(monkeypatch, sup, energy)
+    run = sup.start_seek(LOCAL)
+    run_until(sup, lambda: run.finished)
+    first = [cand for cand in run.candidates if cand.confirms is None]
+    again = [cand for cand in run.candidates if cand.confirms is not None]
+    assert len(first) == SEEK.max_candidates and len(again) == 3
+    ranked = sorted(first, key=lambda cand: cand.energy.value)
+    assert [cand.confirms for cand in again] == [cand.index for cand in ranked[:3]]
+    assert ranked[0].values == ((("mpc.st_opt", lucky[0]),)) and ranked[0].energy.value == 1.0
+    assert all(cand.values == first[cand.confirms].values for cand in again)
+    assert run.best in again and run.best.energy.value == min(cand.energy.value for cand in again)
+    assert run.best.values != ranked[0].values  # the lucky one, measured again, lost
+    assert sup.param_value("mpc.st_opt") == dict(run.best.values)["mpc.st_opt"]
+    events = [e for e in c.events if e.source == "seek" and e.code == "candidate"]
+    assert [e.data["confirms"] for e in events] == [cand.confirms for cand in run.candidates]
+    assert f"#{again[0].confirms} again" in events[len(first)].message
+
+
+def test_when_no_second_measure_is_accepted_the_first_measures_best_stands(
+        make_console: Callable[..., Console], monkeypatch: pytest.MonkeyPatch) -> None:
+    c = seek_console(make_console, confirm=2)
+    sup = c.sup
+    done: list[bool] = []  # the search's candidates all measured: every window after is off track
+
+    def energy(v: float, t: float) -> float:
+        return 100.0 * abs(v - 0.35)
+
+    fake_rows(monkeypatch, sup, energy, off_track=lambda v: bool(done))
+    run = sup.start_seek(LOCAL)
+    run_until(sup, lambda: len(run.candidates) >= SEEK.max_candidates)
+    best = run.best
+    done.append(True)
+    run_until(sup, lambda: run.finished)
+    again = [cand for cand in run.candidates if cand.confirms is not None]
+    assert len(again) == 2 and not any(cand.accepted for cand in again)
+    assert run.best is best and sup.param_value("mpc.st_opt") == dict(best.values)["mpc.st_opt"]
+
+
 @pytest.mark.parametrize("on_stop", ["revert", "best"])
 def test_a_disarm_stops_it_at_once_and_leaves_what_on_stop_says(make_console: Callable[..., Console],
                                                                  monkeypatch: pytest.MonkeyPatch,
@@ -244,7 +297,7 @@ def test_a_drift_outside_the_best_interval_seeks_again(make_console: Callable[..
 def test_a_headless_seek_on_the_simulated_robot_finds_a_best_with_its_interval(tmp_path: Path, capsys) -> None:
     out_json = tmp_path / "seek.json"
     code = main(["seek", "--config", "sim-tuned", "--velocity", "0.2", "--depth", "1", "--params", "mpc.st_opt",
-                 "--candidates", "4", "--seed", "2", "--settle", "3", "--window", "10", "--fast",
+                 "--candidates", "4", "--confirm", "1", "--seed", "2", "--settle", "3", "--window", "10", "--fast",
                  "--json", str(out_json), "--sessions-dir", str(tmp_path)])
     out = capsys.readouterr().out
     assert code == 0, out
@@ -252,15 +305,19 @@ def test_a_headless_seek_on_the_simulated_robot_finds_a_best_with_its_interval(t
     assert [int(k) for k, *_ in lines] == [0, 1, 2, 3]
     assert re.search(r"best: #\d mpc.st_opt [0-9.]+: energy per metre [0-9.]+ J/m \[[0-9.]+, [0-9.]+\]", out)
     data = json.loads(out_json.read_text())
-    assert data["reason"] == "completed" and len(data["candidates"]) == 4
+    assert data["reason"] == "completed" and len(data["candidates"]) == 4 + 1
     assert all(0.2 <= cand["values"]["mpc.st_opt"] <= 0.45 for cand in data["candidates"])
+    *first, again = data["candidates"]
+    energy = {c["index"]: c["figures"]["energy_per_metre"]["value"] for c in first if c["accepted"]}
+    assert again["confirms"] == min(energy, key=energy.get) and again["accepted"]  # the search's best, again
+    assert again["values"] == first[again["confirms"]]["values"]
     best = data["best"]
-    assert best is not None
+    assert best is not None and best["index"] == again["index"]  # the only second measure
     e = best["energy_per_metre"]
     assert e["lo"] <= e["value"] <= e["hi"]
     start = data["candidates"][0]
     assert start["values"] == data["start"] and start["accepted"]
-    assert e["value"] <= start["figures"]["energy_per_metre"]["hi"]
+    assert energy[again["confirms"]] <= start["figures"]["energy_per_metre"]["hi"]
     assert "mpc.lam_f: not one of the seeker's parameters" not in out
     assert main(["seek", "--params", "mpc.lam_f", "--fast"]) == 2
     assert "mpc.lam_f: not one of the seeker's parameters" in capsys.readouterr().err

@@ -179,7 +179,7 @@ def test_a_seekers_run_gives_the_same_figures_every_time() -> None:
     import subprocess
     import sys
 
-    t = e8.Timing(hold_s=3.0, window_s=4.0, seek_settle_s=1.0, seek_window_s=4.0, candidates=3)
+    t = e8.Timing(hold_s=3.0, window_s=4.0, seek_settle_s=1.0, seek_window_s=4.0, candidates=3, confirm=1)
     job = e8.Job(e8.CHANGE_PLANT, e8.CHANGE_SPEED, 0, "seek_baseline", timing=t)
     first = e8.run_job(job)
     hog = subprocess.Popen([sys.executable, "-c", "while True: pass"])
@@ -188,7 +188,7 @@ def test_a_seekers_run_gives_the_same_figures_every_time() -> None:
     finally:
         hog.kill()
         hog.wait()
-    assert first["fault"] == "" and len(first["search"]["candidates"]) == 3
+    assert first["fault"] == "" and len(first["search"]["candidates"]) == 3 + 1
     for k in ("candidates", "ends", "start_time", "best"):
         assert first["search"][k] == second["search"][k], k
     assert first["window"] == second["window"]

@@ -36,6 +36,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--params", nargs="+", default=(), metavar="KEY",
                    help="the parameters to vary (of the configuration's [[seek.params]]; default: all of them)")
     p.add_argument("--candidates", type=int, default=None, metavar="N", help="candidates (the start's included)")
+    p.add_argument("--confirm", type=int, default=None, metavar="N",
+                   help="the search's best N measured once more each; the least second measure wins (0: none)")
     p.add_argument("--seed", type=int, default=None, metavar="S", help="the search's seed")
     p.add_argument("--settle", type=float, default=None, metavar="S", help="settle time after each change, s")
     p.add_argument("--window", type=float, default=None, metavar="S", help="each candidate's measure window, s")
@@ -54,7 +56,8 @@ def _config(args: argparse.Namespace) -> Any:
     cfg = load_config(args.config)
     seek = cfg.seek
     changes = {k: v for k, v in (("settle_s", args.settle), ("window_s", args.window),
-                                 ("max_candidates", args.candidates), ("seed", args.seed)) if v is not None}
+                                 ("max_candidates", args.candidates), ("seed", args.seed),
+                                 ("confirm", args.confirm)) if v is not None}
     seek = seek.replace(**changes, drift_check=False)  # one search: the command ends with it
     seek.only(tuple(args.params))  # a parameter without bounds is said before anything starts
     loop = cfg.loop if args.mode is None else cfg.loop.replace(mode=args.mode)
@@ -99,7 +102,8 @@ def run(args: argparse.Namespace) -> int:
         seek = sup.start_seek(LOCAL, tuple(args.params))
         print(f"seek: {cfg.seek.max_candidates} candidates of {cfg.seek.settle_s:g} s settle and "
               f"{cfg.seek.window_s:g} s measure over " + ", ".join(
-                  f"{p.name} [{p.lo:g}, {p.hi:g}]" for p in seek.params), flush=True)
+                  f"{p.name} [{p.lo:g}, {p.hi:g}]" for p in seek.params)
+              + f"; then the best {cfg.seek.confirm} measured again", flush=True)
         while sup.running and not seek.finished:
             time.sleep(0.02 if args.fast else 0.2)
         if sup.fault:

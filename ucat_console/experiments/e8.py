@@ -27,10 +27,8 @@ declaration's, evaluated mechanically.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any
-
-import numpy as np
 
 from ucat_console.backend.seek.config import SeekConfig, SeekParam
 from ucat_console.backend.sim.params import VehicleConfig
@@ -77,6 +75,7 @@ class Timing:
     seek_settle_s: float = 10.0
     seek_window_s: float = 30.0
     candidates: int = 20
+    confirm: int = 3  # the nominal search's best measured again (none after a change: its time is short)
     after_change_s: float = 120.0  # the seeker's time after a change
 
     @property
@@ -210,7 +209,7 @@ def run_job(job: Job) -> dict[str, Any]:
     base = load_config("sim-tuned")
     params = SEEK_PARAMS[job.controller][1] if seeking else (SeekParam(),)
     seek = SeekConfig(params=params, settle_s=t.seek_settle_s, window_s=t.seek_window_s,
-                      max_candidates=t.candidates, seed=job.seed, drift_check=False)
+                      max_candidates=t.candidates, confirm=t.confirm, seed=job.seed, drift_check=False)
     loop = _apply(base.loop.replace(mode=mode, planner_seed=job.seed), job.values)
     cfg = base.replace(plant=plant_config(job.plant, job.seed), loop=loop, seek=seek,
                        console=base.console.replace(record_on_arm=False))
@@ -278,7 +277,7 @@ def run_job(job: Job) -> dict[str, Any]:
                 tc = change()
                 out["t_change"] = tc
                 try:
-                    again = sup.start_seek(LOCAL, candidates=t.reseek_candidates, seed=job.seed + 1)
+                    again = sup.start_seek(LOCAL, candidates=t.reseek_candidates, seed=job.seed + 1, confirm=0)
                 except CommandRefused as e:  # a failsafe ended the nominal search: tracking not held
                     out["after_change"] = {"reason": f"no second search: {e}", "candidates": [],
                                            "converged_s": math.nan}
@@ -295,11 +294,12 @@ def _search(run: Any, s0: float, events: list[Any]) -> dict[str, Any]:
     """A search's candidates, its best, and its time to converge (s from its start); the
     candidates' windows' ends from their events (the last ``len(run.candidates)``)."""
     cands = [{"index": c.index, "values": dict(c.values), "verdict": c.verdict, "accepted": c.accepted,
+              "confirms": c.confirms,
               "energy_per_metre": None if c.energy is None else c.energy.value,
               "lo": None if c.energy is None else c.energy.lo, "hi": None if c.energy is None else c.energy.hi}
              for c in run.candidates]
     best = run.best
-    ends = [ev.data["t1"] for ev in events[len(events) - len(cands):]]
+    ends = [ev.data.get("t1", math.nan) for ev in events[len(events) - len(cands):]]  # a refused one: none
     return {"reason": run.reason, "candidates": cands, "ends": ends, "start_time": s0,
             "best": None if best is None or best.energy is None else
             {"values": dict(best.values), "energy_per_metre": best.energy.value, "lo": best.energy.lo,
@@ -309,13 +309,15 @@ def _search(run: Any, s0: float, events: list[Any]) -> dict[str, Any]:
 
 def converged_s(cands: list[dict[str, Any]], ends: list[float], s0: float) -> float:
     """Seconds from the search's start to the end of the window of its first accepted
-    candidate within :data:`CONVERGED_PCT` of its best; NaN when none was accepted."""
-    ok = [c["energy_per_metre"] for c in cands if c["accepted"] and c["energy_per_metre"] is not None]
-    if not ok:
+    candidate within :data:`CONVERGED_PCT` of its best; NaN when none was accepted. The
+    search's own candidates' first measures only (not the second measures after it)."""
+    first = [(c, end) for c, end in zip(cands, ends) if c.get("confirms") is None
+             and c["accepted"] and c["energy_per_metre"] is not None]
+    if not first:
         return math.nan
-    best = min(ok)
-    for c, end in zip(cands, ends):
-        if c["accepted"] and c["energy_per_metre"] is not None and c["energy_per_metre"] <= best * (1 + CONVERGED_PCT / 100):
+    best = min(c["energy_per_metre"] for c, _ in first)
+    for c, end in first:
+        if c["energy_per_metre"] <= best * (1 + CONVERGED_PCT / 100):
             return end - s0
     return math.nan
 

@@ -32,7 +32,8 @@ class SeekInputs:
             self.start = gui.add_button("Start seek", color="orange",
                                         hint=f"armed, pilot only: up to {seek.max_candidates} candidates of "
                                              f"{seek.settle_s:g} s settle and {seek.window_s:g} s measure, judged on "
-                                             "electrical energy per metre; DISARM or Esc stops it")
+                                             f"electrical energy per metre, then the best {seek.confirm} measured "
+                                             "again; DISARM or Esc stops it")
             self.keep = gui.add_button("Stop & keep best", visible=False)
             self.revert = gui.add_button("Stop & revert", visible=False)
             self.progress = gui.add_progress_bar(0.0, visible=False)

@@ -6,6 +6,7 @@
     settle_s = 10.0
     window_s = 30.0
     max_candidates = 20
+    confirm = 3
     [[seek.params]]
     name = "mpc.st_opt"
     lo = 0.2
@@ -52,6 +53,9 @@ class SeekConfig(Config):
     window_s: float = param(30.0, lo=0.5, hi=3600.0, unit="s",
                             doc="each candidate's measure window (energy per metre with its bootstrap interval)")
     max_candidates: int = param(20, lo=1, hi=1000, doc="candidates measured in one search (the start's included)")
+    confirm: int = param(3, lo=0, hi=100,
+                         doc="after a search, its best this many accepted candidates measured once more each; "
+                             "the least of these second measures is the best (0: the first measures decide)")
     seed: int = param(0, lo=0, hi=2**31 - 1, doc="seed of the search's sampler (the same seed suggests the same)")
     startup: int = param(5, lo=1, hi=100, doc="candidates drawn at random before the search models the results")
     speed_band: float = param(0.03, lo=0.0, hi=1.0, unit="m/s",

@@ -182,7 +182,7 @@ class SeekView:
     reason: str  # why it ended ("" while it runs)
     phase: str  # settle, measure, recover, watch, done
     candidates: int  # measured so far
-    max_candidates: int  # of one search
+    max_candidates: int  # measures of one search: its candidates and their second measures
     searches: int  # searches begun (the first and each re-seek)
     best: tuple[tuple[str, float], ...]  # the best accepted candidate's values (empty: none yet)
     best_energy: tuple[float, float, float] | None  # its energy per metre and interval (J/m)
@@ -200,9 +200,11 @@ def seek_view(run: Any) -> SeekView | None:
         return None
     best = run.best
     e = None if best is None or best.energy is None else (best.energy.value, best.energy.lo, best.energy.hi)
-    lines = tuple(f"#{c.index}: {c.verdict} ({', '.join(f'{k} {v:.4g}' for k, v in c.values)})"
+    lines = tuple(f"#{c.index}: {c.verdict} ({', '.join(f'{k} {v:.4g}' for k, v in c.values)}"
+                  + (f", #{c.confirms} again" if c.confirms is not None else "") + ")"
                   + (f": {c.energy.value:.1f} J/m" if c.energy is not None else "") for c in run.candidates[-8:])
-    return SeekView(run.finished, run.reason, run.phase, len(run.candidates), run.cfg.max_candidates,
+    return SeekView(run.finished, run.reason, run.phase, len(run.candidates),
+                    run.cfg.max_candidates + run.cfg.confirm,
                     run.searches, () if best is None else best.values, e, run.time_left(), lines)
 
 

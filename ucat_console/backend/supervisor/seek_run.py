@@ -20,7 +20,12 @@ Optuna's TPE) is told each result and suggests the next; the first candidate is 
 in force at the start. Each candidate is an event (source ``"seek"``, code
 ``"candidate"``) and a journal entry with its figures and verdict.
 
-After ``max_candidates`` the best is put in force; with ``drift_check`` the run goes on
+After ``max_candidates`` the search's ``confirm`` best accepted candidates are measured once
+more each, as any candidate (a re-measure's candidate names the one it ``confirms``); the
+least energy per metre of these second measures is the best (the least of twenty noisy
+first measures is, by being chosen, lower than what its values give again; a second measure
+is not chosen on its own figure). When none of them is accepted the first measures' best
+stands. The best is then put in force; with ``drift_check`` the run goes on
 measuring it, window after window, and seeks again (from the best) when a window's energy
 per metre falls outside the best's interval (the robot changed), up to ``max_seeks``
 searches. The pilot can stop it at any time, keeping the best or reverting to the values it
@@ -38,7 +43,7 @@ import math
 import threading
 import time
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Callable, Iterable, Mapping
 
 from ucat_console.backend.access import LOCAL, Actor, actor_name
@@ -107,6 +112,7 @@ class Candidate:
     energy: Estimate | None  # energy per metre (J/m) with its interval; None: no figures
     verdict: str  # "accepted", or why not
     line: str  # the figures in a line
+    confirms: int | None = None  # a second measure: the index of the candidate it measures again
 
     @property
     def accepted(self) -> bool:
@@ -169,6 +175,8 @@ class SeekRun:
         self._values: dict[str, float] = {}
         self._home: dict[str, float] = {}  # the values the present search began from
         self._in_search = 0  # candidates measured in the present search
+        self._to_confirm: list[Candidate] = []  # the search's best, waiting for their second measure
+        self._confirming: Candidate | None = None  # the candidate measured again now
         self._window = (math.nan, math.nan)
         self._due = math.nan
         self._data = RunData()
@@ -192,7 +200,10 @@ class SeekRun:
         if not self.searching:
             return 0.0
         per = self.cfg.settle_s + self.cfg.window_s
-        rest = max(0, self.cfg.max_candidates - self._in_search - 1)
+        if self._confirming is not None:
+            rest = len(self._to_confirm)
+        else:
+            rest = max(0, self.cfg.max_candidates - self._in_search - 1) + self.cfg.confirm
         return max(0.0, self._window[1] - self.host.time()) + rest * per
 
     # ------------------------------------------------------------------ driving it
@@ -254,7 +265,7 @@ class SeekRun:
             if self.phase == "settle":
                 self.phase, self._due = "measure", self._window[1]
             elif self.phase == "measure":
-                self._judge(now)
+                self._judge(now) if self._confirming is None else self._judge_again(now)
             elif self.phase == "recover":
                 self._next(now)
             elif self.phase == "watch":
@@ -325,11 +336,15 @@ class SeekRun:
             self._data.drop_before(now - 1.0)
         values = tuple((d.name, self._values[d.name]) for d in self._dims)
         self._window = (self._window[0], min(self._window[1], now))
-        self._record(Candidate(k, self.searches - 1, values, None, verdict, verdict), None, now)
+        cand = Candidate(k, self.searches - 1, values, None, verdict, verdict)
+        if self._confirming is not None:
+            self._record_again(replace(cand, confirms=self._confirming.index), None, now)
+        else:
+            self._record(cand, None, now)
 
     def _record(self, cand: Candidate, row: TableRow | None, now: float) -> None:
         """``cand`` measured: the search told, its event and journal entry; then the next step."""
-        k, values, energy, verdict = cand.index, cand.values, cand.energy, cand.verdict
+        values, energy = cand.values, cand.energy
         self.candidates.append(cand)
         search = self._search
         assert search is not None
@@ -343,18 +358,7 @@ class SeekRun:
                                      and energy.value < self.best.energy.value)
         if cand.accepted and best:
             self.best = cand
-        info: dict[str, Any] = {
-            "index": k, "search": cand.search, "values": dict(values), "verdict": verdict,
-            "accepted": cand.accepted, "best": self.best is cand, "t0": self._window[0], "t1": self._window[1],
-            "figures": None if row is None else {
-                key: {"value": _json(row.figures[key].value), "lo": _json(row.figures[key].lo),
-                      "hi": _json(row.figures[key].hi)} for key in CANDIDATE_FIGURES},
-        }
-        result = estimate_text(energy) if energy is not None else "no figures"
-        message = f"seek #{k} ({values_text(values)}): {result}; {verdict}"
-        self.host.publish_event(Event(now, "seek", "candidate", message,
-                                      "info" if cand.accepted else "warning", info))
-        self.host.journal(actor_name(self.who), f"seek #{k}", values_text(values), f"{result}; {verdict}")
+        self._publish_candidate(cand, row, now)
         if not cand.accepted:
             back = self._fallback()
             if back != self._values:
@@ -364,6 +368,24 @@ class SeekRun:
                 self.phase, self._due = "recover", self._window[0]
                 return
         self._next(now)
+
+    def _publish_candidate(self, cand: Candidate, row: TableRow | None, now: float) -> None:
+        """``cand``'s event and journal entry."""
+        k, values, energy, verdict = cand.index, cand.values, cand.energy, cand.verdict
+        info: dict[str, Any] = {
+            "index": k, "search": cand.search, "values": dict(values), "verdict": verdict,
+            "accepted": cand.accepted, "best": self.best is cand, "confirms": cand.confirms,
+            "t0": self._window[0], "t1": self._window[1],
+            "figures": None if row is None else {
+                key: {"value": _json(row.figures[key].value), "lo": _json(row.figures[key].lo),
+                      "hi": _json(row.figures[key].hi)} for key in CANDIDATE_FIGURES},
+        }
+        result = estimate_text(energy) if energy is not None else "no figures"
+        again = f", #{cand.confirms} again" if cand.confirms is not None else ""
+        message = f"seek #{k} ({values_text(values)}{again}): {result}; {verdict}"
+        self.host.publish_event(Event(now, "seek", "candidate", message,
+                                      "info" if cand.accepted else "warning", info))
+        self.host.journal(actor_name(self.who), f"seek #{k}", values_text(values) + again, f"{result}; {verdict}")
 
     def _fallback(self) -> dict[str, float]:
         """The best so far, else the values the search began from."""
@@ -401,6 +423,47 @@ class SeekRun:
         self._end_search(now)
 
     def _end_search(self, now: float) -> None:
+        """The search's candidates measured: its best measured again (module docstring)."""
+        search = self.searches - 1
+        ranked = sorted((c for c in self.candidates if c.search == search and c.confirms is None and c.accepted
+                         and c.energy is not None), key=lambda c: c.energy.value if c.energy else math.inf)
+        self._to_confirm = ranked[:self.cfg.confirm]
+        self._confirm_next(now)
+
+    def _confirm_next(self, now: float) -> None:
+        if not self._to_confirm:
+            self._confirming = None
+            again = [c for c in self.candidates if c.search == self.searches - 1 and c.confirms is not None
+                     and c.accepted and c.energy is not None]
+            if again:  # else the first measures' best stands
+                self.best = min(again, key=lambda c: c.energy.value if c.energy else math.inf)
+            self._search_done(now)
+            return
+        self._confirming = self._to_confirm.pop(0)
+        self._set(dict(self._confirming.values))
+        self._settle(now)
+
+    def _judge_again(self, now: float) -> None:
+        """A second measure's window has ended (as :meth:`_judge`)."""
+        first = self._confirming
+        assert first is not None
+        k = len(self.candidates)
+        row, why = self._measure(f"seek #{k}")
+        verdict = why or (self._off_track(row) if row is not None else "") or "accepted"
+        energy = row.figures["energy_per_metre"] if row is not None and not why else None
+        line = segment_line(row) if row is not None else why
+        self._record_again(Candidate(k, self.searches - 1, first.values, energy, verdict, line, first.index),
+                           row, now)
+
+    def _record_again(self, cand: Candidate, row: TableRow | None, now: float) -> None:
+        """A second measure: its event and journal entry (the search is not told); the next."""
+        self.candidates.append(cand)
+        self._publish_candidate(cand, row, now)
+        if not cand.accepted:
+            self.host.restart_expected()  # the next values are judged from the robot's present state
+        self._confirm_next(now)
+
+    def _search_done(self, now: float) -> None:
         best = self.best
         self._set(self._fallback())
         self.host.publish_event(Event(now, "seek", "search", (

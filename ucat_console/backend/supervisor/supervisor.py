@@ -1040,9 +1040,9 @@ class Supervisor:
 
     # ================================================================== seeking efficiency
     def start_seek(self, who: Actor, params: tuple[str, ...] = (), candidates: int | None = None,
-                   seed: int | None = None) -> SeekRun:
+                   seed: int | None = None, confirm: int | None = None) -> SeekRun:
         """Seek efficiency over ``params`` (the configured ``[[seek.params]]`` names; all
-        when empty), ``candidates`` and ``seed`` overriding the configuration's (pilot, armed,
+        when empty), ``candidates``, ``seed`` and ``confirm`` overriding the configuration's (pilot, armed,
         no failsafe active; one at a time, not beside a manoeuvre); docs/seek.md."""
         self.access.require_pilot(who, "seek")
         cfg = self.cfg.seek
@@ -1055,6 +1055,8 @@ class Supervisor:
                 changes["max_candidates"] = number("candidates", candidates, True)
             if seed is not None:
                 changes["seed"] = number("seed", seed, True)
+            if confirm is not None:
+                changes["confirm"] = number("confirm", confirm, True)
             cfg = cfg.replace(**changes)
             cfg.only(names)
         except (TypeError, ValueError) as e:
