@@ -207,3 +207,22 @@ def test_open_report_sends_the_runs_report_and_says_when_there_is_none(
     review.choose(a)
     review.press(review.runs.report_button)
     review.refused(f"report {a}.report.html sent")
+
+
+def test_a_runs_start_is_shown_in_utc_whatever_the_servers_time_zone(monkeypatch: pytest.MonkeyPatch) -> None:
+    import time
+    from types import SimpleNamespace
+
+    from ucat_console.ui.run_list import COLUMNS, run_cells
+
+    row = SimpleNamespace(figures={}, config="sim-tuned", config_hash="", notes="", id="r1", status="ok",
+                          start=1_765_000_000.0, duration=60.0, modes=("mpc",), manoeuvre="", tags=())
+    view = SimpleNamespace(row=row, weights_text=lambda: "")
+    monkeypatch.setenv("TZ", "Pacific/Auckland")  # UTC+13 in December
+    time.tzset()
+    try:
+        cells = dict(zip((h for h, _ in COLUMNS), run_cells(view)))
+    finally:
+        monkeypatch.undo()
+        time.tzset()
+    assert cells["start (UTC)"] == "2025-12-06 05:46"  # 1,765,000,000 s after the epoch, in UTC

@@ -3,7 +3,7 @@ run's tags, notes and report (what :class:`~ucat_console.backend.review.session.
 does with the library, rendered; the page's playback panel holds it).
 
 The search takes the library's query language (docs/library.md); the table shows each run's
-id, start, duration, modes, configuration and MPC weights, manoeuvre, energy per metre with
+id, start (UTC), duration, modes, configuration and MPC weights, manoeuvre, energy per metre with
 its interval, tags and notes, :data:`PAGE_ROWS` runs a page (More runs / Previous runs), and
 the Session chooser below holds every run found (choose one there and Open it). viser's
 Markdown element draws the table (a GitHub-style table); it has no clickable headers, so
@@ -59,13 +59,15 @@ def _num(v: float | None, fmt: str = ".1f") -> str:
 
 
 def _when(start: float | None) -> str:
+    """A run's start in UTC, as the library's ``date`` queries and the reports give it (the
+    robot's computer and the operator's laptop may not share a time zone)."""
     if start is None or not math.isfinite(start):
         return "–"
-    return time.strftime("%Y-%m-%d %H:%M", time.localtime(start))
+    return time.strftime("%Y-%m-%d %H:%M", time.gmtime(start))
 
 
 #: the table's columns: (heading, the sort field it is sorted by, or "")
-COLUMNS = (("run", "id"), ("start", "start"), ("s", "duration"), ("mode", ""), ("config (weights)", "config"),
+COLUMNS = (("run", "id"), ("start (UTC)", "start"), ("s", "duration"), ("mode", ""), ("config (weights)", "config"),
            ("manoeuvre", "manoeuvre"), ("J/m [lo, hi]", "epm"), ("tags", "tags"), ("notes", ""))
 
 
