@@ -22,7 +22,7 @@ CHECK = 0.5
 
 
 def swim(mode: str, seed: int, t_end: float, *, hold: float = 0.0, start_velocity: float = 0.0,
-         failure: Any = None, cfg: FailsafeConfig | None = None) -> dict[str, Any]:
+         failure: Any = None, cfg: FailsafeConfig | None = None, app: Any = APP) -> dict[str, Any]:
     """The simulated robot from ``start_velocity`` at 1 m sent to 0.2 m/s at 1 m for
     ``t_end`` s in ``mode``, a safety monitor on its telemetry checked every CHECK s: the
     fins ask for their first plans only from ``hold`` s on (the fins start late, as when a
@@ -40,7 +40,7 @@ def swim(mode: str, seed: int, t_end: float, *, hold: float = 0.0, start_velocit
     io.plant.reset(position_ned=(0.0, 0.0, 1.0), body_velocity=(start_velocity, 0.0, 0.0, 0.0, 0.0, 0.0),
                    fin_angles=(START_FIN_ANGLE,) * 4, seed=seed)
     stream = TelemetryStream(validate=False)
-    loop = ClosedLoop(APP.loop.replace(mode=mode, planner_seed=seed), io, stream,
+    loop = ClosedLoop(app.loop.replace(mode=mode, planner_seed=seed), io, stream,
                       setpoints=BodySetpoints(0.2, 1.0, 0.0))
     first = loop.fins.request_first
     loop.fins.request_first = lambda t: first(t) if t >= hold else None  # type: ignore[method-assign]
@@ -140,6 +140,16 @@ def test_the_alarm_fires_when_the_robot_is_held_back() -> None:
     on = [tr for tr in r["alarms"] if tr.active]
     assert on and on[0].t > 30.0
     assert "speed -" in on[0].cause
+
+
+def test_a_start_under_the_papers_weights_which_do_not_swim_raises_the_alarm() -> None:
+    """The defaults' MPC (the paper's weights) cannot make the hull's thrust with this fin
+    (docs/findings.md): from rest the robot stays put, and the alarm says so once the
+    expected response is more than the band ahead of it for 10 s."""
+    from ucat_console.config import AppConfig
+
+    on = [tr for tr in swim("mpc", 0, 40.0, app=AppConfig())["alarms"] if tr.active]
+    assert on and 10.0 < on[0].t <= 30.0 and "speed -" in on[0].cause
 
 
 # ---------------------------------------------------------------- the envelope alone

@@ -187,7 +187,7 @@ def measure_ui(duration: float = 20.0, pages: int = 2, warmup: float = 5.0, velo
 
     from ucat_console.backend.access import LOCAL
     from ucat_console.backend.supervisor import Supervisor
-    from ucat_console.config import AppConfig, ConsoleConfig
+    from ucat_console.config import load_config
     from ucat_console.ui.app import ConsoleApp
 
     if duration <= 0 or pages < 1:
@@ -195,7 +195,10 @@ def measure_ui(duration: float = 20.0, pages: int = 2, warmup: float = 5.0, velo
     from ucat_console.backend.camera.config import CameraConfig
 
     cam = CameraConfig(source="emulated", fps=camera) if camera else CameraConfig()
-    cfg = AppConfig(console=ConsoleConfig(port=0), camera=cam)
+    # the configuration the console starts on (scripts/run.sh): under the paper's weights the
+    # simulated robot does not swim, and the tracking failsafe rightly warns after 10 s
+    base = load_config("sim-tuned")
+    cfg = base.replace(console=base.console.replace(port=0), camera=cam)
     with tempfile.TemporaryDirectory() as tmp:
         sup = Supervisor(cfg, sessions_dir=tmp)
         app = ConsoleApp(sup, probe=True)
