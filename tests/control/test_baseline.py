@@ -194,3 +194,25 @@ def test_plan_rejects_non_finite():
 def test_zero_drag_coefficient_rejected():
     with pytest.raises(ValueError, match="c_d"):
         BaselinePlanner(CFG.replace(c_d=0.0), BCFG)
+
+
+def test_a_fin_behind_the_others_beat_shortens_its_next_cycle_by_a_share_of_its_lag() -> None:
+    from ucat_console.control.baseline import PHASE_STEP
+
+    planner = BaselinePlanner(MpcConfig(), BaselineConfig(frequency=1.25, phase_gain=0.25))
+    free = planner.plan(-0.5, 0.2, -1.0)
+    sweep = abs(free.u[0]) + abs(free.u[1])
+    length = sweep / free.u[2]
+    for lag in (0.1, -0.1, 0.3):
+        p = planner.plan(-0.5, 0.2, -1.0, lag)
+        assert p.u[:2] == free.u[:2] and p.commands[0::2] == free.commands[0::2]  # the same strokes
+        assert p.u[2] == p.u[3] == p.commands[1] == p.commands[3]
+        assert sweep / p.u[2] == pytest.approx(length - 0.25 * lag)  # behind: shorter; ahead: longer
+    # at most a fifth of the cycle either way; without a gain, or holding still, no change
+    assert sweep / planner.plan(-0.5, 0.2, -1.0, 10.0).u[2] == pytest.approx(length * (1 - PHASE_STEP))
+    assert sweep / planner.plan(-0.5, 0.2, -1.0, -10.0).u[2] == pytest.approx(length * (1 + PHASE_STEP))
+    unlocked = BaselinePlanner(MpcConfig(), BaselineConfig(frequency=1.25, phase_gain=0.0))
+    assert unlocked.plan(-0.5, 0.2, -1.0, 0.3).u == free.u
+    assert planner.plan(0.0, 0.0, -1.0, 0.3).u == planner.plan(0.0, 0.0, -1.0).u
+    with pytest.raises(ValueError, match="lag"):
+        planner.plan(-0.5, 0.2, -1.0, math.nan)

@@ -187,6 +187,10 @@ class BaselinePlan:
     commands: tuple[float, float, float, float]
 
 
+#: the most a fin's cycle is shortened or lengthened to beat in phase with the others (a share of it)
+PHASE_STEP = 0.2
+
+
 class BaselinePlanner:
     """Per-fin plans of the inverse-model baseline (stateless apart from its configuration).
     ``executor`` gives the drives' timing the fin-model inverse uses."""
@@ -222,16 +226,27 @@ class BaselinePlanner:
             c += math.pi
         return wrap_angle(c)
 
-    def plan(self, fx: float, fy: float, theta_now: float) -> BaselinePlan:
+    def plan(self, fx: float, fy: float, theta_now: float, lag: float = 0.0) -> BaselinePlan:
         """Cycle plan for the per-fin target (fx, fy) N, starting at the fin angle ``theta_now``.
 
         The first stroke goes to the extreme of the oscillation farther from ``theta_now``
         (``centre + A`` on a tie), the second to the other extreme, so that in steady state
         successive cycles join without a jump. A zero request holds the fin where it is.
+
+        ``lag`` (s): how long after the other fins' beats this fin's last began (its last
+        stroke towards larger angles; < 0: before them). A fin's cycles follow from its own
+        last one, so nothing else holds the phase between the fins: an offset a transient
+        leaves stays, and the simulated robot swam a gait with its two sides 0.14 of a cycle
+        apart for 30 % more energy per metre than in phase. The cycle is therefore shortened
+        by ``phase_gain * lag`` (lengthened for a lead), by at most :data:`PHASE_STEP` of its
+        length, its strokes' rate scaled to match: a phase lock on the cycles' lengths. Each
+        fin corrects a share of its own lag, and the correction acts a cycle later (the plan
+        is made during the cycle before), so the offsets shrink for a gain up to 0.5.
         """
         fx = finite("fx", fx)
         fy = finite("fy", fy)
         theta_now = finite("theta_now", theta_now)
+        lag = finite("lag", lag)
         magnitude = math.hypot(fx, fy)
         amplitude = self.amplitude(magnitude)
         w = self.rate(amplitude)
@@ -247,6 +262,11 @@ class BaselinePlanner:
                 first, second = upper, lower
         d1 = first - theta_now
         d2 = second - first
+        sweep = abs(d1) + abs(d2)
+        if lag != 0.0 and sweep > 0.0 and self.bcfg.phase_gain > 0.0:
+            duration = sweep / w
+            step = min(PHASE_STEP * duration, max(-PHASE_STEP * duration, self.bcfg.phase_gain * lag))
+            w = sweep / (duration - step)
         return BaselinePlan(
             target=(fx, fy),
             amplitude=amplitude,

@@ -132,6 +132,12 @@ class BaselineConfig(Config):
         doc="amplitude for a force: the controller's fin model with the drives' stroke timing, or the "
         "paper's eq 19 (4.65 times the fin model's force at the paper's coefficients)",
     )
+    phase_gain: float = param(
+        0.25, lo=0.0, hi=0.5,
+        doc="the share of a fin's lag behind the other fins' beat taken off its next cycle (at most "
+        "a fifth of the cycle), so that the four fins beat in phase; 0: each fin's cycles follow "
+        "from its last alone",
+    )
 
 
 #: the paper's baseline (its eq 19), for the experiments that reproduce it

@@ -157,6 +157,8 @@ class FinPlan:
     centre: Annotated[float, Doc("baseline only: oscillation centre", "rad")] = 0.0
     seed: Annotated[int, Doc("the planner's seed for this plan (-1: none), so a replay is exact",
                              wide=True)] = -1
+    lag: Annotated[float, Doc("how long after the other fins' beats this fin's last began when it was "
+                              "planned (the baseline's phase lock)", "s")] = 0.0
 
 
 @dataclass(frozen=True)

@@ -303,7 +303,7 @@ def test_telemetry_rates_and_replayable_baseline_plans() -> None:
     plans = log.plans()
     assert plans
     for p in plans:
-        out = planner(PlanInputs(p.t, (PLANT_TO_PAPER[p.fin],), p.target, p.v_body, p.theta0, p.u_prev))
+        out = planner(PlanInputs(p.t, (PLANT_TO_PAPER[p.fin],), p.target, p.v_body, p.theta0, p.u_prev, p.lag))
         assert out.u == p.u and out.commands == p.commands
     assert PAPER_TO_PLANT_FIN[PLANT_TO_PAPER[2]] == 2
     assert math.isfinite(log.get(ch.POWER)[-1].energy) and log.get(ch.POWER)[-1].energy > 0.0

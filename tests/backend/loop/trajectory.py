@@ -40,7 +40,11 @@ the baseline only, ``Mode.schedules_body``; its allocation limited to the beat's
 six seconds, before it switches to the baseline. They were written again when the designed
 heading loop's bandwidth rose from 1 / (2.3 tau) to 1 / (1.7 tau) (``HEADING_FACTOR``,
 ``control.body_design``), which changes the heading loop's gains and so every trajectory by
-design.
+design. They were written again when the baseline's fins began to beat in phase (each cycle
+shortened by a share of its fin's lag behind the others' beats, ``BaselineConfig.phase_gain``;
+the plans carry the lag, ``FinPlan.lag``), which changes the baseline's part of every scenario by
+design: the ``mpc`` scenario stayed the same to rtol 1e-9 but for the plans' new column, and so
+did the ``mpc_sync`` scenario's first six seconds, before it switches to the baseline.
 
 Each scenario starts the simulated U-CAT at 1 m depth surging at 0.2 m/s with the
 configuration of the shipped ``sim-tuned``, runs one mode with a velocity, depth and yaw

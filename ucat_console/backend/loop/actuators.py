@@ -152,6 +152,10 @@ class Actuators:
         # and the measured angle and time at each stroke's start
         self._cycles: list[tuple[str, tuple[float, float], float, list[float], list[float], tuple[float, float]]
                            | None] = [None] * N_FINS
+        # each paper fin's last beat (a stroke towards larger angles) began, and its cycle's
+        # planned length: how far a fin lags the others (``lag``)
+        self._beat = [math.nan] * N_FINS
+        self._length = [math.nan] * N_FINS
         # each robot fin's last stroke target the executors asked for (sent or not): a stroke's
         # start while the fin has no feedback, and its size for the Strouhal number
         self._asked = [0.0] * N_FINS
@@ -194,11 +198,23 @@ class Actuators:
         k = lc.C_TARGETS + 2 * act.index
         inputs = PlanInputs(
             t=t, fins=act.fins, target=(float(s[k]), float(s[k + 1])), v_body=float(s[lc.C_V_BODY]),
-            theta0=theta0, u_prev=act.u_prev,
+            theta0=theta0, u_prev=act.u_prev, lag=self.lag(act.fins[0], t),
         )
         act.job = self._planning.submit(act.key, act.planner, inputs)
         act.t_deliver = t + self.cfg.plan_latency
         act.requested = True
+
+    def lag(self, fin: int, t: float) -> float:
+        """How long after the other fins' last beats paper fin ``fin``'s began (s, at ``t``: the
+        median over the others still beating, each wrapped to within half of ``fin``'s cycle;
+        < 0: before them; 0 when none is). A beat begins with a stroke towards larger angles,
+        the same motion on every fin whichever extreme its cycle starts from."""
+        beat, length = self._beat[fin], self._length[fin]
+        if not (length > 0.0):
+            return 0.0
+        offsets = sorted(math.remainder(beat - b, length) for q, b in enumerate(self._beat)
+                         if q != fin and t - b <= 2.0 * self._length[q])  # NaN: never began
+        return offsets[(len(offsets) - 1) // 2] if offsets else 0.0
 
     def deliver_due(self, t: float) -> None:
         """Hand over every plan due at ``t``."""
@@ -267,6 +283,8 @@ class Actuators:
             if tp is SendToServo:
                 pf = PAPER_TO_ROBOT[a.fin]
                 self._stroke_begins(act, a.fin, a.stroke, t)
+                if a.theta_ref > self._asked[pf]:
+                    self._beat[a.fin] = t
                 angle = float(s[lc.C_FB_ANGLE + pf])
                 if angle != angle:  # no feedback yet: from the last command
                     angle = self._asked[pf]
@@ -312,6 +330,7 @@ class Actuators:
         if stroke == 0:
             target, duration, force = act.loaded
             self._cycles[fin] = (act.mode, target, duration, [angle], [t], force)
+            self._length[fin] = duration
             if self._on_cycle is not None:
                 self._on_cycle(fin, target, force)
         elif cycle is not None:

@@ -47,12 +47,13 @@ class PlanInputs:
     v_body: float  # median-filtered forward speed, m/s
     theta0: float  # angle the plan starts from, rad
     u_prev: Vec4  # the fin's previous plan
+    lag: float = 0.0  # s: how long after the other fins' beats this fin's last began
 
 
 def _plan(x: PlanInputs, **result: object) -> FinPlan:
     """A FinPlan of ``x``; ``t``, ``fin``, ``mode`` and ``late`` are the loop's to fill in."""
     return FinPlan(t=x.t, fin=-1, mode="", target=x.target, v_body=x.v_body, theta0=x.theta0,
-                   u_prev=x.u_prev, late=False, **result)  # type: ignore[arg-type]
+                   u_prev=x.u_prev, late=False, lag=x.lag, **result)  # type: ignore[arg-type]
 
 
 def _wrapped(theta0: float) -> tuple[float, float]:
@@ -107,7 +108,7 @@ class BaselineFinPlanner:
     def __call__(self, x: PlanInputs) -> FinPlan:
         t0 = time.perf_counter()
         theta, offset = _wrapped(x.theta0)
-        b = self._planner.plan(x.target[0], x.target[1], theta)
+        b = self._planner.plan(x.target[0], x.target[1], theta, x.lag)
         return _scored(self._scorer, x, theta, b.u, _shift(b.commands, offset), t0,
                        amplitude=b.amplitude, centre=b.centre)
 
