@@ -133,9 +133,9 @@ class BaselineConfig(Config):
         "paper's eq 19 (4.65 times the fin model's force at the paper's coefficients)",
     )
     phase_gain: float = param(
-        0.25, lo=0.0, hi=0.5,
+        0.1, lo=0.0, hi=0.5,
         doc="the share of a fin's lag behind the other fins' beat taken off its next cycle (at most "
-        "a fifth of the cycle), so that the four fins beat in phase; 0: each fin's cycles follow "
+        "a twentieth of the cycle), so that the four fins beat in phase; 0: each fin's cycles follow "
         "from its last alone",
     )
 

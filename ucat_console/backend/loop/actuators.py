@@ -66,6 +66,8 @@ def kept_waiting(done: float, arrived: float, deadline: float) -> float:
     return done - max(arrived, deadline)
 
 
+#: fins whose cycles differ in length by at most this share beat together (``Actuators.lag``)
+SAME_BEAT = 0.1
 #: the cycles over which a fin's pace is judged (``Actuators._judge_pace``)
 PACE_CYCLES = 5
 
@@ -206,14 +208,17 @@ class Actuators:
 
     def lag(self, fin: int, t: float) -> float:
         """How long after the other fins' last beats paper fin ``fin``'s began (s, at ``t``: the
-        median over the others still beating, each wrapped to within half of ``fin``'s cycle;
+        median over the others beating with it, each wrapped to within half of ``fin``'s cycle;
         < 0: before them; 0 when none is). A beat begins with a stroke towards larger angles,
-        the same motion on every fin whichever extreme its cycle starts from."""
+        the same motion on every fin whichever extreme its cycle starts from. The others beat
+        with it while their cycles are within :data:`SAME_BEAT` of its own in length (a fin
+        whose strokes are floored at the slowest rate beats faster: no common beat to keep)."""
         beat, length = self._beat[fin], self._length[fin]
         if not (length > 0.0):
             return 0.0
         offsets = sorted(math.remainder(beat - b, length) for q, b in enumerate(self._beat)
-                         if q != fin and t - b <= 2.0 * self._length[q])  # NaN: never began
+                         if q != fin and t - b <= 2.0 * self._length[q]  # NaN: never began
+                         and abs(self._length[q] - length) <= SAME_BEAT * length)
         return offsets[(len(offsets) - 1) // 2] if offsets else 0.0
 
     def deliver_due(self, t: float) -> None:
