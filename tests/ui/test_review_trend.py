@@ -124,5 +124,5 @@ def test_the_table_shows_one_page_of_runs_and_says_which() -> None:
     rows = [line for line in last if line.startswith("| **run-")]
     assert [r.split(" |")[0] for r in rows] == [f"| **run-{k}**" for k in range(40, 45)]
     assert last[0].startswith("45 runs match mode=mpc: runs 41–45 of 45 (page 3 of 3")
-    assert "start ▲" in last[2]
+    assert "start (UTC) ▲" in last[2]
     assert run_list.runs_markdown([], "x") == "No run matches."
