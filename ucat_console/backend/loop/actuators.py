@@ -214,7 +214,7 @@ class Actuators:
         with it while their cycles are within :data:`SAME_BEAT` of its own in length (a fin
         whose strokes are floored at the slowest rate beats faster: no common beat to keep)."""
         beat, length = self._beat[fin], self._length[fin]
-        if not (length > 0.0):
+        if not (length > 0.0) or beat != beat:  # no cycle, or no beat yet (NaN)
             return 0.0
         offsets = sorted(math.remainder(beat - b, length) for q, b in enumerate(self._beat)
                          if q != fin and t - b <= 2.0 * self._length[q]  # NaN: never began
