@@ -265,7 +265,7 @@ class SeekRun:
             if self.phase == "settle":
                 self.phase, self._due = "measure", self._window[1]
             elif self.phase == "measure":
-                self._judge(now) if self._confirming is None else self._judge_again(now)
+                self._judge(now)
             elif self.phase == "recover":
                 self._next(now)
             elif self.phase == "watch":
@@ -327,7 +327,11 @@ class SeekRun:
         verdict = why or (self._off_track(row) if row is not None else "") or "accepted"
         energy = row.figures["energy_per_metre"] if row is not None and not why else None
         line = segment_line(row) if row is not None else why
-        self._record(Candidate(k, self.searches - 1, values, energy, verdict, line), row, now)
+        cand = Candidate(k, self.searches - 1, values, energy, verdict, line)
+        if self._confirming is not None:  # a second measure: the values of the one it measures again
+            self._record_again(replace(cand, confirms=self._confirming.index), row, now)
+        else:
+            self._record(cand, row, now)
 
     def _reject(self, now: float, verdict: str) -> None:
         """The candidate under test rejected before its window ends (``verdict`` says why)."""
@@ -442,18 +446,6 @@ class SeekRun:
         self._confirming = self._to_confirm.pop(0)
         self._set(dict(self._confirming.values))
         self._settle(now)
-
-    def _judge_again(self, now: float) -> None:
-        """A second measure's window has ended (as :meth:`_judge`)."""
-        first = self._confirming
-        assert first is not None
-        k = len(self.candidates)
-        row, why = self._measure(f"seek #{k}")
-        verdict = why or (self._off_track(row) if row is not None else "") or "accepted"
-        energy = row.figures["energy_per_metre"] if row is not None and not why else None
-        line = segment_line(row) if row is not None else why
-        self._record_again(Candidate(k, self.searches - 1, first.values, energy, verdict, line, first.index),
-                           row, now)
 
     def _record_again(self, cand: Candidate, row: TableRow | None, now: float) -> None:
         """A second measure: its event and journal entry (the search is not told); the next."""
