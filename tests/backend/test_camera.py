@@ -157,6 +157,154 @@ def test_a_live_stream_gives_its_newest_frame_not_a_queue() -> None:
         stream.close()
 
 
+class _RtspRelay:
+    """An RTSP server on this machine that relays one stream, as a camera's or a media
+    server's would serve it: a publisher pushes it (ANNOUNCE, SETUP, RECORD, then RTP
+    interleaved on the TCP connection), readers play it (OPTIONS, DESCRIBE, SETUP, PLAY) and
+    get the publisher's packets from then on; when the publisher hangs up, so do the readers."""
+
+    def __init__(self) -> None:
+        import socket
+        import threading
+        self.sock = socket.create_server(("127.0.0.1", 0))
+        self.url = f"rtsp://127.0.0.1:{self.sock.getsockname()[1]}/cam"
+        self.sdp = b""
+        self.recording = threading.Event()
+        self.readers: list = []
+        self.lock = threading.Lock()
+        threading.Thread(target=self._accept, daemon=True).start()
+
+    def _accept(self) -> None:
+        import threading
+        while True:
+            try:
+                conn, _ = self.sock.accept()
+            except OSError:
+                return
+            threading.Thread(target=self._serve, args=(conn,), daemon=True).start()
+
+    def _serve(self, conn) -> None:
+        f = conn.makefile("rb")
+        publisher = False
+        try:
+            while first := f.read(1):
+                if first == b"$":  # an interleaved packet: channel, length, data
+                    head = f.read(3)
+                    packet = first + head + f.read(int.from_bytes(head[1:], "big"))
+                    with self.lock:
+                        for r in list(self.readers):
+                            try:
+                                r.sendall(packet)
+                            except OSError:
+                                self.readers.remove(r)
+                    continue
+                lines = [first + f.readline()]
+                while lines[-1] not in (b"\r\n", b""):
+                    lines.append(f.readline())
+                method = lines[0].split()[0].decode()
+                headers = {k.strip().lower(): v.strip() for k, _, v in
+                           (ln.decode().partition(":") for ln in lines[1:-1])}
+                body = f.read(int(headers.get("content-length", 0)))
+                extra, content = "", b""
+                if method == "OPTIONS":
+                    extra = "Public: OPTIONS, DESCRIBE, SETUP, PLAY, ANNOUNCE, RECORD, TEARDOWN\r\n"
+                elif method == "ANNOUNCE":
+                    self.sdp, publisher = body, True
+                elif method == "DESCRIBE":
+                    content = self.sdp
+                    extra = f"Content-Type: application/sdp\r\nContent-Base: {self.url}/\r\n"
+                elif method == "SETUP":
+                    extra = f"Transport: {headers['transport']}\r\nSession: 1\r\n"
+                elif method in ("RECORD", "PLAY"):
+                    extra = "Session: 1\r\n"
+                with self.lock:
+                    conn.sendall(f"RTSP/1.0 200 OK\r\nCSeq: {headers.get('cseq', '0')}\r\n{extra}"
+                                 f"Content-Length: {len(content)}\r\n\r\n".encode() + content)
+                    if method == "PLAY":
+                        self.readers.append(conn)
+                if method == "RECORD":
+                    self.recording.set()
+        except OSError:
+            pass
+        finally:
+            if publisher:
+                with self.lock:
+                    for r in self.readers:
+                        r.close()
+                    self.readers.clear()
+            f.close()
+            conn.close()
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+#: an RTSP camera: H.264 (what IP cameras send) over TCP, frame i flat grey 4 (i mod 64),
+#: 20 a second, a key frame every 10
+_RTSP_PUBLISHER = """
+import sys, time, av
+from PIL import Image
+out = av.open(sys.argv[1], "w", format="rtsp", options={"rtsp_transport": "tcp"})
+s = out.add_stream("libx264", rate=20, options={"preset": "ultrafast", "tune": "zerolatency", "g": "10"})
+s.width, s.height, s.pix_fmt = 64, 48, "yuv420p"
+for i in range(100000):
+    frame = av.VideoFrame.from_image(Image.new("RGB", (64, 48), (4 * (i % 64),) * 3))
+    frame.pts = i
+    for p in s.encode(frame):
+        out.mux(p)
+    time.sleep(0.05)
+"""
+
+
+def test_an_rtsp_camera_is_read_scaled_and_its_loss_seen() -> None:
+    """An RTSP camera (H.264 over TCP through an RTSP server, a separate process pushing it):
+    frames come, each the newest, scaled to the configured size over the whole picture (a
+    picture decoded in part, its lower rows green, fails); the camera's hanging up is a
+    failure the camera thread reopens from."""
+    av = pytest.importorskip("av")
+    import subprocess
+    import sys
+    from ucat_console.backend.camera.pyav import PyAVCamera
+    if "libx264" not in av.codecs_available:
+        pytest.skip("this PyAV has no H.264 encoder for the test's camera")
+    relay = _RtspRelay()
+    camera = subprocess.Popen([sys.executable, "-c", _RTSP_PUBLISHER, relay.url],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        wait_for(relay.recording.is_set, 30.0, "the camera to publish its stream")
+        cam = PyAVCamera(CameraConfig(source=relay.url, width=32, height=24, fps=10.0))
+        assert cam.live
+        levels = []
+
+        def taken() -> bool:
+            data = cam.frame(0.0)
+            if data is not None:
+                img = _decode(data)
+                assert img.size == (32, 24)
+                px = [img.getpixel(xy) for xy in ((0, 0), (16, 12), (31, 23), (0, 23))]
+                grey = px[1][0]
+                for p in px:  # grey everywhere, the same grey in every corner
+                    assert max(p) - min(p) <= 6 and abs(p[0] - grey) <= 6, px
+                levels.append(grey)
+            return len(levels) >= 5
+        wait_for(taken, 30.0, "five frames from the RTSP camera")
+        assert len(set(round(v / 4) for v in levels)) >= 3, levels  # newer frames, not one repeated
+        camera.kill()
+
+        def fails() -> bool:
+            try:
+                cam.frame(0.0)
+            except Exception:
+                return True
+            return False
+        wait_for(fails, 30.0, "the camera's hanging up to fail the source")
+        cam.close()
+    finally:
+        camera.kill()
+        camera.wait()
+        relay.close()
+
+
 def test_a_missing_pyav_is_named(monkeypatch) -> None:
     import builtins
     from ucat_console.backend.camera import pyav
