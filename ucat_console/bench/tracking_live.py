@@ -4,9 +4,11 @@ in every mode: does the robot still go where it is sent, and does the tracking a
 ``bench tracking`` runs the loop as fast as it can on a quiet process. Here the console runs
 as ``ucat-console run`` does (the shipped ``sim-tuned``, the simulated robot in the console's
 process, its loop paced by the wall clock) while ``--hogs`` child processes spin
-(:class:`~ucat_console.bench.load.CpuLoad`). For each mode the robot is armed at rest at its
+(:class:`~ucat_console.bench.load.CpuLoad`). For each mode, ``--starts`` times (a new console
+each time, the simulated sensors' noise from seeds 0, 1, ...), the robot is armed at rest at its
 start depth and sent at ``--velocity`` m/s (yaw rate 0); ``--step-at`` s later the depth
-setpoint steps ``--depth-step`` m deeper; the run ends ``--seconds`` s after arming. The
+setpoint steps ``--depth-step`` m deeper; the run ends ``--seconds`` s after arming. A mode is
+reported by the worst of its starts (the tracking alarms of all of them added). The
 simulator's truth is sampled every 0.1 s of wall time:
 
 * ``heading_max_deg``: the largest heading error against the heading at arming, over the
