@@ -305,6 +305,21 @@ def test_an_rtsp_camera_is_read_scaled_and_its_loss_seen() -> None:
         relay.close()
 
 
+def test_a_v4l2_device_is_opened_through_ffmpegs_v4l2_input() -> None:
+    """A V4L2 source goes to FFmpeg's v4l2 input (present in PyAV's FFmpeg): it names a
+    device that is not there, and asks a file that is no video device for its capabilities
+    (the ioctl refused; read as a file it would be data FFmpeg cannot read). No device is at
+    hand here to read frames from."""
+    import errno
+    pytest.importorskip("av")
+    from ucat_console.backend.camera.pyav import PyAVCamera
+    with pytest.raises(OSError, match="/dev/video-not-here"):
+        PyAVCamera(CameraConfig(source="v4l2:/dev/video-not-here"))
+    with pytest.raises(OSError) as e:
+        PyAVCamera(CameraConfig(source="v4l2:/dev/null"))
+    assert e.value.errno == errno.ENOTTY and "/dev/null" in str(e.value)
+
+
 def test_a_missing_pyav_is_named(monkeypatch) -> None:
     import builtins
     from ucat_console.backend.camera import pyav
