@@ -39,6 +39,7 @@ from ucat_console.backend.sim.params import PlantConfig
 from ucat_console.backend.sim.plant import Plant, sample_plant
 from ucat_console.backend.sim.sensors import S_DVL_ROW, S_IMU_ROW, S_NEXT, S_P_ROW
 from ucat_console.control.loop_core import C_NROWS, C_ROWS_PENDING, C_T_NEXT, C_T_ROBOT, READINGS, LoopCore, core_step
+from ucat_console.robot.fins import N_FINS
 from ucat_console.robot.interface import RobotIO, RobotTruth
 from ucat_console.robot.readings import Reading
 from ucat_console.telemetry.channels import POWER_ELECTRICAL
@@ -107,6 +108,7 @@ class SimRobotIO(RobotIO):
         self._telemetry_sinks: tuple[Callable[[str, Any], None], ...] = ()
         self._last_electrical: tuple[float, tuple[float, ...]] | None = None  # (time, battery energy)
         self._electrical_due: ElectricalPower | None = None  # made at the last step, handed on at the next
+        self._weak: dict[int, float] = {}  # weak drives: fin -> the share of the speed asked it runs at
 
     @property
     def runs_core(self) -> bool:  # type: ignore[override]
@@ -115,7 +117,23 @@ class SimRobotIO(RobotIO):
         return type(self).advance_to is SimRobotIO.advance_to
 
     def command_fin(self, fin: int, target_rad: float, profile_velocity_rad_s: float) -> None:
+        factor = self._weak.get(fin)
+        if factor is not None:  # a weak drive: a share of the speed asked, of the servo's maximum at most
+            profile_velocity_rad_s = factor * min(profile_velocity_rad_s, self.plant.cfg.servo.max_rate)
         self.plant.command_fin(fin, target_rad, profile_velocity_rad_s)
+
+    def weaken_fin(self, fin: int, factor: float) -> None:
+        """Fin ``fin``'s drive runs from its next command on at ``factor`` (0 < factor <= 1) of
+        the speed it is asked for (and of the servos' maximum rate): a weak or worn drive. It
+        may happen while the robot runs (every command passes here); 1 makes it whole again."""
+        if isinstance(fin, bool) or not isinstance(fin, int) or not 0 <= fin < N_FINS:
+            raise ValueError(f"fin: {fin!r} is not a plant fin index 0..{N_FINS - 1}")
+        if isinstance(factor, bool) or not (isinstance(factor, (int, float)) and 0.0 < factor <= 1.0):
+            raise ValueError(f"factor: a weak drive runs at a share in (0, 1] of its speed, got {factor!r}")
+        if factor == 1.0:
+            self._weak.pop(fin, None)
+        else:
+            self._weak[fin] = float(factor)
 
     def add_telemetry_sink(self, sink: Callable[[str, Any], None]) -> Callable[[], None]:
         """``sink(channel, message)`` for the simulated drives' electrical input (module

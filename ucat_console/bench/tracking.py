@@ -196,6 +196,7 @@ def run_manoeuvre(app: Any, mode: str, formulation: str, m: Manoeuvre, seed: int
     from ucat_console.backend.loop.closed_loop import ClosedLoop
     from ucat_console.backend.loop.commands import SetBlock, SetSetpoints
     from ucat_console.backend.sim_robot_io import SimRobotIO
+    from ucat_console.robot.fins import PAPER_TO_ROBOT
     from ucat_console.control.allocation import BodySetpoints
     from ucat_console.control.fin_cycle import direction_error
     from ucat_console.backend.fin_rig import START_FIN_ANGLE
@@ -220,7 +221,7 @@ def run_manoeuvre(app: Any, mode: str, formulation: str, m: Manoeuvre, seed: int
                                                             mass=plant.vehicle.mass * c.mass))
     io = SimRobotIO(plant, depth=z0, velocity=m.start_velocity)
     if c.weak != 1.0:
-        _weaken(io, WEAK_FIN, c.weak, plant.servo.max_rate)
+        io.weaken_fin(PAPER_TO_ROBOT[WEAK_FIN], c.weak)
     io.plant.reset(position_ned=(0.0, 0.0, z0), body_velocity=(m.start_velocity, 0.0, 0.0, 0.0, 0.0, 0.0),
                    fin_angles=(START_FIN_ANGLE,) * 4, seed=seed)
     stream = TelemetryStream(validate=False)
@@ -266,20 +267,6 @@ def run_manoeuvre(app: Any, mode: str, formulation: str, m: Manoeuvre, seed: int
     loop.run_until(m.duration)
     loop.close()
     return {"figures": _figures(m, log), "log": log}
-
-
-def _weaken(io: Any, paper_fin: int, factor: float, max_rate: float) -> None:
-    """Paper fin ``paper_fin``'s drive runs at ``factor`` of the speed it is commanded (and
-    of the servos' maximum rate)."""
-    from ucat_console.robot.fins import PAPER_TO_ROBOT
-
-    fin = PAPER_TO_ROBOT[paper_fin]
-    command = io.command_fin
-
-    def weak(i: int, angle: float, rate: float) -> None:
-        command(i, angle, factor * min(rate, max_rate) if i == fin else rate)
-
-    io.command_fin = weak
 
 
 def _figures(m: Manoeuvre, log: _Log) -> dict[str, float]:

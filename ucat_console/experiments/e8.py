@@ -33,10 +33,11 @@ from typing import Any
 from ucat_console.backend.seek.config import SeekConfig, SeekParam
 from ucat_console.backend.sim.params import VehicleConfig
 from ucat_console.backend.sim.variants import cd0_name, plant_assumptions, plant_config
-from ucat_console.bench.tracking import CASES
+from ucat_console.bench.tracking import CASES, WEAK_FIN
 from ucat_console.experiments.distributed import run_all
 from ucat_console.experiments.e7 import TUNING_FREQUENCIES, paired_saving
 from ucat_console.experiments.efficiency_curves import plant_hash
+from ucat_console.robot.fins import PAPER_TO_ROBOT
 
 #: E7's energy-consistent plates (the plate over the profile drag C_D0), not its null plant
 E8_PLANTS = tuple(cd0_name(c) for c in (0.02, 0.05, 0.3))
@@ -243,8 +244,11 @@ def run_job(job: Job) -> dict[str, Any]:
                 fault.append(f"{type(e).__name__}: {e}")
 
     def change() -> float:
-        plant = held[0].plant
-        plant.change_vehicle(changed_vehicle(plant.cfg.vehicle, job.change))
+        io = held[0]
+        if job.change == "weak_fin":  # not one of E8's declared changes (scripts/e8_change_sweep.py)
+            io.weaken_fin(PAPER_TO_ROBOT[WEAK_FIN], CASES["weak_fin"].weak)
+        else:
+            io.plant.change_vehicle(changed_vehicle(io.plant.cfg.vehicle, job.change))
         return sup.loop.time
 
     try:
