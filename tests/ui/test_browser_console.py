@@ -212,7 +212,9 @@ def test_the_theme_switch_is_remembered_across_reloads(browser: Browser, console
     expect(page.locator("#ucat-bar")).to_have_class(re.compile("light"))
     page.reload()
     page.wait_for_function("() => !document.body.innerText.includes('Connecting...')", timeout=30_000)
-    expect(page.locator("#ucat-bar")).to_have_class(re.compile("light"))
+    # the console asks the page for its stored theme and waits up to 20 s for the answer (a
+    # busy machine may take most of that): the test waits beyond it
+    expect(page.locator("#ucat-bar")).to_have_class(re.compile("light"), timeout=30_000)
     page.screenshot(path=str(ARTIFACTS / "console-light.png"))
     ctx.close()
 
