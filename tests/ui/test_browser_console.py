@@ -212,7 +212,8 @@ def test_the_theme_switch_is_remembered_across_reloads(browser: Browser, console
     expect(page.locator("#ucat-bar")).to_have_class(re.compile("light"))
     # the bar's state may come ahead of the console's message storing the choice: reloaded
     # once the browser holds it
-    page.wait_for_function("() => localStorage.getItem('ucat-theme') === 'light'", timeout=30_000)
+    page.wait_for_function("() => Object.keys(localStorage).some(k => k.includes('ucat-theme')"
+                           " && localStorage.getItem(k).includes('light'))", timeout=30_000)
     page.reload()
     page.wait_for_function("() => !document.body.innerText.includes('Connecting...')", timeout=30_000)
     # the console asks the page for its stored theme and waits up to 20 s for the answer (a
