@@ -109,30 +109,13 @@ def test_over_seeds_judges_the_worst_case_and_names_its_seed() -> None:
     assert not missing["met"]  # a figure not measured is never met
 
 
-def test_a_weak_fin_case_runs_one_drive_at_half_the_speed_it_is_commanded() -> None:
-    from ucat_console.robot.fins import PAPER_TO_ROBOT
-
-    calls = []
-
-    class Io:
-        def command_fin(self, fin: int, angle: float, rate: float) -> None:
-            calls.append((fin, rate))
-
-    io = Io()
-    T._weaken(io, T.WEAK_FIN, 0.5, max_rate=10.0)
-    weak = PAPER_TO_ROBOT[T.WEAK_FIN]
-    io.command_fin(weak, 0.1, 8.0)
-    io.command_fin(weak, 0.1, 30.0)  # beyond the servos' rate: half of the rate they make
-    io.command_fin((weak + 1) % 4, 0.1, 8.0)
-    assert calls == [(weak, 4.0), (weak, 5.0), ((weak + 1) % 4, 8.0)]
-
-
 def test_a_fin_whose_drive_runs_at_half_speed_is_reported_slow_and_the_robot_keeps_its_heading() -> None:
     """Straight at 0.2 m/s (baseline) with one fin's drive at half the commanded speed: its
     cycles take longer than planned, the loop reports it (``fin_slow``, naming the fin) and
     the other fins take its share: the heading stays within 10 degrees."""
     from ucat_console.backend.loop.closed_loop import ClosedLoop
     from ucat_console.backend.sim_robot_io import SimRobotIO
+    from ucat_console.robot.fins import PAPER_TO_ROBOT
     from ucat_console.control.allocation import BodySetpoints
     from ucat_console.backend.fin_rig import START_FIN_ANGLE
     from ucat_console.backend.sim.variants import plant_config
@@ -143,7 +126,7 @@ def test_a_fin_whose_drive_runs_at_half_speed_is_reported_slow_and_the_robot_kee
     io = SimRobotIO(plant, depth=1.0, velocity=0.2)
     io.plant.reset(position_ned=(0.0, 0.0, 1.0), body_velocity=(0.2, 0.0, 0.0, 0.0, 0.0, 0.0),
                    fin_angles=(START_FIN_ANGLE,) * 4, seed=1)
-    T._weaken(io, T.WEAK_FIN, 0.5, plant.servo.max_rate)
+    io.weaken_fin(PAPER_TO_ROBOT[T.WEAK_FIN], 0.5)
     stream = TelemetryStream()
     events = []
     stream.subscribe(lambda _c, m: events.append(m), [ch.EVENTS])
