@@ -129,6 +129,15 @@ class _MjpegStream:
         self.server.server_close()
 
 
+def _fails(cam) -> bool:
+    """The camera's next take raises (its source failed or ended)."""
+    try:
+        cam.frame(0.0)
+    except Exception:
+        return True
+    return False
+
+
 def test_a_live_stream_gives_its_newest_frame_not_a_queue() -> None:
     """A source sending faster than the camera takes frames: each take is the newest frame,
     the ones in between are skipped (counted), not queued behind it; the stream's end is a
@@ -145,13 +154,7 @@ def test_a_live_stream_gives_its_newest_frame_not_a_queue() -> None:
         assert cam.frame(0.0) is None  # nothing newer has come
         stream.end.set()  # the camera hangs up
 
-        def fails() -> bool:
-            try:
-                cam.frame(0.0)
-            except Exception:
-                return True
-            return False
-        wait_for(fails, 30.0, "the ended stream to fail")
+        wait_for(lambda: _fails(cam), 30.0, "the ended stream to fail")
         cam.close()
     finally:
         stream.close()
@@ -291,13 +294,7 @@ def test_an_rtsp_camera_is_read_scaled_and_its_loss_seen() -> None:
         assert len(set(round(v / 4) for v in levels)) >= 3, levels  # newer frames, not one repeated
         camera.kill()
 
-        def fails() -> bool:
-            try:
-                cam.frame(0.0)
-            except Exception:
-                return True
-            return False
-        wait_for(fails, 30.0, "the camera's hanging up to fail the source")
+        wait_for(lambda: _fails(cam), 30.0, "the camera's hanging up to fail the source")
         cam.close()
     finally:
         camera.kill()
