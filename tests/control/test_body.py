@@ -419,3 +419,34 @@ def test_a_fin_whose_executed_cycle_fell_short_of_its_plan_has_its_next_plans_co
     off.on_executed(2, (-0.1, 0.0), (-0.06, 0.0))
     off.update(0.1, sp)
     assert off.shortfall == pytest.approx((0.0, 0.0, 0.0), abs=1e-12)
+
+
+def test_the_speed_references_acceleration_rises_to_its_limit_over_the_configured_time():
+    """A speed step: the reference's acceleration grows by max_acceleration over
+    acceleration_rise (the fins take a new demand each at its own cycle), none at once."""
+    rates = {}
+    for rise in (0.0, 2.5):
+        ctl = designed(median_window=1, speed_filter=0.0, acceleration_rise=rise)
+        t, seen = 0.0, []
+        for _ in range(400):  # 8 s at 0.1 m/s, the setpoint 0.35 from 2 s on
+            ctl.on_dvl(dvl(t, 0.1))
+            ctl.update(t, BodySetpoints(0.35 if t >= 2.0 else 0.1, 0.0, 0.0))
+            seen.append((t, ctl.state[bd.B_V_REF_RATE]))
+            t += 0.02
+        rates[rise] = seen
+    a = designed().cfg.max_acceleration
+    at_once, rising = dict(rates[0.0]), dict(rates[2.5])
+    t_step = min(t for t, _ in rates[0.0] if t >= 2.0)
+    assert at_once[t_step] == pytest.approx(a)  # the whole limit in the step's first update
+    for t, r in rates[2.5]:
+        if t < t_step:
+            assert r == pytest.approx(0.0, abs=1e-12)
+        else:  # linear rise to the limit: a / 2.5 per second, the first update already one step on it
+            assert r == pytest.approx(min(a, a * (t - t_step + 0.02) / 2.5), rel=1e-9, abs=1e-12)
+    assert max(rising.values()) == pytest.approx(a)
+    # from rest, where the reference starts, the fins all start together: the limit at once
+    ctl = designed(median_window=1, speed_filter=0.0, acceleration_rise=2.5)
+    for t in (0.0, 0.02):
+        ctl.on_dvl(dvl(t, 0.0))
+        ctl.update(t, BodySetpoints(0.2, 0.0, 0.0))
+    assert ctl.state[bd.B_V_REF_RATE] == pytest.approx(a)

@@ -6,7 +6,8 @@ Control.md section 7; ``BodyConfig.layer`` picks one of two layers over the same
 * ``designed`` (``control.body_design`` for the gains, ``docs/control.md``): physical
   demands, each loop tracking a reference with the hull's model as feed-forward. The
   references close on their setpoints at ``reference_rate`` per second, their rates limited
-  (``max_acceleration``, ``max_dive_rate``, ``max_yaw_acceleration``), starting from what is
+  (``max_acceleration``, ``max_dive_rate``, ``max_yaw_acceleration``; the speed's
+  acceleration rising to its limit over ``acceleration_rise``), starting from what is
   measured: a setpoint step becomes a ramp the loops can follow, with no kick and no
   windup. Velocity: ``X = M_x u_ref' + D_x(u_ref) + PI(u_ref - u)``. Depth: ``Z = Z_trim +
   D_z(z_ref') + PI(z_ref - z)`` (down > 0). Heading: ``N = J r_ref' + N_r(r_ref) + kp e +
@@ -97,6 +98,7 @@ BODY = Layout("the body-frame layer's array", [
     ("ref_rate", 1, "how fast the references close on their setpoints (1/s)"),
     ("max_dive", 1, "the references' rate limits: depth rate"), ("max_acc", 1, "acceleration"),
     ("max_yaw_acc", 1, "yaw acceleration"),
+    ("acc_rise", 1, "how long the speed reference's acceleration takes to rise to its limit (s)"),
     ("v_ref", 1, "the speed reference"), ("v_ref_rate", 1, "its rate of change"), ("z_ref", 1, "the depth reference"),
     ("z_ref_rate", 1, "its rate"), ("r_ref", 1, "the yaw rate reference"), ("r_ref_rate", 1, "its rate"),
     ("x", 1, "designed: the loops' demand: surge (N)"), ("z", 1, "heave (N, down > 0)"), ("n", 1, "yaw moment (N m)"),
@@ -118,12 +120,12 @@ B_DVL_MISSING, B_LAST_DVL_T, B_LAST_DEPTH_T, B_LAST_IMU_T, B_YAW_RATE, B_NEW_V, 
     BODY.at(f) for f in BODY.fields[:8])
 B_FX, B_FY, B_YAW, B_DEPTH_SIGN, B_WINDOW, B_LAYER, B_HEADING, B_HEADING_REF, B_T_REF, B_TRIM, B_HULL = (
     BODY.at(f) for f in BODY.fields[8:19])
-B_LEAD, B_REF_RATE, B_MAX_DIVE, B_MAX_ACC, B_MAX_YAW_ACC, B_V_REF, B_V_REF_RATE, B_Z_REF, B_Z_REF_RATE = (
-    BODY.at(f) for f in BODY.fields[19:28])
+B_LEAD, B_REF_RATE, B_MAX_DIVE, B_MAX_ACC, B_MAX_YAW_ACC, B_ACC_RISE, B_V_REF, B_V_REF_RATE, B_Z_REF, \
+    B_Z_REF_RATE = (BODY.at(f) for f in BODY.fields[19:29])
 B_R_REF, B_R_REF_RATE, B_X, B_Z, B_N, B_APPLIED, B_CUT, B_SPEED_TAU, B_V_LP, B_V_LP_T, B_ALLOC, B_OUT = (
-    BODY.at(f) for f in BODY.fields[28:40])
+    BODY.at(f) for f in BODY.fields[29:41])
 B_CYCLE_TARGET, B_CYCLE_FORCE, B_CYCLE_BIAS, B_BIAS_WEIGHT, B_SHORTFALL, B_SHORTFALL_CAP, B_SHORTFALL_TAU, \
-    B_SHORTFALL_T, B_ASKED, B_PIDS, B_FILTERS = (BODY.at(f) for f in BODY.fields[40:])
+    B_SHORTFALL_T, B_ASKED, B_PIDS, B_FILTERS = (BODY.at(f) for f in BODY.fields[41:])
 #: what the body functions return: all is well, or which input was not a finite number
 BODY_OK, BAD_DVL_VX, BAD_DVL_T, BAD_DEPTH, BAD_DEPTH_T, BAD_GYRO, BAD_IMU_T, BAD_T, EARLIER_T = range(9)
 #: the field each bad input is named by
@@ -277,14 +279,20 @@ def _paper_loops(b: np.ndarray, t: float, sp_v: float, sp_z: float, sp_r: float,
 
 
 @register_jitable
-def _approach(ref: float, rate_of: float, target: float, k: float, limit: float, dt: float) -> tuple[float, float]:
-    """A reference closing on ``target`` at ``k`` per second, its rate at most ``limit``:
-    (the reference after ``dt``, its rate). NaN stays NaN until ``rate_of`` starts it."""
+def _approach(ref: float, rate_before: float, rate_of: float, target: float, k: float, limit: float, rise: float,
+              dt: float) -> tuple[float, float]:
+    """A reference closing on ``target`` at ``k`` per second, its rate at most ``limit`` and
+    moving from ``rate_before`` by at most ``limit`` in ``rise`` seconds (0, or no rate
+    before: at once): (the reference after ``dt``, its rate). NaN stays NaN until
+    ``rate_of`` starts it."""
     if math.isnan(ref):
         if math.isnan(rate_of):
             return math.nan, math.nan
         ref = rate_of
     rate = min(limit, max(-limit, k * (target - ref)))
+    if rise > 0.0 and not math.isnan(rate_before):
+        most = limit * dt / rise
+        rate = min(rate_before + most, max(rate_before - most, rate))
     return ref + rate * dt, rate
 
 
@@ -292,14 +300,15 @@ def _approach(ref: float, rate_of: float, target: float, k: float, limit: float,
 def _move_references(b: np.ndarray, t: float, sp_v: float, sp_z: float, sp_r: float, v: float, z: float,
                      r: float) -> None:
     """The designed layer's references move on to ``t``: speed and depth close on their
-    setpoints from the first measurement, the yaw rate from the first gyro rate, the heading
-    integrates the yaw-rate reference from the first heading."""
+    setpoints from the first measurement (the speed's acceleration rising over
+    ``acceleration_rise``), the yaw rate from the first gyro rate, the heading integrates the
+    yaw-rate reference from the first heading."""
     dt = 0.0 if math.isnan(b[B_T_REF]) else max(0.0, t - b[B_T_REF])
     k = b[B_REF_RATE]
-    b[B_V_REF], b[B_V_REF_RATE] = _approach(b[B_V_REF], v, sp_v, k, b[B_MAX_ACC], dt)
-    b[B_Z_REF], b[B_Z_REF_RATE] = _approach(b[B_Z_REF], z, sp_z, k, b[B_MAX_DIVE], dt)
+    b[B_V_REF], b[B_V_REF_RATE] = _approach(b[B_V_REF], b[B_V_REF_RATE], v, sp_v, k, b[B_MAX_ACC], b[B_ACC_RISE], dt)
+    b[B_Z_REF], b[B_Z_REF_RATE] = _approach(b[B_Z_REF], b[B_Z_REF_RATE], z, sp_z, k, b[B_MAX_DIVE], 0.0, dt)
     r_before = b[B_R_REF]
-    b[B_R_REF], b[B_R_REF_RATE] = _approach(r_before, r, sp_r, k, b[B_MAX_YAW_ACC], dt)
+    b[B_R_REF], b[B_R_REF_RATE] = _approach(r_before, b[B_R_REF_RATE], r, sp_r, k, b[B_MAX_YAW_ACC], 0.0, dt)
     if math.isnan(b[B_HEADING_REF]):
         b[B_HEADING_REF] = b[B_HEADING]
     elif not math.isnan(r_before):
@@ -578,6 +587,7 @@ class BodyController:
         b[B_LEAD] = cfg.max_heading_lead
         b[B_REF_RATE] = cfg.reference_rate
         b[B_MAX_DIVE], b[B_MAX_ACC], b[B_MAX_YAW_ACC] = cfg.max_dive_rate, cfg.max_acceleration, cfg.max_yaw_acceleration
+        b[B_ACC_RISE] = cfg.acceleration_rise
         b[B_SPEED_TAU] = cfg.speed_filter
         b[B_SHORTFALL_TAU] = cfg.shortfall_filter if cfg.feed_shortfall else -1.0
         b[B_BIAS_WEIGHT] = 1.0 if cfg.feed_executed else 0.0

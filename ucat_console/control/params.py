@@ -286,6 +286,12 @@ class BodyConfig(Config):
         round(1.0 / (DESIGN_FACTOR * DESIGN_DELAY), 4), lo=0.01, hi=10.0, unit="1/s",
         doc="designed layer: how fast the loops' references close on a new setpoint (the loops' bandwidth)",
     )
+    acceleration_rise: float = param(
+        round(2.0 * DESIGN_DELAY, 4), lo=0.0, hi=30.0, unit="s",
+        doc="designed layer: how long the speed reference's acceleration takes to rise to max_acceleration "
+        "(0: at once); each fin takes up a new surge demand at its own next cycle, so a demand that rises "
+        "over two of them reaches the two sides alike",
+    )
     max_dive_rate: float = param(
         0.06, lo=0.001, hi=2.0, unit="m/s", doc="designed layer: the depth reference's fastest climb or dive",
     )
