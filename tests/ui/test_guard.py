@@ -388,7 +388,7 @@ def test_a_viewer_spamming_the_review_does_not_hold_up_the_pilots_disarm(
     the loop. (The pages run in the console's own process here, so they share its
     interpreter with the burning listings: the pilot may be silent longer than a browser in
     its own process would be, and its liveness is not what this test is about.)"""
-    console = guarded(pilot_gone=10.0)
+    console = guarded()
     app, sup = console.app, console.sup
     real = app.session_list.sessions
     listings = [0]
