@@ -43,3 +43,20 @@ def test_a_slow_fin_lights_the_vehicle_light_with_its_reason_and_is_recorded(
     with SessionReader(paths[0], tmp_path) as r:
         codes = [(e.source, e.code, e.data.get("fin")) for e in r.events()]
     assert ("loop", "fin_slow", 2) in codes and ("loop", "fin_slow_cleared", 2) in codes
+
+
+def test_fins_stronger_than_their_model_light_the_fins_part_until_they_are_not(
+        make_console: Callable[..., Console]) -> None:
+    sup = make_console().sup
+    scaled = ("the fins make 4.6 times the fin model's force: the body layer asks them for that much less; "
+              "identify the fins (ucat-console identify --fit scale)")
+    sup._loop_stream.publish(ch.EVENTS, Event(t=sup.loop.time, source="loop", code="fin_force_scale",
+                                              message=scaled, level="warning", data={"scale": 4.6}))
+    sup.step(0.5)
+    fins = next(x for x in vehicle_parts(sup.state()) if x.name == "Fins")
+    assert fins.state == "warn" and fins.why == scaled
+    sup._loop_stream.publish(ch.EVENTS, Event(t=sup.loop.time, source="loop", code="fin_force_scale_cleared",
+                                              message="the fins make 1.20 times the fin model's force",
+                                              level="info", data={"scale": 1.2}))
+    sup.step(0.5)
+    assert next(x for x in vehicle_parts(sup.state()) if x.name == "Fins").state == "ok"

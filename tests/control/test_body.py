@@ -450,3 +450,52 @@ def test_the_speed_references_acceleration_rises_to_its_limit_over_the_configure
         ctl.on_dvl(dvl(t, 0.0))
         ctl.update(t, BodySetpoints(0.2, 0.0, 0.0))
     assert ctl.state[bd.B_V_REF_RATE] == pytest.approx(a)
+
+
+def _surge_run(true_scale: float, seconds: float = 30.0, **kw) -> tuple[BodyController, list[tuple]]:
+    """The designed layer holding 0.2 m/s on a hull that moves as its own model says,
+    ``M u' + D(u) = s X``, ``X`` the surge the fins were given by the fin model arriving half
+    a second later (a 2-Hz beat's cycle), the fins making ``true_scale`` times it; DVL at
+    8 Hz, the layer at 50 Hz. The layer and, per step, (t, speed, the surge applied, the
+    scale followed, the scale measured)."""
+    ctl = designed(median_window=1, speed_filter=0.0, **kw)
+    hull = ctl.cfg.hull
+    dt, lag = 0.02, 25
+    given = [0.0] * lag
+    u, sp, out = 0.2, BodySetpoints(0.2, 0.0, 0.0), []
+    for i in range(int(seconds / dt)):
+        t = i * dt
+        if i % 6 == 0:  # 8.3 Hz
+            ctl.on_dvl(dvl(t, u))
+        step = ctl.update(t, sp)
+        scale, measured = ctl.force_scale
+        given.append(step.applied[0] / scale)
+        u += dt * (true_scale * given.pop(0) - hull.surge_drag(u)) / hull.surge_mass
+        out.append((t, u, step.applied[0], scale, measured))
+    return ctl, out
+
+
+def test_fins_stronger_than_their_model_are_measured_and_asked_for_less():
+    ctl, run = _surge_run(4.0, seconds=45.0)
+    engaged = [r for r in run if r[3] > 1.0]
+    assert engaged and engaged[0][0] < 5.0  # followed within seconds, from twice the model on
+    assert all(r[3] == pytest.approx(min(max(r[4], 1.0), 8.0)) for r in engaged)
+    late = [r for r in run if r[0] >= 30.0]
+    assert all(r[4] == pytest.approx(4.0, rel=0.05) for r in late)  # measured within 5 %
+    assert all(abs(r[1] - 0.2) < 0.01 for r in late)  # the speed held
+    # the surge applied is the demand; the fins are asked for a quarter of it by the model
+    x = ctl.state[bd.B_OUT + bd.W_X]
+    assert ctl.state[bd.B_APPLIED] == pytest.approx(ctl.force_scale[0] * x)
+    # a reset (a mode switch, a new arming) keeps what was found
+    ctl.reset()
+    assert ctl.force_scale[0] == pytest.approx(late[-1][3])
+
+
+def test_fins_that_make_their_models_force_leave_the_layer_as_it_was():
+    _, run = _surge_run(1.15)  # the default plant's plate makes 1.15 times the model's thrust
+    _, off = _surge_run(1.15, force_scale_from=0.0)
+    assert all(r[3] == 1.0 for r in run)
+    assert all(r[4] == pytest.approx(1.15, rel=0.2) for r in run if r[0] >= 5.0)
+    assert [r[2] for r in run] == [r[2] for r in off]  # the same surge, to the last bit
+    _, never = _surge_run(4.0, force_scale_from=0.0)
+    assert all(r[3] == 1.0 and r[4] == 1.0 for r in never)

@@ -267,6 +267,7 @@ class SafetyMonitor:
         self._driving = False  # the last tracking message's
         self._fins_started = False  # a stroke started since the fins were driven
         self._slow_fins: dict[int, tuple[float, str]] = {}  # paper fin -> (since, what was reported)
+        self._fin_scale = ""  # what the loop reported of the fins' measured force scale ("": the model's)
         self._allocation: Any = None  # the last BodyAllocation
         self._recorder_failed: tuple[float, str] | None = None  # (since, why)
         self._loop_stuck: str | None = None  # why, while the loop watchdog holds it stuck
@@ -453,6 +454,8 @@ class SafetyMonitor:
                         self._slow_fins.setdefault(fin, (self._now, ev.message))
                     else:
                         self._slow_fins.pop(fin, None)
+            elif ev.source == "loop" and ev.code in ("fin_force_scale", "fin_force_scale_cleared"):
+                self._fin_scale = ev.message if ev.code == "fin_force_scale" else ""
             elif ev.source == "recorder" and ev.code == "write_failed":
                 why = ev.data.get("error")
                 self._recorder_failed = (self._now, why if isinstance(why, str) else ev.message)
@@ -691,6 +694,12 @@ class SafetyMonitor:
         """What was reported of each fin reported slow and not recovered since (paper fin order)."""
         with self._lock:
             return [what for _fin, (_since, what) in sorted(self._slow_fins.items())]
+
+    def fin_scale(self) -> str:
+        """What the loop reported of the fins making more than the fin model's force, while the
+        body layer follows it ("" when they make the model's)."""
+        with self._lock:
+            return self._fin_scale
 
     def motor_faults(self) -> list[str]:
         """The motor controller faults reported and not cleared ("source: what it reported")."""

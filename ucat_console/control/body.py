@@ -16,7 +16,9 @@ Control.md section 7; ``BodyConfig.layer`` picks one of two layers over the same
   holds that heading whatever pushes the robot off it; in a turn ``psi_ref`` never runs more
   than ``max_heading_lead`` ahead of the robot, and the loop never sees more error than that). The wrench goes to :func:`~ucat_console.control.allocation.allocate_wrench`; an
   axis it cut has its loop's last integration undone (anti-windup fed by the allocation),
-  and each loop's output limit is what the fins can deliver on its axis.
+  and each loop's output limit is what the fins can deliver on its axis. Fins that make
+  ``force_scale_from`` times the fin model's force or more (measured from the surge balance,
+  :func:`_measure_scale`) are asked for that much less on every axis.
 * ``paper`` (section IV.B): ``F_x* = -PID_v(v_ref - v)``, ``F_y* = depth_sign *
   PID_z(z_ref - z)``, a yaw thrust differential ``m = PID_r(r_ref - r)``, allocated by
   :func:`~ucat_console.control.allocation.fin_targets`.
@@ -112,7 +114,17 @@ BODY = Layout("the body-frame layer's array", [
     ("bias_weight", 1, "designed: 1.0 the executed cycles correct the plans' force, 0.0 not"),
     ("shortfall", 3, "designed: the fins' shortfall fed forward (surge N, heave N, yaw N m)"),
     ("shortfall_cap", 3, "its bound on each axis"), ("shortfall_tau", 1, "its time constant (s; < 0: none)"),
-    ("shortfall_t", 1, "when it last moved (NaN: not yet)"), ("asked", 3, "the loops' demand and the shortfall"),
+    ("shortfall_t", 1, "when it last moved (NaN: not yet)"),
+    ("scale", 1, "designed: the fins' force per unit of the fin model's that the allocation divides the demand by"),
+    ("scale_from", 1, "the measured scale from which it follows the measurement (<= 0: never)"),
+    ("scale_max", 1, "the largest it follows"), ("scale_est", 1, "the measured scale (the surge balance)"),
+    ("scale_v", 1, "the speed low-passed at SCALE_FILTER (NaN: no sample yet)"),
+    ("scale_drag", 1, "the hull's drag at the speed, low-passed the same"),
+    ("scale_given", 1, "the surge the fins were given by the fin model, through their lag (N)"),
+    ("scale_given_f", 1, "that low-passed the same"), ("scale_xy", 1, "running mean of given x made (N^2)"),
+    ("scale_xx", 1, "running mean of given^2 (N^2)"), ("scale_t", 1, "when it last moved (NaN: not yet)"),
+    ("scale_t0", 1, "when its filters started"),
+    ("asked", 3, "the loops' demand and the shortfall"),
     ("pids", 3 * NPID, "velocity, depth, yaw rate or heading: a PID row each"),
     ("filters", 1, "velocity filter, then depth filter: median_size(window) numbers each (the array's rest)"),
 ])
@@ -125,7 +137,9 @@ B_LEAD, B_REF_RATE, B_MAX_DIVE, B_MAX_ACC, B_MAX_YAW_ACC, B_ACC_RISE, B_V_REF, B
 B_R_REF, B_R_REF_RATE, B_X, B_Z, B_N, B_APPLIED, B_CUT, B_SPEED_TAU, B_V_LP, B_V_LP_T, B_ALLOC, B_OUT = (
     BODY.at(f) for f in BODY.fields[29:41])
 B_CYCLE_TARGET, B_CYCLE_FORCE, B_CYCLE_BIAS, B_BIAS_WEIGHT, B_SHORTFALL, B_SHORTFALL_CAP, B_SHORTFALL_TAU, \
-    B_SHORTFALL_T, B_ASKED, B_PIDS, B_FILTERS = (BODY.at(f) for f in BODY.fields[41:])
+    B_SHORTFALL_T = (BODY.at(f) for f in BODY.fields[41:49])
+B_SCALE, B_SCALE_FROM, B_SCALE_MAX, B_SCALE_EST, B_SCALE_V, B_SCALE_DRAG, B_SCALE_GIVEN, B_SCALE_GIVEN_F, \
+    B_SCALE_XY, B_SCALE_XX, B_SCALE_T, B_SCALE_T0, B_ASKED, B_PIDS, B_FILTERS = (BODY.at(f) for f in BODY.fields[49:])
 #: what the body functions return: all is well, or which input was not a finite number
 BODY_OK, BAD_DVL_VX, BAD_DVL_T, BAD_DEPTH, BAD_DEPTH_T, BAD_GYRO, BAD_IMU_T, BAD_T, EARLIER_T = range(9)
 #: the field each bad input is named by
@@ -134,6 +148,12 @@ BODY_FIELDS = {BAD_DVL_VX: "dvl.vx", BAD_DVL_T: "dvl.t", BAD_DEPTH: "depth.depth
 LAYERS = {"paper": 0.0, "designed": 1.0}
 #: how close (s) the scheduled delay comes to a fin's period before it takes it
 PERIOD_SNAP = 1e-3
+#: the force scale's measurement (:func:`_measure_scale`): the low-pass both sides of the
+#: surge balance go through (s), the lag the fins' force follows the surge they are given
+#: with (s; they take a new demand up at their next cycle, half a second at the 2-Hz beat),
+#: how long the fit remembers (s), and the least mean square of the surge given (N^2) below
+#: which the balance tells nothing and the last measurement holds
+SCALE_FILTER, SCALE_LAG, SCALE_MEMORY, SCALE_EXCITATION = 1.0, 0.5, 5.0, 0.01
 
 
 def body_size(window: int) -> int:
@@ -180,6 +200,9 @@ def body_reset(b: np.ndarray) -> None:
     for k in range(3):
         b[B_SHORTFALL + k] = 0.0
     b[B_SHORTFALL_T] = math.nan
+    # the force scale found stays (the fins did not change); its filters start again
+    b[B_SCALE_V] = math.nan
+    b[B_SCALE_T] = math.nan
     b[B_ASKED] = 0.0
     b[B_ASKED + 1] = b[B_TRIM]
     b[B_ASKED + 2] = 0.0
@@ -323,6 +346,8 @@ def _designed_loops(b: np.ndarray, t: float, sp_v: float, sp_z: float, sp_r: flo
     h = B_HULL
     status = BODY_OK
     v_ref = b[B_V_REF]
+    if b[B_NEW_V] != 0.0 and not math.isnan(v):
+        _measure_scale(b, v, t)
     if b[B_NEW_V] != 0.0 and not math.isnan(v) and not math.isnan(v_ref):
         out = pid_step(b[B_PIDS:B_PIDS + NPID], v_ref - v, v, t)
         if out == EARLIER:
@@ -356,6 +381,49 @@ def _designed_loops(b: np.ndarray, t: float, sp_v: float, sp_z: float, sp_r: flo
 
 
 @register_jitable
+def _measure_scale(b: np.ndarray, v: float, t: float) -> None:
+    """The fins' force scale moves on to a speed ``v`` at ``t``: the hull's surge equation
+    ``M u' + D(u) = s X`` read as a least-squares fit of ``s``, ``X`` the surge the
+    allocation gave the fins by the fin model (before the scale) through a first-order lag
+    of ``SCALE_LAG``, both sides low-passed at ``SCALE_FILTER`` (``M u'`` as ``M (u -
+    u_f) / SCALE_FILTER``, no differentiated noise), the sums forgotten over
+    ``SCALE_MEMORY``. While the fins were given too little surge to tell, the last
+    measurement holds. The allocation follows it from ``scale_from`` on (within
+    ``scale_max``) and leaves it when it falls back below halfway to 1."""
+    if not b[B_SCALE_FROM] > 0.0:
+        return
+    h = B_HULL
+    given = b[B_OUT + W_X] if not math.isnan(b[B_V_REF]) else 0.0
+    drag = b[h + H_SURGE_D] * v + b[h + H_SURGE_DQ] * v * abs(v)
+    if math.isnan(b[B_SCALE_T]):
+        b[B_SCALE_V], b[B_SCALE_DRAG] = v, drag
+        b[B_SCALE_GIVEN] = b[B_SCALE_GIVEN_F] = drag
+        b[B_SCALE_T0] = t
+    else:
+        dt = max(0.0, t - b[B_SCALE_T])
+        a = 1.0 - math.exp(-dt / SCALE_FILTER)
+        b[B_SCALE_GIVEN] += (1.0 - math.exp(-dt / SCALE_LAG)) * (given - b[B_SCALE_GIVEN])
+        b[B_SCALE_GIVEN_F] += a * (b[B_SCALE_GIVEN] - b[B_SCALE_GIVEN_F])
+        b[B_SCALE_V] += a * (v - b[B_SCALE_V])
+        b[B_SCALE_DRAG] += a * (drag - b[B_SCALE_DRAG])
+        made = b[h + H_SURGE_M] * (v - b[B_SCALE_V]) / SCALE_FILTER + b[B_SCALE_DRAG]
+        x = b[B_SCALE_GIVEN_F]
+        k = 1.0 - math.exp(-dt / SCALE_MEMORY)
+        if t - b[B_SCALE_T0] < SCALE_MEMORY:  # a plain mean until it has a memory's worth
+            k = max(k, dt / max(dt, t - b[B_SCALE_T0]))
+        b[B_SCALE_XY] += k * (x * made - b[B_SCALE_XY])
+        b[B_SCALE_XX] += k * (x * x - b[B_SCALE_XX])
+        if b[B_SCALE_XX] > SCALE_EXCITATION:
+            b[B_SCALE_EST] = b[B_SCALE_XY] / b[B_SCALE_XX]
+    b[B_SCALE_T] = t
+    est, start = b[B_SCALE_EST], b[B_SCALE_FROM]
+    if est >= start or (b[B_SCALE] > 1.0 and est >= 0.5 * (1.0 + start)):
+        b[B_SCALE] = min(b[B_SCALE_MAX], max(1.0, est))
+    else:
+        b[B_SCALE] = 1.0
+
+
+@register_jitable
 def body_on_cycle(b: np.ndarray, k: int, tx: float, ty: float, fx: float, fy: float) -> None:
     """Paper fin ``k`` begins a cycle asked for ``(tx, ty)`` whose plan makes ``(fx, fy)``
     by the fin model (N, the fin model's frame)."""
@@ -380,7 +448,8 @@ def _fin_wrench(b: np.ndarray, fx: float, fy: float, k: int) -> tuple[float, flo
     """The physical wrench (surge, heave down > 0, yaw) of paper fin ``k``'s model force."""
     if fx < 0.0:
         fx *= b[B_ALLOC + A_GAIN]
-    return -b[B_ALLOC + A_COS] * fx, -fy, PAPER_SIDES[k] * b[B_ALLOC + A_ARM] * fx
+    s = b[B_SCALE]
+    return -s * b[B_ALLOC + A_COS] * fx, -s * fy, s * PAPER_SIDES[k] * b[B_ALLOC + A_ARM] * fx
 
 
 @register_jitable
@@ -423,10 +492,11 @@ def body_allocate(b: np.ndarray, sp_v: float, sync: bool) -> int:
     n = b[B_N] + b[B_SHORTFALL + 2]
     b[B_ASKED], b[B_ASKED + 1], b[B_ASKED + 2] = x, z, n
     direction = 0.0 if not moving else 1.0 if sp_v > 0.0 else -1.0 if sp_v < 0.0 else 0.0
-    cut = allocate_wrench(x, z, n, direction, sync, b[B_ALLOC:B_ALLOC + NA], b[B_OUT:B_OUT + NW])
-    b[B_APPLIED] = b[B_OUT + W_X]
-    b[B_APPLIED + 1] = b[B_OUT + W_Z]
-    b[B_APPLIED + 2] = b[B_OUT + W_N]
+    s = b[B_SCALE]  # the fins make s times the fin model's force: ask them for 1/s of the demand
+    cut = allocate_wrench(x / s, z / s, n / s, direction, sync, b[B_ALLOC:B_ALLOC + NA], b[B_OUT:B_OUT + NW])
+    b[B_APPLIED] = s * b[B_OUT + W_X]
+    b[B_APPLIED + 1] = s * b[B_OUT + W_Z]
+    b[B_APPLIED + 2] = s * b[B_OUT + W_N]
     b[B_CUT] = cut
     if cut & (CUT_SURGE | CUT_COAST):
         pid_unwind(b[B_PIDS:B_PIDS + NPID], x - b[B_APPLIED])
@@ -479,8 +549,8 @@ def body_targets(b: np.ndarray, k: int) -> tuple[float, float]:
 @register_jitable
 def body_wrench(b: np.ndarray) -> tuple[float, float, float]:
     """The physical wrench (surge N, heave N down > 0, yaw N m) the last step's fin targets
-    make (forward forces ``thrust_gain`` times the model's): the paper layer's, in the
-    designed layer's terms."""
+    make (forward forces ``thrust_gain`` times the model's, all of them the measured force
+    scale times): the paper layer's, in the designed layer's terms."""
     g, cos_a, arm = b[B_ALLOC + A_GAIN], b[B_ALLOC + A_COS], b[B_ALLOC + A_ARM]
     x = z = n = 0.0
     for k in range(4):
@@ -490,7 +560,8 @@ def body_wrench(b: np.ndarray) -> tuple[float, float, float]:
         x -= cos_a * fx
         z -= fy
         n += PAPER_SIDES[k] * arm * fx
-    return x, z, n
+    s = b[B_SCALE]
+    return s * x, s * z, s * n
 
 
 @register_jitable
@@ -591,6 +662,9 @@ class BodyController:
         b[B_SPEED_TAU] = cfg.speed_filter
         b[B_SHORTFALL_TAU] = cfg.shortfall_filter if cfg.feed_shortfall else -1.0
         b[B_BIAS_WEIGHT] = 1.0 if cfg.feed_executed else 0.0
+        b[B_SCALE] = b[B_SCALE_EST] = 1.0
+        b[B_SCALE_FROM] = cfg.force_scale_from if cfg.layer == "designed" else 0.0
+        b[B_SCALE_MAX] = cfg.force_scale_max
         self._executor = executor or ExecutorConfig()
         self.velocity_pid = Pid(cfg.velocity, b[B_PIDS:B_PIDS + NPID])
         self.depth_pid = Pid(cfg.depth, b[B_PIDS + NPID:B_PIDS + 2 * NPID])
@@ -754,6 +828,13 @@ class BodyController:
         strokes made ``executed`` by the fin model (N)."""
         body_on_executed(self.state, fin, finite("planned[0]", planned[0]), finite("planned[1]", planned[1]),
                          finite("executed[0]", executed[0]), finite("executed[1]", executed[1]))
+
+    @property
+    def force_scale(self) -> tuple[float, float]:
+        """(the fins' force per unit of the fin model's that the designed layer asks them for
+        less by, the measured one): (1, 1) until measured."""
+        b = self.state
+        return float(b[B_SCALE]), float(b[B_SCALE_EST])
 
     @property
     def shortfall(self) -> tuple[float, float, float]:

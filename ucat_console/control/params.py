@@ -277,6 +277,16 @@ class BodyConfig(Config):
         doc="designed layer: the largest shortfall fed forward, as a share of what the fins deliver on each axis "
         "(a planner that cannot make more than it does would wind it up)",
     )
+    force_scale_from: float = param(
+        2.0, lo=0.0, hi=20.0,
+        doc="designed layer: when the fins make at least this many times the fin model's force (measured from "
+        "the surge balance: the hull's model against what the fins were asked), the layer asks them for that "
+        "much less on every axis (0: never; a loop designed for the model holds within a factor of 2 of its "
+        "gain, beyond it oscillates)",
+    )
+    force_scale_max: float = param(
+        8.0, lo=1.0, hi=20.0, doc="designed layer: the largest measured force scale the layer follows",
+    )
     max_heading_lead: float = param(
         0.5, lo=0.01, hi=3.0, unit="rad",
         doc="designed layer: how far the commanded heading may run ahead of the robot's (a turn "

@@ -111,12 +111,13 @@ def vehicle_parts(st: ConsoleState) -> list[Light]:
 
 
 def fins_light(safety: SafetyView) -> Light:
-    """The fins' pace: amber while a fin is reported slow (its executed cycles take longer
-    than their plans: a weak, lagging or stuck drive; the loop's ``fin_slow`` event), with
-    what was reported of it."""
-    slow = safety.slow_fins
-    if slow:
-        return Light(LIGHTS["fins"], "warn", "; ".join(slow))
+    """The fins' pace and force: amber while a fin is reported slow (its executed cycles take
+    longer than their plans: a weak, lagging or stuck drive; the loop's ``fin_slow`` event) or
+    the fins make more than the fin model's force (the loop's ``fin_force_scale``: the body
+    layer asks them for less until they are identified), with what was reported."""
+    off = [*safety.slow_fins, *([safety.fin_scale] if safety.fin_scale else [])]
+    if off:
+        return Light(LIGHTS["fins"], "warn", "; ".join(off))
     return Light(LIGHTS["fins"], "ok", "every fin keeps its plans' pace")
 
 

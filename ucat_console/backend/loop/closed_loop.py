@@ -164,11 +164,28 @@ class ClosedLoop:
         self.fins = Actuators(cfg, self._s, members, watches, self._planning, self.outbox, self._command_fin,
                               self.clock.wall_deadline, lambda: self._driving(), mpc_planner,
                               on_cycle=lambda fin, target, force: self.body.on_cycle(fin, target, force, self._t),
-                              on_executed=self.body.on_executed)
+                              on_executed=self._on_executed)
+        self._scaled = False  # whether the body layer follows a measured force scale (its event said so)
         # the set-points the fins are actually sent: the robot's report (the arming gate:
         # those it passes on, and its stops), else each command as given
         self._sent_as_given = not io.report_sent(self.fins.sent)
         self.limit_fins()
+
+    def _on_executed(self, fin: int, planned: tuple[float, float], executed: tuple[float, float]) -> None:
+        """A fin finished a cycle: the body layer's correction, and whether it now follows a
+        measured force scale (an event when it starts or stops: the fins are not the model)."""
+        self.body.on_executed(fin, planned, executed)
+        scale, measured = self.body.force_scale
+        if (scale > 1.0) != self._scaled:
+            self._scaled = scale > 1.0
+            if self._scaled:
+                self.outbox.event(self._t, "fin_force_scale", f"the fins make {measured:.1f} times the fin model's "
+                                  "force: the body layer asks them for that much less; identify the fins "
+                                  "(ucat-console identify --fit scale)", "warning", {"scale": measured})
+            else:
+                self.outbox.event(self._t, "fin_force_scale_cleared", f"the fins make {measured:.2f} times the fin "
+                                  "model's force: the body layer asks them as the model says", "info",
+                                  {"scale": measured})
 
     # ------------------------------------------------------------------ public state
     @property

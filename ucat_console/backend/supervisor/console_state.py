@@ -82,6 +82,7 @@ class SafetyView:
     innovation: tuple[float, float] | None  # the last attitude innovation at rest (time, rad)
     estimate_t: float | None  # the last body state's time
     slow_fins: tuple[str, ...]
+    fin_scale: str  # the fins' force against the fin model's, while the body layer follows it ("": as the model)
     cut: tuple[str, ...]  # the axes the allocation cuts
     off_track: tuple[str, ...]  # the tracked axes off their band
 
@@ -267,6 +268,7 @@ def safety_view(safety: Any, now: float) -> SafetyView:
         motor_faults=tuple(safety.motor_faults()), recent_late_plans=safety.recent_late_plans(),
         depth=depth, altitude=altitude, volts=volts, energy_used=used, innovation=innovation,
         estimate_t=estimate_t, slow_fins=tuple(safety.slow_fins()),
+        fin_scale=safety.fin_scale(),
         cut=tuple(cut), off_track=tuple(off),
     )
 
