@@ -104,6 +104,26 @@ def test_a_stuck_loop_is_disarmed_by_the_watchdog_and_the_failsafe_clears_when_i
         sup.stop()
 
 
+def test_a_loop_on_the_simulated_clock_held_back_is_a_slower_run_not_a_disarm(tmp_path) -> None:
+    # a headless run as fast as it goes: the simulated robot stands still with its loop
+    cfg = load_config(None)
+    cfg = cfg.replace(access=cfg.access.replace(token=TOKEN), console=cfg.console.replace(record_on_arm=False),
+                      failsafe=cfg.failsafe.replace(loop_watchdog=LoopWatchdogRule("disarm", 0.1)))
+    c = Console(cfg, tmp_path)  # the simulated clock
+    sup = c.sup
+    try:
+        c.fly(PILOT, TOKEN)
+        sup.arm(PILOT)
+        t_loop = sup.loop.time
+        sup.stall_loop(PILOT, 1.0)  # ten times the timeout
+        wait_for(lambda: sup.loop.time > t_loop + 5.0, what="the loop past its stall")
+        assert sup.armed
+        assert not sup.safety.is_active("loop_watchdog")
+        assert not any(e.source == "failsafe" and e.code == "loop_watchdog" for e in c.events)
+    finally:
+        c.stop()
+
+
 def test_stalling_the_loop_is_refused_with_its_reason(tmp_path) -> None:
     sup = _console(tmp_path, None)
     try:

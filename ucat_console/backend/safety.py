@@ -51,7 +51,10 @@ Failsafes (``FailsafeConfig`` has one rule, action and timeout, for each):
   :class:`~ucat_console.backend.supervisor.watchdog.LoopWatchdog`, a thread of its own).
   It triggers at once, from the watchdog's thread (:meth:`SafetyMonitor.loop_stuck`: the
   loop's thread, which calls :meth:`SafetyMonitor.check`, is the one stuck), and clears at
-  the first check after the loop steps again (:meth:`SafetyMonitor.loop_resumed`).
+  the first check after the loop steps again (:meth:`SafetyMonitor.loop_resumed`). It watches
+  a loop paced by the wall clock only: under a simulated clock (``run --headless --fast``)
+  the simulated robot stands still while the loop does, and a loop held back by a busy
+  computer is a slower run, not a robot out of control.
 * ``depth_limit``: every valid depth reading for ``timeout`` s deeper than ``max_depth``;
   clears with a valid reading within it.
 * ``altitude``: every valid DVL altitude (finite, above 0: a report without one is not an

@@ -266,7 +266,9 @@ class Supervisor:
         #: each tuning, mode or setpoint change with the figures before and after it
         self.effects = ChangeEffects(cfg.metrics, lambda ev: self.stream.publish(ch.EVENTS, ev))
         self._thread: threading.Thread | None = None
-        #: the loop's watchdog (its thread runs with the loop's, :meth:`start`)
+        #: the loop's watchdog (its thread runs with the loop's, :meth:`start`, under a paced
+        #: clock only: under a simulated one the simulated robot stands still with the loop, so a
+        #: loop the computer holds back for a while is no danger, only a slower run)
         self.watchdog = LoopWatchdog(cfg.failsafe.loop_watchdog.timeout, self._loop_stuck, self.safety.loop_resumed)
         self._unstall = threading.Event()
         self._stopping = False
@@ -301,7 +303,8 @@ class Supervisor:
         self.recorder.epoch_offset = self.wall0
         self._thread = threading.Thread(target=self._run, name="supervisor-loop", daemon=True)
         self._thread.start()
-        self.watchdog.start()
+        if self.clock.paced:
+            self.watchdog.start()
         log.info("supervisor started (robot %s, mode %s)", self.cfg.robot, self.loop.mode)
 
     def step(self, duration: float) -> None:
