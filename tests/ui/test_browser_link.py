@@ -161,3 +161,41 @@ def test_a_page_back_while_another_flies_does_not_ask_and_forgets_its_token(brow
     finally:
         proxy.close()
         c.stop()
+
+
+def test_the_pilot_page_keeps_its_token_through_the_loading_page_of_a_restart(browser: Browser,
+                                                                           tmp_path: Path) -> None:
+    # `ucat-console run` serves its loading page while it prepares the compiled code: the page
+    # that flew comes back to it first (nobody can fly yet), and to the console on the same socket
+    from ucat_console.backend.supervisor import Supervisor
+    from ucat_console.ui.app import ConsoleApp
+    from ucat_console.ui.loading import LoadingPage
+
+    c = browser_console(tmp_path)
+    port = c.app.port
+    page = open_slow(browser, c.url)
+    become_pilot(page)
+    wait_for(lambda: kept_token(page) == TOKEN, timeout=30.0, what="the token kept")
+    c.stop()
+    expect(page.locator("#ucat-banner")).to_be_visible(timeout=SLOW)
+    cfg = console_config(TOKEN, None, scene_rate=15.0, plot_rate=5.0, port=port)
+    loading = LoadingPage(cfg, cfg.console.host, port)
+    sup = app = None
+    try:
+        wait_for(lambda: str(page.evaluate("() => window.__ucat.state.pilot")).startswith("none (the console is"),
+                 timeout=60.0, what="the page on the loading page")
+        expect(page.locator("#ucat-banner")).to_be_hidden(timeout=SLOW)
+        assert kept_token(page) == TOKEN
+        sup = Supervisor(cfg, sessions_dir=tmp_path)
+        app = ConsoleApp(sup, loading_page=loading)
+        app.start()
+        sup.start()
+        wait_for(lambda: sup.access.pilot is not None, timeout=60.0, what="the page back as pilot")
+        expect(page.get_by_text("You are the pilot")).to_be_visible(timeout=SLOW)
+    finally:
+        if sup is not None:
+            sup.stop()
+        if app is not None:
+            app.stop()
+        else:
+            loading.stop()

@@ -19,7 +19,8 @@ page does on its own:
 * **The pilot's token, for reconnects**: the token this page took control with is kept in
   the tab's ``sessionStorage`` (:data:`TOKEN_KEY`; never in the URL, never logged) while the
   page is the pilot. When the page comes back on a new connection (a lost link, the console
-  restarted, the tab reloaded) and nobody flies, it presents the token again, once, through
+  restarted, the tab reloaded; the loading page of a console still starting is passed over)
+  and nobody flies, it presents the token again, once, through
   its own token box and *Take control*: the server checks it as any token (the guard's and
   the access rules' guess budget and lock-outs). The page forgets it when another page flies
   by then, when control leaves it while connected (released, handed over), and when the
@@ -247,6 +248,9 @@ INSTALL = r"""
     client.__ucatWatched = true;
   }
   u.token = (s) => {
+    // the loading page's state (the console still starting: no token box, nobody can fly):
+    // the token is judged against the console's first state
+    if (!s.token_uuid) return;
     if (u.early) { const early = u.early; u.early = null; early.forEach(watch); }
     const token = kept.get();
     if (u.tokenConnection !== u.connection) {  // the first state on a new connection (or a reload)
