@@ -200,6 +200,30 @@ def slow_connect(delay: float, trials: int) -> dict[str, Any]:
             "control_max_s": max(control)}
 
 
+def _arm_when_allowed(sup: Any, timeout: float = 120.0) -> None:
+    """Arm as the console itself, once no failsafe refuses it (on a machine busy enough, the
+    loop watchdog may have disarmed the robot and holds the arming off until the loop steps
+    again); TimeoutError with the last refusal after ``timeout`` s."""
+    from ucat_console.backend.access import LOCAL
+    from ucat_console.backend.supervisor import CommandRefused
+
+    refused = [""]
+
+    def arm() -> bool:
+        try:
+            sup.arm(LOCAL)
+            return True
+        except CommandRefused as e:
+            refused[0] = str(e)
+            time.sleep(0.1)  # asked again a few times a second
+            return False
+
+    try:
+        wait_until(arm, timeout, "arming")
+    except TimeoutError as e:
+        raise TimeoutError(f"{e}: {refused[0]}") from None
+
+
 def slow_disarm(delay: float, trials: int) -> dict[str, Any]:
     """The pilot's Chromium page through a link delaying every chunk ``delay`` s each way, the
     robot armed: from the click on the bar's DISARM (its event in the page, by the page's
@@ -230,7 +254,7 @@ def slow_disarm(delay: float, trials: int) -> dict[str, Any]:
                 # the page shows the last trial's DISARM first: a button still enabled by an older
                 # state may turn off under the click
                 page.wait_for_function("() => document.getElementById('ucat-disarm').disabled", timeout=120_000)
-                sup.arm(LOCAL)
+                _arm_when_allowed(sup)
                 page.wait_for_function("() => !document.getElementById('ucat-disarm').disabled", timeout=120_000)
                 n = len(events)
                 page.locator("#ucat-disarm").click()
