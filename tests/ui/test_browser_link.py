@@ -53,6 +53,18 @@ def become_pilot(page: Page) -> None:
     wait_for(lambda: kept_token(page) == TOKEN, timeout=SLOW / 1000, what="the token kept")
 
 
+def pilot_then_console_gone(browser: Browser, tmp_path: Path) -> tuple[Page, int]:
+    """The pilot's page (its token kept) on a console that has stopped under it, the page
+    showing its link lost; and the port the console served on."""
+    c = browser_console(tmp_path)
+    port = c.app.port
+    page = open_slow(browser, c.url)
+    become_pilot(page)
+    c.stop()
+    expect(page.locator("#ucat-banner")).to_be_visible(timeout=SLOW)
+    return page, port
+
+
 def kept_token(page: Page) -> Any:
     return page.evaluate(f"() => sessionStorage.getItem({TOKEN_KEY!r})")
 
@@ -122,12 +134,7 @@ def test_the_pilot_page_comes_back_as_pilot_after_every_restart(browser: Browser
 
 
 def test_a_kept_token_is_checked_again_and_forgotten_when_it_fails(browser: Browser, tmp_path: Path) -> None:
-    c = browser_console(tmp_path)
-    port = c.app.port
-    page = open_slow(browser, c.url)
-    become_pilot(page)
-    c.stop()
-    expect(page.locator("#ucat-banner")).to_be_visible(timeout=SLOW)
+    page, port = pilot_then_console_gone(browser, tmp_path)
     cfg = console_config("another-token", None, scene_rate=15.0, plot_rate=5.0, port=port)
     c = Console(cfg, tmp_path, serve=True)
     try:
@@ -171,12 +178,7 @@ def test_the_pilot_page_keeps_its_token_through_the_loading_page_of_a_restart(br
     from ucat_console.ui.app import ConsoleApp
     from ucat_console.ui.loading import LoadingPage
 
-    c = browser_console(tmp_path)
-    port = c.app.port
-    page = open_slow(browser, c.url)
-    become_pilot(page)
-    c.stop()
-    expect(page.locator("#ucat-banner")).to_be_visible(timeout=SLOW)
+    page, port = pilot_then_console_gone(browser, tmp_path)
     cfg = console_config(TOKEN, None, scene_rate=15.0, plot_rate=5.0, port=port)
     loading = LoadingPage(cfg, cfg.console.host, port)
     sup = app = None
