@@ -421,6 +421,39 @@ def test_a_fin_whose_executed_cycle_fell_short_of_its_plan_has_its_next_plans_co
     assert off.shortfall == pytest.approx((0.0, 0.0, 0.0), abs=1e-12)
 
 
+def _target_now(ctl: BodyController, k: int, target: tuple[float, float]) -> tuple[float, float]:
+    """What paper fin ``k`` is given when the allocation asks it for ``target``."""
+    ctl.state[bd.B_OUT + bd.W_TARGETS + 2 * k:bd.B_OUT + bd.W_TARGETS + 2 * k + 2] = target
+    return bd.body_targets(ctl.state, k)
+
+
+def test_a_fin_asked_for_almost_nothing_keeps_the_direction_of_its_cycle():
+    ctl, _ = _cruising()
+    hold = ctl.cfg.direction_hold
+    assert hold > 0.0
+    ctl.on_cycle(0, (-0.5, 0.1), (-0.5, 0.1), 0.0)  # fin 0 runs a cycle asked forward and up
+    u = np.array([-0.5, 0.1]) / math.hypot(-0.5, 0.1)
+    # a little lift: the part of it along the running cycle, in that cycle's direction
+    little = 0.5 * hold
+    got = np.array(_target_now(ctl, 0, (0.0, little)))
+    assert got == pytest.approx(float(np.dot((0.0, little), u)) * u, rel=1e-12)
+    # a little sink, against the cycle: next to nothing, still in the cycle's direction
+    got = np.array(_target_now(ctl, 0, (0.0, -little)))
+    assert got == pytest.approx(1e-3 * hold * u, rel=1e-12)
+    # a force above the hold is given as asked, whatever the cycle's direction
+    assert _target_now(ctl, 0, (0.0, 1.2 * hold)) == (0.0, 1.2 * hold)
+    # the hold is by the fin model (it is the strokes' rate): fins measured stronger alike
+    ctl.state[bd.B_SCALE] = 4.0
+    assert _target_now(ctl, 0, (0.0, 1.2 * hold)) == (0.0, 1.2 * hold)
+    assert _target_now(ctl, 0, (0.0, 0.8 * hold)) != (0.0, 0.8 * hold)
+    # a fin with no cycle yet is given its target
+    assert _target_now(ctl, 1, (0.0, little)) == (0.0, little)
+    # off: every target as asked
+    off, _ = _cruising(direction_hold=0.0)
+    off.on_cycle(0, (-0.5, 0.1), (-0.5, 0.1), 0.0)
+    assert _target_now(off, 0, (0.0, little)) == (0.0, little)
+
+
 def test_the_speed_references_acceleration_rises_to_its_limit_over_the_configured_time():
     """A speed step: the reference's acceleration grows by max_acceleration over
     acceleration_rise (the fins take a new demand each at its own cycle), none at once."""

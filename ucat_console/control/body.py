@@ -18,7 +18,9 @@ Control.md section 7; ``BodyConfig.layer`` picks one of two layers over the same
   axis it cut has its loop's last integration undone (anti-windup fed by the allocation),
   and each loop's output limit is what the fins can deliver on its axis. Fins that make
   ``force_scale_from`` times the fin model's force or more (measured from the surge balance,
-  :func:`_measure_scale`) are asked for that much less on every axis.
+  :func:`_measure_scale`) are asked for that much less on every axis. A fin asked for less
+  than ``direction_hold`` (by the fin model) keeps the direction of the cycle it runs
+  (:func:`_held`).
 * ``paper`` (section IV.B): ``F_x* = -PID_v(v_ref - v)``, ``F_y* = depth_sign *
   PID_z(z_ref - z)``, a yaw thrust differential ``m = PID_r(r_ref - r)``, allocated by
   :func:`~ucat_console.control.allocation.fin_targets`.
@@ -124,6 +126,8 @@ BODY = Layout("the body-frame layer's array", [
     ("scale_given_f", 1, "that low-passed the same"), ("scale_xy", 1, "running mean of given x made (N^2)"),
     ("scale_xx", 1, "running mean of given^2 (N^2)"), ("scale_t", 1, "when it last moved (NaN: not yet)"),
     ("scale_t0", 1, "when its filters started"),
+    ("hold", 1, "designed: a fin's target below this (N, by the fin model) keeps its running cycle's "
+             "direction (0: never)"),
     ("asked", 3, "the loops' demand and the shortfall"),
     ("pids", 3 * NPID, "velocity, depth, yaw rate or heading: a PID row each"),
     ("filters", 1, "velocity filter, then depth filter: median_size(window) numbers each (the array's rest)"),
@@ -139,7 +143,8 @@ B_R_REF, B_R_REF_RATE, B_X, B_Z, B_N, B_APPLIED, B_CUT, B_SPEED_TAU, B_V_LP, B_V
 B_CYCLE_TARGET, B_CYCLE_FORCE, B_CYCLE_BIAS, B_BIAS_WEIGHT, B_SHORTFALL, B_SHORTFALL_CAP, B_SHORTFALL_TAU, \
     B_SHORTFALL_T = (BODY.at(f) for f in BODY.fields[41:49])
 B_SCALE, B_SCALE_FROM, B_SCALE_MAX, B_SCALE_EST, B_SCALE_V, B_SCALE_DRAG, B_SCALE_GIVEN, B_SCALE_GIVEN_F, \
-    B_SCALE_XY, B_SCALE_XX, B_SCALE_T, B_SCALE_T0, B_ASKED, B_PIDS, B_FILTERS = (BODY.at(f) for f in BODY.fields[49:])
+    B_SCALE_XY, B_SCALE_XX, B_SCALE_T, B_SCALE_T0, B_HOLD, B_ASKED, B_PIDS, B_FILTERS = (
+        BODY.at(f) for f in BODY.fields[49:])
 #: what the body functions return: all is well, or which input was not a finite number
 BODY_OK, BAD_DVL_VX, BAD_DVL_T, BAD_DEPTH, BAD_DEPTH_T, BAD_GYRO, BAD_IMU_T, BAD_T, EARLIER_T = range(9)
 #: the field each bad input is named by
@@ -543,7 +548,23 @@ def body_targets(b: np.ndarray, k: int) -> tuple[float, float]:
         if k == 1:
             return px, py
         return rx, ry
-    return b[B_OUT + W_TARGETS + 2 * k], b[B_OUT + W_TARGETS + 2 * k + 1]
+    return _held(b, k, b[B_OUT + W_TARGETS + 2 * k], b[B_OUT + W_TARGETS + 2 * k + 1])
+
+
+@register_jitable
+def _held(b: np.ndarray, k: int, tx: float, ty: float) -> tuple[float, float]:
+    """Paper fin ``k``'s designed target ``(tx, ty)``, or, when it is below the hold, the
+    part of it along the direction of the cycle the fin runs (at least a thousandth of the
+    hold, so the direction stays)."""
+    hold = b[B_HOLD]
+    if not tx * tx + ty * ty < hold * hold:
+        return tx, ty
+    px, py = b[B_CYCLE_TARGET + 2 * k], b[B_CYCLE_TARGET + 2 * k + 1]
+    pm = math.hypot(px, py)
+    if not pm > 0.0:  # no cycle yet (NaN), or one asked for nothing
+        return tx, ty
+    d = max((tx * px + ty * py) / pm, 1e-3 * hold)
+    return d * px / pm, d * py / pm
 
 
 @register_jitable
@@ -665,6 +686,7 @@ class BodyController:
         b[B_SCALE] = b[B_SCALE_EST] = 1.0
         b[B_SCALE_FROM] = cfg.force_scale_from if cfg.layer == "designed" else 0.0
         b[B_SCALE_MAX] = cfg.force_scale_max
+        b[B_HOLD] = cfg.direction_hold if cfg.layer == "designed" else 0.0
         self._executor = executor or ExecutorConfig()
         self.velocity_pid = Pid(cfg.velocity, b[B_PIDS:B_PIDS + NPID])
         self.depth_pid = Pid(cfg.depth, b[B_PIDS + NPID:B_PIDS + 2 * NPID])

@@ -287,6 +287,14 @@ class BodyConfig(Config):
     force_scale_max: float = param(
         8.0, lo=1.0, hi=20.0, doc="designed layer: the largest measured force scale the layer follows",
     )
+    direction_hold: float = param(
+        0.05, lo=0.0, hi=10.0, unit="N",
+        doc="designed layer: a fin asked for less than this by the fin model keeps the direction of the cycle "
+        "it runs, making the part of its target along it (0: never). Such strokes are slow beside the stream "
+        "(0.05 N with the paper's coefficients: 0.82 rad/s, 0.08 m/s at the centre of pressure), and a stroke "
+        "centre swung round for a force whose direction is noise drags the fin across the stream at its slowest "
+        "rate: a rudder the fin model does not know",
+    )
     max_heading_lead: float = param(
         0.5, lo=0.01, hi=3.0, unit="rad",
         doc="designed layer: how far the commanded heading may run ahead of the robot's (a turn "
