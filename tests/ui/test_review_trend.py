@@ -50,8 +50,9 @@ def test_a_trend_choice_draws_the_runs_found_and_a_raw_clients_other_value_chang
 
     # the search narrows the runs: the trend follows it
     review.send(review.runs.search, "mode=baseline")
-    wait_for(lambda: len(_data(panel.by_value)[0]) == 2, what="the trend of the runs found")
-    assert esc("mode=baseline") in panel.about.content
+    # the chart's data is set before the text about it: wait for both
+    wait_for(lambda: len(_data(panel.by_value)[0]) == 2 and esc("mode=baseline") in panel.about.content,
+             what="the trend of the runs found, and its text")
 
     before = _data(panel.by_value)
     guard = review.console.app.guard
@@ -78,10 +79,10 @@ def test_a_trend_choice_draws_the_runs_found_and_a_raw_clients_other_value_chang
     review.send(panel.figure, trend.FIGURES["speed_mae"])
     wait_for(lambda: panel.chosen == ("speed_mae", "loop.mpc.lam_st"), what="the figure changed")
     review.send(panel.axis, "date")
-    wait_for(lambda: panel.chosen == ("speed_mae", "date") and panel.by_date.visible, what="by date")
+    wait_for(lambda: panel.chosen == ("speed_mae", "date") and panel.by_date.visible
+             and "no interval for this figure" in panel.about.content, what="by date, and its text")
     x, value, lo, hi, _ = _data(panel.by_date)
     assert len(x) == 2 and np.all(np.diff(x) > 0) and np.all(np.isnan(lo)) and np.all(np.isnan(hi))
-    assert "no interval for this figure" in panel.about.content
 
 
 @dataclass(frozen=True)
