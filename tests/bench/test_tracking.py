@@ -10,7 +10,7 @@ def _log(t, depth, yaw):
     lg = _Log()
     lg.t, lg.depth, lg.yaw = list(t), list(depth), list(yaw)
     lg.yaw_rate = [0.0] * len(lg.t)
-    lg.x = lg.y = [0.0] * len(lg.t)
+    lg.x = lg.y = lg.energy = [0.0] * len(lg.t)
     return lg
 
 
@@ -49,3 +49,21 @@ def test_the_gait_change_is_the_baselines_and_judged_on_its_heading():
     v = verdicts({"gait_change": f})
     assert v["gait_change/heading_all_deg"]["met"] is False
     assert "gait_change/heading_all_deg" not in verdicts({"straight": {"heading_all_deg": 1.0}})
+
+
+def test_a_cruise_is_costed_per_metre_from_when_its_speed_is_judged():
+    """``j_per_m``: the energy the fins drew over the path travelled from SPEED_FROM on (a
+    sideways weave counts as distance), not over the start from rest."""
+    from ucat_console.bench.tracking import SPEED_FROM
+
+    m = next(m for m in manoeuvres(quick=True) if m.name == "speed_0.2")
+    t = np.arange(0.0, m.duration, 0.1)
+    lg = _log(t, np.ones_like(t), np.zeros_like(t))
+    lg.x = list(0.2 * t)
+    lg.y = [0.0] * len(t)
+    # 100 W before SPEED_FROM (the start), 10 W after: 50 J/m at 0.2 m/s
+    lg.energy = list(np.where(t < SPEED_FROM, 100.0 * t, 100.0 * SPEED_FROM + 10.0 * (t - SPEED_FROM)))
+    lg.dvl_t, lg.dvl_v = list(t), [0.2] * len(t)
+    f = _figures(m, lg)
+    assert f["j_per_m"] == pytest.approx(50.0, rel=1e-3)
+    assert f["within"] == 1.0

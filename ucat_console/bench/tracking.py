@@ -16,7 +16,8 @@ rear pair synchronised, and the MPC's closed-stroke formulation):
 * ``turn``: the same with a yaw rate setpoint of 0.1 rad/s: the mean rate error and the
   standard deviation of the heading error against the commanded heading (after SETTLE s);
 * ``speed_<v>``: from rest at 1 m to v in {0.1, 0.2, 0.3} m/s: the share of DVL samples
-  within +-0.025 m/s of v from 30 s on;
+  within +-0.025 m/s of v from 30 s on, and the fins' battery energy per metre travelled then
+  (``j_per_m``, the simulator's truth: what a change of the controller costs);
 * ``gait_change`` (the baseline only, whose beat frequency is its gait): cruising at 0.1 m/s
   at 1 m at 2 Hz, the frequency changes to 0.5 Hz at STEP_AT s (cycles from 0.5 s to 2 s: the
   body loops' schedule follows): the heading from the start;
@@ -182,6 +183,7 @@ class _Log:
     yaw_rate: list[float] = field(default_factory=list)
     x: list[float] = field(default_factory=list)
     y: list[float] = field(default_factory=list)
+    energy: list[float] = field(default_factory=list)  # J: the fins' battery energy since the start
     dvl_t: list[float] = field(default_factory=list)
     dvl_v: list[float] = field(default_factory=list)
     model_err: list[float] = field(default_factory=list)  # rad
@@ -238,6 +240,7 @@ def run_manoeuvre(app: Any, mode: str, formulation: str, m: Manoeuvre, seed: int
             log.yaw_rate.append(tr.velocity[5])
             log.x.append(tr.position[0])
             log.y.append(tr.position[1])
+            log.energy.append(sum(io.plant.fin_battery_energy()))
         elif channel == ch.DVL:
             if msg.valid:
                 log.dvl_t.append(msg.t)
@@ -304,6 +307,11 @@ def _figures(m: Manoeuvre, log: _Log) -> dict[str, float]:
         w = dt >= SPEED_FROM
         out["within"] = float(np.mean(np.abs(dv[w] - m.velocity) <= BAND)) if w.any() else 0.0
         out["mean_speed"] = float(dv[w].mean()) if w.any() else math.nan
+        late = t >= SPEED_FROM
+        if late.sum() > 1:
+            path = float(np.hypot(np.diff(np.asarray(log.x)[late]), np.diff(np.asarray(log.y)[late])).sum())
+            spent = float(np.asarray(log.energy)[late][-1] - np.asarray(log.energy)[late][0])
+            out["j_per_m"] = spent / path if path > 0.0 else math.inf
     if m.name == "e5":
         near = np.nonzero(np.abs(z - m.depth) <= 0.05)[0]
         t_dive = float(t[near[0]]) if near.size else math.inf
