@@ -310,7 +310,8 @@ def _figures(m: Manoeuvre, log: _Log) -> dict[str, float]:
         late = t >= SPEED_FROM
         if late.sum() > 1:
             path = float(np.hypot(np.diff(np.asarray(log.x)[late]), np.diff(np.asarray(log.y)[late])).sum())
-            spent = float(np.asarray(log.energy)[late][-1] - np.asarray(log.energy)[late][0])
+            energy = np.asarray(log.energy)[late]
+            spent = float(energy[-1] - energy[0])
             out["j_per_m"] = spent / path if path > 0.0 else math.inf
     if m.name == "e5":
         near = np.nonzero(np.abs(z - m.depth) <= 0.05)[0]
