@@ -38,6 +38,8 @@ from typing import Any
 
 import numpy as np
 
+from ucat_console.robot.fin_plate import plate_geometry
+
 #: the paper's Table V: (controller, v) -> mean power (W)
 PAPER_POWER = {("baseline", 0.1): 1.900, ("baseline", 0.2): 3.251, ("baseline", 0.3): 3.724,
                ("mpc", 0.1): 1.612, ("mpc", 0.2): 2.212, ("mpc", 0.3): 3.049, ("mpc", 0.4): 3.341}
@@ -112,8 +114,6 @@ def bollard_check() -> list[dict[str, Any]]:
 def ebt_efficiency(st: float, theta0: float, cd0: float, plant: Any) -> float:
     """Elongated-body theory's efficiency (module docstring) at the paper's St (``w L_f / (2 V)``,
     w the mean |rate| of a sinusoid of amplitude ``theta0``), for the plate of ``plant``."""
-    from ucat_console.backend.sim.plate import plate_geometry
-
     c = plant.hydro.resolved()
     chord, span = plate_geometry(c.r_c, c.area)
     u = 1.0  # the efficiency depends on St alone
@@ -129,8 +129,6 @@ def ebt_efficiency(st: float, theta0: float, cd0: float, plant: Any) -> float:
 def trailing_edge_st(paper_st: float, plant: Any) -> float:
     """The Strouhal number on the trailing edge's excursion (the literature's) of a beat whose
     paper St (on the length L_f) is ``paper_st``: the plate reaches R = sqrt(3) r_c."""
-    from ucat_console.backend.sim.plate import plate_geometry
-
     c = plant.hydro.resolved()
     return paper_st * plate_geometry(c.r_c, c.area)[0] / c.fin_length
 

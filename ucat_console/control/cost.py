@@ -21,14 +21,24 @@ Two formulations (``MpcConfig.formulation``):
   c_energy is the model's mechanical power over the cycle, W: each stroke turns the fin
   through |d_k| at the mean rate w_k, so its drag energy is k_D w_k^3 dt_k = k_D |d_k| w_k^2
   (k_D = 0.5 rho C_D A_f r_c^3, :func:`ucat_console.control.power.drag_coefficient`), and it
-  starts from rest, so the motor (which does not regenerate) pays I w_k^2 / 2 to accelerate
-  the fin (I = ``fin_inertia``). It is the cycle's energy divided by the cycle's duration,
-  not the energy alone: a plan is one cycle of a receding horizon, and a short cycle that
-  costs less energy but repeats more often would spend more per second and per metre.
-  With the L1 force term the energy term does not trade force for power while
-  ``lam_e dP/dF < lam_f`` (dP/dF = 1.5 P/F for F ~ w^2, P ~ w^3; at most about 1.1 W/N
-  within the rate limits with the paper's coefficients): it chooses among the plans that
-  make the force the most economical one.
+  starts from rest and ends at rest, so the drive (which does not regenerate) pays I w_k^2 / 2
+  to spin it up and gets nothing back (I = ``fin_inertia``). It is the cycle's energy divided
+  by the cycle's duration, not the energy alone: a plan is one cycle of a receding horizon,
+  and a short cycle that costs less energy but repeats more often would spend more per
+  second and per metre. With the L1 force term the energy term does not trade force for
+  power while ``lam_e dP/dF < lam_f`` (dP/dF = 1.5 P/F for F ~ w^2 at a given stroke): it
+  chooses among the plans that make the force the most economical one.
+
+  What I is decides what "economical" means. By default it is the blade's own 2.8e-5 kg m2:
+  the reversals are then nearly free, the cost does not tell short quick strokes from long
+  ones at the same rate, and the plans keep the stroke the solver's seeded samples found
+  first (on the simulated robot the short ones cost the battery up to twice as much per
+  metre). What the drive really spins up at each stroke is the blade, the water it carries
+  and the motor's rotor through the gearhead, ``robot.fin_plate.STROKE_INERTIA`` (0.035 kg
+  m2): with it the plans take long strokes whatever the seed (dP/dF at the fastest mean rate
+  6.7 W/N for strokes of 0.5 rad, 3.9 W/N for 1 rad, below sim-tuned's lam_f / lam_e of
+  10), and hold the
+  heading less well (docs/findings.md).
 """
 
 from __future__ import annotations

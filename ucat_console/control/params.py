@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 from ucat_console.control.body_design import HullModel, designed_gains, speed_filter
 from ucat_console.robot.geometry import FIN_AREA
+from ucat_console.robot.hull import FIN_INERTIA
 from ucat_console.robot.servo import FIN_ACCELERATION, FIN_MAX_RATE
 from ucat_console.typedconf import Config, param, require_below
 
@@ -71,7 +72,12 @@ class MpcConfig(Config):
     c_d: float = param(0.70, lo=0.0, hi=20.0, doc="drag coefficient C_D")
     c_l: float = param(0.25, lo=0.0, hi=20.0, doc="lift coefficient C_L")
     fin_inertia: float = param(
-        2.8e-5, lo=0.0, hi=1.0, unit="kg m2", doc="fin inertia about its axis (the energy term's model)"
+        FIN_INERTIA, lo=0.0, hi=1.0, unit="kg m2",
+        doc="closed_stroke: the inertia about the fin's shaft the energy term charges each stroke for spinning "
+        "up from rest (the drive does not get it back); the blade's by default. With what the drive really spins "
+        "up, the blade, the water it carries and the rotor (robot.fin_plate.STROKE_INERTIA, 0.0347), the plans "
+        "take long strokes and the energy per metre no longer depends on the seed, but they hold the heading "
+        "less well (docs/findings.md)",
     )
     # Strouhal surrogate (eqs 10-12)
     st_opt: float = param(0.30, lo=0.01, hi=2.0, doc="optimal Strouhal number")

@@ -21,8 +21,8 @@ Mech. 582:153, 2007) used for flapping wings, made for a plate that turns about 
   way the plate turns: a beating fin's thrust along its mean line.
 * **Added mass**: strips across the plate carry the 2-D added mass of a plate of width
   ``span`` (Newman, *Marine Hydrodynamics*, 1977, section 4.13): added inertia
-  ``I_a = rho pi span^2 R^3 / 12`` about the shaft; its force on the hull is periodic and
-  left out.
+  ``I_a = rho pi span^2 R^3 / 12`` about the shaft (``robot.fin_plate``, the plate's size
+  and this inertia's one definition); its force on the hull is periodic and left out.
 
 Why it conserves energy. Work the water does on the plate: the strips' drag opposes their
 motion through the water (``dF . V <= 0``), their lift is across it (no work), the
@@ -57,6 +57,7 @@ import math
 import numpy as np
 from numba import njit
 
+from ucat_console.robot.fin_plate import added_inertia, plate_geometry
 from ucat_console.robot.layout import Layout
 
 #: the plate's entries of the hydro parameter vector (``fin_hydro.HYDRO``'s ``plate`` field
@@ -77,18 +78,6 @@ PLATE = Layout("the plate's parameters", [
 P_NULL, P_CD0, P_CD90, P_CLMAX, P_ROT, P_N, P_RADIUS, P_SPAN, P_PHI, P_ADDED_I, P_RHO = (
     PLATE.at(f) for f in PLATE.fields)
 NP = PLATE.size
-
-
-def plate_geometry(r_c: float, area: float) -> tuple[float, float]:
-    """(R, span) of the plate whose r^2-moment of area is ``area r_c^2``: ``R = sqrt(3) r_c``."""
-    radius = math.sqrt(3.0) * r_c
-    return radius, area / radius
-
-
-def added_inertia(rho: float, r_c: float, area: float, factor: float) -> float:
-    """The plate's added inertia about the shaft, ``factor rho pi span^2 R^3 / 12`` (kg m2)."""
-    radius, span = plate_geometry(r_c, area)
-    return factor * rho * math.pi * span * span * radius ** 3 / 12.0
 
 
 def plate_angle(c_d: float, c_l: float) -> float:
