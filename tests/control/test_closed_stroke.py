@@ -52,7 +52,8 @@ def test_a_cruise_is_planned_with_long_strokes_whatever_the_seed():
     """Making the same forward force at the same rate, short strokes reverse more often; with
     the reversals charged for what the drive spins up, every seed of the solver settles on a
     long stroke (with the blade's inertia alone, 0.44-0.93 rad over these seeds)."""
-    cfg = CFG.replace(lam_f=10.0, lam_st=2.0, lam_d=0.3, centre_rate=3.0, max_cycle=1.0, fin_inertia=STROKE_INERTIA)
+    cfg = CFG.replace(lam_f=10.0, lam_st=2.0, lam_d=0.3, centre_rate=3.0, max_cycle=1.0,  # sim-tuned's
+                      fin_inertia=STROKE_INERTIA)
     lengths = []
     for seed in range(10):
         mpc = FinMpc(cfg, seed=seed)

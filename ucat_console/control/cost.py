@@ -36,9 +36,8 @@ Two formulations (``MpcConfig.formulation``):
   metre). What the drive really spins up at each stroke is the blade, the water it carries
   and the motor's rotor through the gearhead, ``robot.fin_plate.STROKE_INERTIA`` (0.035 kg
   m2): with it the plans take long strokes whatever the seed (dP/dF at the fastest mean rate
-  6.7 W/N for strokes of 0.5 rad, 3.9 W/N for 1 rad, below sim-tuned's lam_f / lam_e of
-  10), and hold the
-  heading less well (docs/findings.md).
+  6.7 W/N for strokes of 0.5 rad, 3.9 W/N for 1 rad, below sim-tuned's lam_f / lam_e of 10),
+  and hold the heading less well (docs/findings.md).
 """
 
 from __future__ import annotations
