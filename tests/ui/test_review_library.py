@@ -97,7 +97,8 @@ def test_a_query_lists_only_the_matching_runs_and_a_bad_one_changes_nothing(
 def test_a_bad_tag_from_a_raw_page_is_refused_and_nothing_is_written(
         make_console: Callable[..., Console], two_runs: tuple[str, str], tmp_path: Path) -> None:
     a, _ = two_runs
-    console = make_console(console_config(**SETTINGS), serve=True)
+    # the pilot page may be slow to answer the console's heartbeats on a loaded machine
+    console = make_console(console_config(pilot_gone=30.0, **SETTINGS), serve=True)
     review = Review(console)
     review.page.take_control(TOKEN)
     wait_for(lambda: console.sup.access.pilot == review.cid, what="the page taking control")

@@ -52,7 +52,8 @@ def test_only_the_pilots_page_repairs_and_the_original_stays_listed(
         make_console: Callable[..., Console], tmp_path: Path) -> None:
     cut = truncated_session(tmp_path)
     original = tmp_path / (cut.stem + ".orig.mcap")
-    console = make_console(console_config(**SETTINGS), serve=True)
+    # the pilot page may be slow to answer the console's heartbeats on a loaded machine
+    console = make_console(console_config(pilot_gone=30.0, **SETTINGS), serve=True)
     viewer = console.page()
     viewer_cid = console.cid_of(viewer)
     viewer.click("Repair")
@@ -73,7 +74,8 @@ def test_only_the_pilots_page_repairs_and_the_original_stays_listed(
 
 def test_the_session_being_recorded_is_not_repaired_and_records_on_complete(
         make_console: Callable[..., Console], tmp_path: Path) -> None:
-    console = make_console(console_config(**SETTINGS), serve=True)
+    # the pilot page may be slow to answer the console's heartbeats on a loaded machine
+    console = make_console(console_config(pilot_gone=30.0, **SETTINGS), serve=True)
     sup = console.sup
     sid = sup.start_recording(LOCAL)
     [path] = sup.recorder.paths
