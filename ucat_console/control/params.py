@@ -9,9 +9,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ucat_console.control.body_design import HullModel, designed_gains, speed_filter
-from ucat_console.robot.geometry import FIN_AREA
+from ucat_console.robot.geometry import FIN_AREA, FIN_R_C
 from ucat_console.robot.hull import FIN_INERTIA
 from ucat_console.robot.servo import FIN_ACCELERATION, FIN_MAX_RATE
+from ucat_console.robot.units import RHO_TABLE_I
 from ucat_console.typedconf import Config, param, require_below
 
 #: the actuation delay (s) and bandwidth factor the designed body layer's default gains are
@@ -65,10 +66,10 @@ class MpcConfig(Config):
     table_n_d: int = param(241, lo=2, hi=4001, doc="force table nodes along the stroke d")
     table_n_w: int = param(121, lo=2, hi=4001, doc="force table nodes along the rate w")
     # fluid and fin (Table I)
-    rho: float = param(1000.0, lo=1.0, hi=2000.0, lo_open=True, unit="kg/m3", doc="water density")
+    rho: float = param(RHO_TABLE_I, lo=1.0, hi=2000.0, lo_open=True, unit="kg/m3", doc="water density")
     fin_area: float = param(FIN_AREA, lo=0.0, hi=1.0, lo_open=True, unit="m2", doc="fin planform A_f")
     fin_length: float = param(0.10, lo=0.0, hi=2.0, lo_open=True, unit="m", doc="effective fin length L_f")
-    r_c: float = param(0.10, lo=0.0, hi=2.0, lo_open=True, unit="m", doc="radius of gyration r_c")
+    r_c: float = param(FIN_R_C, lo=0.0, hi=2.0, lo_open=True, unit="m", doc="radius of gyration r_c")
     c_d: float = param(0.70, lo=0.0, hi=20.0, doc="drag coefficient C_D")
     c_l: float = param(0.25, lo=0.0, hi=20.0, doc="lift coefficient C_L")
     fin_inertia: float = param(
@@ -388,9 +389,9 @@ class PowerConfig(Config):
     values, the measured power is not."""
 
     fin_inertia: float = param(2.8e-5, lo=0.0, hi=1.0, unit="kg m2", doc="fin inertia I")
-    rho: float = param(1000.0, lo=1.0, hi=2000.0, lo_open=True, unit="kg/m3", doc="water density")
+    rho: float = param(RHO_TABLE_I, lo=1.0, hi=2000.0, lo_open=True, unit="kg/m3", doc="water density")
     fin_area: float = param(FIN_AREA, lo=0.0, hi=1.0, lo_open=True, unit="m2", doc="fin planform A_f")
-    r_c: float = param(0.10, lo=0.0, hi=2.0, lo_open=True, unit="m", doc="fin radius of gyration r_c")
+    r_c: float = param(FIN_R_C, lo=0.0, hi=2.0, lo_open=True, unit="m", doc="fin radius of gyration r_c")
     c_d: float = param(0.70, lo=0.0, hi=20.0, doc="the fin's drag coefficient C_D (of the drag power)")
     filter_tau: float = param(
         0.02, lo=0.0, hi=1.0, unit="s", doc="first-order low-pass on rate and acceleration"

@@ -20,13 +20,10 @@ from __future__ import annotations
 
 import math
 
-from ucat_console.robot.geometry import FIN_AREA
+from ucat_console.robot.geometry import FIN_AREA, FIN_R_C
 from ucat_console.robot.hull import FIN_INERTIA
 from ucat_console.robot.motor import FinMotor
-
-#: the fin model's radius of gyration r_c (m, paper Table I) and the water's density (kg/m3)
-R_C = 0.10
-RHO = 1000.0
+from ucat_console.robot.units import RHO_TABLE_I
 
 
 def plate_geometry(r_c: float, area: float) -> tuple[float, float]:
@@ -48,4 +45,4 @@ def rotor_inertia_at_shaft(motor: FinMotor) -> float:
 
 #: what a stroke from rest spins up and the drive does not get back (kg m2): the blade, the
 #: water it carries and the default drive's rotor
-STROKE_INERTIA = FIN_INERTIA + added_inertia(RHO, R_C, FIN_AREA) + rotor_inertia_at_shaft(FinMotor())
+STROKE_INERTIA = FIN_INERTIA + added_inertia(RHO_TABLE_I, FIN_R_C, FIN_AREA) + rotor_inertia_at_shaft(FinMotor())

@@ -38,6 +38,8 @@ ARM_YAW = 0.2981
 FIN_LENGTH = 0.10
 #: fin planform area A_f (m2, paper Table I)
 FIN_AREA = 0.020
+#: the fin's radius of gyration r_c (m, paper Table I)
+FIN_R_C = 0.10
 
 
 @dataclass(frozen=True)

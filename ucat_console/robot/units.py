@@ -32,6 +32,8 @@ GRAVITY = 9.80665
 #: fresh and salt water density (kg/m3)
 RHO_FRESH = 997.0
 RHO_SALT = 1029.0
+#: the water density of the paper's fin model (kg/m3, Table I)
+RHO_TABLE_I = 1000.0
 
 #: 4-20 mA loop: current at zero gauge pressure and from 4 to 20 mA
 LOOP_ZERO_MA = 4.0

@@ -22,7 +22,7 @@ from ucat_console.robot import hull as H
 from ucat_console.robot.geometry import Geometry
 from ucat_console.robot.motor import FinMotor
 from ucat_console.robot.servo import FIN_ACCELERATION, FIN_MAX_RATE
-from ucat_console.robot.units import RHO_FRESH, DriveUnits
+from ucat_console.robot.units import RHO_FRESH, RHO_TABLE_I, DriveUnits
 from ucat_console.typedconf import Config, param, require_below
 
 #: Names of the fin coefficient sets (see :class:`FinHydroConfig`).
@@ -121,11 +121,11 @@ class FinCoefficients(Config):
     plant's plate is calibrated to it (``backend/sim/plate.py``): at zero speed it makes this
     model's mean force, and in a stream what its physics gives."""
 
-    rho: float = param(1000.0, lo=1.0, hi=2000.0, lo_open=True, unit="kg/m3", doc="water density")
+    rho: float = param(RHO_TABLE_I, lo=1.0, hi=2000.0, lo_open=True, unit="kg/m3", doc="water density")
     c_d: float = param(0.70, lo=0.0, hi=20.0, lo_open=True, doc="drag coefficient C_D (the plate's normal force)")
     c_l: float = param(0.25, lo=0.0, hi=20.0, doc="lift coefficient C_L")
     area: float = param(G.FIN_AREA, lo=0.0, hi=1.0, lo_open=True, unit="m2", doc="fin planform area A_f")
-    r_c: float = param(0.10, lo=0.0, hi=2.0, lo_open=True, unit="m", doc="radius of gyration r_c")
+    r_c: float = param(G.FIN_R_C, lo=0.0, hi=2.0, lo_open=True, unit="m", doc="radius of gyration r_c")
     fin_length: float = param(G.FIN_LENGTH, lo=0.0, hi=2.0, lo_open=True, unit="m", doc="fin length L_f (Strouhal)")
 
     def scaled(self, factor: float) -> FinCoefficients:
