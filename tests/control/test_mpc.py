@@ -230,3 +230,25 @@ def test_a_centred_plan_takes_at_most_max_cycle():
     tight = FinMpc(CENTRED.replace(max_cycle=0.01), seed=1, drive=ExecutorConfig()).plan(
         target, v, theta, u_prev, seed=3)
     assert 0.01 < _duration(tight.u) <= _duration(bounded.u)
+
+
+def test_an_aligned_plan_ends_nearer_the_partners_cycle_within_its_cost_tolerance():
+    """With ``align``, the cycle that runs is, among the centred cycles costing at most that
+    fraction more than the best, the one whose duration is nearest the one asked (to end
+    with the fin across the hull): cycle by cycle the two fins' beats come together. Without a duration, or with ``align`` 0, the plan is the
+    best cycle, as before."""
+    cfg = CENTRED.replace(max_cycle=1.0)
+    target, v, theta, u_prev = (-0.5, 0.05), 0.2, -1.6, (0.6, -0.6, 3.0, 3.0)
+
+    def plan(c, duration=math.nan):
+        return FinMpc(c, seed=1, drive=ExecutorConfig()).plan(target, v, theta, u_prev, seed=3, duration=duration)
+
+    best = plan(cfg)
+    assert plan(cfg.replace(align=0.1)).u == best.u
+    assert plan(cfg, duration=_duration(best.u) + 0.3).u == best.u
+    for shift in (-0.2, 0.2):  # the cost grows fast with the duration: the cycle moves a little
+        aligned = plan(cfg.replace(align=0.1), duration=_duration(best.u) + shift)
+        assert (_duration(aligned.u) - _duration(best.u)) * shift >= 0.1 * shift * shift
+        assert aligned.cost.total <= best.cost.total + 0.1 * abs(best.cost.total) + 1e-9
+        assert _duration(aligned.u) <= cfg.max_cycle + 1e-9
+        assert _direction_error(aligned.cost.mean_force, target) <= math.radians(15.0)

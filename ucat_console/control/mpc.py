@@ -21,7 +21,9 @@ cycle that runs is laid about the oscillation centre the target's direction asks
 trade-off of force, Strouhal number, amplitude and smoothness) among the centred cycles of
 the solver's amplitude and rates and of a grid (``MpcConfig.centre_grid``): the solver
 chooses them for a cycle from where the fin is, which, laid about another centre, can make
-a fraction of the force. The plan returned is the cycle as it runs, with its cost.
+a fraction of the force. With ``MpcConfig.align`` > 0 and a duration asked (to end with
+the fin across the hull), the cycle is the one nearest that duration among those costing at
+most that fraction more than the best. The plan returned is the cycle as it runs, with its cost.
 The compiled solver also solves the closed-stroke formulation (``formulation =
 "closed_stroke"``, see :mod:`ucat_console.control.cost`), with its own compiled entry points.
 
@@ -229,11 +231,13 @@ class FinMpc:
         return grad
 
     # ------------------------------------------------------------------ planning
-    def plan(self, f_target, v_body, theta0, u_prev, seed: int | None = None, refine: bool = True) -> Plan:
+    def plan(self, f_target, v_body, theta0, u_prev, seed: int | None = None, refine: bool = True,
+             duration: float = math.nan) -> Plan:
         """Plan the next cycle from angle ``theta0`` (Algorithm 1).
 
         ``seed`` makes this solve reproducible; without it the planner's own random
-        stream continues. ``refine=False`` runs stage 1 only.
+        stream continues. ``refine=False`` runs stage 1 only. ``duration`` (s; NaN: none)
+        is how long the cycle would last to end with the partner fin's (``MpcConfig.align``).
         """
         f, v, th, up = self._inputs(f_target, v_body, theta0, u_prev)
         if self.config.solver == "scipy":
@@ -263,7 +267,7 @@ class FinMpc:
             raise FloatingPointError(f"planner produced a non-finite plan {u}")
         cost = _breakdown(self._terms)
         if self._drive is not None or cfg.centre_rate > 0.0:
-            u, cost = self._executable(u, f, v, th, up)
+            u, cost = self._executable(u, f, v, th, up, duration)
         return self._make_plan(
             tuple(u), cost, th, t_sample, t_refine,
             tuple(self._best_u[0].tolist()), float(self._best_j[0]),
@@ -281,35 +285,43 @@ class FinMpc:
         """:meth:`_timed` of every plan of ``u`` (shape (..., 4))."""
         return u if self._drive is None else timed_rates(u, self.config, self._drive)
 
-    def _bounded(self, cycles: np.ndarray, cost: np.ndarray) -> np.ndarray:
+    def _bounded(self, duration: np.ndarray, cost: np.ndarray) -> np.ndarray:
         """``cost`` with the cycles longer than ``max_cycle`` out of the running (all of them
         but the shortest when none is within it)."""
         limit = self.config.max_cycle
         if limit <= 0.0:
             return cost
-        duration = np.abs(cycles[:, 0]) / cycles[:, 2] + np.abs(cycles[:, 1]) / cycles[:, 3]
         ok = duration <= limit
         if not ok.any():
             ok = duration <= duration.min()
         return np.where(ok, cost, np.inf)
 
-    def _executable(self, u: list[float], f: tuple, v: float, th: float, up: tuple) -> tuple[list[float], CostBreakdown]:
+    def _executable(self, u: list[float], f: tuple, v: float, th: float, up: tuple,
+                    duration: float = math.nan) -> tuple[list[float], CostBreakdown]:
         """The solved plan as it will run (beyond the paper; module docstring): centred on
         the oscillation centre the target's direction asks for, with the amplitude and rates
         of least cost among the solver's and the grids' (:func:`cycle_grid`, then
-        :func:`fine_grid` about the best), and its rates timed by the drive. Returns the plan
-        and its cost."""
+        :func:`fine_grid` about the best), and its rates timed by the drive; with
+        ``MpcConfig.align`` and a ``duration``, the one nearest that duration among those
+        costing little more. Returns the plan and its cost."""
         cfg = self.config
         if not (cfg.centre_rate > 0.0 and math.hypot(*f) >= 1e-3):
             out = self._timed(u)
             return out, self.score(tuple(out), f, v, th, up)
         rows = np.vstack([np.asarray(u, dtype=float)[None], self._grid])
         cycles = self._timed_all(centred_cycles(rows, f, th, up, cfg))
-        k = int(np.argmin(self._bounded(cycles, cost_terms(cycles, f, v, th, up, cfg, self.table)["total"])))
+        raw = cost_terms(cycles, f, v, th, up, cfg, self.table)["total"]
+        k = int(np.argmin(self._bounded(_durations(cycles), raw)))
         fine = fine_grid(rows[k], *self._steps)
         if len(fine):  # the fine grid about the best, which stays if none is better
-            cycles = np.vstack([cycles[k][None], self._timed_all(centred_cycles(fine, f, th, up, cfg))])
-            k = int(np.argmin(self._bounded(cycles, cost_terms(cycles, f, v, th, up, cfg, self.table)["total"])))
+            more = self._timed_all(centred_cycles(fine, f, th, up, cfg))
+            cycles = np.vstack([cycles, more])
+            raw = np.concatenate([raw, cost_terms(more, f, v, th, up, cfg, self.table)["total"]])
+        cost = self._bounded(_durations(cycles), raw)
+        k = int(np.argmin(cost))
+        if cfg.align > 0.0 and math.isfinite(duration):
+            near = cost <= cost[k] + cfg.align * abs(cost[k])
+            k = int(np.argmin(np.where(near, np.abs(_durations(cycles) - duration), np.inf)))
         out = cycles[k].tolist()
         return out, self.score(tuple(out), f, v, th, up)
 
@@ -397,6 +409,11 @@ def centred_cycles(u: np.ndarray, f_target: Sequence[float], theta0: float, u_pr
     side = np.where(rel >= 0.0, 1.0, -1.0)
     amplitude = 0.25 * (d[..., 0] + d[..., 1])
     return np.stack([-rel - side * amplitude, 2.0 * side * amplitude, u[..., 2], u[..., 3]], axis=-1)
+
+
+def _durations(cycles: np.ndarray) -> np.ndarray:
+    """Each cycle's duration (s; shape (n, 4) -> (n,))."""
+    return np.abs(cycles[:, 0]) / cycles[:, 2] + np.abs(cycles[:, 1]) / cycles[:, 3]
 
 
 def cycle_grid(n: int, a_lo: float, a_hi: float, w_lo: float, w_hi: float

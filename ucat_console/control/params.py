@@ -103,6 +103,12 @@ class MpcConfig(Config):
         doc="with centre_rate > 0: the longest cycle the centred plan may take, as the drives time it "
         "(0: no limit; the shortest candidate when none is within it)",
     )
+    align: float = param(
+        0.0, lo=0.0, hi=1.0,
+        doc="with centre_rate > 0: among the centred cycles costing at most this fraction more than the best, "
+        "the one that ends closest to when the fin across the hull begins its next cycle, so that the two "
+        "take up a new target together (0: the best cycle, each fin on its own beat)",
+    )
     centre_grid: int = param(
         12, lo=0, hi=64,
         doc="with centre_rate > 0: the centred cycle is the one of least cost among the solver's and a grid of "

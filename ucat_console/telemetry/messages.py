@@ -10,6 +10,7 @@ session schemas carry it as the field's description).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Annotated
 
@@ -159,6 +160,8 @@ class FinPlan:
                              wide=True)] = -1
     lag: Annotated[float, Doc("how long after the other fins' beats this fin's last began when it was "
                               "planned (the baseline's phase lock)", "s")] = 0.0
+    align: Annotated[float, Doc("how long the cycle would last to end when the fin across the hull ends "
+                                "one (the MPC's alignment; NaN: none)", "s")] = math.nan
 
 
 @dataclass(frozen=True)

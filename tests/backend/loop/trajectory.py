@@ -47,7 +47,12 @@ design: the ``mpc`` scenario stayed the same to rtol 1e-9 but for the plans' new
 did the ``mpc_sync`` scenario's first six seconds, before it switches to the baseline. The
 ``mpc`` scenario's was written again when the shipped ``sim-tuned`` limited the MPC's cycles to
 1 s (``MpcConfig.max_cycle``, 1.5 s before), which changes its plans by design with no change of
-code; the other two scenarios stayed the same to rtol 1e-9.
+code; the other two scenarios stayed the same to rtol 1e-9. They were written again when the
+MPC's fins across the hull from each other began to end their cycles together
+(``MpcConfig.align``, 0.2 in the shipped ``sim-tuned``; the plans carry the duration asked,
+``FinPlan.align``), which changes the MPC's plans by design: the ``baseline`` scenario's first
+six seconds, before it switches to the MPC, stayed the same to rtol 1e-9 but for the plans'
+new column.
 
 Each scenario starts the simulated U-CAT at 1 m depth surging at 0.2 m/s with the
 configuration of the shipped ``sim-tuned``, runs one mode with a velocity, depth and yaw

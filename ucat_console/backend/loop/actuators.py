@@ -72,6 +72,9 @@ SAME_BEAT = 0.1
 PACE_CYCLES = 5
 
 
+PARTNER = (1, 0, 3, 2)  # paper fin -> the fin across the hull from it
+
+
 class Actuator:
     """One logical fin: its executor, its planner, and the plan hand-over state."""
 
@@ -200,11 +203,29 @@ class Actuators:
         k = lc.C_TARGETS + 2 * act.index
         inputs = PlanInputs(
             t=t, fins=act.fins, target=(float(s[k]), float(s[k + 1])), v_body=float(s[lc.C_V_BODY]),
-            theta0=theta0, u_prev=act.u_prev, lag=self.lag(act.fins[0], t),
+            theta0=theta0, u_prev=act.u_prev, lag=self.lag(act.fins[0], t), align=self.align(act, t),
         )
         act.job = self._planning.submit(act.key, act.planner, inputs)
         act.t_deliver = t + self.cfg.plan_latency
         act.requested = True
+
+    def align(self, act: Actuator, t: float) -> float:
+        """How long ``act``'s next cycle (requested at ``t``, as its last stroke begins) would
+        last to end when the fin across the hull ends one (s): the partner's cycle boundary
+        half to one and a half of its cycle length after the next cycle begins. NaN when the
+        MPC does not plan it with ``align``, ``act`` drives a pair, or the partner runs no
+        cycle of its own."""
+        if len(act.fins) != 1 or not MODES[act.mode].mpc or not self.mpc.align > 0.0:
+            return math.nan
+        fin = PARTNER[act.fins[0]]
+        other, cycle = self._owner[fin], self._cycles[fin]
+        length = self._length[fin]
+        if other is None or len(other.fins) != 1 or cycle is None or not length > 0.0:
+            return math.nan
+        u = act.u_prev
+        begins = t + (abs(u[1]) / u[3] if u[3] > 0.0 else 0.0)
+        ends = cycle[4][0] + length  # the partner's running cycle
+        return length + math.remainder(ends - begins - length, length)
 
     def lag(self, fin: int, t: float) -> float:
         """How long after the other fins' last beats paper fin ``fin``'s began (s, at ``t``: the

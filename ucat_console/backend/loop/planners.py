@@ -48,12 +48,14 @@ class PlanInputs:
     theta0: float  # angle the plan starts from, rad
     u_prev: Vec4  # the fin's previous plan
     lag: float = 0.0  # s: how long after the other fins' beats this fin's last began
+    # s: how long the cycle would last to end when the fin across the hull ends one (NaN: none)
+    align: float = math.nan
 
 
 def _plan(x: PlanInputs, **result: object) -> FinPlan:
     """A FinPlan of ``x``; ``t``, ``fin``, ``mode`` and ``late`` are the loop's to fill in."""
     return FinPlan(t=x.t, fin=-1, mode="", target=x.target, v_body=x.v_body, theta0=x.theta0,
-                   u_prev=x.u_prev, late=False, lag=x.lag, **result)  # type: ignore[arg-type]
+                   u_prev=x.u_prev, late=False, lag=x.lag, align=x.align, **result)  # type: ignore[arg-type]
 
 
 def _wrapped(theta0: float) -> tuple[float, float]:
@@ -87,7 +89,7 @@ class MpcFinPlanner:
         # every plan gets its own seed (recorded in FinPlan), so a recording replays exactly
         seed = self._seed_base + self._count
         self._count += 1
-        p = self._mpc.plan(x.target, x.v_body, theta, x.u_prev, seed=seed)
+        p = self._mpc.plan(x.target, x.v_body, theta, x.u_prev, seed=seed, duration=x.align)
         c = p.cost
         return _plan(
             x, u=p.u, commands=_shift(p.commands, offset), cost_total=c.total, cost_force=c.force,

@@ -230,7 +230,8 @@ def counterfactual(
             progress(i)
         s = seed(msg, i) if callable(seed) else seed
         try:
-            plan = planners[msg.fin].plan(msg.target, msg.v_body, wrap_angle(msg.theta0), msg.u_prev, seed=s)
+            plan = planners[msg.fin].plan(msg.target, msg.v_body, wrap_angle(msg.theta0), msg.u_prev, seed=s,
+                                          duration=msg.align)
         except (ValueError, FloatingPointError) as e:
             skipped += 1
             first_refusal = first_refusal or f"fin {msg.fin} at t={msg.t:.3f}: {e}"
