@@ -317,11 +317,12 @@ class FinMpc:
             more = self._timed_all(centred_cycles(fine, f, th, up, cfg))
             cycles = np.vstack([cycles, more])
             raw = np.concatenate([raw, cost_terms(more, f, v, th, up, cfg, self.table)["total"]])
-        cost = self._bounded(_durations(cycles), raw)
+        durations = _durations(cycles)
+        cost = self._bounded(durations, raw)
         k = int(np.argmin(cost))
         if cfg.align > 0.0 and math.isfinite(duration):
             near = cost <= cost[k] + cfg.align * abs(cost[k])
-            k = int(np.argmin(np.where(near, np.abs(_durations(cycles) - duration), np.inf)))
+            k = int(np.argmin(np.where(near, np.abs(durations - duration), np.inf)))
         out = cycles[k].tolist()
         return out, self.score(tuple(out), f, v, th, up)
 
